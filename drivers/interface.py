@@ -1,0 +1,121 @@
+"""The rig interface every backend implements (after ros2_control's hardware lifecycle).
+
+Lifecycle: ``configure()`` opens communication, ``activate()`` lets commands energise the damper,
+then cycles of ``read(t_ns, dt_ns)`` / ``write(cmd, t_ns, dt_ns)``, then ``deactivate()`` (commands
+the safe current, 0 A; callable from any state, never raises for a closed link) and ``close()``
+(idempotent). The object is a context manager whose exit deactivates and closes.
+
+The simulated backend is a peer implementation of this interface, not a flag in another one.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from enum import Enum
+
+TWO_PI = 2.0 * math.pi
+
+#: sample status flags (the same bits travel in the serial and CAN protocols)
+FLAG_WATCHDOG = 0x01  # the device's watchdog cut the current (no valid command in time)
+FLAG_HELD = 0x02  # (sim/emulator) the simulated operator holds the arm
+FLAG_STUCK_SENSOR = 0x04  # (emulator fault injection) the encoder value is frozen
+FLAG_OVERCURRENT = 0x08
+FLAG_FAULT = 0x80
+
+
+@dataclass(slots=True)
+class RigSample:
+    """One sensor sample from the rig, in the device's own units plus the conversion to SI."""
+
+    seq: int  # device sequence number (wraps at 2**16 on the wire)
+    time_ns: int  # host time the sample belongs to
+    device_time_us: int  # device clock
+    arm_counts: int  # arm encoder (theta2)
+    road_counts: int  # road/wheel-side encoder (theta1)
+    current_a: float  # measured coil current
+    flags: int
+    counts_per_rev: int
+
+    @property
+    def theta_rad(self) -> float:
+        """Relative angle theta = theta2 - theta1 [rad]."""
+        return (self.arm_counts - self.road_counts) * TWO_PI / self.counts_per_rev
+
+    @property
+    def theta_road_rad(self) -> float:
+        """Road/wheel-side angle theta1 [rad]."""
+        return self.road_counts * TWO_PI / self.counts_per_rev
+
+
+@dataclass(slots=True)
+class RigCommand:
+    """What the host asks of the rig for one cycle."""
+
+    current_a: float = 0.0  # coil current setpoint
+    road_speed_rad_s: float | None = None  # road-wheel motor speed (sweeps); None: unchanged
+
+
+SAFE_COMMAND = RigCommand(0.0)
+
+
+class RigState(Enum):
+    UNCONFIGURED = "unconfigured"
+    CONFIGURED = "configured"
+    ACTIVE = "active"
+    CLOSED = "closed"
+
+
+class RigInterface(ABC):
+    """Abstract rig: one damper coil to command, two encoders and a current sensor to read."""
+
+    #: backend name in the registry
+    name: str = "abstract"
+
+    def __init__(self) -> None:
+        self.state = RigState.UNCONFIGURED
+
+    # lifecycle -----------------------------------------------------------------------------
+    @abstractmethod
+    def configure(self) -> None:
+        """Open communication and check the device; nothing is energised."""
+
+    @abstractmethod
+    def activate(self) -> None:
+        """From now on ``write`` commands reach the damper."""
+
+    @abstractmethod
+    def read(self, t_ns: int, dt_ns: int) -> RigSample:
+        """The newest sample at host time ``t_ns`` (``dt_ns``: measured period since the last read)."""
+
+    @abstractmethod
+    def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
+        """Send the cycle's command."""
+
+    @abstractmethod
+    def deactivate(self) -> None:
+        """Command the safe current (0 A). Callable from any state; must not raise on a dead link."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the link. Idempotent."""
+
+    # operator ------------------------------------------------------------------------------
+    def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
+        """Ask the rig's operator to hold the arm at ``theta_rad`` and let go after a while.
+
+        Returns True when the backend plays the operator itself (simulated rig, emulator), False
+        when a person has to do it (the bench): the drop test then waits for the hold.
+        """
+        return False
+
+    # context manager -----------------------------------------------------------------------
+    def __enter__(self) -> "RigInterface":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            self.deactivate()
+        finally:
+            self.close()

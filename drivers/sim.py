@@ -1,0 +1,153 @@
+"""The simulated rig: a peer backend of the serial and CAN drivers, stepping the plant model.
+
+The plant advances to the host time each ``read`` is given, so the same backend runs on a
+virtual clock (deterministic, as fast as the CPU allows) or on the real clock; the loop chooses.
+The sensor model quantises both encoders (counts per revolution from the config) and adds
+seeded Gaussian noise to the angles and the measured current when the config asks for it.
+The backend can play the drop-test operator (:meth:`operator_hold`).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from typing import Any
+
+from sashil.drivers.interface import (
+    FLAG_HELD,
+    TWO_PI,
+    RigCommand,
+    RigInterface,
+    RigSample,
+    RigState,
+)
+from sashil.errors import DriverError
+from sashil.models.plant import RigPlant, RoadProfile
+from sashil.models.registry import rig_params
+
+
+class SimulatedRig(RigInterface):
+    """The SAS rig simulated in-process (seed 001 model + coil lag + encoder + noise)."""
+
+    name = "sim"
+
+    def __init__(
+        self,
+        plant: RigPlant,
+        counts_per_rev: int = 4096,
+        angle_noise_rad: float = 0.0,
+        current_noise_a: float = 0.0,
+        noise_seed: int = 0,
+    ):
+        super().__init__()
+        self.plant = plant
+        self.counts_per_rev = int(counts_per_rev)
+        self.angle_noise_rad = float(angle_noise_rad)
+        self.current_noise_a = float(current_noise_a)
+        self._rng = random.Random(noise_seed)
+        self._command = 0.0
+        self._seq = 0
+        self._t0_ns: int | None = None
+        self._last_ns = 0
+        self._release_at_s: float | None = None
+        self.road_profile: RoadProfile | None = None
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any], road: RoadProfile | None = None) -> "SimulatedRig":
+        rig = config["rig"]
+        plant = RigPlant(
+            rig_params(config["model"]),
+            coil_tau_s=rig["coil_tau_s"],
+            current_max_a=rig["current_max_a"],
+            max_step_s=rig["plant_max_step_s"],
+            road=road,
+        )
+        return cls(
+            plant,
+            counts_per_rev=rig["encoder_counts_per_rev"],
+            angle_noise_rad=rig["angle_noise_rad"],
+            current_noise_a=rig["current_noise_a"],
+            noise_seed=rig["noise_seed"],
+        )
+
+    # lifecycle -----------------------------------------------------------------------------
+    def configure(self) -> None:
+        if self.state is RigState.CLOSED:
+            raise DriverError("sim: configure() after close()")
+        self.state = RigState.CONFIGURED
+
+    def activate(self) -> None:
+        if self.state is not RigState.CONFIGURED:
+            raise DriverError(f"sim: activate() in state {self.state.value} (configure() first)")
+        self.state = RigState.ACTIVE
+
+    def deactivate(self) -> None:
+        self._command = 0.0
+        if self.state is RigState.ACTIVE:
+            self.state = RigState.CONFIGURED
+
+    def close(self) -> None:
+        self._command = 0.0
+        self.state = RigState.CLOSED
+
+    # cycle ---------------------------------------------------------------------------------
+    def read(self, t_ns: int, dt_ns: int) -> RigSample:
+        if self.state is RigState.CLOSED or self.state is RigState.UNCONFIGURED:
+            raise DriverError(f"sim: read() in state {self.state.value}")
+        if self._t0_ns is None:
+            self._t0_ns = self._last_ns = t_ns
+        plant = self.plant
+        elapsed = (t_ns - self._last_ns) * 1e-9
+        if self._release_at_s is not None and plant.held:
+            release_in = self._release_at_s - plant.state.time_s
+            if release_in <= elapsed:
+                # step to the release instant, let go, then step the rest of the period
+                if release_in > 0.0:
+                    plant.step(release_in, self._command)
+                    elapsed -= release_in
+                plant.release()
+        if elapsed > 0.0:
+            plant.step(elapsed, self._command)
+        self._last_ns = t_ns
+        st = plant.state
+        theta_road = st.theta_road_rad
+        theta_arm = st.theta_rad + theta_road
+        current = st.current_a
+        if self.angle_noise_rad:
+            theta_arm += self._rng.gauss(0.0, self.angle_noise_rad)
+            theta_road += self._rng.gauss(0.0, self.angle_noise_rad)
+        if self.current_noise_a:
+            current += self._rng.gauss(0.0, self.current_noise_a)
+        scale = self.counts_per_rev / TWO_PI
+        self._seq += 1
+        return RigSample(
+            seq=self._seq,
+            time_ns=t_ns,
+            device_time_us=(t_ns - self._t0_ns) // 1000,
+            arm_counts=round(theta_arm * scale),
+            road_counts=round(theta_road * scale),
+            current_a=current,
+            flags=FLAG_HELD if plant.held else 0,
+            counts_per_rev=self.counts_per_rev,
+        )
+
+    def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
+        if self.state is not RigState.ACTIVE:
+            self._command = 0.0
+            return
+        current = cmd.current_a
+        if not (current == current):  # NaN never reaches the coil
+            current = 0.0
+        self._command = min(max(current, 0.0), self.plant.current_max_a)
+
+    # operator ------------------------------------------------------------------------------
+    def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
+        """Hold the simulated arm at ``theta_rad`` now and release it ``release_after_s`` later."""
+        self.plant.hold(theta_rad)
+        self._release_at_s = self.plant.state.time_s + release_after_s
+        return True
+
+    def set_initial_current(self, current_a: float) -> None:
+        """Start with the coil already carrying ``current_a`` (as if it had flowed for a while)."""
+        self.plant.state.current_a = min(max(current_a, 0.0), self.plant.current_max_a)
+        self._command = self.plant.state.current_a

@@ -1,0 +1,85 @@
+"""The ``sashil`` command: one verb per module in this package, loaded on use.
+
+Each verb module defines ``HELP`` (one line), ``EXAMPLE`` (a command line), ``add_arguments(parser)``
+and ``run(args) -> int``. Errors a user can cause end as one line on stderr and exit code 2 (bad
+input) or the code of their :class:`~sashil.errors.SashilError` kind; never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from sashil.errors import SashilError
+
+#: verb -> module (DESIGN.md fixed verbs)
+VERBS: dict[str, str] = {
+    "drop-test": "sashil.cli.drop_test",
+    "run": "sashil.cli.run",
+    "sweep": "sashil.cli.sweep",
+    "identify": "sashil.cli.identify",
+    "simulate": "sashil.cli.simulate",
+    "emulate": "sashil.cli.emulate",
+    "report": "sashil.cli.report",
+}
+
+EXIT_CODES = {
+    0: "success",
+    1: "the run failed (driver I/O error, unexpected error); the damper was set to 0 A first",
+    2: "bad input: a config key, parameter file, data file, CLI argument or port; nothing energised",
+    3: "a safety trip stopped the run (angle interlock, sensor timeout, stale samples)",
+    4: "a deadline was missed with overrun policy 'fail'",
+    130: "stopped by SIGINT/SIGTERM after a clean shutdown (0 A, data and summary written)",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    epilog = "exit codes:\n" + "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
+    parser = _Parser(
+        prog="sashil",
+        description="Hardware-in-the-loop control of the SAS rig with a rotary MR damper.",
+        epilog=epilog,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
+    for verb, module_name in VERBS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as err:
+            if err.name != module_name:
+                raise
+            continue  # verb not built yet
+        verb_parser = sub.add_parser(
+            verb,
+            help=module.HELP,
+            description=module.HELP,
+            epilog=f"example:\n  {module.EXAMPLE}",
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.add_arguments(verb_parser)
+        verb_parser.set_defaults(_module=module)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._module.run(args) or 0)
+    except SashilError as err:
+        print(f"sashil {args.verb}: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print(f"sashil {args.verb}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

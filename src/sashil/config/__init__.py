@@ -1,0 +1,90 @@
+"""Config loading: YAML (``yaml.safe_load`` only), validated against :mod:`sashil.config.sections`."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sashil.config.schema import defaults, validate
+from sashil.config.sections import SCHEMA
+from sashil.errors import ConfigError
+
+Config = dict[str, Any]
+
+__all__ = ["Config", "default_config", "load_config", "load_params", "apply_params", "dump_config"]
+
+
+def default_config() -> Config:
+    """The default config: simulated rig, seed parameters, 1 kHz."""
+    return defaults(SCHEMA)
+
+
+def _read_yaml(path: Path) -> Any:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = f" line {mark.line + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ConfigError(f"{path}:{line}: not valid YAML ({problem})") from None
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Load and validate a config file; ``None`` gives the default config.
+
+    A config may name a parameter file with ``include_params: FILE`` (relative to the config),
+    which replaces its ``model`` section, as ``--params`` does on the command line.
+    """
+    if path is None:
+        return default_config()
+    path = Path(path)
+    doc = _read_yaml(path)
+    include = None
+    if isinstance(doc, dict) and "include_params" in doc:
+        doc = dict(doc)
+        include = doc.pop("include_params")
+        if not isinstance(include, str):
+            raise ConfigError(f"{path}: include_params: expected a file name, got {include!r}")
+    config = validate(doc, SCHEMA, str(path))
+    from sashil.models.registry import check_model
+
+    check_model(config["model"], str(path), "model")
+    if include is not None:
+        config = apply_params(config, (path.parent / include))
+    return config
+
+
+def load_params(path: str | Path) -> dict[str, Any]:
+    """Load a parameter file (the shape ``sashil identify`` writes) as a ``model`` section."""
+    path = Path(path)
+    doc = _read_yaml(path)
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{path}: expected a mapping with 'model' and 'params', got {type(doc).__name__}")
+    if "params" not in doc:
+        raise ConfigError(f"{path}: params: missing (expected a mapping of model parameters)")
+    name = doc.get("model", "bouc-wen")
+    section = {"name": name, "params": doc["params"]}
+    from sashil.models.registry import check_model
+
+    return check_model(section, str(path), "", complete=True)
+
+
+def apply_params(config: Config, params_path: str | Path) -> Config:
+    """A copy of ``config`` whose model section comes from a parameter file."""
+    out = copy.deepcopy(config)
+    out["model"] = load_params(params_path)
+    return out
+
+
+def dump_config(config: Config) -> str:
+    """The resolved config as YAML text (what a run folder's ``config.yaml`` holds)."""
+    return yaml.safe_dump(config, sort_keys=False, default_flow_style=False)

@@ -1,0 +1,151 @@
+"""A small declarative schema for YAML configs: types, ranges, choices, unknown keys.
+
+Validation errors are one line that names the file, the dotted key and what was expected, e.g.
+``configs/lab.yaml: rig.coil_tau_s: expected a number >= 0, got -1``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from sashil.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Field:
+    """One leaf key: its kind, default and allowed range or choices."""
+
+    kind: str  # "float" | "int" | "bool" | "str" | "choice" | "float?" | "str?" | "float_list"
+    default: Any
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False  # True: value must be strictly greater than ``low``
+    choices: tuple[str, ...] = ()
+    doc: str = ""
+
+    def expected(self) -> str:
+        """Human description of what the field accepts."""
+        if self.kind == "choice":
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        if self.kind == "bool":
+            return "true or false"
+        if self.kind in ("str", "str?"):
+            return "a string" + (" or null" if self.kind.endswith("?") else "")
+        if self.kind == "float_list":
+            return "a list of numbers"
+        word = "an integer" if self.kind == "int" else "a number"
+        parts = []
+        if self.low is not None:
+            parts.append(f"{'>' if self.low_open else '>='} {self.low:g}")
+        if self.high is not None:
+            parts.append(f"<= {self.high:g}")
+        text = word + (" " + " and ".join(parts) if parts else "")
+        return text + (" or null" if self.kind.endswith("?") else "")
+
+    def check(self, value: Any, where: str) -> Any:
+        """Return the value coerced to its kind, or raise ConfigError naming ``where``."""
+
+        def fail() -> ConfigError:
+            return ConfigError(f"{where}: expected {self.expected()}, got {value!r}")
+
+        if value is None and self.kind.endswith("?"):
+            return None
+        kind = self.kind.rstrip("?")
+        if kind == "bool":
+            if not isinstance(value, bool):
+                raise fail()
+            return value
+        if kind == "str":
+            if not isinstance(value, str):
+                raise fail()
+            return value
+        if kind == "choice":
+            if value not in self.choices:
+                raise fail()
+            return value
+        if kind == "float_list":
+            if not isinstance(value, list):
+                raise fail()
+            out = []
+            for item in value:
+                if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+                    raise fail()
+                out.append(float(item))
+            return out
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise fail()
+        if kind == "int" and (not isinstance(value, int) and not float(value).is_integer()):
+            raise fail()
+        number = int(value) if kind == "int" else float(value)
+        if not math.isfinite(number):
+            raise fail()
+        if self.low is not None and (number < self.low or (self.low_open and number == self.low)):
+            raise fail()
+        if self.high is not None and number > self.high:
+            raise fail()
+        return number
+
+
+Schema = Mapping[str, "Field | Schema"]
+
+
+@dataclass
+class Section:
+    """A mapping of keys to Fields or nested Sections; ``open_keys`` allows free-form keys."""
+
+    fields: dict[str, Any] = field(default_factory=dict)
+    open_keys: bool = False
+    doc: str = ""
+
+
+def defaults(schema: Mapping[str, Any]) -> dict[str, Any]:
+    """The default document of a schema (nested dicts of default values)."""
+    out: dict[str, Any] = {}
+    for key, spec in schema.items():
+        if isinstance(spec, Section):
+            out[key] = defaults(spec.fields)
+        else:
+            out[key] = list(spec.default) if isinstance(spec.default, list) else spec.default
+    return out
+
+
+def validate(doc: Any, schema: Mapping[str, Any], source: str, prefix: str = "") -> dict[str, Any]:
+    """Validate ``doc`` against ``schema`` and merge it over the defaults.
+
+    Unknown keys, wrong types and out-of-range values raise :class:`ConfigError` with one line
+    ``<source>: <dotted.key>: <problem>``.
+    """
+    where_root = f"{source}: {prefix.rstrip('.')}" if prefix else source
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, Mapping):
+        raise ConfigError(f"{where_root}: expected a mapping of keys, got {type(doc).__name__}")
+    out = defaults(schema)
+    for key, value in doc.items():
+        dotted = f"{prefix}{key}"
+        spec = schema.get(key) if isinstance(key, str) else None
+        if spec is None:
+            known = ", ".join(sorted(schema)) or "(none)"
+            raise ConfigError(f"{source}: {dotted}: unknown key (known keys here: {known})")
+        if isinstance(spec, Section):
+            if spec.open_keys:
+                if value is None:
+                    value = {}
+                if not isinstance(value, Mapping):
+                    raise ConfigError(f"{source}: {dotted}: expected a mapping, got {value!r}")
+                merged = dict(out[key])
+                for sub_key, sub_value in value.items():
+                    sub_spec = spec.fields.get(sub_key)
+                    merged[sub_key] = (
+                        sub_spec.check(sub_value, f"{source}: {dotted}.{sub_key}")
+                        if isinstance(sub_spec, Field)
+                        else sub_value
+                    )
+                out[key] = merged
+            else:
+                out[key] = validate(value, spec.fields, source, dotted + ".")
+        else:
+            out[key] = spec.check(value, f"{source}: {dotted}")
+    return out

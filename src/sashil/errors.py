@@ -1,0 +1,60 @@
+"""The sashil exception tree: one root, a few kinds (after python-can's ``CanError`` tree).
+
+Every error a user can cause (a config key, a data file, a CLI argument, a wire frame) is one of
+these, carries a one-line message naming *what* and *where*, and is turned into an exit code by the
+CLI. Foreign exceptions (``serial.SerialException``, ``can.CanError``, ``OSError``) are wrapped at the
+driver boundary with ``raise DriverIOError(...) from err``.
+"""
+
+from __future__ import annotations
+
+
+class SashilError(Exception):
+    """Root of every error sashil raises on purpose."""
+
+    #: process exit code the CLI uses for this kind of error
+    exit_code: int = 1
+
+
+class ConfigError(SashilError, ValueError):
+    """A config file, parameter file or CLI argument is wrong (names the file/key and what was expected)."""
+
+    exit_code = 2
+
+
+class DataFileError(SashilError, ValueError):
+    """A recorded data file cannot be used (missing column, NaN, time not increasing, ...)."""
+
+    exit_code = 2
+
+
+class DriverError(SashilError):
+    """A rig driver failed: the backend is unknown, unavailable, or could not be opened."""
+
+    exit_code = 2
+
+
+class DriverIOError(DriverError):
+    """Reading from or writing to the rig failed during a run."""
+
+    exit_code = 1
+
+
+class DriverTimeoutError(DriverIOError, TimeoutError):
+    """The rig did not answer in time."""
+
+
+class ProtocolError(DriverIOError):
+    """A frame from the device is malformed, or the device speaks another protocol version."""
+
+
+class SafetyTrip(SashilError):
+    """The safety supervisor stopped the run (angle interlock, sensor timeout, stale samples...)."""
+
+    exit_code = 3
+
+
+class DeadlineMissedError(SashilError):
+    """The loop missed a deadline and its overrun policy is ``fail``."""
+
+    exit_code = 4

@@ -1,0 +1,221 @@
+"""The drop test of seed 001 section 8: press the arm to theta0 (-5 deg), release, record.
+
+The plan (:class:`DropTestPlan`) is a loop stage: it commands a constant current from the start
+(so the current already flows at release), waits for a steady hold near theta0, detects the
+release and records the free oscillation for the requested duration. The same plan runs on the
+simulated rig (which plays the operator), the emulator and the bench (where a person does).
+
+Release time. When the backend plays the operator it knows the instant it lets go. Otherwise the
+plan estimates it from the departure: just after release the arm leaves the hold angle with
+constant acceleration, ``|theta - theta_hold| = a/2 * (t - t_r)^2``, so ``sqrt|dtheta|`` is linear
+in t and its zero is t_r (a least-squares line through the departure samples between two encoder
+counts and the release threshold).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sashil.drivers import open_rig
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
+from sashil.errors import DriverTimeoutError
+from sashil.experiments.metrics import DropMetrics, drop_metrics
+from sashil.runtime.clock import Clock, RealClock, VirtualClock
+from sashil.runtime.loop import LoopResult, run_loop
+
+#: columns of a drop test's data.csv (DESIGN.md names)
+DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
+
+
+@dataclass
+class DropTestSettings:
+    theta0_rad: float
+    current_a: float
+    duration_s: float
+    rate_hz: float
+    hold_tolerance_rad: float
+    hold_time_s: float
+    release_threshold_rad: float
+    hold_timeout_s: float
+    known_release_after_s: float | None = None  # set when the backend plays the operator
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any], theta0_deg: float, current_a: float, duration_s: float) -> "DropTestSettings":
+        drop = config["drop_test"]
+        return cls(
+            theta0_rad=math.radians(theta0_deg),
+            current_a=current_a,
+            duration_s=duration_s,
+            rate_hz=config["loop"]["rate_hz"],
+            hold_tolerance_rad=math.radians(drop["hold_tolerance_deg"]),
+            hold_time_s=drop["hold_time_s"],
+            release_threshold_rad=math.radians(drop["release_threshold_deg"]),
+            hold_timeout_s=drop["hold_timeout_s"],
+        )
+
+
+@dataclass
+class DropRecord:
+    """The recorded free oscillation, time zero at the release."""
+
+    columns: dict[str, np.ndarray]
+    release_time_ns: int
+    release_estimated: bool
+    hold_angle_rad: float
+    loop: LoopResult | None = None
+    metrics: DropMetrics | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
+    """Release instant from departure samples: zero of the line through ``sqrt|theta - hold|``."""
+    ts, roots = [], []
+    for t, angle in zip(times_ns, angles):
+        moved = abs(angle - hold_angle)
+        if moved >= 1.5 * resolution:
+            ts.append(t)
+            roots.append(math.sqrt(moved))
+    if len(ts) >= 2:
+        t_rel = np.asarray(ts, dtype=float) - ts[0]
+        slope, intercept = np.polyfit(t_rel, np.asarray(roots), 1)
+        if slope > 0:
+            estimate = ts[0] + int(round(-intercept / slope))
+            last_still = max((t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < 0.5 * resolution), default=None)
+            if last_still is None or estimate >= last_still:
+                return min(estimate, ts[0])
+            return last_still
+    still = [t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < resolution]
+    return still[-1] if still else times_ns[0]
+
+
+class DropTestPlan:
+    """Loop stage: constant current; wait for the hold; detect the release; record ``duration_s``."""
+
+    def __init__(self, settings: DropTestSettings, counts_per_rev: int):
+        self.s = settings
+        self.command = RigCommand(settings.current_a)
+        self.resolution = TWO_PI / counts_per_rev
+        self.phase = "wait-hold"
+        self._start_ns: int | None = None
+        self._still_since: int | None = None
+        self._hold_sum = 0.0
+        self._hold_count = 0
+        self.hold_angle = settings.theta0_rad
+        self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=max(16, int(settings.rate_hz)))
+        self.release_ns: int | None = None
+        self.release_estimated = False
+        capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
+        self._rows = np.full((capacity, len(DROP_COLUMNS)), np.nan)
+        self._n = 0
+
+    # the cycle -------------------------------------------------------------------------------
+    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
+        theta = sample.theta_rad
+        if self._start_ns is None:
+            self._start_ns = t_ns
+        if self.phase == "record":
+            return self._record(t_ns, theta, sample.theta_road_rad, sample.current_a)
+        self._recent.append((t_ns, theta, sample.theta_road_rad, sample.current_a))
+        if self.phase == "wait-hold":
+            self._wait_hold(t_ns, theta)
+        elif self.phase == "held":
+            if abs(theta - self.hold_angle) > self.s.release_threshold_rad:
+                self._released(t_ns)
+                if self.phase == "done":
+                    return None
+            elif (t_ns - self._start_ns) * 1e-9 > 2 * self.s.hold_timeout_s:
+                raise DriverTimeoutError(
+                    f"drop test: the arm was held at {math.degrees(self.hold_angle):.2f} deg but not released "
+                    f"within {2 * self.s.hold_timeout_s:g} s"
+                )
+        return self.command
+
+    def _wait_hold(self, t_ns: int, theta: float) -> None:
+        if abs(theta - self.s.theta0_rad) <= self.s.hold_tolerance_rad:
+            if self._still_since is None or abs(theta - self._hold_sum / max(self._hold_count, 1)) > 2 * self.resolution:
+                self._still_since, self._hold_sum, self._hold_count = t_ns, 0.0, 0
+            self._hold_sum += theta
+            self._hold_count += 1
+            if (t_ns - self._still_since) * 1e-9 >= self.s.hold_time_s:
+                self.phase = "held"
+                self.hold_angle = self._hold_sum / self._hold_count
+        else:
+            self._still_since = None
+        if self.phase == "wait-hold" and (t_ns - self._start_ns) * 1e-9 > self.s.hold_timeout_s:
+            raise DriverTimeoutError(
+                f"drop test: no steady hold within ±{math.degrees(self.s.hold_tolerance_rad):g} deg of "
+                f"{math.degrees(self.s.theta0_rad):g} deg for {self.s.hold_time_s:g} s within "
+                f"{self.s.hold_timeout_s:g} s (press the arm to theta0 and hold it still)"
+            )
+
+    def _released(self, t_ns: int) -> None:
+        recent = list(self._recent)
+        if self.s.known_release_after_s is not None:
+            self.release_ns = self._start_ns + round(self.s.known_release_after_s * 1e9)
+        else:
+            self.release_ns = estimate_release_ns(
+                [r[0] for r in recent], [r[1] for r in recent], self.hold_angle, self.resolution
+            )
+            self.release_estimated = True
+        self.phase = "record"
+        for t, theta, road, current in recent:
+            if t >= self.release_ns and self._record(t, theta, road, current) is None:
+                break
+
+    def _record(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
+        time_s = (t_ns - self.release_ns) * 1e-9
+        if time_s > self.s.duration_s + 1e-9 or self._n >= self._rows.shape[0]:
+            self.phase = "done"
+            return None
+        row = self._rows[self._n]
+        row[0], row[1], row[2], row[3], row[4] = time_s, theta, road, current, self.s.current_a
+        self._n += 1
+        return self.command
+
+    def columns(self) -> dict[str, np.ndarray]:
+        data = self._rows[: self._n]
+        return {name: data[:, index].copy() for index, name in enumerate(DROP_COLUMNS)}
+
+
+def default_clock(config: dict[str, Any]) -> Clock:
+    """The sim backend on the virtual clock unless the config asks for the real one."""
+    driver = config["driver"]
+    if driver["name"] == "sim" and driver["clock"] == "virtual":
+        return VirtualClock()
+    return RealClock()
+
+
+def run_drop_test(
+    config: dict[str, Any],
+    theta0_deg: float = -5.0,
+    current_a: float = 0.0,
+    duration_s: float = 10.0,
+    rig: RigInterface | None = None,
+    clock: Clock | None = None,
+) -> DropRecord:
+    """One drop test at a constant current; returns the record from the release on."""
+    settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
+    rig = rig if rig is not None else open_rig(config)
+    clock = clock if clock is not None else default_clock(config)
+    release_after = max(settings.hold_time_s + 0.1, 0.3)
+    if rig.operator_hold(settings.theta0_rad, release_after):
+        settings.known_release_after_s = release_after
+        set_current = getattr(rig, "set_initial_current", None)
+        if set_current is not None:
+            set_current(current_a)
+    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"])
+    loop = run_loop(rig, plan, clock, settings.rate_hz)
+    columns = plan.columns()
+    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop)
+    record.metrics = drop_metrics(
+        columns["time_s"],
+        columns["theta_rad"],
+        settle_band_deg=config["drop_test"]["settle_band_deg"],
+        resolution_rad=plan.resolution,
+    )
+    return record

@@ -1,0 +1,1 @@
+"""Models of the rig and its damper (pure math, no I/O)."""

@@ -1,0 +1,179 @@
+"""Bouc-Wen hysteresis of the rotary MR damper, with current-dependent alpha(i), c(i).
+
+Seed 001 (Iskandarani & Karimi 2011), eqs. 9-12 and 15-17::
+
+    T     = alpha(i) * z + c(i) * theta_dot                                  (eq. 9)
+    c(i)  = c1 + c2 * i,   alpha(i) = alpha1 + alpha2 * i                    (eqs. 11-12, 15-16)
+    z_dot = -gamma*|theta_dot|*z*|z|^(n-1) - beta*theta_dot*|z|^n + delta*theta_dot   (eq. 17)
+
+The seed prints ``z|z|^n`` in the first term; we use the standard ``z|z|^(n-1) = sign(z)|z|^n``.
+
+Numerics (DESIGN.md, research/peers_boucwen.md section 3). The law is rate-independent: dividing
+eq. 17 by theta_dot gives an ODE in the angle,
+
+    dz/dtheta = delta - |z|^n * (beta + gamma * sign(dtheta) * sign(z)),
+
+and with ``s = sign(dtheta)``, ``zeta = s*z`` and the travel ``u = |dtheta|`` both directions of
+motion become one autonomous scalar ODE
+
+    dzeta/du = phi(zeta) = delta - |zeta|^n * (beta + gamma * sign(zeta)),
+
+whose stable equilibrium is the analytic bound ``z_u = (delta / (beta + gamma))^(1/n)``. From any
+``|z| <= z_u`` the exact solution moves monotonically towards ``s*z_u`` and never crosses it. We
+integrate it over each sample's angle increment with backward Euler in the angle, sub-stepped so
+that z changes by at most ``z_u / substeps_per_bound`` per sub-step, each implicit equation solved
+by Newton's method safeguarded by bisection inside the bracket [zeta, z_u]. The result is finite
+and inside the bound for every increment and step size; ``|z|**(n-1)`` is never evaluated at 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class BoucWenParams:
+    """Parameters of the Bouc-Wen rig model (DESIGN.md names; seed 001 section 8 values)."""
+
+    J: float = 1.0
+    k: float = 109.0
+    c1: float = 0.7
+    c2: float = 1.5
+    alpha1: float = 1.0
+    alpha2: float = 1.0
+    beta: float = 873.0
+    gamma: float = 1.0
+    delta: float = 700.0
+    n: float = 0.099
+
+    @classmethod
+    def from_mapping(cls, params: dict) -> "BoucWenParams":
+        """Build from a ``params`` mapping (config ``model.params`` or a parameter file)."""
+        return cls(**{key: float(params[key]) for key in cls.__dataclass_fields__ if key in params})
+
+    def as_dict(self) -> dict[str, float]:
+        return {key: getattr(self, key) for key in self.__dataclass_fields__}
+
+    @property
+    def z_bound(self) -> float:
+        """Analytic bound of |z| for a record starting at |z| <= it: (delta/(beta+gamma))^(1/n)."""
+        return (self.delta / (self.beta + self.gamma)) ** (1.0 / self.n)
+
+    def damping(self, current_a: float) -> float:
+        """c(i) = c1 + c2*i (seed 001 eq. 11)."""
+        return self.c1 + self.c2 * current_a
+
+    def hysteretic_gain(self, current_a: float) -> float:
+        """alpha(i) = alpha1 + alpha2*i (seed 001 eq. 12)."""
+        return self.alpha1 + self.alpha2 * current_a
+
+    def torque(self, z: float, theta_dot: float, current_a: float) -> float:
+        """Damper torque T = alpha(i)*z + c(i)*theta_dot (seed 001 eq. 9)."""
+        return (self.alpha1 + self.alpha2 * current_a) * z + (self.c1 + self.c2 * current_a) * theta_dot
+
+
+class BoucWenZ:
+    """The hysteretic state update z(theta) of seed 001 eq. 17, integrated over angle increments.
+
+    ``advance(z, dtheta)`` is the real-time step (plain Python floats, no allocation);
+    ``trajectory(theta, z0)`` is the batch path over a whole record.
+    """
+
+    __slots__ = ("beta", "gamma", "delta", "n", "z_u", "dz_max", "dz_min", "kappa", "tail", "tail_rate", "tol")
+
+    def __init__(self, beta: float, gamma: float, delta: float, n: float, substeps_per_bound: int = 16):
+        if not (delta > 0.0 and n > 0.0 and beta + gamma > 0.0):
+            raise ValueError(
+                f"Bouc-Wen needs delta > 0, n > 0 and beta + gamma > 0 (got delta={delta}, n={n}, "
+                f"beta+gamma={beta + gamma})"
+            )
+        self.beta = float(beta)
+        self.gamma = float(gamma)
+        self.delta = float(delta)
+        self.n = float(n)
+        self.z_u = (self.delta / (self.beta + self.gamma)) ** (1.0 / self.n)
+        self.dz_max = self.z_u / substeps_per_bound
+        self.dz_min = self.z_u * 1e-4
+        self.kappa = 0.5
+        self.tail = self.z_u * 1e-6
+        self.tail_rate = self.n * self.delta / self.z_u
+        self.tol = self.z_u * 1e-15
+
+    @classmethod
+    def from_params(cls, params: BoucWenParams, substeps_per_bound: int = 16) -> "BoucWenZ":
+        return cls(params.beta, params.gamma, params.delta, params.n, substeps_per_bound)
+
+    def rate(self, zeta: float) -> float:
+        """phi(zeta) = dzeta/du for motion in the direction of zeta's sign convention."""
+        a = abs(zeta)
+        if a == 0.0:
+            return self.delta
+        return self.delta - a**self.n * (self.beta + (self.gamma if zeta > 0.0 else -self.gamma))
+
+    def advance(self, z: float, dtheta: float) -> float:
+        """z after the arm turns by ``dtheta`` [rad] from state ``z`` (any size, either sign)."""
+        if dtheta == 0.0 or dtheta != dtheta:
+            return z
+        z_u = self.z_u
+        s = 1.0 if dtheta > 0.0 else -1.0
+        zeta = s * z
+        if zeta > z_u:
+            zeta = z_u
+        elif zeta < -z_u:
+            zeta = -z_u
+        travel = abs(dtheta)
+        beta, gamma, delta, n = self.beta, self.gamma, self.delta, self.n
+        dz_max, dz_min, tail, tail_rate, kappa = self.dz_max, self.dz_min, self.tail, self.tail_rate, self.kappa
+        rate = self.rate
+        while travel > 0.0 and zeta < z_u:
+            gap = z_u - zeta
+            if gap <= tail:
+                # Linearised exact solution of the last approach to z_u: gap' = -n*delta/z_u * gap.
+                gap *= math.exp(-tail_rate * travel)
+                zeta = z_u - gap if gap > self.tol else z_u
+                break
+            a = abs(zeta)
+            if a == 0.0:
+                phi = delta
+                stiff = math.inf
+            else:
+                c = beta + (gamma if zeta > 0.0 else -gamma)
+                p = a**n
+                phi = delta - p * c
+                stiff = n * p * abs(c) / a  # |dphi/dzeta|
+            if phi <= 0.0:
+                break  # at -z_u with gamma <= 0: an equilibrium of the exact solution
+            h = dz_max / phi
+            limit = kappa / stiff
+            if limit < h:
+                h = max(limit, dz_min / phi)
+            if h > travel:
+                h = travel
+            # classical Runge-Kutta in the travel u, stages clamped to the bound
+            k1 = phi
+            x = zeta + 0.5 * h * k1
+            k2 = rate(x if x < z_u else z_u)
+            x = zeta + 0.5 * h * k2
+            k3 = rate(x if x < z_u else z_u)
+            x = zeta + h * k3
+            k4 = rate(x if x < z_u else z_u)
+            new = zeta + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+            zeta = new if new < z_u else z_u
+            travel -= h
+        return s * zeta
+
+    def trajectory(self, theta: np.ndarray, z0: float = 0.0) -> np.ndarray:
+        """Batch path: z at every sample of an angle record ``theta`` [rad], starting from ``z0``."""
+        theta = np.asarray(theta, dtype=float)
+        out = np.empty_like(theta)
+        z = float(z0)
+        previous = float(theta[0]) if theta.size else 0.0
+        advance = self.advance
+        for index, angle in enumerate(theta.tolist()):
+            z = advance(z, angle - previous)
+            previous = angle
+            out[index] = z
+        return out

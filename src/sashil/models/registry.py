@@ -1,0 +1,62 @@
+"""Model names, their parameter symbols, and checks of a ``model`` section / parameter file."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sashil.errors import ConfigError
+from sashil.models.hysteresis import BoucWenParams
+
+#: model name -> its parameter symbols (seed 001 names; DESIGN.md parameter-file shape)
+MODEL_PARAMS: dict[str, tuple[str, ...]] = {
+    "bouc-wen": tuple(BoucWenParams.__dataclass_fields__),
+    "dahl": ("J", "k", "c1", "c2", "kwa", "kwb", "rho"),
+    "lugre": ("J", "k", "sigma_a", "sigma_b", "sigma0", "sigma1", "sigma2", "a0"),
+    "bingham": ("J", "k", "c0", "c0_i", "fc", "fc_i", "f0"),
+}
+
+
+def check_model(section: dict[str, Any], source: str, where: str, complete: bool = False) -> dict[str, Any]:
+    """Check a ``{name, params}`` model section; return it with float parameters.
+
+    Unknown symbols, non-numbers and (for the rig's Bouc-Wen model) values that break the analytic
+    bound are one-line ConfigErrors naming ``source`` and the key.
+    """
+    prefix = f"{where}." if where else ""
+    name = section.get("name", "bouc-wen")
+    if name not in MODEL_PARAMS:
+        raise ConfigError(f"{source}: {prefix}model: unknown model {name!r} (known: {', '.join(MODEL_PARAMS)})")
+    symbols = MODEL_PARAMS[name]
+    params = section.get("params") or {}
+    if not isinstance(params, dict):
+        raise ConfigError(f"{source}: {prefix}params: expected a mapping of {name} parameters, got {params!r}")
+    out: dict[str, float] = {}
+    for key, value in params.items():
+        if key not in symbols:
+            raise ConfigError(f"{source}: {prefix}params.{key}: not a {name} parameter (expected {', '.join(symbols)})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+            raise ConfigError(f"{source}: {prefix}params.{key}: expected a number, got {value!r}")
+        out[key] = float(value)
+    if complete or name != "bouc-wen":
+        missing = [s for s in symbols if s not in out]
+        if missing:
+            raise ConfigError(f"{source}: {prefix}params: missing {', '.join(missing)} for model {name}")
+    if name == "bouc-wen":
+        merged = {**BoucWenParams().as_dict(), **out}
+        for key in ("J", "n", "delta"):
+            if merged[key] <= 0:
+                raise ConfigError(f"{source}: {prefix}params.{key}: expected a number > 0, got {merged[key]:g}")
+        for key in ("k", "c1", "alpha1"):
+            if merged[key] < 0:
+                raise ConfigError(f"{source}: {prefix}params.{key}: expected a number >= 0, got {merged[key]:g}")
+        if merged["beta"] + merged["gamma"] <= 0:
+            raise ConfigError(f"{source}: {prefix}params.beta+gamma: expected > 0 (bounded z), got {merged['beta'] + merged['gamma']:g}")
+        out = merged
+    return {"name": name, "params": out}
+
+
+def rig_params(model_section: dict[str, Any]) -> BoucWenParams:
+    """The Bouc-Wen parameters the simulated rig runs on (only Bouc-Wen drives the rig plant)."""
+    if model_section.get("name", "bouc-wen") != "bouc-wen":
+        raise ConfigError(f"model.name: the simulated rig runs the bouc-wen model, got {model_section['name']!r}")
+    return BoucWenParams.from_mapping(model_section["params"])

@@ -1,0 +1,1 @@
+"""Run records: the run folder, data files, summaries and plots (off the hot path)."""

@@ -1,0 +1,107 @@
+"""The run folder of DESIGN.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots.
+
+A run folder is created only after every input has been checked, so a bad argument leaves nothing
+behind; files are written under a temporary name and renamed, so a reader never sees half a file.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import socket
+import subprocess
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Mapping
+
+from sashil import __version__
+from sashil.config import Config, dump_config
+from sashil.errors import ConfigError
+from sashil.recording.data_file import Columns, write_data_csv
+
+
+def utc_now() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+def utc_stamp(moment: datetime | None = None) -> str:
+    """``20261121T103000Z``-style stamp for folder names."""
+    return (moment or utc_now()).strftime("%Y%m%dT%H%M%SZ")
+
+
+def git_revision() -> str | None:
+    """The git revision sashil runs from, when it runs from a checkout."""
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=2,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def provenance() -> dict[str, Any]:
+    """What describes the software and machine a run came from."""
+    return {
+        "sashil_version": __version__,
+        "git_revision": git_revision(),
+        "host": socket.gethostname(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+
+
+class RunFolder:
+    """One run's folder; every writer is atomic (temp file + rename)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.started_utc = utc_now()
+
+    @classmethod
+    def create(cls, out: str | Path | None, verb: str, root: str | Path = "runs") -> "RunFolder":
+        """``out`` or ``runs/<UTC timestamp>-<verb>/``; an existing non-empty ``out`` is refused."""
+        if out is None:
+            base = Path(root) / f"{utc_stamp()}-{verb}"
+            path, suffix = base, 1
+            while path.exists():
+                suffix += 1
+                path = base.with_name(f"{base.name}-{suffix}")
+        else:
+            path = Path(out)
+            if path.exists() and (not path.is_dir() or any(path.iterdir())):
+                raise ConfigError(f"--out {path}: exists and is not an empty folder (choose another)")
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"--out {path}: cannot create folder ({err.strerror})") from None
+        return cls(path)
+
+    def file(self, name: str) -> Path:
+        return self.path / name
+
+    def _write_text(self, name: str, text: str) -> Path:
+        target = self.file(name)
+        tmp = target.with_name(target.name + ".part")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(target)
+        return target
+
+    def write_config(self, config: Config) -> Path:
+        return self._write_text("config.yaml", dump_config(config))
+
+    def write_data(self, columns: Columns, name: str = "data.csv") -> Path:
+        return write_data_csv(self.file(name), columns)
+
+    def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
+        doc = {
+            **summary,
+            "started_utc": self.started_utc.isoformat(),
+            "ended_utc": utc_now().isoformat(),
+            "provenance": provenance(),
+        }
+        return self._write_text(name, json.dumps(doc, indent=2, allow_nan=False) + "\n")

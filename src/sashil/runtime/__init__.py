@@ -1,0 +1,1 @@
+"""The real-time side: clocks and the fixed-rate control loop (owns time and I/O)."""

@@ -1,0 +1,56 @@
+"""Clocks for the loop: integer nanoseconds from one monotonic source (DESIGN.md, Time).
+
+``RealClock`` sleeps to a margin before the deadline and spins the rest; ``VirtualClock`` jumps
+straight to the deadline, so simulated runs are deterministic and faster than real time.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+
+class Clock(Protocol):
+    def now_ns(self) -> int: ...
+
+    def sleep_until(self, deadline_ns: int) -> None: ...
+
+
+class RealClock:
+    """``time.perf_counter_ns`` with hybrid sleep-then-spin waiting (``spin_ns`` = 0: no spin)."""
+
+    virtual = False
+
+    def __init__(self, spin_ns: int = 200_000):
+        self.spin_ns = int(spin_ns)
+
+    def now_ns(self) -> int:
+        return time.perf_counter_ns()
+
+    def sleep_until(self, deadline_ns: int) -> None:
+        remaining = deadline_ns - time.perf_counter_ns() - self.spin_ns
+        if remaining > 0:
+            time.sleep(remaining * 1e-9)
+        if self.spin_ns:
+            while time.perf_counter_ns() < deadline_ns:
+                pass
+
+
+class VirtualClock:
+    """Simulated time: ``sleep_until`` advances the clock to the deadline at once."""
+
+    virtual = True
+
+    def __init__(self, start_ns: int = 0):
+        self._now = int(start_ns)
+
+    def now_ns(self) -> int:
+        return self._now
+
+    def sleep_until(self, deadline_ns: int) -> None:
+        if deadline_ns > self._now:
+            self._now = int(deadline_ns)
+
+    def advance(self, ns: int) -> None:
+        """Let simulated time pass (tests use it to model compute time or a stall)."""
+        self._now += int(ns)
