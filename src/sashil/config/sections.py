@@ -56,6 +56,15 @@ DRIVER = Section(
         "name": Field("choice", "sim", choices=("sim", "serial", "can")),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
         "clock": Field("choice", "virtual", choices=("virtual", "real"), doc="sim backend only"),
+        # serial and can backends (drivers/protocol.md)
+        "baud": Field("int", 1_000_000, low=1200, high=100_000_000, doc="serial line rate (ignored by ptys)"),
+        "can_interface": Field("str", "slcan", doc="python-can interface: socketcan, pcan, kvaser, slcan, virtual, ..."),
+        "can_bitrate": Field("int", 1_000_000, low=10_000, high=1_000_000),
+        "can_options": Section({}, open_keys=True),  # extra keyword arguments for can.Bus
+        "pacing": Field("choice", "device", choices=("device", "host"), doc="who times the samples"),
+        "watchdog_ms": Field("int", 50, low=1, high=60_000, doc="device cuts to 0 A without a command this long"),
+        "sample_timeout_ms": Field("float", 2.5, low=0.1, high=10_000.0, doc="read() gives up without a sample"),
+        "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
     },
     doc="which backend talks to the rig",
 )
@@ -63,15 +72,38 @@ DRIVER = Section(
 LOOP = Section(
     {
         "rate_hz": Field("float", 1000.0, low=0.0, low_open=True, high=20000.0),
+        "spin_margin_us": Field("float", 200.0, low=0.0, high=100000.0, doc="sleep to this before a deadline, then spin (0: no spin)"),
+        "overrun_policy": Field("choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"),
+        "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
+        "rt": Section(
+            {
+                "priority": Field("int", 50, low=0, high=99, doc="SCHED_FIFO priority (0: leave the scheduler alone)"),
+                "cpu": Field("int?", None, low=0, high=4095, doc="pin the loop thread to this CPU (null: no pinning)"),
+                "mlockall": Field("bool", True, doc="lock the process memory (no page faults in the loop)"),
+                "gc": Field("choice", "disable", choices=("disable", "freeze", "none"), doc="garbage collector during the run"),
+                "timer_slack_ns": Field("int", 1, low=0, high=10_000_000, doc="PR_SET_TIMERSLACK of the loop thread (0: leave)"),
+            },
+            doc="best-effort real-time set-up; each step's outcome is reported, none is fatal",
+        ),
     },
     doc="the real-time control loop",
+)
+
+SAFETY = Section(
+    {
+        "angle_interlock": Field("bool", True, doc="trip when |theta| exceeds rig.angle_limit_deg"),
+        "slew_a_per_s": Field("float", 0.0, low=0.0, doc="largest current change per second (0: no slew limit)"),
+        "sensor_timeout_cycles": Field("int", 20, low=1, high=1_000_000, doc="trip after this many cycles without a fresh sample"),
+        "trip_on_device_fault": Field("bool", True, doc="trip when the device reports a fault or overcurrent flag"),
+    },
+    doc="the host-side safety supervisor (current clamp [0, rig.current_max_a] is always on)",
 )
 
 DROP_TEST = Section(
     {
         "hold_tolerance_deg": Field("float", 0.5, low=0.0, low_open=True, high=10.0),
         "hold_time_s": Field("float", 0.2, low=0.0, high=60.0),
-        "release_threshold_deg": Field("float", 0.1, low=0.0, low_open=True, high=10.0),
+        "release_threshold_deg": Field("float", 0.5, low=0.0, low_open=True, high=10.0),
         "hold_timeout_s": Field("float", 60.0, low=0.0, low_open=True),
         "settle_band_deg": Field("float", 0.25, low=0.0, low_open=True, high=10.0),
     },
@@ -83,5 +115,6 @@ SCHEMA = {
     "rig": RIG,
     "driver": DRIVER,
     "loop": LOOP,
+    "safety": SAFETY,
     "drop_test": DROP_TEST,
 }

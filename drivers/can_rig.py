@@ -1,0 +1,93 @@
+"""The CAN backend: the rig's interface board on a CAN bus (python-can), frames of ``sashil.dbc``.
+
+The bus is opened with ``can.Bus(interface=driver.can_interface, channel=driver.port,
+bitrate=driver.can_bitrate, **driver.can_options)``, so socketcan, pcan, kvaser, slcan (a serial
+USB-CAN adapter or the emulator's pty) and virtual all work from the config. For ``slcan`` the
+adapter's reset pause ``sleep_after_open`` defaults to 0 s here (python-can's 2 s is for adapters
+that reboot when the port opens; set ``driver.can_options: {sleep_after_open: 2}`` for those).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import can
+
+from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
+from sashil.drivers.link_rig import LinkRig, LinkSettings, error_reason
+from sashil.drivers.messages import Message
+from sashil.errors import DriverError, DriverIOError
+
+
+class CanRig(LinkRig):
+    """The rig over CAN (``driver.name: can``)."""
+
+    name = "can"
+    device_time_bits = 24
+
+    def __init__(self, settings: LinkSettings, interface: str = "slcan", bitrate: int = 1_000_000, options: dict[str, Any] | None = None):
+        super().__init__(settings)
+        if not settings.port:
+            raise DriverError("driver.port: the can backend needs a channel (--port, e.g. can0 or a slcan tty)")
+        self.interface = interface
+        self.bitrate = int(bitrate)
+        self.options = dict(options or {})
+        if interface == "slcan":
+            self.options.setdefault("sleep_after_open", 0)
+        self.decoder = CanDecoder()
+        self._bus: Any = None
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any]) -> "CanRig":
+        driver = config["driver"]
+        return cls(LinkSettings(config), driver["can_interface"], driver["can_bitrate"], driver["can_options"])
+
+    def describe(self) -> str:
+        return f"can {self.interface}:{self.settings.port}"
+
+    def codec_counters(self) -> dict[str, int]:
+        return self.decoder.counters.as_dict()
+
+    # link ------------------------------------------------------------------------------------
+    def _open(self) -> None:
+        filters = [{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in RIG_IDS]
+        try:
+            self._bus = can.Bus(
+                interface=self.interface,
+                channel=self.settings.port,
+                bitrate=self.bitrate,
+                can_filters=filters,
+                **self.options,
+            )
+        except can.CanInterfaceNotImplementedError as err:
+            raise DriverError(f"driver.can_interface: {self.interface!r} is not available ({error_reason(err)})") from None
+        except (can.CanError, ValueError, TypeError, OSError, ImportError) as err:
+            raise DriverError(f"{self.describe()}: cannot open the CAN bus ({error_reason(err)})") from None
+
+    def _send(self, seq: int, msg: Message) -> None:
+        try:
+            for frame_id, data in encode(msg, seq):
+                self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+        except (can.CanError, OSError, ValueError) as err:
+            raise DriverIOError(f"{self.describe()}: link lost on send ({error_reason(err)})") from None
+
+    def _receive(self, timeout_s: float) -> list[tuple[int, Message]]:
+        out: list[tuple[int, Message]] = []
+        bus, decoder = self._bus, self.decoder
+        try:
+            frame = bus.recv(timeout_s)
+            while frame is not None:
+                if not frame.is_error_frame and not frame.is_remote_frame:
+                    got = decoder.feed(frame.arbitration_id, bytes(frame.data))
+                    if got is not None:
+                        out.append(got)
+                frame = bus.recv(0.0)
+        except (can.CanError, OSError, ValueError) as err:
+            raise DriverIOError(f"{self.describe()}: link lost ({error_reason(err)})") from None
+        return out
+
+    def _close_link(self) -> None:
+        if self._bus is not None:
+            bus, self._bus = self._bus, None
+            bus.shutdown()
+

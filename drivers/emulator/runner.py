@@ -1,0 +1,165 @@
+"""Runs a :class:`RigDevice` on a transport in real time (own process, or a thread in tests).
+
+One loop: wait for host bytes until the device's next event (sample due, watchdog deadline) or a
+delayed frame is due; hand what arrived to the device; let the device tick; send its output
+through the fault injection (drop, corrupt, latency). The stall and disconnect faults are the
+loop's: after ``stall_after_s`` it neither reads nor sends, after ``disconnect_after_s`` it closes
+the link and returns.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from sashil.drivers.emulator.device import Faults, Operator, RigDevice
+from sashil.drivers.emulator.transports import (
+    DeviceTransport,
+    Pty,
+    SerialPtyTransport,
+    SlcanPtyTransport,
+    VirtualCanTransport,
+)
+from sashil.drivers.messages import Message
+from sashil.drivers.sim import SimulatedRig
+
+MAX_WAIT_S = 0.02  # upper bound of one wait (keeps stop requests responsive)
+
+
+def build_device(
+    config: dict[str, Any],
+    operator: Operator | None = None,
+    faults: Faults | None = None,
+    fixed_rate_hz: int | None = None,
+) -> RigDevice:
+    """The emulated board around the simulated rig the config describes (model, rig section)."""
+    return RigDevice(SimulatedRig.from_config(config), operator, faults, fixed_rate_hz)
+
+
+@dataclass
+class EmulatorStats:
+    stopped_by: str = ""  # "stop", "duration", "disconnect"
+    stalled: bool = False
+    delayed: list[tuple[int, int, int, Message, bool]] = field(default_factory=list)
+
+
+class Emulator:
+    """The device loop (see module docstring)."""
+
+    def __init__(self, device: RigDevice, transport: DeviceTransport, clock: Callable[[], int] = time.monotonic_ns):
+        self.device = device
+        self.transport = transport
+        self.clock = clock
+        self.stop_event = threading.Event()
+        self.stats = EmulatorStats()
+        self._order = 0
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+    def run(self, duration_s: float | None = None) -> str:
+        """Serve the host until stopped, ``duration_s`` passed, or the disconnect fault; returns why."""
+        device, transport, faults = self.device, self.transport, self.device.faults
+        start = self.clock()
+        end = None if duration_s is None else start + int(duration_s * 1e9)
+        try:
+            while not self.stop_event.is_set():
+                now = self.clock()
+                if end is not None and now >= end:
+                    return self._stopped("duration")
+                session = device.session_time_s(now)
+                if session is not None and faults.disconnect_after_s is not None and session >= faults.disconnect_after_s:
+                    return self._stopped("disconnect")
+                if session is not None and faults.stall_after_s is not None and session >= faults.stall_after_s:
+                    self.stats.stalled = True
+                    self.stop_event.wait(MAX_WAIT_S)
+                    continue
+                wait_ns = int(MAX_WAIT_S * 1e9)
+                for event in (device.next_event_ns(), self._next_delayed_ns(), end):
+                    if event is not None:
+                        wait_ns = min(wait_ns, event - now)
+                received = transport.receive(max(wait_ns, 0) * 1e-9)
+                now = self.clock()
+                device.bad_frames = transport.bad_frames
+                out: list[tuple[int, Message]] = []
+                for seq, msg in received:
+                    out += device.handle(msg, now)
+                out += device.tick(now)
+                for seq, msg in out:
+                    self._emit(seq, msg, now)
+                self._flush_delayed(now)
+            return self._stopped("stop")
+        finally:
+            transport.close()
+
+    def _stopped(self, why: str) -> str:
+        self.stats.stopped_by = why
+        return why
+
+    # output with fault injection ---------------------------------------------------------
+    def _emit(self, seq: int, msg: Message, now: int) -> None:
+        faults = self.device.faults
+        if faults.drop():
+            return
+        corrupt = faults.corrupt()
+        if faults.latency_ms > 0.0:
+            self._order += 1
+            due = now + int(faults.latency_ms * 1e6)
+            heapq.heappush(self.stats.delayed, (due, self._order, seq, msg, corrupt))
+            return
+        self.transport.send(seq, msg, corrupt)
+
+    def _next_delayed_ns(self) -> int | None:
+        return self.stats.delayed[0][0] if self.stats.delayed else None
+
+    def _flush_delayed(self, now: int) -> None:
+        delayed = self.stats.delayed
+        while delayed and delayed[0][0] <= now:
+            _, _, seq, msg, corrupt = heapq.heappop(delayed)
+            self.transport.send(seq, msg, corrupt)
+
+
+class EmulatorThread:
+    """An emulator serving in a thread of this process (tests, benchmarks).
+
+    ``transport``: ``serial`` or ``slcan`` (a pty; the host opens :attr:`port`) or ``virtual``
+    (python-can's virtual bus; :attr:`port` is the channel name).
+    """
+
+    def __init__(
+        self,
+        config: dict[str, Any],
+        transport: str = "serial",
+        operator: Operator | None = None,
+        faults: Faults | None = None,
+        channel: str = "sashil-emulator",
+    ):
+        self.device = build_device(config, operator, faults)
+        if transport == "virtual":
+            self.link: DeviceTransport = VirtualCanTransport(channel)
+            self.port = channel
+        else:
+            pty = Pty.open()
+            self.link = SerialPtyTransport(pty) if transport == "serial" else SlcanPtyTransport(pty)
+            self.port = pty.path
+        self.emulator = Emulator(self.device, self.link)
+        self.result: str | None = None
+        self._thread = threading.Thread(target=self._run, name="sashil-emulator", daemon=True)
+
+    def _run(self) -> None:
+        self.result = self.emulator.run()
+
+    def __enter__(self) -> "EmulatorThread":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        self.emulator.stop()
+        self._thread.join(timeout=5.0)
+

@@ -1,0 +1,283 @@
+"""What the serial and the CAN backend share: handshake, pacing, sample bookkeeping, safe stop.
+
+A subclass moves messages (``sashil.drivers.messages``) over its link with four methods:
+``_open()``, ``_send(seq, msg)``, ``_receive(timeout_s) -> [(seq, msg)]`` and ``_close_link()``;
+it wraps its library's exceptions as :class:`DriverIOError`. This class keeps the RigInterface
+contract on top (protocol.md "Session"):
+
+- ``configure()``: open, Hello -> Version (the protocol version must match, the encoder resolution
+  must match the config), Configure -> Status; any failure closes the link again and raises
+  :class:`DriverError` (exit 2). Nothing is energised: the device drives 0 A until a Command with
+  the ENABLE flag, and it only gets one after ``activate()``.
+- Pacing ``device`` (default): the device streams samples at the loop rate; ``read`` returns the
+  newest sample, waiting for one if none arrived since the last read. Pacing ``host``: each
+  Command is answered by one Sample; ``read`` waits for the answer to the last Command (or polls
+  with the current setpoint when none is outstanding).
+- ``read`` raises :class:`DriverTimeoutError` after ``driver.sample_timeout_ms`` without a sample.
+- ``deactivate()`` sends Command(0 A, not enabled) and never raises; ``close()`` is idempotent.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import abstractmethod
+from typing import Any
+
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample, RigState
+from sashil.drivers.messages import (
+    CMD_ENABLE,
+    PACING_DEVICE,
+    PACING_HOST,
+    PACING_NAMES,
+    PROTOCOL_VERSION,
+    Command,
+    Configure,
+    Hello,
+    Message,
+    RoadSpeed,
+    Sample,
+    Status,
+    Version,
+)
+from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
+
+
+class LinkSettings:
+    """The ``driver`` and ``loop`` keys a link backend needs, checked once."""
+
+    def __init__(self, config: dict[str, Any]):
+        driver = config["driver"]
+        self.port: str | None = driver["port"]
+        self.rate_hz = int(round(config["loop"]["rate_hz"]))
+        self.pacing = PACING_NAMES[driver["pacing"]]
+        self.watchdog_ms = int(round(driver["watchdog_ms"]))
+        self.sample_timeout_s = driver["sample_timeout_ms"] * 1e-3
+        self.connect_timeout_s = driver["connect_timeout_s"]
+        self.counts_per_rev = config["rig"]["encoder_counts_per_rev"]
+        self.current_max_a = config["rig"]["current_max_a"]
+
+
+class LinkRig(RigInterface):
+    """A rig on the far end of a link that carries the sashil messages."""
+
+    #: bits of the device clock on this link (it wraps; the host unwraps it)
+    device_time_bits = 32
+
+    def __init__(self, settings: LinkSettings):
+        super().__init__()
+        self.settings = settings
+        self.device_version: Version | None = None
+        self.counts_per_rev = settings.counts_per_rev
+        self.last_status: Status | None = None
+        self._tx_seq = 0
+        self._setpoint = 0.0
+        self._road_speed: float | None = None
+        self._pending = 0  # host pacing: Commands not yet answered by a Sample
+        self._last_seq: int | None = None
+        self._dev_time_raw: int | None = None
+        self._dev_time_us = 0
+        self._link_up = False
+        #: what the link saw (summary.json material); codec counters come from the subclass
+        self.stats = {"samples": 0, "samples_missed": 0, "samples_skipped": 0, "timeouts": 0, "status_frames": 0}
+
+    # subclass hooks --------------------------------------------------------------------------
+    @abstractmethod
+    def _open(self) -> None: ...
+
+    @abstractmethod
+    def _send(self, seq: int, msg: Message) -> None: ...
+
+    @abstractmethod
+    def _receive(self, timeout_s: float) -> list[tuple[int, Message]]: ...
+
+    @abstractmethod
+    def _close_link(self) -> None: ...
+
+    @abstractmethod
+    def describe(self) -> str:
+        """Where the rig is, for messages ("serial /dev/ttyACM0")."""
+
+    def codec_counters(self) -> dict[str, int]:
+        return {}
+
+    def link_stats(self) -> dict[str, int]:
+        """Sample bookkeeping plus the decoder's counters (bad frames, ...)."""
+        return {**self.stats, **self.codec_counters()}
+
+    # lifecycle -------------------------------------------------------------------------------
+    def configure(self) -> None:
+        if self.state is RigState.CLOSED:
+            raise DriverError(f"{self.describe()}: configure() after close()")
+        if self.state is not RigState.UNCONFIGURED:
+            return
+        self._open()
+        self._link_up = True
+        try:
+            self._handshake()
+        except DriverError as err:
+            self._shutdown_link()
+            if type(err) is DriverError:
+                raise
+            raise DriverError(str(err)) from None  # a failed handshake is bad input: exit 2
+        self.state = RigState.CONFIGURED
+
+    def _handshake(self) -> None:
+        s = self.settings
+        self._send_msg(Command(0.0, 0))
+        self._send_msg(Hello(PROTOCOL_VERSION))
+        version = self._expect(Version, "Version (answer to Hello)")
+        if version.protocol_version != PROTOCOL_VERSION:
+            raise DriverError(
+                f"{self.describe()}: the device speaks sashil protocol version {version.protocol_version}, "
+                f"this host speaks {PROTOCOL_VERSION}"
+            )
+        if version.counts_per_rev != s.counts_per_rev:
+            raise DriverError(
+                f"{self.describe()}: the device's encoder has {version.counts_per_rev} counts/rev, "
+                f"the config says rig.encoder_counts_per_rev: {s.counts_per_rev}"
+            )
+        self.device_version = version
+        self.counts_per_rev = version.counts_per_rev
+        self._send_msg(Configure(s.rate_hz, s.watchdog_ms, s.pacing))
+        status = self._expect(Status, "Status (answer to Configure)")
+        if status.fault_code:
+            raise DriverError(
+                f"{self.describe()}: the device refused rate {s.rate_hz} Hz / watchdog {s.watchdog_ms} ms "
+                f"(fault code {status.fault_code})"
+            )
+
+    def _expect(self, kind: type, what: str) -> Any:
+        deadline = time.monotonic() + self.settings.connect_timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DriverError(
+                    f"{self.describe()}: no {what} within {self.settings.connect_timeout_s:g} s "
+                    "(is a sashil rig on this port, and is it powered?)"
+                )
+            for _, msg in self._receive(remaining):
+                if isinstance(msg, kind):
+                    return msg
+
+    def activate(self) -> None:
+        if self.state is not RigState.CONFIGURED:
+            raise DriverError(f"{self.describe()}: activate() in state {self.state.value} (configure() first)")
+        self.state = RigState.ACTIVE
+
+    def deactivate(self) -> None:
+        self._setpoint = 0.0
+        if self.state is RigState.ACTIVE:
+            self.state = RigState.CONFIGURED
+        if self._link_up:
+            try:
+                self._send_msg(Command(0.0, 0))
+            except Exception:  # noqa: BLE001 - a dead link must not stop the shutdown
+                pass
+
+    def close(self) -> None:
+        if self.state is RigState.CLOSED:
+            return
+        self.deactivate()
+        self._shutdown_link()
+        self.state = RigState.CLOSED
+
+    def _shutdown_link(self) -> None:
+        self._link_up = False
+        try:
+            self._close_link()
+        except Exception:  # noqa: BLE001 - closing is best effort
+            pass
+
+    # cycle -----------------------------------------------------------------------------------
+    def read(self, t_ns: int, dt_ns: int) -> RigSample:
+        if self.state not in (RigState.CONFIGURED, RigState.ACTIVE):
+            raise DriverError(f"{self.describe()}: read() in state {self.state.value}")
+        if self.settings.pacing == PACING_HOST and self._pending == 0:
+            self._send_command()  # nothing outstanding: poll with the current setpoint
+        newest = self._take_samples(self._receive(0.0))
+        if newest is None or self._pending:
+            deadline = time.monotonic() + self.settings.sample_timeout_s
+            while newest is None or self._pending:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                got = self._take_samples(self._receive(remaining))
+                newest = got if got is not None else newest
+        if newest is None:
+            self.stats["timeouts"] += 1
+            self._pending = 0
+            raise DriverTimeoutError(
+                f"{self.describe()}: no sample for {self.settings.sample_timeout_s * 1e3:g} ms (device stalled or link lost)"
+            )
+        seq, sample = newest
+        return RigSample(
+            seq=seq,
+            time_ns=t_ns,
+            device_time_us=self._unwrap_device_time(sample.device_time_us),
+            arm_counts=sample.arm_counts,
+            road_counts=sample.road_counts,
+            current_a=sample.current_a,
+            flags=sample.flags,
+            counts_per_rev=self.counts_per_rev,
+        )
+
+    def _take_samples(self, messages: list[tuple[int, Message]]) -> tuple[int, Sample] | None:
+        newest = None
+        stats = self.stats
+        for seq, msg in messages:
+            if isinstance(msg, Sample):
+                if self._last_seq is not None:
+                    stats["samples_missed"] += max(0, ((seq - self._last_seq) & 0xFFFF) - 1)
+                self._last_seq = seq
+                stats["samples"] += 1
+                if newest is not None:
+                    stats["samples_skipped"] += 1
+                newest = (seq, msg)
+                if self._pending:
+                    self._pending -= 1
+            elif isinstance(msg, Status):
+                stats["status_frames"] += 1
+                self.last_status = msg
+        return newest
+
+    def _unwrap_device_time(self, raw: int) -> int:
+        if self._dev_time_raw is not None:
+            self._dev_time_us += (raw - self._dev_time_raw) & ((1 << self.device_time_bits) - 1)
+        else:
+            self._dev_time_us = raw
+        self._dev_time_raw = raw
+        return self._dev_time_us
+
+    def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
+        if self.state is RigState.ACTIVE:
+            current = cmd.current_a
+            self._setpoint = 0.0 if math.isnan(current) else min(max(current, 0.0), self.settings.current_max_a)
+        else:
+            self._setpoint = 0.0
+        speed = cmd.road_speed_rad_s
+        if speed is not None and speed != self._road_speed and self.state is RigState.ACTIVE:
+            self._send_msg(RoadSpeed(speed))
+            self._road_speed = speed
+        self._send_command()
+
+    def _send_command(self) -> None:
+        enabled = self.state is RigState.ACTIVE
+        self._send_msg(Command(self._setpoint if enabled else 0.0, CMD_ENABLE if enabled else 0))
+        if self.settings.pacing == PACING_HOST:
+            self._pending += 1
+
+    def _send_msg(self, msg: Message) -> None:
+        if not self._link_up:
+            raise DriverIOError(f"{self.describe()}: link is closed")
+        self._tx_seq = (self._tx_seq + 1) & 0xFFFF
+        self._send(self._tx_seq, msg)
+
+
+def error_reason(err: BaseException) -> str:
+    """The first line of a foreign exception's message, for a one-line DriverError."""
+    text = str(err).strip() or type(err).__name__
+    return text.splitlines()[0]
+
+
+__all__ = ["LinkRig", "LinkSettings", "PACING_DEVICE", "PACING_HOST", "DriverTimeoutError"]
