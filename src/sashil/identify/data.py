@@ -1,0 +1,131 @@
+"""Recorded runs as identification records, with the checks identification needs.
+
+A record is what one ``data.csv`` (DESIGN.md columns) tells about the rig: time, relative angle,
+coil current, and when present the road-side angle and an input torque. Bad input is one line
+naming the file and the problem (:class:`~sashil.errors.DataFileError`, exit 2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from sashil.errors import DataFileError
+from sashil.recording.data_file import read_data_csv
+
+#: fewest samples and shortest duration a record may have to be fitted
+MIN_SAMPLES = 200
+MIN_DURATION_S = 0.5
+#: a current spread below this (A) across all records cannot separate alpha1/alpha2, c1/c2
+MIN_CURRENT_SPREAD_A = 0.05
+
+
+@dataclass
+class Record:
+    """One run: time [s], theta [rad], current [A], road-side acceleration, input torque."""
+
+    name: str
+    time_s: np.ndarray
+    theta: np.ndarray
+    current: np.ndarray
+    acc_road: np.ndarray
+    torque_in: np.ndarray
+    theta_dot: np.ndarray = field(repr=False)
+    theta_ddot: np.ndarray = field(repr=False)
+    theta_smooth: np.ndarray = field(repr=False)
+    start_at_rest: bool = True  # drop tests start at standstill; else v0 from the first 20 ms
+
+    @property
+    def v0(self) -> float:
+        """Initial angular velocity: 0 at rest, else a quadratic fit over the first 20 ms."""
+        if self.start_at_rest:
+            return 0.0
+        t = self.time_s - self.time_s[0]
+        m = max(4, int(np.searchsorted(t, 0.02)))
+        return float(np.polyfit(t[:m], self.theta[:m], 2)[1])
+
+    @property
+    def dt(self) -> float:
+        return float(np.median(np.diff(self.time_s)))
+
+    @property
+    def mean_current(self) -> float:
+        return float(np.mean(self.current))
+
+    def initial_state_sign(self) -> float:
+        """Sign of the hysteretic state at the start: a drop test was pressed towards theta0,
+        so z0 = sign(theta0)*bound; a moving start follows its velocity."""
+        v0 = self.v0
+        if v0 != 0.0:
+            return math.copysign(1.0, v0)
+        return math.copysign(1.0, float(self.theta[0])) if self.theta[0] != 0.0 else 0.0
+
+
+def smooth_derivatives(time_s: np.ndarray, theta: np.ndarray, window_s: float = 0.031) -> tuple[np.ndarray, ...]:
+    """Savitzky-Golay smoothed angle, velocity and acceleration (for the equation-error stage)."""
+    dt = float(np.median(np.diff(time_s)))
+    window = max(5, int(round(window_s / dt)) | 1)
+    largest = theta.size if theta.size % 2 else theta.size - 1
+    window = min(window, largest)
+    smooth = savgol_filter(theta, window, 3, mode="interp")
+    vel = savgol_filter(theta, window, 3, deriv=1, delta=dt, mode="interp")
+    acc = savgol_filter(theta, window, 3, deriv=2, delta=dt, mode="interp")
+    return smooth, vel, acc
+
+
+def record_from_columns(name: str, columns: dict[str, np.ndarray], start_at_rest: bool = True) -> Record:
+    """Build a record from data.csv columns (checked by the caller)."""
+    t = np.asarray(columns["time_s"], dtype=float)
+    theta = np.asarray(columns["theta_rad"], dtype=float)
+    current = np.asarray(columns["current_a"], dtype=float)
+    torque_in = np.asarray(columns.get("torque_in_nm", np.zeros_like(t)), dtype=float)
+    torque_in = np.where(np.isfinite(torque_in), torque_in, 0.0)
+    if "theta_road_rad" in columns and np.any(columns["theta_road_rad"] != 0.0):
+        road = np.where(np.isfinite(columns["theta_road_rad"]), columns["theta_road_rad"], 0.0)
+        acc_road = smooth_derivatives(t, road)[2]
+    else:
+        acc_road = np.zeros_like(t)
+    smooth, vel, acc = smooth_derivatives(t, theta)
+    return Record(name, t, theta, current, acc_road, torque_in, vel, acc, smooth, start_at_rest)
+
+
+def load_records(
+    paths: Sequence[str | Path], need_current_change: bool = False, start_at_rest: bool = True
+) -> list[Record]:
+    """Read and check the runs to fit (one-line DataFileError naming the file on bad input)."""
+    records = []
+    for path in paths:
+        columns = read_data_csv(path, required=("time_s", "theta_rad", "current_a"), min_rows=MIN_SAMPLES)
+        for name in ("theta_road_rad", "torque_in_nm"):
+            if name in columns and not np.all(np.isfinite(columns[name])):
+                line = int(np.argmax(~np.isfinite(columns[name]))) + 2
+                raise DataFileError(f"{path}: line {line}, column {name}: NaN or inf")
+        t = columns["time_s"]
+        if t[-1] - t[0] < MIN_DURATION_S:
+            raise DataFileError(
+                f"{path}: record too short ({t[-1] - t[0]:.3g} s; need at least {MIN_DURATION_S} s)"
+            )
+        if np.ptp(columns["theta_rad"]) == 0.0:
+            raise DataFileError(f"{path}: theta_rad never changes (the arm did not move; nothing to fit)")
+        records.append(record_from_columns(str(path), columns, start_at_rest))
+    if need_current_change:
+        check_current_spread(records)
+    return records
+
+
+def check_current_spread(records: Sequence[Record]) -> None:
+    """alpha2 and c2 need runs at different currents."""
+    values = np.concatenate([r.current for r in records])
+    spread = float(np.ptp(values))
+    if spread < MIN_CURRENT_SPREAD_A:
+        names = ", ".join(r.name for r in records)
+        raise DataFileError(
+            f"{names}: current_a never changes (spread {spread:.3g} A < {MIN_CURRENT_SPREAD_A} A), so the "
+            "current-dependent parameters (alpha2, c2, ...) cannot be identified; add a run at another "
+            "current or pass --passive"
+        )
