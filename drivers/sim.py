@@ -42,6 +42,7 @@ class SimulatedRig(RigInterface):
         super().__init__()
         self.plant = plant
         self.counts_per_rev = int(counts_per_rev)
+        self._counts_per_rad = self.counts_per_rev / TWO_PI
         self.angle_noise_rad = float(angle_noise_rad)
         self.current_noise_a = float(current_noise_a)
         self._rng = random.Random(noise_seed)
@@ -98,7 +99,7 @@ class SimulatedRig(RigInterface):
             self._t0_ns = self._last_ns = t_ns
         plant = self.plant
         elapsed = (t_ns - self._last_ns) * 1e-9
-        if self._release_at_s is not None and plant.held:
+        if self._release_at_s is not None and plant._held_at is not None:
             release_in = self._release_at_s - plant.state.time_s
             if release_in <= elapsed:
                 # step to the release instant, let go, then step the rest of the period
@@ -118,17 +119,18 @@ class SimulatedRig(RigInterface):
             theta_road += self._rng.gauss(0.0, self.angle_noise_rad)
         if self.current_noise_a:
             current += self._rng.gauss(0.0, self.current_noise_a)
-        scale = self.counts_per_rev / TWO_PI
+        scale = self._counts_per_rad
         self._seq += 1
+        # positional: seq, time_ns, device_time_us, arm_counts, road_counts, current_a, flags, counts_per_rev
         return RigSample(
-            seq=self._seq,
-            time_ns=t_ns,
-            device_time_us=(t_ns - self._t0_ns) // 1000,
-            arm_counts=round(theta_arm * scale),
-            road_counts=round(theta_road * scale),
-            current_a=current,
-            flags=FLAG_HELD if plant.held else 0,
-            counts_per_rev=self.counts_per_rev,
+            self._seq,
+            t_ns,
+            (t_ns - self._t0_ns) // 1000,
+            round(theta_arm * scale),
+            round(theta_road * scale),
+            current,
+            0 if plant._held_at is None else FLAG_HELD,
+            self.counts_per_rev,
         )
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:

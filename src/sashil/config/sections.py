@@ -110,6 +110,59 @@ DROP_TEST = Section(
     doc="how a drop test finds the hold and the release",
 )
 
+#: the semi-active laws of issue 5 (sashil.control.registry.LAWS holds the same names)
+CONTROL_LAWS = ("passive", "target-damping", "skyhook", "skyhook-onoff", "groundhook", "torque-tracking")
+
+CONTROLLER = Section(
+    {
+        "law": Field("choice", "passive", choices=CONTROL_LAWS, doc="the semi-active law (or --controller)"),
+        "current_a": Field("float", 0.0, low=0.0, high=10.0, doc="passive: the constant current"),
+        "c_target": Field("float?", None, low=0.0, low_open=True, doc="target-damping: linear damping [N m s/rad]"),
+        "zeta": Field("float?", None, low=0.0, low_open=True, high=10.0, doc="target-damping: damping ratio instead of c_target"),
+        "c_sky": Field("float?", None, low=0.0, low_open=True, doc="skyhook: sky damping [N m s/rad]"),
+        "c_ground": Field("float?", None, low=0.0, low_open=True, doc="groundhook: ground damping [N m s/rad]"),
+        "onoff_current_a": Field("float?", None, low=0.0, high=10.0, doc="skyhook-onoff: the 'on' current (null: rig.current_max_a)"),
+        "tracking_bandwidth_hz": Field("float", 2.0, low=0.0, low_open=True, high=500.0, doc="torque-tracking: bandwidth of the random T*"),
+        "tracking_fraction": Field("float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"),
+        "tracking_seed": Field("int", 0, low=0),
+        "estimator_bandwidth_hz": Field("float", 10.0, low=0.0, low_open=True, high=1000.0, doc="relative-angle alpha-beta filter"),
+        "road_bandwidth_hz": Field("float", 30.0, low=0.0, low_open=True, high=1000.0, doc="road-angle alpha-beta-gamma filter"),
+        "model_aided": Field("bool", True, doc="feed the rig model's acceleration to the rate estimator"),
+        "inverse": Field("choice", "full", choices=("full", "viscous"), doc="full Bouc-Wen inverse, or viscous-only (alpha ignored)"),
+        "min_authority_nm_per_a": Field("float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"),
+        "lead_horizon_s": Field("float", 0.003, low=0.0, high=1.0, doc="coil-lag compensation horizon (0: off)"),
+        "coil_tau_s": Field("float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"),
+    },
+    doc="the semi-active controller: estimator, Bouc-Wen observer, law, inverse (issue 5)",
+)
+
+MISMATCH = Section(
+    {
+        "fraction": Field("float", 0.0, low=0.0, high=0.9, doc="each Bouc-Wen parameter of the simulated plant off by this fraction"),
+        "pattern": Field("choice", "alternate", choices=("alternate", "plus", "minus", "random"),
+                         doc="signs of the offsets in J,k,c1,c2,alpha1,alpha2,beta,gamma,delta,n order"),
+        "seed": Field("int", 0, low=0, doc="pattern random: seed of the signs"),
+        "params": Section({}, open_keys=True, doc="per-parameter fractions, e.g. {c1: 0.1} (override fraction)"),
+        "coil_tau": Field("float", 0.0, low=-0.9, high=10.0, doc="plant coil lag = rig.coil_tau_s * (1 + this)"),
+        "encoder_counts_per_rev": Field("int?", None, low=16, high=2**31 - 1, doc="plant encoder quantisation (null: rig's)"),
+        "angle_noise_rad": Field("float?", None, low=0.0, high=1.0, doc="plant angle noise (null: rig's)"),
+        "current_noise_a": Field("float?", None, low=0.0, high=1.0, doc="plant current-sensor noise (null: rig's)"),
+    },
+    doc="how the simulated plant differs from the model the controller uses (issue 5)",
+)
+
+SWEEP = Section(
+    {
+        "amplitude_deg": Field("float", 0.5, low=0.0, low_open=True, high=20.0, doc="road-side amplitude of theta1"),
+        "ramp_s": Field("float", 1.0, low=0.0, high=60.0, doc="raised-cosine amplitude ramp at the start"),
+        "settle_s": Field("float", 6.0, low=0.0, high=600.0, doc="stepped sine: time before measuring at each frequency"),
+        "measure_s": Field("float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"),
+        "steps": Field("int", 10, low=2, high=1000, doc="stepped sine: number of frequencies"),
+        "spacing": Field("choice", "linear", choices=("linear", "log")),
+    },
+    doc="road-side excitation: chirp and stepped sine (issue 5)",
+)
+
 SCHEMA = {
     "model": MODEL,
     "rig": RIG,
@@ -117,4 +170,7 @@ SCHEMA = {
     "loop": LOOP,
     "safety": SAFETY,
     "drop_test": DROP_TEST,
+    "controller": CONTROLLER,
+    "mismatch": MISMATCH,
+    "sweep": SWEEP,
 }

@@ -96,8 +96,10 @@ def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: fl
 class DropTestPlan:
     """Loop stage: constant current; wait for the hold; detect the release; record ``duration_s``."""
 
-    def __init__(self, settings: DropTestSettings, counts_per_rev: int):
+    def __init__(self, settings: DropTestSettings, counts_per_rev: int, controller: Any = None):
         self.s = settings
+        # optional loop stage (sashil.control) that commands the damper after the release
+        self.controller = controller
         self.command = RigCommand(settings.current_a)
         self.resolution = TWO_PI / counts_per_rev
         self.phase = "wait-hold"
@@ -109,8 +111,8 @@ class DropTestPlan:
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=max(16, int(settings.rate_hz)))
         self.release_ns: int | None = None
         self.release_estimated = False
-        capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
-        self._rows = np.full((capacity, len(DROP_COLUMNS)), np.nan)
+        self._capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
+        self._data: tuple[list[float], ...] = tuple([] for _ in DROP_COLUMNS)
         self._n = 0
 
     # the cycle -------------------------------------------------------------------------------
@@ -118,8 +120,10 @@ class DropTestPlan:
         theta = sample.theta_rad
         if self._start_ns is None:
             self._start_ns = t_ns
+        ctl = None if self.controller is None else self.controller.step(sample, t_ns, dt_ns)
         if self.phase == "record":
-            return self._record(t_ns, theta, sample.theta_road_rad, sample.current_a)
+            out = self._record(t_ns, theta, sample.theta_road_rad, sample.current_a)
+            return out if out is None or ctl is None else ctl
         self._recent.append((t_ns, theta, sample.theta_road_rad, sample.current_a))
         if self.phase == "wait-hold":
             self._wait_hold(t_ns, theta)
@@ -133,6 +137,8 @@ class DropTestPlan:
                     f"drop test: the arm was held at {math.degrees(self.hold_angle):.2f} deg but not released "
                     f"within {2 * self.s.hold_timeout_s:g} s"
                 )
+        if ctl is not None and self.phase == "record":
+            return ctl
         return self.command
 
     def _wait_hold(self, t_ns: int, theta: float) -> None:
@@ -169,17 +175,20 @@ class DropTestPlan:
 
     def _record(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
         time_s = (t_ns - self.release_ns) * 1e-9
-        if time_s > self.s.duration_s + 1e-9 or self._n >= self._rows.shape[0]:
+        if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
             self.phase = "done"
             return None
-        row = self._rows[self._n]
-        row[0], row[1], row[2], row[3], row[4] = time_s, theta, road, current, self.s.current_a
+        time_col, theta_col, road_col, current_col, cmd_col = self._data
+        time_col.append(time_s)
+        theta_col.append(theta)
+        road_col.append(road)
+        current_col.append(current)
+        cmd_col.append(self.s.current_a if self.controller is None else self.controller.current_cmd_a)
         self._n += 1
         return self.command
 
     def columns(self) -> dict[str, np.ndarray]:
-        data = self._rows[: self._n]
-        return {name: data[:, index].copy() for index, name in enumerate(DROP_COLUMNS)}
+        return {name: np.asarray(values, dtype=float) for name, values in zip(DROP_COLUMNS, self._data)}
 
 
 def default_clock(config: dict[str, Any]) -> Clock:
@@ -197,8 +206,9 @@ def run_drop_test(
     duration_s: float = 10.0,
     rig: RigInterface | None = None,
     clock: Clock | None = None,
+    controller: Any = None,
 ) -> DropRecord:
-    """One drop test at a constant current; returns the record from the release on."""
+    """One drop test at a constant current (or, after the release, under ``controller``); returns the record from the release on."""
     settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
     rig = rig if rig is not None else open_rig(config)
     clock = clock if clock is not None else default_clock(config)
@@ -208,7 +218,7 @@ def run_drop_test(
         set_current = getattr(rig, "set_initial_current", None)
         if set_current is not None:
             set_current(current_a)
-    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"])
+    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller)
     loop = run_loop(rig, plan, clock, settings.rate_hz)
     columns = plan.columns()
     record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop)

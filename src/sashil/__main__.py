@@ -1,0 +1,7 @@
+"""``python -m sashil`` is the ``sashil`` command."""
+
+import sys
+
+from sashil.cli import main
+
+sys.exit(main())

@@ -1,0 +1,94 @@
+"""``sashil drop-test``: press the arm to theta0, release, record the free oscillation (seed 001 section 8)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from sashil.cli.common import (
+    add_config_options,
+    add_driver_options,
+    add_output_options,
+    current_in_range,
+    positive_seconds,
+    resolve_config,
+)
+from sashil.errors import ConfigError
+from sashil.experiments.drop_test import run_drop_test
+from sashil.recording.plots import plot_angle_overlay
+from sashil.recording.run_folder import RunFolder
+
+HELP = "drop test: hold the arm at theta0, release, record the free oscillation at constant current(s)"
+EXAMPLE = "sashil drop-test --current 0 --current 1 --duration 10 --out runs/drop"
+
+THETA0_LIMIT_DEG = 30.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_config_options(parser)
+    add_driver_options(parser)
+    parser.add_argument("--theta0-deg", type=float, default=-5.0, help="hold angle before release [deg] (default -5)")
+    parser.add_argument(
+        "--current",
+        type=float,
+        action="append",
+        metavar="A",
+        help="constant coil current [A], flowing before release; repeat for one sub-run each (default 0)",
+    )
+    parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)")
+    add_output_options(parser)
+
+
+def _label(current: float) -> str:
+    return f"i{current:.3f}A"
+
+
+def run(args: argparse.Namespace) -> int:
+    config = resolve_config(args)
+    duration = positive_seconds("--duration", args.duration)
+    if not (math.isfinite(args.theta0_deg) and abs(args.theta0_deg) <= THETA0_LIMIT_DEG):
+        raise ConfigError(f"--theta0-deg: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {args.theta0_deg:g}")
+    currents = [current_in_range("--current", value, config) for value in (args.current or [0.0])]
+    if len(set(currents)) != len(currents):
+        raise ConfigError(f"--current: each current once, got {currents}")
+
+    folder = RunFolder.create(args.out, "drop-test")
+    folder.write_config(config)
+    several = len(currents) > 1
+    runs, overlay = [], []
+    exit_status = "ok"
+    for current in currents:
+        print(f"drop test from {args.theta0_deg:g} deg at {current:g} A ...", file=sys.stderr)
+        record = run_drop_test(config, args.theta0_deg, current, duration)
+        target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
+        if several:
+            target.write_config(config)
+        target.write_data(record.columns)
+        metrics = record.metrics.as_dict()
+        entry = {
+            "current_a": current,
+            "theta0_deg": args.theta0_deg,
+            "hold_angle_deg": math.degrees(record.hold_angle_rad),
+            "release_estimated": record.release_estimated,
+            "folder": "." if not several else _label(current),
+            **metrics,
+        }
+        runs.append(entry)
+        if several:
+            target.write_summary({"exit_status": "ok", "verb": "drop-test", "runs": [entry]})
+        overlay.append((f"{current:g} A", record.columns["time_s"], record.columns["theta_rad"]))
+        period = "-" if entry["period_s"] is None else f"{entry['period_s']:.3f} s"
+        peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
+        settle = entry["settling_time_s"]
+        settle_text = "not within the record" if settle is None else f"{settle:.3f} s"
+        print(f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}", file=sys.stderr)
+    plot = plot_angle_overlay(
+        folder.file("drop_test.png"),
+        overlay,
+        f"Drop test from {args.theta0_deg:g}° ({config['driver']['name']} rig)",
+        band_deg=config["drop_test"]["settle_band_deg"],
+    )
+    folder.write_summary({"exit_status": exit_status, "verb": "drop-test", "driver": config["driver"]["name"], "runs": runs})
+    print(f"run folder: {folder.path} (plot {plot.name})", file=sys.stderr)
+    return 0

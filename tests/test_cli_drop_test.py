@@ -1,0 +1,83 @@
+"""``sashil drop-test`` end to end on the simulated rig, and its bad-input handling."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from sashil.cli import main
+from sashil.recording.data_file import REQUIRED_COLUMNS, read_data_csv
+
+
+def test_single_current_run_folder(tmp_path, capsys):
+    out = tmp_path / "D"
+    assert main(["drop-test", "--current", "0", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "data.csv", "drop_test.png", "summary.json"]
+    data = read_data_csv(out / "data.csv", required=REQUIRED_COLUMNS)
+    assert data["time_s"][0] == 0.0
+    assert data["time_s"][-1] == pytest.approx(10.0)
+    assert data["theta_rad"][0] == pytest.approx(math.radians(-5.0), abs=2 * math.pi / 4096)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "ok"
+    (run,) = summary["runs"]
+    assert run["current_a"] == 0.0
+    assert run["period_s"] == pytest.approx(0.600, rel=0.01)
+    assert run["frequency_hz"] == pytest.approx(1 / run["period_s"])
+    assert len(run["peaks_deg"]) >= 5 and run["peaks_deg"][0] == pytest.approx(4.40, abs=0.05)
+    assert 0 < run["settling_time_s"] < 10
+    assert (out / "drop_test.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    err = capsys.readouterr().err
+    assert "period 0.60" in err or "period 0.59" in err
+    assert f"run folder: {out}" in err
+
+
+def test_several_currents_have_one_subfolder_each(tmp_path):
+    out = tmp_path / "D"
+    assert main(["drop-test", "--current", "0", "--current", "1", "--duration", "3", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["folder"] for r in summary["runs"]] == ["i0.000A", "i1.000A"]
+    for folder in ("i0.000A", "i1.000A"):
+        assert (out / folder / "data.csv").exists() and (out / folder / "summary.json").exists()
+    zero, one = summary["runs"]
+    assert one["peaks_deg"][0] < zero["peaks_deg"][0]
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--duration", "-1"], "--duration: expected a duration in seconds > 0, got -1"),
+        (["--theta0-deg", "31"], "--theta0-deg: expected an angle within ±30 deg, got 31"),
+        (["--current", "1.5"], "--current: expected a current in [0, 1] A (rig.current_max_a), got 1.5"),
+        (["--current", "-0.1"], "--current: expected a current in [0, 1] A"),
+        (["--duration", "nan"], "--duration: expected a duration in seconds > 0"),
+    ],
+)
+def test_bad_arguments_exit_2_and_write_nothing(tmp_path, capsys, args, message):
+    out = tmp_path / "D"
+    assert main(["drop-test", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+    assert not out.exists()
+
+
+def test_bad_config_key_exit_2_and_write_nothing(tmp_path, capsys):
+    config = tmp_path / "bad.yaml"
+    config.write_text("rig:\n  coil_tau_z: 0.01\n")
+    out = tmp_path / "D"
+    assert main(["drop-test", "--config", str(config), "--out", str(out)]) == 2
+    assert "bad.yaml: rig.coil_tau_z: unknown key" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_console_script_help_and_usage_errors():
+    help_text = subprocess.run([sys.executable, "-m", "sashil", "drop-test", "--help"],
+                               capture_output=True, text=True, check=True).stdout
+    assert "--theta0-deg" in help_text and "example:" in help_text
+    bad = subprocess.run([sys.executable, "-m", "sashil", "drop-test", "--duration", "x"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2
+    assert "invalid float value" in bad.stderr and bad.stderr.count("\n") <= 2
