@@ -1,23 +1,66 @@
 """The fixed-rate control loop: absolute deadlines, measured period, safe state on any exit.
 
-One cycle: ``sample = rig.read(t, dt)`` -> ``cmd = stage.step(sample, t, dt)`` ->
-``rig.write(cmd, t, dt)``. ``stage.step`` returning ``None`` ends the run (a finished plan). The
-loop owns time and I/O; the stage owns the math. Whatever ends the loop (the end of the duration,
-the stage, an exception) the rig gets the safe command (0 A), ``deactivate()`` and ``close()``, in
-that order, before the loop returns or re-raises.
+One cycle (after ros2_control's read/update/write):
+
+    wait for the deadline -> sample = rig.read(t, dt) -> safety.check(sample)
+    -> cmd = stage.step(sample, t, dt) -> cmd = safety.limit(cmd, dt) -> record the row
+    -> rig.write(cmd, t, dt)
+
+``t`` is the measured wake-up time and ``dt`` the measured period (integer ns from the clock).
+``stage.step`` returning ``None`` ends the run (a finished plan). Deadlines are absolute
+(``start + k * period``), so lateness never accumulates. A cycle that starts a whole period or
+more after its deadline has missed that deadline: with overrun policy ``skip`` the whole missed
+periods are skipped and counted (``missed_deadlines``) with a rate-limited warning; with ``fail``
+the run stops with :class:`~sashil.errors.DeadlineMissedError` (exit 4).
+
+Whatever ends the loop (the duration, the stage, a stop flag set by SIGINT/SIGTERM, a safety
+trip, an exception anywhere) the rig gets the safe command (0 A), then ``deactivate()`` and
+``close()``, each exactly once, before the loop returns or re-raises. ``LoopResult`` (also on
+``ControlLoop.result`` when the loop raised) says how it ended and holds the timing statistics.
+
+Per cycle the loop allocates no dicts or strings: timing goes into preallocated integer arrays
+(:mod:`sashil.runtime.timing`), the data row into the recorder's preallocated ring.
 """
 
 from __future__ import annotations
 
+import logging
+from operator import attrgetter
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Callable, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
+from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip
+from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
+from sashil.runtime.timing import TimingStats
+
+log = logging.getLogger("sashil.loop")
+
+#: the columns the loop records for every cycle (DESIGN.md names first), then the stage's
+#: signals (see ``stage_signals``), then ``seq`` and ``trip_code`` (sashil.safety.TRIP_CODES)
+BASE_COLUMNS = ("time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad")
+TAIL_COLUMNS = ("seq", "trip_code")
+#: DESIGN.md data.csv columns a stage may provide as per-cycle attributes
+STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
+
+#: how the loop ended -> summary.json ``exit_status``
+EXIT_STATUSES = ("ok", "stopped", "safety_trip", "deadline_missed", "error")
+
+#: the recorder may use the interpreter until this long before the loop's next wake-up
+WRITER_GUARD_NS = 50_000
 
 
 class CycleStage(Protocol):
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None: ...
+
+
+class _Recorder(Protocol):
+    window_end_ns: int | None
+
+    def begin_row(self) -> list[Any]: ...
+
+    def commit_row(self) -> None: ...
 
 
 @dataclass
@@ -27,17 +70,226 @@ class LoopResult:
     exit_status: str = "ok"
     error: str | None = None
     trips: list[dict] = field(default_factory=list)
+    timing: TimingStats | None = None
+    stop_reason: str | None = None
+    shutdown_errors: list[str] = field(default_factory=list)
 
 
-def _safe_shutdown(rig: RigInterface, t_ns: int) -> None:
-    try:
-        rig.write(SAFE_COMMAND, t_ns, 0)
-    except Exception:  # noqa: BLE001 - the link may be dead; deactivate still commands 0 A
-        pass
-    try:
-        rig.deactivate()
-    finally:
-        rig.close()
+def stage_signals(stage: object) -> tuple[str, ...]:
+    """The per-cycle values a stage exposes for recording: ``stage.signal_names`` when it says,
+    else those of its attributes named like the DESIGN.md columns (``theta_dot_rad_s``, ``z_hat``,
+    ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step``."""
+    names = getattr(stage, "signal_names", None)
+    if names is None:
+        names = tuple(name for name in STAGE_SIGNALS if hasattr(stage, name))
+    return tuple(names)
+
+
+def record_columns(stage: object) -> tuple[str, ...]:
+    """The data.csv columns of a loop run with ``stage`` (see BASE_COLUMNS)."""
+    return BASE_COLUMNS + stage_signals(stage) + TAIL_COLUMNS
+
+
+class ControlLoop:
+    """One run of ``stage`` on ``rig`` at ``rate_hz``; ``run()`` once."""
+
+    def __init__(
+        self,
+        rig: RigInterface,
+        stage: CycleStage,
+        clock: Clock,
+        rate_hz: float,
+        duration_s: float | None = None,
+        *,
+        safety: Any | None = None,
+        recorder: _Recorder | None = None,
+        stop: Any | None = None,
+        overrun_policy: str = "skip",
+        warn_interval_s: float = 1.0,
+        warn: Callable[[str], None] | None = None,
+    ):
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
+        if overrun_policy not in ("skip", "fail"):
+            raise ValueError(f"overrun_policy must be 'skip' or 'fail', got {overrun_policy!r}")
+        self.rig, self.stage, self.clock = rig, stage, clock
+        self.rate_hz = float(rate_hz)
+        self.period_ns = round(1e9 / rate_hz)
+        self.max_cycles = None if duration_s is None else int(round(duration_s * rate_hz))
+        self.safety, self.recorder, self.stop = safety, recorder, stop
+        self.overrun_policy = overrun_policy
+        self.warn_interval_ns = int(warn_interval_s * 1e9)
+        self.warn = warn if warn is not None else log.warning
+        capacity = (self.max_cycles + 2) if self.max_cycles is not None else 65536
+        self.timing = TimingStats(rate_hz, capacity=capacity)
+        self.result = LoopResult(timing=self.timing)
+        self.start_ns = 0
+        self._last_warn_ns: int | None = None
+        self._suppressed = 0
+        names = stage_signals(stage)
+        self._n_signals = len(names)
+        self._signals = attrgetter(*names) if names else None
+
+    # the run ---------------------------------------------------------------------------------
+    def run(self) -> LoopResult:
+        rig, stage, clock, result, timing = self.rig, self.stage, self.clock, self.result, self.timing
+        safety, recorder, stop = self.safety, self.recorder, self.stop
+        period = self.period_ns
+        max_cycles = self.max_cycles
+        now = clock.now_ns
+        sleep_until = clock.sleep_until
+        spin_ns = getattr(clock, "spin_ns", 0)
+        windowed = recorder is not None and not getattr(clock, "virtual", False)
+        t = now()
+        sample: RigSample | None = None
+        try:
+            rig.configure()
+            rig.activate()
+            read, write, step = rig.read, rig.write, stage.step
+            check = safety.check if safety is not None else None
+            limit = safety.limit if safety is not None else None
+            record = self._record if recorder is not None else None
+            lateness, read_ns, compute_ns, write_ns = timing.lateness, timing.read, timing.compute, timing.write
+            capacity = timing.capacity
+            start = deadline = last = now()
+            self.start_ns = start
+            if safety is not None:
+                safety.start(start)
+            cycles = 0
+            while max_cycles is None or cycles < max_cycles:
+                if stop is not None and stop.requested:
+                    result.exit_status = "stopped"
+                    result.stop_reason = getattr(stop, "signal_name", None) or "stop requested"
+                    break
+                if windowed:
+                    recorder.window_end_ns = deadline - spin_ns - WRITER_GUARD_NS  # type: ignore[union-attr]
+                sleep_until(deadline)
+                t = now()
+                late = t - deadline
+                if late >= period:
+                    self._overrun(t, late)
+                    deadline += (late // period) * period
+                dt = t - last
+                last = t
+                sample = read(t, dt)
+                t_read = now()
+                if check is not None:
+                    check(sample, t)
+                cmd = step(sample, t, dt)
+                if cmd is None:
+                    break
+                if limit is not None:
+                    cmd = limit(cmd, dt)
+                if record is not None:
+                    record(t, sample, cmd.current_a, 0)
+                t_write = now()
+                write(cmd, t, dt)
+                t_end = now()
+                if cycles == capacity:
+                    timing.grow()
+                    capacity = timing.capacity
+                    lateness, read_ns, compute_ns, write_ns = timing.lateness, timing.read, timing.compute, timing.write
+                lateness[cycles] = late
+                read_ns[cycles] = t_read - t
+                compute_ns[cycles] = t_write - t_read
+                write_ns[cycles] = t_end - t_write
+                cycles += 1
+                timing.cycles = cycles
+                deadline += period
+        except BaseException as err:
+            result.exit_status = self._status_of(err)
+            result.error = str(err) or type(err).__name__
+            if isinstance(err, SafetyTrip) and recorder is not None and sample is not None:
+                self._record(t, sample, 0.0, safety.trip_code if safety is not None else 0)
+            self._finish(t)
+            raise
+        self._finish(t)
+        if result.shutdown_errors:
+            result.exit_status = "error"
+            result.error = "shutdown: " + "; ".join(result.shutdown_errors)
+            raise DriverIOError(result.error)
+        return result
+
+    # helpers (off the per-cycle path unless noted) ---------------------------------------------
+    def _record(self, t_ns: int, sample: RigSample | None, current_cmd: float, trip_code: int) -> None:
+        """Fill one data row in the recorder's ring (per cycle; no allocation)."""
+        recorder = self.recorder
+        row = recorder.begin_row()  # type: ignore[union-attr]
+        row[0] = (t_ns - self.start_ns) * 1e-9
+        if sample is None:
+            row[1] = row[2] = row[4] = float("nan")
+            row[-2] = -1
+        else:
+            row[1] = sample.theta_rad
+            row[2] = sample.current_a
+            row[4] = sample.theta_road_rad
+            row[-2] = sample.seq
+        row[3] = current_cmd
+        signals = self._signals
+        if signals is not None:
+            if self._n_signals == 1:
+                row[5] = signals(self.stage)
+            else:
+                row[5 : 5 + self._n_signals] = signals(self.stage)
+        row[-1] = trip_code
+        recorder.commit_row()  # type: ignore[union-attr]
+
+    def _overrun(self, t_ns: int, late_ns: int) -> None:
+        missed = late_ns // self.period_ns
+        timing = self.timing
+        if self.overrun_policy == "fail":
+            timing.missed_deadlines += missed
+            timing.overruns += 1
+            raise DeadlineMissedError(
+                f"deadline missed: cycle {timing.cycles} started {late_ns / 1000:.0f} us late "
+                f"(period {self.period_ns / 1000:g} us; loop.overrun_policy is 'fail')"
+            )
+        timing.missed_deadlines += missed
+        timing.overruns += 1
+        if self._last_warn_ns is None or t_ns - self._last_warn_ns >= self.warn_interval_ns:
+            more = f" (+{self._suppressed} more overrun(s) since the last warning)" if self._suppressed else ""
+            self.warn(
+                f"loop overrun: cycle {timing.cycles} started {late_ns / 1000:.0f} us late, "
+                f"skipped {missed} period(s){more}"
+            )
+            self._last_warn_ns = t_ns
+            self._suppressed = 0
+        else:
+            self._suppressed += 1
+
+    @staticmethod
+    def _status_of(err: BaseException) -> str:
+        if isinstance(err, SafetyTrip):
+            return "safety_trip"
+        if isinstance(err, DeadlineMissedError):
+            return "deadline_missed"
+        if isinstance(err, KeyboardInterrupt):
+            return "stopped"
+        return "error"
+
+    def _finish(self, t_ns: int) -> None:
+        """Safe state: 0 A, deactivate, close (each once), whatever failed before."""
+        result, rig = self.result, self.rig
+        result.cycles = self.timing.cycles
+        result.missed_deadlines = self.timing.missed_deadlines
+        if self.safety is not None:
+            self.safety.safe_state()
+            result.trips = [trip.as_dict() for trip in self.safety.trips]
+        if self.recorder is not None:
+            self.recorder.window_end_ns = None
+        try:
+            rig.write(SAFE_COMMAND, t_ns, 0)
+        except Exception as err:  # noqa: BLE001 - the link may be dead; deactivate() commands 0 A too
+            write_error: Exception | None = err
+        else:
+            write_error = None
+        for name, action in (("deactivate", rig.deactivate), ("close", rig.close)):
+            try:
+                action()
+            except Exception as err:  # noqa: BLE001 - go on to the next step whatever happens
+                result.shutdown_errors.append(f"{name}(): {type(err).__name__}: {err}")
+        if write_error is not None and result.shutdown_errors:
+            result.shutdown_errors.insert(0, f"0 A write: {type(write_error).__name__}: {write_error}")
 
 
 def run_loop(
@@ -46,38 +298,11 @@ def run_loop(
     clock: Clock,
     rate_hz: float,
     duration_s: float | None = None,
+    **options: Any,
 ) -> LoopResult:
-    """Run ``stage`` on ``rig`` at ``rate_hz`` until ``duration_s`` or the stage ends."""
-    period = round(1e9 / rate_hz)
-    max_cycles = None if duration_s is None else int(round(duration_s * rate_hz))
-    result = LoopResult()
-    rig.configure()
-    t = clock.now_ns()
-    try:
-        rig.activate()
-        start = last = clock.now_ns()
-        deadline = start
-        while max_cycles is None or result.cycles < max_cycles:
-            clock.sleep_until(deadline)
-            t = clock.now_ns()
-            dt = t - last
-            last = t
-            sample = rig.read(t, dt)
-            cmd = stage.step(sample, t, dt)
-            if cmd is None:
-                break
-            rig.write(cmd, t, dt)
-            result.cycles += 1
-            deadline += period
-            late = clock.now_ns() - deadline
-            if late > period:
-                skipped = late // period
-                result.missed_deadlines += skipped
-                deadline += skipped * period
-    except BaseException as err:
-        _safe_shutdown(rig, t)
-        result.exit_status = "error"
-        result.error = str(err)
-        raise
-    _safe_shutdown(rig, t)
-    return result
+    """Run ``stage`` on ``rig`` at ``rate_hz`` until ``duration_s``, the stage ends, or a stop.
+
+    ``options`` are the keyword arguments of :class:`ControlLoop` (``safety``, ``recorder``,
+    ``stop``, ``overrun_policy``, ``warn_interval_s``, ``warn``).
+    """
+    return ControlLoop(rig, stage, clock, rate_hz, duration_s, **options).run()

@@ -1,0 +1,116 @@
+"""``sashil run``: closed loop with the configured backend on the real clock, into a run folder."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+from sashil.cli.common import (
+    add_config_options,
+    add_driver_options,
+    add_output_options,
+    current_in_range,
+    positive_seconds,
+    resolve_config,
+)
+from sashil.drivers import open_rig
+from sashil.errors import ConfigError, SashilError
+from sashil.recording.run_folder import RunFolder
+from sashil.runtime.clock import RealClock
+from sashil.runtime.session import run_session
+from sashil.runtime.stages import ConstantCurrent
+from sashil.runtime.timing import format_timing
+
+HELP = "run the rig in closed loop at a fixed rate (real clock), recording data.csv and timing"
+EXAMPLE = "sashil run --duration 10 --controller passive --current 0.5 --out runs/passive-0.5A"
+
+#: highest loop rate each backend supports when the backend does not say (``max_rate_hz``)
+DEFAULT_MAX_RATE_HZ = {"sim": 10_000.0}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_config_options(parser)
+    add_driver_options(parser)
+    parser.add_argument("--duration", type=float, metavar="S", help="seconds to run (default: until Ctrl-C / SIGTERM)")
+    parser.add_argument("--rate", type=float, metavar="HZ", help="loop rate (default: loop.rate_hz, 1000)")
+    parser.add_argument(
+        "--controller",
+        metavar="NAME",
+        help="controller (default: the config's controller section, else passive)",
+    )
+    parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
+    add_output_options(parser)
+
+
+def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
+    """What the backend can do: its ``max_rate_hz`` attribute, else DEFAULT_MAX_RATE_HZ."""
+    value = getattr(rig, "max_rate_hz", None)
+    if value is None:
+        value = DEFAULT_MAX_RATE_HZ.get(backend)
+    return None if value is None else float(value)
+
+
+def check_rate(rate: float, rig: Any, backend: str) -> float:
+    if not (math.isfinite(rate) and rate > 0):
+        raise ConfigError(f"--rate: expected a loop rate in Hz > 0, got {rate:g}")
+    limit = backend_max_rate_hz(rig, backend)
+    if limit is not None and rate > limit:
+        raise ConfigError(f"--rate: {rate:g} Hz is above what the {backend} backend can do ({limit:g} Hz)")
+    return float(rate)
+
+
+def _registry_make_controller() -> Any:
+    try:
+        from sashil.control.registry import make_controller
+    except ModuleNotFoundError as err:
+        if err.name not in ("sashil.control", "sashil.control.registry"):
+            raise
+        return None
+    return make_controller
+
+
+def build_stage(name: str | None, config: dict[str, Any], current: float | None) -> tuple[str, Any]:
+    """The loop stage for ``--controller``/``--current`` (passive: a constant current)."""
+    section = config.get("controller")
+    if name is None:
+        name = section.get("name", "passive") if isinstance(section, dict) and current is None else "passive"
+    if current is not None and name != "passive":
+        raise ConfigError(f"--current: only for --controller passive (got --controller {name})")
+    if name == "passive":
+        value = 0.0 if current is None else current_in_range("--current", current, config)
+        return f"passive {value:g} A", ConstantCurrent(value)
+    make_controller = _registry_make_controller()
+    if make_controller is None:
+        raise ConfigError(f"--controller: unknown controller {name!r} (known: passive)")
+    return name, make_controller(name, config)
+
+
+def run(args: argparse.Namespace) -> int:
+    config = resolve_config(args)
+    duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    backend = config["driver"]["name"]
+    label, stage = build_stage(args.controller, config, args.current)
+    rig = open_rig(config)
+    rate = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, rig, backend)
+    config["loop"]["rate_hz"] = rate
+    config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
+    folder = RunFolder.create(args.out, "run")
+    clock = RealClock(spin_ns=round(config["loop"]["spin_margin_us"] * 1000))
+    print(f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
+          f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}", file=sys.stderr)
+    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label)
+    print(format_timing(outcome.summary["timing"]), file=sys.stderr)
+    for trip in outcome.summary["trips"]:
+        print(f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", file=sys.stderr)
+    print(f"run folder: {folder.path}", file=sys.stderr)
+    error = outcome.error
+    if outcome.result.exit_status == "stopped":
+        print(f"sashil run: stopped by {outcome.result.stop_reason}; damper at 0 A", file=sys.stderr)
+    if error is None or isinstance(error, KeyboardInterrupt):
+        return outcome.exit_code
+    if isinstance(error, SashilError):
+        raise error  # one line and the error's exit code (sashil.cli.main)
+    print(f"sashil run: error: {type(error).__name__}: {error} (the damper was set to 0 A first)", file=sys.stderr)
+    return outcome.exit_code
