@@ -91,7 +91,9 @@ def cobs_encode(data: bytes) -> bytes:
     """Consistent Overhead Byte Stuffing: ``data`` without any 0x00 (delimiter not included)."""
     out = bytearray()
     block = bytearray()
+    full = False  # the last block was a full 254-byte run (code 0xFF, no implied zero)
     for byte in data:
+        full = False
         if byte == 0:
             out.append(len(block) + 1)
             out += block
@@ -102,8 +104,10 @@ def cobs_encode(data: bytes) -> bytes:
                 out.append(255)
                 out += block
                 block.clear()
-    out.append(len(block) + 1)
-    out += block
+                full = True
+    if not full:
+        out.append(len(block) + 1)
+        out += block
     return bytes(out)
 
 

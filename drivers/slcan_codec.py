@@ -6,7 +6,7 @@ The emulator uses it to look like an SLCAN adapter with the rig on its bus, so p
 
     Sn        set a standard bit rate (S0 10k ... S8 1M), only while closed      -> CR
     sxxyy     set BTR0/BTR1, only while closed                                  -> CR
-    O / L     open the channel (L: listen only)                                 -> CR
+    O / L     open the channel (L: listen only; again while open: accepted)     -> CR
     C         close the channel                                                 -> CR
     V / N     hardware+software version / serial number                         -> "V1013" CR / "NSASH" CR
     F         status flags                                                      -> "F00" CR
@@ -122,8 +122,8 @@ class SlcanAdapter:
                 return self._error()
             return OK
         if cmd in "OL" and len(line) == 1:
-            if self.is_open:
-                return self._error()
+            # python-can opens twice (set_bitrate ends with O, then __init__ sends O again): accept
+            # a repeated open like the CANable firmware does
             self.is_open, self.listen_only = True, cmd == "L"
             return OK
         if cmd == "C" and len(line) == 1:

@@ -1,0 +1,99 @@
+"""``sashil emulate``: the simulated rig behind a pseudo-terminal, speaking the serial or SLCAN protocol."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from typing import Any
+
+from sashil.cli.common import add_config_options, positive_seconds, resolve_config
+from sashil.errors import ConfigError
+
+HELP = "run the emulated rig (interface board + simulated plant) on a pty, for the serial or can driver"
+EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_config_options(parser)
+    parser.add_argument("--transport", choices=("serial", "slcan"), default="serial",
+                        help="sashil serial frames, or an SLCAN (LAWICEL) CAN adapter (default serial)")
+    parser.add_argument("--rate", type=float, metavar="HZ",
+                        help="fixed device sample rate; a host asking for another is refused (default: the host's)")
+    parser.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pty")
+    parser.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (default: until SIGINT/SIGTERM)")
+    op = parser.add_argument_group("operator (drop test)")
+    op.add_argument("--hold-deg", type=float, metavar="DEG", help="hold the arm at DEG when the host connects")
+    op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
+    faults = parser.add_argument_group("fault injection (times count from the host's Configure)")
+    faults.add_argument("--drop-rate", type=float, default=0.0, metavar="P", help="drop outgoing frames with probability P")
+    faults.add_argument("--corrupt-rate", type=float, default=0.0, metavar="P", help="send frames with a bad CRC with probability P")
+    faults.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="delay every outgoing frame")
+    faults.add_argument("--stall-after", type=float, metavar="S", help="go silent after S seconds")
+    faults.add_argument("--disconnect-after", type=float, metavar="S", help="close the link after S seconds and exit")
+    faults.add_argument("--stuck-sensor-after", type=float, metavar="S", help="freeze both encoders after S seconds")
+    faults.add_argument("--seed", type=int, default=0, help="seed of the fault injection (default 0)")
+
+
+def _probability(option: str, value: float) -> float:
+    if not 0.0 <= value <= 1.0:
+        raise ConfigError(f"{option}: expected a probability in [0, 1], got {value:g}")
+    return value
+
+
+def _seconds_or_none(option: str, value: float | None) -> float | None:
+    if value is None:
+        return None
+    if not value >= 0.0:
+        raise ConfigError(f"{option}: expected seconds >= 0, got {value:g}")
+    return float(value)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sashil.drivers.emulator import Emulator, Faults, Operator, build_device
+    from sashil.drivers.emulator.transports import Pty, SerialPtyTransport, SlcanPtyTransport
+
+    config = resolve_config(args)
+    rate = None
+    if args.rate is not None:
+        rate = int(round(positive_seconds("--rate", args.rate)))
+        if not 1 <= rate <= 20_000:
+            raise ConfigError(f"--rate: expected 1..20000 Hz, got {args.rate:g}")
+    if args.latency_ms < 0:
+        raise ConfigError(f"--latency-ms: expected >= 0, got {args.latency_ms:g}")
+    faults = Faults(
+        drop_rate=_probability("--drop-rate", args.drop_rate),
+        corrupt_rate=_probability("--corrupt-rate", args.corrupt_rate),
+        latency_ms=args.latency_ms,
+        stall_after_s=_seconds_or_none("--stall-after", args.stall_after),
+        disconnect_after_s=_seconds_or_none("--disconnect-after", args.disconnect_after),
+        stuck_sensor_after_s=_seconds_or_none("--stuck-sensor-after", args.stuck_sensor_after),
+        seed=args.seed,
+    )
+    operator = None
+    if args.hold_deg is not None:
+        operator = Operator(args.hold_deg, _seconds_or_none("--release-after", args.release_after) or 0.0)
+    duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    device = build_device(config, operator, faults, rate)
+    try:
+        pty = Pty.open(args.link)
+    except OSError as err:
+        raise ConfigError(f"--link {args.link}: cannot create the link ({err.strerror})") from None
+    transport: Any = SerialPtyTransport(pty) if args.transport == "serial" else SlcanPtyTransport(pty)
+    emulator = Emulator(device, transport)
+
+    def _stop(signum: int, frame: object) -> None:
+        emulator.stop()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    link = f" (link {args.link})" if args.link else ""
+    print(f"sashil emulate: {args.transport} rig on {pty.path}{link}", flush=True)
+    why = emulator.run(duration)
+    print(
+        f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {transport.bad_frames}, "
+        f"frames corrupted {transport.tx_corrupted}, watchdog trips {device.watchdog_trips}",
+        file=sys.stderr,
+        flush=True,
+    )
+    return 0
