@@ -1,0 +1,116 @@
+"""The controller loop stage: estimator -> observer -> law -> inverse -> coil lead -> safety clamp.
+
+``step(sample, t_ns, dt_ns) -> RigCommand`` (the loop's stage protocol). The per-cycle values
+(``theta_dot_rad_s``, ``z_hat``, ``torque_hat_nm``, ``torque_cmd_nm``, the band, the currents) are
+plain attributes overwritten every cycle, for a recorder to copy; the returned command object is
+reused (no allocation per cycle).
+
+The estimator's model acceleration for the next cycle comes from the rig model
+(seed 001 eq. 13): ``theta_ddot = (-k*theta - T_hat)/J - theta1_ddot``.
+"""
+
+from __future__ import annotations
+
+from sashil.control.estimator import RigEstimator
+from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
+from sashil.control.laws import Law
+from sashil.control.observer import BoucWenObserver
+from sashil.drivers.interface import RigCommand, RigSample
+
+NAN = float("nan")
+
+
+class Controller:
+    """One semi-active controller; see the module docstring for the cycle."""
+
+    def __init__(
+        self,
+        law: Law,
+        estimator: RigEstimator,
+        observer: BoucWenObserver,
+        inverse: HysteresisInverse,
+        lead: CoilLagCompensator,
+        current_max_a: float,
+        model_aided: bool = True,
+        nominal_dt_s: float = 0.001,
+    ):
+        self.law = law
+        self.estimator = estimator
+        self.observer = observer
+        self.inverse = inverse
+        self.lead = lead
+        self.current_max_a = float(current_max_a)
+        self.model_aided = bool(model_aided)
+        self.nominal_dt_s = float(nominal_dt_s)
+        p = observer.params
+        self._k_over_j, self._inv_j = p.k / p.J, 1.0 / p.J
+        self.command = RigCommand(0.0)
+        self._t0_ns: int | None = None
+        self._accel = 0.0
+        # per-cycle values (recorded by the caller)
+        self.time_s = 0.0
+        self.theta_rad = 0.0
+        self.theta_dot_rad_s = 0.0
+        self.body_dot_rad_s = 0.0
+        self.road_dot_rad_s = 0.0
+        self.z_hat = 0.0
+        self.torque_hat_nm = 0.0
+        self.torque_cmd_nm = NAN
+        self.band_lo_nm = 0.0
+        self.band_hi_nm = 0.0
+        self.current_target_a = 0.0
+        self.current_cmd_a = 0.0
+        self.cycles = 0
+        self.unsafe_count = 0  # commands the safety clamp had to change (NaN or outside [0, i_max])
+
+    @property
+    def name(self) -> str:
+        return self.law.name
+
+    @property
+    def clip_count(self) -> int:
+        """Cycles whose target torque lay outside the damper's feasible band (clipped)."""
+        return self.inverse.clip_count
+
+    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        dt = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
+        self.time_s = (t_ns - self._t0_ns) * 1e-9
+        est = self.estimator
+        est.update(sample, dt, self._accel)
+        theta, v = est.theta_rad, est.theta_dot_rad_s
+        self.theta_rad, self.theta_dot_rad_s = theta, v
+        self.body_dot_rad_s, self.road_dot_rad_s = est.body_dot_rad_s, est.road_dot_rad_s
+        measured = sample.current_a
+        if measured != measured:  # no current sensor reading: assume the last command flows
+            measured = self.current_cmd_a
+        obs = self.observer
+        torque_hat = obs.update(theta, v, measured)
+        z = obs.z
+        self.z_hat, self.torque_hat_nm = z, torque_hat
+        inv = self.inverse
+        law = self.law
+        if law.direct:
+            inv.band(z, v)
+            self.torque_cmd_nm = NAN
+            target = law.output(self)
+            self.band_lo_nm, self.band_hi_nm = inv.band_lo_nm, inv.band_hi_nm
+        else:
+            inv.band(z, v)
+            self.band_lo_nm, self.band_hi_nm = inv.band_lo_nm, inv.band_hi_nm
+            torque_cmd = law.output(self)
+            self.torque_cmd_nm = torque_cmd
+            target = inv.current(torque_cmd, z, v)
+        self.current_target_a = target
+        cmd = self.lead.command(target, measured)
+        # safety clamp: the coil only ever sees a finite current in [0, i_max]
+        if not (0.0 <= cmd <= self.current_max_a):
+            self.unsafe_count += 1
+            cmd = 0.0 if cmd != cmd or cmd < 0.0 else self.current_max_a
+        self.current_cmd_a = cmd
+        if self.model_aided:
+            self._accel = -self._k_over_j * theta - self._inv_j * torque_hat - est.road_ddot_rad_s2
+        self.cycles += 1
+        self.command.current_a = cmd
+        return self.command

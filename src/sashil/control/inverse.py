@@ -1,0 +1,99 @@
+"""Inverse hysteresis: the coil current that makes the damper give a desired torque.
+
+Seed 001 eqs. 9-12 solved for the current (research/peers_boucwen.md section 4.2)::
+
+    T(i)  = (alpha1 + alpha2*i)*z + (c1 + c2*i)*v      linear in i, slope D = alpha2*z + c2*v
+    i*    = (T* - alpha1*z - c1*v) / D,  clipped to [0, i_max]
+    i*    = 0  when T*·v <= 0 (the damper can only dissipate) or |D| < min_authority
+
+Every call also reports the feasible band [T(0), T(i_max)] (the damper's torque range at this
+state); a T* outside it is clipped to the nearer end (T is monotone in i) and counted.
+
+``viscous_only=True`` is the comparison inverse that ignores the hysteresis (alpha = 0):
+i* = (T* - c1*v) / (c2*v).
+
+Coil lag (:class:`CoilLagCompensator`): the coil follows its command with a first-order lag tau,
+``i(t+H) = i_cmd + (i_now - i_cmd)*exp(-H/tau)``; commanding
+``i_cmd = i_now + (i* - i_now) / (1 - exp(-H/tau))`` (clipped) brings the measured current
+``i_now`` to i* within the horizon H. H = 0 turns the compensation off.
+"""
+
+from __future__ import annotations
+
+import math
+
+from sashil.models.hysteresis import BoucWenParams
+
+
+class HysteresisInverse:
+    """T* -> i* for the Bouc-Wen damper (per-cycle, plain floats, no allocation)."""
+
+    __slots__ = ("a1", "a2", "c1", "c2", "i_max", "min_authority", "viscous_only", "band_lo_nm", "band_hi_nm",
+                 "clipped", "clip_count", "passive_count")
+
+    def __init__(self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, viscous_only: bool = False):
+        self.a1, self.a2, self.c1, self.c2 = params.alpha1, params.alpha2, params.c1, params.c2
+        self.i_max = float(i_max)
+        self.min_authority = float(min_authority_nm_per_a)
+        self.viscous_only = bool(viscous_only)
+        self.band_lo_nm = 0.0
+        self.band_hi_nm = 0.0
+        self.clipped = False
+        self.clip_count = 0  # cycles whose T* lay outside the feasible band
+        self.passive_count = 0  # cycles with T*·v <= 0 or too little authority (0 A)
+
+    def band(self, z: float, v: float) -> None:
+        """Set the feasible band [T(0), T(i_max)] at state (z, v)."""
+        lo = self.a1 * z + self.c1 * v
+        self.band_lo_nm = lo
+        self.band_hi_nm = lo + (self.a2 * z + self.c2 * v) * self.i_max
+
+    def current(self, torque_nm: float, z: float, v: float) -> float:
+        """i* for the desired torque ``torque_nm`` at the observed z and rate v."""
+        self.band(z, v)
+        if self.viscous_only:
+            z = 0.0
+        if torque_nm * v <= 0.0:
+            self.clipped = False
+            self.passive_count += 1
+            return 0.0
+        authority = self.a2 * z + self.c2 * v
+        if -self.min_authority < authority < self.min_authority:
+            self.clipped = False
+            self.passive_count += 1
+            return 0.0
+        i = (torque_nm - self.a1 * z - self.c1 * v) / authority
+        if i < 0.0:
+            self.clipped = True
+            self.clip_count += 1
+            return 0.0
+        if i > self.i_max:
+            self.clipped = True
+            self.clip_count += 1
+            return self.i_max
+        self.clipped = False
+        return i
+
+
+class CoilLagCompensator:
+    """Lead for the coil's first-order lag: reach the target current within ``horizon_s``."""
+
+    __slots__ = ("tau_s", "horizon_s", "i_max", "gain")
+
+    def __init__(self, tau_s: float, horizon_s: float, i_max: float):
+        self.tau_s = float(tau_s)
+        self.horizon_s = float(horizon_s)
+        self.i_max = float(i_max)
+        active = self.tau_s > 0.0 and self.horizon_s > 0.0
+        self.gain = 1.0 / (1.0 - math.exp(-self.horizon_s / self.tau_s)) if active else 1.0
+
+    def command(self, target_a: float, measured_a: float) -> float:
+        """The coil command for ``target_a`` given the current flowing now (``measured_a``)."""
+        if self.gain == 1.0 or measured_a != measured_a:
+            return target_a
+        cmd = measured_a + (target_a - measured_a) * self.gain
+        if cmd < 0.0:
+            return 0.0
+        if cmd > self.i_max:
+            return self.i_max
+        return cmd

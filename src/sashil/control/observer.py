@@ -1,0 +1,39 @@
+"""Bouc-Wen observer: z-hat over the estimated angle increments and the predicted damper torque.
+
+Seed 001 eqs. 9-12 and 17. The hysteretic state does not depend on the current, so the observer
+runs the model's own stable, rate-independent z-update
+(:meth:`sashil.models.hysteresis.BoucWenZ.advance`) over each cycle's increment of the estimated
+relative angle (open-loop model observer; under persistent motion z forgets its initial value).
+The torque prediction uses the *measured* coil current where the rig reports it::
+
+    T_hat = alpha(i_meas) * z_hat + c(i_meas) * theta_dot_hat          (eq. 9)
+"""
+
+from __future__ import annotations
+
+from sashil.models.hysteresis import BoucWenParams, BoucWenZ
+
+
+class BoucWenObserver:
+    """z-hat and T-hat from the estimated angle, its rate and the measured current."""
+
+    __slots__ = ("params", "hysteresis", "z", "torque_nm", "_theta", "_started")
+
+    def __init__(self, params: BoucWenParams, z0: float = 0.0):
+        self.params = params
+        self.hysteresis = BoucWenZ.from_params(params)
+        self.z = float(z0)
+        self.torque_nm = 0.0
+        self._theta = 0.0
+        self._started = False
+
+    def update(self, theta_rad: float, theta_dot_rad_s: float, current_a: float) -> float:
+        """Advance z-hat to ``theta_rad`` and return T-hat at ``current_a``."""
+        if self._started:
+            self.z = self.hysteresis.advance(self.z, theta_rad - self._theta)
+        else:
+            self._started = True
+        self._theta = theta_rad
+        p = self.params
+        self.torque_nm = (p.alpha1 + p.alpha2 * current_a) * self.z + (p.c1 + p.c2 * current_a) * theta_dot_rad_s
+        return self.torque_nm

@@ -1,0 +1,177 @@
+"""Road-side excitation sweeps: a linear chirp and a stepped sine with its transmissibility table.
+
+The road/wheel-side angle follows theta1(t) = A(t)*sin(phi(t)) (like the seed's wheel speed-up
+through the ~1.6 Hz resonance), A(t) rising over ``ramp_s`` with a raised cosine:
+
+* chirp: phi(t) = 2*pi*(f0*t + (f1 - f0)*t^2/(2*T)), instantaneous frequency f0 -> f1 over T;
+* stepped sine: phi(t) = 2*pi*f*t per frequency, ``settle_s`` to reach the steady state, then
+  ``measure_s`` (rounded up to whole periods) over which the body (arm) angle theta2 = theta +
+  theta1 and the road angle are measured; transmissibility = RMS(theta2) / RMS(theta1) (RMS about
+  the mean).
+
+The simulated rig takes the profile as its road (``SimulatedRig.from_config(config, road=...)``);
+every cycle's command also carries ``road_speed_rad_s = theta1_dot(t)`` for a real rig's road motor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
+from sashil.models.plant import RoadProfile
+from sashil.runtime.clock import Clock, VirtualClock
+from sashil.runtime.loop import run_loop
+
+#: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig)
+SWEEP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a", "theta_dot_rad_s",
+                 "z_hat", "torque_hat_nm", "torque_cmd_nm", "torque_true_nm")
+
+
+def _envelope(t: float, ramp_s: float) -> tuple[float, float, float]:
+    """Raised-cosine ramp e(t) from 0 to 1 over ramp_s, with e' and e''."""
+    if ramp_s <= 0.0 or t >= ramp_s:
+        return 1.0, 0.0, 0.0
+    if t <= 0.0:
+        return 0.0, 0.0, 0.0
+    w = math.pi / ramp_s
+    return 0.5 - 0.5 * math.cos(w * t), 0.5 * w * math.sin(w * t), 0.5 * w * w * math.cos(w * t)
+
+
+def _profile(amplitude_rad: float, ramp_s: float, phase: Callable[[float], tuple[float, float, float]]) -> RoadProfile:
+    def road(t: float) -> tuple[float, float, float]:
+        e, de, dde = _envelope(t, ramp_s)
+        p, dp, ddp = phase(t)
+        s, c = math.sin(p), math.cos(p)
+        a = amplitude_rad
+        return (a * e * s, a * (de * s + e * c * dp), a * (dde * s + 2.0 * de * c * dp + e * (c * ddp - s * dp * dp)))
+
+    return road
+
+
+def chirp_profile(amplitude_rad: float, f_start_hz: float, f_stop_hz: float, duration_s: float, ramp_s: float = 1.0) -> RoadProfile:
+    """theta1(t) = A*sin(2*pi*(f0*t + (f1 - f0)*t^2/(2*T))), frequency held at f1 after T."""
+    rate = (f_stop_hz - f_start_hz) / duration_s
+
+    def phase(t: float) -> tuple[float, float, float]:
+        if t <= duration_s:
+            return TWO_PI * (f_start_hz * t + 0.5 * rate * t * t), TWO_PI * (f_start_hz + rate * t), TWO_PI * rate
+        end = TWO_PI * (f_start_hz * duration_s + 0.5 * rate * duration_s**2)
+        return end + TWO_PI * f_stop_hz * (t - duration_s), TWO_PI * f_stop_hz, 0.0
+
+    return _profile(amplitude_rad, ramp_s, phase)
+
+
+def sine_profile(amplitude_rad: float, f_hz: float, ramp_s: float = 1.0) -> RoadProfile:
+    """theta1(t) = A(t)*sin(2*pi*f*t)."""
+    w = TWO_PI * f_hz
+    return _profile(amplitude_rad, ramp_s, lambda t: (w * t, w, 0.0))
+
+
+def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = "linear") -> list[float]:
+    if spacing == "log":
+        return [float(f) for f in np.geomspace(f_start_hz, f_stop_hz, steps)]
+    return [float(f) for f in np.linspace(f_start_hz, f_stop_hz, steps)]
+
+
+class SweepStage:
+    """Loop stage: run ``controller`` (any stage with the controller's attributes), command the
+    road speed, record the DESIGN.md columns (and the true damper torque on the simulated rig)."""
+
+    def __init__(self, controller: Any, road: RoadProfile, capacity: int, rig: RigInterface | None = None):
+        self.controller = controller
+        self.road = road
+        self.plant = getattr(rig, "plant", None)
+        self._data = np.full((capacity, len(SWEEP_COLUMNS)), np.nan)
+        self._n = 0
+        self._t0: int | None = None
+
+    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
+        if self._t0 is None:
+            self._t0 = t_ns
+        t = (t_ns - self._t0) * 1e-9
+        true_torque = self.plant.damper_torque() if self.plant is not None else math.nan
+        cmd = self.controller.step(sample, t_ns, dt_ns)
+        cmd.road_speed_rad_s = self.road(t)[1]
+        if self._n < self._data.shape[0]:
+            c = self.controller
+            row = self._data[self._n]
+            row[0], row[1], row[2], row[3], row[4] = t, sample.theta_rad, sample.theta_road_rad, sample.current_a, cmd.current_a
+            row[5], row[6], row[7], row[8], row[9] = c.theta_dot_rad_s, c.z_hat, c.torque_hat_nm, c.torque_cmd_nm, true_torque
+            self._n += 1
+        return cmd
+
+    def columns(self) -> dict[str, np.ndarray]:
+        data = self._data[: self._n]
+        return {name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)}
+
+
+RigFactory = Callable[[dict, RoadProfile], RigInterface]
+
+
+def _default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
+    if config["driver"]["name"] == "sim":
+        from sashil.models.mismatch import open_sim_rig
+
+        return open_sim_rig(config, road)
+    from sashil.drivers import open_rig
+
+    return open_rig(config)
+
+
+def run_profile(config: dict[str, Any], controller: Any, road: RoadProfile, duration_s: float,
+                rig_factory: RigFactory | None = None, clock: Clock | None = None) -> dict[str, np.ndarray]:
+    """One run of ``controller`` under the road profile; returns the recorded columns."""
+    rate = float(config["loop"]["rate_hz"])
+    rig = (rig_factory or _default_rig)(config, road)
+    stage = SweepStage(controller, road, int(math.ceil(duration_s * rate)) + 2, rig)
+    run_loop(rig, stage, clock if clock is not None else VirtualClock(), rate, duration_s)
+    return stage.columns()
+
+
+def ac_rms(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.sqrt(np.mean((x - x.mean()) ** 2))) if x.size else math.nan
+
+
+def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """RMS(estimate - truth) / RMS(truth) (NaN rows left out)."""
+    ok = np.isfinite(estimate) & np.isfinite(truth)
+    e, t = np.asarray(estimate)[ok], np.asarray(truth)[ok]
+    return float(np.sqrt(np.mean((e - t) ** 2)) / np.sqrt(np.mean(t**2))) if t.size else math.nan
+
+
+@dataclass
+class SteppedPoint:
+    frequency_hz: float
+    body_rms_rad: float
+    road_rms_rad: float
+    transmissibility: float
+    observer_nrmse: float  # T-hat against the true plant torque (sim only, else NaN)
+    clipped_cycles: int
+
+
+def stepped_sine(config: dict[str, Any], make_controller: Callable[[], Any], freqs: list[float],
+                 rig_factory: RigFactory | None = None) -> list[SteppedPoint]:
+    """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section)."""
+    sweep = config["sweep"]
+    amplitude = math.radians(sweep["amplitude_deg"])
+    points = []
+    for f in freqs:
+        measure = math.ceil(sweep["measure_s"] * f) / f
+        start = sweep["ramp_s"] + sweep["settle_s"]
+        controller = make_controller()
+        cols = run_profile(config, controller, sine_profile(amplitude, f, sweep["ramp_s"]), start + measure, rig_factory)
+        window = cols["time_s"] >= start - 1e-9
+        body = cols["theta_rad"][window] + cols["theta_road_rad"][window]
+        road = cols["theta_road_rad"][window]
+        body_rms, road_rms = ac_rms(body), ac_rms(road)
+        points.append(SteppedPoint(
+            f, body_rms, road_rms, body_rms / road_rms if road_rms > 0 else math.nan,
+            nrmse(cols["torque_hat_nm"][window], cols["torque_true_nm"][window]),
+            int(getattr(controller, "clip_count", 0)),
+        ))
+    return points
