@@ -1,0 +1,302 @@
+"""The control loop on a virtual clock: deadlines, overruns, lifecycle and the safe state on faults."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample
+from sashil.errors import DeadlineMissedError, DriverIOError
+from sashil.recording.data_file import read_data_csv
+from sashil.recording.run_folder import RunFolder
+from sashil.runtime.clock import VirtualClock
+from sashil.runtime.loop import ControlLoop, record_columns, run_loop
+from sashil.runtime.session import run_session
+from sashil.runtime.stages import ConstantCurrent
+
+PERIOD = 1_000_000  # 1 kHz
+COUNTS = 4096
+
+
+class FaultyRig(RigInterface):
+    """Test double (after ros2_control's test components): counts calls, fails on the Nth one."""
+
+    name = "faulty"
+
+    def __init__(self, fail_read_on=None, fail_write_on=None, stale_from=None, theta_deg=None):
+        super().__init__()
+        self.fail_read_on, self.fail_write_on = fail_read_on, fail_write_on
+        self.stale_from = stale_from
+        self.theta_deg = theta_deg or (lambda n: 1.0)
+        self.calls = {name: 0 for name in ("configure", "activate", "read", "write", "deactivate", "close")}
+        self.currents: list[float] = []
+        self.read_times: list[tuple[int, int]] = []
+        self.seq = 0
+
+    def configure(self):
+        self.calls["configure"] += 1
+
+    def activate(self):
+        self.calls["activate"] += 1
+
+    def read(self, t_ns, dt_ns):
+        self.calls["read"] += 1
+        n = self.calls["read"]
+        self.read_times.append((t_ns, dt_ns))
+        if n == self.fail_read_on:
+            raise DriverIOError("faulty: read failed (injected)")
+        if self.stale_from is None or n < self.stale_from:
+            self.seq += 1
+        counts = round(math.radians(self.theta_deg(n)) * COUNTS / (2 * math.pi))
+        return RigSample(self.seq, t_ns, t_ns // 1000, counts, 0, 0.1 * n, 0, COUNTS)
+
+    def write(self, cmd, t_ns, dt_ns):
+        self.calls["write"] += 1
+        if self.calls["write"] == self.fail_write_on:
+            raise DriverIOError("faulty: write failed (injected)")
+        self.currents.append(cmd.current_a)
+
+    def deactivate(self):
+        self.calls["deactivate"] += 1
+        self.currents.append(0.0)
+
+    def close(self):
+        self.calls["close"] += 1
+
+
+class Stall:
+    """Constant current; on cycle ``at`` the cycle takes ``stall_ns`` of (virtual) time."""
+
+    def __init__(self, clock, at=None, stall_ns=0, current=0.5, stop=None):
+        self.clock, self.at, self.stall_ns, self.stop = clock, at, stall_ns, stop
+        self.command = RigCommand(current)
+        self.n = 0
+        self.dts: list[int] = []
+
+    def step(self, sample, t_ns, dt_ns):
+        self.n += 1
+        self.dts.append(dt_ns)
+        if self.n == self.at:
+            self.clock.advance(self.stall_ns)
+        if self.stop is not None and self.n == self.stop[0]:
+            self.stop[1].request("test stop")
+        return self.command
+
+
+def test_deadlines_are_absolute_and_the_measured_period_is_passed():
+    clock = VirtualClock(start_ns=5_000)
+    rig = FaultyRig()
+    stage = Stall(clock)
+    result = run_loop(rig, stage, clock, 1000.0, duration_s=0.01)
+    assert result.cycles == 10 and result.exit_status == "ok"
+    assert [t for t, _ in rig.read_times] == [5_000 + k * PERIOD for k in range(10)]
+    assert stage.dts == [0] + [PERIOD] * 9
+    assert result.timing.summary()["lateness_us"]["max"] == 0.0
+
+
+def test_overruns_are_counted_and_whole_periods_skipped():
+    clock = VirtualClock()
+    rig = FaultyRig()
+    stage = Stall(clock, at=5, stall_ns=3_500_000)  # cycle 5 runs 3.5 periods long
+    warnings: list[str] = []
+    result = run_loop(rig, stage, clock, 1000.0, duration_s=0.02, warn=warnings.append)
+    # cycle 5 started at 4 ms and ended at 7.5 ms: the deadlines 5, 6 and 7 ms are missed, the
+    # next cycle runs at 7.5 ms (0.5 ms late against the 7 ms tick), then back on the grid
+    times = [t for t, _ in rig.read_times]
+    assert times[:6] == [0, 1e6, 2e6, 3e6, 4e6, 7.5e6]
+    assert times[6:9] == [8e6, 9e6, 10e6]
+    assert result.missed_deadlines == 2 and result.timing.overruns == 1
+    assert stage.dts[5] == 3_500_000 and stage.dts[6] == 500_000
+    assert result.cycles == 20  # the duration counts cycles run
+    assert len(warnings) == 1 and "skipped 2 period(s)" in warnings[0]
+    lateness = result.timing.column_us("lateness")
+    assert lateness[5] == pytest.approx(2500.0)
+
+
+def test_overrun_warnings_are_rate_limited():
+    clock = VirtualClock()
+    rig = FaultyRig()
+
+    class EveryOther(Stall):
+        def step(self, sample, t_ns, dt_ns):
+            self.n += 1
+            if self.n % 2 == 0:
+                self.clock.advance(2_200_000)
+            return self.command
+
+    warnings: list[str] = []
+    result = run_loop(rig, EveryOther(clock), clock, 1000.0, duration_s=1.0, warn=warnings.append, warn_interval_s=0.5)
+    # every even cycle stalls 2.2 periods: the next cycle misses one deadline (the last stall
+    # has no next cycle in the 1000)
+    assert result.timing.overruns == 499
+    assert result.missed_deadlines == 499
+    assert 2 <= len(warnings) <= 4  # over ~1.6 s of virtual time, one per 0.5 s
+    assert "more overrun(s) since the last warning" in warnings[1]
+
+
+def test_overrun_policy_fail_stops_in_the_safe_state():
+    clock = VirtualClock()
+    rig = FaultyRig()
+    with pytest.raises(DeadlineMissedError, match="deadline missed: cycle 3"):
+        run_loop(rig, Stall(clock, at=3, stall_ns=2_100_000), clock, 1000.0, 1.0, overrun_policy="fail")
+    assert rig.currents[-2:] == [0.0, 0.0]  # the 0 A write, then deactivate
+    assert rig.calls["deactivate"] == 1 and rig.calls["close"] == 1
+
+
+def test_stage_ending_the_run_and_lifecycle_order():
+    clock = VirtualClock()
+    rig = FaultyRig()
+
+    class Three:
+        n = 0
+
+        def step(self, sample, t_ns, dt_ns):
+            self.n += 1
+            return None if self.n > 3 else RigCommand(0.3)
+
+    result = run_loop(rig, Three(), clock, 500.0)
+    assert result.cycles == 3 and result.exit_status == "ok"
+    assert rig.calls == {"configure": 1, "activate": 1, "read": 4, "write": 4, "deactivate": 1, "close": 1}
+    assert rig.currents == [0.3, 0.3, 0.3, 0.0, 0.0]
+
+
+def test_compute_time_is_measured_on_the_virtual_clock():
+    clock = VirtualClock()
+
+    class Busy(Stall):
+        def step(self, sample, t_ns, dt_ns):
+            self.clock.advance(40_000)
+            return self.command
+
+    loop = ControlLoop(FaultyRig(), Busy(clock), clock, 1000.0, 0.05)
+    loop.run()
+    stats = loop.timing.summary()
+    assert stats["compute_us"] == {"p50": 40.0, "p99": 40.0, "p99_9": 40.0, "max": 40.0}
+    assert stats["read_us"]["max"] == 0.0 and stats["missed_deadlines"] == 0
+
+
+def test_stage_signals_become_columns():
+    class WithSignals(ConstantCurrent):
+        def __init__(self):
+            super().__init__(0.2)
+            self.z_hat = 0.0
+            self.torque_hat_nm = 0.0
+
+    assert record_columns(WithSignals()) == (
+        "time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad", "z_hat", "torque_hat_nm", "seq", "trip_code",
+    )
+    assert record_columns(ConstantCurrent()) == (
+        "time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad", "seq", "trip_code",
+    )
+
+
+# faults through a whole session (recorder + safety + summary) ----------------------------------
+
+
+def _session(tmp_path, config, rig, stage=None, duration_s=0.1):
+    config["loop"]["rt"]["priority"] = 0
+    clock = VirtualClock()
+    folder = RunFolder(tmp_path / "run")
+    folder.path.mkdir()
+    lines: list[str] = []
+    outcome = run_session(
+        config, rig, stage or ConstantCurrent(0.5), folder, clock, duration_s, say=lines.append, realtime=False
+    )
+    summary = json.loads((folder.path / "summary.json").read_text())
+    assert (folder.path / "config.yaml").exists()
+    assert summary["exit_status"] == outcome.result.exit_status
+    assert rig.calls["deactivate"] == 1 and rig.calls["close"] == 1
+    return outcome, summary, folder.path
+
+
+def _rows(path):
+    return read_data_csv(path / "data.csv", required=("time_s", "theta_rad", "current_a", "current_cmd_a"), min_rows=0)
+
+
+def test_session_ok_writes_every_row(tmp_path, config):
+    rig = FaultyRig()
+    outcome, summary, path = _session(tmp_path, config, rig)
+    assert outcome.exit_code == 0 and summary["exit_status"] == "ok"
+    data = _rows(path)
+    assert len(data["time_s"]) == 100
+    assert data["time_s"][:3].tolist() == [0.0, 0.001, 0.002]
+    assert set(data["current_cmd_a"].tolist()) == {0.5}
+    assert data["seq"].tolist() == list(range(1, 101))
+    assert summary["timing"]["cycles"] == 100 and summary["trips"] == []
+    for key in ("rate_hz", "cycles", "missed_deadlines", "lateness_us", "compute_us"):
+        assert key in summary["timing"]
+    assert set(summary["timing"]["lateness_us"]) == {"p50", "p99", "p99_9", "max"}
+
+
+def test_read_raising_on_the_nth_call(tmp_path, config):
+    rig = FaultyRig(fail_read_on=7)
+    outcome, summary, path = _session(tmp_path, config, rig)
+    assert outcome.exit_code == 1 and summary["exit_status"] == "error"
+    assert "read failed" in summary["error"]
+    assert rig.currents[-2:] == [0.0, 0.0]
+    assert len(_rows(path)["time_s"]) == 6  # the cycles before the fault
+
+
+def test_write_raising(tmp_path, config):
+    rig = FaultyRig(fail_write_on=4)
+    outcome, summary, path = _session(tmp_path, config, rig)
+    assert outcome.exit_code == 1 and isinstance(outcome.error, DriverIOError)
+    assert rig.currents[-1] == 0.0 and rig.calls["write"] == 5  # 3 good, the failed one, the 0 A write
+    assert len(_rows(path)["time_s"]) == 4  # the row is recorded before the write
+
+
+def test_stale_sensor_trips(tmp_path, config):
+    config["safety"]["sensor_timeout_cycles"] = 5
+    rig = FaultyRig(stale_from=10)  # seq stops advancing at the 10th read
+    outcome, summary, path = _session(tmp_path, config, rig)
+    assert outcome.exit_code == 3 and summary["exit_status"] == "safety_trip"
+    (trip,) = summary["trips"]
+    assert trip["kind"] == "sensor_timeout" and "5 cycles" in trip["reason"]
+    assert trip["time_s"] == pytest.approx(0.013)  # reads 10..14 stale: the 14th read, at 13 ms
+    data = _rows(path)
+    assert len(data["time_s"]) == 14
+    assert data["trip_code"][-1] == 2 and data["current_cmd_a"][-1] == 0.0
+    assert rig.currents[-2:] == [0.0, 0.0]
+
+
+def test_angle_past_the_interlock_trips(tmp_path, config):
+    rig = FaultyRig(theta_deg=lambda n: 2.0 * n)  # 30 deg limit: 32 deg at the 16th read
+    outcome, summary, path = _session(tmp_path, config, rig)
+    assert outcome.exit_code == 3
+    (trip,) = summary["trips"]
+    assert trip["kind"] == "angle_interlock" and trip["time_s"] == pytest.approx(0.015)
+    assert "beyond the limit 30 deg" in trip["reason"]
+    data = _rows(path)
+    assert len(data["time_s"]) == 16 and data["trip_code"].tolist() == [0] * 15 + [1]
+    assert math.degrees(data["theta_rad"][-1]) == pytest.approx(32.0, abs=0.1)
+    assert rig.currents[-2:] == [0.0, 0.0] and rig.currents[-3] == 0.5
+
+
+def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
+    clock = VirtualClock()
+    rig = FaultyRig()
+
+    class StopAt:
+        command = RigCommand(0.2)
+
+        def __init__(self):
+            self.loop_stop = None
+            self.n = 0
+
+        def step(self, sample, t_ns, dt_ns):
+            self.n += 1
+            if self.n == 30:
+                import signal
+
+                signal.raise_signal(signal.SIGTERM)  # the session routes it to the stop flag
+            return self.command
+
+    config["loop"]["rt"]["priority"] = 0
+    folder = RunFolder(tmp_path / "run")
+    folder.path.mkdir()
+    outcome = run_session(config, rig, StopAt(), folder, clock, None, say=lambda line: None, realtime=False)
+    assert outcome.exit_code == 130 and outcome.result.stop_reason == "SIGTERM"
+    assert len(_rows(folder.path)["time_s"]) == 30
+    assert rig.currents[-2:] == [0.0, 0.0] and rig.calls["close"] == 1

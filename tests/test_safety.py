@@ -1,0 +1,111 @@
+"""The safety supervisor: clamp, slew limit, angle interlock, sensor timeout by sequence number."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sashil.drivers.interface import FLAG_FAULT, FLAG_HELD, FLAG_OVERCURRENT, RigCommand, RigSample
+from sashil.errors import SafetyTrip
+from sashil.safety import SafetySupervisor
+
+COUNTS = 3600  # 0.1 deg per count
+
+
+def sample(seq, theta_deg=0.0, flags=0):
+    return RigSample(seq, 0, 0, round(theta_deg * 10), 0, 0.0, flags, COUNTS)
+
+
+def supervisor(**kw):
+    s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=math.radians(30.0), **kw)
+    s.start(1_000_000_000)
+    return s
+
+
+def test_current_is_clamped_to_the_range_and_nan_is_zero():
+    s = supervisor()
+    assert s.limit(RigCommand(1.7), 1_000_000).current_a == 1.0
+    assert s.limit(RigCommand(-0.2), 1_000_000).current_a == 0.0
+    assert s.limit(RigCommand(float("nan")), 1_000_000).current_a == 0.0
+    assert s.limit(RigCommand(0.4, 2.0), 1_000_000).current_a == 0.4
+    assert s.limit(RigCommand(0.4, 2.0), 1_000_000).road_speed_rad_s == 2.0
+    assert s.clamped_cycles == 3 and s.trips == []
+
+
+def test_slew_limit_over_the_measured_period():
+    s = supervisor(slew_a_per_s=100.0)  # 0.1 A per 1 ms cycle
+    got = [s.limit(RigCommand(1.0), 1_000_000).current_a for _ in range(4)]
+    assert got == pytest.approx([0.1, 0.2, 0.3, 0.4])
+    assert s.limit(RigCommand(1.0), 3_000_000).current_a == pytest.approx(0.7)  # a 3 ms period
+    assert s.limit(RigCommand(0.0), 1_000_000).current_a == pytest.approx(0.6)  # down as well
+    s.safe_state()  # the shutdown wrote 0 A: a restart slews up from 0
+    assert s.limit(RigCommand(1.0), 1_000_000).current_a == pytest.approx(0.1)
+    assert s.slew_limited_cycles == 7
+
+
+def test_angle_interlock_both_ways_with_time_and_reason():
+    s = supervisor()
+    s.check(sample(1, 29.9), 1_000_000_000)
+    s.check(sample(2, -29.9), 1_001_000_000)
+    with pytest.raises(SafetyTrip, match=r"\|theta\| = 30.10 deg beyond the limit 30 deg"):
+        s.check(sample(3, -30.1), 1_250_000_000)
+    (trip,) = s.trips
+    assert trip.kind == "angle_interlock" and trip.code == 1
+    assert trip.time_s == pytest.approx(0.25)
+    assert s.trip_code == 1
+
+
+def test_interlock_off():
+    s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=None)
+    s.check(sample(1, 80.0), 0)
+    assert s.trips == []
+
+
+def test_repeated_sequence_numbers_trip_after_n_cycles():
+    s = supervisor(sensor_timeout_cycles=3)
+    s.check(sample(10), 0)
+    s.check(sample(10), 1)
+    s.check(sample(10), 2)
+    assert s.stale_samples == 2
+    s.check(sample(11), 3)  # fresh again: the count restarts
+    s.check(sample(11), 4)
+    s.check(sample(9), 5)  # backwards: stale as well
+    with pytest.raises(SafetyTrip, match="no fresh sample for 3 cycles"):
+        s.check(sample(11), 6)
+    assert s.trips[0].kind == "sensor_timeout" and s.trips[0].code == 2
+
+
+def test_missing_samples_count_towards_the_timeout():
+    s = supervisor(sensor_timeout_cycles=2)
+    s.check(None, 0)
+    with pytest.raises(SafetyTrip, match="no sample"):
+        s.check(None, 1)
+
+
+def test_sequence_wrap_at_16_bits_is_fresh():
+    s = supervisor(sensor_timeout_cycles=1)
+    s.check(sample(65534), 0)
+    s.check(sample(65535), 1)
+    s.check(sample(0), 2)
+    s.check(sample(1), 3)
+    assert s.stale_samples == 0
+
+
+def test_device_fault_flags_trip_but_held_does_not():
+    s = supervisor()
+    s.check(sample(1, flags=FLAG_HELD), 0)
+    with pytest.raises(SafetyTrip, match="overcurrent"):
+        s.check(sample(2, flags=FLAG_OVERCURRENT), 1)
+    quiet = SafetySupervisor(1.0, trip_on_device_fault=False)
+    quiet.check(sample(1, flags=FLAG_FAULT), 0)
+    assert quiet.trips == []
+
+
+def test_from_config(config):
+    config["safety"]["slew_a_per_s"] = 50.0
+    s = SafetySupervisor.from_config(config)
+    assert s.angle_limit_rad == pytest.approx(math.radians(30.0))
+    assert s.slew_a_per_s == 50.0 and s.sensor_timeout_cycles == 20
+    config["safety"]["angle_interlock"] = False
+    assert SafetySupervisor.from_config(config).angle_limit_rad is None
