@@ -111,7 +111,7 @@ DROP_TEST = Section(
 )
 
 #: the semi-active laws of issue 5 (sashil.control.registry.LAWS holds the same names)
-CONTROL_LAWS = ("passive", "target-damping", "skyhook", "skyhook-onoff", "groundhook", "torque-tracking")
+CONTROL_LAWS = ("passive", "target-damping", "skyhook", "skyhook-onoff", "skyhook-add", "groundhook", "torque-tracking")
 
 CONTROLLER = Section(
     {
@@ -120,6 +120,7 @@ CONTROLLER = Section(
         "c_target": Field("float?", None, low=0.0, low_open=True, doc="target-damping: linear damping [N m s/rad]"),
         "zeta": Field("float?", None, low=0.0, low_open=True, high=10.0, doc="target-damping: damping ratio instead of c_target"),
         "c_sky": Field("float?", None, low=0.0, low_open=True, doc="skyhook: sky damping [N m s/rad]"),
+        "crossover_hz": Field("float?", None, low=0.0, low_open=True, high=500.0, doc="skyhook-add: crossover (null: sqrt(2) x natural frequency)"),
         "c_ground": Field("float?", None, low=0.0, low_open=True, doc="groundhook: ground damping [N m s/rad]"),
         "onoff_current_a": Field("float?", None, low=0.0, high=10.0, doc="skyhook-onoff: the 'on' current (null: rig.current_max_a)"),
         "tracking_bandwidth_hz": Field("float", 2.0, low=0.0, low_open=True, high=500.0, doc="torque-tracking: bandwidth of the random T*"),

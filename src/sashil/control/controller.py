@@ -52,6 +52,7 @@ class Controller:
         self.theta_rad = 0.0
         self.theta_dot_rad_s = 0.0
         self.body_dot_rad_s = 0.0
+        self.body_ddot_rad_s2 = 0.0  # model: (-k*theta - T_hat)/J
         self.road_dot_rad_s = 0.0
         self.z_hat = 0.0
         self.torque_hat_nm = 0.0
@@ -89,6 +90,8 @@ class Controller:
         torque_hat = obs.update(theta, v, measured)
         z = obs.z
         self.z_hat, self.torque_hat_nm = z, torque_hat
+        body_ddot = -self._k_over_j * theta - self._inv_j * torque_hat
+        self.body_ddot_rad_s2 = body_ddot
         inv = self.inverse
         law = self.law
         if law.direct:
@@ -110,7 +113,7 @@ class Controller:
             cmd = 0.0 if cmd != cmd or cmd < 0.0 else self.current_max_a
         self.current_cmd_a = cmd
         if self.model_aided:
-            self._accel = -self._k_over_j * theta - self._inv_j * torque_hat - est.road_ddot_rad_s2
+            self._accel = body_ddot - est.road_ddot_rad_s2
         self.cycles += 1
         self.command.current_a = cmd
         return self.command

@@ -9,6 +9,11 @@ inside the feasible band; the inverse (:mod:`sashil.control.inverse`) clips and 
   zeta = c_target / (2*sqrt(k*J)) of the model (the damper then acts as a linear damper).
 * ``skyhook`` (continuous): T* = c_sky*theta2_dot, a damper to the "sky" on the body (arm).
 * ``skyhook-onoff``: i_max when theta2_dot*theta_dot > 0, else 0 A (two-state Karnopp skyhook).
+* ``skyhook-add``: the mixed skyhook / acceleration-driven-damper on-off law (Savaresi & Spelta
+  2007): below the crossover frequency w_f (theta2_ddot^2 <= w_f^2*theta2_dot^2) on when
+  theta2_dot*theta_dot > 0 (skyhook), above it on when theta2_ddot*theta_dot > 0 (ADD);
+  theta2_ddot = (-k*theta - T_hat)/J from the model. It approximates the lower envelope of the
+  soft and the hard passive damper at every frequency.
 * ``groundhook``: T* = -c_ground*theta1_dot, a damper to the ground on the road/wheel side.
 * ``torque-tracking``: follows a given T*(t), or a band-limited random fraction r(t) of the
   feasible band, T* = T(0) + r(t)*(T(i_max) - T(0)) (for testing the inverse).
@@ -29,6 +34,7 @@ class CycleState(Protocol):
     theta_rad: float
     theta_dot_rad_s: float
     body_dot_rad_s: float
+    body_ddot_rad_s2: float
     road_dot_rad_s: float
     band_lo_nm: float
     band_hi_nm: float
@@ -84,6 +90,21 @@ class SkyhookOnOff(Law):
 
     def output(self, state: CycleState) -> float:
         return self.on if state.body_dot_rad_s * state.theta_dot_rad_s > 0.0 else self.off
+
+
+class SkyhookAdd(Law):
+    name = "skyhook-add"
+    direct = True
+
+    def __init__(self, crossover_rad_s: float, current_on_a: float, current_off_a: float = 0.0):
+        self.w2 = float(crossover_rad_s) ** 2
+        self.on, self.off = float(current_on_a), float(current_off_a)
+
+    def output(self, state: CycleState) -> float:
+        vb, ab, v = state.body_dot_rad_s, state.body_ddot_rad_s2, state.theta_dot_rad_s
+        if ab * ab <= self.w2 * vb * vb:
+            return self.on if vb * v > 0.0 else self.off
+        return self.on if ab * v > 0.0 else self.off
 
 
 class Groundhook(Law):

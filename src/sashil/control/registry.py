@@ -7,6 +7,7 @@ run an unreachable *torque* is clipped to the feasible band and counted, never a
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 from sashil.config.sections import CONTROL_LAWS
@@ -18,6 +19,7 @@ from sashil.control.laws import (
     Law,
     Passive,
     Skyhook,
+    SkyhookAdd,
     SkyhookOnOff,
     TargetDamping,
     TorqueTracking,
@@ -87,6 +89,14 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
         if not 0.0 <= on <= i_max:
             raise ConfigError(f"controller.onoff_current_a: expected a current in [0, {i_max:g}] A, got {on:g}")
         return SkyhookOnOff(on)
+    if name == "skyhook-add":
+        on = section.get("onoff_current_a")
+        on = i_max if on is None else float(on)
+        if not 0.0 <= on <= i_max:
+            raise ConfigError(f"controller.onoff_current_a: expected a current in [0, {i_max:g}] A, got {on:g}")
+        crossover = section.get("crossover_hz")
+        w = math.sqrt(2.0 * params.k / params.J) if crossover is None else 2.0 * math.pi * float(crossover)
+        return SkyhookAdd(w, on)
     if name == "groundhook":
         return Groundhook(_need(section, "c_ground", name, "ground damping in N m s/rad"))
     if name == "torque-tracking":
