@@ -15,7 +15,8 @@ i* = (T* - c1*v) / (c2*v).
 Coil lag (:class:`CoilLagCompensator`): the coil follows its command with a first-order lag tau,
 ``i(t+H) = i_cmd + (i_now - i_cmd)*exp(-H/tau)``; commanding
 ``i_cmd = i_now + (i* - i_now) / (1 - exp(-H/tau))`` (clipped) brings the measured current
-``i_now`` to i* within the horizon H. H = 0 turns the compensation off.
+``i_now`` to i* within the horizon H if held; re-evaluated every cycle (receding horizon) each
+period closes gain*(1 - exp(-T/tau)) of the gap. H = 0 turns the compensation off.
 """
 
 from __future__ import annotations

@@ -1,0 +1,119 @@
+"""``sashil sweep``: road-side excitation through the resonance, chirp or stepped sine (issue 5)."""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+
+from sashil.cli.common import add_config_options, add_driver_options, add_output_options, current_in_range, positive_seconds, resolve_config
+from sashil.control.registry import LAWS, make_controller
+from sashil.errors import ConfigError
+from sashil.experiments.sweep import ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
+from sashil.recording.run_folder import RunFolder
+
+HELP = "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)"
+EXAMPLE = "sashil sweep --f-start 0.5 --f-stop 5 --duration 30 --controller skyhook-onoff"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_config_options(parser)
+    add_driver_options(parser)
+    parser.add_argument("--f-start", type=float, default=0.5, metavar="HZ", help="start frequency [Hz] (default 0.5)")
+    parser.add_argument("--f-stop", type=float, default=5.0, metavar="HZ", help="stop frequency [Hz] (default 5)")
+    parser.add_argument("--duration", type=float, default=30.0, metavar="S", help="chirp length [s] (default 30)")
+    parser.add_argument("--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--controller", metavar="LAW", help=f"semi-active law ({', '.join(LAWS)}); default controller.law")
+    group.add_argument("--current", type=float, metavar="A", help="passive constant current instead of a law")
+    parser.add_argument("--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)")
+    parser.add_argument("--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)")
+    add_output_options(parser)
+
+
+def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
+    for option, value in (("--f-start", args.f_start), ("--f-stop", args.f_stop)):
+        if not (math.isfinite(value) and 0.0 < value <= config["loop"]["rate_hz"] / 10):
+            raise ConfigError(f"{option}: expected a frequency in (0, {config['loop']['rate_hz'] / 10:g}] Hz, got {value:g}")
+    if args.f_stop <= args.f_start:
+        raise ConfigError(f"--f-stop: expected a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
+    config = copy.deepcopy(config)
+    if args.amplitude_deg is not None:
+        if not (math.isfinite(args.amplitude_deg) and 0.0 < args.amplitude_deg <= 20.0):
+            raise ConfigError(f"--amplitude-deg: expected an angle in (0, 20] deg, got {args.amplitude_deg:g}")
+        config["sweep"]["amplitude_deg"] = args.amplitude_deg
+    if args.steps is not None:
+        if not 2 <= args.steps <= 1000:
+            raise ConfigError(f"--steps: expected an integer in [2, 1000], got {args.steps}")
+        config["sweep"]["steps"] = args.steps
+    if args.current is not None:
+        config["controller"]["current_a"] = current_in_range("--current", args.current, config)
+        return "passive", config
+    name = args.controller or config["controller"]["law"]
+    if name not in LAWS:
+        raise ConfigError(f"--controller: unknown law {name!r} (known: {', '.join(LAWS)})")
+    make_controller(name, config)  # bad law parameters fail here, before a folder exists
+    return name, config
+
+
+def _plot(folder: RunFolder, points, label: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot([p.frequency_hz for p in points], [p.transmissibility for p in points], "o-", label=label)
+    ax.set_xlabel("road frequency [Hz]")
+    ax.set_ylabel("body RMS / road RMS")
+    ax.set_title("transmissibility (stepped sine)")
+    ax.grid(True)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(folder.file("transmissibility.png"), dpi=100)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    config = resolve_config(args)
+    duration = positive_seconds("--duration", args.duration)
+    name, config = _check(args, config)
+    folder = RunFolder.create(args.out, "sweep")
+    folder.write_config(config)
+    label = name if args.current is None else f"passive {args.current:g} A"
+    sweep = config["sweep"]
+    if args.stepped:
+        freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
+        points = stepped_sine(config, lambda: make_controller(name, config), freqs)
+        lines = ["frequency_hz,body_rms_rad,road_rms_rad,transmissibility,observer_nrmse,clipped_cycles"]
+        print(f"{'f [Hz]':>8} {'body RMS [deg]':>15} {'transmissibility':>17} {'observer NRMSE':>15}")
+        for p in points:
+            lines.append(f"{p.frequency_hz!r},{p.body_rms_rad!r},{p.road_rms_rad!r},{p.transmissibility!r},{p.observer_nrmse!r},{p.clipped_cycles}")
+            print(f"{p.frequency_hz:8.3f} {math.degrees(p.body_rms_rad):15.4f} {p.transmissibility:17.4f} {100 * p.observer_nrmse:14.1f}%")
+        folder._write_text("transmissibility.csv", "\n".join(lines) + "\n")
+        _plot(folder, points, label)
+        integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
+        print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
+        summary = {"exit_status": "ok", "mode": "stepped", "controller": label,
+                   "integrated_body_rms_rad": integrated,
+                   "points": [p.__dict__ for p in points]}
+    else:
+        amplitude = math.radians(sweep["amplitude_deg"])
+        controller = make_controller(name, config)
+        total = duration + sweep["ramp_s"]
+        cols = run_profile(config, controller, chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]), total)
+        folder.write_data(cols)
+        body = cols["theta_rad"] + cols["theta_road_rad"]
+        summary = {"exit_status": "ok", "mode": "chirp", "controller": label,
+                   "body_rms_rad": ac_rms(body), "road_rms_rad": ac_rms(cols["theta_road_rad"]),
+                   "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),
+                   "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
+                   "clipped_cycles": int(getattr(controller, "clip_count", 0))}
+        print(f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
+              f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg")
+    summary = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+    if "points" in summary:
+        summary["points"] = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in p.items()} for p in summary["points"]]
+    folder.write_summary(summary)
+    print(f"run folder: {folder.path}")
+    return 0

@@ -1,0 +1,197 @@
+"""Issue 5: estimator, observer, inverse, laws, controller stage, registry errors, plant mismatch."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sashil.config import default_config
+from sashil.control.estimator import RigEstimator, TrackingFilter, rate_response
+from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
+from sashil.control.laws import SkyhookOnOff, band_limited_fraction
+from sashil.control.observer import BoucWenObserver
+from sashil.control.registry import make_controller
+from sashil.drivers.interface import RigSample
+from sashil.errors import ConfigError
+from sashil.experiments.drop_test import run_drop_test
+from sashil.models.hysteresis import BoucWenParams, BoucWenZ
+from sashil.models.mismatch import mismatch_fractions, open_sim_rig, plant_config
+from sashil.runtime.clock import VirtualClock
+
+SEED = BoucWenParams()
+
+
+def sample(arm_counts: int, road_counts: int = 0, current: float = 0.0, cpr: int = 4096) -> RigSample:
+    return RigSample(0, 0, 0, arm_counts, road_counts, current, 0, cpr)
+
+
+# --- estimator ------------------------------------------------------------------------------
+def test_alpha_beta_tracks_a_constant_rate_from_counts():
+    cpr, rate = 4096, 0.8  # rad/s
+    est = RigEstimator(bandwidth_hz=10.0)
+    for k in range(3000):
+        counts = round(rate * k * 1e-3 * cpr / (2 * math.pi))
+        est.update(sample(counts, cpr=cpr), 1e-3)
+    assert est.theta_dot_rad_s == pytest.approx(rate, abs=0.01)
+    assert est.body_dot_rad_s == pytest.approx(rate, abs=0.01)
+
+
+def test_alpha_beta_delay_matches_the_analogue_loop_2_over_w():
+    gain, delay, _ = rate_response(25.0, 1000.0, 1.0, order=2)
+    assert delay == pytest.approx(2.0 / (2 * math.pi * 25.0), rel=0.05)
+    assert gain == pytest.approx(1.0, abs=0.01)
+    _, delay3, _ = rate_response(30.0, 1000.0, 1.6, order=3)
+    assert abs(delay3) < 0.5e-3
+
+
+def test_model_acceleration_removes_the_lag_of_a_known_motion():
+    # theta = sin(w t): with the exact acceleration the estimate follows without lag
+    w, dt = 2 * math.pi * 1.6, 1e-3
+    plain, aided = TrackingFilter(10.0), TrackingFilter(10.0)
+    worst_plain = worst_aided = 0.0
+    for k in range(4000):
+        t = k * dt
+        plain.update(math.sin(w * t), dt)
+        aided.update(math.sin(w * t), dt, -w * w * math.sin(w * (t - 0.5 * dt)))
+        if t > 1.0:
+            worst_plain = max(worst_plain, abs(plain.v - w * math.cos(w * t)))
+            worst_aided = max(worst_aided, abs(aided.v - w * math.cos(w * t)))
+    assert worst_aided < 0.02 * w < worst_plain
+
+
+# --- observer -------------------------------------------------------------------------------
+def test_observer_z_is_the_model_z_update_and_torque_is_eq9():
+    obs = BoucWenObserver(SEED)
+    angles = [0.01 * math.sin(0.01 * k) for k in range(800)]
+    expected = BoucWenZ.from_params(SEED).trajectory(angles)
+    for angle in angles:
+        obs.update(angle, 0.3, 0.4)
+    assert obs.z == pytest.approx(float(expected[-1]), rel=1e-12)
+    assert obs.torque_nm == pytest.approx((1 + 0.4) * obs.z + (0.7 + 1.5 * 0.4) * 0.3, rel=1e-12)
+
+
+# --- inverse --------------------------------------------------------------------------------
+def test_inverse_hand_values_band_and_clipping():
+    inv = HysteresisInverse(SEED, 1.0)
+    # z = 0.1, v = 1: T(0) = 0.1 + 0.7 = 0.8, T(1) = 0.2 + 2.2 = 2.4, slope 1.6
+    assert inv.current(1.6, 0.1, 1.0) == pytest.approx(0.5)
+    assert (inv.band_lo_nm, inv.band_hi_nm) == pytest.approx((0.8, 2.4))
+    assert inv.current(3.0, 0.1, 1.0) == 1.0 and inv.clipped and inv.clip_count == 1
+    assert inv.current(0.5, 0.1, 1.0) == 0.0 and inv.clip_count == 2
+    assert inv.current(-1.0, 0.1, 1.0) == 0.0 and inv.passive_count == 1  # T*·v <= 0: cannot push
+    assert inv.current(1.0, -0.001, 0.0) == 0.0  # T*·v = 0
+    assert inv.current(0.01, -0.0015, 0.001) == 0.0 and inv.passive_count == 3  # |alpha2 z + c2 v| < 1e-3
+
+
+def test_viscous_only_inverse_ignores_alpha():
+    inv = HysteresisInverse(SEED, 1.0, viscous_only=True)
+    assert inv.current(1.45, 0.1, 1.0) == pytest.approx(0.5)  # (1.45 - 0.7) / 1.5
+
+
+def test_coil_lead_speeds_up_the_coil_current():
+    tau, horizon, dt = 0.01, 0.003, 1e-3
+    lead = CoilLagCompensator(tau, horizon, 1.0)
+    assert lead.gain == pytest.approx(1.0 / (1.0 - math.exp(-0.3)))
+    # one period with the command held: the current closes gain*(1 - exp(-dt/tau)) of the gap
+    cmd = lead.command(0.3, 0.2)
+    after = cmd + (0.2 - cmd) * math.exp(-dt / tau)
+    assert after - 0.2 == pytest.approx(0.1 * lead.gain * (1 - math.exp(-dt / tau)))
+    current, plain = 0.2, 0.2
+    for _ in range(3):
+        cmd = lead.command(0.3, current)
+        current = cmd + (current - cmd) * math.exp(-dt / tau)
+        plain = 0.3 + (plain - 0.3) * math.exp(-dt / tau)
+    assert abs(0.3 - current) < 0.35 * abs(0.3 - plain)
+    assert lead.command(5.0, 0.2) == 1.0 and lead.command(-1.0, 0.2) == 0.0  # clipped to [0, i_max]
+    assert CoilLagCompensator(tau, 0.0, 1.0).command(0.6, 0.2) == 0.6
+
+
+# --- laws, controller -----------------------------------------------------------------------
+class _State:
+    def __init__(self, v, vb):
+        self.theta_dot_rad_s, self.body_dot_rad_s = v, vb
+
+
+def test_skyhook_onoff_switches_on_the_sign_of_body_times_relative_rate():
+    law = SkyhookOnOff(1.0)
+    assert law.output(_State(0.2, 0.5)) == 1.0
+    assert law.output(_State(-0.2, 0.5)) == 0.0
+
+
+def test_band_limited_fraction_stays_in_its_range_and_band():
+    table = band_limited_fraction(2.0, 0.1, 0.9, seed=3)
+    assert table.min() == pytest.approx(0.1) and table.max() == pytest.approx(0.9)
+    import numpy as np
+
+    spectrum = np.abs(np.fft.rfft(table - table.mean()))
+    freqs = np.fft.rfftfreq(table.size, 1e-3)
+    assert spectrum[freqs > 2.01].max() < 1e-9 * spectrum.max()
+
+
+def test_nan_target_ends_at_zero_current():
+    config = default_config()
+    ctl = make_controller("torque-tracking", config, torque=lambda t: float("nan"))
+    for k in range(5):
+        cmd = ctl.step(sample(k, 0, 0.3), k * 1_000_000, 1_000_000)
+        assert cmd.current_a == 0.0
+
+
+def mismatched(pattern="alternate"):
+    config = default_config()
+    config["mismatch"].update(fraction=0.1, coil_tau=0.1, pattern=pattern)
+    config["controller"]["zeta"] = 0.07
+    return config
+
+
+def zetas(metrics):
+    return [d / math.sqrt(4 * math.pi**2 + d * d) for d in metrics.log_decrements]
+
+
+def test_target_damping_drop_decays_exponentially_with_mismatch_and_constant_current_does_not():
+    config = mismatched()
+    ctl = make_controller("target-damping", config)
+    record = run_drop_test(config, -5.0, 0.5, 6.0, rig=open_sim_rig(config), clock=VirtualClock(), controller=ctl)
+    controlled = zetas(record.metrics)
+    assert len(controlled) >= 4
+    assert all(abs(z / 0.07 - 1.0) <= 0.10 for z in controlled), controlled
+    constant = zetas(run_drop_test(config, -5.0, 0.5, 6.0, rig=open_sim_rig(config), clock=VirtualClock()).metrics)
+    assert constant[-1] / constant[0] > 1.2, constant  # Coulomb-like hysteresis: decrement grows as it decays
+    assert record.columns["current_cmd_a"].max() > record.columns["current_cmd_a"].min()  # the controller commanded
+
+
+# --- registry errors --------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "name, update, message",
+    [
+        ("bogus", {}, "controller.law: unknown law 'bogus'"),
+        ("skyhook", {}, "controller.c_sky: law 'skyhook' needs c_sky"),
+        ("groundhook", {}, "controller.c_ground"),
+        ("target-damping", {}, "controller.zeta: law 'target-damping' needs zeta"),
+        ("target-damping", {"zeta": 0.2}, "controller.zeta: 0.2 is outside what the damper can do"),
+        ("target-damping", {"c_target": 5.0}, "controller.c_target: 5 N m s/rad is outside"),
+        ("passive", {"current_a": 3.0}, "controller.current_a"),
+        ("torque-tracking", {"tracking_fraction": [0.9, 0.1]}, "controller.tracking_fraction"),
+    ],
+)
+def test_bad_controller_input_is_one_line_naming_the_key(name, update, message):
+    config = default_config()
+    config["controller"].update(update)
+    with pytest.raises(ConfigError) as err:
+        make_controller(name, config)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+# --- mismatch ---------------------------------------------------------------------------------
+def test_mismatch_patterns_and_overrides():
+    fr = mismatch_fractions({"fraction": 0.1, "pattern": "alternate", "params": {"k": 0.05}})
+    assert fr["J"] == 0.1 and fr["c1"] == 0.1 and fr["c2"] == -0.1 and fr["k"] == 0.05
+    config = default_config()
+    config["mismatch"].update(fraction=0.1, pattern="plus", coil_tau=0.5, encoder_counts_per_rev=1024)
+    plant = plant_config(config)
+    assert plant["model"]["params"]["c1"] == pytest.approx(0.77)
+    assert plant["rig"]["coil_tau_s"] == pytest.approx(0.015)
+    assert plant["rig"]["encoder_counts_per_rev"] == 1024
+    assert config["model"]["params"]["c1"] == 0.7  # the controller's model is untouched
+    with pytest.raises(ConfigError, match="mismatch.params.q: not a bouc-wen parameter"):
+        mismatch_fractions({"params": {"q": 0.1}})

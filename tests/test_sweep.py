@@ -1,0 +1,72 @@
+"""Issue 5: road profiles, stepped-sine transmissibility, the ``sashil sweep`` verb."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from sashil.cli import main
+from sashil.config import default_config
+from sashil.control.registry import make_controller
+from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
+
+
+@pytest.mark.parametrize("profile", [chirp_profile(0.01, 0.5, 5.0, 10.0, 1.0), sine_profile(0.01, 2.0, 1.0)])
+def test_profiles_are_consistent_with_their_derivatives(profile):
+    h = 1e-5
+    for t in (0.3, 0.9, 2.0, 7.5, 11.0):
+        (x0, v0, a0), (x1, v1, _) = profile(t - h), profile(t + h)
+        x, v, a = profile(t)
+        assert v == pytest.approx((x1 - x0) / (2 * h), abs=1e-6)
+        assert a == pytest.approx((v1 - v0) / (2 * h), abs=1e-4)
+
+
+def test_chirp_is_a_sine_of_the_linear_frequency_ramp():
+    road = chirp_profile(0.02, 0.5, 5.0, 10.0, ramp_s=0.0)
+    for t in (0.5, 4.0, 9.9):
+        phase = 2 * math.pi * (0.5 * t + 0.5 * 0.45 * t * t)
+        x, v, _ = road(t)
+        assert x == pytest.approx(0.02 * math.sin(phase), abs=1e-12)
+        assert v == pytest.approx(0.02 * math.cos(phase) * 2 * math.pi * (0.5 + 0.45 * t), abs=1e-12)
+    # held at f_stop after the ramp: one period later the angle repeats
+    assert road(12.0)[0] == pytest.approx(road(12.2)[0], abs=1e-9)
+
+
+def test_stepped_sine_transmissibility_is_one_below_and_small_above_resonance():
+    config = default_config()
+    config["sweep"].update(settle_s=3.0, measure_s=2.0, ramp_s=0.5)
+    soft = stepped_sine(config, lambda: make_controller("passive", config), [0.3, 1.66, 5.0])
+    assert soft[0].transmissibility == pytest.approx(1.0, abs=0.05)
+    assert soft[1].transmissibility > 3.0  # resonance sqrt(109)/(2 pi) = 1.66 Hz, light damping
+    assert soft[2].transmissibility < 0.3
+    config["controller"]["current_a"] = 1.0
+    hard = stepped_sine(config, lambda: make_controller("passive", config), [1.66])
+    assert hard[0].transmissibility < 0.6 * soft[1].transmissibility
+
+
+def test_sweep_cli_stepped_writes_table_and_plot(tmp_path):
+    out = tmp_path / "run"
+    rc = main(["sweep", "--stepped", "--steps", "2", "--f-start", "1", "--f-stop", "3", "--current", "0.5", "--out", str(out)])
+    assert rc == 0
+    lines = (out / "transmissibility.csv").read_text().splitlines()
+    assert lines[0].startswith("frequency_hz,body_rms_rad") and len(lines) == 3
+    assert (out / "transmissibility.png").stat().st_size > 1000
+    assert json.loads((out / "summary.json").read_text())["exit_status"] == "ok"
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--controller", "nope"], "--controller: unknown law 'nope'"),
+        (["--controller", "skyhook"], "controller.c_sky"),
+        (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency above"),
+        (["--current", "5"], "--current: expected a current in [0, 1]"),
+    ],
+)
+def test_sweep_cli_bad_input_is_one_line(tmp_path, capsys, argv, message):
+    rc = main(["sweep", *argv, "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
