@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
-from typing import Any
+import sys
+from typing import Any, Sequence
 
 from sashil.config import Config, apply_params, load_config
 from sashil.errors import ConfigError
@@ -24,6 +26,72 @@ def add_driver_options(parser: argparse.ArgumentParser) -> None:
 
 def add_output_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", help="run folder (default runs/<UTC timestamp>-<verb>/)")
+
+
+def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True) -> None:
+    """``--rerun``, ``--rerun-connect``, ``--rerun-save`` (live view / recording) and ``--format``."""
+    group = parser.add_argument_group("live view and output formats")
+    group.add_argument("--rerun", action="store_true", help="spawn the rerun viewer and stream the run to it live")
+    group.add_argument("--rerun-connect", metavar="URL", help="stream to a running rerun viewer (e.g. rerun+http://127.0.0.1:9876/proxy)")
+    group.add_argument("--rerun-save", metavar="FILE.rrd", help="record the live view to an .rrd file (no viewer needed)")
+    if formats:
+        group.add_argument(
+            "--format",
+            action="append",
+            choices=("csv", "mat"),
+            metavar="FMT",
+            help="data formats to write: csv (always) and mat (MATLAB data.mat beside data.csv); repeatable",
+        )
+
+
+def wants_rerun(args: argparse.Namespace) -> bool:
+    return bool(getattr(args, "rerun", False) or getattr(args, "rerun_connect", None) or getattr(args, "rerun_save", None))
+
+
+def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str) -> Any:
+    """The :class:`~sashil.recording.rerun_log.RerunLog` the options ask for, or None."""
+    if not wants_rerun(args):
+        return None
+    from sashil.recording.rerun_log import RerunLog
+
+    return RerunLog.open(
+        columns,
+        save=args.rerun_save,
+        viewer=bool(args.rerun),
+        connect=getattr(args, "rerun_connect", None),
+        name=name,
+    )
+
+
+def wants_mat(args: argparse.Namespace) -> bool:
+    return "mat" in (getattr(args, "format", None) or ())
+
+
+def add_verbosity_options(parser: argparse.ArgumentParser) -> None:
+    """``--quiet`` / ``--verbose`` (every verb; set up by :func:`setup_logging`)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors, no progress")
+    group.add_argument("-v", "--verbose", action="store_true", help="debug messages too")
+
+
+def setup_logging(args: argparse.Namespace) -> int:
+    """Configure the ``sashil`` logger from ``--quiet``/``--verbose``; returns the level."""
+    level = logging.WARNING if getattr(args, "quiet", False) else logging.DEBUG if getattr(args, "verbose", False) else logging.INFO
+    logger = logging.getLogger("sashil")
+    logger.setLevel(level)
+    if not any(getattr(h, "_sashil", False) for h in logger.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        handler._sashil = True  # type: ignore[attr-defined]
+        logger.addHandler(handler)
+        logger.propagate = False
+    return level
+
+
+def say(args: argparse.Namespace, message: str) -> None:
+    """A progress/status line on stderr unless ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        print(message, file=sys.stderr, flush=True)
 
 
 def resolve_config(args: argparse.Namespace) -> Config:

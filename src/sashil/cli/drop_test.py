@@ -10,12 +10,16 @@ from sashil.cli.common import (
     add_config_options,
     add_driver_options,
     add_output_options,
+    add_recording_options,
     current_in_range,
+    open_rerun,
+    wants_mat,
     positive_seconds,
     resolve_config,
 )
 from sashil.errors import ConfigError
-from sashil.experiments.drop_test import run_drop_test
+from sashil.experiments.drop_test import DROP_COLUMNS, run_drop_test
+from sashil.recording.matlab import write_mat
 from sashil.recording.plots import plot_angle_overlay
 from sashil.recording.run_folder import RunFolder
 
@@ -38,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)")
     add_output_options(parser)
+    add_recording_options(parser)
 
 
 def _label(current: float) -> str:
@@ -53,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     if len(set(currents)) != len(currents):
         raise ConfigError(f"--current: each current once, got {currents}")
 
+    live = open_rerun(args, DROP_COLUMNS, "sashil drop-test")
+    live_offset_s = 0.0
     folder = RunFolder.create(args.out, "drop-test")
     folder.write_config(config)
     several = len(currents) > 1
@@ -65,6 +72,12 @@ def run(args: argparse.Namespace) -> int:
         if several:
             target.write_config(config)
         target.write_data(record.columns)
+        if wants_mat(args):
+            write_mat(target.file("data.mat"), record.columns, {"verb": "drop-test", "current_a": current})
+        if live is not None:
+            live.note(live_offset_s, f"drop test from {args.theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)")
+            live.log_columns(record.columns, live_offset_s)
+            live_offset_s += duration + 1.0
         metrics = record.metrics.as_dict()
         entry = {
             "current_a": current,
@@ -89,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
         f"Drop test from {args.theta0_deg:g}° ({config['driver']['name']} rig)",
         band_deg=config["drop_test"]["settle_band_deg"],
     )
+    if live is not None:
+        live.close()
     folder.write_summary({"exit_status": exit_status, "verb": "drop-test", "driver": config["driver"]["name"], "runs": runs})
     print(f"run folder: {folder.path} (plot {plot.name})", file=sys.stderr)
     return 0

@@ -115,6 +115,14 @@ class Recorder:
     def rows_committed(self) -> int:
         return self._head
 
+    def copy_rows(self, start: int, stop: int, step: int = 1) -> list[tuple[Any, ...]]:
+        """Copies of committed rows ``start, start+step, ... < stop`` (row numbers as counted by
+        ``rows_committed``) for a reader off the hot path such as the live view. Rows older than
+        ``rows_committed - capacity`` are gone; the caller keeps clear of them."""
+        ring, cap = self._ring, self.capacity
+        stop = min(stop, self._head)
+        return [tuple(ring[i % cap]) for i in range(max(start, 0), stop, step)]
+
     # writer thread ---------------------------------------------------------------------------
     def _run(self) -> None:
         try:

@@ -1,0 +1,362 @@
+"""Live view and ``.rrd`` recording of a run with rerun-sdk (API of rerun-sdk 0.41).
+
+What is logged (timeline ``time``, seconds of the run, a duration timeline):
+
+==============================  ===========================================================
+entity                          series (data.csv columns)
+==============================  ===========================================================
+``signals/angle_deg``           θ (``theta_rad``), θ1 (``theta_road_rad``), in degrees
+``signals/velocity_rad_s``      θ̇ (``theta_dot_rad_s``)
+``signals/current_a``           commanded (``current_cmd_a``), measured (``current_a``)
+``signals/torque_nm``           T̂ (``torque_hat_nm``), T* (``torque_cmd_nm``), the feasible
+                                band T(0), T(i_max) (seed 001 eq. 10 with ẑ and θ̇)
+``signals/z_hat``               ẑ (``z_hat``)
+``timing/lateness_us``          loop wake-up lateness per cycle
+``hysteresis/torque_vs_*``      T̂ against θ̇ [deg/s] and against θ [deg], as 2-D points
+``events/trips``                safety trips (text log, level ERROR)
+``events/notes``                run events such as the start of each drop test (level INFO)
+==============================  ===========================================================
+
+A series is logged only when its columns exist. 2-D views draw y downward, so the hysteresis
+points are stored as (x, −T̂) and the view is named accordingly; the torque values themselves are
+in ``signals/torque_nm`` unchanged.
+
+Never blocking the loop: :class:`LiveTap` runs in its own thread. Every ``batch_s`` it copies
+every ``every``-th committed row from the recorder's ring (:meth:`Recorder.copy_rows`), builds one
+column batch per entity and sends each with ``rr.send_columns`` (one call per entity, ~0.1 ms).
+Like the recorder's writer, it starts a send only when it fits before the loop's next wake-up
+(``recorder.window_end_ns``), so it uses the interpreter while the loop sleeps. It never waits for
+the loop; if it falls behind the ring it skips rows (counted in ``rows_skipped``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+DEG = 180.0 / math.pi
+TIMELINE = "time"
+TRIPS_ENTITY = "events/trips"
+NOTES_ENTITY = "events/notes"
+APP_ID = "sashil"
+#: a send is started only this long before the loop's next wake-up
+SEND_BUDGET_NS = 300_000
+POLL_S = 0.002
+
+
+@dataclass(frozen=True)
+class Series:
+    """One time-series entity: several data columns drawn in one plot."""
+
+    entity: str
+    title: str
+    columns: tuple[str, ...]
+    names: tuple[str, ...]
+    scale: float = 1.0
+
+
+SERIES: tuple[Series, ...] = (
+    Series("signals/angle_deg", "angle θ, θ1 [deg]", ("theta_rad", "theta_road_rad"), ("θ (relative)", "θ1 (road)"), DEG),
+    Series("signals/velocity_rad_s", "velocity θ̇ [rad/s]", ("theta_dot_rad_s",), ("θ̇",)),
+    Series("signals/current_a", "coil current [A]", ("current_cmd_a", "current_a"), ("commanded", "measured")),
+    Series(
+        "signals/torque_nm",
+        "damper torque [N·m]",
+        ("torque_hat_nm", "torque_cmd_nm", "band_lo_nm", "band_hi_nm"),
+        ("T̂ (observer)", "T* (target)", "band T(0)", "band T(i_max)"),
+    ),
+    Series("signals/z_hat", "hysteretic state ẑ", ("z_hat",), ("ẑ",)),
+    Series("timing/lateness_us", "loop lateness [µs]", ("lateness_us",), ("wake-up lateness",)),
+)
+
+#: (entity, x column, x scale, view title); y is always -torque_hat_nm (see module doc)
+HYSTERESIS: tuple[tuple[str, str, float, str], ...] = (
+    ("hysteresis/torque_vs_velocity", "theta_dot_rad_s", DEG, "hysteresis: T̂ [N·m, up] against θ̇ [deg/s]"),
+    ("hysteresis/torque_vs_angle", "theta_rad", DEG, "hysteresis: T̂ [N·m, up] against θ [deg]"),
+)
+
+
+def feasible_band(columns: Mapping[str, np.ndarray], params: Mapping[str, float], current_max_a: float) -> None:
+    """Add ``band_lo_nm``/``band_hi_nm``: the torque range T(0), T(i_max) at the observed state.
+
+    Seed 001 eq. 10 with eq. 11-12: ``T(i) = (alpha1 + alpha2 i) z + (c1 + c2 i) theta_dot``, linear
+    in i, so the band's ends are its values at 0 A and at i_max. Needs ``z_hat`` and
+    ``theta_dot_rad_s``; does nothing without them or when the band is already there.
+    """
+    if "band_lo_nm" in columns or "z_hat" not in columns or "theta_dot_rad_s" not in columns:
+        return
+    z, v = np.asarray(columns["z_hat"], float), np.asarray(columns["theta_dot_rad_s"], float)
+    lo = params["alpha1"] * z + params["c1"] * v
+    columns["band_lo_nm"] = lo  # type: ignore[index]
+    columns["band_hi_nm"] = lo + (params["alpha2"] * z + params["c2"] * v) * current_max_a  # type: ignore[index]
+
+
+def present_series(columns: Sequence[str]) -> list[tuple[Series, tuple[int, ...]]]:
+    """The series with at least one column in ``columns``, and which of their columns are there."""
+    have = set(columns)
+    out = []
+    for series in SERIES:
+        idx = tuple(i for i, name in enumerate(series.columns) if name in have)
+        if idx:
+            out.append((series, idx))
+    return out
+
+
+def blueprint(columns: Sequence[str]) -> Any:
+    """Panels: time series on the left (angle, velocity, current, torque, ẑ, lateness), the two
+    hysteresis loops (built up over the whole run) and the trip log on the right."""
+    import rerun.blueprint as rrb
+
+    left = [rrb.TimeSeriesView(origin=f"/{s.entity}", name=s.title) for s, _ in present_series(columns)]
+    right: list[Any] = []
+    if "torque_hat_nm" in columns:
+        whole_run = rrb.VisibleTimeRange(
+            TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative()
+        )
+        for entity, x_name, _, title in HYSTERESIS:
+            if x_name in columns:
+                right.append(rrb.Spatial2DView(origin=f"/{entity}", name=title, time_ranges=[whole_run]))
+    right.append(rrb.TextLogView(origin="/events", name="trips and events"))
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Vertical(*left), rrb.Vertical(*right), column_shares=[3, 2]),
+        collapse_panels=True,
+    )
+
+
+class RerunLog:
+    """A rerun recording stream with the sashil layout: a viewer, an ``.rrd`` file, or both."""
+
+    def __init__(self, stream: Any, columns: Sequence[str] = ()):
+        self.rec = stream
+        self._named: set[str] = set()
+        self.sends = 0
+        self.send_ns_max = 0
+        self.send_ns_total = 0
+        self.columns = tuple(columns)
+
+    @classmethod
+    def open(
+        cls,
+        columns: Sequence[str],
+        *,
+        save: str | Path | None = None,
+        viewer: bool = False,
+        connect: str | None = None,
+        name: str | None = None,
+    ) -> "RerunLog":
+        """Open a stream to ``save`` (``.rrd``), a spawned viewer (``viewer``), a viewer at
+        ``connect`` (a ``rerun+http://…/proxy`` URL), or several of them; sends the blueprint."""
+        import rerun as rr
+
+        from sashil.errors import ConfigError
+
+        rec = rr.RecordingStream(APP_ID)
+        if name:
+            rec.send_recording_name(name)
+        sinks = []
+        if viewer and connect is None:
+            try:
+                rec.spawn(connect=False)
+            except Exception as err:  # noqa: BLE001 - no viewer binary / no display: say so
+                raise ConfigError(f"--rerun: cannot start the rerun viewer ({err}); use --rerun-save FILE.rrd") from None
+        if viewer or connect is not None:
+            sinks.append(rr.GrpcSink(connect) if connect else rr.GrpcSink())
+        if save is not None:
+            path = Path(save)
+            if not path.parent.is_dir():
+                raise ConfigError(f"--rerun-save {path}: folder {path.parent} does not exist")
+            sinks.append(rr.FileSink(str(path)))
+        rec.set_sinks(*sinks)
+        log = cls(rec, columns)
+        rec.send_blueprint(blueprint(columns))
+        return log
+
+    # sending -------------------------------------------------------------------------------
+    def _send(self, entity: str, time_s: np.ndarray, archetype_columns: Any) -> None:
+        import rerun as rr
+
+        t0 = time.perf_counter_ns()
+        rr.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=time_s)], columns=archetype_columns, recording=self.rec)
+        spent = time.perf_counter_ns() - t0
+        self.sends += 1
+        self.send_ns_total += spent
+        self.send_ns_max = max(self.send_ns_max, spent)
+
+    def batches(self, columns: Mapping[str, np.ndarray], time_offset_s: float = 0.0) -> list[tuple[str, Any]]:
+        """The sends for a block of rows: ``[(entity, thunk), ...]``, each thunk one send."""
+        import rerun as rr
+
+        time_s = np.asarray(columns["time_s"], float) + time_offset_s
+        if time_s.size == 0:
+            return []
+        out: list[tuple[str, Any]] = []
+        for series, idx in present_series(list(columns)):
+            names = [series.names[i] for i in idx]
+            values = np.column_stack([np.asarray(columns[series.columns[i]], float) * series.scale for i in idx])
+            if series.entity not in self._named:
+                self.rec.log(series.entity, rr.SeriesLines(names=names), static=True)
+                self._named.add(series.entity)
+            out.append((series.entity, lambda e=series.entity, v=values: self._send(e, time_s, rr.Scalars.columns(scalars=v))))
+        if "torque_hat_nm" in columns:
+            torque = np.asarray(columns["torque_hat_nm"], float)
+            for entity, x_name, scale, _ in HYSTERESIS:
+                if x_name in columns:
+                    points = np.column_stack([np.asarray(columns[x_name], float) * scale, -torque])
+                    points = points[np.isfinite(points).all(axis=1)]
+                    if points.size:
+                        # one row at the block's last time holding all its points (the view keeps the history)
+                        cols = rr.Points2D.columns(positions=points, radii=np.full(len(points), -1.5)).partition([len(points)])
+                        out.append((entity, lambda e=entity, c=cols: self._send(e, time_s[-1:], c)))
+        return out
+
+    def log_columns(self, columns: Mapping[str, np.ndarray], time_offset_s: float = 0.0) -> None:
+        """Send whole columns (a finished record, e.g. a drop test) in one batch per entity."""
+        for _, send in self.batches(columns, time_offset_s):
+            send()
+
+    def trip(self, time_s: float, reason: str) -> None:
+        import rerun as rr
+
+        self.rec.set_time(TIMELINE, duration=time_s)
+        self.rec.log(TRIPS_ENTITY, rr.TextLog(f"{time_s:.3f} s: {reason}", level=rr.TextLogLevel.ERROR))
+        self.rec.reset_time()
+
+    def note(self, time_s: float, text: str) -> None:
+        import rerun as rr
+
+        self.rec.set_time(TIMELINE, duration=time_s)
+        self.rec.log(NOTES_ENTITY, rr.TextLog(text, level=rr.TextLogLevel.INFO))
+        self.rec.reset_time()
+
+    def close(self) -> None:
+        """Flush everything to the sinks and disconnect (the ``.rrd`` is complete afterwards)."""
+        self.rec.flush()
+        self.rec.disconnect()
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "sends": self.sends,
+            "send_us_mean": round(self.send_ns_total / self.sends / 1e3, 1) if self.sends else None,
+            "send_us_max": round(self.send_ns_max / 1e3, 1),
+        }
+
+
+class LiveTap:
+    """The thread that feeds a :class:`RerunLog` from a running loop's recorder (module doc)."""
+
+    def __init__(
+        self,
+        log: RerunLog,
+        every: int = 10,
+        batch_s: float = 0.1,
+        band: tuple[Mapping[str, float], float] | None = None,
+    ):
+        if every < 1 or not batch_s > 0:
+            raise ValueError("every >= 1 and batch_s > 0 required")
+        self.log = log
+        self.every = int(every)
+        self.batch_s = float(batch_s)
+        self.band = band  # (Bouc-Wen params, i_max) for the feasible band
+        self.recorder: Any = None
+        self.timing: Any = None
+        self._next = 0
+        self.rows_sent = 0
+        self.rows_skipped = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+
+    def start(self, recorder: Any, timing: Any = None) -> "LiveTap":
+        """Follow ``recorder`` (a :class:`~sashil.recording.recorder.Recorder`) and, when given,
+        the loop's :class:`~sashil.runtime.timing.TimingStats` (for the lateness series)."""
+        self.recorder, self.timing = recorder, timing
+        self._thread = threading.Thread(target=self._run, name="sashil-rerun", daemon=True)
+        self._thread.start()
+        return self
+
+    def _window_open(self) -> bool:
+        window = self.recorder.window_end_ns
+        return window is None or time.perf_counter_ns() + SEND_BUDGET_NS <= window
+
+    def _collect(self) -> dict[str, np.ndarray] | None:
+        rec = self.recorder
+        head = rec.rows_committed
+        oldest = head - rec.capacity + 64  # rows before this may be overwritten while we copy
+        if self._next < oldest:
+            skipped = oldest - self._next
+            skipped -= skipped % self.every
+            self._next += skipped
+            self.rows_skipped += skipped
+        rows = rec.copy_rows(self._next, head, self.every)
+        if not rows:
+            return None
+        first = self._next
+        self._next += len(rows) * self.every
+        self.rows_sent += len(rows)
+        block = np.asarray(rows, dtype=float)
+        columns = {name: block[:, i] for i, name in enumerate(rec.columns)}
+        timing = self.timing
+        if timing is not None:
+            cycles = timing.cycles
+            lateness = np.full(len(rows), np.nan)
+            picks = np.arange(first, first + len(rows) * self.every, self.every)
+            ok = picks < cycles
+            if ok.any():
+                data = np.frombuffer(timing.lateness, dtype=np.int64, count=cycles)
+                lateness[ok] = data[picks[ok]] * 1e-3
+            columns["lateness_us"] = lateness
+        if self.band is not None:
+            feasible_band(columns, *self.band)
+        return columns
+
+    def _run(self) -> None:
+        try:
+            next_batch = time.perf_counter()
+            pending: list[tuple[str, Any]] = []
+            while not self._stop.is_set():
+                if pending:
+                    if self._window_open():
+                        pending.pop(0)[1]()
+                        continue
+                elif time.perf_counter() >= next_batch:
+                    next_batch += self.batch_s
+                    if self._window_open():
+                        columns = self._collect()
+                        if columns is not None:
+                            pending = self.log.batches(columns)
+                        continue
+                self._stop.wait(POLL_S)
+        except BaseException as err:  # noqa: BLE001 - the live view must never take the run down
+            self.error = err
+
+    def close(self, trips: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
+        """Stop the thread, send the rest of the rows and the trips, finish the recording."""
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            self._thread = None
+        if self.error is None and self.recorder is not None:
+            while True:
+                columns = self._collect()
+                if columns is None:
+                    break
+                self.log.log_columns(columns)
+        for trip in trips:
+            self.log.trip(float(trip.get("time_s") or 0.0), str(trip.get("reason", "trip")))
+        self.log.close()
+        return self.stats()
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "rows_sent": self.rows_sent,
+            "rows_skipped": self.rows_skipped,
+            "every": self.every,
+            "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
+            **self.log.stats(),
+        }
