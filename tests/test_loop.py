@@ -300,3 +300,29 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     assert outcome.exit_code == 130 and outcome.result.stop_reason == "SIGTERM"
     assert len(_rows(folder.path)["time_s"]) == 30
     assert rig.currents[-2:] == [0.0, 0.0] and rig.calls["close"] == 1
+
+
+def test_an_unexpected_error_in_the_stage_ends_at_0_a(tmp_path, config):
+    class Broken(ConstantCurrent):
+        n = 0
+
+        def step(self, sample, t_ns, dt_ns):
+            self.n += 1
+            if self.n == 3:
+                raise ZeroDivisionError("division by zero in the law")
+            return self.command
+
+    rig = FaultyRig()
+    outcome, summary, path = _session(tmp_path, config, rig, Broken(0.7))
+    assert outcome.exit_code == 1 and summary["exit_status"] == "error"
+    assert summary["error"] == "division by zero in the law"
+    assert rig.currents == [0.7, 0.7, 0.0, 0.0]
+    assert len(_rows(path)["time_s"]) == 2
+
+
+def test_real_clock_spin_margin_is_capped_at_a_quarter_period():
+    from sashil.runtime.clock import RealClock
+
+    assert RealClock.for_rate(200.0, 1000.0).spin_ns == 200_000
+    assert RealClock.for_rate(200.0, 5000.0).spin_ns == 50_000
+    assert RealClock.for_rate(0.0, 1000.0).spin_ns == 0

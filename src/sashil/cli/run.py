@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     config["loop"]["rate_hz"] = rate
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
     folder = RunFolder.create(args.out, "run")
-    clock = RealClock(spin_ns=round(config["loop"]["spin_margin_us"] * 1000))
+    clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     print(f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
           f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}", file=sys.stderr)
     outcome = run_session(config, rig, stage, folder, clock, duration, controller=label)

@@ -24,6 +24,16 @@ class RealClock:
     def __init__(self, spin_ns: int = 200_000):
         self.spin_ns = int(spin_ns)
 
+    @classmethod
+    def for_rate(cls, spin_margin_us: float, rate_hz: float) -> "RealClock":
+        """The loop's clock: spin margin ``loop.spin_margin_us``, at most a quarter of the period.
+
+        The cap keeps a fast loop sleeping part of every period: a SCHED_FIFO thread that spins
+        all the time is throttled by the kernel (``sched_rt_runtime_us``: 50 ms off each second).
+        """
+        period_ns = 1e9 / rate_hz
+        return cls(spin_ns=round(min(spin_margin_us * 1000.0, period_ns / 4)))
+
     def now_ns(self) -> int:
         return time.perf_counter_ns()
 

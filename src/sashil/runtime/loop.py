@@ -25,8 +25,8 @@ Per cycle the loop allocates no dicts or strings: timing goes into preallocated 
 from __future__ import annotations
 
 import logging
-from operator import attrgetter
 from dataclasses import dataclass, field
+from operator import attrgetter
 from typing import Any, Callable, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample

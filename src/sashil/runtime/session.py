@@ -63,6 +63,7 @@ def run_session(
     verb: str = "run",
     say: Callable[[str], None] = _stderr,
     realtime: bool = True,
+    live: Any = None,
 ) -> SessionOutcome:
     """Run ``stage`` on ``rig`` in closed loop, recording into ``folder`` (see module doc)."""
     loop_cfg = config["loop"]
@@ -86,6 +87,8 @@ def run_session(
     with catch_stop_signals() as stop:
         loop.stop = stop
         recorder.start()
+        if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
+            live.start(recorder, loop.timing)
         try:
             if rt is not None:
                 rt.apply()
@@ -107,6 +110,8 @@ def run_session(
                     loop.result.exit_status = "error"
                     loop.result.error = str(err)
         result = loop.result
+        live_stats = live.close(result.trips) if live is not None else None
+        folder.write_timing(loop.timing)
         status = result.exit_status
         code = exit_code_of(status, error)
         summary: dict[str, Any] = {
@@ -123,6 +128,7 @@ def run_session(
             "safety": safety.summary(),
             "realtime": rt.report() if rt is not None else {},
             "recording": recorder.summary(),
+            "live_view": live_stats,
             "shutdown_errors": result.shutdown_errors,
         }
         folder.write_summary(summary)
