@@ -63,6 +63,21 @@ def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str) -> A
     )
 
 
+def open_live_tap(args: argparse.Namespace, config: Config, columns: Sequence[str], name: str) -> Any:
+    """A :class:`~sashil.recording.rerun_log.LiveTap` for a loop run (``run_session(live=...)``),
+    or None without a rerun option. The feasible torque band is added for the Bouc-Wen model."""
+    if not wants_rerun(args):
+        return None
+    from sashil.recording.rerun_log import LiveTap
+
+    model = config.get("model", {})
+    band = None
+    if model.get("name") == "bouc-wen" and "z_hat" in columns and "theta_dot_rad_s" in columns:
+        band = (model["params"], float(config["rig"]["current_max_a"]))
+    extra = ("lateness_us",) + (("band_lo_nm", "band_hi_nm") if band is not None else ())
+    return LiveTap(open_rerun(args, tuple(columns) + extra, name), band=band)
+
+
 def wants_mat(args: argparse.Namespace) -> bool:
     return "mat" in (getattr(args, "format", None) or ())
 

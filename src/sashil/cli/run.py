@@ -11,14 +11,19 @@ from sashil.cli.common import (
     add_config_options,
     add_driver_options,
     add_output_options,
+    add_recording_options,
     current_in_range,
+    open_live_tap,
+    wants_mat,
     positive_seconds,
     resolve_config,
 )
 from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
+from sashil.recording.matlab import export_mat
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
+from sashil.runtime.loop import record_columns
 from sashil.runtime.session import run_session
 from sashil.runtime.stages import ConstantCurrent
 from sashil.runtime.timing import format_timing
@@ -42,6 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
     add_output_options(parser)
+    add_recording_options(parser)
 
 
 def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
@@ -96,11 +102,14 @@ def run(args: argparse.Namespace) -> int:
     rate = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, rig, backend)
     config["loop"]["rate_hz"] = rate
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
+    live = open_live_tap(args, config, record_columns(stage), "sashil run")
     folder = RunFolder.create(args.out, "run")
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     print(f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
           f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}", file=sys.stderr)
-    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label)
+    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live)
+    if wants_mat(args):
+        export_mat(folder.file("data.csv"))
     print(format_timing(outcome.summary["timing"]), file=sys.stderr)
     for trip in outcome.summary["trips"]:
         print(f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", file=sys.stderr)

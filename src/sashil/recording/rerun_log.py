@@ -175,7 +175,26 @@ class RerunLog:
         rec.set_sinks(*sinks)
         log = cls(rec, columns)
         rec.send_blueprint(blueprint(columns))
+        log.warm_up()
         return log
+
+    def warm_up(self) -> None:
+        """Pay the SDK's first-call costs (~20 ms for the first time column) before the loop
+        starts, and name the series of every entity (static ``SeriesLines``)."""
+        import rerun as rr
+
+        for series, idx in present_series(self.columns):
+            self._name_series(series, idx)
+        rr.TimeColumn(TIMELINE, duration=np.zeros(2))
+        rr.Scalars.columns(scalars=np.zeros((2, 2)))
+        rr.Points2D.columns(positions=np.zeros((2, 2)), radii=np.full(2, -1.5)).partition([2])
+
+    def _name_series(self, series: Series, idx: tuple[int, ...]) -> None:
+        import rerun as rr
+
+        if series.entity not in self._named:
+            self.rec.log(series.entity, rr.SeriesLines(names=[series.names[i] for i in idx]), static=True)
+            self._named.add(series.entity)
 
     # sending -------------------------------------------------------------------------------
     def _send(self, entity: str, time_s: np.ndarray, archetype_columns: Any) -> None:
@@ -197,11 +216,8 @@ class RerunLog:
             return []
         out: list[tuple[str, Any]] = []
         for series, idx in present_series(list(columns)):
-            names = [series.names[i] for i in idx]
             values = np.column_stack([np.asarray(columns[series.columns[i]], float) * series.scale for i in idx])
-            if series.entity not in self._named:
-                self.rec.log(series.entity, rr.SeriesLines(names=names), static=True)
-                self._named.add(series.entity)
+            self._name_series(series, idx)
             out.append((series.entity, lambda e=series.entity, v=values: self._send(e, time_s, rr.Scalars.columns(scalars=v))))
         if "torque_hat_nm" in columns:
             torque = np.asarray(columns["torque_hat_nm"], float)
@@ -341,15 +357,18 @@ class LiveTap:
             self._stop.set()
             self._thread.join()
             self._thread = None
-        if self.error is None and self.recorder is not None:
-            while True:
-                columns = self._collect()
-                if columns is None:
-                    break
-                self.log.log_columns(columns)
-        for trip in trips:
-            self.log.trip(float(trip.get("time_s") or 0.0), str(trip.get("reason", "trip")))
-        self.log.close()
+        try:
+            if self.error is None and self.recorder is not None:
+                while True:
+                    columns = self._collect()
+                    if columns is None:
+                        break
+                    self.log.log_columns(columns)
+            for trip in trips:
+                self.log.trip(float(trip.get("time_s") or 0.0), str(trip.get("reason", "trip")))
+            self.log.close()
+        except Exception as err:  # noqa: BLE001 - the run's own records come first
+            self.error = err
         return self.stats()
 
     def stats(self) -> dict[str, Any]:
@@ -360,3 +379,28 @@ class LiveTap:
             "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
             **self.log.stats(),
         }
+
+
+def load_rrd(path: str | Path) -> dict[str, dict[str, list[Any]]]:
+    """Read an ``.rrd`` back (``rerun.chunk.RrdReader``, the first recording in the file):
+    ``{entity path: {column: values}}``, time columns (``time``, ``log_time``) in seconds.
+    Used by the tests and handy for checking a recording without the viewer."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    if not Path(path).is_file():
+        from sashil.errors import DataFileError
+
+        raise DataFileError(f"{path}: no such .rrd file")
+    out: dict[str, dict[str, list[Any]]] = {}
+    for chunk in RrdReader(str(path)).stream():
+        batch = chunk.to_record_batch()
+        entry = out.setdefault(chunk.entity_path, {})
+        for name in batch.schema.names:
+            column = batch.column(name)
+            if pa.types.is_temporal(column.type):  # the time line and rerun's log_time: seconds
+                values = (np.asarray(column.cast(pa.int64())) * 1e-9).tolist()
+            else:
+                values = column.to_pylist()
+            entry.setdefault(name, []).extend(values)
+    return out

@@ -10,6 +10,7 @@ import json
 import platform
 import socket
 import subprocess
+import sys
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping
@@ -52,6 +53,7 @@ def provenance() -> dict[str, Any]:
         "host": socket.gethostname(),
         "python": platform.python_version(),
         "platform": platform.platform(),
+        "command_line": sys.argv[:],
     }
 
 
@@ -96,6 +98,22 @@ class RunFolder:
 
     def write_data(self, columns: Columns, name: str = "data.csv") -> Path:
         return write_data_csv(self.file(name), columns)
+
+    def write_timing(self, timing: Any, name: str = "timing.npz") -> Path:
+        """Per-cycle loop timing (``lateness_ns``, ``read_ns``, ``compute_ns``, ``write_ns``, int64
+        arrays, one entry per cycle) of a :class:`~sashil.runtime.timing.TimingStats`, for reports."""
+        import numpy as np
+
+        target = self.file(name)
+        tmp = target.with_name(target.name + ".part")
+        arrays = {
+            f"{column}_ns": np.frombuffer(getattr(timing, column), dtype=np.int64, count=timing.cycles).copy()
+            for column in ("lateness", "read", "compute", "write")
+        }
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, rate_hz=np.float64(timing.rate_hz), **arrays)
+        tmp.replace(target)
+        return target
 
     def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
         doc = {
