@@ -7,9 +7,12 @@ import copy
 import math
 
 from sashil.cli.common import add_config_options, add_driver_options, add_output_options, current_in_range, positive_seconds, resolve_config
+from sashil.cli.common import add_recording_options, open_rerun, wants_mat
 from sashil.control.registry import LAWS, make_controller
 from sashil.errors import ConfigError
-from sashil.experiments.sweep import ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
+from sashil.experiments.sweep import SWEEP_COLUMNS, ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
+from sashil.recording.matlab import write_mat
+from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
 
 HELP = "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)"
@@ -29,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)")
     parser.add_argument("--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)")
     add_output_options(parser)
+    add_recording_options(parser)  # live view / data.mat of the chirp's data.csv
 
 
 def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
@@ -78,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     config = resolve_config(args)
     duration = positive_seconds("--duration", args.duration)
     name, config = _check(args, config)
+    live = None if args.stepped else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep")
     folder = RunFolder.create(args.out, "sweep")
     folder.write_config(config)
     label = name if args.current is None else f"passive {args.current:g} A"
@@ -103,6 +108,14 @@ def run(args: argparse.Namespace) -> int:
         total = duration + sweep["ramp_s"]
         cols = run_profile(config, controller, chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]), total)
         folder.write_data(cols)
+        if wants_mat(args):
+            write_mat(folder.file("data.mat"), cols, {"verb": "sweep", "controller": label})
+        if live is not None:
+            shown = dict(cols)
+            if config["model"]["name"] == "bouc-wen":
+                feasible_band(shown, config["model"]["params"], config["rig"]["current_max_a"])
+            live.log_columns(shown)
+            live.close()
         body = cols["theta_rad"] + cols["theta_road_rad"]
         summary = {"exit_status": "ok", "mode": "chirp", "controller": label,
                    "body_rms_rad": ac_rms(body), "road_rms_rad": ac_rms(cols["theta_road_rad"]),
