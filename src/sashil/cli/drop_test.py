@@ -11,8 +11,11 @@ from sashil.cli.common import (
     add_driver_options,
     add_output_options,
     add_recording_options,
+    add_verbosity_options,
     current_in_range,
     open_rerun,
+    say,
+    setup_logging,
     wants_mat,
     positive_seconds,
     resolve_config,
@@ -32,7 +35,7 @@ THETA0_LIMIT_DEG = 30.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
-    parser.add_argument("--theta0-deg", type=float, default=-5.0, help="hold angle before release [deg] (default -5)")
+    parser.add_argument("--theta0-deg", type=float, default=-5.0, metavar="DEG", help="hold angle before release [deg] (default -5)")
     parser.add_argument(
         "--current",
         type=float,
@@ -43,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)")
     add_output_options(parser)
     add_recording_options(parser)
+    add_verbosity_options(parser)
 
 
 def _label(current: float) -> str:
@@ -50,6 +54,7 @@ def _label(current: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    setup_logging(args)
     config = resolve_config(args)
     duration = positive_seconds("--duration", args.duration)
     if not (math.isfinite(args.theta0_deg) and abs(args.theta0_deg) <= THETA0_LIMIT_DEG):
@@ -66,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     runs, overlay = [], []
     exit_status = "ok"
     for current in currents:
-        print(f"drop test from {args.theta0_deg:g} deg at {current:g} A ...", file=sys.stderr)
+        say(args, f"drop test from {args.theta0_deg:g} deg at {current:g} A ...")
         record = run_drop_test(config, args.theta0_deg, current, duration)
         target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
         if several:
@@ -95,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
         settle = entry["settling_time_s"]
         settle_text = "not within the record" if settle is None else f"{settle:.3f} s"
-        print(f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}", file=sys.stderr)
+        say(args, f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}")
     plot = plot_angle_overlay(
         folder.file("drop_test.png"),
         overlay,

@@ -12,8 +12,11 @@ from sashil.cli.common import (
     add_driver_options,
     add_output_options,
     add_recording_options,
+    add_verbosity_options,
     current_in_range,
     open_live_tap,
+    say,
+    setup_logging,
     wants_mat,
     positive_seconds,
     resolve_config,
@@ -48,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
     add_output_options(parser)
     add_recording_options(parser)
+    add_verbosity_options(parser)
 
 
 def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
@@ -94,6 +98,7 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
 
 
 def run(args: argparse.Namespace) -> int:
+    setup_logging(args)
     config = resolve_config(args)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     backend = config["driver"]["name"]
@@ -105,12 +110,14 @@ def run(args: argparse.Namespace) -> int:
     live = open_live_tap(args, config, record_columns(stage), "sashil run")
     folder = RunFolder.create(args.out, "run")
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-    print(f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
-          f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}", file=sys.stderr)
-    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live)
+    say(args, f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
+        f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}")
+    quiet = bool(args.quiet)  # --quiet: warnings (overruns) only, not the real-time set-up lines
+    report = lambda line: None if quiet and line.startswith("realtime:") else print(line, file=sys.stderr, flush=True)  # noqa: E731
+    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
     if wants_mat(args):
         export_mat(folder.file("data.csv"))
-    print(format_timing(outcome.summary["timing"]), file=sys.stderr)
+    say(args, format_timing(outcome.summary["timing"]))
     for trip in outcome.summary["trips"]:
         print(f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", file=sys.stderr)
     print(f"run folder: {folder.path}", file=sys.stderr)

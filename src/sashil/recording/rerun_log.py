@@ -197,11 +197,11 @@ class RerunLog:
             self._named.add(series.entity)
 
     # sending -------------------------------------------------------------------------------
-    def _send(self, entity: str, time_s: np.ndarray, archetype_columns: Any) -> None:
+    def _send(self, entity: str, times: Any, archetype_columns: Any) -> None:
         import rerun as rr
 
         t0 = time.perf_counter_ns()
-        rr.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=time_s)], columns=archetype_columns, recording=self.rec)
+        rr.send_columns(entity, indexes=[times], columns=archetype_columns, recording=self.rec)
         spent = time.perf_counter_ns() - t0
         self.sends += 1
         self.send_ns_total += spent
@@ -214,12 +214,14 @@ class RerunLog:
         time_s = np.asarray(columns["time_s"], float) + time_offset_s
         if time_s.size == 0:
             return []
+        times = rr.TimeColumn(TIMELINE, duration=time_s)  # shared by every series of the block
         out: list[tuple[str, Any]] = []
         for series, idx in present_series(list(columns)):
             values = np.column_stack([np.asarray(columns[series.columns[i]], float) * series.scale for i in idx])
             self._name_series(series, idx)
-            out.append((series.entity, lambda e=series.entity, v=values: self._send(e, time_s, rr.Scalars.columns(scalars=v))))
+            out.append((series.entity, lambda e=series.entity, v=values: self._send(e, times, rr.Scalars.columns(scalars=v))))
         if "torque_hat_nm" in columns:
+            last = rr.TimeColumn(TIMELINE, duration=time_s[-1:])
             torque = np.asarray(columns["torque_hat_nm"], float)
             for entity, x_name, scale, _ in HYSTERESIS:
                 if x_name in columns:
@@ -228,7 +230,7 @@ class RerunLog:
                     if points.size:
                         # one row at the block's last time holding all its points (the view keeps the history)
                         cols = rr.Points2D.columns(positions=points, radii=np.full(len(points), -1.5)).partition([len(points)])
-                        out.append((entity, lambda e=entity, c=cols: self._send(e, time_s[-1:], c)))
+                        out.append((entity, lambda e=entity, c=cols: self._send(e, last, c)))
         return out
 
     def log_columns(self, columns: Mapping[str, np.ndarray], time_offset_s: float = 0.0) -> None:
@@ -270,7 +272,7 @@ class LiveTap:
         self,
         log: RerunLog,
         every: int = 10,
-        batch_s: float = 0.1,
+        batch_s: float = 0.25,
         band: tuple[Mapping[str, float], float] | None = None,
     ):
         if every < 1 or not batch_s > 0:
