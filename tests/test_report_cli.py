@@ -1,0 +1,61 @@
+"""CLI polish (issue 7): every verb's --help ends with an example, rig verbs share option names,
+--quiet silences progress, and the recording options are refused cleanly when misused."""
+
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+from sashil.cli import VERBS, build_parser, main
+
+
+def _verb_help(verb: str, capsys) -> str:
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args([verb, "--help"])
+    assert exit_info.value.code == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("verb", list(VERBS))
+def test_every_verb_help_has_an_example(verb, capsys):
+    module = importlib.import_module(VERBS[verb])
+    assert module.EXAMPLE.startswith(f"sashil {verb}")
+    text = _verb_help(verb, capsys)
+    assert f"example:\n  {module.EXAMPLE}" in text
+
+
+@pytest.mark.parametrize("verb", ["drop-test", "run", "sweep"])
+def test_rig_verbs_share_option_names(verb, capsys):
+    text = _verb_help(verb, capsys)
+    for option in ("--config FILE", "--params FILE", "--driver", "--port PORT", "--out DIR",
+                   "--rerun ", "--rerun-save FILE.rrd", "--rerun-connect URL", "--format FMT"):
+        assert option in text, f"{verb}: {option}"
+
+
+def test_top_level_help_lists_exit_codes(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--help"])
+    text = capsys.readouterr().out
+    for code in ("0", "1", "2", "3", "4", "130"):
+        assert f"\n  {code:>3}  " in text
+
+
+def test_quiet_drop_test_prints_only_the_run_folder(tmp_path, capsys):
+    assert main(["drop-test", "--duration", "1", "--out", str(tmp_path / "D"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [f"run folder: {tmp_path / 'D'} (plot drop_test.png)"]
+
+
+def test_quiet_and_verbose_together_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["drop-test", "-q", "-v"])
+    assert exit_info.value.code == 2
+    assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_unknown_format_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["drop-test", "--format", "xlsx"])
+    assert exit_info.value.code == 2
+    assert "--format" in capsys.readouterr().err
