@@ -36,9 +36,9 @@ def test_report_on_two_drop_tests_writes_plots_and_side_by_side_summary(two_drop
     header = next(line for line in text.splitlines() if line.startswith("| metric |"))
     assert header == "| metric | A 0 A | B 1 A |"
     period = next(line for line in text.splitlines() if line.startswith("| period [s] |"))
-    assert period == f"| period [s] | {run_a['period_s']:.3g} | {run_b['period_s']:.3g} |"
+    assert period == f"| period [s] | {run_a['period_s']:.4g} | {run_b['period_s']:.4g} |"
     decrement = next(line for line in text.splitlines() if line.startswith("| log decrement |"))
-    assert decrement == f"| log decrement | {run_a['log_decrement']:.3g} | {run_b['log_decrement']:.3g} |"
+    assert decrement == f"| log decrement | {run_a['log_decrement']:.4g} | {run_b['log_decrement']:.4g} |"
     assert run_b["log_decrement"] > run_a["log_decrement"]  # more current, more damping
     assert "![theta](theta.png)" in text
     assert "reading" in capsys.readouterr().err  # progress lines

@@ -147,21 +147,30 @@ def _pyplot():
     return plt
 
 
+def _save(plt: Any, fig: Any, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def _axes(ax: Any, xlabel: str, ylabel: str, title: str | None = None) -> None:
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+
+
 def plot_theta(path: Path, traces: Sequence[Trace]) -> Path:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
     for trace in traces:
         ax.plot(trace.columns["time_s"], np.degrees(trace.columns["theta_rad"]), linewidth=1.0, label=trace.label)
     ax.axhline(0.0, color="0.4", linewidth=0.6)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("arm angle θ [deg]")
-    ax.set_title("θ(t)")
-    ax.grid(True, alpha=0.3)
+    _axes(ax, "time [s]", "arm angle θ [deg]", "θ(t)")
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, str]]) -> Path:
@@ -170,18 +179,10 @@ def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarra
     for label, theta, velocity, torque, source in loops:
         left.plot(velocity, torque, linewidth=0.7, label=f"{label} ({source})")
         right.plot(np.degrees(theta), torque, linewidth=0.7, label=label)
-    left.set_xlabel("θ̇ [rad/s]")
-    right.set_xlabel("θ [deg]")
-    for ax in (left, right):
-        ax.set_ylabel("damper torque [N·m]")
-        ax.grid(True, alpha=0.3)
-    left.set_title("torque against velocity")
-    right.set_title("torque against angle")
+    _axes(left, "θ̇ [rad/s]", "damper torque [N·m]", "torque against velocity")
+    _axes(right, "θ [deg]", "damper torque [N·m]", "torque against angle")
     left.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
@@ -191,15 +192,9 @@ def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
         if run.sweep is not None:
             ax.plot(run.sweep["frequency_hz"], run.sweep["transmissibility"], "o-", label=run.label)
     ax.axhline(1.0, color="0.4", linewidth=0.6)
-    ax.set_xlabel("road frequency [Hz]")
-    ax.set_ylabel("transmissibility RMS(θ2) / RMS(θ1)")
-    ax.set_title("transmissibility")
-    ax.grid(True, alpha=0.3)
+    _axes(ax, "road frequency [Hz]", "transmissibility RMS(θ2) / RMS(θ1)", "transmissibility")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def plot_timing(path: Path, runs: Sequence[RunRecord]) -> Path:
@@ -210,26 +205,22 @@ def plot_timing(path: Path, runs: Sequence[RunRecord]) -> Path:
             continue
         for ax, key in ((left, "lateness_ns"), (right, "compute_ns")):
             if key in run.timing and run.timing[key].size:
-                values = run.timing[key] * 1e-3
-                ax.hist(values, bins=100, histtype="step", log=True, label=run.label)
-    left.set_xlabel("wake-up lateness [µs]")
-    right.set_xlabel("compute time per cycle [µs]")
+                ax.hist(run.timing[key] * 1e-3, bins=100, histtype="step", log=True, label=run.label)
+    _axes(left, "wake-up lateness [µs]", "cycles")
+    _axes(right, "compute time per cycle [µs]", "cycles")
     for ax in (left, right):
-        ax.set_ylabel("cycles")
-        ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 # summary -------------------------------------------------------------------------------------
-def _fmt(value: Any, digits: int = 3) -> str:
+def _fmt(value: Any, digits: int = 4) -> str:
     if value is None:
         return "–"
     if isinstance(value, float):
-        return "–" if not math.isfinite(value) else f"{value:.{digits}g}"
+        if not math.isfinite(value):
+            return "–"
+        return f"{value:.{digits}g}" if abs(value) < 10**digits else f"{value:.0f}"
     if isinstance(value, list):
         return ", ".join(_fmt(v, digits) for v in value[:4]) + (" …" if len(value) > 4 else "")
     return str(value)

@@ -60,8 +60,9 @@ def provenance() -> dict[str, Any]:
 class RunFolder:
     """One run's folder; every writer is atomic (temp file + rename)."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, verb: str | None = None):
         self.path = path
+        self.verb = verb
         self.started_utc = utc_now()
 
     @classmethod
@@ -81,7 +82,7 @@ class RunFolder:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise ConfigError(f"--out {path}: cannot create folder ({err.strerror})") from None
-        return cls(path)
+        return cls(path, verb)
 
     def file(self, name: str) -> Path:
         return self.path / name
@@ -117,6 +118,7 @@ class RunFolder:
 
     def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
         doc = {
+            **({"verb": self.verb} if self.verb and "verb" not in summary else {}),
             **summary,
             "started_utc": self.started_utc.isoformat(),
             "ended_utc": utc_now().isoformat(),
