@@ -7,10 +7,11 @@ import copy
 import math
 
 from sashil.cli.common import add_config_options, add_driver_options, add_output_options, current_in_range, positive_seconds, resolve_config
-from sashil.cli.common import add_recording_options, open_rerun, wants_mat
+from sashil.cli.common import add_recording_options, add_verbosity_options, open_rerun, setup_logging, wants_mat
 from sashil.control.registry import LAWS, make_controller
 from sashil.errors import ConfigError
 from sashil.experiments.sweep import SWEEP_COLUMNS, ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
+from sashil.identify.progress import Progress
 from sashil.recording.matlab import write_mat
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
@@ -33,6 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)")
     add_output_options(parser)
     add_recording_options(parser)  # live view / data.mat of the chirp's data.csv
+    add_verbosity_options(parser)
 
 
 def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
@@ -79,6 +81,7 @@ def _plot(folder: RunFolder, points, label: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    setup_logging(args)
     config = resolve_config(args)
     duration = positive_seconds("--duration", args.duration)
     name, config = _check(args, config)
@@ -89,7 +92,12 @@ def run(args: argparse.Namespace) -> int:
     sweep = config["sweep"]
     if args.stepped:
         freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
-        points = stepped_sine(config, lambda: make_controller(name, config), freqs)
+        bar = Progress(len(freqs), "stepped sine", enabled=not args.quiet)
+        points = []
+        for f in freqs:  # one frequency at a time, for the progress bar
+            points += stepped_sine(config, lambda: make_controller(name, config), [f])
+            bar.advance(1, f"{f:.3g} Hz")
+        bar.close()
         lines = ["frequency_hz,body_rms_rad,road_rms_rad,transmissibility,observer_nrmse,clipped_cycles"]
         print(f"{'f [Hz]':>8} {'body RMS [deg]':>15} {'transmissibility':>17} {'observer NRMSE':>15}")
         for p in points:
