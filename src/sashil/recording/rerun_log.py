@@ -31,7 +31,10 @@ the loop; if it falls behind the ring it skips rows (counted in ``rows_skipped``
 
 from __future__ import annotations
 
+import logging
 import math
+import shutil
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -48,6 +51,9 @@ APP_ID = "sashil"
 #: a send is started only this long before the loop's next wake-up
 SEND_BUDGET_NS = 300_000
 POLL_S = 0.002
+FLUSH_TIMEOUT_S = 10.0
+
+log = logging.getLogger("sashil.rerun")
 
 
 @dataclass(frozen=True)
@@ -134,6 +140,7 @@ class RerunLog:
 
     def __init__(self, stream: Any, columns: Sequence[str] = ()):
         self.rec = stream
+        self.failed = False
         self._named: set[str] = set()
         self.sends = 0
         self.send_ns_max = 0
@@ -161,10 +168,16 @@ class RerunLog:
             rec.send_recording_name(name)
         sinks = []
         if viewer and connect is None:
+            # the viewer that rerun-sdk installs beside this Python, else `rerun` on PATH
+            beside = Path(sys.executable).with_name("rerun")
+            executable = str(beside) if beside.is_file() else shutil.which("rerun")
+            if executable is None:
+                raise ConfigError("--rerun: no rerun viewer executable (pip install rerun-sdk); use --rerun-save FILE.rrd")
             try:
-                rec.spawn(connect=False)
-            except Exception as err:  # noqa: BLE001 - no viewer binary / no display: say so
-                raise ConfigError(f"--rerun: cannot start the rerun viewer ({err}); use --rerun-save FILE.rrd") from None
+                rr.spawn(connect=False, executable_path=executable, recording=rec)
+            except Exception as err:  # noqa: BLE001 - the viewer would not start: say so on one line
+                first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+                raise ConfigError(f"--rerun: cannot start the rerun viewer ({first}); use --rerun-save FILE.rrd") from None
         if viewer or connect is not None:
             sinks.append(rr.GrpcSink(connect) if connect else rr.GrpcSink())
         if save is not None:
@@ -253,9 +266,18 @@ class RerunLog:
         self.rec.reset_time()
 
     def close(self) -> None:
-        """Flush everything to the sinks and disconnect (the ``.rrd`` is complete afterwards)."""
-        self.rec.flush()
-        self.rec.disconnect()
+        """Flush everything to the sinks and disconnect (the ``.rrd`` is complete afterwards).
+
+        A viewer that went away (or never came up) is reported as a warning, never raised: the
+        run's own records do not depend on the live view."""
+        try:
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except Exception as err:  # noqa: BLE001 - e.g. gRPC could not reach the viewer
+            text = str(err).strip().splitlines()
+            log.warning("live view: %s", text[0] if text else type(err).__name__)
+            self.failed = True
+        finally:
+            self.rec.disconnect()
 
     def stats(self) -> dict[str, Any]:
         return {
