@@ -29,7 +29,7 @@ def test_every_verb_help_has_an_example(verb, capsys):
 def test_rig_verbs_share_option_names(verb, capsys):
     text = _verb_help(verb, capsys)
     for option in ("--config FILE", "--params FILE", "--driver", "--port PORT", "--out DIR",
-                   "--rerun ", "--rerun-save FILE.rrd", "--rerun-connect URL", "--format FMT"):
+                   "--rerun ", "--rerun-save [FILE.rrd]", "--rerun-connect URL", "--format FMT"):
         assert option in text, f"{verb}: {option}"
 
 

@@ -58,11 +58,22 @@ def test_drop_test_rerun_save_loads_back_with_the_logged_entities(tmp_path):
     assert doc["/signals/angle_deg"]["SeriesLines:names"][0] == ["θ (relative)", "θ1 (road)"]
 
 
-def test_rerun_save_into_a_missing_folder_is_one_line_and_writes_nothing(tmp_path, capsys):
+def test_rerun_save_into_a_missing_folder_is_a_usage_error_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "D"
-    assert main(["drop-test", "--out", str(out), "--rerun-save", str(tmp_path / "no" / "x.rrd")]) == 2
-    assert "--rerun-save" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["drop-test", "--out", str(out), "--rerun-save", str(tmp_path / "no" / "x.rrd")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "--rerun-save" in err and "does not exist" in err and "\n" not in err
     assert not out.exists()
+
+
+def test_rerun_save_without_a_file_records_into_the_run_folder(tmp_path):
+    out = tmp_path / "D"
+    assert main(["drop-test", "--duration", "1", "--out", str(out), "--rerun-save", "-q"]) == 0
+    doc = load_rrd(out / "live.rrd")
+    _, angle = _series(doc, "signals/angle_deg")
+    assert angle[:, 0] == pytest.approx(np.degrees(read_data_csv(out / "data.csv")["theta_rad"]), abs=1e-12)
 
 
 def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):

@@ -6,6 +6,7 @@ import argparse
 import logging
 import math
 import sys
+from pathlib import Path
 from typing import Any, Sequence
 
 from sashil.config import Config, apply_params, load_config
@@ -28,12 +29,35 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", help="run folder (default runs/<UTC timestamp>-<verb>/)")
 
 
+#: ``--rerun-save`` without a file name: ``live.rrd`` in the run folder (a marker no path can equal)
+IN_RUN_FOLDER = "{run folder}/live.rrd"
+
+
+def rrd_path(text: str) -> str:
+    """``--rerun-save FILE``: checked when the command line is read, before anything is written."""
+    if text == IN_RUN_FOLDER:  # argparse passes the const through here too
+        return text
+    path = Path(text)
+    if path.suffix != ".rrd":
+        raise argparse.ArgumentTypeError(f"expected a file name ending .rrd, got {text!r}")
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"folder {str(path.parent)!r} of {text!r} does not exist")
+    return text
+
+
 def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True) -> None:
     """``--rerun``, ``--rerun-connect``, ``--rerun-save`` (live view / recording) and ``--format``."""
     group = parser.add_argument_group("live view and output formats")
     group.add_argument("--rerun", action="store_true", help="spawn the rerun viewer and stream the run to it live")
     group.add_argument("--rerun-connect", metavar="URL", help="stream to a running rerun viewer (e.g. rerun+http://127.0.0.1:9876/proxy)")
-    group.add_argument("--rerun-save", metavar="FILE.rrd", help="record the live view to an .rrd file (no viewer needed)")
+    group.add_argument(
+        "--rerun-save",
+        nargs="?",
+        const=IN_RUN_FOLDER,
+        type=rrd_path,
+        metavar="FILE.rrd",
+        help="record the live view to an .rrd file, no viewer needed (no FILE: live.rrd in the run folder)",
+    )
     if formats:
         group.add_argument(
             "--format",
@@ -48,22 +72,26 @@ def wants_rerun(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "rerun", False) or getattr(args, "rerun_connect", None) or getattr(args, "rerun_save", None))
 
 
-def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str) -> Any:
-    """The :class:`~sashil.recording.rerun_log.RerunLog` the options ask for, or None."""
+def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str, folder: Path) -> Any:
+    """The :class:`~sashil.recording.rerun_log.RerunLog` the options ask for, or None
+    (``folder``: the run folder, for ``--rerun-save`` without a file name)."""
     if not wants_rerun(args):
         return None
     from sashil.recording.rerun_log import RerunLog
 
+    save = args.rerun_save
+    if save == IN_RUN_FOLDER:
+        save = Path(folder) / "live.rrd"
     return RerunLog.open(
         columns,
-        save=args.rerun_save,
+        save=save,
         viewer=bool(args.rerun),
         connect=getattr(args, "rerun_connect", None),
         name=name,
     )
 
 
-def open_live_tap(args: argparse.Namespace, config: Config, columns: Sequence[str], name: str) -> Any:
+def open_live_tap(args: argparse.Namespace, config: Config, columns: Sequence[str], name: str, folder: Path) -> Any:
     """A :class:`~sashil.recording.rerun_log.LiveTap` for a loop run (``run_session(live=...)``),
     or None without a rerun option. The feasible torque band is added for the Bouc-Wen model."""
     if not wants_rerun(args):
@@ -75,7 +103,7 @@ def open_live_tap(args: argparse.Namespace, config: Config, columns: Sequence[st
     if model.get("name") == "bouc-wen" and "z_hat" in columns and "theta_dot_rad_s" in columns:
         band = (model["params"], float(config["rig"]["current_max_a"]))
     extra = ("lateness_us",) + (("band_lo_nm", "band_hi_nm") if band is not None else ())
-    return LiveTap(open_rerun(args, tuple(columns) + extra, name), band=band)
+    return LiveTap(open_rerun(args, tuple(columns) + extra, name, folder), band=band)
 
 
 def wants_mat(args: argparse.Namespace) -> bool:

@@ -63,9 +63,9 @@ def run(args: argparse.Namespace) -> int:
     if len(set(currents)) != len(currents):
         raise ConfigError(f"--current: each current once, got {currents}")
 
-    live = open_rerun(args, DROP_COLUMNS, "sashil drop-test")
-    live_offset_s = 0.0
     folder = RunFolder.create(args.out, "drop-test")
+    live = open_rerun(args, DROP_COLUMNS, "sashil drop-test", folder.path)
+    live_offset_s = 0.0
     folder.write_config(config)
     several = len(currents) > 1
     runs, overlay = [], []

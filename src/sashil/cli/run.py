@@ -107,8 +107,8 @@ def run(args: argparse.Namespace) -> int:
     rate = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, rig, backend)
     config["loop"]["rate_hz"] = rate
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
-    live = open_live_tap(args, config, record_columns(stage), "sashil run")
     folder = RunFolder.create(args.out, "run")
+    live = open_live_tap(args, config, record_columns(stage), "sashil run", folder.path)
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     say(args, f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
         f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}")

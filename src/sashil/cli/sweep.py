@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
     config = resolve_config(args)
     duration = positive_seconds("--duration", args.duration)
     name, config = _check(args, config)
-    live = None if args.stepped else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep")
     folder = RunFolder.create(args.out, "sweep")
+    live = None if args.stepped else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
     folder.write_config(config)
     label = name if args.current is None else f"passive {args.current:g} A"
     sweep = config["sweep"]
