@@ -69,6 +69,11 @@ def test_observer_z_is_the_model_z_update_and_torque_is_eq9():
         obs.update(angle, 0.3, 0.4)
     assert obs.z == pytest.approx(float(expected[-1]), rel=1e-12)
     assert obs.torque_nm == pytest.approx((1 + 0.4) * obs.z + (0.7 + 1.5 * 0.4) * 0.3, rel=1e-12)
+    by_increment = BoucWenObserver(SEED)
+    for before, after in zip(angles[:-1], angles[1:]):
+        by_increment.update_increment(after - before, -0.2, 0.0)
+    assert by_increment.z == pytest.approx(obs.z, rel=1e-12)
+    assert by_increment.torque_nm == pytest.approx(obs.z - 0.7 * 0.2, rel=1e-12)
 
 
 # --- inverse --------------------------------------------------------------------------------

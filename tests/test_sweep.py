@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 
@@ -70,3 +71,23 @@ def test_sweep_cli_bad_input_is_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert rc == 2 and message in err and err.count("\n") == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch():
+    # issue 5 acceptance, shortened: 10 % plant mismatch, coil lag +10 %, 4096 counts/rev
+    config = default_config()
+    config["mismatch"].update(fraction=0.1, coil_tau=0.1)
+    config["sweep"].update(settle_s=4.0, measure_s=2.0, ramp_s=1.0)
+    config["controller"]["crossover_hz"] = 3.5
+    freqs = [1.0, 1.5, 2.5, 4.5]
+
+    def body(name, current=None):
+        cfg = copy.deepcopy(config)
+        if current is not None:
+            cfg["controller"]["current_a"] = current
+        return [p.body_rms_rad for p in stepped_sine(cfg, lambda: make_controller(name, cfg), freqs)]
+
+    soft, hard, law = body("passive", 0.0), body("passive", 1.0), body("skyhook-add")
+    ratios = [x / min(a, b) for x, a, b in zip(law, soft, hard)]
+    assert max(ratios) <= 1.03, ratios
+    assert soft[1] > 2 * hard[1] and hard[3] > soft[3]  # the two passive settings each lose somewhere

@@ -124,12 +124,13 @@ def main() -> None:
     print(f"\n[3] stepped sine 0.5-5 Hz ({steps} frequencies, road amplitude {config['sweep']['amplitude_deg']} deg): body RMS [deg]")
     freqs = frequencies(0.5, 5.0, steps)
     laws = [("passive 0 A", "passive", 0.0), ("passive 1 A", "passive", 1.0),
-            ("skyhook-onoff", "skyhook-onoff", None), ("skyhook-add", "skyhook-add", None)]
+            ("skyhook-onoff", "skyhook-onoff", None), ("skyhook c=10", "skyhook", None), ("skyhook-add 3.5", "skyhook-add", None)]
     table = {}
     for label, name, current in laws:
         cfg = copy.deepcopy(config)
         if current is not None:
             cfg["controller"]["current_a"] = current
+        cfg["controller"].update(c_sky=10.0, crossover_hz=3.5)  # tuned on this simulation (see README)
         table[label] = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, cfg), freqs)
     print("  f [Hz]  " + "".join(f"{label:>15s}" for label, _, _ in laws) + "   best/min(passive)")
     for index, f in enumerate(freqs):

@@ -127,6 +127,7 @@ CONTROLLER = Section(
         "tracking_fraction": Field("float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"),
         "tracking_seed": Field("int", 0, low=0),
         "estimator_bandwidth_hz": Field("float", 10.0, low=0.0, low_open=True, high=1000.0, doc="relative-angle alpha-beta filter"),
+        "estimator_order": Field("int", 2, low=2, high=3, doc="2: alpha-beta (+model), 3: alpha-beta-gamma (+model error)"),
         "road_bandwidth_hz": Field("float", 30.0, low=0.0, low_open=True, high=1000.0, doc="road-angle alpha-beta-gamma filter"),
         "model_aided": Field("bool", True, doc="feed the rig model's acceleration to the rate estimator"),
         "inverse": Field("choice", "full", choices=("full", "viscous"), doc="full Bouc-Wen inverse, or viscous-only (alpha ignored)"),
@@ -154,7 +155,7 @@ MISMATCH = Section(
 
 SWEEP = Section(
     {
-        "amplitude_deg": Field("float", 0.5, low=0.0, low_open=True, high=20.0, doc="road-side amplitude of theta1"),
+        "amplitude_deg": Field("float", 1.0, low=0.0, low_open=True, high=20.0, doc="road-side amplitude of theta1"),
         "ramp_s": Field("float", 1.0, low=0.0, high=60.0, doc="raised-cosine amplitude ramp at the start"),
         "settle_s": Field("float", 6.0, low=0.0, high=600.0, doc="stepped sine: time before measuring at each frequency"),
         "measure_s": Field("float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"),

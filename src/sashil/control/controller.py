@@ -6,7 +6,7 @@ plain attributes overwritten every cycle, for a recorder to copy; the returned c
 reused (no allocation per cycle).
 
 The estimator's model acceleration for the next cycle comes from the rig model
-(seed 001 eq. 13): ``theta_ddot = (-k*theta - T_hat)/J - theta1_ddot``.
+(seed 001 eq. 13): ``theta2_ddot = (-k*theta - T_hat)/J`` (the relative channel subtracts theta1_ddot).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ class Controller:
         self.command = RigCommand(0.0)
         self._t0_ns: int | None = None
         self._accel = 0.0
+        self._v_prev = 0.0
         # per-cycle values (recorded by the caller)
         self.time_s = 0.0
         self.theta_rad = 0.0
@@ -79,7 +80,7 @@ class Controller:
         dt = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
         self.time_s = (t_ns - self._t0_ns) * 1e-9
         est = self.estimator
-        est.update(sample, dt, self._accel)
+        est.update(sample, dt, self._accel)  # model body acceleration of the last cycle
         theta, v = est.theta_rad, est.theta_dot_rad_s
         self.theta_rad, self.theta_dot_rad_s = theta, v
         self.body_dot_rad_s, self.road_dot_rad_s = est.body_dot_rad_s, est.road_dot_rad_s
@@ -87,7 +88,11 @@ class Controller:
         if measured != measured:  # no current sensor reading: assume the last command flows
             measured = self.current_cmd_a
         obs = self.observer
-        torque_hat = obs.update(theta, v, measured)
+        # z-hat advances over the angle increment of the estimated rate (trapezoidal), not over the
+        # filtered angle's increments: a count arriving makes the filtered angle step back and
+        # forth by a fraction of a count, enough to flip z (it saturates within ~3e-4 rad)
+        torque_hat = obs.update_increment(0.5 * (v + self._v_prev) * dt, v, measured)
+        self._v_prev = v
         z = obs.z
         self.z_hat, self.torque_hat_nm = z, torque_hat
         body_ddot = -self._k_over_j * theta - self._inv_j * torque_hat
@@ -113,7 +118,7 @@ class Controller:
             cmd = 0.0 if cmd != cmd or cmd < 0.0 else self.current_max_a
         self.current_cmd_a = cmd
         if self.model_aided:
-            self._accel = body_ddot - est.road_ddot_rad_s2
+            self._accel = body_ddot
         self.cycles += 1
         self.command.current_a = cmd
         return self.command

@@ -4,6 +4,8 @@ Seed 001 eqs. 9-12 and 17. The hysteretic state does not depend on the current, 
 runs the model's own stable, rate-independent z-update
 (:meth:`sashil.models.hysteresis.BoucWenZ.advance`) over each cycle's increment of the estimated
 relative angle (open-loop model observer; under persistent motion z forgets its initial value).
+The controller advances z over the increment of the estimated rate (``update_increment``, see
+:mod:`sashil.control.controller`); ``update`` takes angle samples instead.
 The torque prediction uses the *measured* coil current where the rig reports it::
 
     T_hat = alpha(i_meas) * z_hat + c(i_meas) * theta_dot_hat          (eq. 9)
@@ -34,6 +36,14 @@ class BoucWenObserver:
         else:
             self._started = True
         self._theta = theta_rad
+        return self._torque(theta_dot_rad_s, current_a)
+
+    def update_increment(self, dtheta_rad: float, theta_dot_rad_s: float, current_a: float) -> float:
+        """Advance z-hat over the angle increment ``dtheta_rad`` and return T-hat at ``current_a``."""
+        self.z = self.hysteresis.advance(self.z, dtheta_rad)
+        return self._torque(theta_dot_rad_s, current_a)
+
+    def _torque(self, theta_dot_rad_s: float, current_a: float) -> float:
         p = self.params
         self.torque_nm = (p.alpha1 + p.alpha2 * current_a) * self.z + (p.c1 + p.c2 * current_a) * theta_dot_rad_s
         return self.torque_nm

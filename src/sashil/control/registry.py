@@ -140,7 +140,8 @@ def make_controller(
     tau = float(rig["coil_tau_s"] if tau is None else tau)
     return Controller(
         law=law,
-        estimator=RigEstimator(float(section["estimator_bandwidth_hz"]), float(section["road_bandwidth_hz"])),
+        estimator=RigEstimator(float(section["estimator_bandwidth_hz"]), float(section["road_bandwidth_hz"]),
+                               order=3 if section.get("estimator_order", 2) == 3 else 2),
         observer=BoucWenObserver(params),
         inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"] == "viscous"),
         lead=CoilLagCompensator(tau, float(section["lead_horizon_s"]), i_max),
