@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
             "release_estimated": record.release_estimated,
             "folder": "." if not several else _label(current),
             **metrics,
+            "timing": record.loop.timing.summary() if record.loop is not None and record.loop.timing is not None else None,
         }
         runs.append(entry)
         if several:
@@ -109,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if live is not None:
         live.close()
-    folder.write_summary({"exit_status": exit_status, "verb": "drop-test", "driver": config["driver"]["name"], "runs": runs})
+    driver = config["driver"]
+    clock = "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"  # timing is simulated on the virtual clock
+    folder.write_summary({"exit_status": exit_status, "verb": "drop-test", "driver": driver["name"], "clock": clock, "runs": runs})
     print(f"run folder: {folder.path} (plot {plot.name})", file=sys.stderr)
     return 0
