@@ -66,9 +66,24 @@ class Record:
         return math.copysign(1.0, float(self.theta[0])) if self.theta[0] != 0.0 else 0.0
 
 
-def smooth_derivatives(time_s: np.ndarray, theta: np.ndarray, window_s: float = 0.031) -> tuple[np.ndarray, ...]:
-    """Savitzky-Golay smoothed angle, velocity and acceleration (for the equation-error stage)."""
+def dominant_period(time_s: np.ndarray, theta: np.ndarray) -> float:
+    """Period [s] of the strongest non-zero frequency of a record (FFT of the mean-removed angle)."""
     dt = float(np.median(np.diff(time_s)))
+    spec = np.abs(np.fft.rfft(theta - np.mean(theta)))
+    spec[0] = 0.0
+    f = np.fft.rfftfreq(theta.size, dt)
+    peak = f[int(np.argmax(spec))]
+    return 1.0 / peak if peak > 0.0 else time_s[-1] - time_s[0]
+
+
+def smooth_derivatives(time_s: np.ndarray, theta: np.ndarray, window_s: float | None = None) -> tuple[np.ndarray, ...]:
+    """Savitzky-Golay (cubic) smoothed angle, velocity and acceleration for the equation-error stage.
+
+    The default window is 13 % of the record's dominant period, within [21, 101] ms: long enough to
+    average the encoder quantisation out of the acceleration, short against the motion."""
+    dt = float(np.median(np.diff(time_s)))
+    if window_s is None:
+        window_s = min(max(0.13 * dominant_period(time_s, theta), 0.021), 0.101)
     window = max(5, int(round(window_s / dt)) | 1)
     largest = theta.size if theta.size % 2 else theta.size - 1
     window = min(window, largest)

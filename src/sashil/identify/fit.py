@@ -108,11 +108,22 @@ class Problem:
         A = np.vstack(blocks)
         y = self._target
         self.evaluations += 1
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        # normal equations on scaled columns (5-6 unknowns; rows in the tens of thousands)
+        scale = np.sqrt(np.einsum("ij,ij->j", A, A))
+        scale[scale == 0.0] = 1.0
+        As = A / scale
+        G = As.T @ As
+        rhs = As.T @ y
+        try:
+            coef = np.linalg.solve(G, rhs) / scale
+        except np.linalg.LinAlgError:
+            coef = np.linalg.lstsq(A, y, rcond=None)[0]
         lower = np.array([-np.inf if n in FREE_SIGN else 0.0 for n in self.linear])
         if np.any(coef < lower):
-            q, r = np.linalg.qr(A)
-            coef = lsq_linear(r, q.T @ y, bounds=(lower, np.inf), method="bvls").x
+            # the same problem through the Cholesky factor of the normal matrix: ||R x - b||, R^T b = rhs
+            r = np.linalg.cholesky(G + 1e-12 * np.eye(G.shape[0])).T
+            b = np.linalg.solve(r.T, rhs)
+            coef = lsq_linear(r, b, bounds=(lower * scale, np.inf), method="bvls").x / scale
         resid = A @ coef - y
         lin = dict(zip(self.linear, map(float, coef)))
         return {**lin, **self.fixed_linear}, float(np.sqrt(np.mean(resid**2)))
