@@ -234,7 +234,8 @@ class RigDevice:
             arm, road = self._stuck
         self._sample_seq = (self._sample_seq + 1) & 0xFFFF
         self.samples_sent += 1
-        device_time_us = (now_ns - (self.boot_ns or now_ns)) // 1000
+        boot = self.boot_ns if self.boot_ns is not None else now_ns
+        device_time_us = (now_ns - boot) // 1000
         return self._sample_seq, Sample(device_time_us, arm, road, reading.current_a, reading.flags | self.flags())
 
     def _reply(self, msg: Message) -> tuple[int, Message]:

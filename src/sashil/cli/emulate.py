@@ -25,6 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     op = parser.add_argument_group("operator (drop test)")
     op.add_argument("--hold-deg", type=float, metavar="DEG", help="hold the arm at DEG when the host connects")
     op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
+    parser.add_argument("--priority", type=int, default=60, metavar="P",
+                        help="SCHED_FIFO priority of the emulator, best effort (default 60, above the loop's 50)")
     faults = parser.add_argument_group("fault injection (times count from the host's Configure)")
     faults.add_argument("--drop-rate", type=float, default=0.0, metavar="P", help="drop outgoing frames with probability P")
     faults.add_argument("--corrupt-rate", type=float, default=0.0, metavar="P", help="send frames with a bad CRC with probability P")
@@ -85,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
     def _stop(signum: int, frame: object) -> None:
         emulator.stop()
 
+    # a device's sample timer is not starved by the host: best-effort SCHED_FIFO above the loop's 50
+    from sashil.runtime.rt_setup import RealtimeSetup
+
+    RealtimeSetup(priority=args.priority).apply()
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     link = f" (link {args.link})" if args.link else ""

@@ -1,0 +1,204 @@
+"""The emulated interface board on simulated time: pacing, watchdog, operator, faults."""
+
+from __future__ import annotations
+
+import math
+
+from sashil.config import default_config
+from sashil.drivers.emulator import Faults, Operator, build_device
+from sashil.drivers.emulator.runner import Emulator
+from sashil.drivers.emulator.transports import DeviceTransport, corrupt_frame
+from sashil.drivers.interface import FLAG_HELD, FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand
+from sashil.drivers.messages import (
+    CMD_ENABLE,
+    FAULT_BAD_CONFIGURE,
+    PACING_DEVICE,
+    PACING_HOST,
+    PROTOCOL_VERSION,
+    Command,
+    Configure,
+    Hello,
+    Sample,
+    Status,
+    Version,
+)
+from sashil.drivers.serial_codec import StreamDecoder, encode_frame
+from sashil.drivers.sim import SimulatedRig
+
+MS = 1_000_000
+
+
+def samples(out):
+    return [msg for _, msg in out if isinstance(msg, Sample)]
+
+
+def run_ticks(device, start_ns, stop_ns, step_ns=MS, command=None):
+    got = []
+    for t in range(start_ns, stop_ns, step_ns):
+        if command is not None:
+            got += device.handle(command, t)
+        got += device.tick(t)
+    return got
+
+
+def test_hello_and_configure_answers():
+    device = build_device(default_config())
+    assert device.handle(Hello(PROTOCOL_VERSION), 0) == [(1, Version(PROTOCOL_VERSION, 4096, 1.0))]
+    (_, status), = device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    assert status == Status(0, 0, 0, 0)
+    fixed = build_device(default_config(), fixed_rate_hz=500)
+    (_, refused), = fixed.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    assert refused.fault_code == FAULT_BAD_CONFIGURE and not fixed.configured
+
+
+def test_device_pacing_streams_one_sample_per_period():
+    device = build_device(default_config())
+    assert run_ticks(device, 0, 5 * MS) == []  # nothing before Configure
+    device.handle(Configure(1000, 50, PACING_DEVICE), 5 * MS)
+    got = samples(run_ticks(device, 5 * MS, 105 * MS, step_ns=MS // 4))
+    assert len(got) == 100
+    assert [s.device_time_us for s in got[:3]] == [5000, 6000, 7000]
+
+
+def test_host_pacing_answers_each_command_with_one_sample():
+    device = build_device(default_config())
+    device.handle(Configure(1000, 50, PACING_HOST), 0)
+    assert run_ticks(device, 0, 10 * MS) == []
+    got = run_ticks(device, 10 * MS, 20 * MS, command=Command(0.2, CMD_ENABLE))
+    assert len(samples(got)) == 10
+
+
+def test_samples_are_the_simulated_rig_sensor_model():
+    """The board adds no physics: same plant, same times -> the same encoder counts."""
+    config = default_config()
+    device = build_device(config)
+    reference = SimulatedRig.from_config(config)
+    reference.configure(), reference.activate()
+    device.handle(Configure(1000, 1000, PACING_DEVICE), 0)
+    reference.read(0, 0)
+    device.rig.plant.state.theta_rad = reference.plant.state.theta_rad = math.radians(3.0)
+    for k in range(1, 300):
+        t = k * MS
+        current = 0.5 if k > 100 else 0.0
+        device.handle(Command(current, CMD_ENABLE), t)  # the plant ran under the old command up to t
+        sample = samples(device.tick(t))[0]
+        expected = reference.read(t, MS)
+        reference.write(RigCommand(current), t, MS)
+        assert (sample.arm_counts, sample.road_counts) == (expected.arm_counts, expected.road_counts)
+        assert abs(sample.current_a - expected.current_a) < 1e-12
+
+
+def test_watchdog_cuts_the_current_within_its_time_plus_one_cycle():
+    device = build_device(default_config())
+    drive_log = []
+    device.on_drive = lambda t, i: drive_log.append((t, i))
+    device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    run_ticks(device, 0, 20 * MS, command=Command(0.8, CMD_ENABLE))  # last command at 19 ms
+    assert device.drive_a == 0.8
+    got = run_ticks(device, 20 * MS, 100 * MS)
+    assert drive_log[-1][1] == 0.0
+    assert drive_log[-1][0] <= 19 * MS + 50 * MS + 1 * MS
+    assert device.watchdog_trips == 1
+    statuses = [msg for _, msg in got if isinstance(msg, Status)]
+    assert statuses and statuses[0].flags & FLAG_WATCHDOG
+    flagged = [s for s in samples(got) if s.flags & FLAG_WATCHDOG]
+    assert flagged and flagged[0].device_time_us <= (19 + 51) * 1000
+    # the next valid command clears the flag and drives again
+    got = run_ticks(device, 100 * MS, 102 * MS, command=Command(0.3, CMD_ENABLE))
+    assert not samples(got)[-1].flags & FLAG_WATCHDOG and device.drive_a == 0.3
+
+
+def test_command_without_enable_drives_zero():
+    device = build_device(default_config())
+    device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    device.handle(Command(0.9, 0), MS)
+    assert device.drive_a == 0.0
+    device.handle(Command(5.0, CMD_ENABLE), 2 * MS)
+    assert device.drive_a == 1.0  # clamped to rig.current_max_a
+
+
+def test_operator_holds_then_releases_from_configure():
+    device = build_device(default_config(), operator=Operator(-5.0, 0.5))
+    run_ticks(device, 0, 200 * MS)  # before the host connects: nothing held
+    device.handle(Configure(1000, 1000, PACING_DEVICE), 200 * MS)
+    got = samples(run_ticks(device, 200 * MS, 1200 * MS, command=Command(0.0, CMD_ENABLE)))
+    held = [s for s in got if s.flags & FLAG_HELD]
+    assert 495 <= len(held) <= 501
+    hold_counts = round(math.radians(-5.0) * 4096 / (2 * math.pi))
+    assert all(s.arm_counts == hold_counts for s in held)
+    assert got[-1].arm_counts != hold_counts  # let go: the arm swings
+
+
+def test_stuck_sensor_freezes_both_encoders_and_flags_it():
+    device = build_device(default_config(), operator=Operator(-5.0, 0.0), faults=Faults(stuck_sensor_after_s=0.05))
+    device.handle(Configure(1000, 1000, PACING_DEVICE), 0)
+    got = samples(run_ticks(device, 0, 120 * MS, command=Command(0.0, CMD_ENABLE)))
+    stuck = [s for s in got if s.flags & FLAG_STUCK_SENSOR]
+    assert len(stuck) == 70
+    assert len({s.arm_counts for s in stuck}) == 1
+    assert got[10].arm_counts != got[40].arm_counts  # it did move before
+
+
+class ListTransport(DeviceTransport):
+    """An in-memory link for the runner: scripted host messages in, frames out."""
+
+    def __init__(self, script):
+        super().__init__()
+        self.script = script  # [(time_ns, message)]
+        self.sent = []
+        self.clock_ns = 0
+
+    @property
+    def bad_frames(self):
+        return 0
+
+    def receive(self, timeout_s):
+        target = self.clock_ns + max(int(timeout_s * 1e9), 1000)
+        first = min((t for t, _ in self.script), default=None)
+        self.clock_ns = max(self.clock_ns, first) if first is not None and first <= target else target
+        due = [m for t, m in self.script if t <= self.clock_ns]
+        self.script = [(t, m) for t, m in self.script if t > self.clock_ns]
+        return [(0, m) for m in due]
+
+    def send(self, seq, msg, corrupt=False):
+        self.sent.append((self.clock_ns, seq, msg, corrupt))
+
+    def close(self):
+        pass
+
+
+def test_runner_fault_injection_on_simulated_time():
+    script = [(0, Configure(1000, 50, PACING_DEVICE))] + [(k * MS, Command(0.0, CMD_ENABLE)) for k in range(1, 300)]
+    link = ListTransport(script)
+    device = build_device(default_config(), faults=Faults(drop_rate=0.1, corrupt_rate=0.05, latency_ms=2.0, disconnect_after_s=0.2, seed=3))
+    emulator = Emulator(device, link, clock=lambda: link.clock_ns)
+    assert emulator.run() == "disconnect"
+    sent = [s for s in link.sent if isinstance(s[2], Sample)]
+    assert 150 < len(sent) < 195  # ~200 samples, ~10 % dropped
+    assert 0 < sum(1 for s in sent if s[3]) < 25
+    first = min(s[0] for s in sent)
+    assert first >= 2 * MS  # the latency: nothing leaves before 2 ms
+
+
+def test_stall_sends_nothing_after_its_time():
+    link = ListTransport([(0, Configure(1000, 50, PACING_DEVICE))])
+    device = build_device(default_config(), faults=Faults(stall_after_s=0.05))
+    emulator = Emulator(device, link, clock=lambda: link.clock_ns)
+
+    def wait(timeout_s):  # simulated time passes while the stalled device waits
+        link.clock_ns += int(timeout_s * 1e9)
+        return False
+
+    emulator.stop_event.wait = wait
+    assert emulator.run(duration_s=0.15) == "duration"
+    assert emulator.stats.stalled
+    assert 45 <= len(link.sent) <= 53 and max(t for t, *_ in link.sent) <= 51 * MS
+
+
+def test_corrupted_serial_frame_fails_the_crc_only():
+    frame = encode_frame(Sample(1, 2, 3, 0.0, 0), 1)
+    bad = corrupt_frame(frame)
+    assert bad != frame and bad.endswith(b"\x00") and 0 not in bad[:-1]
+    decoder = StreamDecoder()
+    assert decoder.feed(bad + frame) == [(1, Sample(1, 2, 3, 0.0, 0))]
+    assert decoder.counters.bad_frames == 1
