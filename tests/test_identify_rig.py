@@ -66,3 +66,15 @@ def test_passive_fit_fixes_current_terms():
     assert result.params["c2"] == 0.0 and result.params["kwb"] == 0.0
     assert result.fixed["c2"] == 0.0
     assert result.params["k"] == pytest.approx(95.0, rel=0.02)
+
+
+def test_parameter_file_in_another_z_scale(bouc_wen_fit):
+    from sashil.identify.report import param_document
+
+    doc = param_document(bouc_wen_fit, delta=700.0)
+    p = doc["params"]
+    assert p["delta"] == pytest.approx(700.0)
+    bound = (p["delta"] / (p["beta"] + p["gamma"])) ** (1.0 / p["n"])
+    for key in ("alpha1", "alpha2"):  # the saturated hysteretic torque alpha*bound is unchanged
+        assert p[key] * bound == pytest.approx(bouc_wen_fit.params[key], rel=1e-9)
+    assert "delta = 700" in doc["normalisation"]

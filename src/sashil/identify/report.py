@@ -29,7 +29,8 @@ def param_document(result: FitResult, delta: float | None = None) -> dict:
     stderr = dict(result.stderr)
     normalisation = result.normalisation
     if result.model == "bouc-wen" and delta is not None:
-        zu = (delta / (params["beta"] + params["gamma"])) ** (1.0 / params["n"])
+        bound = (params["delta"] / (params["beta"] + params["gamma"])) ** (1.0 / params["n"])
+        zu = bound * delta / params["delta"]  # z -> kappa*z with kappa = delta_new/delta
         rescaled = bouc_wen_rescale(params, zu)
         for key in ("alpha1", "alpha2", "beta", "gamma", "delta"):
             if key in stderr and params[key] != 0.0:
