@@ -59,3 +59,33 @@ def test_unknown_format_is_a_usage_error(capsys):
         main(["drop-test", "--format", "xlsx"])
     assert exit_info.value.code == 2
     assert "--format" in capsys.readouterr().err
+
+
+def test_run_progress_text_and_hooks_fan_out():
+    import io
+
+    from sashil.recording.run_progress import RunProgress, SessionHooks
+
+    progress = RunProgress(60.0, 1000.0, stream=io.StringIO(), width=10)
+    assert progress.text(15_000, 2) == "run   15.0 s / 60 s [###-------] 15000 cycles, 2 missed deadline(s)"
+    assert RunProgress(None, 500.0, stream=io.StringIO()).text(1000, 0) == "run    2.0 s 1000 cycles, 0 missed deadline(s)"
+    assert progress.interval_s == 10.0  # not a terminal: a plain line every 10 s
+
+    calls = []
+
+    class Hook:
+        def __init__(self, name, stats):
+            self.name, self.stats = name, stats
+
+        def start(self, recorder, timing):
+            calls.append(("start", self.name, recorder, timing))
+
+        def close(self, trips):
+            calls.append(("close", self.name, list(trips)))
+            return self.stats
+
+    hooks = SessionHooks(None, Hook("a", None), Hook("b", {"sends": 3}))
+    hooks.start("rec", "timing")
+    assert hooks.close([{"time_s": 1.0}]) == {"sends": 3}
+    assert calls == [("start", "a", "rec", "timing"), ("start", "b", "rec", "timing"),
+                     ("close", "a", [{"time_s": 1.0}]), ("close", "b", [{"time_s": 1.0}])]

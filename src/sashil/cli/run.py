@@ -25,6 +25,7 @@ from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
 from sashil.recording.matlab import export_mat
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import record_columns
 from sashil.runtime.session import run_session
@@ -109,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
     folder = RunFolder.create(args.out, "run")
     live = open_live_tap(args, config, record_columns(stage), "sashil run", folder.path)
+    if not args.quiet:  # progress of the run on stderr (a bar on a terminal, a line every 10 s otherwise)
+        live = SessionHooks(live, RunProgress(duration, rate))
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     say(args, f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
         f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}")
