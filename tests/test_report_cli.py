@@ -67,7 +67,7 @@ def test_run_progress_text_and_hooks_fan_out():
     from sashil.recording.run_progress import RunProgress, SessionHooks
 
     progress = RunProgress(60.0, 1000.0, stream=io.StringIO(), width=10)
-    assert progress.text(15_000, 2) == "run   15.0 s / 60 s [###-------] 15000 cycles, 2 missed deadline(s)"
+    assert progress.text(18_000, 2) == "run   18.0 s / 60 s [###-------] 18000 cycles, 2 missed deadline(s)"
     assert RunProgress(None, 500.0, stream=io.StringIO()).text(1000, 0) == "run    2.0 s 1000 cycles, 0 missed deadline(s)"
     assert progress.interval_s == 10.0  # not a terminal: a plain line every 10 s
 

@@ -40,7 +40,7 @@ class RunProgress:
         run_s = cycles / self.rate_hz
         if self.duration_s:
             done = min(1.0, run_s / self.duration_s)
-            filled = int(round(self.width * done))
+            filled = int(self.width * done)
             head = f"run {run_s:6.1f} s / {self.duration_s:g} s [{'#' * filled}{'-' * (self.width - filled)}]"
         else:
             head = f"run {run_s:6.1f} s"
