@@ -19,6 +19,7 @@ contract on top (protocol.md "Session"):
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from abc import abstractmethod
@@ -41,6 +42,8 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
+
+log = logging.getLogger(__name__)
 
 
 class LinkSettings:
@@ -178,9 +181,17 @@ class LinkRig(RigInterface):
     def close(self) -> None:
         if self.state is RigState.CLOSED:
             return
+        was_up = self._link_up
         self.deactivate()
         self._shutdown_link()
         self.state = RigState.CLOSED
+        if was_up:
+            stats = self.link_stats()
+            lost = stats.get("bad_frames", 0) + stats["samples_missed"] + stats["timeouts"]
+            (log.warning if lost else log.info)(
+                "%s: link: %d samples, %d bad frames, %d samples missed, %d timeouts",
+                self.describe(), stats["samples"], stats.get("bad_frames", 0), stats["samples_missed"], stats["timeouts"],
+            )
 
     def _shutdown_link(self) -> None:
         self._link_up = False

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     why = emulator.run(duration)
     print(
         f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {transport.bad_frames}, "
-        f"frames corrupted {transport.tx_corrupted}, watchdog trips {device.watchdog_trips}",
+        f"frames corrupted {transport.tx_corrupted}, watchdog trips {device.watchdog_trips}, late samples {device.overruns}",
         file=sys.stderr,
         flush=True,
     )
