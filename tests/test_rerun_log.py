@@ -54,6 +54,9 @@ def test_drop_test_rerun_save_loads_back_with_the_logged_entities(tmp_path):
     notes = [text for row in doc["/events/notes"]["TextLog:text"] for text in row]
     assert any("at 1 A" in text for text in notes)
     assert doc["/signals/angle_deg"]["SeriesLines:names"][0] == ["θ (relative)", "θ1 (road)"]
+    from rerun.chunk import RrdReader
+
+    assert len(RrdReader(str(rrd)).blueprints()) == 1  # the panel layout travels with the recording
 
 
 def test_rerun_save_into_a_missing_folder_is_a_usage_error_and_writes_nothing(tmp_path, capsys):

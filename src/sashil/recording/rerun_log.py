@@ -131,7 +131,7 @@ def blueprint(columns: Sequence[str]) -> Any:
     right.append(rrb.TextLogView(origin="/events", name="trips and events"))
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*left), rrb.Vertical(*right), column_shares=[3, 2]),
-        collapse_panels=True,
+        rrb.TimePanel(state="expanded", timeline=TIMELINE),  # scrub back through a run (live: the view follows the newest data)
     )
 
 
