@@ -104,6 +104,15 @@ def main() -> None:
         print(f"  {inverse:8s} inverse: NRMSE(T - T*) = {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
               f"{100 * r['nrmse_range']:.1f} % of range(T*); observer NRMSE {100 * r['observer_nrmse']:.1f} %; clipped {r['clipped']}")
 
+    references = (("no plant mismatch", {"fraction": 0.0, "coil_tau": 0.0}),
+                  ("65536 counts/rev", {"encoder_counts_per_rev": 65536}))
+    for label, update in references:
+        cfg = copy.deepcopy(config)
+        cfg["mismatch"].update(update)
+        r = torque_tracking(cfg, "full", 1.2, 1.0, 12.0 if args.quick else 30.0)
+        print(f"  (reference) full inverse, {label}: NRMSE {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
+              f"{100 * r['nrmse_range']:.1f} % of range(T*)")
+
     # 2. target damping drop test ---------------------------------------------------------------
     print("\n[2] drop test from -5 deg: target damping zeta = 0.07 vs constant 0.5 A")
     cfg = copy.deepcopy(config)

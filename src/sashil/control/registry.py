@@ -53,6 +53,15 @@ def _need(section: dict[str, Any], key: str, law: str, what: str) -> float:
     return float(value)
 
 
+def _on_current(section: dict[str, Any], i_max: float) -> float:
+    """The 'on' current of the two-state laws (``onoff_current_a``, default i_max)."""
+    on = section.get("onoff_current_a")
+    on = i_max if on is None else float(on)
+    if not 0.0 <= on <= i_max:
+        raise ConfigError(f"controller.onoff_current_a: expected a current in [0, {i_max:g}] A, got {on:g}")
+    return on
+
+
 def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: float, rate_hz: float) -> Law:
     """The law ``name`` with its parameters from ``section`` (checked against the model's band)."""
     if name == "passive":
@@ -84,16 +93,9 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
     if name == "skyhook":
         return Skyhook(_need(section, "c_sky", name, "sky damping in N m s/rad"))
     if name == "skyhook-onoff":
-        on = section.get("onoff_current_a")
-        on = i_max if on is None else float(on)
-        if not 0.0 <= on <= i_max:
-            raise ConfigError(f"controller.onoff_current_a: expected a current in [0, {i_max:g}] A, got {on:g}")
-        return SkyhookOnOff(on)
+        return SkyhookOnOff(_on_current(section, i_max))
     if name == "skyhook-add":
-        on = section.get("onoff_current_a")
-        on = i_max if on is None else float(on)
-        if not 0.0 <= on <= i_max:
-            raise ConfigError(f"controller.onoff_current_a: expected a current in [0, {i_max:g}] A, got {on:g}")
+        on = _on_current(section, i_max)
         crossover = section.get("crossover_hz")
         w = math.sqrt(2.0 * params.k / params.J) if crossover is None else 2.0 * math.pi * float(crossover)
         return SkyhookAdd(w, on)
