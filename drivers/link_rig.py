@@ -101,6 +101,15 @@ class LinkRig(RigInterface):
     def describe(self) -> str:
         """Where the rig is, for messages ("serial /dev/ttyACM0")."""
 
+    @property
+    def device_paced(self) -> bool:
+        """True when the device's sample timer paces the cycle (``read`` blocks until the next sample).
+
+        A loop may then skip its own sleep to the deadline: its clock and the device's drift apart,
+        and sleeping to one while waiting on the other shows up as lateness of up to a period.
+        """
+        return self.settings.pacing == PACING_DEVICE
+
     def codec_counters(self) -> dict[str, int]:
         return {}
 
