@@ -55,6 +55,10 @@ class SimulatedRig(RigInterface):
 
     @classmethod
     def from_config(cls, config: dict[str, Any], road: RoadProfile | None = None) -> "SimulatedRig":
+        """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
+        from sashil.models.mismatch import plant_config
+
+        config = plant_config(config)
         rig = config["rig"]
         plant = RigPlant(
             rig_params(config["model"]),

@@ -81,3 +81,49 @@ def test_console_script_help_and_usage_errors():
                          capture_output=True, text=True)
     assert bad.returncode == 2
     assert "invalid float value" in bad.stderr and bad.stderr.count("\n") <= 2
+
+
+class _FailingRig:
+    """A simulated rig whose link dies on the Nth read (as a cable pulled mid-test)."""
+
+    def __init__(self, rig, fail_on: int):
+        self.rig, self.fail_on, self.reads = rig, fail_on, 0
+        self.currents: list[float] = []
+        self.deactivated = self.closed = 0
+
+    def __getattr__(self, name):
+        return getattr(self.rig, name)
+
+    def read(self, t_ns, dt_ns):
+        self.reads += 1
+        if self.reads == self.fail_on:
+            from sashil.errors import DriverIOError
+
+            raise DriverIOError("serial /dev/ttyACM0: device disconnected")
+        return self.rig.read(t_ns, dt_ns)
+
+    def write(self, cmd, t_ns, dt_ns):
+        self.currents.append(cmd.current_a)
+        self.rig.write(cmd, t_ns, dt_ns)
+
+    def deactivate(self):
+        self.deactivated += 1
+        self.rig.deactivate()
+
+    def close(self):
+        self.closed += 1
+        self.rig.close()
+
+
+def test_a_link_failure_mid_test_keeps_the_data_and_ends_at_zero_amps(config):
+    from sashil.drivers import open_rig
+    from sashil.experiments.drop_test import run_drop_test
+
+    rig = _FailingRig(open_rig(config), fail_on=1300)  # 0.3 s hold, then ~1 s of oscillation
+    record = run_drop_test(config, -5.0, 1.0, 10.0, rig=rig)
+    assert record.error is not None and "device disconnected" in str(record.error)
+    assert record.loop.exit_status == "error"
+    assert 0.9 < record.columns["time_s"][-1] < 1.0  # the data up to the fault is kept
+    assert rig.currents[-1] == 0.0  # the safe command went out last
+    assert (rig.deactivated, rig.closed) == (1, 1)
+    assert rig.rig._command == 0.0  # and the simulated coil is driven to 0 A

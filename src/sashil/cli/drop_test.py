@@ -20,7 +20,7 @@ from sashil.cli.common import (
     positive_seconds,
     resolve_config,
 )
-from sashil.errors import ConfigError
+from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import DROP_COLUMNS, run_drop_test
 from sashil.recording.matlab import write_mat
 from sashil.recording.plots import plot_angle_overlay
@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     several = len(currents) > 1
     runs, overlay = [], []
     exit_status = "ok"
+    failure: SashilError | None = None
     for current in currents:
         say(args, f"drop test from {args.theta0_deg:g} deg at {current:g} A ...")
         record = run_drop_test(config, args.theta0_deg, current, duration)
@@ -92,10 +93,19 @@ def run(args: argparse.Namespace) -> int:
             "folder": "." if not several else _label(current),
             **metrics,
             "timing": record.loop.timing.summary() if record.loop is not None and record.loop.timing is not None else None,
+            "trips": record.loop.trips if record.loop is not None else [],
+            "link": record.extra.get("link"),
+            "exit_status": "ok" if record.error is None else record.loop.exit_status,
+            "error": None if record.error is None else str(record.error),
         }
         runs.append(entry)
         if several:
-            target.write_summary({"exit_status": "ok", "verb": "drop-test", "runs": [entry]})
+            target.write_summary({"exit_status": entry["exit_status"], "verb": "drop-test", "runs": [entry]})
+        if record.error is not None:
+            failure = record.error
+            exit_status = entry["exit_status"]
+            overlay.append((f"{current:g} A (stopped)", record.columns["time_s"], record.columns["theta_rad"]))
+            break
         overlay.append((f"{current:g} A", record.columns["time_s"], record.columns["theta_rad"]))
         period = "-" if entry["period_s"] is None else f"{entry['period_s']:.3f} s"
         peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
@@ -112,6 +122,11 @@ def run(args: argparse.Namespace) -> int:
         live.close()
     driver = config["driver"]
     clock = "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"  # timing is simulated on the virtual clock
-    folder.write_summary({"exit_status": exit_status, "verb": "drop-test", "driver": driver["name"], "clock": clock, "runs": runs})
+    summary = {"exit_status": exit_status, "verb": "drop-test", "driver": driver["name"], "clock": clock, "runs": runs}
+    if failure is not None:
+        summary.update(error=str(failure), exit_code=failure.exit_code)
+    folder.write_summary(summary)
     print(f"run folder: {folder.path} (plot {plot.name})", file=sys.stderr)
+    if failure is not None:
+        raise failure  # one line and its exit code from the CLI; the data up to it is on disk
     return 0

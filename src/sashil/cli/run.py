@@ -86,11 +86,13 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
     """The loop stage for ``--controller``/``--current`` (passive: a constant current)."""
     section = config.get("controller")
     if name is None:
-        name = section.get("name", "passive") if isinstance(section, dict) and current is None else "passive"
+        name = section.get("law", "passive") if isinstance(section, dict) and current is None else "passive"
     if current is not None and name != "passive":
         raise ConfigError(f"--current: only for --controller passive (got --controller {name})")
     if name == "passive":
-        value = 0.0 if current is None else current_in_range("--current", current, config)
+        configured = section.get("current_a", 0.0) if isinstance(section, dict) else 0.0
+        value = current_in_range("--current" if current is not None else "controller.current_a",
+                                 configured if current is None else current, config)
         return f"passive {value:g} A", ConstantCurrent(value)
     make_controller = _registry_make_controller()
     if make_controller is None:

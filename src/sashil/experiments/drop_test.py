@@ -23,10 +23,11 @@ import numpy as np
 
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
-from sashil.errors import DriverTimeoutError
+from sashil.errors import DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
-from sashil.runtime.loop import LoopResult, run_loop
+from sashil.runtime.loop import ControlLoop, LoopResult
+from sashil.safety import SafetySupervisor
 
 #: columns of a drop test's data.csv (DESIGN.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
@@ -69,6 +70,7 @@ class DropRecord:
     hold_angle_rad: float
     loop: LoopResult | None = None
     metrics: DropMetrics | None = None
+    error: SashilError | None = None  # what ended the test early (the data up to it is kept)
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -208,7 +210,12 @@ def run_drop_test(
     clock: Clock | None = None,
     controller: Any = None,
 ) -> DropRecord:
-    """One drop test at a constant current (or, after the release, under ``controller``); returns the record from the release on."""
+    """One drop test at a constant current (or, after the release, under ``controller``).
+
+    Returns the record from the release on. An error that ends the test early (a driver error, a
+    safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
+    up to it and the error in ``record.error``.
+    """
     settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
     rig = rig if rig is not None else open_rig(config)
     clock = clock if clock is not None else default_clock(config)
@@ -219,9 +226,24 @@ def run_drop_test(
         if set_current is not None:
             set_current(current_a)
     plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller)
-    loop = run_loop(rig, plan, clock, settings.rate_hz)
+    loop = ControlLoop(
+        rig,
+        plan,
+        clock,
+        settings.rate_hz,
+        safety=SafetySupervisor.from_config(config),
+        overrun_policy=config["loop"]["overrun_policy"],
+    )
+    error: SashilError | None = None
+    try:
+        loop.run()  # whatever ends it, the rig is at 0 A, deactivated and closed
+    except SashilError as err:
+        error = err
     columns = plan.columns()
-    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop)
+    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop.result)
+    record.error = error
+    if hasattr(rig, "link_stats"):
+        record.extra["link"] = rig.link_stats()
     record.metrics = drop_metrics(
         columns["time_s"],
         columns["theta_rad"],

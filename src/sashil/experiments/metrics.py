@@ -80,6 +80,8 @@ def half_cycle_extrema(time_s: np.ndarray, theta: np.ndarray, floor_rad: float) 
 
 def settling_time(time_s: np.ndarray, theta: np.ndarray, band_rad: float) -> float | None:
     """First time after which |theta| stays inside the band; None if it never does."""
+    if len(theta) == 0:
+        return None
     outside = np.nonzero(np.abs(theta) >= band_rad)[0]
     if outside.size == 0:
         return float(time_s[0])

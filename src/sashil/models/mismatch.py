@@ -69,7 +69,7 @@ def plant_config(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def open_sim_rig(config: dict[str, Any], road: RoadProfile | None = None):
-    """The simulated rig of the mismatched plant (``sashil.drivers.sim.SimulatedRig``)."""
+    """The simulated rig of the mismatched plant (``SimulatedRig.from_config`` applies the mismatch)."""
     from sashil.drivers.sim import SimulatedRig
 
-    return SimulatedRig.from_config(plant_config(config), road=road)
+    return SimulatedRig.from_config(config, road=road)

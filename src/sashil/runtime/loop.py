@@ -151,6 +151,10 @@ class ControlLoop:
             record = self._record if recorder is not None else None
             lateness, read_ns, compute_ns, write_ns = timing.lateness, timing.read, timing.compute, timing.write
             capacity = timing.capacity
+            # a device-paced link (sashil.drivers.link_rig) streams samples on its own clock; sleeping
+            # to a host deadline as well would beat the two clocks against each other
+            paced = bool(getattr(rig, "device_paced", False))
+            late = 0
             start = deadline = last = now()
             self.start_ns = start
             if safety is not None:
@@ -163,16 +167,28 @@ class ControlLoop:
                     break
                 if windowed:
                     recorder.window_end_ns = deadline - spin_ns - WRITER_GUARD_NS  # type: ignore[union-attr]
-                sleep_until(deadline)
-                t = now()
-                late = t - deadline
-                if late >= period:
-                    self._overrun(t, late)
-                    deadline += (late // period) * period
+                if paced:
+                    t = now()  # the device's sample timer paces the cycle: read() blocks for it
+                else:
+                    sleep_until(deadline)
+                    t = now()
+                    late = t - deadline
+                    if late >= period:
+                        self._overrun(t, late)
+                        deadline += (late // period) * period
                 dt = t - last
                 last = t
                 sample = read(t, dt)
                 t_read = now()
+                if paced:
+                    # lateness of a sample against one period after the previous one: jitter of
+                    # the device's stream as the host sees it; a lost sample counts as a miss
+                    late = t_read - deadline if cycles else 0
+                    if late >= period:
+                        self._overrun(t_read, late)
+                    deadline = t_read
+                    if late < 0:
+                        late = 0
                 if check is not None:
                     check(sample, t)
                 cmd = step(sample, t, dt)

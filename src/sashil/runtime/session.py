@@ -129,6 +129,7 @@ def run_session(
             "realtime": rt.report() if rt is not None else {},
             "recording": recorder.summary(),
             "live_view": live_stats,
+            "link": rig.link_stats() if hasattr(rig, "link_stats") else None,
             "shutdown_errors": result.shutdown_errors,
         }
         folder.write_summary(summary)
