@@ -25,6 +25,7 @@ from numba import njit
 
 from sashil.models.bingham import bingham_velocity_step as _bingham_step_py
 from sashil.models.dahl import dahl_w_advance as _dahl_py
+from sashil.models.hysteresis import advance_z as bw_advance  # compiled in sashil.models (one law)
 from sashil.models.lugre import lugre_z_advance as _lugre_py
 
 BOUC_WEN, DAHL, LUGRE, BINGHAM = 0, 1, 2, 3
@@ -33,68 +34,6 @@ MODEL_CODES = {"bouc-wen": BOUC_WEN, "dahl": DAHL, "lugre": LUGRE, "bingham": BI
 dahl_w_advance = njit(cache=True)(_dahl_py)
 lugre_z_advance = njit(cache=True)(_lugre_py)
 bingham_velocity_step = njit(cache=True)(_bingham_step_py)
-
-
-@njit(cache=True)
-def _bw_rate(zeta: float, beta: float, gamma: float, delta: float, n: float) -> float:
-    a = abs(zeta)
-    if a == 0.0:
-        return delta
-    return delta - a**n * (beta + (gamma if zeta > 0.0 else -gamma))
-
-
-@njit(cache=True)
-def bw_advance(z: float, dtheta: float, beta: float, gamma: float, delta: float, n: float, z_u: float) -> float:
-    """Bouc-Wen z after an angle increment (seed 001 eq. 17 as dz/dtheta; the scheme of
-    :meth:`sashil.models.hysteresis.BoucWenZ.advance`: RK4 in the travel with steps limited to
-    z_u/16 of change and by the local stiffness, exact exponential tail next to the bound)."""
-    if dtheta == 0.0 or dtheta != dtheta:
-        return z
-    s = 1.0 if dtheta > 0.0 else -1.0
-    zeta = s * z
-    if zeta > z_u:
-        zeta = z_u
-    elif zeta < -z_u:
-        zeta = -z_u
-    travel = abs(dtheta)
-    dz_max = z_u / 16.0
-    dz_min = z_u * 1e-4
-    tail = z_u * 1e-6
-    tail_rate = n * delta / z_u
-    while travel > 0.0 and zeta < z_u:
-        gap = z_u - zeta
-        if gap <= tail:
-            gap *= math.exp(-tail_rate * travel)
-            zeta = z_u - gap if gap > z_u * 1e-15 else z_u
-            break
-        a = abs(zeta)
-        if a == 0.0:
-            phi = delta
-            stiff = math.inf
-        else:
-            c = beta + (gamma if zeta > 0.0 else -gamma)
-            p = a**n
-            phi = delta - p * c
-            stiff = n * p * abs(c) / a
-        if phi <= 0.0:
-            break
-        h = dz_max / phi
-        limit = 0.5 / stiff
-        if limit < h:
-            h = max(limit, dz_min / phi)
-        if h > travel:
-            h = travel
-        k1 = phi
-        x = zeta + 0.5 * h * k1
-        k2 = _bw_rate(min(x, z_u), beta, gamma, delta, n)
-        x = zeta + 0.5 * h * k2
-        k3 = _bw_rate(min(x, z_u), beta, gamma, delta, n)
-        x = zeta + h * k3
-        k4 = _bw_rate(min(x, z_u), beta, gamma, delta, n)
-        new = zeta + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
-        zeta = new if new < z_u else z_u
-        travel -= h
-    return s * zeta
 
 
 @njit(cache=True)

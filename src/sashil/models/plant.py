@@ -14,9 +14,9 @@ sensor model of the simulated backend, not here) encoder quantisation and noise.
 Integration per sub-step h: the coil current follows its exact first-order response; the arm takes
 a trapezoidal-rule step of the linear part (solved in closed form; A-stable, second order, energy
 conserving without damping) with the hysteretic torque alpha*z_mid, z_mid the mean of z at the
-start and z predicted at the end of the sub-step along the previous sub-step's slope dz/dtheta;
-z itself advances over the angle increment
-with :class:`~sashil.models.hysteresis.BoucWenZ` (rate-independent, bounded).
+start and z predicted at the end of the sub-step; z itself advances over the angle increment with
+:func:`~sashil.models.hysteresis.advance_z` (rate-independent, bounded). The sub-step is
+:func:`rig_substep`, a plain function of floats compiled with numba.
 """
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from sashil.models.hysteresis import BoucWenParams, BoucWenZ
+from sashil.models._jit import jit
+from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
 
 #: road-side motion: t [s] -> (theta1 [rad], theta1_dot [rad/s], theta1_ddot [rad/s^2])
 RoadProfile = Callable[[float], "tuple[float, float, float]"]
@@ -45,6 +46,40 @@ class RigState:
     torque_in_nm: float = 0.0
 
 
+@jit
+def rig_substep(
+    theta: float, v: float, z: float, i: float, h: float, cmd: float, decay: float,
+    J: float, k: float, c1: float, c2: float, alpha1: float, alpha2: float,
+    beta: float, gamma: float, delta: float, n: float, z_u: float, force: float,
+) -> tuple[float, float, float, float]:
+    """One sub-step h of the released arm (seed 001 eqs. 13-17); returns (theta, v, z, i).
+
+    ``force`` is the torque from outside the arm-spring-damper: T_in - J*theta1_ddot. The coil
+    current follows its exact first-order response towards ``cmd`` (``decay`` = exp(-h/tau)). The
+    linear part takes a trapezoidal-rule step solved in closed form for the new rate; the
+    hysteretic torque uses the mean of z at the start and z predicted at the end (z advanced over
+    the angle increment of a predictor step that holds z); z then advances over the corrected
+    angle increment with :func:`~sashil.models.hysteresis.advance_z`.
+    """
+    i_next = cmd + (i - cmd) * decay
+    i_mid = 0.5 * (i + i_next)
+    c = c1 + c2 * i_mid
+    alpha = alpha1 + alpha2 * i_mid
+    gain = h / J
+    lhs = 1.0 + 0.25 * gain * h * k + 0.5 * gain * c
+    rhs0 = v * (2.0 - lhs) + gain * (-k * theta + force)
+    v_next = (rhs0 - gain * alpha * z) / lhs
+    dtheta = 0.5 * h * (v + v_next)
+    if (z >= z_u and dtheta >= 0.0) or (z <= -z_u and dtheta <= 0.0):
+        # saturated in the direction of motion: z stays at its bound
+        return theta + dtheta, v_next, z, i_next
+    z_pred = advance_z(z, dtheta, beta, gamma, delta, n, z_u)
+    v_next = (rhs0 - gain * alpha * 0.5 * (z + z_pred)) / lhs
+    theta_next = theta + 0.5 * h * (v + v_next)
+    z_next = advance_z(z, theta_next - theta, beta, gamma, delta, n, z_u)
+    return theta_next, v_next, z_next, i_next
+
+
 class RigPlant:
     """Arm + spring + Bouc-Wen MR damper + coil lag; ``step(dt, current_cmd)`` advances it."""
 
@@ -58,8 +93,11 @@ class RigPlant:
         torque_in: Callable[[float], float] | None = None,
     ):
         self.params = params
-        self._coefficients = (params.J, params.k, params.c1, params.c2, params.alpha1, params.alpha2)
         self.hysteresis = BoucWenZ.from_params(params)
+        self._coefficients = (params.J, params.k, params.c1, params.c2, params.alpha1, params.alpha2,
+                              params.beta, params.gamma, params.delta, params.n, self.hysteresis.z_u)
+        # compile (or load from numba's cache) now, not in the first real-time cycle
+        rig_substep(0.0, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, *self._coefficients, 0.0)
         self.coil_tau_s = float(coil_tau_s)
         self.current_max_a = float(current_max_a)
         self.max_step_s = float(max_step_s)
@@ -67,7 +105,6 @@ class RigPlant:
         self.torque_in = torque_in
         self.state = RigState()
         self._held_at: float | None = None
-        self._slope = 0.0  # dz/dtheta of the last sub-step (the z predictor)
         self._decay_h = -1.0
         self._split_dt = -1.0
         self._split_count = 1
@@ -110,62 +147,33 @@ class RigPlant:
             self._split_count = max(1, math.ceil(dt / self.max_step_s - 1e-9))
         count = self._split_count
         h = dt / count
-        cmd = min(max(current_cmd_a, 0.0), self.current_max_a)
-        J, k, c1, c2, alpha1, alpha2 = self._coefficients
-        advance = self.hysteresis.advance
-        z_u = self.hysteresis.z_u
+        # floats only: numba compiles one signature (an int here would compile another mid-run)
+        cmd = float(min(max(current_cmd_a, 0.0), self.current_max_a))
+        J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u = self._coefficients
         if h != self._decay_h:
             self._decay_h = h
             self._decay = math.exp(-h / self.coil_tau_s) if self.coil_tau_s > 0.0 else 0.0
         decay = self._decay
         st = self.state
-        theta, v, z, i, t = st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s
+        theta, v, z, i, t = float(st.theta_rad), float(st.theta_dot_rad_s), float(st.z), float(st.current_a), st.time_s
         road, torque_in = self.road, self.torque_in
         road_acc = 0.0
         tin = 0.0
         held = self._held_at is not None
-        slope = self._slope
         for _ in range(count):
-            i_next = cmd + (i - cmd) * decay
-            i_mid = 0.5 * (i + i_next)
-            c = c1 + c2 * i_mid
-            alpha = alpha1 + alpha2 * i_mid
-            t_mid = t + 0.5 * h
-            if road is not None:
-                road_acc = road(t_mid)[2]
-            if torque_in is not None:
-                tin = torque_in(t_mid)
             if held:
-                v_next = 0.0
-                theta_next = theta
-                z_next = z
+                i = cmd + (i - cmd) * decay
             else:
-                # trapezoidal rule for the linear part (A-stable, 2nd order, keeps the energy of
-                # an undamped oscillator), solved in closed form for v_next
-                gain = h / J
-                lhs = 1.0 + 0.25 * gain * h * k + 0.5 * gain * c
-                rhs0 = v * (2.0 - lhs) + gain * (-k * theta + tin - J * road_acc)
-                # predictor with z held at its start value, corrector with the sub-step mean of z
-                v_pred = (rhs0 - gain * alpha * z) / lhs
-                dtheta = 0.5 * h * (v + v_pred)
-                if (z >= z_u and dtheta >= 0.0) or (z <= -z_u and dtheta <= 0.0):
-                    # saturated in the direction of motion: z stays at its bound
-                    v_next = v_pred
-                    theta_next = theta + 0.5 * h * (v + v_next)
-                    z_next = z
-                else:
-                    # predict z at the end of the sub-step along the last sub-step's slope
-                    # dz/dtheta (>= 0 by eq. 17), correct the torque with the mean of z
-                    z_pred = z + slope * 2.0 * dtheta
-                    z_pred = z_u if z_pred > z_u else (-z_u if z_pred < -z_u else z_pred)
-                    v_next = (rhs0 - gain * alpha * 0.5 * (z + z_pred)) / lhs
-                    theta_next = theta + 0.5 * h * (v + v_next)
-                    z_next = advance(z, theta_next - theta)
-                    if theta_next != theta:
-                        slope = (z_next - z) / (theta_next - theta)
-            theta, v, z, i, t = theta_next, v_next, z_next, i_next, t + h
+                if road is not None:
+                    road_acc = road(t + 0.5 * h)[2]
+                if torque_in is not None:
+                    tin = torque_in(t + 0.5 * h)
+                theta, v, z, i = rig_substep(
+                    theta, v, z, i, h, cmd, decay, J, k, c1, c2, alpha1, alpha2,
+                    beta, gamma, delta, n, z_u, tin - J * road_acc,
+                )
+            t += h
         st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s = theta, v, z, i, t
-        self._slope = slope
         if road is not None:
             st.theta_road_rad, st.theta_road_dot_rad_s, _ = road(t)
         st.torque_in_nm = tin
