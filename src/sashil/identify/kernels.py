@@ -4,8 +4,9 @@ Every kernel is the compiled form of a law documented in :mod:`sashil.models`; t
 Dahl and LuGre are compiled straight from their pure-Python definitions. ``cache=True`` keeps the
 JIT cost to the first run on a machine.
 
-Rig models share one integrator, the scheme of :class:`sashil.models.plant.RigPlant` (seed 001
-eqs. 13-17): per sub-step h <= ``max_step`` a semi-implicit Euler step of
+Bouc-Wen runs the simulated rig's own sub-step (:func:`sashil.models.plant.rig_substep`, trapezoidal
+rule). The other rig models share one integrator (seed 001 eqs. 13-17): per sub-step
+h <= ``max_step`` a semi-implicit Euler step of
 ``J*theta_ddot = -k*theta - T_damper + T_in - J*theta1_ddot`` with the viscous part implicit, the
 hysteretic state taken at the mean of its start and a predicted end, and the state advanced over
 the angle increment (rate-independent laws). Model codes and parameter layouts (registry order):
@@ -27,6 +28,7 @@ from sashil.models.bingham import bingham_velocity_step as _bingham_step_py
 from sashil.models.dahl import dahl_w_advance as _dahl_py
 from sashil.models.hysteresis import advance_z as bw_advance  # compiled in sashil.models (one law)
 from sashil.models.lugre import lugre_z_advance as _lugre_py
+from sashil.models.plant import rig_substep
 
 BOUC_WEN, DAHL, LUGRE, BINGHAM = 0, 1, 2, 3
 MODEL_CODES = {"bouc-wen": BOUC_WEN, "dahl": DAHL, "lugre": LUGRE, "bingham": BINGHAM}
@@ -114,9 +116,13 @@ def simulate_rig(
                 theta += h * v
                 continue
             if model == BOUC_WEN:
-                c = p[2] + p[3] * i
-                g = p[4] + p[5] * i
-            elif model == DAHL:
+                # exactly the simulated rig's sub-step (the recorded current needs no coil lag)
+                theta, v, s, _ = rig_substep(
+                    theta, v, s, i, h, i, 0.0, J, k, p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], bound,
+                    force + k * theta,
+                )
+                continue
+            if model == DAHL:
                 c = p[2] + p[3] * i
                 g = p[4] + p[5] * i
             else:  # LuGre: sigma1*(v - r|v|z) + sigma2*v + sigma_b*v*i + (sigma_a + sigma0*i)*z
