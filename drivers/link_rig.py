@@ -14,6 +14,8 @@ contract on top (protocol.md "Session"):
   Command is answered by one Sample; ``read`` waits for the answer to the last Command (or polls
   with the current setpoint when none is outstanding).
 - ``read`` raises :class:`DriverTimeoutError` after ``driver.sample_timeout_ms`` without a sample.
+  Time the host process itself was paused (a wait that returns well past its timeout) does not
+  count: the device was not silent then, the host was not listening (``host_pauses`` in the stats).
 - ``deactivate()`` sends Command(0 A, not enabled) and never raises; ``close()`` is idempotent.
 """
 
@@ -44,6 +46,9 @@ from sashil.drivers.messages import (
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
 
 log = logging.getLogger(__name__)
+
+#: a receive wait that overruns its timeout by more than this was a pause of the host process
+HOST_PAUSE_S = 0.5e-3
 
 
 class LinkSettings:
@@ -82,7 +87,8 @@ class LinkRig(RigInterface):
         self._dev_time_us = 0
         self._link_up = False
         #: what the link saw (summary.json material); codec counters come from the subclass
-        self.stats = {"samples": 0, "samples_missed": 0, "samples_skipped": 0, "timeouts": 0, "status_frames": 0}
+        self.stats = {"samples": 0, "samples_missed": 0, "samples_skipped": 0, "timeouts": 0, "status_frames": 0,
+                      "host_pauses": 0}
 
     # subclass hooks --------------------------------------------------------------------------
     @abstractmethod
@@ -219,11 +225,19 @@ class LinkRig(RigInterface):
         if newest is None or self._pending:
             deadline = time.monotonic() + self.settings.sample_timeout_s
             while newest is None or self._pending:
-                remaining = deadline - time.monotonic()
+                now = time.monotonic()
+                remaining = deadline - now
                 if remaining <= 0:
                     break
                 got = self._take_samples(self._receive(remaining))
                 newest = got if got is not None else newest
+                # A wait that came back much later than asked means this process was not running
+                # (a scheduler or VM pause, which stops an emulator on the same machine too): that
+                # time was not the device's silence, so it does not count towards the timeout.
+                overslept = time.monotonic() - now - remaining
+                if got is None and overslept > HOST_PAUSE_S:
+                    deadline += overslept
+                    self.stats["host_pauses"] += 1
         if newest is None:
             self.stats["timeouts"] += 1
             self._pending = 0
