@@ -103,7 +103,7 @@ class SimulatedRig(RigInterface):
             self._t0_ns = self._last_ns = t_ns
         plant = self.plant
         elapsed = (t_ns - self._last_ns) * 1e-9
-        if self._release_at_s is not None and plant._held_at is not None:
+        if self._release_at_s is not None:
             release_in = self._release_at_s - plant.state.time_s
             if release_in <= elapsed:
                 # step to the release instant, let go, then step the rest of the period
@@ -111,6 +111,7 @@ class SimulatedRig(RigInterface):
                     plant.step(release_in, self._command)
                     elapsed -= release_in
                 plant.release()
+                self._release_at_s = None
         if elapsed > 0.0:
             plant.step(elapsed, self._command)
         self._last_ns = t_ns
@@ -155,5 +156,5 @@ class SimulatedRig(RigInterface):
 
     def set_initial_current(self, current_a: float) -> None:
         """Start with the coil already carrying ``current_a`` (as if it had flowed for a while)."""
-        self.plant.state.current_a = min(max(current_a, 0.0), self.plant.current_max_a)
+        self.plant.state.current_a = float(min(max(current_a, 0.0), self.plant.current_max_a))
         self._command = self.plant.state.current_a

@@ -105,10 +105,8 @@ class RigPlant:
         self.torque_in = torque_in
         self.state = RigState()
         self._held_at: float | None = None
-        self._decay_h = -1.0
         self._split_dt = -1.0
-        self._split_count = 1
-        self._decay = 0.0
+        self._split = (1, 0.0, 0.0)  # sub-steps, their length and the coil's decay over one
 
     # --- operator actions (what a person does to the bench rig) -------------------------------
     def hold(self, theta_rad: float) -> None:
@@ -143,36 +141,33 @@ class RigPlant:
         if dt <= 0.0:
             return self.state
         if dt != self._split_dt:
-            self._split_dt = dt
-            self._split_count = max(1, math.ceil(dt / self.max_step_s - 1e-9))
-        count = self._split_count
-        h = dt / count
+            count = max(1, math.ceil(dt / self.max_step_s - 1e-9))
+            h = dt / count
+            decay = math.exp(-h / self.coil_tau_s) if self.coil_tau_s > 0.0 else 0.0
+            self._split_dt, self._split = dt, (count, h, decay)
+        count, h, decay = self._split
         # floats only: numba compiles one signature (an int here would compile another mid-run)
         cmd = float(min(max(current_cmd_a, 0.0), self.current_max_a))
-        J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u = self._coefficients
-        if h != self._decay_h:
-            self._decay_h = h
-            self._decay = math.exp(-h / self.coil_tau_s) if self.coil_tau_s > 0.0 else 0.0
-        decay = self._decay
         st = self.state
-        theta, v, z, i, t = float(st.theta_rad), float(st.theta_dot_rad_s), float(st.z), float(st.current_a), st.time_s
+        theta, v, z, i, t = st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s
         road, torque_in = self.road, self.torque_in
-        road_acc = 0.0
         tin = 0.0
-        held = self._held_at is not None
-        for _ in range(count):
-            if held:
+        if self._held_at is not None:
+            for _ in range(count):
                 i = cmd + (i - cmd) * decay
-            else:
-                if road is not None:
-                    road_acc = road(t + 0.5 * h)[2]
-                if torque_in is not None:
-                    tin = torque_in(t + 0.5 * h)
+            t += count * h
+        else:
+            J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u = self._coefficients
+            force = 0.0
+            for _ in range(count):
+                if road is not None or torque_in is not None:
+                    t_mid = t + 0.5 * h
+                    tin = 0.0 if torque_in is None else float(torque_in(t_mid))
+                    force = tin - (0.0 if road is None else J * road(t_mid)[2])
                 theta, v, z, i = rig_substep(
-                    theta, v, z, i, h, cmd, decay, J, k, c1, c2, alpha1, alpha2,
-                    beta, gamma, delta, n, z_u, tin - J * road_acc,
+                    theta, v, z, i, h, cmd, decay, J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u, force
                 )
-            t += h
+                t += h
         st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s = theta, v, z, i, t
         if road is not None:
             st.theta_road_rad, st.theta_road_dot_rad_s, _ = road(t)
