@@ -82,6 +82,7 @@ LOOP = Section(
                 "mlockall": Field("bool", True, doc="lock the process memory (no page faults in the loop)"),
                 "gc": Field("choice", "disable", choices=("disable", "freeze", "none"), doc="garbage collector during the run"),
                 "timer_slack_ns": Field("int", 1, low=0, high=10_000_000, doc="PR_SET_TIMERSLACK of the loop thread (0: leave)"),
+                "gil_switch_us": Field("int", 100, low=0, high=100_000, doc="interpreter thread switch interval during the run (0: leave)"),
             },
             doc="best-effort real-time set-up; each step's outcome is reported, none is fatal",
         ),

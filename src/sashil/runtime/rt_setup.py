@@ -1,4 +1,5 @@
-"""Best-effort real-time set-up of the loop thread: timer slack, CPU, SCHED_FIFO, mlockall, GC.
+"""Best-effort real-time set-up of the loop thread: timer slack, CPU, SCHED_FIFO, mlockall, GC,
+and the interpreter's thread switch interval.
 
 Every step is tried on its own and its outcome recorded (``ok``, ``failed`` with the reason, or
 ``skipped``); none is fatal, as in ros2_control's "try SCHED_FIFO on any kernel" (see
@@ -16,6 +17,7 @@ import ctypes
 import ctypes.util
 import gc
 import os
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,13 +58,14 @@ class RealtimeSetup:
     mlockall: bool = True
     gc_mode: str = "disable"  # "disable" | "freeze" | "none"
     timer_slack_ns: int = 1
+    gil_switch_us: int = 100
     outcomes: dict[str, StepOutcome] = field(default_factory=dict)
     _saved: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
     def from_config(cls, loop_section: dict[str, Any]) -> "RealtimeSetup":
         rt = loop_section["rt"]
-        return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"])
+        return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"], rt["gil_switch_us"])
 
     # the steps --------------------------------------------------------------------------------
     def apply(self) -> dict[str, StepOutcome]:
@@ -73,8 +76,18 @@ class RealtimeSetup:
             "sched_fifo": self._sched_fifo(),
             "mlockall": self._mlockall(libc),
             "gc": self._gc(),
+            "gil_switch": self._gil_switch(),
         }
         return self.outcomes
+
+    def _gil_switch(self) -> StepOutcome:
+        # A background thread (recorder writer, live view) holding the interpreter when the loop
+        # wakes would keep it for up to the switch interval (5 ms by default); shorten it.
+        if not self.gil_switch_us:
+            return StepOutcome("skipped", "loop.rt.gil_switch_us is 0")
+        self._saved["switch_interval"] = sys.getswitchinterval()
+        sys.setswitchinterval(self.gil_switch_us * 1e-6)
+        return StepOutcome("ok", f"{sys.getswitchinterval() * 1e6:.0f} us (was {self._saved['switch_interval'] * 1e6:.0f} us)")
 
     def _timer_slack(self, libc: ctypes.CDLL | None) -> StepOutcome:
         if not self.timer_slack_ns:
@@ -144,6 +157,8 @@ class RealtimeSetup:
     def restore(self) -> None:
         """Undo what ``apply`` changed (never raises)."""
         saved, self._saved = self._saved, {}
+        if "switch_interval" in saved:
+            sys.setswitchinterval(saved["switch_interval"])
         if "gc_enabled" in saved:
             gc.unfreeze()
             if saved["gc_enabled"]:
