@@ -20,6 +20,47 @@ from sashil.drivers.messages import Message
 from sashil.errors import DriverError, DriverIOError
 
 
+
+class BufferedPort:
+    """A pyserial port whose ``read`` is served from one bulk read of everything waiting.
+
+    python-can's slcan backend reads a line with one ``read(1)`` per byte (a system call each);
+    this keeps its protocol code and halves the receive cost of a 2-frame sample. Everything else
+    is the port's own.
+    """
+
+    def __init__(self, port: Any):
+        self._port = port
+        self._data = bytearray()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._port, name)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in ("_port", "_data"):
+            object.__setattr__(self, name, value)
+        else:
+            setattr(self._port, name, value)
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._data) + self._port.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        if len(self._data) < size:
+            waiting = self._port.in_waiting
+            if waiting:
+                self._data += self._port.read(waiting)
+        if len(self._data) < size and self._port.timeout != 0:
+            self._data += self._port.read(size - len(self._data))
+        out = bytes(self._data[:size])
+        del self._data[:size]
+        return out
+
+    def reset_input_buffer(self) -> None:
+        self._data.clear()
+        self._port.reset_input_buffer()
+
 class CanRig(LinkRig):
     """The rig over CAN (``driver.name: can``)."""
 
@@ -70,8 +111,10 @@ class CanRig(LinkRig):
         if self.interface == "slcan" and port is not None:
             # python-can's slcan reads byte by byte with the port's 1 ms timeout, so recv(0) blocks
             # up to 1 ms on an empty port; with timeout 0 it returns at once and this backend waits
-            # in select() on the port instead (measured: round trip p50 1.5 ms -> see bench_link)
+            # in select() on the port instead (measured: round trip p50 1.5 ms -> see bench_link).
+            # Its one read(1) system call per byte is served from a buffer filled in one read.
             port.timeout = 0
+            self._bus.serialPortOrig = BufferedPort(port)
             self._fd = self._bus.fileno()
 
     def _send(self, seq: int, msg: Message) -> None:
@@ -86,10 +129,10 @@ class CanRig(LinkRig):
         bus, decoder = self._bus, self.decoder
         try:
             if self._fd is not None:
-                frame = bus.recv(0.0)
+                frame = self._recv_waiting()
                 if frame is None and timeout_s > 0:
                     ready, _, _ = select.select([self._fd], [], [], timeout_s)
-                    frame = bus.recv(0.0) if ready else None
+                    frame = self._recv_waiting() if ready else None
             else:
                 frame = bus.recv(timeout_s)
             while frame is not None:
@@ -97,10 +140,19 @@ class CanRig(LinkRig):
                     got = decoder.feed(frame.arbitration_id, bytes(frame.data))
                     if got is not None:
                         out.append(got)
-                frame = bus.recv(0.0)
+                frame = self._recv_waiting() if self._fd is not None else bus.recv(0.0)
         except (can.CanError, OSError, ValueError) as err:
             raise DriverIOError(f"{self.describe()}: link lost ({error_reason(err)})") from None
         return out
+
+    def _recv_waiting(self) -> can.Message | None:
+        """The next frame among the bytes already received (SLCAN lines that are not frames,
+        such as the adapter's transmit acknowledgements, are skipped), or None."""
+        bus = self._bus
+        frame = bus.recv(0.0)
+        while frame is None and bus.serialPortOrig.in_waiting:
+            frame = bus.recv(0.0)
+        return frame
 
     def _close_link(self) -> None:
         if self._bus is not None:
