@@ -71,6 +71,8 @@ def run_session(
     safety = SafetySupervisor.from_config(config)
     recorder = Recorder(folder.file("data.csv"), record_columns(stage))
     rt = RealtimeSetup.from_config(loop_cfg) if realtime else None
+    if rt is not None and live is not None:
+        rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
     loop = ControlLoop(
         rig,
         stage,
