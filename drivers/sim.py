@@ -9,7 +9,6 @@ The backend can play the drop-test operator (:meth:`operator_hold`).
 
 from __future__ import annotations
 
-import math
 import random
 from typing import Any
 

@@ -5,9 +5,11 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
+import message_strategies
+
 from sashil.drivers import can_codec
 from sashil.drivers.can_codec import CanDecoder, database, encode, frame_bits
-from sashil.drivers.messages import Command, Configure, Hello, RoadSpeed, Sample, Status, Version
+from sashil.drivers.messages import Command, RoadSpeed, Sample
 
 
 def test_dbc_loads_with_the_protocol_messages():
@@ -49,16 +51,7 @@ def test_dbc_decodes_what_the_codec_encodes_in_physical_units():
     assert abs(db.decode_message(frame_id, data)["RoadSpeedCmd"] + 1.5) < 1e-9
 
 
-i32 = st.integers(-(2**31), 2**31 - 1)
-messages = st.one_of(
-    st.builds(Sample, st.integers(0, 2**24 - 1), i32, i32, st.floats(-16.0, 16.0), st.integers(0, 255)),
-    st.builds(Command, st.floats(0.0, 32.0), st.integers(0, 255)),
-    st.builds(RoadSpeed, st.floats(-2000.0, 2000.0)),
-    st.builds(Status, st.integers(0, 255), st.integers(0, 255), st.integers(0, 65535), st.integers(0, 65535)),
-    st.builds(Hello, st.integers(0, 255)),
-    st.builds(Version, st.integers(0, 255), st.integers(0, 2**32 - 1), st.floats(0.0, 32.0)),
-    st.builds(Configure, st.integers(0, 65535), st.integers(0, 65535), st.integers(0, 1)),
-)
+messages = message_strategies.messages(24)
 
 
 @given(messages, st.integers(0, 65535))

@@ -6,7 +6,6 @@ generous timeouts, so a loaded machine makes them slower, not flaky.
 
 from __future__ import annotations
 
-import os
 
 import can
 import pytest

@@ -8,17 +8,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import message_strategies
+
 from sashil.drivers.messages import (
     CMD_ENABLE,
     CURRENT_LSB_A,
     ROAD_SPEED_LSB_RAD_S,
     Command,
-    Configure,
     Hello,
-    RoadSpeed,
     Sample,
-    Status,
-    Version,
 )
 from sashil.drivers.serial_codec import (
     MAX_FRAME,
@@ -117,16 +115,7 @@ def test_bad_crc_and_length_are_told_apart():
 
 
 # --- round trips ------------------------------------------------------------------------------
-i32 = st.integers(-(2**31), 2**31 - 1)
-messages = st.one_of(
-    st.builds(Sample, st.integers(0, 2**32 - 1), i32, i32, st.floats(-16.0, 16.0), st.integers(0, 255)),
-    st.builds(Command, st.floats(0.0, 32.0), st.integers(0, 255)),
-    st.builds(RoadSpeed, st.floats(-2000.0, 2000.0)),
-    st.builds(Status, st.integers(0, 255), st.integers(0, 255), st.integers(0, 65535), st.integers(0, 65535)),
-    st.builds(Hello, st.integers(0, 255)),
-    st.builds(Version, st.integers(0, 255), st.integers(0, 2**32 - 1), st.floats(0.0, 32.0)),
-    st.builds(Configure, st.integers(0, 65535), st.integers(0, 65535), st.integers(0, 1)),
-)
+messages = message_strategies.messages(32)
 
 
 def assert_close(decoded, msg):

@@ -18,7 +18,7 @@ from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
 def test_profiles_are_consistent_with_their_derivatives(profile):
     h = 1e-5
     for t in (0.3, 0.9, 2.0, 7.5, 11.0):
-        (x0, v0, a0), (x1, v1, _) = profile(t - h), profile(t + h)
+        (x0, v0, _), (x1, v1, _) = profile(t - h), profile(t + h)
         x, v, a = profile(t)
         assert v == pytest.approx((x1 - x0) / (2 * h), abs=1e-6)
         assert a == pytest.approx((v1 - v0) / (2 * h), abs=1e-4)

@@ -9,7 +9,6 @@ Bouc-Wen friction model of Tables 2-3, the Coulomb/MSTV/Bouc-Wen comparison at 1
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import replace
 from pathlib import Path
 

@@ -12,7 +12,6 @@ come from one linear least-squares solve (variable projection).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable
 
