@@ -127,3 +127,17 @@ def test_a_link_failure_mid_test_keeps_the_data_and_ends_at_zero_amps(config):
     assert rig.currents[-1] == 0.0  # the safe command went out last
     assert (rig.deactivated, rig.closed) == (1, 1)
     assert rig.rig._command == 0.0  # and the simulated coil is driven to 0 A
+
+
+def test_the_configs_controller_takes_over_at_the_release(tmp_path):
+    config = tmp_path / "td.yaml"
+    config.write_text("controller:\n  law: target-damping\n  zeta: 0.07\n")
+    out = tmp_path / "D"
+    assert main(["drop-test", "--config", str(config), "--current", "0.5", "--duration", "6", "--out", str(out)]) == 0
+    (run,) = json.loads((out / "summary.json").read_text())["runs"]
+    # target damping: each cycle decays like a linear damper of zeta 0.07 (log decrement 2 pi zeta / sqrt(1 - zeta^2))
+    target = 2 * math.pi * 0.07 / math.sqrt(1 - 0.07**2)
+    assert len(run["log_decrements"]) >= 4
+    assert all(abs(d / target - 1) < 0.1 for d in run["log_decrements"])
+    data = read_data_csv(out / "data.csv", required=REQUIRED_COLUMNS)
+    assert 0.0 < data["current_cmd_a"].max() <= 1.0 and data["current_cmd_a"].min() == 0.0  # the law modulates the current

@@ -49,6 +49,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_verbosity_options(parser)
 
 
+def _controller(config: dict) -> object | None:
+    """The config's controller, which takes over at the release (None: the constant current)."""
+    law = config["controller"]["law"]
+    if law == "passive":
+        return None
+    from sashil.control.registry import make_controller
+
+    return make_controller(law, config)
+
+
 def _label(current: float) -> str:
     return f"i{current:.3f}A"
 
@@ -73,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     failure: SashilError | None = None
     for current in currents:
         say(args, f"drop test from {args.theta0_deg:g} deg at {current:g} A ...")
-        record = run_drop_test(config, args.theta0_deg, current, duration)
+        record = run_drop_test(config, args.theta0_deg, current, duration, controller=_controller(config))
         target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
         if several:
             target.write_config(config)
