@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
             "timing": record.loop.timing.summary() if record.loop is not None and record.loop.timing is not None else None,
             "trips": record.loop.trips if record.loop is not None else [],
             "link": record.extra.get("link"),
+            "realtime": record.extra.get("realtime"),
             "exit_status": "ok" if record.error is None else record.loop.exit_status,
             "error": None if record.error is None else str(record.error),
         }

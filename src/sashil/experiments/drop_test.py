@@ -27,6 +27,7 @@ from sashil.errors import DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import ControlLoop, LoopResult
+from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.safety import SafetySupervisor
 
 #: columns of a drop test's data.csv (DESIGN.md names)
@@ -198,7 +199,7 @@ def default_clock(config: dict[str, Any]) -> Clock:
     driver = config["driver"]
     if driver["name"] == "sim" and driver["clock"] == "virtual":
         return VirtualClock()
-    return RealClock()
+    return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
 
 
 def run_drop_test(
@@ -235,15 +236,25 @@ def run_drop_test(
         overrun_policy=config["loop"]["overrun_policy"],
     )
     error: SashilError | None = None
+    # on the real clock (bench, emulator) the loop gets the same best-effort real-time set-up as
+    # `sashil run`; simulated time needs none
+    realtime = None if getattr(clock, "virtual", False) else RealtimeSetup.from_config(config["loop"])
+    if realtime is not None:
+        realtime.apply()
     try:
         loop.run()  # whatever ends it, the rig is at 0 A, deactivated and closed
     except SashilError as err:
         error = err
+    finally:
+        if realtime is not None:
+            realtime.restore()
     columns = plan.columns()
     record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop.result)
     record.error = error
     if hasattr(rig, "link_stats"):
         record.extra["link"] = rig.link_stats()
+    if realtime is not None:
+        record.extra["realtime"] = realtime.report()
     record.metrics = drop_metrics(
         columns["time_s"],
         columns["theta_rad"],
