@@ -21,7 +21,7 @@ from sashil.cli.common import (
     resolve_config,
 )
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.drop_test import DROP_COLUMNS, run_drop_test
+from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
 from sashil.recording.matlab import write_mat
 from sashil.recording.plots import plot_angle_overlay
 from sashil.recording.run_folder import RunFolder
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--current: each current once, got {currents}")
 
     folder = RunFolder.create(args.out, "drop-test")
-    live = open_rerun(args, DROP_COLUMNS, "sashil drop-test", folder.path)
+    columns = DROP_COLUMNS + (CONTROLLER_COLUMNS if config["controller"]["law"] != "passive" else ())
+    live = open_rerun(args, columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     folder.write_config(config)
     several = len(currents) > 1

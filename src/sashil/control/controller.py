@@ -45,6 +45,8 @@ class Controller:
         p = observer.params
         self._k_over_j, self._inv_j = p.k / p.J, 1.0 / p.J
         self.command = RigCommand(0.0)
+        #: set by an experiment while something outside the model holds the arm (drop-test hold)
+        self.held = False
         self._t0_ns: int | None = None
         self._accel = 0.0
         self._v_prev = 0.0
@@ -118,7 +120,8 @@ class Controller:
             cmd = 0.0 if cmd != cmd or cmd < 0.0 else self.current_max_a
         self.current_cmd_a = cmd
         if self.model_aided:
-            self._accel = body_ddot
+            # an arm held by hand does not accelerate, whatever the model's torques say
+            self._accel = 0.0 if self.held else body_ddot
         self.cycles += 1
         self.command.current_a = cmd
         return self.command

@@ -32,6 +32,8 @@ from sashil.safety import SafetySupervisor
 
 #: columns of a drop test's data.csv (DESIGN.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
+#: added when a controller acts after the release (its per-cycle values, DESIGN.md names)
+CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
 @dataclass
@@ -111,11 +113,12 @@ class DropTestPlan:
         self._hold_sum = 0.0
         self._hold_count = 0
         self.hold_angle = settings.theta0_rad
-        self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=max(16, int(settings.rate_hz)))
+        self._recent: deque[tuple] = deque(maxlen=max(16, int(settings.rate_hz)))  # rows before the release
         self.release_ns: int | None = None
         self.release_estimated = False
         self._capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
-        self._data: tuple[list[float], ...] = tuple([] for _ in DROP_COLUMNS)
+        self.column_names = DROP_COLUMNS + (CONTROLLER_COLUMNS if controller is not None else ())
+        self._data: tuple[list[float], ...] = tuple([] for _ in self.column_names)
         self._n = 0
 
     # the cycle -------------------------------------------------------------------------------
@@ -123,11 +126,14 @@ class DropTestPlan:
         theta = sample.theta_rad
         if self._start_ns is None:
             self._start_ns = t_ns
-        ctl = None if self.controller is None else self.controller.step(sample, t_ns, dt_ns)
+        ctl = None
+        if self.controller is not None:
+            self.controller.held = self.phase != "record"  # the operator's hand is outside the model
+            ctl = self.controller.step(sample, t_ns, dt_ns)
         if self.phase == "record":
-            out = self._record(t_ns, theta, sample.theta_road_rad, sample.current_a)
+            out = self._record_cycle(t_ns, theta, sample.theta_road_rad, sample.current_a)
             return out if out is None or ctl is None else ctl
-        self._recent.append((t_ns, theta, sample.theta_road_rad, sample.current_a))
+        self._recent.append(self._row(t_ns, theta, sample.theta_road_rad, sample.current_a))
         if self.phase == "wait-hold":
             self._wait_hold(t_ns, theta)
         elif self.phase == "held":
@@ -172,26 +178,49 @@ class DropTestPlan:
             )
             self.release_estimated = True
         self.phase = "record"
-        for t, theta, road, current in recent:
-            if t >= self.release_ns and self._record(t, theta, road, current) is None:
+        for row in recent:
+            if row[0] >= self.release_ns and self._record(row) is None:
                 break
 
-    def _record(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
+    def _row(self, t_ns: int, theta: float, road: float, current: float) -> tuple:
+        """One cycle's values in column order (time still in host ns)."""
+        ctl = self.controller
+        if ctl is None:
+            return (t_ns, theta, road, current, self.s.current_a)
+        return (t_ns, theta, road, current, ctl.current_cmd_a, ctl.theta_dot_rad_s, ctl.z_hat,
+                ctl.torque_hat_nm, ctl.torque_cmd_nm)
+
+    def _record_cycle(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
+        """Record this cycle (the common case, without building a row tuple)."""
+        if self.controller is not None:
+            return self._record(self._row(t_ns, theta, road, current))
         time_s = (t_ns - self.release_ns) * 1e-9
         if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
             self.phase = "done"
             return None
-        time_col, theta_col, road_col, current_col, cmd_col = self._data
-        time_col.append(time_s)
-        theta_col.append(theta)
-        road_col.append(road)
-        current_col.append(current)
-        cmd_col.append(self.s.current_a if self.controller is None else self.controller.current_cmd_a)
+        data = self._data
+        data[0].append(time_s)
+        data[1].append(theta)
+        data[2].append(road)
+        data[3].append(current)
+        data[4].append(self.s.current_a)
+        self._n += 1
+        return self.command
+
+    def _record(self, row: tuple) -> RigCommand | None:
+        time_s = (row[0] - self.release_ns) * 1e-9
+        if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
+            self.phase = "done"
+            return None
+        data = self._data
+        data[0].append(time_s)
+        for column, value in zip(data[1:], row[1:]):
+            column.append(value)
         self._n += 1
         return self.command
 
     def columns(self) -> dict[str, np.ndarray]:
-        return {name: np.asarray(values, dtype=float) for name, values in zip(DROP_COLUMNS, self._data)}
+        return {name: np.asarray(values, dtype=float) for name, values in zip(self.column_names, self._data)}
 
 
 def default_clock(config: dict[str, Any]) -> Clock:
