@@ -141,3 +141,6 @@ def test_the_configs_controller_takes_over_at_the_release(tmp_path):
     assert all(abs(d / target - 1) < 0.1 for d in run["log_decrements"])
     data = read_data_csv(out / "data.csv", required=REQUIRED_COLUMNS)
     assert 0.0 < data["current_cmd_a"].max() <= 1.0 and data["current_cmd_a"].min() == 0.0  # the law modulates the current
+    # the controller's own signals are recorded, and the held arm gave the estimator no false motion
+    assert {"theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm"} <= set(data)
+    assert abs(data["theta_dot_rad_s"][0]) < 0.01
