@@ -166,13 +166,6 @@ class BoucWenZ:
     def from_params(cls, params: BoucWenParams) -> "BoucWenZ":
         return cls(params.beta, params.gamma, params.delta, params.n)
 
-    def rate(self, zeta: float) -> float:
-        """phi(zeta) = dzeta/du for motion in the direction of zeta's sign convention."""
-        a = abs(zeta)
-        if a == 0.0:
-            return self.delta
-        return self.delta - a**self.n * (self.beta + (self.gamma if zeta > 0.0 else -self.gamma))
-
     def advance(self, z: float, dtheta: float) -> float:
         """z after the arm turns by ``dtheta`` [rad] from state ``z`` (any size, either sign)."""
         return advance_z(float(z), float(dtheta), self.beta, self.gamma, self.delta, self.n, self.z_u)

@@ -9,7 +9,7 @@ entity                          series (data.csv columns)
 ``signals/velocity_rad_s``      θ̇ (``theta_dot_rad_s``)
 ``signals/current_a``           commanded (``current_cmd_a``), measured (``current_a``)
 ``signals/torque_nm``           T̂ (``torque_hat_nm``), T* (``torque_cmd_nm``), the feasible
-                                band T(0), T(i_max) (seed 001 eq. 10 with ẑ and θ̇)
+                                band T(0), T(i_max) (seed 001 eq. 9 with ẑ and θ̇)
 ``signals/z_hat``               ẑ (``z_hat``)
 ``timing/lateness_us``          loop wake-up lateness per cycle
 ``hysteresis/torque_vs_*``      T̂ against θ̇ [deg/s] and against θ [deg], as 2-D points
@@ -42,6 +42,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+
+from sashil.models.hysteresis import BoucWenParams
 
 DEG = 180.0 / math.pi
 TIMELINE = "time"
@@ -91,16 +93,16 @@ HYSTERESIS: tuple[tuple[str, str, float, str], ...] = (
 def feasible_band(columns: Mapping[str, np.ndarray], params: Mapping[str, float], current_max_a: float) -> None:
     """Add ``band_lo_nm``/``band_hi_nm``: the torque range T(0), T(i_max) at the observed state.
 
-    Seed 001 eq. 10 with eq. 11-12: ``T(i) = (alpha1 + alpha2 i) z + (c1 + c2 i) theta_dot``, linear
+    Seed 001 eq. 9 with eqs. 11-12 (:meth:`BoucWenParams.torque`): ``T(i) = (alpha1 + alpha2 i) z + (c1 + c2 i) theta_dot``, linear
     in i, so the band's ends are its values at 0 A and at i_max. Needs ``z_hat`` and
     ``theta_dot_rad_s``; does nothing without them or when the band is already there.
     """
     if "band_lo_nm" in columns or "z_hat" not in columns or "theta_dot_rad_s" not in columns:
         return
     z, v = np.asarray(columns["z_hat"], float), np.asarray(columns["theta_dot_rad_s"], float)
-    lo = params["alpha1"] * z + params["c1"] * v
-    columns["band_lo_nm"] = lo  # type: ignore[index]
-    columns["band_hi_nm"] = lo + (params["alpha2"] * z + params["c2"] * v) * current_max_a  # type: ignore[index]
+    model = BoucWenParams.from_mapping(dict(params))
+    columns["band_lo_nm"] = model.torque(z, v, 0.0)  # type: ignore[index]
+    columns["band_hi_nm"] = model.torque(z, v, current_max_a)  # type: ignore[index]
 
 
 def present_series(columns: Sequence[str]) -> list[tuple[Series, tuple[int, ...]]]:
