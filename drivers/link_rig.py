@@ -13,7 +13,13 @@ contract on top (protocol.md "Session"):
   newest sample, waiting for one if none arrived since the last read. Pacing ``host``: each
   Command is answered by one Sample; ``read`` waits for the answer to the last Command (or polls
   with the current setpoint when none is outstanding).
-- ``read`` raises :class:`DriverTimeoutError` after ``driver.sample_timeout_ms`` without a sample.
+- A **link gap**: after ``driver.sample_timeout_ms`` without a sample ``read`` commands 0 A at
+  once (the safe state, within 3 cycles at the defaults) and keeps listening. A sample within
+  ``driver.link_lost_ms`` (counted from when ``read`` began to wait) ends the gap: the run goes on and the gap
+  is counted (``gaps``, ``gap_max_ms``). No sample by then: :class:`DriverTimeoutError`, the run
+  ends. ``link_lost_ms <= sample_timeout_ms`` ends the run at the sample timeout. A short device
+  silence (a USB serial adapter batching bytes, an emulator's process paused by its machine) then
+  costs a few cycles at 0 A instead of the run; a stalled or lost link still ends it.
   Time the host process itself was paused (a wait that returns well past its timeout) does not
   count: the device was not silent then, the host was not listening (``host_pauses`` in the stats).
 - ``deactivate()`` sends Command(0 A, not enabled) and never raises; ``close()`` is idempotent.
@@ -61,6 +67,7 @@ class LinkSettings:
         self.pacing = PACING_NAMES[driver["pacing"]]
         self.watchdog_ms = int(round(driver["watchdog_ms"]))
         self.sample_timeout_s = driver["sample_timeout_ms"] * 1e-3
+        self.link_lost_s = max(driver["link_lost_ms"] * 1e-3, self.sample_timeout_s)
         self.connect_timeout_s = driver["connect_timeout_s"]
         self.counts_per_rev = config["rig"]["encoder_counts_per_rev"]
         self.current_max_a = config["rig"]["current_max_a"]
@@ -88,7 +95,7 @@ class LinkRig(RigInterface):
         self._link_up = False
         #: what the link saw (summary.json material); codec counters come from the subclass
         self.stats = {"samples": 0, "samples_missed": 0, "samples_skipped": 0, "timeouts": 0, "status_frames": 0,
-                      "host_pauses": 0}
+                      "host_pauses": 0, "gaps": 0, "gap_max_ms": 0.0, "zero_current_after_ms": 0.0}
 
     # subclass hooks --------------------------------------------------------------------------
     @abstractmethod
@@ -119,7 +126,7 @@ class LinkRig(RigInterface):
     def codec_counters(self) -> dict[str, int]:
         return {}
 
-    def link_stats(self) -> dict[str, int]:
+    def link_stats(self) -> dict[str, float]:
         """Sample bookkeeping plus the decoder's counters (bad frames, ...)."""
         return {**self.stats, **self.codec_counters()}
 
@@ -223,27 +230,10 @@ class LinkRig(RigInterface):
             self._send_command()  # nothing outstanding: poll with the current setpoint
         newest = self._take_samples(self._receive(0.0))
         if newest is None or self._pending:
-            deadline = time.monotonic() + self.settings.sample_timeout_s
-            while newest is None or self._pending:
-                now = time.monotonic()
-                remaining = deadline - now
-                if remaining <= 0:
-                    break
-                got = self._take_samples(self._receive(remaining))
-                newest = got if got is not None else newest
-                # A wait that came back much later than asked means this process was not running
-                # (a scheduler or VM pause, which stops an emulator on the same machine too): that
-                # time was not the device's silence, so it does not count towards the timeout.
-                overslept = time.monotonic() - now - remaining
-                if got is None and overslept > HOST_PAUSE_S:
-                    deadline += overslept
-                    self.stats["host_pauses"] += 1
-        if newest is None:
-            self.stats["timeouts"] += 1
-            self._pending = 0
-            raise DriverTimeoutError(
-                f"{self.describe()}: no sample for {self.settings.sample_timeout_s * 1e3:g} ms (device stalled or link lost)"
-            )
+            start = time.monotonic()
+            newest = self._wait_for_sample(newest, start + self.settings.sample_timeout_s)
+            if newest is None:
+                newest = self._ride_through_gap(start)
         seq, sample = newest
         return RigSample(
             seq=seq,
@@ -255,6 +245,46 @@ class LinkRig(RigInterface):
             flags=sample.flags,
             counts_per_rev=self.counts_per_rev,
         )
+
+    def _wait_for_sample(self, newest: tuple[int, Sample] | None, deadline: float) -> tuple[int, Sample] | None:
+        """Receive until a sample (and, host-paced, the answer to the last Command) or ``deadline``."""
+        while newest is None or self._pending:
+            now = time.monotonic()
+            remaining = deadline - now
+            if remaining <= 0:
+                break
+            got = self._take_samples(self._receive(remaining))
+            newest = got if got is not None else newest
+            # A wait that came back much later than asked means this process was not running
+            # (a scheduler or VM pause, which stops an emulator on the same machine too): that
+            # time was not the device's silence, so it does not count towards the timeout.
+            overslept = time.monotonic() - now - remaining
+            if got is None and overslept > HOST_PAUSE_S:
+                deadline += overslept
+                self.stats["host_pauses"] += 1
+        return newest
+
+    def _ride_through_gap(self, start: float) -> tuple[int, Sample]:
+        """No sample for the sample timeout: 0 A now, then wait up to the link-lost time for one."""
+        stats = self.stats
+        settings = self.settings
+        self._setpoint = 0.0
+        self._pending = 0
+        self._send_command()  # the device drives 0 A from here until the loop writes again
+        stats["zero_current_after_ms"] = max(stats["zero_current_after_ms"], (time.monotonic() - start) * 1e3)
+        # the rest of the link-lost time; the sample-timeout wait already added any host pause
+        newest = self._wait_for_sample(None, time.monotonic() + settings.link_lost_s - settings.sample_timeout_s)
+        if newest is None:
+            stats["timeouts"] += 1
+            self._pending = 0
+            lost_ms = settings.link_lost_s * 1e3
+            cut = "" if settings.link_lost_s <= settings.sample_timeout_s else \
+                f"; current set to 0 A after {settings.sample_timeout_s * 1e3:g} ms"
+            raise DriverTimeoutError(f"{self.describe()}: no sample for {lost_ms:g} ms (device stalled or link lost{cut})")
+        stats["gaps"] += 1
+        stats["gap_max_ms"] = max(stats["gap_max_ms"], round((time.monotonic() - start) * 1e3, 3))
+        log.debug("%s: link gap of %.1f ms ridden through at 0 A", self.describe(), (time.monotonic() - start) * 1e3)
+        return newest
 
     def _take_samples(self, messages: list[tuple[int, Message]]) -> tuple[int, Sample] | None:
         newest = None

@@ -176,6 +176,8 @@ def run_over_link(driver: str, transport: str, pacing: str, duration: float, tmp
     print(f"  {transport:6s} pacing {pacing:6s}: exit {done.returncode}, cycles {timing['cycles']}, "
           f"missed deadlines {timing['missed_deadlines']}, lateness p99 {timing['lateness_us']['p99']:.0f} "
           f"max {timing['lateness_us']['max']:.0f} us, read p50 {timing['read_us']['p50']:.0f} p99 {timing['read_us']['p99']:.0f} us")
+    link_stats = summary.get("link") or {}
+    print(f"    link gaps ridden through at 0 A: {link_stats.get('gaps', 0)} (longest {link_stats.get('gap_max_ms', 0.0):.1f} ms)")
     if done.returncode:
         print("    " + [line for line in done.stderr.splitlines() if "error" in line][-1])
     for line in link_lines:
@@ -209,7 +211,7 @@ def main() -> None:
             print(f"  {name:6s} {percentiles(times)}{ratio}")
         timeout = "default" if args.sample_timeout_ms is None else f"{args.sample_timeout_ms:g} ms"
         print(f"sashil run at 1 kHz for {args.duration:g} s over each link (emulator process SCHED_FIFO 60, loop FIFO 50, "
-              f"sample timeout {timeout}):")
+              f"sample timeout {timeout}, link lost 25 ms):")
         for transport, driver in (("serial", "serial"), ("slcan", "can")):
             for pacing in ("device", "host"):
                 run_over_link(driver, transport, pacing, args.duration, tmp, args.sample_timeout_ms)

@@ -63,7 +63,8 @@ DRIVER = Section(
         "can_options": Section({}, open_keys=True),  # extra keyword arguments for can.Bus
         "pacing": Field("choice", "device", choices=("device", "host"), doc="who times the samples"),
         "watchdog_ms": Field("int", 50, low=1, high=60_000, doc="device cuts to 0 A without a command this long"),
-        "sample_timeout_ms": Field("float", 2.5, low=0.1, high=10_000.0, doc="read() gives up without a sample"),
+        "sample_timeout_ms": Field("float", 2.5, low=0.1, high=10_000.0, doc="0 A after this long without a sample"),
+        "link_lost_ms": Field("float", 25.0, low=0.0, high=60_000.0, doc="the run ends after this long without a sample"),
         "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
     },
     doc="which backend talks to the rig",
