@@ -9,6 +9,9 @@ set FLAG_WATCHDOG until the next valid Command.
 
 A session starts at each Configure: the operator (``hold_deg``/``release_after_s``) presses the
 arm to the hold angle then, and the ``*_after_s`` fault times count from then.
+
+With a :class:`~sashil.drivers.emulator.truth.TruthLog` in :attr:`RigDevice.truth` every sample
+taken also records the plant's true state (``sashil emulate --truth``).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import random
 from dataclasses import dataclass
 from typing import Callable
 
+from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -123,6 +127,8 @@ class RigDevice:
         self.overruns = 0
         #: called with (now_ns, drive_a) whenever the drive current changes (tests, logging)
         self.on_drive: Callable[[int, float], None] | None = None
+        #: the plant's true state at every sample taken (``sashil emulate --truth``), or None
+        self.truth: TruthLog | None = None
 
     # time ------------------------------------------------------------------------------------
     def session_time_s(self, now_ns: int) -> float | None:
@@ -236,6 +242,8 @@ class RigDevice:
         self.samples_sent += 1
         boot = self.boot_ns if self.boot_ns is not None else now_ns
         device_time_us = (now_ns - boot) // 1000
+        if self.truth is not None:
+            self.truth.record(self._sample_seq, device_time_us, self.rig.plant)
         return self._sample_seq, Sample(device_time_us, arm, road, reading.current_a, reading.flags | self.flags())
 
     def _reply(self, msg: Message) -> tuple[int, Message]:

@@ -23,6 +23,7 @@ from sashil.drivers.emulator.transports import (
     SlcanPtyTransport,
     VirtualCanTransport,
 )
+from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.messages import Message
 from sashil.drivers.sim import SimulatedRig
 
@@ -34,9 +35,13 @@ def build_device(
     operator: Operator | None = None,
     faults: Faults | None = None,
     fixed_rate_hz: int | None = None,
+    truth: TruthLog | None = None,
 ) -> RigDevice:
-    """The emulated board around the simulated rig the config describes (model, rig section)."""
-    return RigDevice(SimulatedRig.from_config(config), operator, faults, fixed_rate_hz)
+    """The emulated board around the simulated rig the config describes (model, rig and mismatch
+    sections: ``SimulatedRig.from_config``); ``truth`` records the plant's state at each sample."""
+    device = RigDevice(SimulatedRig.from_config(config), operator, faults, fixed_rate_hz)
+    device.truth = truth
+    return device
 
 
 @dataclass
@@ -126,7 +131,7 @@ class EmulatorThread:
     """An emulator serving in a thread of this process (tests, benchmarks).
 
     ``transport``: ``serial`` or ``slcan`` (a pty; the host opens :attr:`port`) or ``virtual``
-    (python-can's virtual bus; :attr:`port` is the channel name).
+    (python-can's virtual bus; :attr:`port` is the channel name). ``truth``: see :func:`build_device`.
     """
 
     def __init__(
@@ -136,8 +141,9 @@ class EmulatorThread:
         operator: Operator | None = None,
         faults: Faults | None = None,
         channel: str = "sashil-emulator",
+        truth: TruthLog | None = None,
     ):
-        self.device = build_device(config, operator, faults)
+        self.device = build_device(config, operator, faults, truth=truth)
         if transport == "virtual":
             self.link: DeviceTransport = VirtualCanTransport(channel)
             self.port = channel

@@ -22,6 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fixed device sample rate; a host asking for another is refused (default: the host's)")
     parser.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pty")
     parser.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (default: until SIGINT/SIGTERM)")
+    parser.add_argument("--truth", metavar="FILE",
+                        help="ground truth: write FILE (CSV) on exit with one row per sample sent: seq (as on the wire), "
+                             "device_time_us, plant_time_s and the plant's true theta_true_rad, theta_dot_true_rad_s, "
+                             "z_true, current_true_a, torque_true_nm; join with the host's data.csv on seq")
     op = parser.add_argument_group("operator (drop test)")
     op.add_argument("--hold-deg", type=float, metavar="DEG", help="hold the arm at DEG when the host connects")
     op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
@@ -51,8 +55,19 @@ def _seconds_or_none(option: str, value: float | None) -> float | None:
     return float(value)
 
 
+def _start_truth_file(path: str) -> None:
+    """Create the --truth file now (header only) so a path that cannot be written fails before the link is up."""
+    from sashil.drivers.emulator import TRUTH_COLUMNS
+
+    try:
+        with open(path, "w", encoding="utf-8") as handle:
+            handle.write(",".join(TRUTH_COLUMNS) + "\n")
+    except OSError as err:
+        raise ConfigError(f"--truth {path}: cannot write ({err.strerror})") from None
+
+
 def run(args: argparse.Namespace) -> int:
-    from sashil.drivers.emulator import Emulator, Faults, Operator, build_device
+    from sashil.drivers.emulator import Emulator, Faults, Operator, TruthLog, build_device
     from sashil.drivers.emulator.transports import Pty, SerialPtyTransport, SlcanPtyTransport
 
     config = resolve_config(args)
@@ -76,7 +91,11 @@ def run(args: argparse.Namespace) -> int:
     if args.hold_deg is not None:
         operator = Operator(args.hold_deg, _seconds_or_none("--release-after", args.release_after) or 0.0)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
-    device = build_device(config, operator, faults, rate)
+    truth = None
+    if args.truth is not None:
+        truth = TruthLog()
+        _start_truth_file(args.truth)
+    device = build_device(config, operator, faults, rate, truth)
     try:
         pty = Pty.open(args.link)
     except OSError as err:
@@ -95,7 +114,12 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, _stop)
     link = f" (link {args.link})" if args.link else ""
     print(f"sashil emulate: {args.transport} rig on {pty.path}{link}", flush=True)
-    why = emulator.run(duration)
+    try:
+        why = emulator.run(duration)
+    finally:
+        if truth is not None:  # stopped by SIGINT/SIGTERM, --duration, a disconnect or an error
+            truth.write_csv(args.truth)
+            print(f"sashil emulate: truth: {len(truth)} samples written to {args.truth}", file=sys.stderr, flush=True)
     print(
         f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {transport.bad_frames}, "
         f"frames corrupted {transport.tx_corrupted}, watchdog trips {device.watchdog_trips}, late samples {device.overruns}",
