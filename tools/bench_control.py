@@ -104,8 +104,12 @@ def main() -> None:
         print(f"  {inverse:8s} inverse: NRMSE(T - T*) = {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
               f"{100 * r['nrmse_range']:.1f} % of range(T*); observer NRMSE {100 * r['observer_nrmse']:.1f} %; clipped {r['clipped']}")
 
+    fine = 1 << 24  # an encoder fine enough that quantisation no longer matters
     references = (("no plant mismatch", {"fraction": 0.0, "coil_tau": 0.0}),
-                  ("65536 counts/rev", {"encoder_counts_per_rev": 65536}))
+                  ("65536 counts/rev", {"encoder_counts_per_rev": 65536}),
+                  ("no plant mismatch, 2^24 counts/rev", {"fraction": 0.0, "coil_tau": 0.0, "encoder_counts_per_rev": fine}),
+                  ("only n off by -10 % (z_u -22 %), 2^24 counts/rev",
+                   {"fraction": 0.0, "coil_tau": 0.0, "params": {"n": -0.1}, "encoder_counts_per_rev": fine}))
     for label, update in references:
         cfg = copy.deepcopy(config)
         cfg["mismatch"].update(update)
