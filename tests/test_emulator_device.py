@@ -202,3 +202,23 @@ def test_corrupted_serial_frame_fails_the_crc_only():
     decoder = StreamDecoder()
     assert decoder.feed(bad + frame) == [(1, Sample(1, 2, 3, 0.0, 0))]
     assert decoder.counters.bad_frames == 1
+
+
+def test_road_speed_step_moves_the_road_and_kicks_the_relative_rate():
+    # a speed command steps the road wheel's speed: the arm keeps its absolute rate, so the relative
+    # rate theta_dot = theta2_dot - theta1_dot drops by the change (the impulse of road acceleration)
+    from sashil.drivers.messages import RoadSpeed
+
+    device = build_device(default_config())
+    device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    plant = device.rig.plant
+    assert device.handle(RoadSpeed(0.5), 10 * MS) == []
+    assert plant.state.theta_dot_rad_s == -0.5 and plant.state.theta_road_dot_rad_s == 0.5
+    device.handle(RoadSpeed(0.2), 30 * MS)
+    assert math.isclose(plant.state.theta_road_rad, 0.5 * 0.020, rel_tol=1e-9)  # 20 ms at 0.5 rad/s
+    run_ticks(device, 30 * MS, 50 * MS)
+    assert math.isclose(plant.state.theta_road_rad, 0.010 + 0.2 * 0.019, rel_tol=1e-9)  # last tick at 49 ms
+    absolute = plant.state.theta_dot_rad_s + plant.state.theta_road_dot_rad_s
+    device.handle(RoadSpeed(0.0), 49 * MS)  # at the plant's present time: only the step acts
+    assert plant.state.theta_road_dot_rad_s == 0.0
+    assert math.isclose(plant.state.theta_dot_rad_s, absolute, rel_tol=1e-12)

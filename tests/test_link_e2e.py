@@ -161,3 +161,28 @@ def test_host_silence_lets_the_device_watchdog_cut_the_current(emulator, tmp_pat
         later = [rig.read(0, 0) for _ in range(100)]
         assert later[-1].current_a < later[0].current_a  # the coil current decays towards 0
         assert all(s.flags & FLAG_WATCHDOG for s in later)
+
+
+@pytest.mark.parametrize("transport, driver", DRIVERS)
+def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transport, driver, emulator, tmp_path):
+    from sashil.drivers.emulator import read_truth_csv
+
+    truth_path = tmp_path / "truth.csv"
+    emu = emulator(transport, "--truth", str(truth_path))
+    out = tmp_path / "sweep"
+    done = sashil("sweep", "--driver", driver, "--port", emu.link, "--f-start", "1.5", "--f-stop", "1.5", "--duration", "2",
+                  "--amplitude-deg", "1", "--current", "0.3", "--out", str(out), "--config", relaxed_config(tmp_path))
+    assert done.returncode == 0, done.stderr
+    emu.stop()
+    data = np.genfromtxt(out / "data.csv", delimiter=",", names=True)
+    truth = read_truth_csv(truth_path)
+    # on the real clock (the link paces it): 3000 cycles over at least the 1 s ramp + 2 s
+    assert len(data) == 3000 and data["time_s"][-1] >= 2.9
+    late = data["time_s"] >= 1.5  # after the ramp: the road wheel turns +-1 deg at 1.5 Hz
+    road_deg = np.degrees(data["theta_road_rad"][late])
+    assert 0.8 <= (road_deg.max() - road_deg.min()) / 2 <= 1.2
+    # every row's seq is a sample of the truth; the host's angle is the plant's to the encoder count
+    row_of = {int(seq): k for k, seq in enumerate(truth["seq"])}
+    rows = np.array([row_of[int(seq)] for seq in data["seq"]])
+    assert np.max(np.abs(data["theta_rad"] - truth["theta_true_rad"][rows])) <= np.radians(COUNT_DEG) + 1e-12
+    assert np.ptp(np.degrees(truth["theta_true_rad"][rows][late])) > 0.5  # the road's speed steps move the arm

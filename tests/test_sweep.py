@@ -57,12 +57,27 @@ def test_sweep_cli_stepped_writes_table_and_plot(tmp_path):
     assert json.loads((out / "summary.json").read_text())["exit_status"] == "ok"
 
 
+def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
+    # --f-stop = --f-start: a sine at that frequency; data.csv carries the sample seq (join with emulate --truth)
+    out = tmp_path / "sine"
+    rc = main(["sweep", "--f-start", "1.25", "--f-stop", "1.25", "--duration", "2", "--amplitude-deg", "1",
+               "--current", "0", "--out", str(out)])
+    assert rc == 0
+    lines = (out / "data.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[-1] == "seq" and lines[1].split(",")[-1] == "1" and lines[-1].split(",")[-1] == str(len(lines) - 1)
+    rows = [dict(zip(header, map(float, line.split(",")))) for line in lines[1:]]
+    late = [r for r in rows if r["time_s"] >= 1.0]  # after the 1 s ramp: theta1 = sin(2 pi 1.25 t), 1 deg
+    assert max(abs(math.degrees(r["theta_road_rad"]) - math.sin(2 * math.pi * 1.25 * r["time_s"])) for r in late) < 0.1
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
         (["--controller", "nope"], "--controller: unknown law 'nope'"),
         (["--controller", "skyhook"], "controller.c_sky"),
-        (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency above"),
+        (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency at or above --f-start (3 Hz)"),
+        (["--stepped", "--f-start", "2", "--f-stop", "2"], "--f-stop: a stepped sine needs a frequency above"),
         (["--current", "5"], "--current: expected a current in [0, 1]"),
     ],
 )

@@ -40,6 +40,7 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.drivers.sim import SimulatedRig
+from sashil.models.plant import RigPlant
 
 
 @dataclass
@@ -73,16 +74,28 @@ class Operator:
 
 
 class RoadWheel:
-    """Road-side angle under a speed command: theta1(t) = theta1(t_k) + w_k (t - t_k) (a road profile)."""
+    """Road-side angle under speed commands: theta1(t) = theta1(t_k) + w_k (t - t_k) (a road profile).
+
+    A speed command is a step of the road wheel's speed (a motor with a fast speed loop), an
+    impulse of road acceleration that the plant's smooth road force -J*theta1_ddot cannot carry:
+    :meth:`set_speed` applies it to the plant as the jump it causes. The arm keeps its absolute
+    rate theta2_dot, so the relative rate theta_dot = theta2_dot - theta1_dot drops by the speed
+    change (unless the operator holds the arm).
+    """
 
     def __init__(self) -> None:
         self._t0 = 0.0
         self._theta0 = 0.0
         self.speed_rad_s = 0.0
 
-    def set_speed(self, t_s: float, speed_rad_s: float) -> None:
+    def set_speed(self, plant: RigPlant, speed_rad_s: float) -> None:
+        """Step the wheel to ``speed_rad_s`` at the plant's present time."""
+        t_s = plant.state.time_s
         self._theta0 = self(t_s)[0]
         self._t0 = t_s
+        if not plant.held:
+            plant.state.theta_dot_rad_s -= speed_rad_s - self.speed_rad_s
+        plant.state.theta_road_dot_rad_s = speed_rad_s
         self.speed_rad_s = speed_rad_s
 
     def __call__(self, t_s: float) -> tuple[float, float, float]:
@@ -157,7 +170,7 @@ class RigDevice:
             return [self._reply(self._configure(msg, now_ns))]
         if isinstance(msg, RoadSpeed):
             self._advance(now_ns)
-            self.road.set_speed(self.rig.plant.state.time_s, msg.speed_rad_s)
+            self.road.set_speed(self.rig.plant, msg.speed_rad_s)
             return []
         return []  # device-to-host messages coming back: ignore
 

@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
     parser.add_argument("--f-start", type=float, default=0.5, metavar="HZ", help="start frequency [Hz] (default 0.5)")
-    parser.add_argument("--f-stop", type=float, default=5.0, metavar="HZ", help="stop frequency [Hz] (default 5)")
+    parser.add_argument("--f-stop", type=float, default=5.0, metavar="HZ",
+                        help="stop frequency [Hz] (default 5; equal to --f-start: a sine at that frequency)")
     parser.add_argument("--duration", type=float, default=30.0, metavar="S", help="chirp length [s] (default 30)")
     parser.add_argument("--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)")
     group = parser.add_mutually_exclusive_group()
@@ -41,8 +42,10 @@ def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
     for option, value in (("--f-start", args.f_start), ("--f-stop", args.f_stop)):
         if not (math.isfinite(value) and 0.0 < value <= config["loop"]["rate_hz"] / 10):
             raise ConfigError(f"{option}: expected a frequency in (0, {config['loop']['rate_hz'] / 10:g}] Hz, got {value:g}")
-    if args.f_stop <= args.f_start:
-        raise ConfigError(f"--f-stop: expected a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
+    if args.f_stop < args.f_start:
+        raise ConfigError(f"--f-stop: expected a frequency at or above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
+    if args.stepped and args.f_stop == args.f_start:
+        raise ConfigError(f"--f-stop: a stepped sine needs a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
     config = copy.deepcopy(config)
     if args.amplitude_deg is not None:
         if not (math.isfinite(args.amplitude_deg) and 0.0 < args.amplitude_deg <= 20.0):

@@ -10,7 +10,11 @@ through the ~1.6 Hz resonance), A(t) rising over ``ramp_s`` with a raised cosine
   the mean).
 
 The simulated rig takes the profile as its road (``SimulatedRig.from_config(config, road=...)``);
-every cycle's command also carries ``road_speed_rad_s = theta1_dot(t)`` for a real rig's road motor.
+every cycle's command also carries ``road_speed_rad_s = theta1_dot(t)`` for a real rig's road motor
+(and the emulator's road wheel). The simulated rig runs on the virtual clock unless the config asks
+for the real one; a link (serial, CAN: the emulator or the bench) runs on the real clock with the
+loop's real-time set-up, as a drop test does. Each row records the sample's sequence number
+(``seq``, as on the wire), so a link run joins with the emulator's ``--truth`` file.
 """
 
 from __future__ import annotations
@@ -23,10 +27,11 @@ import numpy as np
 
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
 from sashil.models.plant import RoadProfile
-from sashil.runtime.clock import Clock, VirtualClock
+from sashil.runtime.clock import Clock
 from sashil.runtime.loop import run_loop
+from sashil.runtime.rt_setup import RealtimeSetup
 
-#: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig)
+#: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
 SWEEP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a", "theta_dot_rad_s",
                  "z_hat", "torque_hat_nm", "torque_cmd_nm", "torque_true_nm")
 
@@ -86,6 +91,7 @@ class SweepStage:
         self.road = road
         self.plant = getattr(rig, "plant", None)
         self._data = np.full((capacity, len(SWEEP_COLUMNS)), np.nan)
+        self._seq = np.zeros(capacity, dtype=np.int64)
         self._n = 0
         self._t0: int | None = None
 
@@ -101,12 +107,14 @@ class SweepStage:
             row = self._data[self._n]
             row[0], row[1], row[2], row[3], row[4] = t, sample.theta_rad, sample.theta_road_rad, sample.current_a, cmd.current_a
             row[5], row[6], row[7], row[8], row[9] = c.theta_dot_rad_s, c.z_hat, c.torque_hat_nm, c.torque_cmd_nm, true_torque
+            self._seq[self._n] = sample.seq
             self._n += 1
         return cmd
 
     def columns(self) -> dict[str, np.ndarray]:
+        """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of the rows so far."""
         data = self._data[: self._n]
-        return {name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)}
+        return {**{name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)}, "seq": self._seq[: self._n].copy()}
 
 
 RigFactory = Callable[[dict, RoadProfile], RigInterface]
@@ -124,11 +132,26 @@ def _default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
 
 def run_profile(config: dict[str, Any], controller: Any, road: RoadProfile, duration_s: float,
                 rig_factory: RigFactory | None = None, clock: Clock | None = None) -> dict[str, np.ndarray]:
-    """One run of ``controller`` under the road profile; returns the recorded columns."""
+    """One run of ``controller`` under the road profile; returns the recorded columns.
+
+    Clock: ``clock``, else the config's (:func:`~sashil.experiments.drop_test.default_clock`: the
+    virtual one for the simulated rig, the real one for a link); on the real clock the loop gets
+    the best-effort real-time set-up of ``loop.rt``.
+    """
+    from sashil.experiments.drop_test import default_clock
+
     rate = float(config["loop"]["rate_hz"])
     rig = (rig_factory or _default_rig)(config, road)
     stage = SweepStage(controller, road, int(math.ceil(duration_s * rate)) + 2, rig)
-    run_loop(rig, stage, clock if clock is not None else VirtualClock(), rate, duration_s)
+    clock = clock if clock is not None else default_clock(config)
+    realtime = None if getattr(clock, "virtual", False) else RealtimeSetup.from_config(config["loop"])
+    if realtime is not None:
+        realtime.apply()
+    try:
+        run_loop(rig, stage, clock, rate, duration_s)
+    finally:
+        if realtime is not None:
+            realtime.restore()
     return stage.columns()
 
 
