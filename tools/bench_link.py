@@ -124,8 +124,10 @@ def _sleep_until(t_ns: int) -> None:
 
 
 class EmulatorProcess:
-    def __init__(self, transport: str, link: str):
-        self.proc = subprocess.Popen([*SASHIL, "emulate", "--transport", transport, "--link", link],
+    """``sashil emulate --transport TRANSPORT --link LINK [FLAGS...]`` in a child process."""
+
+    def __init__(self, transport: str, link: str, *flags: str):
+        self.proc = subprocess.Popen([*SASHIL, "emulate", "--transport", transport, "--link", link, *flags],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.proc.stdout.readline()
         if "rig on" not in line:
