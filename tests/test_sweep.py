@@ -14,14 +14,23 @@ from sashil.control.registry import make_controller
 from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
 
 
-@pytest.mark.parametrize("profile", [chirp_profile(0.01, 0.5, 5.0, 10.0, 1.0), sine_profile(0.01, 2.0, 1.0)])
+@pytest.mark.parametrize("profile", [chirp_profile(0.01, 0.5, 5.0, 10.0, 1.0), sine_profile(0.01, 2.0, 1.0),
+                                     sine_profile(0.01, 2.0, 1.0, stop_s=7.0)])
 def test_profiles_are_consistent_with_their_derivatives(profile):
     h = 1e-5
-    for t in (0.3, 0.9, 2.0, 7.5, 11.0):
+    for t in (0.3, 0.9, 2.0, 6.9, 7.2, 7.5, 7.95, 11.0):
         (x0, v0, _), (x1, v1, _) = profile(t - h), profile(t + h)
         x, v, a = profile(t)
         assert v == pytest.approx((x1 - x0) / (2 * h), abs=1e-6)
         assert a == pytest.approx((v1 - v0) / (2 * h), abs=1e-4)
+
+
+def test_the_stepped_sine_road_ramps_down_to_rest_after_its_stop_time():
+    road = sine_profile(0.01, 2.0, 1.0, stop_s=7.0)
+    assert road(6.875) == pytest.approx(sine_profile(0.01, 2.0, 1.0)(6.875))  # untouched before the stop
+    x, v, a = road(7.5)  # half-way down the raised cosine: half the amplitude
+    assert x == pytest.approx(0.005 * math.sin(2 * math.pi * 2.0 * 7.5), abs=1e-12)
+    assert road(8.0) == (0.0, 0.0, 0.0) and road(9.3) == (0.0, 0.0, 0.0)  # at rest from stop + ramp on
 
 
 def test_chirp_is_a_sine_of_the_linear_frequency_ramp():
@@ -69,6 +78,48 @@ def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
     rows = [dict(zip(header, map(float, line.split(",")))) for line in lines[1:]]
     late = [r for r in rows if r["time_s"] >= 1.0]  # after the 1 s ramp: theta1 = sin(2 pi 1.25 t), 1 deg
     assert max(abs(math.degrees(r["theta_road_rad"]) - math.sin(2 * math.pi * 1.25 * r["time_s"])) for r in late) < 0.1
+
+
+@pytest.mark.parametrize("mode", [[], ["--stepped", "--steps", "2"]])
+def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_data(tmp_path, capsys, mode):
+    # at the 1.6 Hz resonance and 0 A the arm swings past a 3 deg interlock (rig.angle_limit_deg)
+    config = tmp_path / "tight.yaml"
+    config.write_text("rig:\n  angle_limit_deg: 3.0\n")
+    out = tmp_path / "tripped"
+    rc = main(["sweep", *mode, "--f-start", "1.6", "--f-stop", "2.0", "--duration", "20", "--current", "0.5",
+               "--config", str(config), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc != 0 and "angle" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "error" and "angle" in summary["error"]
+    if not mode:  # the chirp's rows up to the trip are on disk; the last command is 0 A
+        lines = (out / "data.csv").read_text().splitlines()
+        header = lines[0].split(",")
+        last = dict(zip(header, lines[-1].split(",")))
+        assert len(lines) > 500 and float(last["current_cmd_a"]) == pytest.approx(0.5)
+        assert abs(math.degrees(float(last["theta_rad"]))) > 2.5
+    else:
+        assert summary["points"] == []  # the first frequency tripped: nothing measured, nothing invented
+
+
+def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
+    from sashil.errors import SafetyTrip
+    from sashil.experiments.sweep import run_profile
+    from sashil.models.mismatch import open_sim_rig
+
+    config = default_config()
+    config["rig"]["angle_limit_deg"] = 3.0
+    rigs, kept = [], []
+
+    def factory(cfg, road):
+        rigs.append(open_sim_rig(cfg, road))
+        return rigs[-1]
+
+    with pytest.raises(SafetyTrip):
+        run_profile(config, make_controller("passive", {**config, "controller": {"current_a": 0.5}}),
+                    sine_profile(math.radians(1.0), 1.6, 1.0), 20.0, factory, keep=kept.append)
+    assert rigs[0]._command == 0.0 and rigs[0].plant.state.current_a < 0.5
+    assert len(kept) == 1 and kept[0]["current_cmd_a"][-1] == pytest.approx(0.5) and len(kept[0]["time_s"]) > 500
 
 
 @pytest.mark.parametrize(

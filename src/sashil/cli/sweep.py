@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 import copy
 import math
+import sys
 
 from sashil.cli.common import add_config_options, add_driver_options, add_output_options, current_in_range, positive_seconds, resolve_config
 from sashil.cli.common import add_recording_options, add_verbosity_options, open_rerun, setup_logging, wants_mat
 from sashil.control.registry import LAWS, make_controller
-from sashil.errors import ConfigError
+from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import SWEEP_COLUMNS, ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
 from sashil.identify.progress import Progress
 from sashil.recording.matlab import write_mat
@@ -97,10 +98,15 @@ def run(args: argparse.Namespace) -> int:
         freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
         bar = Progress(len(freqs), "stepped sine", enabled=not args.quiet)
         points = []
-        for f in freqs:  # one frequency at a time, for the progress bar
-            points += stepped_sine(config, lambda: make_controller(name, config), [f])
-            bar.advance(1, f"{f:.3g} Hz")
-        bar.close()
+        try:
+            for f in freqs:  # one frequency at a time, for the progress bar
+                points += stepped_sine(config, lambda: make_controller(name, config), [f])
+                bar.advance(1, f"{f:.3g} Hz")
+        except SashilError as err:  # the frequencies done so far are kept
+            _write_failed(folder, err, {"mode": "stepped", "controller": label, "points": [p.__dict__ for p in points]})
+            raise
+        finally:
+            bar.close()
         lines = ["frequency_hz,body_rms_rad,road_rms_rad,transmissibility,observer_nrmse,clipped_cycles"]
         print(f"{'f [Hz]':>8} {'body RMS [deg]':>15} {'transmissibility':>17} {'observer NRMSE':>15}")
         for p in points:
@@ -117,8 +123,12 @@ def run(args: argparse.Namespace) -> int:
         amplitude = math.radians(sweep["amplitude_deg"])
         controller = make_controller(name, config)
         total = duration + sweep["ramp_s"]
-        cols = run_profile(config, controller, chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]), total)
-        folder.write_data(cols)
+        try:  # data.csv is written however the run ends
+            cols = run_profile(config, controller, chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]),
+                               total, keep=folder.write_data)
+        except SashilError as err:
+            _write_failed(folder, err, {"mode": "chirp", "controller": label})
+            raise
         if wants_mat(args):
             write_mat(folder.file("data.mat"), cols, {"verb": "sweep", "controller": label})
         if live is not None:
@@ -135,9 +145,23 @@ def run(args: argparse.Namespace) -> int:
                    "clipped_cycles": int(getattr(controller, "clip_count", 0))}
         print(f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
               f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg")
-    summary = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
-    if "points" in summary:
-        summary["points"] = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in p.items()} for p in summary["points"]]
-    folder.write_summary(summary)
+    _write_summary(folder, summary)
     print(f"run folder: {folder.path}")
     return 0
+
+
+def _write_summary(folder: RunFolder, summary: dict) -> None:
+    """summary.json with NaN as null (JSON has no NaN)."""
+    def finite(items: dict) -> dict:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in items.items()}
+
+    summary = finite(summary)
+    if "points" in summary:
+        summary["points"] = [finite(p) for p in summary["points"]]
+    folder.write_summary(summary)
+
+
+def _write_failed(folder: RunFolder, err: SashilError, summary: dict) -> None:
+    """The summary of a sweep that ended early (a link fault, a safety trip); the error is raised on."""
+    _write_summary(folder, {"exit_status": "error", "error": str(err), **summary})
+    print(f"run folder: {folder.path} (the sweep ended early; what was recorded is kept)", file=sys.stderr)

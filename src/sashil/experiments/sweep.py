@@ -7,7 +7,8 @@ through the ~1.6 Hz resonance), A(t) rising over ``ramp_s`` with a raised cosine
 * stepped sine: phi(t) = 2*pi*f*t per frequency, ``settle_s`` to reach the steady state, then
   ``measure_s`` (rounded up to whole periods) over which the body (arm) angle theta2 = theta +
   theta1 and the road angle are measured; transmissibility = RMS(theta2) / RMS(theta1) (RMS about
-  the mean).
+  the mean). Then the amplitude ramps back to 0 over ``ramp_s``, so that a rig that stays up
+  between frequencies starts the next one at rest.
 
 The simulated rig takes the profile as its road (``SimulatedRig.from_config(config, road=...)``);
 every cycle's command also carries ``road_speed_rad_s = theta1_dot(t)`` for a real rig's road motor
@@ -30,6 +31,7 @@ from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import run_loop
 from sashil.runtime.rt_setup import RealtimeSetup
+from sashil.safety import SafetySupervisor
 
 #: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
 SWEEP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a", "theta_dot_rad_s",
@@ -46,9 +48,16 @@ def _envelope(t: float, ramp_s: float) -> tuple[float, float, float]:
     return 0.5 - 0.5 * math.cos(w * t), 0.5 * w * math.sin(w * t), 0.5 * w * w * math.cos(w * t)
 
 
-def _profile(amplitude_rad: float, ramp_s: float, phase: Callable[[float], tuple[float, float, float]]) -> RoadProfile:
+def _profile(amplitude_rad: float, ramp_s: float, phase: Callable[[float], tuple[float, float, float]],
+             stop_s: float | None = None) -> RoadProfile:
+    """A(t)*sin(phi(t)) with A(t) = A*e(t): e ramps up over ``ramp_s`` and, from ``stop_s`` on,
+    back down over ``ramp_s`` (the product rule gives the rate and acceleration)."""
+
     def road(t: float) -> tuple[float, float, float]:
         e, de, dde = _envelope(t, ramp_s)
+        if stop_s is not None and t > stop_s:
+            r, dr, ddr = _envelope(t - stop_s, ramp_s)
+            e, de, dde = e * (1.0 - r), de * (1.0 - r) - e * dr, dde * (1.0 - r) - 2.0 * de * dr - e * ddr
         p, dp, ddp = phase(t)
         s, c = math.sin(p), math.cos(p)
         a = amplitude_rad
@@ -70,10 +79,10 @@ def chirp_profile(amplitude_rad: float, f_start_hz: float, f_stop_hz: float, dur
     return _profile(amplitude_rad, ramp_s, phase)
 
 
-def sine_profile(amplitude_rad: float, f_hz: float, ramp_s: float = 1.0) -> RoadProfile:
-    """theta1(t) = A(t)*sin(2*pi*f*t)."""
+def sine_profile(amplitude_rad: float, f_hz: float, ramp_s: float = 1.0, stop_s: float | None = None) -> RoadProfile:
+    """theta1(t) = A(t)*sin(2*pi*f*t); from ``stop_s`` on the amplitude ramps back to 0."""
     w = TWO_PI * f_hz
-    return _profile(amplitude_rad, ramp_s, lambda t: (w * t, w, 0.0))
+    return _profile(amplitude_rad, ramp_s, lambda t: (w * t, w, 0.0), stop_s)
 
 
 def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = "linear") -> list[float]:
@@ -131,12 +140,15 @@ def _default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
 
 
 def run_profile(config: dict[str, Any], controller: Any, road: RoadProfile, duration_s: float,
-                rig_factory: RigFactory | None = None, clock: Clock | None = None) -> dict[str, np.ndarray]:
-    """One run of ``controller`` under the road profile; returns the recorded columns.
+                rig_factory: RigFactory | None = None, clock: Clock | None = None,
+                keep: Callable[[dict[str, np.ndarray]], None] | None = None) -> dict[str, np.ndarray]:
+    """One run of ``controller`` under the road profile, under the safety supervisor of the config's
+    ``safety`` section; returns the recorded columns.
 
     Clock: ``clock``, else the config's (:func:`~sashil.experiments.drop_test.default_clock`: the
     virtual one for the simulated rig, the real one for a link); on the real clock the loop gets
-    the best-effort real-time set-up of ``loop.rt``.
+    the best-effort real-time set-up of ``loop.rt``. ``keep`` gets the columns recorded so far
+    however the run ends (a link fault, a safety trip, a stop), before the error propagates.
     """
     from sashil.experiments.drop_test import default_clock
 
@@ -148,10 +160,12 @@ def run_profile(config: dict[str, Any], controller: Any, road: RoadProfile, dura
     if realtime is not None:
         realtime.apply()
     try:
-        run_loop(rig, stage, clock, rate, duration_s)
+        run_loop(rig, stage, clock, rate, duration_s, safety=SafetySupervisor.from_config(config))
     finally:
         if realtime is not None:
             realtime.restore()
+        if keep is not None:
+            keep(stage.columns())
     return stage.columns()
 
 
@@ -187,8 +201,11 @@ def stepped_sine(config: dict[str, Any], make_controller: Callable[[], Any], fre
         measure = math.ceil(sweep["measure_s"] * f) / f
         start = sweep["ramp_s"] + sweep["settle_s"]
         controller = make_controller()
-        cols = run_profile(config, controller, sine_profile(amplitude, f, sweep["ramp_s"]), start + measure, rig_factory)
-        window = cols["time_s"] >= start - 1e-9
+        # the road ramps down after the measurement: a rig that stays up between frequencies (a link)
+        # starts the next one at rest instead of with a step of the road speed
+        stop = start + measure
+        cols = run_profile(config, controller, sine_profile(amplitude, f, sweep["ramp_s"], stop), stop + sweep["ramp_s"], rig_factory)
+        window = (cols["time_s"] >= start - 1e-9) & (cols["time_s"] < stop - 1e-9)
         body = cols["theta_rad"][window] + cols["theta_road_rad"][window]
         road = cols["theta_road_rad"][window]
         body_rms, road_rms = ac_rms(body), ac_rms(road)
