@@ -216,8 +216,9 @@ def stepped(bench: Bench, config: dict, sim: dict) -> None:
             ratio = values[2] / min(values[0], values[1])
             print(f"    {f:6.2f}  " + "".join(f"{math.degrees(v):14.4f}" for v in values) + f"   {ratio:.3f}")
     print("  (the emulated plant is one rig through all frequencies of a law, the in-process one starts each frequency\n"
-          "   from rest: a frequency that ends with the road wheel at full speed leaves the next one a kick that at 0 A\n"
-          "   (zeta ~ 0.04) has not died out after the ramp and settle time; first frequencies compare like for like)")
+          "   from rest: the road ramps down after each measurement, but at 0 A (zeta ~ 0.04) the arm's swing from a\n"
+          "   frequency near the resonance decays only to ~e^(-zeta*w_n*t) = 0.12 over ramp-down + ramp + settle (5 s);\n"
+          "   first frequencies compare like for like, later 0 A points read high)")
 
 
 def simulated(config: dict, quick: bool, duration_s: float) -> dict:
