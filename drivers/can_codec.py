@@ -110,10 +110,11 @@ class CanCounters:
     unknown_id: int = 0  # frames with an id that is not in the DBC (ignored)
     bad_length: int = 0  # a known id with the wrong data length
     unpaired: int = 0  # a SampleB without its SampleA, or a SampleA overwritten before its SampleB
+    bad_lines: int = 0  # adapter lines the CAN library could not parse (an SLCAN line garbled on the wire)
 
     @property
     def bad_frames(self) -> int:
-        return self.bad_length + self.unpaired
+        return self.bad_length + self.unpaired + self.bad_lines
 
     def as_dict(self) -> dict[str, int]:
         return {
@@ -122,6 +123,7 @@ class CanCounters:
             "unknown_id": self.unknown_id,
             "bad_length": self.bad_length,
             "unpaired": self.unpaired,
+            "bad_lines": self.bad_lines,
         }
 
 

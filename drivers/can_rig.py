@@ -126,7 +126,7 @@ class CanRig(LinkRig):
 
     def _receive(self, timeout_s: float) -> list[tuple[int, Message]]:
         out: list[tuple[int, Message]] = []
-        bus, decoder = self._bus, self.decoder
+        decoder = self.decoder
         try:
             if self._fd is not None:
                 frame = self._recv_waiting()
@@ -134,24 +134,32 @@ class CanRig(LinkRig):
                     ready, _, _ = select.select([self._fd], [], [], timeout_s)
                     frame = self._recv_waiting() if ready else None
             else:
-                frame = bus.recv(timeout_s)
+                frame = self._recv(timeout_s)
             while frame is not None:
                 if not frame.is_error_frame and not frame.is_remote_frame:
                     got = decoder.feed(frame.arbitration_id, bytes(frame.data))
                     if got is not None:
                         out.append(got)
-                frame = self._recv_waiting() if self._fd is not None else bus.recv(0.0)
-        except (can.CanError, OSError, ValueError) as err:
+                frame = self._recv_waiting() if self._fd is not None else self._recv(0.0)
+        except (can.CanError, OSError) as err:
             raise DriverIOError(f"{self.describe()}: link lost ({error_reason(err)})") from None
         return out
+
+    def _recv(self, timeout_s: float) -> can.Message | None:
+        """``bus.recv``; a line the interface cannot parse (an SLCAN line garbled on the wire, which
+        python-can has already dropped from its buffer) is counted as ``bad_lines`` and skipped."""
+        try:
+            return self._bus.recv(timeout_s)
+        except ValueError:
+            self.decoder.counters.bad_lines += 1
+            return None
 
     def _recv_waiting(self) -> can.Message | None:
         """The next frame among the bytes already received (SLCAN lines that are not frames,
         such as the adapter's transmit acknowledgements, are skipped), or None."""
-        bus = self._bus
-        frame = bus.recv(0.0)
-        while frame is None and bus.serialPortOrig.in_waiting:
-            frame = bus.recv(0.0)
+        frame = self._recv(0.0)
+        while frame is None and self._bus.serialPortOrig.in_waiting:
+            frame = self._recv(0.0)
         return frame
 
     def _close_link(self) -> None:

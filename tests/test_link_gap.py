@@ -94,3 +94,31 @@ def test_link_lost_at_or_below_the_sample_timeout_ends_at_the_timeout():
     rig.silent = True
     with pytest.raises(DriverTimeoutError, match=r"^scripted rig: no sample for 2.5 ms \(device stalled or link lost\)$"):
         rig.read(0, 0)
+
+
+def test_a_garbled_slcan_line_is_a_bad_frame_not_a_lost_link():
+    """python-can's slcan raises ValueError on a line it cannot parse (and has dropped it already)."""
+    import can
+
+    from sashil.drivers.can_codec import encode
+    from sashil.drivers.can_rig import CanRig
+
+    frames = [can.Message(arbitration_id=i, data=d, is_extended_id=False)
+              for i, d in encode(Sample(1000, 10, -3, 0.25, 0), seq=5)]
+
+    class GarbledFirst:
+        def __init__(self):
+            self.queue = ["garbled", *frames]
+
+        def recv(self, timeout):
+            item = self.queue.pop(0) if self.queue else None
+            if item == "garbled":
+                raise ValueError("non-hexadecimal number found in fromhex() arg at position 1")
+            return item
+
+    rig = CanRig(LinkSettings(config(2.5, 25.0)), interface="virtual")
+    rig._bus = GarbledFirst()
+    assert rig._receive(0.0) == []  # the garbled line: counted, nothing decoded, the link stays up
+    got = rig._receive(0.0)
+    assert [msg for _, msg in got] == [Sample(1000, 10, -3, 0.25, 0)]
+    assert rig.codec_counters()["bad_lines"] == 1 and rig.codec_counters()["bad_frames"] == 1
