@@ -281,9 +281,10 @@ class LinkRig(RigInterface):
             cut = "" if settings.link_lost_s <= settings.sample_timeout_s else \
                 f"; current set to 0 A after {settings.sample_timeout_s * 1e3:g} ms"
             raise DriverTimeoutError(f"{self.describe()}: no sample for {lost_ms:g} ms (device stalled or link lost{cut})")
+        gap_ms = (time.monotonic() - start) * 1e3
         stats["gaps"] += 1
-        stats["gap_max_ms"] = max(stats["gap_max_ms"], round((time.monotonic() - start) * 1e3, 3))
-        log.debug("%s: link gap of %.1f ms ridden through at 0 A", self.describe(), (time.monotonic() - start) * 1e3)
+        stats["gap_max_ms"] = max(stats["gap_max_ms"], round(gap_ms, 3))
+        log.debug("%s: link gap of %.1f ms ridden through at 0 A", self.describe(), gap_ms)
         return newest
 
     def _take_samples(self, messages: list[tuple[int, Message]]) -> tuple[int, Sample] | None:
