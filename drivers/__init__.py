@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, SAFE_COMMAND
+from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
 from sashil.errors import DriverError
 
 #: backend name -> (module, class)
@@ -19,7 +19,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "can": ("sashil.drivers.can_rig", "CanRig"),
 }
 
-__all__ = ["BACKENDS", "RigCommand", "RigInterface", "RigSample", "SAFE_COMMAND", "open_rig", "backend_class"]
+__all__ = ["BACKENDS", "SAFE_COMMAND", "RigCommand", "RigInterface", "RigSample", "backend_class", "open_rig"]
 
 
 def backend_class(name: str) -> type[RigInterface]:

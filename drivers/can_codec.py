@@ -13,7 +13,7 @@ in order; :class:`CanDecoder` pairs each SampleB with the SampleA right before i
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache, lru_cache
 from pathlib import Path
 
 import cantools
@@ -48,12 +48,12 @@ RIG_IDS = (ID_SAMPLE_A, ID_SAMPLE_B, ID_STATUS, ID_VERSION)
 
 
 @lru_cache(maxsize=1)
-def database() -> "cantools.database.can.Database":
+def database() -> cantools.database.can.Database:
     """The parsed ``sashil.dbc``."""
     return cantools.database.load_file(str(DBC_PATH))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _message(frame_id: int):  # -> cantools Message
     return database().get_message_by_frame_id(frame_id)
 
@@ -78,7 +78,11 @@ def encode(msg: Message, seq: int = 0) -> list[tuple[int, bytes]]:
             ),
         ]
     if isinstance(msg, Command):
-        raw = {"CmdSeq": seq & 0xFFFF, "CurrentCmd": current_to_wire(msg.current_a, signed=False), "CmdFlags": msg.flags & 0xFF}
+        raw = {
+            "CmdSeq": seq & 0xFFFF,
+            "CurrentCmd": current_to_wire(msg.current_a, signed=False),
+            "CmdFlags": msg.flags & 0xFF,
+        }
         return [_pack(ID_COMMAND, raw)]
     if isinstance(msg, RoadSpeed):
         return [_pack(ID_ROAD_SPEED, {"RoadSpeedCmd": road_speed_to_wire(msg.speed_rad_s)})]
@@ -170,7 +174,9 @@ class CanDecoder:
         if frame_id == ID_ROAD_SPEED:
             return 0, RoadSpeed(float(sig["RoadSpeedCmd"]))
         if frame_id == ID_STATUS:
-            return 0, Status(int(sig["StatusFlags"]), int(sig["FaultCode"]), int(sig["BadFrames"]), int(sig["WatchdogTrips"]))
+            return 0, Status(
+                int(sig["StatusFlags"]), int(sig["FaultCode"]), int(sig["BadFrames"]), int(sig["WatchdogTrips"])
+            )
         if frame_id == ID_HELLO:
             return 0, Hello(int(sig["HelloVersion"]))
         if frame_id == ID_VERSION:

@@ -20,7 +20,6 @@ from sashil.drivers.messages import Message
 from sashil.errors import DriverError, DriverIOError
 
 
-
 class BufferedPort:
     """A pyserial port whose ``read`` is served from one bulk read of everything waiting.
 
@@ -61,13 +60,20 @@ class BufferedPort:
         self._data.clear()
         self._port.reset_input_buffer()
 
+
 class CanRig(LinkRig):
     """The rig over CAN (``driver.name: can``)."""
 
     name = "can"
     device_time_bits = 24
 
-    def __init__(self, settings: LinkSettings, interface: str = "slcan", bitrate: int = 1_000_000, options: dict[str, Any] | None = None):
+    def __init__(
+        self,
+        settings: LinkSettings,
+        interface: str = "slcan",
+        bitrate: int = 1_000_000,
+        options: dict[str, Any] | None = None,
+    ):
         super().__init__(settings)
         if not settings.port:
             raise DriverError("driver.port: the can backend needs a channel (--port, e.g. can0 or a slcan tty)")
@@ -81,7 +87,7 @@ class CanRig(LinkRig):
         self._fd: int | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> "CanRig":
+    def from_config(cls, config: dict[str, Any]) -> CanRig:
         driver = config["driver"]
         return cls(LinkSettings(config), driver["can_interface"], driver["can_bitrate"], driver["can_options"])
 
@@ -103,7 +109,9 @@ class CanRig(LinkRig):
                 **self.options,
             )
         except can.CanInterfaceNotImplementedError as err:
-            raise DriverError(f"driver.can_interface: {self.interface!r} is not available ({error_reason(err)})") from None
+            raise DriverError(
+                f"driver.can_interface: {self.interface!r} is not available ({error_reason(err)})"
+            ) from None
         except (can.CanError, ValueError, TypeError, OSError, ImportError) as err:
             raise DriverError(f"{self.describe()}: cannot open the CAN bus ({error_reason(err)})") from None
         self._fd = None
@@ -166,4 +174,3 @@ class CanRig(LinkRig):
         if self._bus is not None:
             bus, self._bus = self._bus, None
             bus.shutdown()
-

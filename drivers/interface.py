@@ -111,7 +111,7 @@ class RigInterface(ABC):
         return False
 
     # context manager -----------------------------------------------------------------------
-    def __enter__(self) -> "RigInterface":
+    def __enter__(self) -> RigInterface:
         return self
 
     def __exit__(self, *exc: object) -> None:

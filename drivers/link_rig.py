@@ -94,8 +94,17 @@ class LinkRig(RigInterface):
         self._dev_time_us = 0
         self._link_up = False
         #: what the link saw (summary.json material); codec counters come from the subclass
-        self.stats = {"samples": 0, "samples_missed": 0, "samples_skipped": 0, "timeouts": 0, "status_frames": 0,
-                      "host_pauses": 0, "gaps": 0, "gap_max_ms": 0.0, "zero_current_after_ms": 0.0}
+        self.stats = {
+            "samples": 0,
+            "samples_missed": 0,
+            "samples_skipped": 0,
+            "timeouts": 0,
+            "status_frames": 0,
+            "host_pauses": 0,
+            "gaps": 0,
+            "gap_max_ms": 0.0,
+            "zero_current_after_ms": 0.0,
+        }
 
     # subclass hooks --------------------------------------------------------------------------
     @abstractmethod
@@ -197,7 +206,7 @@ class LinkRig(RigInterface):
         if self._link_up:
             try:
                 self._send_msg(Command(0.0, 0))
-            except Exception:  # noqa: BLE001 - a dead link must not stop the shutdown
+            except Exception:
                 pass
 
     def close(self) -> None:
@@ -212,14 +221,18 @@ class LinkRig(RigInterface):
             lost = stats.get("bad_frames", 0) + stats["samples_missed"] + stats["timeouts"]
             (log.warning if lost else log.info)(
                 "%s: link: %d samples, %d bad frames, %d samples missed, %d timeouts",
-                self.describe(), stats["samples"], stats.get("bad_frames", 0), stats["samples_missed"], stats["timeouts"],
+                self.describe(),
+                stats["samples"],
+                stats.get("bad_frames", 0),
+                stats["samples_missed"],
+                stats["timeouts"],
             )
 
     def _shutdown_link(self) -> None:
         self._link_up = False
         try:
             self._close_link()
-        except Exception:  # noqa: BLE001 - closing is best effort
+        except Exception:
             pass
 
     # cycle -----------------------------------------------------------------------------------
@@ -278,9 +291,14 @@ class LinkRig(RigInterface):
             stats["timeouts"] += 1
             self._pending = 0
             lost_ms = settings.link_lost_s * 1e3
-            cut = "" if settings.link_lost_s <= settings.sample_timeout_s else \
-                f"; current set to 0 A after {settings.sample_timeout_s * 1e3:g} ms"
-            raise DriverTimeoutError(f"{self.describe()}: no sample for {lost_ms:g} ms (device stalled or link lost{cut})")
+            cut = (
+                ""
+                if settings.link_lost_s <= settings.sample_timeout_s
+                else f"; current set to 0 A after {settings.sample_timeout_s * 1e3:g} ms"
+            )
+            raise DriverTimeoutError(
+                f"{self.describe()}: no sample for {lost_ms:g} ms (device stalled or link lost{cut})"
+            )
         gap_ms = (time.monotonic() - start) * 1e3
         stats["gaps"] += 1
         stats["gap_max_ms"] = max(stats["gap_max_ms"], round(gap_ms, 3))
@@ -345,4 +363,4 @@ def error_reason(err: BaseException) -> str:
     return text.splitlines()[0]
 
 
-__all__ = ["LinkRig", "LinkSettings", "PACING_DEVICE", "PACING_HOST", "DriverTimeoutError"]
+__all__ = ["PACING_DEVICE", "PACING_HOST", "DriverTimeoutError", "LinkRig", "LinkSettings"]

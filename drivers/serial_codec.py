@@ -18,6 +18,8 @@ import struct
 from dataclasses import dataclass, field
 
 from sashil.drivers.messages import (
+    CURRENT_LSB_A,
+    ROAD_SPEED_LSB_RAD_S,
     Command,
     Configure,
     Hello,
@@ -26,8 +28,6 @@ from sashil.drivers.messages import (
     Sample,
     Status,
     Version,
-    CURRENT_LSB_A,
-    ROAD_SPEED_LSB_RAD_S,
     current_to_wire,
     road_speed_to_wire,
 )
@@ -185,7 +185,9 @@ def decode_payload(msg_type: int, payload: bytes) -> Message:
         if msg_type == TYPE_CONFIGURE:
             return Configure(*_CONFIGURE.unpack(payload))
     except struct.error:
-        raise FrameError("length", f"message type 0x{msg_type:02x}: payload of {len(payload)} bytes has the wrong length") from None
+        raise FrameError(
+            "length", f"message type 0x{msg_type:02x}: payload of {len(payload)} bytes has the wrong length"
+        ) from None
     raise FrameError("unknown_type", f"unknown message type 0x{msg_type:02x}")
 
 

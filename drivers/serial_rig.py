@@ -35,7 +35,7 @@ class SerialRig(LinkRig):
         self._fd: int | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> "SerialRig":
+    def from_config(cls, config: dict[str, Any]) -> SerialRig:
         return cls(LinkSettings(config), baud=config["driver"]["baud"])
 
     def describe(self) -> str:
@@ -58,7 +58,7 @@ class SerialRig(LinkRig):
             raise DriverError(f"serial port {self.port_name}: cannot open ({error_reason(err)})") from None
         try:
             self._fd = self._port.fileno()
-        except Exception:  # noqa: BLE001 - URL handlers without a file descriptor
+        except Exception:
             self._fd = None
         try:
             self._port.reset_input_buffer()
@@ -95,4 +95,3 @@ class SerialRig(LinkRig):
         if self._port is not None:
             port, self._port = self._port, None
             port.close()
-

@@ -53,7 +53,7 @@ class SimulatedRig(RigInterface):
         self.road_profile: RoadProfile | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any], road: RoadProfile | None = None) -> "SimulatedRig":
+    def from_config(cls, config: dict[str, Any], road: RoadProfile | None = None) -> SimulatedRig:
         """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
         from sashil.models.mismatch import plant_config
 

@@ -12,7 +12,9 @@ I32 = st.integers(-(2**31), 2**31 - 1)
 def messages(device_time_bits: int) -> st.SearchStrategy:
     """Any protocol message; a Sample's device time fits ``device_time_bits`` (32 serial, 24 CAN)."""
     return st.one_of(
-        st.builds(Sample, st.integers(0, 2**device_time_bits - 1), I32, I32, st.floats(-16.0, 16.0), st.integers(0, 255)),
+        st.builds(
+            Sample, st.integers(0, 2**device_time_bits - 1), I32, I32, st.floats(-16.0, 16.0), st.integers(0, 255)
+        ),
         st.builds(Command, st.floats(0.0, 32.0), st.integers(0, 255)),
         st.builds(RoadSpeed, st.floats(-2000.0, 2000.0)),
         st.builds(Status, st.integers(0, 255), st.integers(0, 255), st.integers(0, 65535), st.integers(0, 65535)),

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import message_strategies
 from hypothesis import given
 from hypothesis import strategies as st
-
-import message_strategies
 
 from sashil.drivers import can_codec
 from sashil.drivers.can_codec import CanDecoder, database, encode, frame_bits
@@ -46,7 +45,12 @@ def test_command_frame_bytes_and_clamping():
 def test_dbc_decodes_what_the_codec_encodes_in_physical_units():
     db = database()
     frame_id, data = encode(Sample(10, 1, 2, -0.25, 0x82), seq=9)[1]
-    assert db.decode_message(frame_id, data) == {"SampleSeq": 9, "DeviceTimeUs": 10, "CurrentMeas": -0.25, "SampleFlags": 0x82}
+    assert db.decode_message(frame_id, data) == {
+        "SampleSeq": 9,
+        "DeviceTimeUs": 10,
+        "CurrentMeas": -0.25,
+        "SampleFlags": 0x82,
+    }
     frame_id, data = encode(RoadSpeed(-1.5))[0]
     assert abs(db.decode_message(frame_id, data)["RoadSpeedCmd"] + 1.5) < 1e-9
 

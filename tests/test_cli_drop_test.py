@@ -74,11 +74,13 @@ def test_bad_config_key_exit_2_and_write_nothing(tmp_path, capsys):
 
 
 def test_console_script_help_and_usage_errors():
-    help_text = subprocess.run([sys.executable, "-m", "sashil", "drop-test", "--help"],
-                               capture_output=True, text=True, check=True).stdout
+    help_text = subprocess.run(
+        [sys.executable, "-m", "sashil", "drop-test", "--help"], capture_output=True, text=True, check=True
+    ).stdout
     assert "--theta0-deg" in help_text and "example:" in help_text
-    bad = subprocess.run([sys.executable, "-m", "sashil", "drop-test", "--duration", "x"],
-                         capture_output=True, text=True)
+    bad = subprocess.run(
+        [sys.executable, "-m", "sashil", "drop-test", "--duration", "x"], capture_output=True, text=True
+    )
     assert bad.returncode == 2
     assert "invalid float value" in bad.stderr and bad.stderr.count("\n") <= 2
 
@@ -140,7 +142,9 @@ def test_the_configs_controller_takes_over_at_the_release(tmp_path):
     assert len(run["log_decrements"]) >= 4
     assert all(abs(d / target - 1) < 0.1 for d in run["log_decrements"])
     data = read_data_csv(out / "data.csv", required=REQUIRED_COLUMNS)
-    assert 0.0 < data["current_cmd_a"].max() <= 1.0 and data["current_cmd_a"].min() == 0.0  # the law modulates the current
+    assert (
+        0.0 < data["current_cmd_a"].max() <= 1.0 and data["current_cmd_a"].min() == 0.0
+    )  # the law modulates the current
     # the controller's own signals are recorded, and the held arm gave the estimator no false motion
     assert {"theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm"} <= set(data)
     assert abs(data["theta_dot_rad_s"][0]) < 0.01

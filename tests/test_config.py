@@ -18,8 +18,18 @@ def test_shipped_sim_yaml_is_the_default_config():
 
 def test_default_config_has_the_seed_parameters():
     params = default_config()["model"]["params"]
-    assert params == {"J": 1.0, "k": 109.0, "c1": 0.7, "c2": 1.5, "alpha1": 1.0, "alpha2": 1.0,
-                      "beta": 873.0, "gamma": 1.0, "delta": 700.0, "n": 0.099}
+    assert params == {
+        "J": 1.0,
+        "k": 109.0,
+        "c1": 0.7,
+        "c2": 1.5,
+        "alpha1": 1.0,
+        "alpha2": 1.0,
+        "beta": 873.0,
+        "gamma": 1.0,
+        "delta": 700.0,
+        "n": 0.099,
+    }
     assert default_config()["loop"]["rate_hz"] == 1000.0
     assert default_config()["driver"]["name"] == "sim"
 
@@ -71,8 +81,10 @@ def test_partial_config_keeps_other_defaults(tmp_path):
 
 def test_parameter_file_roundtrip_and_include(tmp_path):
     params = tmp_path / "damper.yaml"
-    params.write_text("model: bouc-wen\nparams: {J: 1.0, k: 100.0, c1: 0.5, c2: 1.0, alpha1: 2.0, alpha2: 1.0,\n"
-                      "         beta: 800.0, gamma: 2.0, delta: 600.0, n: 0.2}\nfit: {rms_rad: 0.001}\n")
+    params.write_text(
+        "model: bouc-wen\nparams: {J: 1.0, k: 100.0, c1: 0.5, c2: 1.0, alpha1: 2.0, alpha2: 1.0,\n"
+        "         beta: 800.0, gamma: 2.0, delta: 600.0, n: 0.2}\nfit: {rms_rad: 0.001}\n"
+    )
     section = load_params(params)
     assert section["params"]["k"] == 100.0
     config = load_config(_write(tmp_path, "include_params: damper.yaml\n"))

@@ -44,10 +44,10 @@ def run_ticks(device, start_ns, stop_ns, step_ns=MS, command=None):
 def test_hello_and_configure_answers():
     device = build_device(default_config())
     assert device.handle(Hello(PROTOCOL_VERSION), 0) == [(1, Version(PROTOCOL_VERSION, 4096, 1.0))]
-    (_, status), = device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    ((_, status),) = device.handle(Configure(1000, 50, PACING_DEVICE), 0)
     assert status == Status(0, 0, 0, 0)
     fixed = build_device(default_config(), fixed_rate_hz=500)
-    (_, refused), = fixed.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    ((_, refused),) = fixed.handle(Configure(1000, 50, PACING_DEVICE), 0)
     assert refused.fault_code == FAULT_BAD_CONFIGURE and not fixed.configured
 
 
@@ -170,7 +170,10 @@ class ListTransport(DeviceTransport):
 def test_runner_fault_injection_on_simulated_time():
     script = [(0, Configure(1000, 50, PACING_DEVICE))] + [(k * MS, Command(0.0, CMD_ENABLE)) for k in range(1, 300)]
     link = ListTransport(script)
-    device = build_device(default_config(), faults=Faults(drop_rate=0.1, corrupt_rate=0.05, latency_ms=2.0, disconnect_after_s=0.2, seed=3))
+    device = build_device(
+        default_config(),
+        faults=Faults(drop_rate=0.1, corrupt_rate=0.05, latency_ms=2.0, disconnect_after_s=0.2, seed=3),
+    )
     emulator = Emulator(device, link, clock=lambda: link.clock_ns)
     assert emulator.run() == "disconnect"
     sent = [s for s in link.sent if isinstance(s[2], Sample)]

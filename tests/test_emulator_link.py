@@ -6,7 +6,6 @@ generous timeouts, so a loaded machine makes them slower, not flaky.
 
 from __future__ import annotations
 
-
 import can
 import pytest
 
@@ -22,8 +21,9 @@ from sashil.errors import DriverError, DriverIOError
 
 def host_config(driver: str, port: str, interface: str = "slcan", pacing: str = "device") -> dict:
     config = default_config()
-    config["driver"].update(name=driver, port=port, can_interface=interface, pacing=pacing,
-                            sample_timeout_ms=500.0, connect_timeout_s=5.0)
+    config["driver"].update(
+        name=driver, port=port, can_interface=interface, pacing=pacing, sample_timeout_ms=500.0, connect_timeout_s=5.0
+    )
     return config
 
 

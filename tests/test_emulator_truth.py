@@ -35,7 +35,9 @@ def mismatched_config() -> dict:
 
 def host_config(driver: str, port: str) -> dict:
     config = default_config()
-    config["driver"].update(name=driver, port=port, can_interface="slcan", sample_timeout_ms=500.0, connect_timeout_s=5.0)
+    config["driver"].update(
+        name=driver, port=port, can_interface="slcan", sample_timeout_ms=500.0, connect_timeout_s=5.0
+    )
     return config
 
 
@@ -99,7 +101,9 @@ def test_truth_rows_match_the_samples_the_host_received(transport, driver):
     count = TWO_PI / 4096
     theta_host = np.array([s.theta_rad for s in samples])
     assert np.max(np.abs(theta_host - cols["theta_true_rad"][rows])) <= count + 1e-12  # two roundings
-    assert np.allclose([s.current_a for s in samples], cols["current_true_a"][rows], rtol=0, atol=0.25e-3 + 1e-9)  # 0.5 mA on the wire
+    assert np.allclose(
+        [s.current_a for s in samples], cols["current_true_a"][rows], rtol=0, atol=0.25e-3 + 1e-9
+    )  # 0.5 mA on the wire
     assert cols["current_true_a"][rows][-1] > 0.5  # the host's 0.8 A reached the coil
     # T = alpha(i) z + c(i) theta_dot of the plant's (mismatched) parameters
     p = plant.params

@@ -49,8 +49,11 @@ def test_serial_rig_follows_a_small_current(config):
     _exercise(config)
 
 
-@pytest.mark.skipif(not CAN_CHANNEL, reason="set SASHIL_TEST_CAN_CHANNEL (and SASHIL_TEST_CAN_INTERFACE) to test a rig over CAN")
+@pytest.mark.skipif(
+    not CAN_CHANNEL, reason="set SASHIL_TEST_CAN_CHANNEL (and SASHIL_TEST_CAN_INTERFACE) to test a rig over CAN"
+)
 def test_can_rig_follows_a_small_current(config):
-    config["driver"].update(name="can", port=CAN_CHANNEL,
-                            can_interface=os.environ.get("SASHIL_TEST_CAN_INTERFACE", "socketcan"))
+    config["driver"].update(
+        name="can", port=CAN_CHANNEL, can_interface=os.environ.get("SASHIL_TEST_CAN_INTERFACE", "socketcan")
+    )
     _exercise(config)

@@ -15,8 +15,14 @@ from sashil.identify import boucwen_benchmark as B
 def test_exact_zhat_update_matches_integration(zh, dy):
     a, d = 800.0, -1100.0
     s = math.copysign(1.0, dy)
-    sol = solve_ivp(lambda u, z: [s * (1.0 - a * s * z[0] - d * abs(z[0]))], (0, abs(dy)), [zh], rtol=1e-12,
-                    atol=1e-15, max_step=abs(dy) / 200)
+    sol = solve_ivp(
+        lambda u, z: [s * (1.0 - a * s * z[0] - d * abs(z[0]))],
+        (0, abs(dy)),
+        [zh],
+        rtol=1e-12,
+        atol=1e-15,
+        max_step=abs(dy) / 200,
+    )
     assert B.zhat_advance(zh, dy, a, d) == pytest.approx(sol.y[0, -1], rel=1e-7, abs=1e-12)
 
 

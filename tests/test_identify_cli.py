@@ -24,8 +24,12 @@ def drop(tmp_path_factory):
 
 
 def _columns(n=1000):
-    return {"time_s": np.arange(n) * 1e-3, "theta_rad": np.linspace(-0.08, 0.0, n), "current_a": np.zeros(n),
-            "current_cmd_a": np.zeros(n)}
+    return {
+        "time_s": np.arange(n) * 1e-3,
+        "theta_rad": np.linspace(-0.08, 0.0, n),
+        "current_a": np.zeros(n),
+        "current_cmd_a": np.zeros(n),
+    }
 
 
 @pytest.mark.parametrize(

@@ -25,8 +25,13 @@ def _run(plant: RigPlant, seconds: float, current: float, road=None, torque=None
         i.append(st.current_a)
         th1.append(road(st.time_s)[0] if road else 0.0)
         tin.append(torque(st.time_s) if torque else 0.0)
-    return {"time_s": np.array(t), "theta_rad": np.array(th), "current_a": np.array(i),
-            "theta_road_rad": np.array(th1), "torque_in_nm": np.array(tin)}
+    return {
+        "time_s": np.array(t),
+        "theta_rad": np.array(th),
+        "current_a": np.array(i),
+        "theta_road_rad": np.array(th1),
+        "torque_in_nm": np.array(tin),
+    }
 
 
 def test_input_torque_column_drives_the_simulation():

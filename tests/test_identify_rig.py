@@ -28,8 +28,9 @@ def test_rescale_keeps_the_torque_path():
     p = TRUTH.as_dict()
     q = bouc_wen_rescale(p)
     theta = np.concatenate([np.linspace(0, -0.08, 200), np.linspace(-0.08, 0.05, 300)])
-    rec = record_from_columns("r", {"time_s": np.arange(theta.size) * 1e-3, "theta_rad": theta,
-                                    "current_a": np.zeros(theta.size)})
+    rec = record_from_columns(
+        "r", {"time_s": np.arange(theta.size) * 1e-3, "theta_rad": theta, "current_a": np.zeros(theta.size)}
+    )
     zp = MODELS["bouc-wen"].state_path(p, rec)
     zq = MODELS["bouc-wen"].state_path(q, rec)
     assert q["delta"] == pytest.approx(q["beta"] + q["gamma"])  # unit bound

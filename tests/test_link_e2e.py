@@ -28,7 +28,9 @@ class Emulator:
         self.link = str(tmp / f"rig-{transport}")
         self.proc = subprocess.Popen(
             [*SASHIL, "emulate", "--transport", transport, "--link", self.link, "--duration", "120", *flags],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         line = self.proc.stdout.readline()  # "sashil emulate: serial rig on /dev/pts/N (link ...)"
         assert "rig on /dev/" in line, line + self.proc.stderr.read()
@@ -78,8 +80,19 @@ def sim_drop(tmp_path_factory):
 def test_drop_test_over_the_link_matches_the_sim_backend(transport, driver, emulator, tmp_path, sim_drop):
     emu = emulator(transport, "--hold-deg", "-5", "--release-after", "1")
     out = tmp_path / "drop"
-    done = sashil("drop-test", "--driver", driver, "--port", emu.link, "--duration", "3", "--out", str(out),
-                  "--config", relaxed_config(tmp_path))
+    done = sashil(
+        "drop-test",
+        "--driver",
+        driver,
+        "--port",
+        emu.link,
+        "--duration",
+        "3",
+        "--out",
+        str(out),
+        "--config",
+        relaxed_config(tmp_path),
+    )
     assert done.returncode == 0, done.stderr
     run = json.loads((out / "summary.json").read_text())["runs"][0]
     assert run["release_estimated"]  # found from the data: nobody told the host when the operator let go
@@ -93,8 +106,19 @@ def test_drop_test_over_the_link_matches_the_sim_backend(transport, driver, emul
 def test_run_over_the_link_with_corrupt_frames_completes_and_counts_them(transport, driver, emulator, tmp_path):
     emu = emulator(transport, "--corrupt-rate", "0.01", "--seed", "7")
     out = tmp_path / "run"
-    done = sashil("run", "--driver", driver, "--port", emu.link, "--duration", "3", "--out", str(out),
-                  "--config", relaxed_config(tmp_path))
+    done = sashil(
+        "run",
+        "--driver",
+        driver,
+        "--port",
+        emu.link,
+        "--duration",
+        "3",
+        "--out",
+        str(out),
+        "--config",
+        relaxed_config(tmp_path),
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["timing"]["cycles"] >= 2500
@@ -120,7 +144,9 @@ def test_link_fault_trips_to_zero_within_three_cycles(fault, transport, driver, 
     for attempt in range(3):
         emu = emulator(transport, fault, "0.5")
         out = tmp_path / f"run{attempt}"
-        done = sashil("run", "--driver", driver, "--port", emu.link, "--duration", "10", "--current", "0.5", "--out", str(out))
+        done = sashil(
+            "run", "--driver", driver, "--port", emu.link, "--duration", "10", "--current", "0.5", "--out", str(out)
+        )
         emu_report = emu.stop()
         data = (out / "data.csv").read_text().splitlines()
         if len(data) > 400:
@@ -170,8 +196,27 @@ def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transp
     truth_path = tmp_path / "truth.csv"
     emu = emulator(transport, "--truth", str(truth_path))
     out = tmp_path / "sweep"
-    done = sashil("sweep", "--driver", driver, "--port", emu.link, "--f-start", "1.5", "--f-stop", "1.5", "--duration", "2",
-                  "--amplitude-deg", "1", "--current", "0.3", "--out", str(out), "--config", relaxed_config(tmp_path))
+    done = sashil(
+        "sweep",
+        "--driver",
+        driver,
+        "--port",
+        emu.link,
+        "--f-start",
+        "1.5",
+        "--f-stop",
+        "1.5",
+        "--duration",
+        "2",
+        "--amplitude-deg",
+        "1",
+        "--current",
+        "0.3",
+        "--out",
+        str(out),
+        "--config",
+        relaxed_config(tmp_path),
+    )
     assert done.returncode == 0, done.stderr
     emu.stop()
     data = np.genfromtxt(out / "data.csv", delimiter=",", names=True)

@@ -84,7 +84,10 @@ def test_a_lost_link_ends_after_link_lost_with_the_current_already_at_zero():
     rig.silent = True
     with pytest.raises(DriverTimeoutError) as err:
         rig.read(0, 0)
-    assert str(err.value) == "scripted rig: no sample for 6 ms (device stalled or link lost; current set to 0 A after 2.5 ms)"
+    assert (
+        str(err.value)
+        == "scripted rig: no sample for 6 ms (device stalled or link lost; current set to 0 A after 2.5 ms)"
+    )
     assert rig.sent[-1] == Command(0.0, CMD_ENABLE)
     assert rig.link_stats()["timeouts"] == 1 and rig.link_stats()["gaps"] == 0
 
@@ -92,7 +95,9 @@ def test_a_lost_link_ends_after_link_lost_with_the_current_already_at_zero():
 def test_link_lost_at_or_below_the_sample_timeout_ends_at_the_timeout():
     rig = active(ScriptedLink(config(2.5, 0.0), answer_zero=True))
     rig.silent = True
-    with pytest.raises(DriverTimeoutError, match=r"^scripted rig: no sample for 2.5 ms \(device stalled or link lost\)$"):
+    with pytest.raises(
+        DriverTimeoutError, match=r"^scripted rig: no sample for 2.5 ms \(device stalled or link lost\)$"
+    ):
         rig.read(0, 0)
 
 
@@ -103,8 +108,10 @@ def test_a_garbled_slcan_line_is_a_bad_frame_not_a_lost_link():
     from sashil.drivers.can_codec import encode
     from sashil.drivers.can_rig import CanRig
 
-    frames = [can.Message(arbitration_id=i, data=d, is_extended_id=False)
-              for i, d in encode(Sample(1000, 10, -3, 0.25, 0), seq=5)]
+    frames = [
+        can.Message(arbitration_id=i, data=d, is_extended_id=False)
+        for i, d in encode(Sample(1000, 10, -3, 0.25, 0), seq=5)
+    ]
 
     class GarbledFirst:
         def __init__(self):

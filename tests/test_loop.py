@@ -185,10 +185,24 @@ def test_stage_signals_become_columns():
             self.torque_hat_nm = 0.0
 
     assert record_columns(WithSignals()) == (
-        "time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad", "z_hat", "torque_hat_nm", "seq", "trip_code",
+        "time_s",
+        "theta_rad",
+        "current_a",
+        "current_cmd_a",
+        "theta_road_rad",
+        "z_hat",
+        "torque_hat_nm",
+        "seq",
+        "trip_code",
     )
     assert record_columns(ConstantCurrent()) == (
-        "time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad", "seq", "trip_code",
+        "time_s",
+        "theta_rad",
+        "current_a",
+        "current_cmd_a",
+        "theta_road_rad",
+        "seq",
+        "trip_code",
     )
 
 

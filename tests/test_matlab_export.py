@@ -36,7 +36,9 @@ def test_drop_test_format_mat_matches_data_csv(tmp_path):
 
 def test_export_from_a_run_folder_carries_its_metadata(tmp_path):
     write_data_csv(tmp_path / "data.csv", {"time_s": [0.0, 0.001], "theta_rad": [0.1, -0.2], "current_a": [0.0, 0.5]})
-    (tmp_path / "summary.json").write_text('{"verb": "run", "exit_status": "safety_trip", "provenance": {"sashil_version": "9.9"}}')
+    (tmp_path / "summary.json").write_text(
+        '{"verb": "run", "exit_status": "safety_trip", "provenance": {"sashil_version": "9.9"}}'
+    )
     doc = loadmat(export_mat(tmp_path / "data.csv"))
     assert doc["theta_rad"][:, 0].tolist() == [0.1, -0.2]
     meta = doc["sashil"]

@@ -13,7 +13,11 @@ from sashil.identify import kernels
 from sashil.models.bingham import BinghamParams, bingham_velocity_step
 from sashil.models.dahl import DahlParams, dahl_w_advance
 from sashil.models.friction_damper import (
-    FrictionDamperParams, bouc_wen_friction_rate, coulomb_friction, mstv_friction, stv_slipping,
+    FrictionDamperParams,
+    bouc_wen_friction_rate,
+    coulomb_friction,
+    mstv_friction,
+    stv_slipping,
 )
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 from sashil.models.lugre import LuGreParams, lugre_z_advance
@@ -84,9 +88,9 @@ def test_compiled_rig_simulation_matches_free_oscillation_without_damper():
 
 
 def test_compiled_rig_simulation_close_to_rig_plant():
-    from sashil.identify.synthetic import drop_test_columns
     from sashil.identify.data import record_from_columns
     from sashil.identify.rig_models import MODELS
+    from sashil.identify.synthetic import drop_test_columns
 
     truth = BoucWenParams(k=95, c1=0.5, c2=1.2, alpha1=1.3, alpha2=0.8, beta=600, gamma=50, delta=500, n=0.2)
     cols = drop_test_columns(truth, -5.0, 0.5, duration_s=4.0, counts_per_rev=0)

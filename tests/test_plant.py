@@ -64,8 +64,16 @@ def _reference_drop(current: float, duration: float):
         return [v, (-p.k * theta - p.damping(current) * v - p.hysteretic_gain(current) * z) / p.J, z_dot]
 
     t = np.arange(0.0, duration, 1e-3)
-    sol = solve_ivp(rhs, (0.0, duration), [math.radians(-5.0), 0.0, z0], method="LSODA",
-                    rtol=1e-10, atol=1e-12, t_eval=t, max_step=1e-4)
+    sol = solve_ivp(
+        rhs,
+        (0.0, duration),
+        [math.radians(-5.0), 0.0, z0],
+        method="LSODA",
+        rtol=1e-10,
+        atol=1e-12,
+        t_eval=t,
+        max_step=1e-4,
+    )
     return t, sol.y[0]
 
 
@@ -79,8 +87,11 @@ def test_seed_drop_test_follows_the_model(config, current):
     error = np.abs(record.columns["theta_rad"][:n] - theta_ref[:n])
     # quantisation (half a count) plus the plant's 1 ms step
     assert np.max(error) < 0.5 * resolution + math.radians(0.005)
-    ref_peaks = [math.degrees(theta_ref[j]) for j in range(1, n - 1)
-                 if theta_ref[j] > 0 and theta_ref[j] >= theta_ref[j - 1] and theta_ref[j] > theta_ref[j + 1]]
+    ref_peaks = [
+        math.degrees(theta_ref[j])
+        for j in range(1, n - 1)
+        if theta_ref[j] > 0 and theta_ref[j] >= theta_ref[j - 1] and theta_ref[j] > theta_ref[j + 1]
+    ]
     got = record.metrics.peaks_deg[: len(ref_peaks)]
     assert got == pytest.approx(ref_peaks[: len(got)], abs=math.degrees(resolution))
 
@@ -121,8 +132,9 @@ def test_held_arm_does_not_move_until_released():
 
 def test_road_input_drives_the_relative_angle():
     # a road angle accelerating at a constant rate pushes the relative angle the other way (-J*th1'')
-    plant = RigPlant(BoucWenParams(alpha1=0.0, alpha2=0.0, c1=0.0), max_step_s=1e-4,
-                     road=lambda t: (0.5 * 2.0 * t * t, 2.0 * t, 2.0))
+    plant = RigPlant(
+        BoucWenParams(alpha1=0.0, alpha2=0.0, c1=0.0), max_step_s=1e-4, road=lambda t: (0.5 * 2.0 * t * t, 2.0 * t, 2.0)
+    )
     plant.step(0.01, 0.0)
     assert plant.state.theta_rad == pytest.approx(-0.5 * 2.0 * 0.01**2, rel=0.02)
     assert plant.state.theta_road_rad == pytest.approx(1e-4)

@@ -58,14 +58,26 @@ def test_drop_torque_is_minus_k_theta_minus_j_theta_ddot():
 def test_timing_and_transmissibility_plots_when_the_runs_have_them(tmp_path):
     run = tmp_path / "S"
     run.mkdir()
-    (run / "summary.json").write_text(json.dumps({
-        "verb": "sweep", "exit_status": "ok",
-        "timing": {"rate_hz": 1000.0, "cycles": 3, "missed_deadlines": 1,
-                   "lateness_us": {"p50": 1.0, "p99": 2.0, "max": 1500.0}, "compute_us": {"p50": 10.0, "p99": 20.0, "max": 30.0}},
-        "trips": [{"time_s": 0.002, "reason": "angle interlock"}],
-    }))
+    (run / "summary.json").write_text(
+        json.dumps(
+            {
+                "verb": "sweep",
+                "exit_status": "ok",
+                "timing": {
+                    "rate_hz": 1000.0,
+                    "cycles": 3,
+                    "missed_deadlines": 1,
+                    "lateness_us": {"p50": 1.0, "p99": 2.0, "max": 1500.0},
+                    "compute_us": {"p50": 10.0, "p99": 20.0, "max": 30.0},
+                },
+                "trips": [{"time_s": 0.002, "reason": "angle interlock"}],
+            }
+        )
+    )
     write_data_csv(run / "transmissibility.csv", {"frequency_hz": [1.0, 1.6, 3.0], "transmissibility": [1.2, 3.5, 0.4]})
-    np.savez(run / "timing.npz", lateness_ns=np.array([1000, 2000, 1_500_000]), compute_ns=np.array([10_000, 20_000, 30_000]))
+    np.savez(
+        run / "timing.npz", lateness_ns=np.array([1000, 2000, 1_500_000]), compute_ns=np.array([10_000, 20_000, 30_000])
+    )
     out = tmp_path / "R"
     assert main(["report", str(run), "--out", str(out), "--quiet"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["report.md", "timing.png", "transmissibility.png"]

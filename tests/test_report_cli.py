@@ -28,8 +28,17 @@ def test_every_verb_help_has_an_example(verb, capsys):
 @pytest.mark.parametrize("verb", ["drop-test", "run", "sweep"])
 def test_rig_verbs_share_option_names(verb, capsys):
     text = _verb_help(verb, capsys)
-    for option in ("--config FILE", "--params FILE", "--driver", "--port PORT", "--out DIR",
-                   "--rerun ", "--rerun-save [FILE.rrd]", "--rerun-connect URL", "--format FMT"):
+    for option in (
+        "--config FILE",
+        "--params FILE",
+        "--driver",
+        "--port PORT",
+        "--out DIR",
+        "--rerun ",
+        "--rerun-save [FILE.rrd]",
+        "--rerun-connect URL",
+        "--format FMT",
+    ):
         assert option in text, f"{verb}: {option}"
 
 
@@ -68,7 +77,9 @@ def test_run_progress_text_and_hooks_fan_out():
 
     progress = RunProgress(60.0, 1000.0, stream=io.StringIO(), width=10)
     assert progress.text(18_000, 2) == "run   18.0 s / 60 s [###-------] 18000 cycles, 2 missed deadline(s)"
-    assert RunProgress(None, 500.0, stream=io.StringIO()).text(1000, 0) == "run    2.0 s 1000 cycles, 0 missed deadline(s)"
+    assert (
+        RunProgress(None, 500.0, stream=io.StringIO()).text(1000, 0) == "run    2.0 s 1000 cycles, 0 missed deadline(s)"
+    )
     assert progress.interval_s == 10.0  # not a terminal: a plain line every 10 s
 
     calls = []
@@ -87,5 +98,9 @@ def test_run_progress_text_and_hooks_fan_out():
     hooks = SessionHooks(None, Hook("a", None), Hook("b", {"sends": 3}))
     hooks.start("rec", "timing")
     assert hooks.close([{"time_s": 1.0}]) == {"sends": 3}
-    assert calls == [("start", "a", "rec", "timing"), ("start", "b", "rec", "timing"),
-                     ("close", "a", [{"time_s": 1.0}]), ("close", "b", [{"time_s": 1.0}])]
+    assert calls == [
+        ("start", "a", "rec", "timing"),
+        ("start", "b", "rec", "timing"),
+        ("close", "a", [{"time_s": 1.0}]),
+        ("close", "b", [{"time_s": 1.0}]),
+    ]

@@ -37,7 +37,24 @@ def test_feasible_band_is_the_torque_at_zero_and_at_max_current():
 
 def test_drop_test_rerun_save_loads_back_with_the_logged_entities(tmp_path):
     out, rrd = tmp_path / "D", tmp_path / "drop.rrd"
-    assert main(["drop-test", "--current", "0", "--current", "1", "--duration", "2", "--out", str(out), "--rerun-save", str(rrd)]) == 0
+    assert (
+        main(
+            [
+                "drop-test",
+                "--current",
+                "0",
+                "--current",
+                "1",
+                "--duration",
+                "2",
+                "--out",
+                str(out),
+                "--rerun-save",
+                str(rrd),
+            ]
+        )
+        == 0
+    )
     doc = load_rrd(rrd)
     assert {"/signals/angle_deg", "/signals/current_a", "/events/notes"} <= set(doc)
     times, angle = _series(doc, "signals/angle_deg")
@@ -87,7 +104,16 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     tap = LiveTap(RerunLog.open(columns + ("lateness_us",), save=rrd), every=10, band=(params, 1.0))
     folder = RunFolder.create(tmp_path / "R", "run")
     outcome = run_session(
-        config, open_rig(config), stage, folder, VirtualClock(), 1.5, controller="t", realtime=False, live=tap, say=lambda _: None
+        config,
+        open_rig(config),
+        stage,
+        folder,
+        VirtualClock(),
+        1.5,
+        controller="t",
+        realtime=False,
+        live=tap,
+        say=lambda _: None,
     )
     assert outcome.exit_code == 0
     stats = outcome.summary["live_view"]

@@ -55,7 +55,9 @@ def test_short_real_clock_run_writes_a_complete_folder(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run(
         [*CLI, "--config", _config(tmp_path), "--duration", "0.3", "--current", "0.4", "--out", str(out)],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -72,7 +74,9 @@ def test_signal_during_a_real_clock_run_leaves_a_complete_folder(tmp_path, sig):
     out = tmp_path / "run"
     proc = subprocess.Popen(
         [*CLI, "--config", _config(tmp_path), "--current", "0.3", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         deadline = time.monotonic() + 60

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import binascii
 
+import message_strategies
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-import message_strategies
 
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -33,7 +32,12 @@ from sashil.drivers.serial_codec import (
 # --- CRC-16/CCITT-FALSE ------------------------------------------------------------------------
 @pytest.mark.parametrize(
     "data, crc",
-    [(b"123456789", 0x29B1), (b"", 0xFFFF), (b"A", 0xB915), (bytes(range(256)), binascii.crc_hqx(bytes(range(256)), 0xFFFF))],
+    [
+        (b"123456789", 0x29B1),
+        (b"", 0xFFFF),
+        (b"A", 0xB915),
+        (bytes(range(256)), binascii.crc_hqx(bytes(range(256)), 0xFFFF)),
+    ],
 )
 def test_crc16_ccitt_false_vectors(data, crc):
     assert crc16_ccitt(data) == crc
@@ -154,7 +158,11 @@ def test_split_stream_decodes_every_frame(msgs, data):
 
 
 @settings(max_examples=50)
-@given(st.lists(st.tuples(messages, st.binary(min_size=1, max_size=20).filter(lambda b: 0 not in b)), min_size=1, max_size=6))
+@given(
+    st.lists(
+        st.tuples(messages, st.binary(min_size=1, max_size=20).filter(lambda b: 0 not in b)), min_size=1, max_size=6
+    )
+)
 def test_garbage_before_frames_costs_nothing_but_is_counted(items):
     """Garbage ended by a delimiter is one bad frame; the frame after it still decodes."""
     stream = b"".join(garbage + b"\x00" + encode_frame(m, i) for i, (m, garbage) in enumerate(items))

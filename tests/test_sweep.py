@@ -14,8 +14,10 @@ from sashil.control.registry import make_controller
 from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
 
 
-@pytest.mark.parametrize("profile", [chirp_profile(0.01, 0.5, 5.0, 10.0, 1.0), sine_profile(0.01, 2.0, 1.0),
-                                     sine_profile(0.01, 2.0, 1.0, stop_s=7.0)])
+@pytest.mark.parametrize(
+    "profile",
+    [chirp_profile(0.01, 0.5, 5.0, 10.0, 1.0), sine_profile(0.01, 2.0, 1.0), sine_profile(0.01, 2.0, 1.0, stop_s=7.0)],
+)
 def test_profiles_are_consistent_with_their_derivatives(profile):
     h = 1e-5
     for t in (0.3, 0.9, 2.0, 6.9, 7.2, 7.5, 7.95, 11.0):
@@ -58,7 +60,9 @@ def test_stepped_sine_transmissibility_is_one_below_and_small_above_resonance():
 
 def test_sweep_cli_stepped_writes_table_and_plot(tmp_path):
     out = tmp_path / "run"
-    rc = main(["sweep", "--stepped", "--steps", "2", "--f-start", "1", "--f-stop", "3", "--current", "0.5", "--out", str(out)])
+    rc = main(
+        ["sweep", "--stepped", "--steps", "2", "--f-start", "1", "--f-stop", "3", "--current", "0.5", "--out", str(out)]
+    )
     assert rc == 0
     lines = (out / "transmissibility.csv").read_text().splitlines()
     assert lines[0].startswith("frequency_hz,body_rms_rad") and len(lines) == 3
@@ -69,8 +73,23 @@ def test_sweep_cli_stepped_writes_table_and_plot(tmp_path):
 def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
     # --f-stop = --f-start: a sine at that frequency; data.csv carries the sample seq (join with emulate --truth)
     out = tmp_path / "sine"
-    rc = main(["sweep", "--f-start", "1.25", "--f-stop", "1.25", "--duration", "2", "--amplitude-deg", "1",
-               "--current", "0", "--out", str(out)])
+    rc = main(
+        [
+            "sweep",
+            "--f-start",
+            "1.25",
+            "--f-stop",
+            "1.25",
+            "--duration",
+            "2",
+            "--amplitude-deg",
+            "1",
+            "--current",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     lines = (out / "data.csv").read_text().splitlines()
     header = lines[0].split(",")
@@ -86,8 +105,24 @@ def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_
     config = tmp_path / "tight.yaml"
     config.write_text("rig:\n  angle_limit_deg: 3.0\n")
     out = tmp_path / "tripped"
-    rc = main(["sweep", *mode, "--f-start", "1.6", "--f-stop", "2.0", "--duration", "20", "--current", "0.5",
-               "--config", str(config), "--out", str(out)])
+    rc = main(
+        [
+            "sweep",
+            *mode,
+            "--f-start",
+            "1.6",
+            "--f-stop",
+            "2.0",
+            "--duration",
+            "20",
+            "--current",
+            "0.5",
+            "--config",
+            str(config),
+            "--out",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert rc != 0 and "angle" in err
     summary = json.loads((out / "summary.json").read_text())
@@ -116,8 +151,14 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
         return rigs[-1]
 
     with pytest.raises(SafetyTrip):
-        run_profile(config, make_controller("passive", {**config, "controller": {"current_a": 0.5}}),
-                    sine_profile(math.radians(1.0), 1.6, 1.0), 20.0, factory, keep=kept.append)
+        run_profile(
+            config,
+            make_controller("passive", {**config, "controller": {"current_a": 0.5}}),
+            sine_profile(math.radians(1.0), 1.6, 1.0),
+            20.0,
+            factory,
+            keep=kept.append,
+        )
     assert rigs[0]._command == 0.0 and rigs[0].plant.state.current_a < 0.5
     assert len(kept) == 1 and kept[0]["current_cmd_a"][-1] == pytest.approx(0.5) and len(kept[0]["time_s"]) > 500
 

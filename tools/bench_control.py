@@ -101,21 +101,29 @@ def main() -> None:
     print("\n[1] torque tracking (road 1.2 Hz, 1 deg; T* = band-limited 2 Hz random fraction 0.1-0.9 of the band)")
     for inverse in ("full", "viscous"):
         r = torque_tracking(config, inverse, 1.2, 1.0, 12.0 if args.quick else 30.0)
-        print(f"  {inverse:8s} inverse: NRMSE(T - T*) = {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
-              f"{100 * r['nrmse_range']:.1f} % of range(T*); observer NRMSE {100 * r['observer_nrmse']:.1f} %; clipped {r['clipped']}")
+        print(
+            f"  {inverse:8s} inverse: NRMSE(T - T*) = {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
+            f"{100 * r['nrmse_range']:.1f} % of range(T*); observer NRMSE {100 * r['observer_nrmse']:.1f} %; clipped {r['clipped']}"
+        )
 
     fine = 1 << 24  # an encoder fine enough that quantisation no longer matters
-    references = (("no plant mismatch", {"fraction": 0.0, "coil_tau": 0.0}),
-                  ("65536 counts/rev", {"encoder_counts_per_rev": 65536}),
-                  ("no plant mismatch, 2^24 counts/rev", {"fraction": 0.0, "coil_tau": 0.0, "encoder_counts_per_rev": fine}),
-                  ("only n off by -10 % (z_u -22 %), 2^24 counts/rev",
-                   {"fraction": 0.0, "coil_tau": 0.0, "params": {"n": -0.1}, "encoder_counts_per_rev": fine}))
+    references = (
+        ("no plant mismatch", {"fraction": 0.0, "coil_tau": 0.0}),
+        ("65536 counts/rev", {"encoder_counts_per_rev": 65536}),
+        ("no plant mismatch, 2^24 counts/rev", {"fraction": 0.0, "coil_tau": 0.0, "encoder_counts_per_rev": fine}),
+        (
+            "only n off by -10 % (z_u -22 %), 2^24 counts/rev",
+            {"fraction": 0.0, "coil_tau": 0.0, "params": {"n": -0.1}, "encoder_counts_per_rev": fine},
+        ),
+    )
     for label, update in references:
         cfg = copy.deepcopy(config)
         cfg["mismatch"].update(update)
         r = torque_tracking(cfg, "full", 1.2, 1.0, 12.0 if args.quick else 30.0)
-        print(f"  (reference) full inverse, {label}: NRMSE {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
-              f"{100 * r['nrmse_range']:.1f} % of range(T*)")
+        print(
+            f"  (reference) full inverse, {label}: NRMSE {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
+            f"{100 * r['nrmse_range']:.1f} % of range(T*)"
+        )
 
     # 2. target damping drop test ---------------------------------------------------------------
     print("\n[2] drop test from -5 deg: target damping zeta = 0.07 vs constant 0.5 A")
@@ -124,9 +132,14 @@ def main() -> None:
     record, ctl, rows = drop(cfg, "target-damping", 0.5, 8.0)
     m = record.metrics
     print("  target-damping peaks [deg]:", " ".join(f"{p:.3f}" for p in m.peaks_deg))
-    print("     successive zeta:", " ".join(f"{zeta_of(d):.4f}" for d in m.log_decrements),
-          f"(within 10 % of 0.07: {all(abs(zeta_of(d) / 0.07 - 1) <= 0.10 for d in m.log_decrements)})")
-    print(f"     clipped cycles {ctl.clip_count} of {ctl.cycles}; observer NRMSE on the drop: {100 * nrmse(rows[:, 0], rows[:, 1]):.1f} %")
+    print(
+        "     successive zeta:",
+        " ".join(f"{zeta_of(d):.4f}" for d in m.log_decrements),
+        f"(within 10 % of 0.07: {all(abs(zeta_of(d) / 0.07 - 1) <= 0.10 for d in m.log_decrements)})",
+    )
+    print(
+        f"     clipped cycles {ctl.clip_count} of {ctl.cycles}; observer NRMSE on the drop: {100 * nrmse(rows[:, 0], rows[:, 1]):.1f} %"
+    )
     record05, _, _ = drop(cfg, None, 0.5, 8.0)
     m5 = record05.metrics
     print("  constant 0.5 A peaks [deg]:  ", " ".join(f"{p:.3f}" for p in m5.peaks_deg))
@@ -134,10 +147,17 @@ def main() -> None:
 
     # 3. stepped sweep --------------------------------------------------------------------------
     steps = 4 if args.quick else 10
-    print(f"\n[3] stepped sine 0.5-5 Hz ({steps} frequencies, road amplitude {config['sweep']['amplitude_deg']} deg): body RMS [deg]")
+    print(
+        f"\n[3] stepped sine 0.5-5 Hz ({steps} frequencies, road amplitude {config['sweep']['amplitude_deg']} deg): body RMS [deg]"
+    )
     freqs = frequencies(0.5, 5.0, steps)
-    laws = [("passive 0 A", "passive", 0.0), ("passive 1 A", "passive", 1.0),
-            ("skyhook-onoff", "skyhook-onoff", None), ("skyhook c=10", "skyhook", None), ("skyhook-add 3.5", "skyhook-add", None)]
+    laws = [
+        ("passive 0 A", "passive", 0.0),
+        ("passive 1 A", "passive", 1.0),
+        ("skyhook-onoff", "skyhook-onoff", None),
+        ("skyhook c=10", "skyhook", None),
+        ("skyhook-add 3.5", "skyhook-add", None),
+    ]
     table = {}
     for label, name, current in laws:
         cfg = copy.deepcopy(config)
@@ -149,13 +169,25 @@ def main() -> None:
     for index, f in enumerate(freqs):
         best_passive = min(table["passive 0 A"][index].body_rms_rad, table["passive 1 A"][index].body_rms_rad)
         ratios = {label: table[label][index].body_rms_rad / best_passive for label, _, _ in laws[2:]}
-        print(f"  {f:6.2f}  " + "".join(f"{math.degrees(table[label][index].body_rms_rad):15.4f}" for label, _, _ in laws)
-              + "   " + " ".join(f"{k}={v:.3f}" for k, v in ratios.items()))
-    print("  integrated RMS over the frequencies [deg]: " + ", ".join(
-        f"{label} {math.degrees(math.sqrt(statistics.fmean(p.body_rms_rad**2 for p in table[label]))):.4f}" for label, _, _ in laws))
+        print(
+            f"  {f:6.2f}  "
+            + "".join(f"{math.degrees(table[label][index].body_rms_rad):15.4f}" for label, _, _ in laws)
+            + "   "
+            + " ".join(f"{k}={v:.3f}" for k, v in ratios.items())
+        )
+    print(
+        "  integrated RMS over the frequencies [deg]: "
+        + ", ".join(
+            f"{label} {math.degrees(math.sqrt(statistics.fmean(p.body_rms_rad**2 for p in table[label]))):.4f}"
+            for label, _, _ in laws
+        )
+    )
     for label, _, _ in laws[2:]:
-        worst = max(table[label][i].body_rms_rad / min(table["passive 0 A"][i].body_rms_rad, table["passive 1 A"][i].body_rms_rad)
-                    for i in range(len(freqs)))
+        worst = max(
+            table[label][i].body_rms_rad
+            / min(table["passive 0 A"][i].body_rms_rad, table["passive 1 A"][i].body_rms_rad)
+            for i in range(len(freqs))
+        )
         print(f"  {label}: worst ratio to min(passive 0 A, 1 A) = {worst:.3f} (acceptance <= 1.03)")
 
     # 4. observer on a chirp --------------------------------------------------------------------
@@ -163,8 +195,10 @@ def main() -> None:
     ctl = make_controller("skyhook-add", cfg)
     cols = run_profile(cfg, ctl, chirp_profile(math.radians(0.5), 0.5, 5.0, 20.0), 20.0)
     keep = cols["time_s"] >= 2.0
-    print(f"\n[4] observer T-hat vs true plant torque on a 0.5-5 Hz chirp (skyhook-add): NRMSE "
-          f"{100 * nrmse(cols['torque_hat_nm'][keep], cols['torque_true_nm'][keep]):.1f} %")
+    print(
+        f"\n[4] observer T-hat vs true plant torque on a 0.5-5 Hz chirp (skyhook-add): NRMSE "
+        f"{100 * nrmse(cols['torque_hat_nm'][keep], cols['torque_true_nm'][keep]):.1f} %"
+    )
 
     # 5. cycle time -----------------------------------------------------------------------------
     print("\n[5] one controller cycle (estimator + observer + law + inverse + lead + safety clamp), wall clock")
@@ -183,8 +217,10 @@ def main() -> None:
             ctl.step(sample, (k + 1) * 1_000_000, 1_000_000)
             times.append(perf() - t0)
         times.sort()
-        print(f"  {name:16s} median {times[len(times) // 2] / 1000:.1f} us, p99 {times[int(0.99 * len(times))] / 1000:.1f} us, "
-              f"max {times[-1] / 1000:.1f} us")
+        print(
+            f"  {name:16s} median {times[len(times) // 2] / 1000:.1f} us, p99 {times[int(0.99 * len(times))] / 1000:.1f} us, "
+            f"max {times[-1] / 1000:.1f} us"
+        )
 
 
 if __name__ == "__main__":

@@ -45,9 +45,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from bench_control import drop, mismatched_config, torque_tracking, zeta_of
 from bench_link import SASHIL, EmulatorProcess
+
 from sashil.config import dump_config
 from sashil.control.registry import make_controller
 from sashil.drivers.emulator import read_truth_csv
@@ -81,7 +81,9 @@ class Bench:
         self.transport, self.driver, self.tmp = transport, TRANSPORTS[transport], tmp
         self.runs = 0
 
-    def cli(self, config: dict, verb: str, *args: str, emulator_flags: tuple[str, ...] = ()) -> tuple[Path | None, dict]:
+    def cli(
+        self, config: dict, verb: str, *args: str, emulator_flags: tuple[str, ...] = ()
+    ) -> tuple[Path | None, dict]:
         """``sashil VERB --driver D --port LINK --config (config) ARGS`` against a new ``sashil emulate
         --config (config) --truth FILE``; returns (run folder or None when the run failed, truth columns)."""
         self.runs += 1
@@ -89,11 +91,28 @@ class Bench:
         config_path = self.tmp / f"{name}.yaml"
         config_path.write_text(dump_config(config))
         link, truth_path, out = self.tmp / f"{name}.pty", self.tmp / f"{name}.truth.csv", self.tmp / name
-        emulator = EmulatorProcess(self.transport, str(link), "--config", str(config_path), "--truth", str(truth_path),
-                                   *emulator_flags)
+        emulator = EmulatorProcess(
+            self.transport, str(link), "--config", str(config_path), "--truth", str(truth_path), *emulator_flags
+        )
         try:
-            done = subprocess.run([*SASHIL, verb, "--driver", self.driver, "--port", str(link), "--config", str(config_path),
-                                   "--out", str(out), *args], capture_output=True, text=True, timeout=600)
+            done = subprocess.run(
+                [
+                    *SASHIL,
+                    verb,
+                    "--driver",
+                    self.driver,
+                    "--port",
+                    str(link),
+                    "--config",
+                    str(config_path),
+                    "--out",
+                    str(out),
+                    *args,
+                ],
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
         finally:
             emulator.stop()
         truth = read_truth_csv(truth_path)
@@ -107,8 +126,10 @@ class Bench:
 def link_note(link: dict | None) -> str:
     if not link:
         return ""
-    return (f"link: {link.get('samples', 0)} samples, {link.get('samples_skipped', 0)} skipped, "
-            f"{link.get('samples_missed', 0)} missed, {link.get('gaps', 0)} gaps (max {link.get('gap_max_ms', 0.0):.1f} ms)")
+    return (
+        f"link: {link.get('samples', 0)} samples, {link.get('samples_skipped', 0)} skipped, "
+        f"{link.get('samples_missed', 0)} missed, {link.get('gaps', 0)} gaps (max {link.get('gap_max_ms', 0.0):.1f} ms)"
+    )
 
 
 def drop_line(label: str, peaks: list[float], decrements: list[float], check: bool) -> None:
@@ -119,14 +140,23 @@ def drop_line(label: str, peaks: list[float], decrements: list[float], check: bo
 
 
 def drop_tests(bench: Bench, config: dict, sim: dict) -> None:
-    print(f"\n[a] drop test from -5 deg over {bench.transport}: target damping zeta = {ZETA}, then constant 0.5 A "
-          "(0.5 A flows before the release)")
+    print(
+        f"\n[a] drop test from -5 deg over {bench.transport}: target damping zeta = {ZETA}, then constant 0.5 A "
+        "(0.5 A flows before the release)"
+    )
     for law, label in (("target-damping", "target damping"), ("passive", "constant 0.5 A")):
         cfg = copy.deepcopy(config)
         cfg["controller"]["law"] = law
         progress(f"{bench.transport}: drop test, {label} (about 12 s)")
-        out, _ = bench.cli(cfg, "drop-test", "--current", "0.5", "--duration", "8",
-                           emulator_flags=("--hold-deg", "-5", "--release-after", "1"))
+        out, _ = bench.cli(
+            cfg,
+            "drop-test",
+            "--current",
+            "0.5",
+            "--duration",
+            "8",
+            emulator_flags=("--hold-deg", "-5", "--release-after", "1"),
+        )
         print(f"  {label}:")
         if out is not None:
             run = json.loads((out / "summary.json").read_text())["runs"][0]
@@ -175,39 +205,72 @@ def tracking_figures(out: Path, truth: dict) -> dict:
 
 
 def tracking(bench: Bench, config: dict, duration_s: float, sim: dict) -> None:
-    print(f"\n[b] torque tracking over {bench.transport} (road {ROAD_HZ} Hz, {ROAD_DEG} deg, {duration_s:g} s + 1 s ramp, "
-          f"from t = {KEEP_AFTER_S:g} s; T* = band-limited random 0.1-0.9 of the band; T_true from the emulator's truth, "
-          "joined on seq)")
+    print(
+        f"\n[b] torque tracking over {bench.transport} (road {ROAD_HZ} Hz, {ROAD_DEG} deg, {duration_s:g} s + 1 s ramp, "
+        f"from t = {KEEP_AFTER_S:g} s; T* = band-limited random 0.1-0.9 of the band; T_true from the emulator's truth, "
+        "joined on seq)"
+    )
     for inverse in ("full", "viscous"):
         cfg = copy.deepcopy(config)
         cfg["controller"].update(law="torque-tracking", inverse=inverse)
         progress(f"{bench.transport}: sweep, torque tracking, {inverse} inverse (about {duration_s + 4:.0f} s)")
-        out, truth = bench.cli(cfg, "sweep", "--controller", "torque-tracking", "--f-start", str(ROAD_HZ), "--f-stop",
-                               str(ROAD_HZ), "--amplitude-deg", str(ROAD_DEG), "--duration", str(duration_s))
+        out, truth = bench.cli(
+            cfg,
+            "sweep",
+            "--controller",
+            "torque-tracking",
+            "--f-start",
+            str(ROAD_HZ),
+            "--f-stop",
+            str(ROAD_HZ),
+            "--amplitude-deg",
+            str(ROAD_DEG),
+            "--duration",
+            str(duration_s),
+        )
         s = sim[inverse]
         if out is not None:
             r = tracking_figures(out, truth)
-            print(f"  {inverse:7s} inverse, emulated:  NRMSE(T - T*) {100 * r['nrmse_rms']:5.1f} % of RMS(T*), "
-                  f"{100 * r['nrmse_range']:4.1f} % of range; observer NRMSE {100 * r['observer_nrmse']:5.1f} %  "
-                  f"({r['joined']} of {r['rows']} host rows joined with the truth)")
-        print(f"  {inverse:7s} inverse, simulated: NRMSE(T - T*) {100 * s['nrmse_rms']:5.1f} % of RMS(T*), "
-              f"{100 * s['nrmse_range']:4.1f} % of range; observer NRMSE {100 * s['observer_nrmse']:5.1f} %")
+            print(
+                f"  {inverse:7s} inverse, emulated:  NRMSE(T - T*) {100 * r['nrmse_rms']:5.1f} % of RMS(T*), "
+                f"{100 * r['nrmse_range']:4.1f} % of range; observer NRMSE {100 * r['observer_nrmse']:5.1f} %  "
+                f"({r['joined']} of {r['rows']} host rows joined with the truth)"
+            )
+        print(
+            f"  {inverse:7s} inverse, simulated: NRMSE(T - T*) {100 * s['nrmse_rms']:5.1f} % of RMS(T*), "
+            f"{100 * s['nrmse_range']:4.1f} % of range; observer NRMSE {100 * s['observer_nrmse']:5.1f} %"
+        )
 
 
 def stepped(bench: Bench, config: dict, sim: dict) -> None:
     freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
-    print(f"\n[c] stepped sine over {bench.transport} at {', '.join(f'{f:.2f}' for f in freqs)} Hz "
-          f"(road {config['sweep']['amplitude_deg']:g} deg, settle {STEPPED['settle_s']:g} s, measure {STEPPED['measure_s']:g} s): "
-          "body RMS [deg], ratio to min(passive 0 A, 1 A)")
+    print(
+        f"\n[c] stepped sine over {bench.transport} at {', '.join(f'{f:.2f}' for f in freqs)} Hz "
+        f"(road {config['sweep']['amplitude_deg']:g} deg, settle {STEPPED['settle_s']:g} s, measure {STEPPED['measure_s']:g} s): "
+        "body RMS [deg], ratio to min(passive 0 A, 1 A)"
+    )
     emulated: dict[str, list[float] | None] = {}
     per_law = len(freqs) * (config["sweep"]["ramp_s"] + STEPPED["settle_s"] + STEPPED["measure_s"]) + 4
     for label, name, current in STEPPED_LAWS:
         progress(f"{bench.transport}: stepped sine, {label} (about {per_law:.0f} s)")
         args = ("--current", f"{current:g}") if current is not None else ("--controller", name)
-        out, _ = bench.cli(config, "sweep", "--stepped", "--f-start", str(STEPPED["f_start"]), "--f-stop",
-                           str(STEPPED["f_stop"]), "--steps", str(STEPPED["steps"]), *args)
-        emulated[label] = None if out is None else [
-            p["body_rms_rad"] for p in json.loads((out / "summary.json").read_text())["points"]]
+        out, _ = bench.cli(
+            config,
+            "sweep",
+            "--stepped",
+            "--f-start",
+            str(STEPPED["f_start"]),
+            "--f-stop",
+            str(STEPPED["f_stop"]),
+            "--steps",
+            str(STEPPED["steps"]),
+            *args,
+        )
+        emulated[label] = (
+            None
+            if out is None
+            else [p["body_rms_rad"] for p in json.loads((out / "summary.json").read_text())["points"]]
+        )
     for source, table in (("emulated", emulated), ("simulated", sim)):
         print(f"  {source}:")
         print("    f [Hz]  " + "".join(f"{label:>14s}" for label, _, _ in STEPPED_LAWS) + "   skyhook / min(passive)")
@@ -215,10 +278,12 @@ def stepped(bench: Bench, config: dict, sim: dict) -> None:
             values = [table[label][k] if table.get(label) else math.nan for label, _, _ in STEPPED_LAWS]
             ratio = values[2] / min(values[0], values[1])
             print(f"    {f:6.2f}  " + "".join(f"{math.degrees(v):14.4f}" for v in values) + f"   {ratio:.3f}")
-    print("  (the emulated plant is one rig through all frequencies of a law, the in-process one starts each frequency\n"
-          "   from rest: the road ramps down after each measurement, but at 0 A (zeta ~ 0.04) the arm's swing from a\n"
-          "   frequency near the resonance decays only to ~e^(-zeta*w_n*t) = 0.12 over ramp-down + ramp + settle (5 s);\n"
-          "   first frequencies compare like for like, later 0 A points read high)")
+    print(
+        "  (the emulated plant is one rig through all frequencies of a law, the in-process one starts each frequency\n"
+        "   from rest: the road ramps down after each measurement, but at 0 A (zeta ~ 0.04) the arm's swing from a\n"
+        "   frequency near the resonance decays only to ~e^(-zeta*w_n*t) = 0.12 over ramp-down + ramp + settle (5 s);\n"
+        "   first frequencies compare like for like, later 0 A points read high)"
+    )
 
 
 def simulated(config: dict, quick: bool, duration_s: float) -> dict:
@@ -245,14 +310,20 @@ def simulated(config: dict, quick: bool, duration_s: float) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--transport", choices=("serial", "slcan", "both"), default="both",
-                        help="emulator transport (serial: --driver serial; slcan: --driver can); default both")
+    parser.add_argument(
+        "--transport",
+        choices=("serial", "slcan", "both"),
+        default="both",
+        help="emulator transport (serial: --driver serial; slcan: --driver can); default both",
+    )
     parser.add_argument("--quick", action="store_true", help="shorter torque tracking (8 s), no stepped sine")
     args = parser.parse_args()
     duration = 8.0 if args.quick else 15.0
     config = link_config()
-    print("plant mismatch: 10 % per parameter, pattern alternate; coil lag +10 %; 4096 counts/rev "
-          "(bench_control.mismatched_config); host driver.sample_timeout_ms 20, link_lost_ms 500")
+    print(
+        "plant mismatch: 10 % per parameter, pattern alternate; coil lag +10 %; 4096 counts/rev "
+        "(bench_control.mismatched_config); host driver.sample_timeout_ms 20, link_lost_ms 500"
+    )
     started = time.monotonic()
     sim = simulated(config, args.quick, duration)
     transports = ("serial", "slcan") if args.transport == "both" else (args.transport,)

@@ -34,8 +34,18 @@ BOX = [(50.0, 200.0), (0.0, 3.0), (0.0, 3.0), (0.0, 2.0), (0.0, 2.0)] + list(MOD
 
 def params_from(x) -> dict[str, float]:
     S = 10.0 ** x[5]
-    return {"J": 1.0, "k": x[0], "c1": x[1], "c2": x[2], "alpha1": x[3], "alpha2": x[4],
-            "beta": S * x[6], "gamma": S * (1.0 - x[6]), "delta": S, "n": x[7]}
+    return {
+        "J": 1.0,
+        "k": x[0],
+        "c1": x[1],
+        "c2": x[2],
+        "alpha1": x[3],
+        "alpha2": x[4],
+        "beta": S * x[6],
+        "gamma": S * (1.0 - x[6]),
+        "delta": S,
+        "n": x[7],
+    }
 
 
 def ivp_simulate(p: dict[str, float], record, deadline: float) -> np.ndarray:
@@ -50,7 +60,9 @@ def ivp_simulate(p: dict[str, float], record, deadline: float) -> np.ndarray:
             raise TimeoutError
         th, v, z = y
         az = abs(z)
-        zdot = v * (p["delta"] - (az ** p["n"] if az > 0 else 0.0) * (p["beta"] + p["gamma"] * math.copysign(1.0, v * z)))
+        zdot = v * (
+            p["delta"] - (az ** p["n"] if az > 0 else 0.0) * (p["beta"] + p["gamma"] * math.copysign(1.0, v * z))
+        )
         return [v, (-p["k"] * th - c * v - a * z) / p["J"], zdot]
 
     y0 = [record.theta[0], 0.0, math.copysign(zu, record.theta[0])]
@@ -80,8 +92,16 @@ def baseline(records, cap_s: float, seed: int = 0):
             best[0], best[1] = value, np.array(x)
         return value
 
-    differential_evolution(cost, BOX, popsize=5, maxiter=1000, seed=seed, polish=False, tol=1e-8,
-                           callback=lambda *a, **k: time.perf_counter() > deadline)
+    differential_evolution(
+        cost,
+        BOX,
+        popsize=5,
+        maxiter=1000,
+        seed=seed,
+        polish=False,
+        tol=1e-8,
+        callback=lambda *a, **k: time.perf_counter() > deadline,
+    )
     return best[1], time.perf_counter() - started, evaluations[0]
 
 
@@ -100,10 +120,20 @@ def main() -> None:
     def describe(label, params, wall, evals, train):
         sim = MODELS["bouc-wen"].simulate(params, held)
         errs = {k: 100.0 * (params[k] - truth[k]) / truth[k] for k in ("k", "c1", "c2", "alpha1", "alpha2")}
-        at = {f"c({i:g})": 100 * ((params["c1"] + params["c2"] * i) / (truth["c1"] + truth["c2"] * i) - 1) for i in (0, 1)}
-        at.update({f"alpha({i:g})": 100 * ((params["alpha1"] + params["alpha2"] * i) / (truth["alpha1"] + truth["alpha2"] * i) - 1) for i in (0, 1)})
-        print(f"{label:<34} {wall:>9.2f} {evals:>7d} {100 * train:>10.3f}% {100 * nrmse(sim, held.theta):>10.3f}% "
-              f"{100 * nrmse(sim, clean):>10.3f}%")
+        at = {
+            f"c({i:g})": 100 * ((params["c1"] + params["c2"] * i) / (truth["c1"] + truth["c2"] * i) - 1) for i in (0, 1)
+        }
+        at.update(
+            {
+                f"alpha({i:g})": 100
+                * ((params["alpha1"] + params["alpha2"] * i) / (truth["alpha1"] + truth["alpha2"] * i) - 1)
+                for i in (0, 1)
+            }
+        )
+        print(
+            f"{label:<34} {wall:>9.2f} {evals:>7d} {100 * train:>10.3f}% {100 * nrmse(sim, held.theta):>10.3f}% "
+            f"{100 * nrmse(sim, clean):>10.3f}%"
+        )
         print("    parameter errors [%]: " + ", ".join(f"{k} {v:+.2f}" for k, v in {**errs, **at}.items()))
 
     print("truth (unit z bound):", ", ".join(f"{k}={v:.5g}" for k, v in truth.items()))
@@ -119,8 +149,10 @@ def main() -> None:
     p = params_from(x)
     train = float(np.mean([nrmse(MODELS["bouc-wen"].simulate(p, r), r.theta) for r in records]))
     describe(f"baseline solve_ivp+DE (cap {cap:g} s)", p, bwall, bevals, train)
-    print("NRMSE = RMS error / std of the angle; 'val' is against the recorded (quantised) angle, "
-          "'vs clean' against the noiseless one. Wall times on a shared 2-core machine are noisy.")
+    print(
+        "NRMSE = RMS error / std of the angle; 'val' is against the recorded (quantised) angle, "
+        "'vs clean' against the noiseless one. Wall times on a shared 2-core machine are noisy."
+    )
 
 
 if __name__ == "__main__":

@@ -77,18 +77,26 @@ def codec_cost(n: int = 20000) -> None:
             can_decoder.feed(frame_id, data)
     t5 = time.perf_counter_ns()
     print("codec cost per message (this machine, shared, noisy):")
-    print(f"  serial encode Sample {(t1 - t0) / n / 1e3:6.2f} us   decode Sample {(t2 - t1) / n / 1e3:6.2f} us   ({len(frame)} bytes on the wire)")
-    print(f"  CAN    encode Command {(t4 - t3) / n / 1e3:5.2f} us   decode Sample (2 frames) {(t5 - t4) / n / 1e3:6.2f} us  (cantools via sashil.dbc)")
+    print(
+        f"  serial encode Sample {(t1 - t0) / n / 1e3:6.2f} us   decode Sample {(t2 - t1) / n / 1e3:6.2f} us   ({len(frame)} bytes on the wire)"
+    )
+    print(
+        f"  CAN    encode Command {(t4 - t3) / n / 1e3:5.2f} us   decode Sample (2 frames) {(t5 - t4) / n / 1e3:6.2f} us  (cantools via sashil.dbc)"
+    )
 
 
 def bus_load(rate_hz: float = 1000.0, bitrate: int = 1_000_000) -> None:
     per_cycle = {"SampleA": 8, "SampleB": 8, "Command": 5}
     nominal = sum(can_codec.frame_bits(n, worst_case_stuffing=False) for n in per_cycle.values())
     worst = sum(can_codec.frame_bits(n) for n in per_cycle.values())
-    print(f"CAN bus load at {rate_hz:g} Hz on {bitrate / 1e6:g} Mbit/s (frames per cycle: {', '.join(f'{k} {v} B' for k, v in per_cycle.items())}):")
-    print(f"  {nominal} bits/cycle without stuffing -> {100 * nominal * rate_hz / bitrate:.1f} %;"
-          f" worst-case stuffing {worst} bits/cycle -> {100 * worst * rate_hz / bitrate:.1f} %"
-          f"; time on the bus per cycle {worst / bitrate * 1e6:.0f} us worst case")
+    print(
+        f"CAN bus load at {rate_hz:g} Hz on {bitrate / 1e6:g} Mbit/s (frames per cycle: {', '.join(f'{k} {v} B' for k, v in per_cycle.items())}):"
+    )
+    print(
+        f"  {nominal} bits/cycle without stuffing -> {100 * nominal * rate_hz / bitrate:.1f} %;"
+        f" worst-case stuffing {worst} bits/cycle -> {100 * worst * rate_hz / bitrate:.1f} %"
+        f"; time on the bus per cycle {worst / bitrate * 1e6:.0f} us worst case"
+    )
 
 
 def echo_round_trip(n: int) -> list[int]:
@@ -127,8 +135,12 @@ class EmulatorProcess:
     """``sashil emulate --transport TRANSPORT --link LINK [FLAGS...]`` in a child process."""
 
     def __init__(self, transport: str, link: str, *flags: str):
-        self.proc = subprocess.Popen([*SASHIL, "emulate", "--transport", transport, "--link", link, *flags],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(
+            [*SASHIL, "emulate", "--transport", transport, "--link", link, *flags],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         line = self.proc.stdout.readline()
         if "rig on" not in line:
             raise SystemExit(f"emulator did not start: {line}{self.proc.stderr.read()}")
@@ -162,24 +174,46 @@ def command_round_trip(driver: str, port: str, n: int) -> list[int]:
     return times
 
 
-def run_over_link(driver: str, transport: str, pacing: str, duration: float, tmp: Path, timeout_ms: float | None) -> None:
+def run_over_link(
+    driver: str, transport: str, pacing: str, duration: float, tmp: Path, timeout_ms: float | None
+) -> None:
     link = str(tmp / f"rig-{transport}-{pacing}")
     emu = EmulatorProcess(transport, link)
     config = tmp / f"{transport}-{pacing}.yaml"
     extra = "" if timeout_ms is None else f"  sample_timeout_ms: {timeout_ms:g}\n"
     config.write_text(f"driver:\n  pacing: {pacing}\n{extra}")
     out = tmp / f"run-{transport}-{pacing}"
-    done = subprocess.run([*SASHIL, "run", "--driver", driver, "--port", link, "--duration", str(duration),
-                           "--config", str(config), "--out", str(out)], capture_output=True, text=True)
+    done = subprocess.run(
+        [
+            *SASHIL,
+            "run",
+            "--driver",
+            driver,
+            "--port",
+            link,
+            "--duration",
+            str(duration),
+            "--config",
+            str(config),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
     emu_line = emu.stop()
     summary = json.loads((out / "summary.json").read_text())
     timing = summary["timing"]
     link_lines = [line for line in done.stderr.splitlines() if "link:" in line]
-    print(f"  {transport:6s} pacing {pacing:6s}: exit {done.returncode}, cycles {timing['cycles']}, "
-          f"missed deadlines {timing['missed_deadlines']}, lateness p99 {timing['lateness_us']['p99']:.0f} "
-          f"max {timing['lateness_us']['max']:.0f} us, read p50 {timing['read_us']['p50']:.0f} p99 {timing['read_us']['p99']:.0f} us")
+    print(
+        f"  {transport:6s} pacing {pacing:6s}: exit {done.returncode}, cycles {timing['cycles']}, "
+        f"missed deadlines {timing['missed_deadlines']}, lateness p99 {timing['lateness_us']['p99']:.0f} "
+        f"max {timing['lateness_us']['max']:.0f} us, read p50 {timing['read_us']['p50']:.0f} p99 {timing['read_us']['p99']:.0f} us"
+    )
     link_stats = summary.get("link") or {}
-    print(f"    link gaps ridden through at 0 A: {link_stats.get('gaps', 0)} (longest {link_stats.get('gap_max_ms', 0.0):.1f} ms)")
+    print(
+        f"    link gaps ridden through at 0 A: {link_stats.get('gaps', 0)} (longest {link_stats.get('gap_max_ms', 0.0):.1f} ms)"
+    )
     if done.returncode:
         print("    " + [line for line in done.stderr.splitlines() if "error" in line][-1])
     for line in link_lines:
@@ -191,7 +225,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=60.0, help="seconds of each sashil run (default 60)")
     parser.add_argument("--round-trips", type=int, default=3000, help="round trips per link (default 3000)")
-    parser.add_argument("--sample-timeout-ms", type=float, help="driver.sample_timeout_ms of the runs (default: the config default, 2.5)")
+    parser.add_argument(
+        "--sample-timeout-ms",
+        type=float,
+        help="driver.sample_timeout_ms of the runs (default: the config default, 2.5)",
+    )
     args = parser.parse_args()
     print(f"bench_link: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} (shared machine: timing is noisy)")
     codec_cost()
@@ -212,8 +250,10 @@ def main() -> None:
             ratio = "" if name == "echo" else f"   p50 = {np.percentile(times, 50) / echo_p50:.1f} x echo"
             print(f"  {name:6s} {percentiles(times)}{ratio}")
         timeout = "default" if args.sample_timeout_ms is None else f"{args.sample_timeout_ms:g} ms"
-        print(f"sashil run at 1 kHz for {args.duration:g} s over each link (emulator process SCHED_FIFO 60, loop FIFO 50, "
-              f"sample timeout {timeout}, link lost 25 ms):")
+        print(
+            f"sashil run at 1 kHz for {args.duration:g} s over each link (emulator process SCHED_FIFO 60, loop FIFO 50, "
+            f"sample timeout {timeout}, link lost 25 ms):"
+        )
         for transport, driver in (("serial", "serial"), ("slcan", "can")):
             for pacing in ("device", "host"):
                 run_over_link(driver, transport, pacing, args.duration, tmp, args.sample_timeout_ms)

@@ -129,7 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench_loop-") as tmp:
         full = full_run(config, args.rate, args.duration, Path(tmp) / "full")
         print(line(f"full {args.rate:g} Hz", full["timing"]), flush=True)
-        print(f"  recorder: {full['recording']['rows_written']} rows written, {full['recording']['rows_dropped']} dropped")
+        print(
+            f"  recorder: {full['recording']['rows_written']} rows written, {full['recording']['rows_dropped']} dropped"
+        )
         fast = None
         if args.fast_rate > 0:
             fast = full_run(config, args.fast_rate, args.fast_duration, Path(tmp) / "fast")
@@ -141,12 +143,16 @@ def main(argv: list[str] | None = None) -> int:
     misses = full["timing"]["missed_deadlines"]
     print(f"p99 lateness full/bare: {f99:.2f} / {b99:.2f} us = {ratio:.2f}x  (goal <= 1.5x under SCHED_FIFO)")
     print(f"missed deadlines at {args.rate:g} Hz: bare {bare['timing']['missed_deadlines']}, full {misses}  (goal 0)")
-    print(f"median compute (stage+safety+record): {compute:.1f} us; median whole cycle incl. sim read/write: "
-          f"{full['timing']['cycle_us']['p50']:.1f} us  (goal <= 50 us)")
+    print(
+        f"median compute (stage+safety+record): {compute:.1f} us; median whole cycle incl. sim read/write: "
+        f"{full['timing']['cycle_us']['p50']:.1f} us  (goal <= 50 us)"
+    )
     if fast is not None:
         t = fast["timing"]
-        print(f"{args.fast_rate:g} Hz miss rate: {t['missed_deadlines']} of {t['cycles'] + t['missed_deadlines']} "
-              f"deadlines ({100 * t['missed_deadlines'] / max(t['cycles'] + t['missed_deadlines'], 1):.3f} %)")
+        print(
+            f"{args.fast_rate:g} Hz miss rate: {t['missed_deadlines']} of {t['cycles'] + t['missed_deadlines']} "
+            f"deadlines ({100 * t['missed_deadlines'] / max(t['cycles'] + t['missed_deadlines'], 1):.3f} %)"
+        )
     print("note: timing depends on machine load; other processes on a shared box make these numbers noisy")
     return 0
 

@@ -46,15 +46,30 @@ def road_sine(amplitude_rad: float, freq_hz: float):
     w = 2 * math.pi * freq_hz
 
     def road(t: float) -> tuple[float, float, float]:
-        return amplitude_rad * math.sin(w * t), amplitude_rad * w * math.cos(w * t), -amplitude_rad * w * w * math.sin(w * t)
+        return (
+            amplitude_rad * math.sin(w * t),
+            amplitude_rad * w * math.cos(w * t),
+            -amplitude_rad * w * w * math.sin(w * t),
+        )
 
     return road
 
 
 def hot_path_ns(rows: int = 200_000) -> float:
     """Mean ns per row of begin_row + fill + commit_row (the writer thread running)."""
-    columns = ("time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad", "theta_dot_rad_s", "z_hat",
-               "torque_hat_nm", "torque_cmd_nm", "seq", "trip_code")
+    columns = (
+        "time_s",
+        "theta_rad",
+        "current_a",
+        "current_cmd_a",
+        "theta_road_rad",
+        "theta_dot_rad_s",
+        "z_hat",
+        "torque_hat_nm",
+        "torque_cmd_nm",
+        "seq",
+        "trip_code",
+    )
     with tempfile.TemporaryDirectory() as tmp:
         recorder = Recorder(Path(tmp) / "data.csv", columns, capacity=1 << 18).start()
         t0 = time.perf_counter_ns()
@@ -80,19 +95,34 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
     live = None
     if rrd is not None:
         columns = record_columns(stage) + ("lateness_us", "band_lo_nm", "band_hi_nm")
-        live = LiveTap(RerunLog.open(columns, save=rrd), batch_s=batch_s, band=(config["model"]["params"], config["rig"]["current_max_a"]))
+        live = LiveTap(
+            RerunLog.open(columns, save=rrd),
+            batch_s=batch_s,
+            band=(config["model"]["params"], config["rig"]["current_max_a"]),
+        )
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
-    outcome = run_session(config, rig, stage, RunFolder.create(folder, "run"), clock, duration,
-                          controller="target-damping", live=live, say=lambda _: None)
+    outcome = run_session(
+        config,
+        rig,
+        stage,
+        RunFolder.create(folder, "run"),
+        clock,
+        duration,
+        controller="target-damping",
+        live=live,
+        say=lambda _: None,
+    )
     return outcome.summary
 
 
 def line(label: str, summary: dict) -> str:
     t = summary["timing"]
     lat, comp = t["lateness_us"], t["compute_us"]
-    return (f"  {label:<22} cycles {t['cycles']:>6}  missed {t['missed_deadlines']:>4}  "
-            f"lateness p50 {lat['p50']:.1f} p99 {lat['p99']:.1f} p99.9 {lat['p99_9']:.1f} max {lat['max']:.1f} us  "
-            f"compute p50 {comp['p50']:.1f} p99 {comp['p99']:.1f} us  rows dropped {summary['recording']['rows_dropped']}")
+    return (
+        f"  {label:<22} cycles {t['cycles']:>6}  missed {t['missed_deadlines']:>4}  "
+        f"lateness p50 {lat['p50']:.1f} p99 {lat['p99']:.1f} p99.9 {lat['p99_9']:.1f} max {lat['max']:.1f} us  "
+        f"compute p50 {comp['p50']:.1f} p99 {comp['p99']:.1f} us  rows dropped {summary['recording']['rows_dropped']}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -113,9 +143,11 @@ def main(argv: list[str] | None = None) -> int:
         print(line("recorder + --rerun-save", live))
         stats = live["live_view"]
         share = stats["sends"] * (stats["send_us_mean"] or 0.0) * 1e-6 / args.duration
-        print(f"  rerun thread (batches every {args.batch_s:g} s): {stats['rows_sent']} rows sent (every {stats['every']}th), {stats['rows_skipped']} skipped, "
-              f"{stats['sends']} sends, mean {stats['send_us_mean']} us, max {stats['send_us_max']} us, "
-              f"{100 * share:.2f} % of wall time, .rrd {rrd.stat().st_size / 1e6:.2f} MB, error {stats['error']}")
+        print(
+            f"  rerun thread (batches every {args.batch_s:g} s): {stats['rows_sent']} rows sent (every {stats['every']}th), {stats['rows_skipped']} skipped, "
+            f"{stats['sends']} sends, mean {stats['send_us_mean']} us, max {stats['send_us_max']} us, "
+            f"{100 * share:.2f} % of wall time, .rrd {rrd.stat().st_size / 1e6:.2f} MB, error {stats['error']}"
+        )
     ok = plain["timing"]["missed_deadlines"] == 0 and live["timing"]["missed_deadlines"] == 0
     print(f"goal (no missed deadline either way): {'met' if ok else 'NOT met'}")
     return 0 if ok else 1

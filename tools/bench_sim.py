@@ -34,8 +34,12 @@ def bench_drop_test(repeats: int) -> None:
         simulated = record.loop.cycles / config["loop"]["rate_hz"]
         wall_ratios.append(simulated / wall)
         cpu_ratios.append(simulated / cpu)
-    print(f"simulated drop test: {simulated:.2f} s of rig time per run (10 s record + hold), {repeats} runs at 0 A / 1 A")
-    print(f"  speed (wall): best {max(wall_ratios):7.0f}x  median {statistics.median(wall_ratios):7.0f}x real time   [goal >= 200x]")
+    print(
+        f"simulated drop test: {simulated:.2f} s of rig time per run (10 s record + hold), {repeats} runs at 0 A / 1 A"
+    )
+    print(
+        f"  speed (wall): best {max(wall_ratios):7.0f}x  median {statistics.median(wall_ratios):7.0f}x real time   [goal >= 200x]"
+    )
     print(f"  speed (CPU):  best {max(cpu_ratios):7.0f}x  median {statistics.median(cpu_ratios):7.0f}x real time")
 
 

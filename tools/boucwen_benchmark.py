@@ -43,8 +43,11 @@ def main() -> int:
     parser.add_argument("--estimation", metavar="CSV", help="periodic estimation data (default: generated)")
     parser.add_argument("--period", type=int, default=B.N_PERIOD, help="samples per period of the estimation data")
     parser.add_argument("--test", metavar="CSV", help="test data simulated from rest (default: generated multisine)")
-    parser.add_argument("--test-steady", action="store_true",
-                        help="the --test file is one steady-state period (simulate it twice, score the second)")
+    parser.add_argument(
+        "--test-steady",
+        action="store_true",
+        help="the --test file is one steady-state period (simulate it twice, score the second)",
+    )
     parser.add_argument("--seed", type=int, default=7, help="seed of the generated estimation multisine")
     parser.add_argument("--write-data", metavar="DIR", help="write the generated estimation/test CSVs here")
     args = parser.parse_args()
@@ -62,33 +65,39 @@ def main() -> int:
         print(f"boucwen_benchmark: error: {err}")
         return 2
     print(f"estimation data: {source} ({gen_s:.2f} s to generate/read)")
-    print(f"identification wall time: {fit.wall_s:.2f} s (global stage {fit.global_s:.2f} s), {fit.evaluations} evaluations; "
-          "published white-box (Brunot et al. 2017, Nelder-Mead): 44 min")
+    print(
+        f"identification wall time: {fit.wall_s:.2f} s (global stage {fit.global_s:.2f} s), {fit.evaluations} evaluations; "
+        "published white-box (Brunot et al. 2017, Nelder-Mead): 44 min"
+    )
     print(f"training output RMSE (periods 2..): {fit.train_rmse_m:.3e} m (noise floor 8e-6 m)")
     for name in B.NAMES:
         print(f"  {name:>5} = {fit.params[name]:>14.6g} +- {fit.stderr[name]:.3g}   (true {B.TRUE[name]:g})")
     beta = 1e3
-    print(f"  (nu = 1 fixed; with beta = {beta:g}: gamma = {fit.params['a'] / beta:.5g}, delta = {fit.params['d'] / beta:.5g})")
+    print(
+        f"  (nu = 1 fixed; with beta = {beta:g}: gamma = {fit.params['a'] / beta:.5g}, delta = {fit.params['d'] / beta:.5g})"
+    )
     if args.test:
         ut, yt = read_io(args.test)
         if args.test_steady:
-            ym = B.simulate(np.tile(ut, 2), fit.params, periodic_n=ut.size)[ut.size:]
+            ym = B.simulate(np.tile(ut, 2), fit.params, periodic_n=ut.size)[ut.size :]
         else:
             ym = B.simulate(ut, fit.params)
         rmse, std = float(np.sqrt(np.mean((ym - yt) ** 2))), float(np.std(yt))
         print(f"test {args.test}: simulation RMSE {rmse:.3e} m ({100 * rmse / std:.3g} % of output std)")
     else:
         rmse, std = B.test_rmse(fit.params)
-        print(f"held-out noiseless multisine (steady-state period): simulation RMSE {rmse:.3e} m "
-              f"({100 * rmse / std:.3g} % of std {std:.3e} m); acceptance <= 2e-6 m; best published "
-              "black-box on the official test 7.5e-6 m")
+        print(
+            f"held-out noiseless multisine (steady-state period): simulation RMSE {rmse:.3e} m "
+            f"({100 * rmse / std:.3g} % of std {std:.3e} m); acceptance <= 2e-6 m; best published "
+            "black-box on the official test 7.5e-6 m"
+        )
     if args.write_data:
         out = Path(args.write_data)
         out.mkdir(parents=True, exist_ok=True)
         if not args.estimation:
             write_data_csv(out / "estimation.csv", {"u": u, "y": y})
         ut, yt = B.generate(12345, 2)
-        write_data_csv(out / "test_multisine.csv", {"u": ut[B.N_PERIOD:], "y": yt[B.N_PERIOD:]})
+        write_data_csv(out / "test_multisine.csv", {"u": ut[B.N_PERIOD :], "y": yt[B.N_PERIOD :]})
         print(f"wrote {out}/estimation.csv, {out}/test_multisine.csv")
     return 0
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from sashil.identify.friction import force_nrmse, identify_two_stage, simulate_harmonic, table1_tests  # noqa: E402
-from sashil.models.friction_damper import TABLE1, FrictionDamperParams  # noqa: E402
+from sashil.identify.friction import force_nrmse, identify_two_stage, simulate_harmonic, table1_tests
+from sashil.models.friction_damper import TABLE1, FrictionDamperParams
 
 
 def loops_figure(p: FrictionDamperParams, path: Path) -> None:
@@ -78,14 +78,19 @@ def main() -> int:
     forces = [simulate_harmonic(p, "bouc-wen", f, a)[4] + rng.normal(0.0, args.noise, 401) for f, a in train]
     start = replace(p, k1=150.0, c1=1.0, c2=1.0, f_max=50.0, alpha=20.0, beta=20.0, gamma=0.0, n=2.0)
     fit = identify_two_stage(train, forces, start)
-    print(f"two-stage identification from {len(train)} synthetic loops (10 Hz 1 mm, 3 Hz 1 mm; "
-          f"{args.noise:g} N RMS noise): wall {fit.wall_s:.1f} s")
+    print(
+        f"two-stage identification from {len(train)} synthetic loops (10 Hz 1 mm, 3 Hz 1 mm; "
+        f"{args.noise:g} N RMS noise): wall {fit.wall_s:.1f} s"
+    )
     for stage in fit.stages:
         print("  " + stage)
     q = fit.params
     for name in ("k1", "c1", "c2", "alpha", "beta", "gamma", "n"):
-        print(f"  {name:>5} = {getattr(q, name):9.4g}   (Table 2/3: {getattr(p, name):g})   [A fixed at {p.A:g}]"
-              if name == "alpha" else f"  {name:>5} = {getattr(q, name):9.4g}   (Table 2/3: {getattr(p, name):g})")
+        print(
+            f"  {name:>5} = {getattr(q, name):9.4g}   (Table 2/3: {getattr(p, name):g})   [A fixed at {p.A:g}]"
+            if name == "alpha"
+            else f"  {name:>5} = {getattr(q, name):9.4g}   (Table 2/3: {getattr(p, name):g})"
+        )
     worst = 0.0
     print("force NRMSE of the identified model against the noiseless Table-1 loops:")
     for f, a in table1_tests():

@@ -9,5 +9,14 @@ from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.runner import Emulator, EmulatorThread, build_device
 from sashil.drivers.emulator.truth import TRUTH_COLUMNS, TruthLog, read_truth_csv
 
-__all__ = ["Emulator", "EmulatorThread", "Faults", "Operator", "RigDevice", "TRUTH_COLUMNS", "TruthLog", "build_device",
-           "read_truth_csv"]
+__all__ = [
+    "TRUTH_COLUMNS",
+    "Emulator",
+    "EmulatorThread",
+    "Faults",
+    "Operator",
+    "RigDevice",
+    "TruthLog",
+    "build_device",
+    "read_truth_csv",
+]

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand
@@ -208,7 +208,11 @@ class RigDevice:
         if self.boot_ns is None:
             self.boot_ns = now_ns
         out: list[tuple[int, Message]] = []
-        if self._last_cmd_ns is not None and not self.watchdog_tripped and now_ns - self._last_cmd_ns >= self.watchdog_ns:
+        if (
+            self._last_cmd_ns is not None
+            and not self.watchdog_tripped
+            and now_ns - self._last_cmd_ns >= self.watchdog_ns
+        ):
             self._advance(now_ns)
             self.watchdog_tripped = True
             self.watchdog_trips += 1

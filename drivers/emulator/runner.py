@@ -12,8 +12,9 @@ from __future__ import annotations
 import heapq
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.transports import (
@@ -76,7 +77,11 @@ class Emulator:
                 if end is not None and now >= end:
                     return self._stopped("duration")
                 session = device.session_time_s(now)
-                if session is not None and faults.disconnect_after_s is not None and session >= faults.disconnect_after_s:
+                if (
+                    session is not None
+                    and faults.disconnect_after_s is not None
+                    and session >= faults.disconnect_after_s
+                ):
                     return self._stopped("disconnect")
                 if session is not None and faults.stall_after_s is not None and session >= faults.stall_after_s:
                     self.stats.stalled = True
@@ -158,7 +163,7 @@ class EmulatorThread:
     def _run(self) -> None:
         self.result = self.emulator.run()
 
-    def __enter__(self) -> "EmulatorThread":
+    def __enter__(self) -> EmulatorThread:
         self._thread.start()
         return self
 
@@ -168,4 +173,3 @@ class EmulatorThread:
     def stop(self) -> None:
         self.emulator.stop()
         self._thread.join(timeout=5.0)
-

@@ -34,7 +34,7 @@ class Pty:
     link: str | None = None
 
     @classmethod
-    def open(cls, link: str | None = None) -> "Pty":
+    def open(cls, link: str | None = None) -> Pty:
         master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no line editing: bytes pass unchanged
         os.set_blocking(master, False)

@@ -25,8 +25,16 @@ import numpy as np
 from sashil.models.plant import RigPlant
 
 #: columns of the truth CSV, in order
-TRUTH_COLUMNS = ("seq", "device_time_us", "plant_time_s", "theta_true_rad", "theta_dot_true_rad_s", "z_true",
-                 "current_true_a", "torque_true_nm")
+TRUTH_COLUMNS = (
+    "seq",
+    "device_time_us",
+    "plant_time_s",
+    "theta_true_rad",
+    "theta_dot_true_rad_s",
+    "z_true",
+    "current_true_a",
+    "torque_true_nm",
+)
 #: rows per preallocated block (65536 rows x 8 float64 = 4 MiB, about a minute at 1 kHz)
 BLOCK_ROWS = 65536
 _INTEGER = {"seq", "device_time_us"}
@@ -57,8 +65,10 @@ class TruthLog:
     def columns(self) -> dict[str, np.ndarray]:
         """The rows so far as columns (``seq`` and ``device_time_us`` as int64)."""
         data = np.concatenate([*self._blocks[:-1], self._blocks[-1][: self._n]])
-        return {name: (data[:, k].astype(np.int64) if name in _INTEGER else data[:, k].copy())
-                for k, name in enumerate(TRUTH_COLUMNS)}
+        return {
+            name: (data[:, k].astype(np.int64) if name in _INTEGER else data[:, k].copy())
+            for k, name in enumerate(TRUTH_COLUMNS)
+        }
 
     def write_csv(self, path: str | Path) -> Path:
         """Write the rows to ``path`` as CSV (header :data:`TRUTH_COLUMNS`; written whole, then renamed)."""
@@ -87,5 +97,6 @@ def read_truth_csv(path: str | Path) -> dict[str, np.ndarray]:
         raise DataFileError(f"{path}: expected the truth columns {','.join(TRUTH_COLUMNS)}, got {','.join(header)}")
     if data.size == 0:
         data = np.empty((0, len(TRUTH_COLUMNS)))
-    return {name: (data[:, k].astype(np.int64) if name in _INTEGER else data[:, k])
-            for k, name in enumerate(TRUTH_COLUMNS)}
+    return {
+        name: (data[:, k].astype(np.int64) if name in _INTEGER else data[:, k]) for k, name in enumerate(TRUTH_COLUMNS)
+    }

@@ -76,7 +76,7 @@ class SafetySupervisor:
         self._out = RigCommand(0.0)
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> "SafetySupervisor":
+    def from_config(cls, config: dict[str, Any]) -> SafetySupervisor:
         safety, rig = config["safety"], config["rig"]
         return cls(
             current_max_a=rig["current_max_a"],
@@ -127,7 +127,9 @@ class SafetySupervisor:
                 )
             return  # a stale sample is not judged again
         if sample.flags & self.fault_mask:
-            kinds = [name for bit, name in ((FLAG_FAULT, "fault"), (FLAG_OVERCURRENT, "overcurrent")) if sample.flags & bit]
+            kinds = [
+                name for bit, name in ((FLAG_FAULT, "fault"), (FLAG_OVERCURRENT, "overcurrent")) if sample.flags & bit
+            ]
             self._trip(t_ns, "device_fault", f"device reports {' and '.join(kinds)} (flags 0x{sample.flags:02x})")
         limit = self.angle_limit_rad
         if limit is not None:

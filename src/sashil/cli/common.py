@@ -6,8 +6,9 @@ import argparse
 import logging
 import math
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from sashil.config import Config, apply_params, load_config
 from sashil.errors import ConfigError
@@ -22,7 +23,9 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 def add_driver_options(parser: argparse.ArgumentParser) -> None:
     """``--driver`` and ``--port`` (every verb that talks to a rig)."""
     parser.add_argument("--driver", choices=("sim", "serial", "can"), help="override driver.name")
-    parser.add_argument("--port", metavar="PORT", help="pyserial URL/device path, or CAN channel (override driver.port)")
+    parser.add_argument(
+        "--port", metavar="PORT", help="pyserial URL/device path, or CAN channel (override driver.port)"
+    )
 
 
 def add_output_options(parser: argparse.ArgumentParser) -> None:
@@ -49,7 +52,11 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
     """``--rerun``, ``--rerun-connect``, ``--rerun-save`` (live view / recording) and ``--format``."""
     group = parser.add_argument_group("live view and output formats")
     group.add_argument("--rerun", action="store_true", help="spawn the rerun viewer and stream the run to it live")
-    group.add_argument("--rerun-connect", metavar="URL", help="stream to a running rerun viewer (e.g. rerun+http://127.0.0.1:9876/proxy)")
+    group.add_argument(
+        "--rerun-connect",
+        metavar="URL",
+        help="stream to a running rerun viewer (e.g. rerun+http://127.0.0.1:9876/proxy)",
+    )
     group.add_argument(
         "--rerun-save",
         nargs="?",
@@ -69,7 +76,9 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
 
 
 def wants_rerun(args: argparse.Namespace) -> bool:
-    return bool(getattr(args, "rerun", False) or getattr(args, "rerun_connect", None) or getattr(args, "rerun_save", None))
+    return bool(
+        getattr(args, "rerun", False) or getattr(args, "rerun_connect", None) or getattr(args, "rerun_save", None)
+    )
 
 
 def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str, folder: Path) -> Any:
@@ -119,7 +128,13 @@ def add_verbosity_options(parser: argparse.ArgumentParser) -> None:
 
 def setup_logging(args: argparse.Namespace) -> int:
     """Configure the ``sashil`` logger from ``--quiet``/``--verbose``; returns the level."""
-    level = logging.WARNING if getattr(args, "quiet", False) else logging.DEBUG if getattr(args, "verbose", False) else logging.INFO
+    level = (
+        logging.WARNING
+        if getattr(args, "quiet", False)
+        else logging.DEBUG
+        if getattr(args, "verbose", False)
+        else logging.INFO
+    )
     logger = logging.getLogger("sashil")
     logger.setLevel(level)
     if not any(getattr(h, "_sashil", False) for h in logger.handlers):

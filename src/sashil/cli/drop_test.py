@@ -14,11 +14,11 @@ from sashil.cli.common import (
     add_verbosity_options,
     current_in_range,
     open_rerun,
+    positive_seconds,
+    resolve_config,
     say,
     setup_logging,
     wants_mat,
-    positive_seconds,
-    resolve_config,
 )
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
@@ -35,7 +35,9 @@ THETA0_LIMIT_DEG = 30.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
-    parser.add_argument("--theta0-deg", type=float, default=-5.0, metavar="DEG", help="hold angle before release [deg] (default -5)")
+    parser.add_argument(
+        "--theta0-deg", type=float, default=-5.0, metavar="DEG", help="hold angle before release [deg] (default -5)"
+    )
     parser.add_argument(
         "--current",
         type=float,
@@ -43,7 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="A",
         help="constant coil current [A], flowing before release; repeat for one sub-run each (default 0)",
     )
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)")
+    parser.add_argument(
+        "--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)"
+    )
     add_output_options(parser)
     add_recording_options(parser)
     add_verbosity_options(parser)
@@ -92,7 +96,10 @@ def run(args: argparse.Namespace) -> int:
         if wants_mat(args):
             write_mat(target.file("data.mat"), record.columns, {"verb": "drop-test", "current_a": current})
         if live is not None:
-            live.note(live_offset_s, f"drop test from {args.theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)")
+            live.note(
+                live_offset_s,
+                f"drop test from {args.theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)",
+            )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
         metrics = record.metrics.as_dict()
@@ -103,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
             "release_estimated": record.release_estimated,
             "folder": "." if not several else _label(current),
             **metrics,
-            "timing": record.loop.timing.summary() if record.loop is not None and record.loop.timing is not None else None,
+            "timing": record.loop.timing.summary()
+            if record.loop is not None and record.loop.timing is not None
+            else None,
             "trips": record.loop.trips if record.loop is not None else [],
             "link": record.extra.get("link"),
             "realtime": record.extra.get("realtime"),
@@ -123,7 +132,10 @@ def run(args: argparse.Namespace) -> int:
         peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
         settle = entry["settling_time_s"]
         settle_text = "not within the record" if settle is None else f"{settle:.3f} s"
-        say(args, f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}")
+        say(
+            args,
+            f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}",
+        )
     plot = plot_angle_overlay(
         folder.file("drop_test.png"),
         overlay,
@@ -133,7 +145,9 @@ def run(args: argparse.Namespace) -> int:
     if live is not None:
         live.close()
     driver = config["driver"]
-    clock = "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"  # timing is simulated on the virtual clock
+    clock = (
+        "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"
+    )  # timing is simulated on the virtual clock
     summary = {"exit_status": exit_status, "verb": "drop-test", "driver": driver["name"], "clock": clock, "runs": runs}
     if failure is not None:
         summary.update(error=str(failure), exit_code=failure.exit_code)

@@ -16,24 +16,46 @@ EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --rele
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
-    parser.add_argument("--transport", choices=("serial", "slcan"), default="serial",
-                        help="sashil serial frames, or an SLCAN (LAWICEL) CAN adapter (default serial)")
-    parser.add_argument("--rate", type=float, metavar="HZ",
-                        help="fixed device sample rate; a host asking for another is refused (default: the host's)")
+    parser.add_argument(
+        "--transport",
+        choices=("serial", "slcan"),
+        default="serial",
+        help="sashil serial frames, or an SLCAN (LAWICEL) CAN adapter (default serial)",
+    )
+    parser.add_argument(
+        "--rate",
+        type=float,
+        metavar="HZ",
+        help="fixed device sample rate; a host asking for another is refused (default: the host's)",
+    )
     parser.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pty")
-    parser.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (default: until SIGINT/SIGTERM)")
-    parser.add_argument("--truth", metavar="FILE",
-                        help="ground truth: write FILE (CSV) on exit with one row per sample sent: seq (as on the wire), "
-                             "device_time_us, plant_time_s and the plant's true theta_true_rad, theta_dot_true_rad_s, "
-                             "z_true, current_true_a, torque_true_nm; join with the host's data.csv on seq")
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="exit after S seconds (default: until SIGINT/SIGTERM)"
+    )
+    parser.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="ground truth: write FILE (CSV) on exit with one row per sample sent: seq (as on the wire), "
+        "device_time_us, plant_time_s and the plant's true theta_true_rad, theta_dot_true_rad_s, "
+        "z_true, current_true_a, torque_true_nm; join with the host's data.csv on seq",
+    )
     op = parser.add_argument_group("operator (drop test)")
     op.add_argument("--hold-deg", type=float, metavar="DEG", help="hold the arm at DEG when the host connects")
     op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
-    parser.add_argument("--priority", type=int, default=60, metavar="P",
-                        help="SCHED_FIFO priority of the emulator, best effort (default 60, above the loop's 50)")
+    parser.add_argument(
+        "--priority",
+        type=int,
+        default=60,
+        metavar="P",
+        help="SCHED_FIFO priority of the emulator, best effort (default 60, above the loop's 50)",
+    )
     faults = parser.add_argument_group("fault injection (times count from the host's Configure)")
-    faults.add_argument("--drop-rate", type=float, default=0.0, metavar="P", help="drop outgoing frames with probability P")
-    faults.add_argument("--corrupt-rate", type=float, default=0.0, metavar="P", help="send frames with a bad CRC with probability P")
+    faults.add_argument(
+        "--drop-rate", type=float, default=0.0, metavar="P", help="drop outgoing frames with probability P"
+    )
+    faults.add_argument(
+        "--corrupt-rate", type=float, default=0.0, metavar="P", help="send frames with a bad CRC with probability P"
+    )
     faults.add_argument("--latency-ms", type=float, default=0.0, metavar="MS", help="delay every outgoing frame")
     faults.add_argument("--stall-after", type=float, metavar="S", help="go silent after S seconds")
     faults.add_argument("--disconnect-after", type=float, metavar="S", help="close the link after S seconds and exit")

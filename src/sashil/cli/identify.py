@@ -18,13 +18,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", metavar="RUN", help="data.csv files (or run folders holding one)")
     parser.add_argument("--model", choices=MODEL_CHOICES, default="bouc-wen", help="model to fit, or all to rank them")
     parser.add_argument("--out", metavar="FILE", default="params.yaml", help="parameter file to write (best model)")
-    parser.add_argument("--passive", action="store_true", help="runs at one current: fix the current terms (c2, alpha2, ...) at 0")
-    parser.add_argument("--two-stage", action="store_true", help="seed 000 procedure: linear part with Coulomb friction first")
+    parser.add_argument(
+        "--passive", action="store_true", help="runs at one current: fix the current terms (c2, alpha2, ...) at 0"
+    )
+    parser.add_argument(
+        "--two-stage", action="store_true", help="seed 000 procedure: linear part with Coulomb friction first"
+    )
     parser.add_argument("--inertia", type=float, default=1.0, metavar="J", help="arm inertia J (fixed; default 1)")
-    parser.add_argument("--start", choices=("rest", "moving"), default="rest",
-                        help="runs start at rest (drop tests) or moving (v0 from the first 20 ms)")
-    parser.add_argument("--delta", type=float, metavar="VALUE",
-                        help="write Bouc-Wen with this delta (z scale) instead of the unit z bound")
+    parser.add_argument(
+        "--start",
+        choices=("rest", "moving"),
+        default="rest",
+        help="runs start at rest (drop tests) or moving (v0 from the first 20 ms)",
+    )
+    parser.add_argument(
+        "--delta",
+        type=float,
+        metavar="VALUE",
+        help="write Bouc-Wen with this delta (z scale) instead of the unit z bound",
+    )
     parser.add_argument("--plot", metavar="PNG", help="overlay plot (default: next to --out, *_fit.png)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the global search")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -39,7 +51,12 @@ def run(args: argparse.Namespace) -> int:
     from sashil.identify.data import load_records
     from sashil.identify.fit import FitOptions, fit_model
     from sashil.identify.report import (
-        comparison_table, format_result, overlay_plot, param_document, ranked, write_params,
+        comparison_table,
+        format_result,
+        overlay_plot,
+        param_document,
+        ranked,
+        write_params,
     )
 
     if not (args.inertia > 0):
@@ -49,11 +66,17 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.exists():
         raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
-    records = load_records([_data_path(r) for r in args.runs], need_current_change=not args.passive,
-                           start_at_rest=args.start == "rest")
+    records = load_records(
+        [_data_path(r) for r in args.runs], need_current_change=not args.passive, start_at_rest=args.start == "rest"
+    )
     names = ["bouc-wen", "dahl", "lugre", "bingham"] if args.model == "all" else [args.model]
-    options = FitOptions(passive=args.passive, two_stage=args.two_stage, J=args.inertia, seed=args.seed,
-                         progress=not args.quiet and sys.stderr.isatty())
+    options = FitOptions(
+        passive=args.passive,
+        two_stage=args.two_stage,
+        J=args.inertia,
+        seed=args.seed,
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
     results = []
     for name in names:
         result = fit_model(name, records, options)

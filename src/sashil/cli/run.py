@@ -15,11 +15,11 @@ from sashil.cli.common import (
     add_verbosity_options,
     current_in_range,
     open_live_tap,
+    positive_seconds,
+    resolve_config,
     say,
     setup_logging,
     wants_mat,
-    positive_seconds,
-    resolve_config,
 )
 from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
@@ -91,8 +91,11 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
         raise ConfigError(f"--current: only for --controller passive (got --controller {name})")
     if name == "passive":
         configured = section.get("current_a", 0.0) if isinstance(section, dict) else 0.0
-        value = current_in_range("--current" if current is not None else "controller.current_a",
-                                 configured if current is None else current, config)
+        value = current_in_range(
+            "--current" if current is not None else "controller.current_a",
+            configured if current is None else current,
+            config,
+        )
         return f"passive {value:g} A", ConstantCurrent(value)
     make_controller = _registry_make_controller()
     if make_controller is None:
@@ -115,8 +118,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:  # progress of the run on stderr (a bar on a terminal, a line every 10 s otherwise)
         live = SessionHooks(live, RunProgress(duration, rate))
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-    say(args, f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
-        f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}")
+    say(
+        args,
+        f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
+        f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+    )
     quiet = bool(args.quiet)  # --quiet: warnings (overruns) only, not the real-time set-up lines
     report = lambda line: None if quiet and line.startswith("realtime:") else print(line, file=sys.stderr, flush=True)  # noqa: E731
     outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)

@@ -18,12 +18,18 @@ EXAMPLE = "sashil simulate --params params.yaml --input runs/a/data.csv --out ru
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_output_options(parser)
-    parser.add_argument("--input", metavar="CSV", help="inputs: time_s, current_a (or current_cmd_a), optional "
-                        "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared")
+    parser.add_argument(
+        "--input",
+        metavar="CSV",
+        help="inputs: time_s, current_a (or current_cmd_a), optional "
+        "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared",
+    )
     parser.add_argument("--theta0-deg", type=float, default=-5.0, help="drop test without --input: initial angle")
     parser.add_argument("--current", type=float, default=0.0, help="drop test without --input: coil current [A]")
     parser.add_argument("--duration", type=float, default=10.0, help="drop test without --input: seconds")
-    parser.add_argument("--start", choices=("rest", "moving"), default="rest", help="the input starts at rest or moving")
+    parser.add_argument(
+        "--start", choices=("rest", "moving"), default="rest", help="the input starts at rest or moving"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,7 +72,10 @@ def run(args: argparse.Namespace) -> int:
         summary["nrmse"] = nrmse(columns["theta_rad"], measured)
     _plot(folder.file("theta.png"), columns, model)
     folder.write_summary(summary)
-    print(f"simulated {model} on {source}: {folder.path}" + (f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else ""))
+    print(
+        f"simulated {model} on {source}: {folder.path}"
+        + (f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else "")
+    )
     return 0
 
 

@@ -7,8 +7,19 @@ import copy
 import math
 import sys
 
-from sashil.cli.common import add_config_options, add_driver_options, add_output_options, current_in_range, positive_seconds, resolve_config
-from sashil.cli.common import add_recording_options, add_verbosity_options, open_rerun, setup_logging, wants_mat
+from sashil.cli.common import (
+    add_config_options,
+    add_driver_options,
+    add_output_options,
+    add_recording_options,
+    add_verbosity_options,
+    current_in_range,
+    open_rerun,
+    positive_seconds,
+    resolve_config,
+    setup_logging,
+    wants_mat,
+)
 from sashil.control.registry import LAWS, make_controller
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import SWEEP_COLUMNS, ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
@@ -25,15 +36,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
     parser.add_argument("--f-start", type=float, default=0.5, metavar="HZ", help="start frequency [Hz] (default 0.5)")
-    parser.add_argument("--f-stop", type=float, default=5.0, metavar="HZ",
-                        help="stop frequency [Hz] (default 5; equal to --f-start: a sine at that frequency)")
+    parser.add_argument(
+        "--f-stop",
+        type=float,
+        default=5.0,
+        metavar="HZ",
+        help="stop frequency [Hz] (default 5; equal to --f-start: a sine at that frequency)",
+    )
     parser.add_argument("--duration", type=float, default=30.0, metavar="S", help="chirp length [s] (default 30)")
-    parser.add_argument("--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)")
+    parser.add_argument(
+        "--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)"
+    )
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--controller", metavar="LAW", help=f"semi-active law ({', '.join(LAWS)}); default controller.law")
+    group.add_argument(
+        "--controller", metavar="LAW", help=f"semi-active law ({', '.join(LAWS)}); default controller.law"
+    )
     group.add_argument("--current", type=float, metavar="A", help="passive constant current instead of a law")
-    parser.add_argument("--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)")
-    parser.add_argument("--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)")
+    parser.add_argument(
+        "--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)"
+    )
+    parser.add_argument(
+        "--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)"
+    )
     add_output_options(parser)
     add_recording_options(parser)  # live view / data.mat of the chirp's data.csv
     add_verbosity_options(parser)
@@ -42,11 +66,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
     for option, value in (("--f-start", args.f_start), ("--f-stop", args.f_stop)):
         if not (math.isfinite(value) and 0.0 < value <= config["loop"]["rate_hz"] / 10):
-            raise ConfigError(f"{option}: expected a frequency in (0, {config['loop']['rate_hz'] / 10:g}] Hz, got {value:g}")
+            raise ConfigError(
+                f"{option}: expected a frequency in (0, {config['loop']['rate_hz'] / 10:g}] Hz, got {value:g}"
+            )
     if args.f_stop < args.f_start:
-        raise ConfigError(f"--f-stop: expected a frequency at or above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
+        raise ConfigError(
+            f"--f-stop: expected a frequency at or above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}"
+        )
     if args.stepped and args.f_stop == args.f_start:
-        raise ConfigError(f"--f-stop: a stepped sine needs a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}")
+        raise ConfigError(
+            f"--f-stop: a stepped sine needs a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}"
+        )
     config = copy.deepcopy(config)
     if args.amplitude_deg is not None:
         if not (math.isfinite(args.amplitude_deg) and 0.0 < args.amplitude_deg <= 20.0):
@@ -90,7 +120,11 @@ def run(args: argparse.Namespace) -> int:
     duration = positive_seconds("--duration", args.duration)
     name, config = _check(args, config)
     folder = RunFolder.create(args.out, "sweep")
-    live = None if args.stepped else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+    live = (
+        None
+        if args.stepped
+        else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+    )
     folder.write_config(config)
     label = name if args.current is None else f"passive {args.current:g} A"
     sweep = config["sweep"]
@@ -110,22 +144,35 @@ def run(args: argparse.Namespace) -> int:
         lines = ["frequency_hz,body_rms_rad,road_rms_rad,transmissibility,observer_nrmse,clipped_cycles"]
         print(f"{'f [Hz]':>8} {'body RMS [deg]':>15} {'transmissibility':>17} {'observer NRMSE':>15}")
         for p in points:
-            lines.append(f"{p.frequency_hz!r},{p.body_rms_rad!r},{p.road_rms_rad!r},{p.transmissibility!r},{p.observer_nrmse!r},{p.clipped_cycles}")
-            print(f"{p.frequency_hz:8.3f} {math.degrees(p.body_rms_rad):15.4f} {p.transmissibility:17.4f} {100 * p.observer_nrmse:14.1f}%")
+            lines.append(
+                f"{p.frequency_hz!r},{p.body_rms_rad!r},{p.road_rms_rad!r},{p.transmissibility!r},{p.observer_nrmse!r},{p.clipped_cycles}"
+            )
+            print(
+                f"{p.frequency_hz:8.3f} {math.degrees(p.body_rms_rad):15.4f} {p.transmissibility:17.4f} {100 * p.observer_nrmse:14.1f}%"
+            )
         folder._write_text("transmissibility.csv", "\n".join(lines) + "\n")
         _plot(folder, points, label)
         integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
         print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
-        summary = {"exit_status": "ok", "mode": "stepped", "controller": label,
-                   "integrated_body_rms_rad": integrated,
-                   "points": [p.__dict__ for p in points]}
+        summary = {
+            "exit_status": "ok",
+            "mode": "stepped",
+            "controller": label,
+            "integrated_body_rms_rad": integrated,
+            "points": [p.__dict__ for p in points],
+        }
     else:
         amplitude = math.radians(sweep["amplitude_deg"])
         controller = make_controller(name, config)
         total = duration + sweep["ramp_s"]
         try:  # data.csv is written however the run ends
-            cols = run_profile(config, controller, chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]),
-                               total, keep=folder.write_data)
+            cols = run_profile(
+                config,
+                controller,
+                chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]),
+                total,
+                keep=folder.write_data,
+            )
         except SashilError as err:
             _write_failed(folder, err, {"mode": "chirp", "controller": label})
             raise
@@ -138,13 +185,20 @@ def run(args: argparse.Namespace) -> int:
             live.log_columns(shown)
             live.close()
         body = cols["theta_rad"] + cols["theta_road_rad"]
-        summary = {"exit_status": "ok", "mode": "chirp", "controller": label,
-                   "body_rms_rad": ac_rms(body), "road_rms_rad": ac_rms(cols["theta_road_rad"]),
-                   "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),
-                   "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
-                   "clipped_cycles": int(getattr(controller, "clip_count", 0))}
-        print(f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
-              f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg")
+        summary = {
+            "exit_status": "ok",
+            "mode": "chirp",
+            "controller": label,
+            "body_rms_rad": ac_rms(body),
+            "road_rms_rad": ac_rms(cols["theta_road_rad"]),
+            "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),
+            "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
+            "clipped_cycles": int(getattr(controller, "clip_count", 0)),
+        }
+        print(
+            f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
+            f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg"
+        )
     _write_summary(folder, summary)
     print(f"run folder: {folder.path}")
     return 0
@@ -152,6 +206,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_summary(folder: RunFolder, summary: dict) -> None:
     """summary.json with NaN as null (JSON has no NaN)."""
+
     def finite(items: dict) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in items.items()}
 

@@ -14,7 +14,7 @@ from sashil.errors import ConfigError
 
 Config = dict[str, Any]
 
-__all__ = ["Config", "default_config", "load_config", "load_params", "apply_params", "dump_config"]
+__all__ = ["Config", "apply_params", "default_config", "dump_config", "load_config", "load_params"]
 
 
 def default_config() -> Config:

@@ -7,8 +7,9 @@ Validation errors are one line that names the file, the dotted key and what was 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from sashil.errors import ConfigError
 

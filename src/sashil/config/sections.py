@@ -33,9 +33,7 @@ MODEL = Section(
     },
     doc="the rig and damper model (same shape as the parameter file `sashil identify` writes)",
 )
-MODEL.fields["params"].fields.update(
-    {key: Field("float", value) for key, value in BOUC_WEN_SEED.items()}
-)
+MODEL.fields["params"].fields.update({key: Field("float", value) for key, value in BOUC_WEN_SEED.items()})
 
 RIG = Section(
     {
@@ -58,13 +56,17 @@ DRIVER = Section(
         "clock": Field("choice", "virtual", choices=("virtual", "real"), doc="sim backend only"),
         # serial and can backends (drivers/protocol.md)
         "baud": Field("int", 1_000_000, low=1200, high=100_000_000, doc="serial line rate (ignored by ptys)"),
-        "can_interface": Field("str", "slcan", doc="python-can interface: socketcan, pcan, kvaser, slcan, virtual, ..."),
+        "can_interface": Field(
+            "str", "slcan", doc="python-can interface: socketcan, pcan, kvaser, slcan, virtual, ..."
+        ),
         "can_bitrate": Field("int", 1_000_000, low=10_000, high=1_000_000),
         "can_options": Section({}, open_keys=True),  # extra keyword arguments for can.Bus
         "pacing": Field("choice", "device", choices=("device", "host"), doc="who times the samples"),
         "watchdog_ms": Field("int", 50, low=1, high=60_000, doc="device cuts to 0 A without a command this long"),
         "sample_timeout_ms": Field("float", 2.5, low=0.1, high=10_000.0, doc="0 A after this long without a sample"),
-        "link_lost_ms": Field("float", 25.0, low=0.0, high=60_000.0, doc="the run ends after this long without a sample"),
+        "link_lost_ms": Field(
+            "float", 25.0, low=0.0, high=60_000.0, doc="the run ends after this long without a sample"
+        ),
         "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
     },
     doc="which backend talks to the rig",
@@ -73,17 +75,27 @@ DRIVER = Section(
 LOOP = Section(
     {
         "rate_hz": Field("float", 1000.0, low=0.0, low_open=True, high=20000.0),
-        "spin_margin_us": Field("float", 200.0, low=0.0, high=100000.0, doc="sleep to this before a deadline, then spin (0: no spin)"),
-        "overrun_policy": Field("choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"),
+        "spin_margin_us": Field(
+            "float", 200.0, low=0.0, high=100000.0, doc="sleep to this before a deadline, then spin (0: no spin)"
+        ),
+        "overrun_policy": Field(
+            "choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"
+        ),
         "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
         "rt": Section(
             {
                 "priority": Field("int", 50, low=0, high=99, doc="SCHED_FIFO priority (0: leave the scheduler alone)"),
                 "cpu": Field("int?", None, low=0, high=4095, doc="pin the loop thread to this CPU (null: no pinning)"),
                 "mlockall": Field("bool", True, doc="lock the process memory (no page faults in the loop)"),
-                "gc": Field("choice", "disable", choices=("disable", "freeze", "none"), doc="garbage collector during the run"),
-                "timer_slack_ns": Field("int", 1, low=0, high=10_000_000, doc="PR_SET_TIMERSLACK of the loop thread (0: leave)"),
-                "gil_switch_us": Field("int", 100, low=0, high=100_000, doc="interpreter thread switch interval during the run (0: leave)"),
+                "gc": Field(
+                    "choice", "disable", choices=("disable", "freeze", "none"), doc="garbage collector during the run"
+                ),
+                "timer_slack_ns": Field(
+                    "int", 1, low=0, high=10_000_000, doc="PR_SET_TIMERSLACK of the loop thread (0: leave)"
+                ),
+                "gil_switch_us": Field(
+                    "int", 100, low=0, high=100_000, doc="interpreter thread switch interval during the run (0: leave)"
+                ),
             },
             doc="best-effort real-time set-up; each step's outcome is reported, none is fatal",
         ),
@@ -95,7 +107,9 @@ SAFETY = Section(
     {
         "angle_interlock": Field("bool", True, doc="trip when |theta| exceeds rig.angle_limit_deg"),
         "slew_a_per_s": Field("float", 0.0, low=0.0, doc="largest current change per second (0: no slew limit)"),
-        "sensor_timeout_cycles": Field("int", 20, low=1, high=1_000_000, doc="trip after this many cycles without a fresh sample"),
+        "sensor_timeout_cycles": Field(
+            "int", 20, low=1, high=1_000_000, doc="trip after this many cycles without a fresh sample"
+        ),
         "trip_on_device_fault": Field("bool", True, doc="trip when the device reports a fault or overcurrent flag"),
     },
     doc="the host-side safety supervisor (current clamp [0, rig.current_max_a] is always on)",
@@ -120,35 +134,70 @@ CONTROLLER = Section(
         "law": Field("choice", "passive", choices=CONTROL_LAWS, doc="the semi-active law (or --controller)"),
         "current_a": Field("float", 0.0, low=0.0, high=10.0, doc="passive: the constant current"),
         "c_target": Field("float?", None, low=0.0, low_open=True, doc="target-damping: linear damping [N m s/rad]"),
-        "zeta": Field("float?", None, low=0.0, low_open=True, high=10.0, doc="target-damping: damping ratio instead of c_target"),
+        "zeta": Field(
+            "float?", None, low=0.0, low_open=True, high=10.0, doc="target-damping: damping ratio instead of c_target"
+        ),
         "c_sky": Field("float?", None, low=0.0, low_open=True, doc="skyhook: sky damping [N m s/rad]"),
-        "crossover_hz": Field("float?", None, low=0.0, low_open=True, high=500.0, doc="skyhook-add: crossover (null: sqrt(2) x natural frequency)"),
+        "crossover_hz": Field(
+            "float?",
+            None,
+            low=0.0,
+            low_open=True,
+            high=500.0,
+            doc="skyhook-add: crossover (null: sqrt(2) x natural frequency)",
+        ),
         "c_ground": Field("float?", None, low=0.0, low_open=True, doc="groundhook: ground damping [N m s/rad]"),
-        "onoff_current_a": Field("float?", None, low=0.0, high=10.0, doc="skyhook-onoff: the 'on' current (null: rig.current_max_a)"),
-        "tracking_bandwidth_hz": Field("float", 2.0, low=0.0, low_open=True, high=500.0, doc="torque-tracking: bandwidth of the random T*"),
-        "tracking_fraction": Field("float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"),
+        "onoff_current_a": Field(
+            "float?", None, low=0.0, high=10.0, doc="skyhook-onoff: the 'on' current (null: rig.current_max_a)"
+        ),
+        "tracking_bandwidth_hz": Field(
+            "float", 2.0, low=0.0, low_open=True, high=500.0, doc="torque-tracking: bandwidth of the random T*"
+        ),
+        "tracking_fraction": Field(
+            "float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"
+        ),
         "tracking_seed": Field("int", 0, low=0),
-        "estimator_bandwidth_hz": Field("float", 10.0, low=0.0, low_open=True, high=1000.0, doc="relative-angle alpha-beta filter"),
-        "estimator_order": Field("int", 2, low=2, high=3, doc="2: alpha-beta (+model), 3: alpha-beta-gamma (+model error)"),
-        "road_bandwidth_hz": Field("float", 30.0, low=0.0, low_open=True, high=1000.0, doc="road-angle alpha-beta-gamma filter"),
+        "estimator_bandwidth_hz": Field(
+            "float", 10.0, low=0.0, low_open=True, high=1000.0, doc="relative-angle alpha-beta filter"
+        ),
+        "estimator_order": Field(
+            "int", 2, low=2, high=3, doc="2: alpha-beta (+model), 3: alpha-beta-gamma (+model error)"
+        ),
+        "road_bandwidth_hz": Field(
+            "float", 30.0, low=0.0, low_open=True, high=1000.0, doc="road-angle alpha-beta-gamma filter"
+        ),
         "model_aided": Field("bool", True, doc="feed the rig model's acceleration to the rate estimator"),
-        "inverse": Field("choice", "full", choices=("full", "viscous"), doc="full Bouc-Wen inverse, or viscous-only (alpha ignored)"),
-        "min_authority_nm_per_a": Field("float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"),
+        "inverse": Field(
+            "choice", "full", choices=("full", "viscous"), doc="full Bouc-Wen inverse, or viscous-only (alpha ignored)"
+        ),
+        "min_authority_nm_per_a": Field(
+            "float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"
+        ),
         "lead_horizon_s": Field("float", 0.003, low=0.0, high=1.0, doc="coil-lag compensation horizon (0: off)"),
-        "coil_tau_s": Field("float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"),
+        "coil_tau_s": Field(
+            "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
+        ),
     },
     doc="the semi-active controller: estimator, Bouc-Wen observer, law, inverse (issue 5)",
 )
 
 MISMATCH = Section(
     {
-        "fraction": Field("float", 0.0, low=0.0, high=0.9, doc="each Bouc-Wen parameter of the simulated plant off by this fraction"),
-        "pattern": Field("choice", "alternate", choices=("alternate", "plus", "minus", "random"),
-                         doc="signs of the offsets in J,k,c1,c2,alpha1,alpha2,beta,gamma,delta,n order"),
+        "fraction": Field(
+            "float", 0.0, low=0.0, high=0.9, doc="each Bouc-Wen parameter of the simulated plant off by this fraction"
+        ),
+        "pattern": Field(
+            "choice",
+            "alternate",
+            choices=("alternate", "plus", "minus", "random"),
+            doc="signs of the offsets in J,k,c1,c2,alpha1,alpha2,beta,gamma,delta,n order",
+        ),
         "seed": Field("int", 0, low=0, doc="pattern random: seed of the signs"),
         "params": Section({}, open_keys=True, doc="per-parameter fractions, e.g. {c1: 0.1} (override fraction)"),
         "coil_tau": Field("float", 0.0, low=-0.9, high=10.0, doc="plant coil lag = rig.coil_tau_s * (1 + this)"),
-        "encoder_counts_per_rev": Field("int?", None, low=16, high=2**31 - 1, doc="plant encoder quantisation (null: rig's)"),
+        "encoder_counts_per_rev": Field(
+            "int?", None, low=16, high=2**31 - 1, doc="plant encoder quantisation (null: rig's)"
+        ),
         "angle_noise_rad": Field("float?", None, low=0.0, high=1.0, doc="plant angle noise (null: rig's)"),
         "current_noise_a": Field("float?", None, low=0.0, high=1.0, doc="plant current-sensor noise (null: rig's)"),
     },
@@ -159,8 +208,12 @@ SWEEP = Section(
     {
         "amplitude_deg": Field("float", 1.0, low=0.0, low_open=True, high=20.0, doc="road-side amplitude of theta1"),
         "ramp_s": Field("float", 1.0, low=0.0, high=60.0, doc="raised-cosine amplitude ramp at the start"),
-        "settle_s": Field("float", 6.0, low=0.0, high=600.0, doc="stepped sine: time before measuring at each frequency"),
-        "measure_s": Field("float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"),
+        "settle_s": Field(
+            "float", 6.0, low=0.0, high=600.0, doc="stepped sine: time before measuring at each frequency"
+        ),
+        "measure_s": Field(
+            "float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"
+        ),
         "steps": Field("int", 10, low=2, high=1000, doc="stepped sine: number of frequencies"),
         "spacing": Field("choice", "linear", choices=("linear", "log")),
     },

@@ -55,7 +55,7 @@ from sashil.drivers.interface import TWO_PI, RigSample
 class TrackingFilter:
     """One angle channel: angle, rate (and with ``order=3`` acceleration) from quantised samples."""
 
-    __slots__ = ("bandwidth_hz", "order", "x", "v", "a", "_dt", "_g", "_h", "_k", "started")
+    __slots__ = ("_dt", "_g", "_h", "_k", "a", "bandwidth_hz", "order", "started", "v", "x")
 
     def __init__(self, bandwidth_hz: float = 10.0, order: int = 2):
         if not bandwidth_hz > 0.0:
@@ -145,11 +145,25 @@ class RigEstimator:
     resonance) while the road moves a lot.
     """
 
-    __slots__ = ("relative", "road", "body", "theta_rad", "theta_dot_rad_s", "theta_road_rad", "road_dot_rad_s",
-                 "road_ddot_rad_s2", "body_dot_rad_s")
+    __slots__ = (
+        "body",
+        "body_dot_rad_s",
+        "relative",
+        "road",
+        "road_ddot_rad_s2",
+        "road_dot_rad_s",
+        "theta_dot_rad_s",
+        "theta_rad",
+        "theta_road_rad",
+    )
 
-    def __init__(self, bandwidth_hz: float = 10.0, road_bandwidth_hz: float = 30.0, body_bandwidth_hz: float | None = None,
-                 order: int = 2):
+    def __init__(
+        self,
+        bandwidth_hz: float = 10.0,
+        road_bandwidth_hz: float = 30.0,
+        body_bandwidth_hz: float | None = None,
+        order: int = 2,
+    ):
         self.relative = TrackingFilter(bandwidth_hz, order=order)
         self.road = TrackingFilter(road_bandwidth_hz, order=3)
         self.body = TrackingFilter(body_bandwidth_hz or bandwidth_hz, order=order)

@@ -29,10 +29,24 @@ from sashil.models.hysteresis import BoucWenParams
 class HysteresisInverse:
     """T* -> i* for the Bouc-Wen damper (per-cycle, plain floats, no allocation)."""
 
-    __slots__ = ("a1", "a2", "c1", "c2", "i_max", "min_authority", "viscous_only", "band_lo_nm", "band_hi_nm",
-                 "clipped", "clip_count", "passive_count")
+    __slots__ = (
+        "a1",
+        "a2",
+        "band_hi_nm",
+        "band_lo_nm",
+        "c1",
+        "c2",
+        "clip_count",
+        "clipped",
+        "i_max",
+        "min_authority",
+        "passive_count",
+        "viscous_only",
+    )
 
-    def __init__(self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, viscous_only: bool = False):
+    def __init__(
+        self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, viscous_only: bool = False
+    ):
         self.a1, self.a2, self.c1, self.c2 = params.alpha1, params.alpha2, params.c1, params.c2
         self.i_max = float(i_max)
         self.min_authority = float(min_authority_nm_per_a)
@@ -79,7 +93,7 @@ class HysteresisInverse:
 class CoilLagCompensator:
     """Lead for the coil's first-order lag: reach the target current within ``horizon_s``."""
 
-    __slots__ = ("tau_s", "horizon_s", "i_max", "gain")
+    __slots__ = ("gain", "horizon_s", "i_max", "tau_s")
 
     def __init__(self, tau_s: float, horizon_s: float, i_max: float):
         self.tau_s = float(tau_s)

@@ -22,7 +22,8 @@ inside the feasible band; the inverse (:mod:`sashil.control.inverse`) clips and 
 from __future__ import annotations
 
 import math
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -141,8 +142,12 @@ class TorqueTracking(Law):
 
     name = "torque-tracking"
 
-    def __init__(self, torque: Callable[[float], float] | None = None, fraction: np.ndarray | None = None,
-                 rate_hz: float = 1000.0):
+    def __init__(
+        self,
+        torque: Callable[[float], float] | None = None,
+        fraction: np.ndarray | None = None,
+        rate_hz: float = 1000.0,
+    ):
         if (torque is None) == (fraction is None):
             raise ValueError("torque-tracking needs exactly one of a torque signal T*(t) or a band fraction table")
         self.torque = torque

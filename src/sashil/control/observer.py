@@ -19,7 +19,7 @@ from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 class BoucWenObserver:
     """z-hat and T-hat from the estimated angle, its rate and the measured current."""
 
-    __slots__ = ("params", "hysteresis", "z", "torque_nm", "_theta", "_started")
+    __slots__ = ("_started", "_theta", "hysteresis", "params", "torque_nm", "z")
 
     def __init__(self, params: BoucWenParams, z0: float = 0.0):
         self.params = params

@@ -8,7 +8,8 @@ run an unreachable *torque* is clipped to the feasible band and counted, never a
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sashil.config.sections import CONTROL_LAWS
 from sashil.control.controller import Controller
@@ -33,13 +34,13 @@ from sashil.models.registry import rig_params
 
 LAWS = CONTROL_LAWS
 
-__all__ = ["LAWS", "make_controller", "make_law", "controller_section"]
+__all__ = ["LAWS", "controller_section", "make_controller", "make_law"]
 
 
 def controller_section(config: dict[str, Any]) -> dict[str, Any]:
     """The config's ``controller`` section (defaults when a config predates it)."""
-    from sashil.config.sections import CONTROLLER
     from sashil.config.schema import defaults
+    from sashil.config.sections import CONTROLLER
 
     return {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
 
@@ -47,7 +48,9 @@ def controller_section(config: dict[str, Any]) -> dict[str, Any]:
 def _need(section: dict[str, Any], key: str, law: str, what: str) -> float:
     value = section.get(key)
     if value is None:
-        raise ConfigError(f"controller.{key}: law {law!r} needs {key} ({what}); set it in the config's controller: section")
+        raise ConfigError(
+            f"controller.{key}: law {law!r} needs {key} ({what}); set it in the config's controller: section"
+        )
     if not value > 0:
         raise ConfigError(f"controller.{key}: expected a number > 0 for law {law!r}, got {value!r}")
     return float(value)
@@ -67,12 +70,16 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
     if name == "passive":
         current = float(section.get("current_a") or 0.0)
         if not 0.0 <= current <= i_max:
-            raise ConfigError(f"controller.current_a: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {current:g}")
+            raise ConfigError(
+                f"controller.current_a: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {current:g}"
+            )
         return Passive(current)
     if name == "target-damping":
         c_target, zeta = section.get("c_target"), section.get("zeta")
         if c_target is None and zeta is None:
-            raise ConfigError("controller.zeta: law 'target-damping' needs zeta (damping ratio) or c_target (N m s/rad)")
+            raise ConfigError(
+                "controller.zeta: law 'target-damping' needs zeta (damping ratio) or c_target (N m s/rad)"
+            )
         if c_target is not None and zeta is not None:
             raise ConfigError("controller.c_target: give either c_target or zeta for law 'target-damping', not both")
         c_lo, c_hi = params.c1, params.c1 + params.c2 * i_max
@@ -109,8 +116,12 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
             )
         bandwidth = float(section.get("tracking_bandwidth_hz") or 2.0)
         if not 0.0 < bandwidth < rate_hz / 2:
-            raise ConfigError(f"controller.tracking_bandwidth_hz: expected a number in (0, {rate_hz / 2:g}) Hz, got {bandwidth:g}")
-        table = band_limited_fraction(bandwidth, fraction[0], fraction[1], int(section.get("tracking_seed") or 0), rate_hz)
+            raise ConfigError(
+                f"controller.tracking_bandwidth_hz: expected a number in (0, {rate_hz / 2:g}) Hz, got {bandwidth:g}"
+            )
+        table = band_limited_fraction(
+            bandwidth, fraction[0], fraction[1], int(section.get("tracking_seed") or 0), rate_hz
+        )
         return TorqueTracking(fraction=table, rate_hz=rate_hz)
     raise ConfigError(f"controller.law: unknown law {name!r} (known: {', '.join(LAWS)})")
 
@@ -142,10 +153,15 @@ def make_controller(
     tau = float(rig["coil_tau_s"] if tau is None else tau)
     return Controller(
         law=law,
-        estimator=RigEstimator(float(section["estimator_bandwidth_hz"]), float(section["road_bandwidth_hz"]),
-                               order=3 if section.get("estimator_order", 2) == 3 else 2),
+        estimator=RigEstimator(
+            float(section["estimator_bandwidth_hz"]),
+            float(section["road_bandwidth_hz"]),
+            order=3 if section.get("estimator_order", 2) == 3 else 2,
+        ),
         observer=BoucWenObserver(params),
-        inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"] == "viscous"),
+        inverse=HysteresisInverse(
+            params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"] == "viscous"
+        ),
         lead=CoilLagCompensator(tau, float(section["lead_horizon_s"]), i_max),
         current_max_a=i_max,
         model_aided=bool(section["model_aided"]),

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from sashil.drivers import open_rig
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
+from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
 from sashil.errors import DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
@@ -49,7 +49,9 @@ class DropTestSettings:
     known_release_after_s: float | None = None  # set when the backend plays the operator
 
     @classmethod
-    def from_config(cls, config: dict[str, Any], theta0_deg: float, current_a: float, duration_s: float) -> "DropTestSettings":
+    def from_config(
+        cls, config: dict[str, Any], theta0_deg: float, current_a: float, duration_s: float
+    ) -> DropTestSettings:
         drop = config["drop_test"]
         return cls(
             theta0_rad=math.radians(theta0_deg),
@@ -90,7 +92,9 @@ def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: fl
         slope, intercept = np.polyfit(t_rel, np.asarray(roots), 1)
         if slope > 0:
             estimate = ts[0] + int(round(-intercept / slope))
-            last_still = max((t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < 0.5 * resolution), default=None)
+            last_still = max(
+                (t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < 0.5 * resolution), default=None
+            )
             if last_still is None or estimate >= last_still:
                 return min(estimate, ts[0])
             return last_still
@@ -152,7 +156,10 @@ class DropTestPlan:
 
     def _wait_hold(self, t_ns: int, theta: float) -> None:
         if abs(theta - self.s.theta0_rad) <= self.s.hold_tolerance_rad:
-            if self._still_since is None or abs(theta - self._hold_sum / max(self._hold_count, 1)) > 2 * self.resolution:
+            if (
+                self._still_since is None
+                or abs(theta - self._hold_sum / max(self._hold_count, 1)) > 2 * self.resolution
+            ):
                 self._still_since, self._hold_sum, self._hold_count = t_ns, 0.0, 0
             self._hold_sum += theta
             self._hold_count += 1
@@ -187,8 +194,17 @@ class DropTestPlan:
         ctl = self.controller
         if ctl is None:
             return (t_ns, theta, road, current, self.s.current_a)
-        return (t_ns, theta, road, current, ctl.current_cmd_a, ctl.theta_dot_rad_s, ctl.z_hat,
-                ctl.torque_hat_nm, ctl.torque_cmd_nm)
+        return (
+            t_ns,
+            theta,
+            road,
+            current,
+            ctl.current_cmd_a,
+            ctl.theta_dot_rad_s,
+            ctl.z_hat,
+            ctl.torque_hat_nm,
+            ctl.torque_cmd_nm,
+        )
 
     def _record_cycle(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
         """Record this cycle (the common case, without building a row tuple)."""

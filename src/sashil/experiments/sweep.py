@@ -21,12 +21,13 @@ loop's real-time set-up, as a drop test does. Each row records the sample's sequ
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, TWO_PI
+from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import run_loop
@@ -34,8 +35,18 @@ from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.safety import SafetySupervisor
 
 #: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
-SWEEP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a", "theta_dot_rad_s",
-                 "z_hat", "torque_hat_nm", "torque_cmd_nm", "torque_true_nm")
+SWEEP_COLUMNS = (
+    "time_s",
+    "theta_rad",
+    "theta_road_rad",
+    "current_a",
+    "current_cmd_a",
+    "theta_dot_rad_s",
+    "z_hat",
+    "torque_hat_nm",
+    "torque_cmd_nm",
+    "torque_true_nm",
+)
 
 
 def _envelope(t: float, ramp_s: float) -> tuple[float, float, float]:
@@ -48,8 +59,12 @@ def _envelope(t: float, ramp_s: float) -> tuple[float, float, float]:
     return 0.5 - 0.5 * math.cos(w * t), 0.5 * w * math.sin(w * t), 0.5 * w * w * math.cos(w * t)
 
 
-def _profile(amplitude_rad: float, ramp_s: float, phase: Callable[[float], tuple[float, float, float]],
-             stop_s: float | None = None) -> RoadProfile:
+def _profile(
+    amplitude_rad: float,
+    ramp_s: float,
+    phase: Callable[[float], tuple[float, float, float]],
+    stop_s: float | None = None,
+) -> RoadProfile:
     """A(t)*sin(phi(t)) with A(t) = A*e(t): e ramps up over ``ramp_s`` and, from ``stop_s`` on,
     back down over ``ramp_s`` (the product rule gives the rate and acceleration)."""
 
@@ -66,7 +81,9 @@ def _profile(amplitude_rad: float, ramp_s: float, phase: Callable[[float], tuple
     return road
 
 
-def chirp_profile(amplitude_rad: float, f_start_hz: float, f_stop_hz: float, duration_s: float, ramp_s: float = 1.0) -> RoadProfile:
+def chirp_profile(
+    amplitude_rad: float, f_start_hz: float, f_stop_hz: float, duration_s: float, ramp_s: float = 1.0
+) -> RoadProfile:
     """theta1(t) = A*sin(2*pi*(f0*t + (f1 - f0)*t^2/(2*T))), frequency held at f1 after T."""
     rate = (f_stop_hz - f_start_hz) / duration_s
 
@@ -114,8 +131,20 @@ class SweepStage:
         if self._n < self._data.shape[0]:
             c = self.controller
             row = self._data[self._n]
-            row[0], row[1], row[2], row[3], row[4] = t, sample.theta_rad, sample.theta_road_rad, sample.current_a, cmd.current_a
-            row[5], row[6], row[7], row[8], row[9] = c.theta_dot_rad_s, c.z_hat, c.torque_hat_nm, c.torque_cmd_nm, true_torque
+            row[0], row[1], row[2], row[3], row[4] = (
+                t,
+                sample.theta_rad,
+                sample.theta_road_rad,
+                sample.current_a,
+                cmd.current_a,
+            )
+            row[5], row[6], row[7], row[8], row[9] = (
+                c.theta_dot_rad_s,
+                c.z_hat,
+                c.torque_hat_nm,
+                c.torque_cmd_nm,
+                true_torque,
+            )
             self._seq[self._n] = sample.seq
             self._n += 1
         return cmd
@@ -123,7 +152,10 @@ class SweepStage:
     def columns(self) -> dict[str, np.ndarray]:
         """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of the rows so far."""
         data = self._data[: self._n]
-        return {**{name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)}, "seq": self._seq[: self._n].copy()}
+        return {
+            **{name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)},
+            "seq": self._seq[: self._n].copy(),
+        }
 
 
 RigFactory = Callable[[dict, RoadProfile], RigInterface]
@@ -139,9 +171,15 @@ def _default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
     return open_rig(config)
 
 
-def run_profile(config: dict[str, Any], controller: Any, road: RoadProfile, duration_s: float,
-                rig_factory: RigFactory | None = None, clock: Clock | None = None,
-                keep: Callable[[dict[str, np.ndarray]], None] | None = None) -> dict[str, np.ndarray]:
+def run_profile(
+    config: dict[str, Any],
+    controller: Any,
+    road: RoadProfile,
+    duration_s: float,
+    rig_factory: RigFactory | None = None,
+    clock: Clock | None = None,
+    keep: Callable[[dict[str, np.ndarray]], None] | None = None,
+) -> dict[str, np.ndarray]:
     """One run of ``controller`` under the road profile, under the safety supervisor of the config's
     ``safety`` section; returns the recorded columns.
 
@@ -191,8 +229,12 @@ class SteppedPoint:
     clipped_cycles: int
 
 
-def stepped_sine(config: dict[str, Any], make_controller: Callable[[], Any], freqs: list[float],
-                 rig_factory: RigFactory | None = None) -> list[SteppedPoint]:
+def stepped_sine(
+    config: dict[str, Any],
+    make_controller: Callable[[], Any],
+    freqs: list[float],
+    rig_factory: RigFactory | None = None,
+) -> list[SteppedPoint]:
     """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section)."""
     sweep = config["sweep"]
     amplitude = math.radians(sweep["amplitude_deg"])
@@ -204,14 +246,21 @@ def stepped_sine(config: dict[str, Any], make_controller: Callable[[], Any], fre
         # the road ramps down after the measurement: a rig that stays up between frequencies (a link)
         # starts the next one at rest instead of with a step of the road speed
         stop = start + measure
-        cols = run_profile(config, controller, sine_profile(amplitude, f, sweep["ramp_s"], stop), stop + sweep["ramp_s"], rig_factory)
+        cols = run_profile(
+            config, controller, sine_profile(amplitude, f, sweep["ramp_s"], stop), stop + sweep["ramp_s"], rig_factory
+        )
         window = (cols["time_s"] >= start - 1e-9) & (cols["time_s"] < stop - 1e-9)
         body = cols["theta_rad"][window] + cols["theta_road_rad"][window]
         road = cols["theta_road_rad"][window]
         body_rms, road_rms = ac_rms(body), ac_rms(road)
-        points.append(SteppedPoint(
-            f, body_rms, road_rms, body_rms / road_rms if road_rms > 0 else math.nan,
-            nrmse(cols["torque_hat_nm"][window], cols["torque_true_nm"][window]),
-            int(getattr(controller, "clip_count", 0)),
-        ))
+        points.append(
+            SteppedPoint(
+                f,
+                body_rms,
+                road_rms,
+                body_rms / road_rms if road_rms > 0 else math.nan,
+                nrmse(cols["torque_hat_nm"][window], cols["torque_true_nm"][window]),
+                int(getattr(controller, "clip_count", 0)),
+            )
+        )
     return points

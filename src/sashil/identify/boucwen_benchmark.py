@@ -40,7 +40,9 @@ UPSAMPLE = 20
 NOISE_M = 8e-6
 
 
-def multisine(seed: int, n: int = N_PERIOD, fs: float = FS, f_lo: float = 5.0, f_hi: float = 150.0, rms: float = 50.0) -> np.ndarray:
+def multisine(
+    seed: int, n: int = N_PERIOD, fs: float = FS, f_lo: float = 5.0, f_hi: float = 150.0, rms: float = 50.0
+) -> np.ndarray:
     """One period of a random-phase multisine with equal amplitudes on all lines in [f_lo, f_hi]."""
     rng = np.random.default_rng(seed)
     spectrum = np.zeros(n // 2 + 1, complex)
@@ -133,7 +135,9 @@ def zhat_path(y: np.ndarray, a: float, d: float, passes: int) -> np.ndarray:
     return out
 
 
-def simulate(u: np.ndarray, params: dict[str, float], periodic_n: int | None = None, factor: int = UPSAMPLE) -> np.ndarray:
+def simulate(
+    u: np.ndarray, params: dict[str, float], periodic_n: int | None = None, factor: int = UPSAMPLE
+) -> np.ndarray:
     """Output y at the input's rate, from rest, with band-limited input interpolation.
 
     ``periodic_n``: the input repeats every n samples (interpolate one period, tile); else the whole
@@ -204,8 +208,16 @@ def identify(u: np.ndarray, y: np.ndarray, n: int = N_PERIOD, seed: int = 0, f_c
         evaluations[0] += 1
         return linear(ad)[1]
 
-    de = differential_evolution(cost, [(-3000.0, 3000.0), (-3000.0, 3000.0)], popsize=15, maxiter=60, tol=1e-8,
-                                seed=seed, polish=False, init="sobol")
+    de = differential_evolution(
+        cost,
+        [(-3000.0, 3000.0), (-3000.0, 3000.0)],
+        popsize=15,
+        maxiter=60,
+        tol=1e-8,
+        seed=seed,
+        polish=False,
+        init="sobol",
+    )
     coef, _ = linear(de.x)
     global_s = time.perf_counter() - started
     x0 = np.array([*coef, *de.x])
@@ -223,8 +235,9 @@ def identify(u: np.ndarray, y: np.ndarray, n: int = N_PERIOD, seed: int = 0, f_c
     m, p = fit.jac.shape
     cov = 2 * fit.cost / max(m - p, 1) * np.linalg.pinv(fit.jac.T @ fit.jac)
     stderr = dict(zip(NAMES, np.sqrt(np.clip(np.diag(cov), 0, None)) * scale))
-    return BenchmarkFit(params, stderr, time.perf_counter() - started, global_s, evaluations[0],
-                        float(np.sqrt(np.mean(fit.fun**2))))
+    return BenchmarkFit(
+        params, stderr, time.perf_counter() - started, global_s, evaluations[0], float(np.sqrt(np.mean(fit.fun**2)))
+    )
 
 
 def test_rmse(params: dict[str, float], seed: int = 12345) -> tuple[float, float]:

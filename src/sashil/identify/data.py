@@ -8,9 +8,9 @@ naming the file and the problem (:class:`~sashil.errors.DataFileError`, exit 2).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -122,9 +122,7 @@ def load_records(
                 raise DataFileError(f"{path}: line {line}, column {name}: NaN or inf")
         t = columns["time_s"]
         if t[-1] - t[0] < MIN_DURATION_S:
-            raise DataFileError(
-                f"{path}: record too short ({t[-1] - t[0]:.3g} s; need at least {MIN_DURATION_S} s)"
-            )
+            raise DataFileError(f"{path}: record too short ({t[-1] - t[0]:.3g} s; need at least {MIN_DURATION_S} s)")
         if np.ptp(columns["theta_rad"]) == 0.0:
             raise DataFileError(f"{path}: theta_rad never changes (the arm did not move; nothing to fit)")
         records.append(record_from_columns(str(path), columns, start_at_rest))

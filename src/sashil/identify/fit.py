@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares, lsq_linear
@@ -136,7 +136,7 @@ class Problem:
     def params_of(self, x: np.ndarray) -> dict[str, float]:
         nl_names = self.model.nonlinear
         lin = dict(zip(self.linear, x[: len(self.linear)]))
-        nl = dict(zip(nl_names, x[len(self.linear):]))
+        nl = dict(zip(nl_names, x[len(self.linear) :]))
         return self.model.full_params(nl, {**lin, **self.fixed_linear}, self.options.J)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -222,7 +222,7 @@ def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions,
     def compose(v: np.ndarray) -> np.ndarray:
         lin = dict(zip(hyst, v[: len(hyst)]))
         full = [linear_part[s] if s in linear_part else lin[s] for s in problem.linear]
-        return np.array(full + list(v[len(hyst):]))
+        return np.array(full + list(v[len(hyst) :]))
 
     fc = stage1["fc"]
     bounds = [(0.0, 4.0 * fc + 1e-3) for _ in hyst] + list(model.nl_bounds)
@@ -231,8 +231,15 @@ def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions,
         return float(np.sqrt(np.mean(problem.residuals(compose(v)) ** 2)))
 
     result = differential_evolution(
-        cost, bounds, popsize=options.popsize, maxiter=options.maxiter, tol=1e-6, seed=options.seed,
-        polish=False, init="sobol", callback=lambda *a, **k: bar.advance(1),
+        cost,
+        bounds,
+        popsize=options.popsize,
+        maxiter=options.maxiter,
+        tol=1e-6,
+        seed=options.seed,
+        polish=False,
+        init="sobol",
+        callback=lambda *a, **k: bar.advance(1),
     )
     del x_lin
     return compose(result.x)

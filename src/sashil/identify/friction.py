@@ -17,7 +17,7 @@ from numba import njit
 from scipy.optimize import differential_evolution, least_squares
 
 from sashil.identify.kernels import bingham_velocity_step, bw_advance
-from sashil.models.friction_damper import LAWS, FrictionDamperParams, TABLE1
+from sashil.models.friction_damper import LAWS, TABLE1, FrictionDamperParams
 
 MAX_STEP_S = 2e-5
 
@@ -72,11 +72,34 @@ def _harmonic(law, amp, freq, periods, per_period, M, m, k1, c1, c2, fmax, A, al
     return out
 
 
-def simulate_harmonic(p: FrictionDamperParams, law: str, frequency_hz: float, amplitude_mm: float,
-                      periods: int = 2, samples_per_period: int = 400):
+def simulate_harmonic(
+    p: FrictionDamperParams,
+    law: str,
+    frequency_hz: float,
+    amplitude_mm: float,
+    periods: int = 2,
+    samples_per_period: int = 400,
+):
     """(t, Y, Y', X, F) over the last period of a harmonic test (eqs. 1-2 with the chosen law)."""
-    out = _harmonic(LAWS[law], amplitude_mm, frequency_hz, periods, samples_per_period, p.M, p.m, p.k1, p.c1,
-                    p.c2, p.f_max, p.A, p.alpha, p.beta, p.gamma, p.n, p.eps)
+    out = _harmonic(
+        LAWS[law],
+        amplitude_mm,
+        frequency_hz,
+        periods,
+        samples_per_period,
+        p.M,
+        p.m,
+        p.k1,
+        p.c1,
+        p.c2,
+        p.f_max,
+        p.A,
+        p.alpha,
+        p.beta,
+        p.gamma,
+        p.n,
+        p.eps,
+    )
     return tuple(out[:, j] for j in range(5))
 
 
@@ -96,8 +119,9 @@ class FrictionFit:
     stages: list[str]
 
 
-def identify_two_stage(tests: list[tuple[float, float]], forces: list[np.ndarray], start: FrictionDamperParams,
-                       seed: int = 0) -> FrictionFit:
+def identify_two_stage(
+    tests: list[tuple[float, float]], forces: list[np.ndarray], start: FrictionDamperParams, seed: int = 0
+) -> FrictionFit:
     """Seed 000 section 4.2: (1) k1, c1, c2, F_max with Coulomb friction (DE on eq. 10, Table 2 ranges);
     (2) alpha, beta, gamma, n of Bouc-Wen friction (DE, Table 3 ranges; A fixed at its Table 3 value,
     because z's scale is not identifiable beside alpha), then (3) least squares on all seven."""
@@ -118,7 +142,14 @@ def identify_two_stage(tests: list[tuple[float, float]], forces: list[np.ndarray
     lin_bounds = [(50.0, 300.0), (0.0, 10.0), (0.0, 10.0), (40.0, 65.0)]
     s1 = differential_evolution(
         lambda x: rms(residual(replace(start, k1=x[0], c1=x[1], c2=x[2], f_max=x[3]), "coulomb")),
-        lin_bounds, popsize=8, maxiter=25, seed=seed, polish=False, tol=1e-6, init="sobol")
+        lin_bounds,
+        popsize=8,
+        maxiter=25,
+        seed=seed,
+        polish=False,
+        tol=1e-6,
+        init="sobol",
+    )
     p1 = replace(start, k1=s1.x[0], c1=s1.x[1], c2=s1.x[2], f_max=s1.x[3])
     # Table 3 ranges
     bw_bounds = [(5.0, 50.0), (5.0, 70.0), (-30.0, 30.0), (1.1, 4.0)]
@@ -126,8 +157,16 @@ def identify_two_stage(tests: list[tuple[float, float]], forces: list[np.ndarray
     def bw(p, x):
         return replace(p, alpha=x[0], beta=x[1], gamma=x[2], n=x[3])
 
-    s2 = differential_evolution(lambda x: rms(residual(bw(p1, x), "bouc-wen")), bw_bounds, popsize=8, maxiter=25,
-                                seed=seed, polish=False, tol=1e-6, init="sobol")
+    s2 = differential_evolution(
+        lambda x: rms(residual(bw(p1, x), "bouc-wen")),
+        bw_bounds,
+        popsize=8,
+        maxiter=25,
+        seed=seed,
+        polish=False,
+        tol=1e-6,
+        init="sobol",
+    )
     x0 = np.array([p1.k1, p1.c1, p1.c2, *s2.x])
     lo = np.array([50.0, 0.0, 0.0, 5.0, 5.0, -30.0, 1.1])
     hi = np.array([300.0, 10.0, 10.0, 50.0, 70.0, 30.0, 4.0])
@@ -135,8 +174,12 @@ def identify_two_stage(tests: list[tuple[float, float]], forces: list[np.ndarray
     def full(x):
         return replace(start, k1=x[0], c1=x[1], c2=x[2], alpha=x[3], beta=x[4], gamma=x[5], n=x[6])
 
-    s3 = least_squares(lambda x: residual(full(x), "bouc-wen"), np.clip(x0, lo + 1e-6, hi - 1e-6),
-                       bounds=(lo, hi), x_scale="jac")
-    stages = [f"stage 1 Coulomb: k1={p1.k1:.4g} c1={p1.c1:.3g} c2={p1.c2:.3g} F_max={p1.f_max:.4g} (RMS {s1.fun:.3g} N)",
-              f"stage 2 Bouc-Wen hysteresis: RMS {s2.fun:.3g} N", f"stage 3 joint least squares: RMS {rms(s3.fun):.3g} N"]
+    s3 = least_squares(
+        lambda x: residual(full(x), "bouc-wen"), np.clip(x0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi), x_scale="jac"
+    )
+    stages = [
+        f"stage 1 Coulomb: k1={p1.k1:.4g} c1={p1.c1:.3g} c2={p1.c2:.3g} F_max={p1.f_max:.4g} (RMS {s1.fun:.3g} N)",
+        f"stage 2 Bouc-Wen hysteresis: RMS {s2.fun:.3g} N",
+        f"stage 3 joint least squares: RMS {rms(s3.fun):.3g} N",
+    ]
     return FrictionFit(full(s3.x), time.perf_counter() - started, rms(s3.fun), stages)

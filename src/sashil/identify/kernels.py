@@ -118,7 +118,24 @@ def simulate_rig(
             if model == BOUC_WEN:
                 # exactly the simulated rig's sub-step (the recorded current needs no coil lag)
                 theta, v, s, _ = rig_substep(
-                    theta, v, s, i, h, i, 0.0, J, k, p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], bound,
+                    theta,
+                    v,
+                    s,
+                    i,
+                    h,
+                    i,
+                    0.0,
+                    J,
+                    k,
+                    p[2],
+                    p[3],
+                    p[4],
+                    p[5],
+                    p[6],
+                    p[7],
+                    p[8],
+                    p[9],
+                    bound,
                     force + k * theta,
                 )
                 continue

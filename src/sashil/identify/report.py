@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import yaml
@@ -68,8 +68,10 @@ def write_params(path: str | Path, document: dict) -> Path:
 
 def format_result(result: FitResult) -> str:
     """Per-model report: parameters with 1-sigma, runs, flagged correlations, wall time."""
-    lines = [f"model {result.model}: RMS {result.rms_total:.4g} rad, wall {result.wall_s:.2f} s, "
-             f"{result.evaluations} evaluations"]
+    lines = [
+        f"model {result.model}: RMS {result.rms_total:.4g} rad, wall {result.wall_s:.2f} s, "
+        f"{result.evaluations} evaluations"
+    ]
     for stage in result.stages:
         lines.append(f"  {stage}")
     for name, value in result.params.items():
@@ -92,7 +94,9 @@ def comparison_table(results: Sequence[FitResult]) -> str:
     """Ranked table of models (``--model all``)."""
     rows = ranked(results)
     names = rows[0].record_names
-    head = f"{'rank':>4}  {'model':<9} {'RMS [rad]':>11} " + " ".join(f"{'NRMSE run' + str(j + 1):>12}" for j in range(len(names)))
+    head = f"{'rank':>4}  {'model':<9} {'RMS [rad]':>11} " + " ".join(
+        f"{'NRMSE run' + str(j + 1):>12}" for j in range(len(names))
+    )
     lines = [head + f" {'wall [s]':>9}"]
     for rank, r in enumerate(rows, start=1):
         cells = " ".join(f"{100 * v:>11.3g}%" for v in r.nrmse)

@@ -12,8 +12,8 @@ come from one linear least-squares solve (variable projection).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -19,7 +19,9 @@ def drop_test_inputs(theta0_deg: float, current_a: float, duration_s: float, dt:
     return {"time_s": t, "theta_rad": theta, "current_a": np.full(count, current_a)}
 
 
-def simulate_columns(model: str, params: dict[str, float], inputs: dict[str, np.ndarray], start_at_rest: bool = True) -> dict[str, np.ndarray]:
+def simulate_columns(
+    model: str, params: dict[str, float], inputs: dict[str, np.ndarray], start_at_rest: bool = True
+) -> dict[str, np.ndarray]:
     """data.csv columns of the model driven by ``inputs`` (time_s, current_a, optional theta_road_rad,
     torque_in_nm; theta_rad's first sample is the initial angle)."""
     columns = dict(inputs)

@@ -53,7 +53,7 @@ class BoucWenParams:
     n: float = 0.099
 
     @classmethod
-    def from_mapping(cls, params: dict) -> "BoucWenParams":
+    def from_mapping(cls, params: dict) -> BoucWenParams:
         """Build from a ``params`` mapping (config ``model.params`` or a parameter file)."""
         return cls(**{key: float(params[key]) for key in cls.__dataclass_fields__ if key in params})
 
@@ -148,7 +148,7 @@ class BoucWenZ:
     ``trajectory(theta, z0)`` is the batch path over a whole record.
     """
 
-    __slots__ = ("beta", "gamma", "delta", "n", "z_u")
+    __slots__ = ("beta", "delta", "gamma", "n", "z_u")
 
     def __init__(self, beta: float, gamma: float, delta: float, n: float):
         if not (delta > 0.0 and n > 0.0 and beta + gamma > 0.0):
@@ -163,7 +163,7 @@ class BoucWenZ:
         self.z_u = (self.delta / (self.beta + self.gamma)) ** (1.0 / self.n)
 
     @classmethod
-    def from_params(cls, params: BoucWenParams) -> "BoucWenZ":
+    def from_params(cls, params: BoucWenParams) -> BoucWenZ:
         return cls(params.beta, params.gamma, params.delta, params.n)
 
     def advance(self, z: float, dtheta: float) -> float:

@@ -42,7 +42,9 @@ def mismatch_fractions(section: dict[str, Any]) -> dict[str, float]:
     out = {key: sign * fraction for key, sign in zip(PARAMETER_ORDER, signs)}
     for key, value in (section.get("params") or {}).items():
         if key not in PARAMETER_ORDER:
-            raise ConfigError(f"mismatch.params.{key}: not a bouc-wen parameter (expected {', '.join(PARAMETER_ORDER)})")
+            raise ConfigError(
+                f"mismatch.params.{key}: not a bouc-wen parameter (expected {', '.join(PARAMETER_ORDER)})"
+            )
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not -0.9 <= value <= 10.0:
             raise ConfigError(f"mismatch.params.{key}: expected a fraction in [-0.9, 10], got {value!r}")
         out[key] = float(value)

@@ -22,8 +22,8 @@ start and z predicted at the end of the sub-step; z itself advances over the ang
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from sashil.models._jit import jit
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
@@ -48,9 +48,25 @@ class RigState:
 
 @jit
 def rig_substep(
-    theta: float, v: float, z: float, i: float, h: float, cmd: float, decay: float,
-    J: float, k: float, c1: float, c2: float, alpha1: float, alpha2: float,
-    beta: float, gamma: float, delta: float, n: float, z_u: float, force: float,
+    theta: float,
+    v: float,
+    z: float,
+    i: float,
+    h: float,
+    cmd: float,
+    decay: float,
+    J: float,
+    k: float,
+    c1: float,
+    c2: float,
+    alpha1: float,
+    alpha2: float,
+    beta: float,
+    gamma: float,
+    delta: float,
+    n: float,
+    z_u: float,
+    force: float,
 ) -> tuple[float, float, float, float]:
     """One sub-step h of the released arm (seed 001 eqs. 13-17); returns (theta, v, z, i).
 
@@ -94,8 +110,19 @@ class RigPlant:
     ):
         self.params = params
         self.hysteresis = BoucWenZ.from_params(params)
-        self._coefficients = (params.J, params.k, params.c1, params.c2, params.alpha1, params.alpha2,
-                              params.beta, params.gamma, params.delta, params.n, self.hysteresis.z_u)
+        self._coefficients = (
+            params.J,
+            params.k,
+            params.c1,
+            params.c2,
+            params.alpha1,
+            params.alpha2,
+            params.beta,
+            params.gamma,
+            params.delta,
+            params.n,
+            self.hysteresis.z_u,
+        )
         # compile (or load from numba's cache) now, not in the first real-time cycle
         rig_substep(0.0, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, *self._coefficients, 0.0)
         self.coil_tau_s = float(coil_tau_s)

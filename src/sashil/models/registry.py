@@ -50,7 +50,9 @@ def check_model(section: dict[str, Any], source: str, where: str, complete: bool
             if merged[key] < 0:
                 raise ConfigError(f"{source}: {prefix}params.{key}: expected a number >= 0, got {merged[key]:g}")
         if merged["beta"] + merged["gamma"] <= 0:
-            raise ConfigError(f"{source}: {prefix}params.beta+gamma: expected > 0 (bounded z), got {merged['beta'] + merged['gamma']:g}")
+            raise ConfigError(
+                f"{source}: {prefix}params.beta+gamma: expected > 0 (bounded z), got {merged['beta'] + merged['gamma']:g}"
+            )
         out = merged
     return {"name": name, "params": out}
 

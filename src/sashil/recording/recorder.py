@@ -22,8 +22,9 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 #: rows formatted per slice (a slice holds the GIL for roughly SLICE_ROWS * 3 µs)
 SLICE_ROWS = 16
@@ -63,7 +64,7 @@ class Recorder:
         self.error: BaseException | None = None
 
     # lifecycle -------------------------------------------------------------------------------
-    def start(self) -> "Recorder":
+    def start(self) -> Recorder:
         """Create the file, write the header line, start the writer thread."""
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
         self._write_all((",".join(self.columns) + "\n").encode())
@@ -88,7 +89,7 @@ class Recorder:
         if self.error is not None:
             raise OSError(f"{self.path}: recording failed: {self.error}") from self.error
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -150,7 +151,7 @@ class Recorder:
                 self._stop.wait(POLL_S)
             if pending:
                 self._write_all("".join(pending).encode())
-        except BaseException as err:  # noqa: BLE001 - reported by close(); the loop must not die here
+        except BaseException as err:
             self.error = err
 
     def _format_slice(self, max_rows: int) -> str:

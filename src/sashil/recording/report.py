@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ def _model_params(folder: Path) -> dict[str, float] | None:
         return {"k": float(params["k"]), "J": float(params.get("J", 1.0))}
     except (OSError, KeyError, TypeError, ValueError, ImportError):
         return None
-    except Exception:  # noqa: BLE001 - a broken YAML: the report goes on without the torque estimate
+    except Exception:
         return None
 
 
@@ -87,7 +88,11 @@ def load_run(path: str | Path) -> RunRecord:
     if runs:
         for entry in runs:
             sub = path / str(entry.get("folder", "."))
-            label = f"{path.name} {entry.get('current_a', '?'):g} A" if isinstance(entry.get("current_a"), (int, float)) else path.name
+            label = (
+                f"{path.name} {entry.get('current_a', '?'):g} A"
+                if isinstance(entry.get("current_a"), (int, float))
+                else path.name
+            )
             columns = read_data_csv(sub / "data.csv")
             record.traces.append(Trace(label, columns, entry, _model_params(sub) or _model_params(path)))
     elif (path / "data.csv").exists():

@@ -37,9 +37,10 @@ import shutil
 import sys
 import threading
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -70,7 +71,9 @@ class Series:
 
 
 SERIES: tuple[Series, ...] = (
-    Series("signals/angle_deg", "angle θ, θ1 [deg]", ("theta_rad", "theta_road_rad"), ("θ (relative)", "θ1 (road)"), DEG),
+    Series(
+        "signals/angle_deg", "angle θ, θ1 [deg]", ("theta_rad", "theta_road_rad"), ("θ (relative)", "θ1 (road)"), DEG
+    ),
     Series("signals/velocity_rad_s", "velocity θ̇ [rad/s]", ("theta_dot_rad_s",), ("θ̇",)),
     Series("signals/current_a", "coil current [A]", ("current_cmd_a", "current_a"), ("commanded", "measured")),
     Series(
@@ -133,7 +136,9 @@ def blueprint(columns: Sequence[str]) -> Any:
     right.append(rrb.TextLogView(origin="/events", name="trips and events"))
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*left), rrb.Vertical(*right), column_shares=[3, 2]),
-        rrb.TimePanel(state="expanded", timeline=TIMELINE),  # scrub back through a run (live: the view follows the newest data)
+        rrb.TimePanel(
+            state="expanded", timeline=TIMELINE
+        ),  # scrub back through a run (live: the view follows the newest data)
     )
 
 
@@ -158,7 +163,7 @@ class RerunLog:
         viewer: bool = False,
         connect: str | None = None,
         name: str | None = None,
-    ) -> "RerunLog":
+    ) -> RerunLog:
         """Open a stream to ``save`` (``.rrd``), a spawned viewer (``viewer``), a viewer at
         ``connect`` (a ``rerun+http://…/proxy`` URL), or several of them; sends the blueprint."""
         import rerun as rr
@@ -174,12 +179,16 @@ class RerunLog:
             beside = Path(sys.executable).with_name("rerun")
             executable = str(beside) if beside.is_file() else shutil.which("rerun")
             if executable is None:
-                raise ConfigError("--rerun: no rerun viewer executable (pip install rerun-sdk); use --rerun-save FILE.rrd")
+                raise ConfigError(
+                    "--rerun: no rerun viewer executable (pip install rerun-sdk); use --rerun-save FILE.rrd"
+                )
             try:
                 rr.spawn(connect=False, executable_path=executable, recording=rec)
-            except Exception as err:  # noqa: BLE001 - the viewer would not start: say so on one line
+            except Exception as err:
                 first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-                raise ConfigError(f"--rerun: cannot start the rerun viewer ({first}); use --rerun-save FILE.rrd") from None
+                raise ConfigError(
+                    f"--rerun: cannot start the rerun viewer ({first}); use --rerun-save FILE.rrd"
+                ) from None
         if viewer or connect is not None:
             sinks.append(rr.GrpcSink(connect) if connect else rr.GrpcSink())
         if save is not None:
@@ -243,7 +252,9 @@ class RerunLog:
             self._send(series.entity, shared["all"], rr.Scalars.columns(scalars=values))
 
         def points(entity: str, x_name: str, scale: float) -> None:
-            xy = np.column_stack([np.asarray(columns[x_name], float) * scale, -np.asarray(columns["torque_hat_nm"], float)])
+            xy = np.column_stack(
+                [np.asarray(columns[x_name], float) * scale, -np.asarray(columns["torque_hat_nm"], float)]
+            )
             xy = xy[np.isfinite(xy).all(axis=1)]
             if xy.size:  # one row at the block's last time holding all its points (the view keeps the history)
                 cols = rr.Points2D.columns(positions=xy, radii=np.full(len(xy), -1.5)).partition([len(xy)])
@@ -284,7 +295,7 @@ class RerunLog:
         run's own records do not depend on the live view."""
         try:
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
-        except Exception as err:  # noqa: BLE001 - e.g. gRPC could not reach the viewer
+        except Exception as err:
             text = str(err).strip().splitlines()
             log.warning("live view: %s", text[0] if text else type(err).__name__)
             self.failed = True
@@ -324,7 +335,7 @@ class LiveTap:
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
 
-    def start(self, recorder: Any, timing: Any = None) -> "LiveTap":
+    def start(self, recorder: Any, timing: Any = None) -> LiveTap:
         """Follow ``recorder`` (a :class:`~sashil.recording.recorder.Recorder`) and, when given,
         the loop's :class:`~sashil.runtime.timing.TimingStats` (for the lateness series)."""
         self.recorder, self.timing = recorder, timing
@@ -384,7 +395,7 @@ class LiveTap:
                             pending = self.log.batches(columns)
                         continue
                 self._stop.wait(POLL_S)
-        except BaseException as err:  # noqa: BLE001 - the live view must never take the run down
+        except BaseException as err:
             self.error = err
 
     def close(self, trips: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
@@ -403,7 +414,7 @@ class LiveTap:
             for trip in trips:
                 self.log.trip(float(trip.get("time_s") or 0.0), str(trip.get("reason", "trip")))
             self.log.close()
-        except Exception as err:  # noqa: BLE001 - the run's own records come first
+        except Exception as err:
             self.error = err
         return self.stats()
 

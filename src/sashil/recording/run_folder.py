@@ -11,9 +11,10 @@ import platform
 import socket
 import subprocess
 import sys
+from collections.abc import Mapping
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from sashil import __version__
 from sashil.config import Config, dump_config
@@ -66,7 +67,7 @@ class RunFolder:
         self.started_utc = utc_now()
 
     @classmethod
-    def create(cls, out: str | Path | None, verb: str, root: str | Path = "runs") -> "RunFolder":
+    def create(cls, out: str | Path | None, verb: str, root: str | Path = "runs") -> RunFolder:
         """``out`` or ``runs/<UTC timestamp>-<verb>/``; an existing non-empty ``out`` is refused."""
         if out is None:
             base = Path(root) / f"{utc_stamp()}-{verb}"

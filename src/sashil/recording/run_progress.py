@@ -13,7 +13,8 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from typing import Any, Mapping, Sequence, TextIO
+from collections.abc import Mapping, Sequence
+from typing import Any, TextIO
 
 #: printing a line holds the interpreter this long at most (generous)
 PRINT_BUDGET_NS = 200_000
@@ -22,8 +23,14 @@ PRINT_BUDGET_NS = 200_000
 class RunProgress:
     """Prints ``run 12.0 s / 60 s [#####-----] 12000 cycles, 0 missed`` every ``interval_s``."""
 
-    def __init__(self, duration_s: float | None, rate_hz: float, interval_s: float | None = None,
-                 stream: TextIO | None = None, width: int = 24):
+    def __init__(
+        self,
+        duration_s: float | None,
+        rate_hz: float,
+        interval_s: float | None = None,
+        stream: TextIO | None = None,
+        width: int = 24,
+    ):
         self.stream = stream if stream is not None else sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.duration_s = duration_s
@@ -46,7 +53,7 @@ class RunProgress:
             head = f"run {run_s:6.1f} s"
         return f"{head} {cycles} cycles, {missed} missed deadline(s)"
 
-    def start(self, recorder: Any, timing: Any) -> "RunProgress":
+    def start(self, recorder: Any, timing: Any) -> RunProgress:
         self.recorder, self.timing = recorder, timing
         self._thread = threading.Thread(target=self._run, name="sashil-progress", daemon=True)
         self._thread.start()
@@ -85,7 +92,7 @@ class SessionHooks:
     def __init__(self, *hooks: Any):
         self.hooks = [hook for hook in hooks if hook is not None]
 
-    def start(self, recorder: Any, timing: Any) -> "SessionHooks":
+    def start(self, recorder: Any, timing: Any) -> SessionHooks:
         for hook in self.hooks:
             hook.start(recorder, timing)
         return self

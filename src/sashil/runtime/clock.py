@@ -25,7 +25,7 @@ class RealClock:
         self.spin_ns = int(spin_ns)
 
     @classmethod
-    def for_rate(cls, spin_margin_us: float, rate_hz: float) -> "RealClock":
+    def for_rate(cls, spin_margin_us: float, rate_hz: float) -> RealClock:
         """The loop's clock: spin margin ``loop.spin_margin_us``, at most a quarter of the period.
 
         The cap keeps a fast loop sleeping part of every period: a SCHED_FIFO thread that spins

@@ -25,9 +25,10 @@ Per cycle the loop allocates no dicts or strings: timing goes into preallocated 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import attrgetter
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
 from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip
@@ -295,14 +296,14 @@ class ControlLoop:
             self.recorder.window_end_ns = None
         try:
             rig.write(SAFE_COMMAND, t_ns, 0)
-        except Exception as err:  # noqa: BLE001 - the link may be dead; deactivate() commands 0 A too
+        except Exception as err:
             write_error: Exception | None = err
         else:
             write_error = None
         for name, action in (("deactivate", rig.deactivate), ("close", rig.close)):
             try:
                 action()
-            except Exception as err:  # noqa: BLE001 - go on to the next step whatever happens
+            except Exception as err:
                 result.shutdown_errors.append(f"{name}(): {type(err).__name__}: {err}")
         if write_error is not None and result.shutdown_errors:
             result.shutdown_errors.insert(0, f"0 A write: {type(write_error).__name__}: {write_error}")

@@ -64,7 +64,7 @@ class RealtimeSetup:
     _saved: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def from_config(cls, loop_section: dict[str, Any]) -> "RealtimeSetup":
+    def from_config(cls, loop_section: dict[str, Any]) -> RealtimeSetup:
         rt = loop_section["rt"]
         return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"], rt["gil_switch_us"])
 
@@ -88,7 +88,9 @@ class RealtimeSetup:
             return StepOutcome("skipped", "loop.rt.gil_switch_us is 0")
         self._saved["switch_interval"] = sys.getswitchinterval()
         sys.setswitchinterval(self.gil_switch_us * 1e-6)
-        return StepOutcome("ok", f"{sys.getswitchinterval() * 1e6:.0f} us (was {self._saved['switch_interval'] * 1e6:.0f} us)")
+        return StepOutcome(
+            "ok", f"{sys.getswitchinterval() * 1e6:.0f} us (was {self._saved['switch_interval'] * 1e6:.0f} us)"
+        )
 
     def _timer_slack(self, libc: ctypes.CDLL | None) -> StepOutcome:
         if not self.timer_slack_ns:
@@ -142,7 +144,9 @@ class RealtimeSetup:
         # memory-map lock: with a busy allocating thread beside the loop (the rerun live view's
         # native threads) that stalled the loop for milliseconds (measured: 10 missed deadlines
         # in 20 s with it, 0-1 without), so such runs lock only what is mapped now.
-        flags, text = (MCL_CURRENT, "MCL_CURRENT") if self.current_only else (MCL_CURRENT | MCL_FUTURE, "MCL_CURRENT|MCL_FUTURE")
+        flags, text = (
+            (MCL_CURRENT, "MCL_CURRENT") if self.current_only else (MCL_CURRENT | MCL_FUTURE, "MCL_CURRENT|MCL_FUTURE")
+        )
         if libc.mlockall(flags) != 0:
             return StepOutcome("failed", "mlockall: " + _errno_text() + " (memlock limit: `ulimit -l`)")
         self._saved["mlock"] = libc

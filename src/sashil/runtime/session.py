@@ -15,8 +15,9 @@ outcome), ``recording`` (rows written/dropped) and ``controller``.
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from sashil.errors import SashilError
 from sashil.recording.recorder import Recorder
@@ -98,7 +99,7 @@ def run_session(
                     say(line)
             try:
                 loop.run()
-            except BaseException as err:  # noqa: BLE001 - reported in the summary and by the caller
+            except BaseException as err:
                 error = err
             finally:
                 if rt is not None:

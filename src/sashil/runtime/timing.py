@@ -88,7 +88,8 @@ def format_timing(timing: dict[str, Any]) -> str:
 
     def row(label: str, stats: dict[str, float | None]) -> str:
         cells = "  ".join(
-            f"{key}={'-' if stats[key] is None else format(stats[key], '.1f')}" for key in ("p50", "p99", "p99_9", "max")
+            f"{key}={'-' if stats[key] is None else format(stats[key], '.1f')}"
+            for key in ("p50", "p99", "p99_9", "max")
         )
         return f"  {label:<9} {cells} us"
 
