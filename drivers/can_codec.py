@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cache, lru_cache
 from pathlib import Path
+from typing import cast
 
 import cantools
 
@@ -50,11 +51,13 @@ RIG_IDS = (ID_SAMPLE_A, ID_SAMPLE_B, ID_STATUS, ID_VERSION)
 @lru_cache(maxsize=1)
 def database() -> cantools.database.can.Database:
     """The parsed ``sashil.dbc``."""
-    return cantools.database.load_file(str(DBC_PATH))
+    db = cantools.database.load_file(str(DBC_PATH))
+    assert isinstance(db, cantools.database.can.Database)  # a .dbc is a CAN database
+    return db
 
 
 @cache
-def _message(frame_id: int):  # -> cantools Message
+def _message(frame_id: int) -> cantools.database.can.Message:
     return database().get_message_by_frame_id(frame_id)
 
 
@@ -136,7 +139,7 @@ class CanDecoder:
     """Turns received CAN frames back into ``(seq, message)``; pairs SampleA/SampleB."""
 
     counters: CanCounters = field(default_factory=CanCounters)
-    _sample_a: dict[str, int] | None = None
+    _sample_a: dict[str, float] | None = None
 
     def feed(self, frame_id: int, data: bytes) -> tuple[int, Message] | None:
         """The message completed by this frame, or None (first half of a sample, unknown id)."""
@@ -150,7 +153,7 @@ class CanDecoder:
             counters.bad_length += 1
             return None
         counters.frames += 1
-        sig = spec.decode(data, decode_choices=False)
+        sig = cast("dict[str, float]", spec.decode(data, decode_choices=False))  # numbers: no choices decoded
         if frame_id == ID_SAMPLE_A:
             if self._sample_a is not None:
                 counters.unpaired += 1

@@ -67,7 +67,7 @@ def test_bad_config_gives_one_line_naming_file_and_key(tmp_path, text, message):
 
 
 def test_missing_config_file(tmp_path):
-    with pytest.raises(ConfigError, match="nope.yaml: no such file"):
+    with pytest.raises(ConfigError, match=r"nope\.yaml: no such file"):
         load_config(tmp_path / "nope.yaml")
 
 
@@ -94,5 +94,5 @@ def test_parameter_file_roundtrip_and_include(tmp_path):
 def test_parameter_file_must_be_complete(tmp_path):
     params = tmp_path / "damper.yaml"
     params.write_text("model: bouc-wen\nparams: {k: 100.0}\n")
-    with pytest.raises(ConfigError, match="damper.yaml: params: missing J, c1"):
+    with pytest.raises(ConfigError, match=r"damper\.yaml: params: missing J, c1"):
         load_params(params)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -70,7 +71,7 @@ def test_observer_z_is_the_model_z_update_and_torque_is_eq9():
     assert obs.z == pytest.approx(float(expected[-1]), rel=1e-12)
     assert obs.torque_nm == pytest.approx((1 + 0.4) * obs.z + (0.7 + 1.5 * 0.4) * 0.3, rel=1e-12)
     by_increment = BoucWenObserver(SEED)
-    for before, after in zip(angles[:-1], angles[1:]):
+    for before, after in itertools.pairwise(angles):
         by_increment.update_increment(after - before, -0.2, 0.0)
     assert by_increment.z == pytest.approx(obs.z, rel=1e-12)
     assert by_increment.torque_nm == pytest.approx(obs.z - 0.7 * 0.2, rel=1e-12)
@@ -198,5 +199,5 @@ def test_mismatch_patterns_and_overrides():
     assert plant["rig"]["coil_tau_s"] == pytest.approx(0.015)
     assert plant["rig"]["encoder_counts_per_rev"] == 1024
     assert config["model"]["params"]["c1"] == 0.7  # the controller's model is untouched
-    with pytest.raises(ConfigError, match="mismatch.params.q: not a bouc-wen parameter"):
+    with pytest.raises(ConfigError, match=r"mismatch\.params\.q: not a bouc-wen parameter"):
         mismatch_fractions({"params": {"q": 0.1}})

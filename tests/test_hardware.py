@@ -8,6 +8,7 @@ The rig must be free to move and nobody's hand near the arm: the tests command u
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import pytest
@@ -39,7 +40,7 @@ def _exercise(config):
     result = run_loop(rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate), rate)
     assert result.exit_status == "ok"
     seqs = [s.seq for s in probe.samples]
-    assert all((b - a) % 65536 >= 1 for a, b in zip(seqs, seqs[1:])), "sequence numbers advance"
+    assert all((b - a) % 65536 >= 1 for a, b in itertools.pairwise(seqs)), "sequence numbers advance"
     assert abs(probe.samples[-1].current_a - 0.2) < 0.05, "the coil follows the command"
 
 

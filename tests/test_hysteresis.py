@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -95,7 +96,7 @@ def _cycle(current: float, amplitude: float = math.radians(3), freq: float = 1.5
 
 @pytest.mark.parametrize("current", [0.0, 0.25, 0.5, 1.0])
 def test_closed_cycle_dissipates_positive_energy(current):
-    theta, theta_dot, torque = _cycle(current)
+    _theta, theta_dot, torque = _cycle(current)
     energy = np.trapezoid(torque * theta_dot, dx=1e-4)  # = closed integral of T dtheta
     assert energy > 0.0
     # hand estimate: viscous pi*c*w*A^2 plus the hysteretic ~ 4*alpha*z_u*A (rectangular loop)
@@ -108,11 +109,11 @@ def test_closed_cycle_dissipates_positive_energy(current):
 def test_torque_grows_with_current_for_the_same_motion():
     energies, peaks = [], []
     for current in (0.0, 0.25, 0.5, 0.75, 1.0):
-        theta, theta_dot, torque = _cycle(current)
+        _theta, theta_dot, torque = _cycle(current)
         energies.append(np.trapezoid(torque * theta_dot, dx=1e-4))
         peaks.append(np.max(np.abs(torque)))
-    assert all(b > a for a, b in zip(energies, energies[1:]))
-    assert all(b > a for a, b in zip(peaks, peaks[1:]))
+    assert all(b > a for a, b in itertools.pairwise(energies))
+    assert all(b > a for a, b in itertools.pairwise(peaks))
 
 
 def test_torque_formula_eq9():

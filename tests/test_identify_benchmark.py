@@ -46,6 +46,6 @@ def test_multisine_spec():
 def test_identification_meets_benchmark_acceptance():
     u, y = B.generate(3, 3, B.NOISE_M)  # 3 periods (first discarded) keeps the test short
     fit = B.identify(u, y)
-    rmse, std = B.test_rmse(fit.params)
+    rmse, _std = B.test_rmse(fit.params)
     assert rmse <= 2e-6
     assert fit.params["k"] == pytest.approx(5e4, rel=0.01)

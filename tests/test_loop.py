@@ -255,7 +255,7 @@ def test_read_raising_on_the_nth_call(tmp_path, config):
 
 def test_write_raising(tmp_path, config):
     rig = FaultyRig(fail_write_on=4)
-    outcome, summary, path = _session(tmp_path, config, rig)
+    outcome, _summary, path = _session(tmp_path, config, rig)
     assert outcome.exit_code == 1 and isinstance(outcome.error, DriverIOError)
     assert rig.currents[-1] == 0.0 and rig.calls["write"] == 5  # 3 good, the failed one, the 0 A write
     assert len(_rows(path)["time_s"]) == 4  # the row is recorded before the write

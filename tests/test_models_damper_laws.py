@@ -116,6 +116,6 @@ def test_friction_damper_sticks_below_f_max():
     from sashil.identify.friction import simulate_harmonic
 
     p = FrictionDamperParams(k1=100.0, c1=0.5, c2=0.5, f_max=44.0)
-    t, Y, Yd, X, F = simulate_harmonic(p, "coulomb", 1.0, 0.3)
+    _t, Y, Yd, X, F = simulate_harmonic(p, "coulomb", 1.0, 0.3)
     assert np.max(np.abs(X)) == 0.0
     np.testing.assert_allclose(F, 100.0 * Y + 0.5 * Yd, atol=1e-9)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -48,7 +49,7 @@ def test_drop_torque_is_minus_k_theta_minus_j_theta_ddot():
     # theta = A sin(w t): T_d = -k theta - J theta'' = A (J w^2 - k) sin(w t)
     k, J, A, w = 109.0, 1.0, 0.08, 7.0
     t = np.arange(0, 3, 1e-3)
-    theta, velocity, torque = drop_torque(t, A * np.sin(w * t), k, J)
+    _theta, velocity, torque = drop_torque(t, A * np.sin(w * t), k, J)
     inner = slice(100, -100)
     # the 0.12 s cubic Savitzky-Golay fit attenuates theta'' by ~1 % at 7 rad/s: allow 2 % of J A w^2
     assert torque[inner] == pytest.approx(A * (J * w * w - k) * np.sin(w * t[inner]), abs=0.02 * J * A * w * w)
@@ -100,8 +101,9 @@ def test_bad_run_folder_is_one_line_exit_2_and_nothing_written(tmp_path, capsys)
 
 def test_summary_marks_missing_values():
     class Run:
-        path, label, traces = "x", "x", []
-        summary = {"verb": "run", "exit_status": "stopped"}
+        path, label = "x", "x"
+        traces: ClassVar[list] = []
+        summary: ClassVar[dict] = {"verb": "run", "exit_status": "stopped"}
 
     text = markdown_summary([Run()], [])
     assert "| x | run | stopped | – | – | – |" in text

@@ -101,7 +101,7 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     columns = record_columns(stage)
     rrd = tmp_path / "run.rrd"
     params = config["model"]["params"]
-    tap = LiveTap(RerunLog.open(columns + ("lateness_us",), save=rrd), every=10, band=(params, 1.0))
+    tap = LiveTap(RerunLog.open((*columns, "lateness_us"), save=rrd), every=10, band=(params, 1.0))
     folder = RunFolder.create(tmp_path / "R", "run")
     outcome = run_session(
         config,

@@ -151,7 +151,7 @@ def test_split_stream_decodes_every_frame(msgs, data):
     cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=10)))
     decoder = StreamDecoder()
     got = []
-    for a, b in zip([0] + cuts, cuts + [len(stream)]):
+    for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True):
         got += decoder.feed(stream[a:b])
     assert [seq for seq, _ in got] == list(range(len(msgs)))
     assert decoder.counters.frames == len(msgs) and decoder.counters.bad_frames == 0

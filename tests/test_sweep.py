@@ -22,7 +22,7 @@ def test_profiles_are_consistent_with_their_derivatives(profile):
     h = 1e-5
     for t in (0.3, 0.9, 2.0, 6.9, 7.2, 7.5, 7.95, 11.0):
         (x0, v0, _), (x1, v1, _) = profile(t - h), profile(t + h)
-        x, v, a = profile(t)
+        _x, v, a = profile(t)
         assert v == pytest.approx((x1 - x0) / (2 * h), abs=1e-6)
         assert a == pytest.approx((v1 - v0) / (2 * h), abs=1e-4)
 
@@ -30,7 +30,7 @@ def test_profiles_are_consistent_with_their_derivatives(profile):
 def test_the_stepped_sine_road_ramps_down_to_rest_after_its_stop_time():
     road = sine_profile(0.01, 2.0, 1.0, stop_s=7.0)
     assert road(6.875) == pytest.approx(sine_profile(0.01, 2.0, 1.0)(6.875))  # untouched before the stop
-    x, v, a = road(7.5)  # half-way down the raised cosine: half the amplitude
+    x, _v, _a = road(7.5)  # half-way down the raised cosine: half the amplitude
     assert x == pytest.approx(0.005 * math.sin(2 * math.pi * 2.0 * 7.5), abs=1e-12)
     assert road(8.0) == (0.0, 0.0, 0.0) and road(9.3) == (0.0, 0.0, 0.0)  # at rest from stop + ramp on
 
@@ -94,7 +94,7 @@ def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
     lines = (out / "data.csv").read_text().splitlines()
     header = lines[0].split(",")
     assert header[-1] == "seq" and lines[1].split(",")[-1] == "1" and lines[-1].split(",")[-1] == str(len(lines) - 1)
-    rows = [dict(zip(header, map(float, line.split(",")))) for line in lines[1:]]
+    rows = [dict(zip(header, map(float, line.split(",")), strict=True)) for line in lines[1:]]
     late = [r for r in rows if r["time_s"] >= 1.0]  # after the 1 s ramp: theta1 = sin(2 pi 1.25 t), 1 deg
     assert max(abs(math.degrees(r["theta_road_rad"]) - math.sin(2 * math.pi * 1.25 * r["time_s"])) for r in late) < 0.1
 
@@ -130,7 +130,7 @@ def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_
     if not mode:  # the chirp's rows up to the trip are on disk; the last command is 0 A
         lines = (out / "data.csv").read_text().splitlines()
         header = lines[0].split(",")
-        last = dict(zip(header, lines[-1].split(",")))
+        last = dict(zip(header, lines[-1].split(","), strict=True))
         assert len(lines) > 500 and float(last["current_cmd_a"]) == pytest.approx(0.5)
         assert abs(math.degrees(float(last["theta_rad"]))) > 2.5
     else:
@@ -195,6 +195,6 @@ def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch()
         return [p.body_rms_rad for p in stepped_sine(cfg, lambda: make_controller(name, cfg), freqs)]
 
     soft, hard, law = body("passive", 0.0), body("passive", 1.0), body("skyhook-add")
-    ratios = [x / min(a, b) for x, a, b in zip(law, soft, hard)]
+    ratios = [x / min(a, b) for x, a, b in zip(law, soft, hard, strict=True)]
     assert max(ratios) <= 1.03, ratios
     assert soft[1] > 2 * hard[1] and hard[3] > soft[3]  # the two passive settings each lose somewhere

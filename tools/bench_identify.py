@@ -29,7 +29,7 @@ from sashil.models.hysteresis import BoucWenParams
 
 TRUTH = BoucWenParams(k=95.0, c1=0.5, c2=1.2, alpha1=1.3, alpha2=0.8, beta=600.0, gamma=50.0, delta=500.0, n=0.2)
 NAMES = ("k", "c1", "c2", "alpha1", "alpha2", "log10_S", "b", "n")
-BOX = [(50.0, 200.0), (0.0, 3.0), (0.0, 3.0), (0.0, 2.0), (0.0, 2.0)] + list(MODELS["bouc-wen"].nl_bounds)
+BOX = [(50.0, 200.0), (0.0, 3.0), (0.0, 3.0), (0.0, 2.0), (0.0, 2.0), *list(MODELS["bouc-wen"].nl_bounds)]
 
 
 def params_from(x) -> dict[str, float]:
@@ -86,7 +86,7 @@ def baseline(records, cap_s: float, seed: int = 0):
             sims = [ivp_simulate(params_from(x), r, deadline) for r in records]
         except TimeoutError:
             return 1e3
-        err = np.concatenate([s - r.theta for s, r in zip(sims, records)])
+        err = np.concatenate([s - r.theta for s, r in zip(sims, records, strict=True)])
         value = float(np.sqrt(np.mean(err**2))) if np.all(np.isfinite(err)) else 1e3
         if value < best[0]:
             best[0], best[1] = value, np.array(x)

@@ -94,7 +94,7 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
     rig = SimulatedRig.from_config(config, road=road_sine(math.radians(2.0), 1.6))
     live = None
     if rrd is not None:
-        columns = record_columns(stage) + ("lateness_us", "band_lo_nm", "band_hi_nm")
+        columns = (*record_columns(stage), "lateness_us", "band_lo_nm", "band_hi_nm")
         live = LiveTap(
             RerunLog.open(columns, save=rrd),
             batch_s=batch_s,

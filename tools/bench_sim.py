@@ -14,6 +14,7 @@ Goals: drop test >= 200x real time; damper step <= 20 us median.
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import time
 
@@ -49,7 +50,7 @@ def bench_damper_step() -> None:
     record = run_drop_test(config, -5.0, 0.0, 10.0)
     angles = record.columns["theta_rad"].tolist()
     currents = record.columns["current_a"].tolist()
-    increments = [b - a for a, b in zip(angles, angles[1:])]
+    increments = [b - a for a, b in itertools.pairwise(angles)]
     law = BoucWenZ.from_params(params)
     torque = params.torque
     clock = time.perf_counter_ns
@@ -62,7 +63,7 @@ def bench_damper_step() -> None:
     samples = []
     for _ in range(3):
         z = 0.0
-        for dtheta, current in zip(increments, currents):
+        for dtheta, current in zip(increments, currents, strict=True):
             t0 = clock()
             z = law.advance(z, dtheta)
             torque(z, dtheta * 1000.0, current)

@@ -26,7 +26,7 @@ def loops_figure(p: FrictionDamperParams, path: Path) -> None:
     fig, axes = plt.subplots(2, len(TABLE1), figsize=(4 * len(TABLE1), 7))
     for col, (f, amps) in enumerate(TABLE1.items()):
         for a in amps:
-            t, Y, Yd, X, F = simulate_harmonic(p, "bouc-wen", f, a)
+            _t, Y, Yd, _X, F = simulate_harmonic(p, "bouc-wen", f, a)
             axes[0, col].plot(Y, F, lw=1, label=f"{a:g} mm")
             axes[1, col].plot(Yd, F, lw=1, label=f"{a:g} mm")
         axes[0, col].set_title(f"{f:g} Hz")
@@ -46,7 +46,7 @@ def loops_figure(p: FrictionDamperParams, path: Path) -> None:
 def comparison_figure(p: FrictionDamperParams, path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for law in ("coulomb", "mstv", "bouc-wen"):
-        t, Y, Yd, X, F = simulate_harmonic(p, law, 10.0, 1.0)
+        _t, Y, Yd, _X, F = simulate_harmonic(p, law, 10.0, 1.0)
         axes[0].plot(Y, F, lw=1, label=law)
         axes[1].plot(Yd, F, lw=1, label=law)
     axes[0].set_xlabel("displacement Y [mm]")

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sashil.drivers.emulator.truth import TruthLog
-from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand
+from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample
 from sashil.drivers.messages import (
     CMD_ENABLE,
     FAULT_BAD_CONFIGURE,
@@ -135,7 +135,6 @@ class RigDevice:
         self._sample_seq = 0
         self._tx_seq = 0
         self._stuck: tuple[int, int] | None = None
-        self._last_read = None
         self.samples_sent = 0
         self.overruns = 0
         #: called with (now_ns, drive_a) whenever the drive current changes (tests, logging)
@@ -241,13 +240,12 @@ class RigDevice:
             if self.on_drive is not None:
                 self.on_drive(now_ns, drive)
 
-    def _advance(self, now_ns: int) -> None:
+    def _advance(self, now_ns: int) -> RigSample:
         """Step the plant to ``now_ns`` (the sensor model advances with each read)."""
-        self._last_read = self.rig.read(now_ns, 0)
+        return self.rig.read(now_ns, 0)
 
     def _sample(self, now_ns: int) -> tuple[int, Message]:
-        self._advance(now_ns)
-        reading = self._last_read
+        reading = self._advance(now_ns)
         arm, road = reading.arm_counts, reading.road_counts
         stuck_after = self.faults.stuck_sensor_after_s
         elapsed = self.session_time_s(now_ns)

@@ -95,7 +95,7 @@ class Emulator:
                 now = self.clock()
                 device.bad_frames = transport.bad_frames
                 out: list[tuple[int, Message]] = []
-                for seq, msg in received:
+                for _seq, msg in received:
                     out += device.handle(msg, now)
                 out += device.tick(now)
                 for seq, msg in out:

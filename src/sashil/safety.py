@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 from sashil.drivers.interface import FLAG_FAULT, FLAG_OVERCURRENT, RigCommand, RigSample
 from sashil.errors import SafetyTrip
@@ -100,32 +100,10 @@ class SafetySupervisor:
     # after read -------------------------------------------------------------------------------
     def check(self, sample: RigSample | None, t_ns: int) -> None:
         """Raise SafetyTrip (after recording it) if the sample breaks an interlock."""
-        if sample is None:
-            fresh = False
-        else:
-            seq = sample.seq
-            last = self._last_seq
-            if last is None:
-                fresh = True
-            else:
-                step = (seq - last) % SEQ_MODULUS
-                fresh = 0 < step < SEQ_HALF
-            if fresh:
-                self._last_seq = seq
-        if fresh:
-            self._not_fresh = 0
-        else:
-            self.stale_samples += 1
-            self._not_fresh += 1
-            if self._not_fresh >= self.sensor_timeout_cycles:
-                what = "no sample" if sample is None else f"sequence number stuck at or behind {self._last_seq}"
-                self._trip(
-                    t_ns,
-                    "sensor_timeout",
-                    f"sensor timeout: no fresh sample for {self._not_fresh} cycles ({what}; "
-                    f"safety.sensor_timeout_cycles = {self.sensor_timeout_cycles})",
-                )
+        if sample is None or not self._advances(sample.seq):
+            self._stale(sample, t_ns)
             return  # a stale sample is not judged again
+        self._not_fresh = 0
         if sample.flags & self.fault_mask:
             kinds = [
                 name for bit, name in ((FLAG_FAULT, "fault"), (FLAG_OVERCURRENT, "overcurrent")) if sample.flags & bit
@@ -142,7 +120,28 @@ class SafetySupervisor:
                     f"{math.degrees(limit):g} deg (rig.angle_limit_deg)",
                 )
 
-    def _trip(self, t_ns: int, kind: str, reason: str) -> None:
+    def _advances(self, seq: int) -> bool:
+        """Whether ``seq`` is fresh: the first one, or ahead of the last by less than half the counter."""
+        last = self._last_seq
+        fresh = last is None or 0 < (seq - last) % SEQ_MODULUS < SEQ_HALF
+        if fresh:
+            self._last_seq = seq
+        return fresh
+
+    def _stale(self, sample: RigSample | None, t_ns: int) -> None:
+        """Count a cycle without a fresh sample; trip after ``sensor_timeout_cycles`` of them."""
+        self.stale_samples += 1
+        self._not_fresh += 1
+        if self._not_fresh >= self.sensor_timeout_cycles:
+            what = "no sample" if sample is None else f"sequence number stuck at or behind {self._last_seq}"
+            self._trip(
+                t_ns,
+                "sensor_timeout",
+                f"sensor timeout: no fresh sample for {self._not_fresh} cycles ({what}; "
+                f"safety.sensor_timeout_cycles = {self.sensor_timeout_cycles})",
+            )
+
+    def _trip(self, t_ns: int, kind: str, reason: str) -> NoReturn:
         trip = Trip((t_ns - self.start_ns) * 1e-9, kind, reason)
         self.trips.append(trip)
         self._last_current = 0.0

@@ -102,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
             )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
+        assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
         metrics = record.metrics.as_dict()
         entry = {
             "current_a": current,

@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     for run_dir in args.run_dirs:
         load_run(run_dir)
     folder = RunFolder.create(args.out, "report")
-    runs, files = write_report(args.run_dirs, folder.path, progress)
+    _runs, files = write_report(args.run_dirs, folder.path, progress)
     if "mat" in (args.format or ()):
         for run_dir in args.run_dirs:
             for data in sorted(Path(run_dir).rglob("data.csv")):

@@ -6,6 +6,7 @@ import argparse
 import copy
 import math
 import sys
+from typing import Any
 
 from sashil.cli.common import (
     add_config_options,
@@ -123,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     live = (
         None
         if args.stepped
-        else open_rerun(args, SWEEP_COLUMNS + ("band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+        else open_rerun(args, (*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
     )
     folder.write_config(config)
     label = name if args.current is None else f"passive {args.current:g} A"
@@ -154,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         _plot(folder, points, label)
         integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
         print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
-        summary = {
+        summary: dict[str, Any] = {
             "exit_status": "ok",
             "mode": "stepped",
             "controller": label,

@@ -158,6 +158,7 @@ class TorqueTracking(Law):
         if self.torque is not None:
             return self.torque(state.time_s)
         table = self.fraction
+        assert table is not None  # __init__ sets exactly one of torque, fraction
         r = table[int(state.time_s * self.rate_hz) % len(table)]
         return state.band_lo_nm + r * (state.band_hi_nm - state.band_lo_nm)
 

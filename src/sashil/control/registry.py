@@ -75,7 +75,8 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
             )
         return Passive(current)
     if name == "target-damping":
-        c_target, zeta = section.get("c_target"), section.get("zeta")
+        c_target: Any = section.get("c_target")
+        zeta: Any = section.get("zeta")
         if c_target is None and zeta is None:
             raise ConfigError(
                 "controller.zeta: law 'target-damping' needs zeta (damping ratio) or c_target (N m s/rad)"

@@ -82,7 +82,7 @@ class DropRecord:
 def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
     """Release instant from departure samples: zero of the line through ``sqrt|theta - hold|``."""
     ts, roots = [], []
-    for t, angle in zip(times_ns, angles):
+    for t, angle in zip(times_ns, angles, strict=True):
         moved = abs(angle - hold_angle)
         if moved >= 1.5 * resolution:
             ts.append(t)
@@ -93,12 +93,13 @@ def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: fl
         if slope > 0:
             estimate = ts[0] + int(round(-intercept / slope))
             last_still = max(
-                (t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < 0.5 * resolution), default=None
+                (t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < 0.5 * resolution),
+                default=None,
             )
             if last_still is None or estimate >= last_still:
                 return min(estimate, ts[0])
             return last_still
-    still = [t for t, a in zip(times_ns, angles) if abs(a - hold_angle) < resolution]
+    still = [t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < resolution]
     return still[-1] if still else times_ns[0]
 
 
@@ -168,6 +169,7 @@ class DropTestPlan:
                 self.hold_angle = self._hold_sum / self._hold_count
         else:
             self._still_since = None
+        assert self._start_ns is not None  # step() sets it on the first cycle
         if self.phase == "wait-hold" and (t_ns - self._start_ns) * 1e-9 > self.s.hold_timeout_s:
             raise DriverTimeoutError(
                 f"drop test: no steady hold within ±{math.degrees(self.s.hold_tolerance_rad):g} deg of "
@@ -177,6 +179,7 @@ class DropTestPlan:
 
     def _released(self, t_ns: int) -> None:
         recent = list(self._recent)
+        assert self._start_ns is not None  # step() sets it on the first cycle
         if self.s.known_release_after_s is not None:
             self.release_ns = self._start_ns + round(self.s.known_release_after_s * 1e9)
         else:
@@ -210,6 +213,7 @@ class DropTestPlan:
         """Record this cycle (the common case, without building a row tuple)."""
         if self.controller is not None:
             return self._record(self._row(t_ns, theta, road, current))
+        assert self.release_ns is not None  # recording starts at the release
         time_s = (t_ns - self.release_ns) * 1e-9
         if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
             self.phase = "done"
@@ -224,19 +228,22 @@ class DropTestPlan:
         return self.command
 
     def _record(self, row: tuple) -> RigCommand | None:
+        assert self.release_ns is not None  # recording starts at the release
         time_s = (row[0] - self.release_ns) * 1e-9
         if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
             self.phase = "done"
             return None
         data = self._data
         data[0].append(time_s)
-        for column, value in zip(data[1:], row[1:]):
+        for column, value in zip(data[1:], row[1:], strict=True):
             column.append(value)
         self._n += 1
         return self.command
 
     def columns(self) -> dict[str, np.ndarray]:
-        return {name: np.asarray(values, dtype=float) for name, values in zip(self.column_names, self._data)}
+        return {
+            name: np.asarray(values, dtype=float) for name, values in zip(self.column_names, self._data, strict=True)
+        }
 
 
 def default_clock(config: dict[str, Any]) -> Clock:

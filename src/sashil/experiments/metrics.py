@@ -5,6 +5,7 @@ Pure functions on sampled angle records (radians in, the unit named in each resu
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import asdict, dataclass
 
@@ -119,7 +120,7 @@ def drop_metrics(
         ups = zero_crossings_up(time_s, theta, hysteresis_rad=floor)
         period = float(np.mean(np.diff(ups))) if ups.size >= 2 else None
     amplitudes = [value for _, value in peaks]
-    decrements = [math.log(a / b) for a, b in zip(amplitudes[:-1], amplitudes[1:])]
+    decrements = [math.log(a / b) for a, b in itertools.pairwise(amplitudes)]
     decrement = float(np.mean(decrements)) if decrements else None
     ratio = None if decrement is None else decrement / math.sqrt(4 * math.pi**2 + decrement**2)
     return DropMetrics(

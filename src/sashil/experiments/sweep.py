@@ -178,7 +178,7 @@ def run_profile(
     duration_s: float,
     rig_factory: RigFactory | None = None,
     clock: Clock | None = None,
-    keep: Callable[[dict[str, np.ndarray]], None] | None = None,
+    keep: Callable[[dict[str, np.ndarray]], object] | None = None,
 ) -> dict[str, np.ndarray]:
     """One run of ``controller`` under the road profile, under the safety supervisor of the config's
     ``safety`` section; returns the recorded columns.

@@ -225,16 +225,16 @@ def identify(u: np.ndarray, y: np.ndarray, n: int = N_PERIOD, seed: int = 0, f_c
 
     def residuals(xs):
         evaluations[0] += 1
-        p = dict(zip(NAMES, xs * scale))
+        p = dict(zip(NAMES, xs * scale, strict=True))
         sim = simulate(u[: periods * n], p, periodic_n=n)
         e = sim[n:] - y[n : periods * n]
         return np.where(np.isfinite(e), e, 1.0)
 
     fit = least_squares(residuals, x0 / scale, method="lm", x_scale=1.0)
-    params = dict(zip(NAMES, fit.x * scale))
+    params = dict(zip(NAMES, fit.x * scale, strict=True))
     m, p = fit.jac.shape
     cov = 2 * fit.cost / max(m - p, 1) * np.linalg.pinv(fit.jac.T @ fit.jac)
-    stderr = dict(zip(NAMES, np.sqrt(np.clip(np.diag(cov), 0, None)) * scale))
+    stderr = dict(zip(NAMES, np.sqrt(np.clip(np.diag(cov), 0, None)) * scale, strict=True))
     return BenchmarkFit(
         params, stderr, time.perf_counter() - started, global_s, evaluations[0], float(np.sqrt(np.mean(fit.fun**2)))
     )

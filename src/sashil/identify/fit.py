@@ -91,7 +91,10 @@ class Problem:
         self.evaluations = 0
         trim = [slice(15, r.theta.size - 15) for r in self.records]
         self._target = np.concatenate(
-            [(r.torque_in - options.J * (r.theta_ddot + r.acc_road))[s] for r, s in zip(self.records, trim)]
+            [
+                (r.torque_in - options.J * (r.theta_ddot + r.acc_road))[s]
+                for r, s in zip(self.records, trim, strict=True)
+            ]
         )
         self._trim = trim
 
@@ -101,9 +104,9 @@ class Problem:
         model = self.model
         probe = model.full_params(nl, {s: 1.0 for s in model.linear}, self.options.J)
         blocks = []
-        for record, s in zip(self.records, self._trim):
+        for record, s in zip(self.records, self._trim, strict=True):
             state = model.state_path(probe, record)
-            cols = dict(zip(model.linear, model.regressors(nl, state, record)))
+            cols = dict(zip(model.linear, model.regressors(nl, state, record), strict=True))
             blocks.append(np.column_stack([cols[name][s] for name in self.linear]))
         A = np.vstack(blocks)
         y = self._target
@@ -125,7 +128,7 @@ class Problem:
             b = np.linalg.solve(r.T, rhs)
             coef = lsq_linear(r, b, bounds=(lower * scale, np.inf), method="bvls").x / scale
         resid = A @ coef - y
-        lin = dict(zip(self.linear, map(float, coef)))
+        lin = dict(zip(self.linear, map(float, coef), strict=True))
         return {**lin, **self.fixed_linear}, float(np.sqrt(np.mean(resid**2)))
 
     # --- output error ------------------------------------------------------------------------------
@@ -135,8 +138,8 @@ class Problem:
 
     def params_of(self, x: np.ndarray) -> dict[str, float]:
         nl_names = self.model.nonlinear
-        lin = dict(zip(self.linear, x[: len(self.linear)]))
-        nl = dict(zip(nl_names, x[len(self.linear) :]))
+        lin = dict(zip(self.linear, x[: len(self.linear)], strict=True))
+        nl = dict(zip(nl_names, x[len(self.linear) :], strict=True))
         return self.model.full_params(nl, {**lin, **self.fixed_linear}, self.options.J)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -176,7 +179,7 @@ def _global_vp(problem: Problem, options: FitOptions, bar: Progress, starts: int
         return [np.array([lin[s] for s in problem.linear])]
 
     def cost(v: np.ndarray) -> float:
-        return problem.linear_solve(dict(zip(model.nonlinear, v)))[1]
+        return problem.linear_solve(dict(zip(model.nonlinear, v, strict=True)))[1]
 
     result = differential_evolution(
         cost,
@@ -202,7 +205,7 @@ def _global_vp(problem: Problem, options: FitOptions, bar: Progress, starts: int
                 break
     out = []
     for v in candidates:
-        lin, _ = problem.linear_solve(dict(zip(model.nonlinear, v)))
+        lin, _ = problem.linear_solve(dict(zip(model.nonlinear, v, strict=True)))
         out.append(np.array([lin[s] for s in problem.linear] + list(v)))
     return out
 
@@ -220,7 +223,7 @@ def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions,
     x_lin = [linear_part.get(s, 0.0) for s in problem.linear if s in linear_part]
 
     def compose(v: np.ndarray) -> np.ndarray:
-        lin = dict(zip(hyst, v[: len(hyst)]))
+        lin = dict(zip(hyst, v[: len(hyst)], strict=True))
         full = [linear_part[s] if s in linear_part else lin[s] for s in problem.linear]
         return np.array(full + list(v[len(hyst) :]))
 
@@ -263,7 +266,7 @@ def _uncertainty(problem: Problem, fit) -> tuple[dict, dict, list]:
         G[:, j] = [(pp[n] - pm[n]) / (2 * step) for n in names]
     cov = G @ cov_x @ G.T
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    stderr = {n: float(s) for n, s in zip(names, sd)}
+    stderr = {n: float(s) for n, s in zip(names, sd, strict=True)}
     corr: dict[str, dict[str, float]] = {}
     flagged = []
     for a, na in enumerate(names):
@@ -304,6 +307,7 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
         )
         if fit is None or trial.cost < fit.cost:
             fit = trial
+    assert fit is not None  # at least one start
     stages.append(
         f"local: least_squares on the output error from the best of {options.starts} screened start(s) (best: {fit.nfev} evaluations, status {fit.status})"
     )
@@ -312,8 +316,8 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
     params = problem.params_of(fit.x)
     stderr, corr, flagged = _uncertainty(problem, fit)
     sims = problem.simulate(params)
-    rms = [float(np.sqrt(np.mean((s - r.theta) ** 2))) for s, r in zip(sims, records)]
-    nr = [nrmse(s, r.theta) for s, r in zip(sims, records)]
+    rms = [float(np.sqrt(np.mean((s - r.theta) ** 2))) for s, r in zip(sims, records, strict=True)]
+    nr = [nrmse(s, r.theta) for s, r in zip(sims, records, strict=True)]
     return FitResult(
         model=name,
         params=params,

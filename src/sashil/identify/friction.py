@@ -37,7 +37,7 @@ def _harmonic(law, amp, freq, periods, per_period, M, m, k1, c1, c2, fmax, A, al
     total = periods * per_period
     t = 0.0
     for j in range(total):
-        for q in range(sub):
+        for _q in range(sub):
             tm = t + 0.5 * h
             Y = amp * math.sin(w * tm)
             Yd = amp * w * math.cos(w * tm)
@@ -129,7 +129,7 @@ def identify_two_stage(
 
     def residual(p: FrictionDamperParams, law: str) -> np.ndarray:
         parts = []
-        for (f, a), F in zip(tests, forces):
+        for (f, a), F in zip(tests, forces, strict=True):
             sim = simulate_harmonic(p, law, f, a)[4]
             parts.append(sim - F)
         r = np.concatenate(parts)

@@ -49,7 +49,7 @@ def param_document(result: FitResult, delta: float | None = None) -> dict:
             "rms_rad_total": result.rms_total,
             "runs": [
                 {"file": name, "rms_rad": rms, "nrmse": nr}
-                for name, rms, nr in zip(result.record_names, result.rms_rad, result.nrmse)
+                for name, rms, nr in zip(result.record_names, result.rms_rad, result.nrmse, strict=True)
             ],
             "wall_s": round(result.wall_s, 3),
             "evaluations": result.evaluations,
@@ -81,7 +81,7 @@ def format_result(result: FitResult) -> str:
             se = result.stderr.get(name, float("nan"))
             rel = f" ({100 * se / abs(value):.2g} %)" if value else ""
             lines.append(f"  {name:>8} = {value:<12.6g} +- {se:.3g}{rel}")
-    for name, rms, nr in zip(result.record_names, result.rms_rad, result.nrmse):
+    for name, rms, nr in zip(result.record_names, result.rms_rad, result.nrmse, strict=True):
         lines.append(f"  run {name}: RMS {rms:.4g} rad, NRMSE {100 * nr:.3g} %")
     for a, b, c in result.flagged:
         lines.append(f"  WARNING correlation {a}-{b} = {c:+.4f} (> 0.95: not separately identifiable)")
@@ -113,7 +113,7 @@ def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: 
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(len(records), 1, figsize=(9, 2.8 * len(records)), squeeze=False, sharex=False)
-    for ax, record in zip(axes[:, 0], records):
+    for ax, record in zip(axes[:, 0], records, strict=True):
         ax.plot(record.time_s, np.degrees(record.theta), color="k", lw=1.2, label="recorded")
         for r in ranked(results):
             sim = MODELS[r.model].simulate(r.params, record)

@@ -31,10 +31,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
 from sashil.models._jit import jit
+
+#: a float, or an array of them (the laws apply element-wise)
+Value = TypeVar("Value", float, np.ndarray)
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,7 @@ class BoucWenParams:
         """alpha(i) = alpha1 + alpha2*i (seed 001 eq. 12)."""
         return self.alpha1 + self.alpha2 * current_a
 
-    def torque(self, z: float, theta_dot: float, current_a: float) -> float:
+    def torque(self, z: Value, theta_dot: Value, current_a: float) -> Value:
         """Damper torque T = alpha(i)*z + c(i)*theta_dot (seed 001 eq. 9)."""
         return (self.alpha1 + self.alpha2 * current_a) * z + (self.c1 + self.c2 * current_a) * theta_dot
 

@@ -39,7 +39,7 @@ def mismatch_fractions(section: dict[str, Any]) -> dict[str, float]:
         signs = [rng.choice((-1.0, 1.0)) for _ in PARAMETER_ORDER]
     else:
         raise ConfigError(f"mismatch.pattern: expected one of 'alternate', 'plus', 'minus', 'random', got {pattern!r}")
-    out = {key: sign * fraction for key, sign in zip(PARAMETER_ORDER, signs)}
+    out = {key: sign * fraction for key, sign in zip(PARAMETER_ORDER, signs, strict=True)}
     for key, value in (section.get("params") or {}).items():
         if key not in PARAMETER_ORDER:
             raise ConfigError(

@@ -36,11 +36,11 @@ def format_rows(columns: Columns) -> str:
     arrays = [np.asarray(columns[name]) for name in names]
     lengths = {a.shape[0] for a in arrays}
     if len(lengths) > 1:
-        raise ValueError(f"columns of unequal length: {dict(zip(names, (a.shape[0] for a in arrays)))}")
+        raise ValueError(f"columns of unequal length: {dict(zip(names, (a.shape[0] for a in arrays), strict=True))}")
     out = io.StringIO()
     out.write(",".join(names) + "\n")
     lists = [a.tolist() for a in arrays]
-    for row in zip(*lists):
+    for row in zip(*lists, strict=True):
         out.write(",".join(repr(v) if isinstance(v, float) else str(v) for v in row) + "\n")
     return out.getvalue()
 

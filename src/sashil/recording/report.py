@@ -317,4 +317,4 @@ def write_report(
         plots.append(plot_timing(out / "timing.png", runs))
     summary = out / "report.md"
     summary.write_text(markdown_summary(runs, plots), encoding="utf-8")
-    return runs, plots + [summary]
+    return runs, [*plots, summary]

@@ -37,7 +37,7 @@ import shutil
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, MutableMapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,7 +93,7 @@ HYSTERESIS: tuple[tuple[str, str, float, str], ...] = (
 )
 
 
-def feasible_band(columns: Mapping[str, np.ndarray], params: Mapping[str, float], current_max_a: float) -> None:
+def feasible_band(columns: MutableMapping[str, np.ndarray], params: Mapping[str, float], current_max_a: float) -> None:
     """Add ``band_lo_nm``/``band_hi_nm``: the torque range T(0), T(i_max) at the observed state.
 
     Seed 001 eq. 9 with eqs. 11-12 (:meth:`BoucWenParams.torque`): ``T(i) = (alpha1 + alpha2 i) z + (c1 + c2 i) theta_dot``, linear
@@ -104,8 +104,8 @@ def feasible_band(columns: Mapping[str, np.ndarray], params: Mapping[str, float]
         return
     z, v = np.asarray(columns["z_hat"], float), np.asarray(columns["theta_dot_rad_s"], float)
     model = BoucWenParams.from_mapping(dict(params))
-    columns["band_lo_nm"] = model.torque(z, v, 0.0)  # type: ignore[index]
-    columns["band_hi_nm"] = model.torque(z, v, current_max_a)  # type: ignore[index]
+    columns["band_lo_nm"] = model.torque(z, v, 0.0)
+    columns["band_hi_nm"] = model.torque(z, v, current_max_a)
 
 
 def present_series(columns: Sequence[str]) -> list[tuple[Series, tuple[int, ...]]]:
@@ -173,7 +173,7 @@ class RerunLog:
         rec = rr.RecordingStream(APP_ID)
         if name:
             rec.send_recording_name(name)
-        sinks = []
+        sinks: list[Any] = []
         if viewer and connect is None:
             # the viewer that rerun-sdk installs beside this Python, else `rerun` on PATH
             beside = Path(sys.executable).with_name("rerun")

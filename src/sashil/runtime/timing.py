@@ -20,6 +20,16 @@ import numpy as np
 #: quantiles reported for each timing column (key -> fraction)
 QUANTILES = (("p50", 0.50), ("p99", 0.99), ("p99_9", 0.999))
 
+
+def quantiles_us(values: np.ndarray) -> dict[str, float | None]:
+    """``{p50, p99, p99_9, max}`` of durations in µs, rounded to ns (all None when there are none)."""
+    out: dict[str, float | None] = dict.fromkeys([*(key for key, _ in QUANTILES), "max"])
+    if values.size:
+        out.update({key: round(float(np.quantile(values, q)), 3) for key, q in QUANTILES})
+        out["max"] = round(float(values.max()), 3)
+    return out
+
+
 COLUMNS = ("lateness", "read", "compute", "write")
 
 
@@ -54,22 +64,12 @@ class TimingStats:
 
     def stats_us(self, name: str) -> dict[str, float | None]:
         """``{p50, p99, p99_9, max}`` of a column in µs (None for an empty run)."""
-        values = self.column_us(name)
-        if values.size == 0:
-            return {key: None for key, _ in QUANTILES} | {"max": None}
-        out = {key: round(float(np.quantile(values, q)), 3) for key, q in QUANTILES}
-        out["max"] = round(float(values.max()), 3)
-        return out
+        return quantiles_us(self.column_us(name))
 
     def summary(self) -> dict[str, Any]:
         """The ``timing`` block of summary.json (DESIGN.md fixed keys plus read/write/cycle)."""
         cycle = self.column_us("read") + self.column_us("compute") + self.column_us("write")
-        cycle_stats: dict[str, float | None]
-        if cycle.size:
-            cycle_stats = {key: round(float(np.quantile(cycle, q)), 3) for key, q in QUANTILES}
-            cycle_stats["max"] = round(float(cycle.max()), 3)
-        else:
-            cycle_stats = {key: None for key, _ in QUANTILES} | {"max": None}
+        cycle_stats = quantiles_us(cycle)
         return {
             "rate_hz": self.rate_hz,
             "cycles": self.cycles,
