@@ -15,7 +15,12 @@ MODEL_CHOICES = ("bouc-wen", "dahl", "lugre", "bingham", "all")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("runs", nargs="+", metavar="RUN", help="data.csv files (or run folders holding one)")
+    parser.add_argument(
+        "runs",
+        nargs="+",
+        metavar="RUN",
+        help="data.csv files, run folders, or folders of runs (a multi-current drop test: every sub-run)",
+    )
     parser.add_argument("--model", choices=MODEL_CHOICES, default="bouc-wen", help="model to fit, or all to rank them")
     parser.add_argument("--out", metavar="FILE", default="params.yaml", help="parameter file to write (best model)")
     parser.add_argument(
@@ -38,13 +43,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write Bouc-Wen with this delta (z scale) instead of the unit z bound",
     )
     parser.add_argument("--plot", metavar="PNG", help="overlay plot (default: next to --out, *_fit.png)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the global search")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of --two-stage's genetic search (the default search is deterministic)"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _data_path(run: str) -> Path:
+def data_paths(run: str) -> list[Path]:
+    """The data.csv files of a RUN argument: a file itself, a run folder's data.csv, or every
+    data.csv in the sub-folders of a folder without one (a multi-current drop test's ``i0.000A/``,
+    ``i1.000A/``, ...; a calibration's runs), in name order."""
     path = Path(run)
-    return path / "data.csv" if path.is_dir() else path
+    if not path.is_dir():
+        return [path]
+    if (path / "data.csv").is_file():
+        return [path / "data.csv"]
+    found = sorted(path.glob("*/data.csv")) or sorted(path.glob("*/*/data.csv"))
+    return found or [path / "data.csv"]  # the last: "no such file" from the data loader
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,7 +82,9 @@ def run(args: argparse.Namespace) -> int:
     if not out.parent.exists():
         raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
     records = load_records(
-        [_data_path(r) for r in args.runs], need_current_change=not args.passive, start_at_rest=args.start == "rest"
+        [p for r in args.runs for p in data_paths(r)],
+        need_current_change=not args.passive,
+        start_at_rest=args.start == "rest",
     )
     names = ["bouc-wen", "dahl", "lugre", "bingham"] if args.model == "all" else [args.model]
     options = FitOptions(

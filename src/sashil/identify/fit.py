@@ -5,12 +5,15 @@ recorded angle theta over all samples of all runs (output error, a simulation fr
 initial angle, driven by its recorded current, road-side motion and input torque).
 
 Stages (default, ``fit_model``):
-1. global: differential evolution (the modern form of the seed's genetic algorithm) over the few
-   parameters that shape the internal state; for each candidate the torque coefficients come from
-   one linear least-squares solve of the torque balance on smoothed derivatives (variable
-   projection, equation error) - milliseconds per candidate;
+1. global: a deterministic multi-start over the few parameters that shape the internal state: an
+   unscrambled Sobol design over their box (the exponent n spaced geometrically), then Nelder-Mead
+   from the best distinct design points; for each candidate the torque coefficients come from one
+   linear least-squares solve of the torque balance on smoothed derivatives (variable projection,
+   equation error) - milliseconds per candidate. Nothing in it is random, so the answer depends on
+   the data only (the seed's genetic algorithm, differential evolution, remains for ``two_stage``);
 2. local: trust-region least squares (scipy ``least_squares``) on the output error over all free
-   parameters, from the best global candidate.
+   parameters, from the best few global candidates screened by their output error; the best
+   refinement wins, and whether the others reached the same cost is reported (convergence).
 ``two_stage=True`` is the seed 000 procedure instead: the linear part (k, c1, c2) with Coulomb
 friction first (output error), then the hysteresis parameters by differential evolution on the
 output error with the linear part fixed, then the same local refinement of everything.
@@ -39,11 +42,14 @@ class FitOptions:
     passive: bool = False  # fix the current-dependent terms at 0 (runs at one current)
     two_stage: bool = False
     J: float = 1.0
-    popsize: int = 12
-    maxiter: int = 30
+    popsize: int = 12  # two-stage DE only
+    maxiter: int = 30  # two-stage DE only
+    design: int = 256  # Sobol design points of the global stage (rounded to a power of two)
     starts: int = 8  # distinct global candidates screened by their output error
-    refine: int = 1  # local refinements from the best screened candidates
-    seed: int = 0
+    refine: int = 2  # local refinements from the best screened candidates
+    probe_nfev: int = 25  # evaluations of each refinement before the best one is carried on
+    max_nfev: int = 100  # evaluations of the carried-on refinement
+    seed: int = 0  # two-stage DE only; the default search is deterministic
     max_step: float = 1e-3
     progress: bool = False
     local: bool = True
@@ -64,6 +70,7 @@ class FitResult:
     fixed: dict[str, float]
     normalisation: str
     stages: list[str] = field(default_factory=list)
+    convergence: dict = field(default_factory=dict)
 
     @property
     def rms_total(self) -> float:
@@ -171,43 +178,87 @@ def _inside(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.clip(x, lo_m, hi_m)
 
 
+def _design(model: RigModel, count: int) -> np.ndarray:
+    """Deterministic space-filling points of the model's nonlinear box (unscrambled Sobol)."""
+    from scipy.stats import qmc
+
+    dims = len(model.nonlinear)
+    m = max(1, math.ceil(math.log2(max(count, 2))))
+    unit = qmc.Sobol(dims, scramble=False).random_base2(m)
+    unit = (unit + 0.5 / unit.shape[0]) % 1.0  # off the box corners (the first Sobol point is 0)
+    logs = model.nl_log or (False,) * dims
+    out = np.empty_like(unit)
+    for j, ((lo, hi), log) in enumerate(zip(model.nl_bounds, logs, strict=True)):
+        if log:
+            out[:, j] = np.exp(np.log(lo) + unit[:, j] * (np.log(hi) - np.log(lo)))
+        else:
+            out[:, j] = lo + unit[:, j] * (hi - lo)
+    return out
+
+
 def _global_vp(problem: Problem, options: FitOptions, bar: Progress, starts: int = 1) -> list[np.ndarray]:
-    """Best (and up to ``starts`` distinct good) candidates of the variable-projection search."""
+    """Best (and up to ``starts`` distinct good) candidates of the variable-projection search.
+
+    Deterministic: the Sobol design's VP costs, then Nelder-Mead from the best distinct points
+    (distinct: more than a tenth of the box apart in some coordinate)."""
+    from scipy.optimize import minimize
+
     model = problem.model
     if not model.nonlinear:
         lin, _ = problem.linear_solve({})
         return [np.array([lin[s] for s in problem.linear])]
+    lo = np.array([b[0] for b in model.nl_bounds])
+    hi = np.array([b[1] for b in model.nl_bounds])
+    span = hi - lo
 
     def cost(v: np.ndarray) -> float:
-        return problem.linear_solve(dict(zip(model.nonlinear, v, strict=True)))[1]
+        v = np.clip(v, lo, hi)
+        try:
+            value = problem.linear_solve(dict(zip(model.nonlinear, v, strict=True)))[1]
+        except (ValueError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError):
+            return math.inf
+        return value if math.isfinite(value) else math.inf
 
-    result = differential_evolution(
-        cost,
-        model.nl_bounds,
-        popsize=options.popsize,
-        maxiter=options.maxiter,
-        tol=1e-6,
-        seed=options.seed,
-        polish=False,
-        init="sobol",
-        callback=lambda *a, **k: bar.advance(1),
-    )
-    candidates = [result.x]
-    population = getattr(result, "population", None)
-    if population is not None and starts > 1:
-        order = np.argsort(result.population_energies)
-        span = np.array([b[1] - b[0] for b in model.nl_bounds])
-        for index in order:
-            v = population[index]
-            if all(np.max(np.abs(v - c) / span) > 0.1 for c in candidates):
-                candidates.append(v)
-            if len(candidates) >= starts:
-                break
+    design = _design(model, options.design)
+    scores = np.array([cost(v) for v in design])
+    bar.advance(1)
+    seeds: list[np.ndarray] = []
+    for index in np.argsort(scores, kind="stable"):
+        v = design[index]
+        if all(np.max(np.abs(v - c) / span) > 0.1 for c in seeds):
+            seeds.append(v)
+        if len(seeds) >= max(starts, 1):
+            break
+    polished = []
+    for v in seeds:
+        result = minimize(
+            cost,
+            v,
+            method="Nelder-Mead",
+            options={"maxfev": 60 * len(v), "xatol": 1e-4, "fatol": 1e-10, "initial_simplex": _simplex(v, lo, hi)},
+        )
+        polished.append((float(result.fun), np.clip(result.x, lo, hi)))
+        bar.advance(1)
+    candidates: list[np.ndarray] = []
+    for _, v in sorted(polished, key=lambda item: item[0]):
+        if all(np.max(np.abs(v - c) / span) > 0.02 for c in candidates):
+            candidates.append(v)
     out = []
-    for v in candidates:
+    for v in candidates[: max(starts, 1)]:
         lin, _ = problem.linear_solve(dict(zip(model.nonlinear, v, strict=True)))
         out.append(np.array([lin[s] for s in problem.linear] + list(v)))
     return out
+
+
+def _simplex(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Nelder-Mead's first simplex: v and one step of a twentieth of the box along each axis (inwards)."""
+    points = [v.copy()]
+    for j in range(v.size):
+        step = 0.05 * (hi[j] - lo[j])
+        p = v.copy()
+        p[j] = v[j] + step if v[j] + step <= hi[j] else v[j] - step
+        points.append(p)
+    return np.array(points)
 
 
 def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions, bar: Progress) -> np.ndarray:
@@ -286,7 +337,7 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
     started = time.perf_counter()
     model = MODELS[name]
     problem = Problem(model, records, options)
-    total = options.maxiter * (2 if options.two_stage else 1) + 1
+    total = options.maxiter * 2 + 1 if options.two_stage else options.starts + options.refine + 1
     bar = Progress(total, f"identify {name}", enabled=options.progress)
     stages = []
     if options.two_stage and name == "bouc-wen":
@@ -294,24 +345,42 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
         stages.append("two-stage: Coulomb linear part (output error), then hysteresis by DE (output error)")
     else:
         starts = _global_vp(problem, options, bar, options.starts)
-        stages.append("global: differential evolution, variable projection on the torque balance")
+        stages.append(
+            f"global: deterministic multi-start (Sobol design of {_design(model, options.design).shape[0]} points, "
+            f"Nelder-Mead from {len(starts)} distinct), variable projection on the torque balance"
+        )
     lo, hi = problem.bounds()
+    screened = len(starts)
     if len(starts) > options.refine:
         # screen the global candidates by their output error, refine the best few
         scores = [float(np.sum(problem.residuals(_inside(x, lo, hi)) ** 2)) for x in starts]
-        starts = [starts[j] for j in np.argsort(scores)[: options.refine]]
-    fit = None
+        starts = [starts[j] for j in np.argsort(scores, kind="stable")[: options.refine]]
+    trials = []
+    # a short refinement of each start, then the best one carried on to convergence
+    budget = options.probe_nfev if len(starts) > 1 else options.max_nfev
     for x0 in starts:
         trial = least_squares(
-            problem.residuals, _inside(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=100 if options.local else 1
+            problem.residuals,
+            _inside(x0, lo, hi),
+            bounds=(lo, hi),
+            x_scale="jac",
+            max_nfev=budget if options.local else 1,
         )
-        if fit is None or trial.cost < fit.cost:
-            fit = trial
-    assert fit is not None  # at least one start
+        trials.append(trial)
+        bar.advance(1)
+    best = min(range(len(trials)), key=lambda j: trials[j].cost)
+    fit = trials[best]
+    if options.local and len(starts) > 1 and fit.status == 0:
+        more = least_squares(
+            problem.residuals, _inside(fit.x, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=options.max_nfev
+        )
+        more.nfev += fit.nfev
+        trials[best] = fit = more
+    convergence = _convergence(problem, fit, trials)
     stages.append(
-        f"local: least_squares on the output error from the best of {options.starts} screened start(s) (best: {fit.nfev} evaluations, status {fit.status})"
+        f"local: least_squares on the output error from the best {len(trials)} of {screened} screened start(s) "
+        f"(best: {fit.nfev} evaluations, status {fit.status}: {convergence['message']})"
     )
-    bar.advance(1)
     bar.close()
     params = problem.params_of(fit.x)
     stderr, corr, flagged = _uncertainty(problem, fit)
@@ -332,4 +401,22 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
         fixed={"J": options.J, **problem.fixed_linear},
         normalisation=model.normalisation,
         stages=stages,
+        convergence=convergence,
     )
+
+
+def _convergence(problem: Problem, fit, trials: Sequence) -> dict:
+    """How the local stage ended: status, evaluations, gradient, and the spread of the refinements."""
+    best = float(fit.cost)
+    agree = [t for t in trials if t.cost <= best * 1.005 + 1e-300]
+    converged = fit.status > 0  # 0: evaluation budget used up
+    return {
+        "converged": bool(converged),
+        "status": int(fit.status),
+        "message": str(fit.message),
+        "evaluations": int(fit.nfev),
+        "optimality": float(fit.optimality),
+        "refinements": len(trials),
+        "refinements_within_0_5pct": len(agree),
+        "costs": [float(2.0 * t.cost) for t in trials],
+    }

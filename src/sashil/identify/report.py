@@ -54,6 +54,7 @@ def param_document(result: FitResult, delta: float | None = None) -> dict:
             "wall_s": round(result.wall_s, 3),
             "evaluations": result.evaluations,
             "stages": result.stages,
+            "convergence": result.convergence,
         },
     }
 

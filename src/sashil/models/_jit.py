@@ -8,11 +8,45 @@ run on a machine.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
 F = TypeVar("F", bound=Callable)
+
+_PACKAGE = Path(__file__).resolve().parent.parent
+#: sources whose compiled kernels call each other: numba's cache checks only a function's own file,
+#: so a change in one (e.g. advance_z) would leave a stale copy inlined in the others' caches
+_KERNEL_SOURCES = ("models/*.py", "identify/kernels.py", "identify/boucwen_benchmark.py", "identify/friction.py")
+
+
+def refresh_stale_cache(package: Path = _PACKAGE) -> bool:
+    """Drop numba's cached kernels when any kernel source changed since they were cached.
+
+    A digest of the sources is kept beside the cache (``models/__pycache__/jit-sources.sha256``);
+    when it differs, every ``*.nbi``/``*.nbc`` of the kernel folders is removed, so each kernel
+    compiles once from the current sources. Best effort (a read-only install keeps its cache).
+    Returns True when the cache was dropped.
+    """
+    files = sorted({path for pattern in _KERNEL_SOURCES for path in package.glob(pattern)})
+    digest = hashlib.sha256()
+    for path in files:
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    stamp = package / "models" / "__pycache__" / "jit-sources.sha256"
+    try:
+        if stamp.is_file() and stamp.read_text().strip() == digest.hexdigest():
+            return False
+        for folder in {path.parent / "__pycache__" for path in files}:
+            for cached in [*folder.glob("*.nbi"), *folder.glob("*.nbc")]:
+                cached.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest.hexdigest() + "\n")
+    except OSError:
+        return False
+    return True
+
 
 try:
     if os.environ.get("SASHIL_NO_JIT"):
@@ -20,6 +54,7 @@ try:
     from numba import njit as _njit
 
     JIT = True
+    refresh_stale_cache()
 
     def jit(function: F) -> F:
         return _njit(cache=True)(function)  # type: ignore[return-value]

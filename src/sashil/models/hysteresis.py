@@ -124,7 +124,8 @@ def advance_z(z: float, dtheta: float, beta: float, gamma: float, delta: float, 
         if phi <= 0.0:
             break  # at -z_u with gamma <= 0: an equilibrium of the exact solution
         h = dz_max / phi
-        limit = 0.5 / stiff
+        # n > 1: |z|^n underflows to 0 for tiny |z|, so the stiffness is 0 there (no limit)
+        limit = 0.5 / stiff if stiff > 0.0 else h
         if limit < h:
             h = max(limit, dz_min / phi)
         if h > travel:
