@@ -10,6 +10,8 @@ that reboot when the port opens; set ``driver.can_options: {sleep_after_open: 2}
 from __future__ import annotations
 
 import select
+import time
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -83,6 +85,8 @@ class CanRig(LinkRig):
         if interface == "slcan":
             self.options.setdefault("sleep_after_open", 0)
         self.decoder = CanDecoder()
+        #: frame trace (``sashil.recording.can_trace.CanTrace.put``): gets every frame sent and received
+        self.frame_sink: Callable[[can.Message], None] | None = None
         self._bus: Any = None
         self._fd: int | None = None
 
@@ -126,15 +130,21 @@ class CanRig(LinkRig):
             self._fd = self._bus.fileno()
 
     def _send(self, seq: int, msg: Message) -> None:
+        sink = self.frame_sink
         try:
             for frame_id, data in encode(msg, seq):
-                self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+                frame = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+                self._bus.send(frame)
+                if sink is not None:
+                    frame.timestamp, frame.is_rx = time.time(), False
+                    sink(frame)
         except (can.CanError, OSError, ValueError) as err:
             raise DriverIOError(f"{self.describe()}: link lost on send ({error_reason(err)})") from None
 
     def _receive(self, timeout_s: float) -> list[tuple[int, Message]]:
         out: list[tuple[int, Message]] = []
         decoder = self.decoder
+        sink = self.frame_sink
         try:
             if self._fd is not None:
                 frame = self._recv_waiting()
@@ -144,6 +154,8 @@ class CanRig(LinkRig):
             else:
                 frame = self._recv(timeout_s)
             while frame is not None:
+                if sink is not None:
+                    sink(frame)
                 if not frame.is_error_frame and not frame.is_remote_frame:
                     got = decoder.feed(frame.arbitration_id, bytes(frame.data))
                     if got is not None:

@@ -11,13 +11,25 @@ from pathlib import Path
 from typing import Any
 
 from sashil.config import Config, apply_params, load_config
+from sashil.config.overrides import apply_overrides
 from sashil.errors import ConfigError
+from sashil.recording.formats import FORMATS, check_formats
+from sashil.recording.formats import HELP as FORMAT_HELP
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
-    """``--config`` and ``--params`` (every verb)."""
+    """``--config``, ``--params`` and ``--set`` (every verb that reads a config)."""
     parser.add_argument("--config", metavar="FILE", help="YAML config (default: simulated rig, seed parameters)")
     parser.add_argument("--params", metavar="FILE", help="parameter file from `sashil identify` (replaces the model)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        dest="overrides",
+        metavar="SECTION.KEY=VALUE",
+        help="change one config value, checked like the config file (YAML value; repeatable), "
+        "e.g. --set loop.rate_hz=500 --set controller.law=skyhook --set controller.c_sky=2",
+    )
 
 
 def add_driver_options(parser: argparse.ArgumentParser) -> None:
@@ -66,13 +78,7 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
         help="record the live view to an .rrd file, no viewer needed (no FILE: live.rrd in the run folder)",
     )
     if formats:
-        group.add_argument(
-            "--format",
-            action="append",
-            choices=("csv", "mat"),
-            metavar="FMT",
-            help="data formats to write: csv (always) and mat (MATLAB data.mat beside data.csv); repeatable",
-        )
+        group.add_argument("--format", action="append", choices=FORMATS, metavar="FMT", help=FORMAT_HELP)
 
 
 def wants_rerun(args: argparse.Namespace) -> bool:
@@ -119,6 +125,11 @@ def wants_mat(args: argparse.Namespace) -> bool:
     return "mat" in (getattr(args, "format", None) or ())
 
 
+def formats(args: argparse.Namespace) -> tuple[str, ...]:
+    """The ``--format`` values, each once (checked by :func:`resolve_config`)."""
+    return tuple(dict.fromkeys(getattr(args, "format", None) or ()))
+
+
 def add_verbosity_options(parser: argparse.ArgumentParser) -> None:
     """``--quiet`` / ``--verbose`` (every verb; set up by :func:`setup_logging`)."""
     group = parser.add_mutually_exclusive_group()
@@ -153,14 +164,17 @@ def say(args: argparse.Namespace, message: str) -> None:
 
 
 def resolve_config(args: argparse.Namespace) -> Config:
-    """The config the verb runs with: file (or defaults), then --params, then --driver/--port."""
+    """The config the verb runs with: file (or defaults), then --params, then each --set, then
+    --driver/--port. Every step is validated before anything is opened or written."""
     config = load_config(getattr(args, "config", None))
     if getattr(args, "params", None):
         config = apply_params(config, args.params)
+    config = apply_overrides(config, getattr(args, "overrides", None) or ())
     if getattr(args, "driver", None):
         config["driver"]["name"] = args.driver
     if getattr(args, "port", None):
         config["driver"]["port"] = args.port
+    check_formats(getattr(args, "format", None), config["driver"]["name"])  # before anything runs
     return config
 
 

@@ -18,11 +18,11 @@ from sashil.cli.common import (
     resolve_config,
     say,
     setup_logging,
-    wants_mat,
 )
+from sashil.cli.outputs import start_can_trace, write_formats
+from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
-from sashil.recording.matlab import write_mat
 from sashil.recording.plots import plot_angle_overlay
 from sashil.recording.run_folder import RunFolder
 
@@ -86,15 +86,21 @@ def run(args: argparse.Namespace) -> int:
     runs, overlay = [], []
     exit_status = "ok"
     failure: SashilError | None = None
+    law = config["controller"]["law"]
     for current in currents:
-        say(args, f"drop test from {args.theta0_deg:g} deg at {current:g} A ...")
-        record = run_drop_test(config, args.theta0_deg, current, duration, controller=_controller(config))
+        label = f"{law} (from {current:g} A until the release)" if law != "passive" else f"passive {current:g} A"
+        say(args, f"drop test from {args.theta0_deg:g} deg, {label} ...")
         target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
+        rig = open_rig(config)
+        trace = start_can_trace(args, rig, target.path)
+        try:
+            record = run_drop_test(config, args.theta0_deg, current, duration, rig=rig, controller=_controller(config))
+        finally:
+            trace_stats = trace.close() if trace is not None else None
         if several:
             target.write_config(config)
         target.write_data(record.columns)
-        if wants_mat(args):
-            write_mat(target.file("data.mat"), record.columns, {"verb": "drop-test", "current_a": current})
+        write_formats(args, target.path, config, "drop-test", record.columns, current_a=current, controller=label)
         if live is not None:
             live.note(
                 live_offset_s,
@@ -106,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         metrics = record.metrics.as_dict()
         entry = {
             "current_a": current,
+            "controller": label,
             "theta0_deg": args.theta0_deg,
             "hold_angle_deg": math.degrees(record.hold_angle_rad),
             "release_estimated": record.release_estimated,
@@ -119,10 +126,21 @@ def run(args: argparse.Namespace) -> int:
             "realtime": record.extra.get("realtime"),
             "exit_status": "ok" if record.error is None else record.loop.exit_status,
             "error": None if record.error is None else str(record.error),
+            "can_trace": trace_stats,
         }
         runs.append(entry)
         if several:
-            target.write_summary({"exit_status": entry["exit_status"], "verb": "drop-test", "runs": [entry]})
+            target.write_summary(
+                {
+                    "exit_status": entry["exit_status"],
+                    "verb": "drop-test",
+                    "driver": config["driver"]["name"],
+                    "controller": label,
+                    "timing": entry["timing"],
+                    "trips": entry["trips"],
+                    "runs": [{**entry, "folder": "."}],
+                }
+            )
         if record.error is not None:
             failure = record.error
             exit_status = entry["exit_status"]
@@ -149,7 +167,15 @@ def run(args: argparse.Namespace) -> int:
     clock = (
         "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"
     )  # timing is simulated on the virtual clock
-    summary = {"exit_status": exit_status, "verb": "drop-test", "driver": driver["name"], "clock": clock, "runs": runs}
+    summary = {
+        "exit_status": exit_status,
+        "verb": "drop-test",
+        "driver": driver["name"],
+        "controller": law if law != "passive" else "passive (constant current per run)",
+        "clock": clock,
+        "timing": runs[0]["timing"] if len(runs) == 1 else None,
+        "runs": runs,
+    }
     if failure is not None:
         summary.update(error=str(failure), exit_code=failure.exit_code)
     folder.write_summary(summary)

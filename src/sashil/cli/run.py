@@ -19,11 +19,12 @@ from sashil.cli.common import (
     resolve_config,
     say,
     setup_logging,
-    wants_mat,
 )
+from sashil.cli.outputs import finish_loop_run, start_can_trace
 from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
-from sashil.recording.matlab import export_mat
+from sashil.experiments.road_option import DEFAULT_SIM_ROAD, RoadStage, parse_road
+from sashil.experiments.road_option import SYNTAX as ROAD_SYNTAX
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.runtime.clock import RealClock
@@ -50,6 +51,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="controller (default: the config's controller section, else passive)",
     )
     parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
+    parser.add_argument(
+        "--road",
+        metavar="SPEC",
+        help=f"road excitation theta1(t): {ROAD_SYNTAX} (default on the sim backend: {DEFAULT_SIM_ROAD}, else none)",
+    )
     add_output_options(parser)
     add_recording_options(parser)
     add_verbosity_options(parser)
@@ -109,7 +115,15 @@ def run(args: argparse.Namespace) -> int:
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     backend = config["driver"]["name"]
     label, stage = build_stage(args.controller, config, args.current)
-    rig = open_rig(config)
+    road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if backend == "sim" else None), config)
+    if backend == "sim" and road is not None:
+        from sashil.models.mismatch import open_sim_rig
+
+        rig = open_sim_rig(config, road)  # the plant's road angle follows the profile
+    else:
+        rig = open_rig(config)
+        if road is not None:
+            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
     rate = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, rig, backend)
     config["loop"]["rate_hz"] = rate
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
@@ -120,14 +134,17 @@ def run(args: argparse.Namespace) -> int:
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     say(
         args,
-        f"sashil run: {backend} backend, {label}, {rate:g} Hz, "
+        f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
         f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
     )
     quiet = bool(args.quiet)  # --quiet: warnings (overruns) only, not the real-time set-up lines
     report = lambda line: None if quiet and line.startswith("realtime:") else print(line, file=sys.stderr, flush=True)  # noqa: E731
-    outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
-    if wants_mat(args):
-        export_mat(folder.file("data.csv"))
+    trace = start_can_trace(args, rig, folder.path)
+    try:
+        outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
+    finally:
+        trace_stats = trace.close() if trace is not None else None
+    finish_loop_run(args, folder, config, outcome.summary, trace_stats)
     say(args, format_timing(outcome.summary["timing"]))
     for trip in outcome.summary["trips"]:
         print(f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", file=sys.stderr)

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if measured is not None:
         columns["theta_measured_rad"] = measured
     folder.write_data(columns)
-    summary = {"exit_status": 0, "model": model, "input": source, "samples": int(columns["time_s"].size)}
+    summary = {"exit_status": "ok", "model": model, "input": source, "samples": int(columns["time_s"].size)}
     if measured is not None:
         summary["rms_rad"] = float(np.sqrt(np.mean((columns["theta_rad"] - measured) ** 2)))
         summary["nrmse"] = nrmse(columns["theta_rad"], measured)

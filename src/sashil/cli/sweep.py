@@ -19,13 +19,21 @@ from sashil.cli.common import (
     positive_seconds,
     resolve_config,
     setup_logging,
-    wants_mat,
 )
+from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.control.registry import LAWS, make_controller
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.sweep import SWEEP_COLUMNS, ac_rms, chirp_profile, frequencies, nrmse, run_profile, stepped_sine
+from sashil.experiments.sweep import (
+    SWEEP_COLUMNS,
+    _default_rig,
+    ac_rms,
+    chirp_profile,
+    frequencies,
+    nrmse,
+    run_profile,
+    stepped_sine,
+)
 from sashil.identify.progress import Progress
-from sashil.recording.matlab import write_mat
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
 
@@ -128,6 +136,32 @@ def run(args: argparse.Namespace) -> int:
     )
     folder.write_config(config)
     label = name if args.current is None else f"passive {args.current:g} A"
+    trace_box: list = []  # the CAN frame trace (--format blf|asc|log|mf4), started with the first rig
+
+    def rig_factory(cfg: dict, road):  # every rig of the sweep feeds the one trace
+        rig = _default_rig(cfg, road)
+        if trace_box:
+            trace_box[0].attach(rig)
+        else:
+            trace = start_can_trace(args, rig, folder.path)
+            if trace is not None:
+                trace_box.append(trace)
+        return rig
+
+    try:
+        summary = _sweep(args, config, name, label, duration, folder, live, rig_factory)
+    finally:
+        if trace_box:
+            trace_stats = trace_box[0].close()
+    if trace_box:
+        summary["can_trace"] = trace_stats
+    _write_summary(folder, summary)
+    print(f"run folder: {folder.path}")
+    return 0
+
+
+def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> dict:
+    """Run the stepped sine or the chirp; returns the summary."""
     sweep = config["sweep"]
     if args.stepped:
         freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
@@ -135,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         points = []
         try:
             for f in freqs:  # one frequency at a time, for the progress bar
-                points += stepped_sine(config, lambda: make_controller(name, config), [f])
+                points += stepped_sine(config, lambda: make_controller(name, config), [f], rig_factory)
                 bar.advance(1, f"{f:.3g} Hz")
         except SashilError as err:  # the frequencies done so far are kept
             _write_failed(folder, err, {"mode": "stepped", "controller": label, "points": [p.__dict__ for p in points]})
@@ -157,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
         summary: dict[str, Any] = {
             "exit_status": "ok",
+            "driver": config["driver"]["name"],
             "mode": "stepped",
             "controller": label,
             "integrated_body_rms_rad": integrated,
@@ -172,13 +207,13 @@ def run(args: argparse.Namespace) -> int:
                 controller,
                 chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]),
                 total,
+                rig_factory,
                 keep=folder.write_data,
             )
         except SashilError as err:
             _write_failed(folder, err, {"mode": "chirp", "controller": label})
             raise
-        if wants_mat(args):
-            write_mat(folder.file("data.mat"), cols, {"verb": "sweep", "controller": label})
+        write_formats(args, folder.path, config, "sweep", cols, controller=label)
         if live is not None:
             shown = dict(cols)
             if config["model"]["name"] == "bouc-wen":
@@ -188,6 +223,7 @@ def run(args: argparse.Namespace) -> int:
         body = cols["theta_rad"] + cols["theta_road_rad"]
         summary = {
             "exit_status": "ok",
+            "driver": config["driver"]["name"],
             "mode": "chirp",
             "controller": label,
             "body_rms_rad": ac_rms(body),
@@ -200,9 +236,7 @@ def run(args: argparse.Namespace) -> int:
             f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
             f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg"
         )
-    _write_summary(folder, summary)
-    print(f"run folder: {folder.path}")
-    return 0
+    return summary
 
 
 def _write_summary(folder: RunFolder, summary: dict) -> None:

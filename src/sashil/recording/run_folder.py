@@ -20,6 +20,7 @@ from sashil import __version__
 from sashil.config import Config, dump_config
 from sashil.errors import ConfigError
 from sashil.recording.data_file import Columns, write_data_csv
+from sashil.recording.summary_schema import normalise
 
 
 def utc_now() -> datetime:
@@ -118,9 +119,9 @@ class RunFolder:
         return target
 
     def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
+        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`."""
         doc = {
-            **({"verb": self.verb} if self.verb and "verb" not in summary else {}),
-            **summary,
+            **normalise(summary, self.verb),
             "started_utc": self.started_utc.isoformat(),
             "ended_utc": utc_now().isoformat(),
             "provenance": provenance(),

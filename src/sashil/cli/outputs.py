@@ -1,0 +1,57 @@
+"""What a verb writes beside ``data.csv`` after (or while) it runs: ``--format`` files, CAN traces, plots.
+
+Thin glue between the command line and the writers in :mod:`sashil.recording` (formats, can_trace,
+plots), so each verb needs one call at the start and one at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from sashil.cli.common import formats
+from sashil.recording.can_trace import CanTrace
+from sashil.recording.formats import can_formats, write_data_formats
+from sashil.recording.run_folder import RunFolder
+
+
+def start_can_trace(args: argparse.Namespace, rig: Any, folder: Path) -> CanTrace | None:
+    """The running CAN frame trace ``--format blf|asc|log|mf4`` asks for, attached to ``rig``, or None."""
+    trace = CanTrace.for_formats(folder, can_formats(formats(args)))
+    if trace is None:
+        return None
+    trace.attach(rig)
+    return trace.start()
+
+
+def write_formats(
+    args: argparse.Namespace,
+    folder: Path,
+    config: Mapping[str, Any],
+    verb: str,
+    columns: Mapping[str, Any] | None = None,
+    **meta: Any,
+) -> list[Path]:
+    """The data files ``--format mat|parquet`` asks for (from ``columns``, else from data.csv)."""
+    return write_data_formats(folder, formats(args), columns, config, {"verb": verb, **meta})
+
+
+def finish_loop_run(
+    args: argparse.Namespace,
+    folder: RunFolder,
+    config: Mapping[str, Any],
+    summary: dict[str, Any],
+    trace_stats: dict[str, Any] | None,
+) -> None:
+    """After a loop run (``sashil run``): the ``--format`` files, ``run.png``, and the summary
+    again with the trace's counts."""
+    from sashil.recording.plots import plot_run
+
+    if (folder.path / "data.csv").exists():
+        write_formats(args, folder.path, config, summary.get("verb", "run"), controller=summary.get("controller"))
+        plot_run(folder.path / "run.png", folder.path, summary)
+    if trace_stats is not None:
+        summary["can_trace"] = trace_stats
+        folder.write_summary(summary)

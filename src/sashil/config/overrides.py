@@ -1,0 +1,68 @@
+"""``--set section.key=value``: change config values from the command line.
+
+Each override is parsed as YAML (``500`` is a number, ``skyhook`` a string, ``null``, ``true``,
+``[0.1, 0.9]`` a list, exactly as in a config file), set at its dotted key in a copy of the
+resolved config, and the whole config is validated again by the config file's own code path
+(:func:`sashil.config.schema.validate` and the model check). So a ``--set`` accepts exactly what a
+config file accepts, and a bad one fails with one line naming the key and what was expected,
+e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'``.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterable
+from typing import Any
+
+import yaml
+
+from sashil.config.schema import validate
+from sashil.config.sections import SCHEMA
+from sashil.errors import ConfigError
+
+#: the source named in error messages
+SOURCE = "--set"
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``"loop.rt.priority=0"`` -> ``(["loop", "rt", "priority"], 0)``; the value is read as YAML."""
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value (e.g. loop.rate_hz=500)")
+    path = key.split(".")
+    if len(path) < 2 or any(not part for part in path):
+        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value, with a dotted key (e.g. loop.rate_hz=500)")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as err:
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ConfigError(f"{SOURCE}: {key}: not a valid YAML value ({problem}): {raw!r}") from None
+    return path, value
+
+
+def _set(doc: dict[str, Any], path: list[str], value: Any) -> None:
+    node = doc
+    for depth, part in enumerate(path[:-1]):
+        child = node.setdefault(part, {})
+        if not isinstance(child, dict):
+            where = ".".join(path[: depth + 1])
+            raise ConfigError(f"{SOURCE}: {'.'.join(path)}: {where} is a value, not a section (set {where}=VALUE)")
+        node = child
+    node[path[-1]] = value
+
+
+def apply_overrides(config: dict[str, Any], overrides: Iterable[str]) -> dict[str, Any]:
+    """A validated copy of ``config`` with each ``section.key=value`` override applied in order."""
+    overrides = list(overrides)
+    if not overrides:
+        return config
+    doc = copy.deepcopy(config)
+    for text in overrides:
+        path, value = parse_override(text)
+        _set(doc, path, value)
+    out = validate(doc, SCHEMA, SOURCE)
+    from sashil.models.registry import check_model
+
+    check_model(out["model"], SOURCE, "model")
+    return out

@@ -1,0 +1,229 @@
+"""Issue 15: --set overrides, the summary.json schema, sashil.load_run, --format parquet/mat, --road."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+import sashil
+from sashil.cli import main
+from sashil.config import default_config
+from sashil.config.overrides import apply_overrides
+from sashil.errors import ConfigError, DataFileError
+from sashil.recording.summary_schema import SCHEMA_VERSION
+
+#: a real-clock run in-process without touching the scheduler or locking memory
+QUIET_RT = ["--set", "loop.rt.priority=0", "--set", "loop.rt.mlockall=false"]
+COMMON_KEYS = ("schema_version", "verb", "exit_status", "exit_code", "error", "driver", "controller", "timing", "trips")
+
+
+# --set ---------------------------------------------------------------------------------------
+def test_overrides_are_typed_like_the_config_file():
+    config = apply_overrides(
+        default_config(),
+        [
+            "loop.rate_hz=500",
+            "controller.law=skyhook",
+            "controller.c_sky=2",
+            "loop.rt.cpu=null",
+            "controller.tracking_fraction=[0.2, 0.8]",
+            "model.params.k=120",
+            "safety.angle_interlock=false",
+        ],
+    )
+    assert config["loop"]["rate_hz"] == 500.0 and isinstance(config["loop"]["rate_hz"], float)
+    assert config["controller"]["law"] == "skyhook" and config["controller"]["c_sky"] == 2.0
+    assert config["controller"]["tracking_fraction"] == [0.2, 0.8]
+    assert config["model"]["params"]["k"] == 120.0
+    assert config["safety"]["angle_interlock"] is False
+    assert default_config()["loop"]["rate_hz"] == 1000.0  # the input is not changed
+
+
+def test_later_override_wins():
+    assert apply_overrides(default_config(), ["loop.rate_hz=500", "loop.rate_hz=250"])["loop"]["rate_hz"] == 250.0
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("loop.rate_hz=fast", "--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'"),
+        ("loop.rate=5", "--set: loop.rate: unknown key (known keys here:"),
+        ("nosuch.key=1", "--set: nosuch: unknown key"),
+        ("controller.law=bogus", "--set: controller.law: expected one of 'passive'"),
+        ("safety.angle_interlock=3", "--set: safety.angle_interlock: expected true or false, got 3"),
+        ("model.params.foo=1", "--set: model.params.foo: not a bouc-wen parameter"),
+        ("loop.rate_hz.x=1", "--set: loop.rate_hz.x: loop.rate_hz is a value, not a section"),
+        ("loop", "--set 'loop': expected section.key=value"),
+        ("rate_hz=5", "--set 'rate_hz=5': expected section.key=value, with a dotted key"),
+    ],
+)
+def test_bad_override_is_one_line_naming_key_and_type(override, message):
+    with pytest.raises(ConfigError) as err:
+        apply_overrides(default_config(), [override])
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("verb", ["drop-test", "run", "sweep", "simulate"])
+def test_bad_set_on_any_verb_exits_2_and_writes_nothing(tmp_path, capsys, verb):
+    out = tmp_path / "out"
+    assert main([verb, "--set", "loop.rate_hz=fast", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "loop.rate_hz: expected a number" in err
+    assert not out.exists()
+
+
+def test_set_is_in_the_resolved_config_of_the_run_folder(tmp_path):
+    out = tmp_path / "drop"
+    argv = ["drop-test", "--duration", "1", "--out", str(out), "-q"]
+    assert main([*argv, "--set", "drop_test.settle_band_deg=0.5", "--set", "rig.encoder_counts_per_rev=8192"]) == 0
+    saved = yaml.safe_load((out / "config.yaml").read_text())
+    assert saved["drop_test"]["settle_band_deg"] == 0.5
+    assert saved["rig"]["encoder_counts_per_rev"] == 8192
+    assert json.loads((out / "summary.json").read_text())["runs"][0]["settle_band_deg"] == 0.5
+
+
+# --format ------------------------------------------------------------------------------------
+def test_can_trace_format_on_a_driver_without_can_frames_is_refused_before_anything_runs(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", "--duration", "1", "--format", "blf", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--format blf: a CAN frame trace needs the can driver" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_missing_library_names_the_extra(tmp_path, capsys, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pyarrow" else real(name, *a))
+    out = tmp_path / "out"
+    assert main(["drop-test", "--format", "parquet", "--out", str(out)]) == 2
+    assert "pip install 'sashil[parquet]'" in capsys.readouterr().err
+    assert not out.exists()
+
+
+# load_run and the summary schema -------------------------------------------------------------
+@pytest.fixture(scope="module")
+def drop_runs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("drops")
+    single, multi = root / "single", root / "multi"
+    assert (
+        main(["drop-test", "--duration", "2", "--format", "parquet", "--format", "mat", "--out", str(single), "-q"])
+        == 0
+    )
+    assert main(["drop-test", "--duration", "2", "--current", "0", "--current", "1", "--out", str(multi), "-q"]) == 0
+    return single, multi
+
+
+def test_every_summary_has_the_common_keys(drop_runs, tmp_path):
+    single, multi = drop_runs
+    sim = tmp_path / "sim"
+    assert main(["simulate", "--duration", "1", "--out", str(sim)]) == 0
+    for folder in (single, multi, multi / "i1.000A", sim):
+        summary = json.loads((folder / "summary.json").read_text())
+        assert all(key in summary for key in COMMON_KEYS), folder
+        assert summary["schema_version"] == SCHEMA_VERSION
+        assert isinstance(summary["exit_status"], str) and summary["exit_code"] == 0
+    assert json.loads((single / "summary.json").read_text())["controller"] == "passive (constant current per run)"
+
+
+def test_load_run_reads_a_drop_test_in_each_format(drop_runs):
+    single, _ = drop_runs
+    run = sashil.load_run(single)
+    assert run.path == single and run.verb == "drop-test"
+    assert run.data_file.name == "data.parquet"
+    from sashil.api import read_data_file
+
+    csv = read_data_file(single / "data.csv")
+    mat = read_data_file(single / "data.mat")
+    assert list(run.data) == list(csv) == list(mat)
+    for name in csv:
+        np.testing.assert_array_equal(run.data[name], csv[name])  # same rows, bit for bit
+        np.testing.assert_array_equal(mat[name], csv[name])
+    assert run.config["loop"]["rate_hz"] == 1000.0
+    assert run.runs == [run]
+    assert run.metrics["period_s"] == pytest.approx(0.6, abs=0.02)
+    assert run.units["theta_rad"] == "rad" and run.units["current_a"] == "A"
+
+
+def test_parquet_carries_units_and_config(drop_runs):
+    from sashil.recording.parquet_sink import read_metadata
+
+    meta = read_metadata(drop_runs[0] / "data.parquet")
+    assert meta["units"]["time_s"] == "s" and meta["units"]["theta_road_rad"] == "rad"
+    assert meta["config"]["model"]["params"]["k"] == 109.0
+    assert meta["run"]["verb"] == "drop-test" and meta["run"]["current_a"] == 0.0
+
+
+def test_load_run_of_a_multi_current_drop_test_lists_sub_runs(drop_runs):
+    _, multi = drop_runs
+    run = sashil.load_run(multi)
+    assert [r.name for r in run.runs] == ["i0.000A", "i1.000A"]
+    assert run.run("i1.000A").metrics["current_a"] == 1.0
+    assert run.runs[1].data["current_cmd_a"][0] == 1.0
+    peaks0 = run.runs[0].metrics["peaks_deg"][0]
+    assert peaks0 > run.runs[1].metrics["peaks_deg"][0]  # 1 A damps more
+    with pytest.raises(DataFileError, match="holds 2 sub-runs"):
+        _ = run.data
+    sub = sashil.load_run(multi / "i0.000A")  # a sub-folder is a run folder of its own
+    assert sub.runs == [sub] and sub.metrics["current_a"] == 0.0
+
+
+def test_load_run_of_a_loop_run_with_road(tmp_path):
+    out = tmp_path / "run"
+    assert main(["run", "--duration", "0.5", "-q", *QUIET_RT, "--format", "parquet", "--out", str(out)]) == 0
+    run = sashil.load_run(out)
+    assert run.summary["verb"] == "run" and run.summary["timing"]["cycles"] == 500
+    assert run.data["seq"].dtype == np.int64
+    assert np.ptp(run.data["theta_road_rad"]) > 0  # the default road excitation of the sim backend
+    assert run.timing is not None and run.timing["lateness_ns"].size == 500
+    assert (out / "run.png").stat().st_size > 10_000
+
+
+def test_load_run_of_something_else_is_one_clear_error(tmp_path):
+    with pytest.raises(DataFileError, match="not a folder"):
+        sashil.load_run(tmp_path / "missing")
+    with pytest.raises(DataFileError, match="not a sashil run folder"):
+        sashil.load_run(tmp_path)
+
+
+# --road --------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("square:1", "expected sine:F_HZ"),
+        ("sine:x", "expected sine:F_HZ"),
+        ("sine:0", "expected a frequency in (0, 100] Hz, got 0"),
+        ("sine:1:45", "expected an amplitude in (0, 20] deg, got 45"),
+        ("chirp:1:2:0", "expected a chirp length in seconds > 0"),
+    ],
+)
+def test_bad_road_is_exit_2(tmp_path, capsys, spec, message):
+    out = tmp_path / "out"
+    assert main(["run", "--duration", "1", "--road", spec, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_road_stage_sends_the_road_speed_and_keeps_the_signals():
+    from sashil.drivers.interface import RigSample
+    from sashil.experiments.road_option import RoadStage, parse_road
+
+    profile, text = parse_road("sine:2:1", {**default_config(), "sweep": {**default_config()["sweep"], "ramp_s": 0}})
+    assert text == "sine 2 Hz, 1 deg"
+
+    class Stage:
+        z_hat = 0.5
+
+        def step(self, sample, t_ns, dt_ns):
+            from sashil.drivers.interface import RigCommand
+
+            return RigCommand(0.3)
+
+    stage = RoadStage(Stage(), profile)
+    sample = RigSample(1, 0, 0, 0, 0, 0.0, 0, 4096)
+    assert stage.step(sample, 1_000, 1_000).road_speed_rad_s == pytest.approx(2 * np.pi * 2 * np.radians(1))
+    assert stage.z_hat == 0.5
