@@ -68,5 +68,5 @@ def test_identify_then_simulate(drop, tmp_path, capsys):
     run = tmp_path / "sim"
     assert main(["simulate", "--params", str(out), "--input", str(drop), "--out", str(run)]) == 0
     summary = json.loads((run / "summary.json").read_text())
-    assert summary["exit_status"] == 0 and summary["model"] == "dahl" and summary["nrmse"] < 0.05
+    assert summary["exit_status"] == "ok" and summary["model"] == "dahl" and summary["nrmse"] < 0.05
     assert (run / "data.csv").exists() and (run / "config.yaml").exists()
