@@ -2,6 +2,6 @@
 
 __version__ = "0.1.0"
 
-from sashil.api import Run, load_run  # noqa: E402  (the Python API: sashil.load_run(folder))
+from sashil.api import Run, load_run  # the Python API: sashil.load_run(folder)
 
 __all__ = ["Run", "__version__", "load_run"]

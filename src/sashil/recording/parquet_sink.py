@@ -62,7 +62,7 @@ def write_parquet(
     if len(lengths) > 1:
         raise DataFileError(f"{path}: columns of unequal length {sorted(lengths)}")
     units = {name: column_unit(name) for name in columns}
-    fields = [pa.field(name, a.type, metadata={"unit": units[name]}) for name, a in zip(columns, arrays)]
+    fields = [pa.field(name, a.type, metadata={"unit": units[name]}) for name, a in zip(columns, arrays, strict=True)]
     metadata = {"sashil.units": json.dumps(units), "sashil.run": json.dumps(dict(meta or {}))}
     if config is not None:
         from sashil.config import dump_config
