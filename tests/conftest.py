@@ -1,15 +1,109 @@
-"""Shared fixtures: the default config and a fresh run-folder path per test."""
+"""Shared fixtures: the default config, and a guard that fails any test that leaks a resource.
+
+The guard (autouse) compares what is open after a test with what was open before it: python-can
+buses not shut down, threads still alive, pseudo-terminal fds still open and child processes still
+running (or not waited for). A leaked bus or pty keeps a channel busy for the tests that follow; a
+leaked thread or child keeps driving an emulated rig. Threads and children get a short grace to end
+on their own (a join, not a sleep).
+"""
 
 from __future__ import annotations
 
 import copy
+import os
+import threading
+import time
+import weakref
+from collections.abc import Iterator
 
+import can
 import pytest
 
 from sashil.config import default_config
+
+#: how long a thread or child that is on its way out may take to end after the test
+GRACE_S = 2.0
+
+_buses: weakref.WeakSet[can.BusABC] = weakref.WeakSet()
+_bus_init = can.BusABC.__init__
+
+
+def _tracking_init(self: can.BusABC, *args: object, **kwargs: object) -> None:
+    _bus_init(self, *args, **kwargs)
+    _buses.add(self)
+
+
+can.BusABC.__init__ = _tracking_init  # type: ignore[method-assign]
 
 
 @pytest.fixture
 def config():
     """A fresh copy of the default config (simulated rig, seed parameters, 1 kHz)."""
     return copy.deepcopy(default_config())
+
+
+def _open_buses() -> set[int]:
+    return {id(bus) for bus in list(_buses) if not getattr(bus, "_is_shutdown", True)}
+
+
+def _pty_fds() -> set[tuple[int, str]]:
+    """This process's open fds on the pty master/slave devices (``/dev/ptmx``, ``/dev/pts/N``)."""
+    out = set()
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{name}")
+        except OSError:
+            continue  # closed while listing (the listing's own fd)
+        if target == "/dev/ptmx" or target.startswith("/dev/pts/"):
+            out.add((int(name), target))
+    return out
+
+
+def _children() -> set[int]:
+    """Pids whose parent is this process (running or zombie: a zombie was never waited for)."""
+    me, out = os.getpid(), set()
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == me:
+            out.add(int(entry))
+    return out
+
+
+def _settle(check, before, deadline: float):
+    """What ``check()`` finds beyond ``before``, once it is empty or the deadline has passed."""
+    extra = check() - before
+    while extra and time.monotonic() < deadline:
+        time.sleep(0.01)  # polling for the leak to clear up, not timing a test
+        extra = check() - before
+    return extra
+
+
+def _threads() -> set[threading.Thread]:
+    return {t for t in threading.enumerate() if t.is_alive()}
+
+
+@pytest.fixture(autouse=True)
+def no_leaks() -> Iterator[None]:
+    """Fail a test that leaves a CAN bus, a thread, a pty fd or a child process behind."""
+    buses, threads, ptys, children = _open_buses(), _threads(), _pty_fds(), _children()
+    yield
+    deadline = time.monotonic() + GRACE_S
+    for thread in _threads() - threads:
+        thread.join(max(0.0, deadline - time.monotonic()))
+    leaks = []
+    if left := _open_buses() - buses:
+        leaks.append(f"{len(left)} python-can bus(es) not shut down")
+    if left := _threads() - threads:
+        leaks.append("threads still running: " + ", ".join(sorted(t.name for t in left)))
+    if left := _settle(_pty_fds, ptys, deadline):
+        leaks.append("pty fds still open: " + ", ".join(f"{fd} -> {path}" for fd, path in sorted(left)))
+    if left := _settle(_children, children, deadline):
+        leaks.append(f"child processes still running or not waited for: pids {sorted(left)}")
+    if leaks:
+        pytest.fail("leaked: " + "; ".join(leaks), pytrace=False)

@@ -18,6 +18,8 @@ from sashil.drivers.emulator.transports import Pty
 from sashil.drivers.interface import RigCommand, RigState
 from sashil.errors import DriverError, DriverIOError
 
+pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
+
 
 def host_config(driver: str, port: str, interface: str = "slcan", pacing: str = "device") -> dict:
     config = default_config()
@@ -44,40 +46,42 @@ def wait_for(rig, predicate, cycles=2000, current=0.0):
 def test_backend_session_drives_and_stops_the_coil(transport, driver, interface, pacing):
     config = default_config()
     with EmulatorThread(config, transport, channel=f"t-{transport}-{pacing}") as emu:
-        rig = open_rig(host_config(driver, emu.port, interface, pacing))
-        rig.configure()
-        assert emu.device.configured and emu.device.drive_a == 0.0
-        rig.write(RigCommand(0.7), 0, 0)  # before activate(): 0 A
-        rig.read(0, 0)
-        assert emu.device.drive_a == 0.0
-        rig.activate()
-        seqs = [rig.read(0, 0).seq for _ in range(20)]
-        assert seqs == sorted(seqs)
-        wait_for(rig, lambda s: s.current_a > 0.3, current=0.7)  # coil lag, then the current flows
-        assert emu.device.drive_a == pytest.approx(0.7, abs=0.0005)
-        rig.deactivate()
-        rig.read(0, 0)
-        assert emu.device.drive_a == 0.0
-        rig.close()
-        rig.close()  # idempotent
-        assert rig.state is RigState.CLOSED
-        assert rig.link_stats()["bad_frames"] == 0
+        with open_rig(host_config(driver, emu.port, interface, pacing)) as rig:  # closed however the test ends
+            rig.configure()
+            assert emu.device.configured and emu.device.drive_a == 0.0
+            rig.write(RigCommand(0.7), 0, 0)  # before activate(): 0 A
+            rig.read(0, 0)
+            assert emu.device.drive_a == 0.0
+            rig.activate()
+            seqs = [rig.read(0, 0).seq for _ in range(20)]
+            assert seqs == sorted(seqs)
+            wait_for(rig, lambda s: s.current_a > 0.3, current=0.7)  # coil lag, then the current flows
+            assert emu.device.drive_a == pytest.approx(0.7, abs=0.0005)
+            rig.deactivate()
+            rig.read(0, 0)
+            assert emu.device.drive_a == 0.0
+            rig.close()
+            rig.close()  # idempotent
+            assert rig.state is RigState.CLOSED
+            assert rig.link_stats()["bad_frames"] == 0
 
 
 def test_the_dbc_decodes_the_frames_the_can_backend_sends():
     with EmulatorThread(default_config(), "virtual", channel="t-dbc") as emu:
-        listener = can.Bus(interface="virtual", channel="t-dbc")
-        with open_rig(host_config("can", emu.port, "virtual")) as rig:
-            rig.configure()
-            rig.activate()
-            rig.read(0, 0)
-            rig.write(RigCommand(0.25), 0, 0)
-    seen = {}  # the emulator has stopped: drain what the listener got
-    frame = listener.recv(0.0)
-    while frame is not None:
-        seen.setdefault(frame.arbitration_id, []).append(database().decode_message(frame.arbitration_id, frame.data))
-        frame = listener.recv(0.0)
-    listener.shutdown()
+        with can.Bus(interface="virtual", channel="t-dbc") as listener:
+            with open_rig(host_config("can", emu.port, "virtual")) as rig:
+                rig.configure()
+                rig.activate()
+                rig.read(0, 0)
+                rig.write(RigCommand(0.25), 0, 0)
+            emu.stop()
+            seen = {}  # the emulator has stopped: drain what the listener got
+            frame = listener.recv(0.0)
+            while frame is not None:
+                seen.setdefault(frame.arbitration_id, []).append(
+                    database().decode_message(frame.arbitration_id, frame.data)
+                )
+                frame = listener.recv(0.0)
     assert seen[0x1F1] == [{"HelloVersion": 1}]
     assert seen[0x1F0] == [{"SampleRateHz": 1000, "WatchdogMs": 50, "Pacing": "device"}]
     assert {"CmdSeq", "CurrentCmd", "CmdFlags"} <= set(seen[0x100][0])
@@ -89,14 +93,13 @@ def test_the_dbc_decodes_the_frames_the_can_backend_sends():
 def test_wrong_protocol_version_is_refused_and_nothing_energised(monkeypatch):
     monkeypatch.setattr(device_module, "PROTOCOL_VERSION", 2)
     with EmulatorThread(default_config(), "serial") as emu:
-        rig = open_rig(host_config("serial", emu.port))
-        with pytest.raises(DriverError) as err:
-            rig.configure()
-        assert type(err.value) is DriverError and err.value.exit_code == 2
-        assert "protocol version 2" in str(err.value) and "\n" not in str(err.value)
-        assert emu.device.drive_a == 0.0 and not emu.device.configured
-        rig.deactivate()
-        rig.close()
+        with open_rig(host_config("serial", emu.port)) as rig:
+            with pytest.raises(DriverError) as err:
+                rig.configure()
+            assert type(err.value) is DriverError and err.value.exit_code == 2
+            assert "protocol version 2" in str(err.value) and "\n" not in str(err.value)
+            assert emu.device.drive_a == 0.0 and not emu.device.configured
+            rig.deactivate()
 
 
 def test_missing_port_busy_port_and_silent_port():
@@ -104,12 +107,11 @@ def test_missing_port_busy_port_and_silent_port():
         open_rig(host_config("serial", "/dev/does-not-exist")).configure()
     assert err.value.exit_code == 2 and "/dev/does-not-exist" in str(err.value)
     with EmulatorThread(default_config(), "serial") as emu:
-        first = open_rig(host_config("serial", emu.port))
-        first.configure()
-        with pytest.raises(DriverError) as err:
-            open_rig(host_config("serial", emu.port)).configure()
-        assert err.value.exit_code == 2 and "cannot open" in str(err.value)
-        first.close()
+        with open_rig(host_config("serial", emu.port)) as first:
+            first.configure()
+            with pytest.raises(DriverError) as err:
+                open_rig(host_config("serial", emu.port)).configure()
+            assert err.value.exit_code == 2 and "cannot open" in str(err.value)
     pty = Pty.open()
     try:
         config = host_config("serial", pty.path)
@@ -135,16 +137,15 @@ def test_unknown_can_interface_and_missing_port():
 def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, driver):
     emu = EmulatorThread(default_config(), transport, faults=Faults(disconnect_after_s=0.05))
     with emu:
-        rig = open_rig(host_config(driver, emu.port))
-        rig.configure()
-        rig.activate()
-        with pytest.raises(DriverIOError):
-            for _ in range(5000):
-                rig.read(0, 0)
-                rig.write(RigCommand(0.1), 0, 0)
-        rig.deactivate()  # a dead link: must not raise
-        rig.close()
-        rig.close()
+        with open_rig(host_config(driver, emu.port)) as rig:
+            rig.configure()
+            rig.activate()
+            with pytest.raises(DriverIOError):
+                for _ in range(5000):
+                    rig.read(0, 0)
+                    rig.write(RigCommand(0.1), 0, 0)
+            rig.deactivate()  # a dead link: must not raise
+            rig.close()
 
 
 def test_corrupt_frames_are_counted_and_the_run_goes_on():

@@ -80,6 +80,7 @@ def test_read_truth_csv_header_only_and_bad_header(tmp_path):
     assert str(err.value).startswith(f"{bad}: expected the truth columns") and "\n" not in str(err.value)
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("transport, driver", [("serial", "serial"), ("slcan", "can")])
 def test_truth_rows_match_the_samples_the_host_received(transport, driver):
     config = mismatched_config()
@@ -120,6 +121,7 @@ def test_bad_truth_path_is_one_line(tmp_path, capsys):
     assert rc == 2 and err.count("\n") == 1 and f"--truth {target}: cannot write" in err
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("stop", ["sigterm", "sigint", "duration"])
 def test_emulate_process_writes_the_truth_when_it_exits(tmp_path, stop):
     truth_path, link = tmp_path / "truth.csv", tmp_path / "rig"

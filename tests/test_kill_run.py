@@ -18,6 +18,8 @@ import pytest
 
 from sashil.recording.data_file import REQUIRED_COLUMNS, read_data_csv
 
+pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
+
 KILL_AFTER_S = 2.5
 
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
+
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 COUNT_DEG = 360.0 / 4096  # encoder resolution (rig.encoder_counts_per_rev default)
 DRIVERS = [("serial", "serial"), ("slcan", "can")]

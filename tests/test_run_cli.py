@@ -51,6 +51,7 @@ def _config(tmp_path, extra=""):
     return str(cfg)
 
 
+@pytest.mark.e2e
 def test_short_real_clock_run_writes_a_complete_folder(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run(
@@ -69,6 +70,7 @@ def test_short_real_clock_run_writes_a_complete_folder(tmp_path):
     assert "lateness" in proc.stderr and "missed deadline" in proc.stderr
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_during_a_real_clock_run_leaves_a_complete_folder(tmp_path, sig):
     out = tmp_path / "run"
