@@ -43,6 +43,7 @@ def test_multisine_spec():
     assert np.all(spec[(f < 5) | (f > 150)] < 1e-9 * spec.max())
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_identification_meets_benchmark_acceptance():
     u, y = B.generate(3, 3, B.NOISE_M)  # 3 periods (first discarded) keeps the test short
     fit = B.identify(u, y)

@@ -36,12 +36,14 @@ def seed_fit(seed_drops):
     return fit_model("bouc-wen", seed_drops, FitOptions(seed=0))
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_the_fit_does_not_depend_on_the_seed(seed_drops, seed_fit):
     again = fit_model("bouc-wen", seed_drops, FitOptions(seed=12345))
     assert again.params == seed_fit.params
     assert seed_fit.convergence["refinements"] == 2 and "converged" in seed_fit.convergence
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_bouc_wen_ranks_first_on_the_seed_damper(seed_drops, seed_fit):
     lugre = fit_model("lugre", seed_drops, FitOptions())
     assert seed_fit.rms_total < lugre.rms_total

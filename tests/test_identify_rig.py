@@ -37,6 +37,7 @@ def test_rescale_keeps_the_torque_path():
     np.testing.assert_allclose(p["alpha1"] * zp, q["alpha1"] * zq, rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_recovery_of_non_seed_parameters(bouc_wen_fit):
     truth = bouc_wen_rescale(TRUTH.as_dict())
     got = bouc_wen_fit.params
@@ -48,6 +49,7 @@ def test_recovery_of_non_seed_parameters(bouc_wen_fit):
     assert set(bouc_wen_fit.stderr) >= {"k", "c1", "c2", "alpha1", "alpha2", "beta", "gamma", "delta", "n"}
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_held_out_drop_test_prediction(bouc_wen_fit):
     cols = drop_test_columns(TRUTH, -4.0, 0.5)
     clean = drop_test_columns(TRUTH, -4.0, 0.5, counts_per_rev=0)["theta_rad"]
@@ -55,6 +57,7 @@ def test_held_out_drop_test_prediction(bouc_wen_fit):
     assert nrmse(sim, clean) <= 0.02
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_bouc_wen_ranks_above_dahl_and_bingham(drops, bouc_wen_fit):
     for other in ("dahl", "bingham"):
         result = fit_model(other, drops, FitOptions())
@@ -69,6 +72,7 @@ def test_passive_fit_fixes_current_terms():
     assert result.params["k"] == pytest.approx(95.0, rel=0.02)
 
 
+@pytest.mark.e2e  # a whole simulate-and-fit identification (seconds)
 def test_parameter_file_in_another_z_scale(bouc_wen_fit):
     from sashil.identify.report import param_document
 
