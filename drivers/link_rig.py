@@ -28,12 +28,11 @@ contract on top (protocol.md "Session"):
 from __future__ import annotations
 
 import logging
-import math
 import time
 from abc import abstractmethod
 from typing import Any
 
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, RigState
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample, RigState, clamp_current
 from sashil.drivers.messages import (
     CMD_ENABLE,
     PACING_DEVICE,
@@ -335,7 +334,7 @@ class LinkRig(RigInterface):
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         if self.state is RigState.ACTIVE:
             current = cmd.current_a
-            self._setpoint = 0.0 if math.isnan(current) else min(max(current, 0.0), self.settings.current_max_a)
+            self._setpoint = clamp_current(current, self.settings.current_max_a)
         else:
             self._setpoint = 0.0
         speed = cmd.road_speed_rad_s

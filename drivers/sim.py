@@ -19,6 +19,7 @@ from sashil.drivers.interface import (
     RigInterface,
     RigSample,
     RigState,
+    clamp_current,
 )
 from sashil.errors import DriverError
 from sashil.models.plant import RigPlant, RoadProfile
@@ -141,10 +142,7 @@ class SimulatedRig(RigInterface):
         if self.state is not RigState.ACTIVE:
             self._command = 0.0
             return
-        current = cmd.current_a
-        if not (current == current):  # NaN never reaches the coil
-            current = 0.0
-        self._command = min(max(current, 0.0), self.plant.current_max_a)
+        self._command = clamp_current(cmd.current_a, self.plant.current_max_a)
 
     # operator ------------------------------------------------------------------------------
     def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
@@ -155,5 +153,5 @@ class SimulatedRig(RigInterface):
 
     def set_initial_current(self, current_a: float) -> None:
         """Start with the coil already carrying ``current_a`` (as if it had flowed for a while)."""
-        self.plant.state.current_a = float(min(max(current_a, 0.0), self.plant.current_max_a))
+        self.plant.state.current_a = clamp_current(float(current_a), self.plant.current_max_a)
         self._command = self.plant.state.current_a

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from sashil.identify.data import record_from_columns
-from sashil.identify.fit import FitOptions, fit_model, nrmse
+from sashil.identify.fit import FitOptions, fit_model
 from sashil.identify.rig_models import MODELS, bouc_wen_rescale
 from sashil.identify.synthetic import drop_test_columns
 from sashil.models.hysteresis import BoucWenParams
+from sashil.stats import nrmse
 
 TRUTH = BoucWenParams(k=95.0, c1=0.5, c2=1.2, alpha1=1.3, alpha2=0.8, beta=600.0, gamma=50.0, delta=500.0, n=0.2)
 

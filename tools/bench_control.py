@@ -24,9 +24,10 @@ import numpy as np
 from sashil.config import default_config
 from sashil.control.registry import make_controller
 from sashil.experiments.drop_test import run_drop_test
-from sashil.experiments.sweep import chirp_profile, frequencies, nrmse, run_profile, sine_profile, stepped_sine
+from sashil.experiments.sweep import chirp_profile, frequencies, run_profile, sine_profile, stepped_sine
 from sashil.models.mismatch import open_sim_rig
 from sashil.runtime.clock import VirtualClock
+from sashil.stats import nrmse
 
 
 def mismatched_config(pattern: str) -> dict:

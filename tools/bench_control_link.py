@@ -51,7 +51,8 @@ from bench_link import SASHIL, EmulatorProcess
 from sashil.config import dump_config
 from sashil.control.registry import make_controller
 from sashil.drivers.emulator import read_truth_csv
-from sashil.experiments.sweep import frequencies, nrmse, stepped_sine
+from sashil.experiments.sweep import frequencies, stepped_sine
+from sashil.stats import nrmse
 
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
 ZETA = 0.07

@@ -18,8 +18,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from sashil.identify.friction import force_nrmse, identify_two_stage, simulate_harmonic, table1_tests
+from sashil.identify.friction import identify_two_stage, simulate_harmonic, table1_tests
 from sashil.models.friction_damper import TABLE1, FrictionDamperParams
+from sashil.stats import nrmse
 
 
 def loops_figure(p: FrictionDamperParams, path: Path) -> None:
@@ -94,7 +95,7 @@ def main() -> int:
     worst = 0.0
     print("force NRMSE of the identified model against the noiseless Table-1 loops:")
     for f, a in table1_tests():
-        value = force_nrmse(simulate_harmonic(q, "bouc-wen", f, a)[4], simulate_harmonic(p, "bouc-wen", f, a)[4])
+        value = nrmse(simulate_harmonic(q, "bouc-wen", f, a)[4], simulate_harmonic(p, "bouc-wen", f, a)[4])
         worst = max(worst, value)
         print(f"  {f:5g} Hz {a:5g} mm: {100 * value:.3f} %")
     print(f"worst {100 * worst:.3f} % (acceptance <= 1 %)")

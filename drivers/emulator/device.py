@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sashil.drivers.emulator.truth import TruthLog
-from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample
+from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample, clamp_current
 from sashil.drivers.messages import (
     CMD_ENABLE,
     FAULT_BAD_CONFIGURE,
@@ -233,7 +233,7 @@ class RigDevice:
         return flags
 
     def _set_drive(self, current_a: float, now_ns: int) -> None:
-        drive = 0.0 if math.isnan(current_a) else min(max(current_a, 0.0), self.rig.plant.current_max_a)
+        drive = clamp_current(current_a, self.rig.plant.current_max_a)
         self.rig.write(RigCommand(drive), now_ns, 0)
         if drive != self.drive_a:
             self.drive_a = drive

@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
-from sashil.drivers.interface import FLAG_FAULT, FLAG_OVERCURRENT, RigCommand, RigSample
+from sashil.drivers.interface import FLAG_FAULT, FLAG_OVERCURRENT, RigCommand, RigSample, clamp_current
 from sashil.errors import SafetyTrip
 
 #: the data.csv ``trip_code`` column: 0 = no trip, else the kind below
@@ -153,15 +153,8 @@ class SafetySupervisor:
 
         Returns one reused RigCommand (no allocation per cycle); the driver copies what it needs.
         """
-        current = cmd.current_a
-        if current != current:  # NaN
-            current = 0.0
-            self.clamped_cycles += 1
-        elif current < 0.0:
-            current = 0.0
-            self.clamped_cycles += 1
-        elif current > self.current_max_a:
-            current = self.current_max_a
+        current = clamp_current(cmd.current_a, self.current_max_a)
+        if current != cmd.current_a:  # outside [0, i_max], or NaN (never equal to itself)
             self.clamped_cycles += 1
         if self.slew_a_per_s > 0.0:
             step = self.slew_a_per_s * dt_ns * 1e-9

@@ -33,10 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.identify.fit import nrmse
     from sashil.identify.simulate import drop_test_inputs, simulate_columns
     from sashil.recording.data_file import read_data_csv
     from sashil.recording.run_folder import RunFolder
+    from sashil.stats import nrmse
 
     config = resolve_config(args)
     model = config["model"]["name"]

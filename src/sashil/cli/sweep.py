@@ -29,13 +29,13 @@ from sashil.experiments.sweep import (
     ac_rms,
     chirp_profile,
     frequencies,
-    nrmse,
     run_profile,
     stepped_sine,
 )
 from sashil.identify.progress import Progress
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
+from sashil.stats import nrmse
 
 HELP = "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)"
 EXAMPLE = "sashil sweep --f-start 0.5 --f-stop 5 --duration 30 --controller skyhook-onoff"

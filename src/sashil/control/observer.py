@@ -44,6 +44,5 @@ class BoucWenObserver:
         return self._torque(theta_dot_rad_s, current_a)
 
     def _torque(self, theta_dot_rad_s: float, current_a: float) -> float:
-        p = self.params
-        self.torque_nm = (p.alpha1 + p.alpha2 * current_a) * self.z + (p.c1 + p.c2 * current_a) * theta_dot_rad_s
+        self.torque_nm = self.params.torque(self.z, theta_dot_rad_s, current_a)
         return self.torque_nm

@@ -33,6 +33,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import run_loop
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.safety import SafetySupervisor
+from sashil.stats import nrmse
 
 #: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
 SWEEP_COLUMNS = (
@@ -210,13 +211,6 @@ def run_profile(
 def ac_rms(x: np.ndarray) -> float:
     x = np.asarray(x, dtype=float)
     return float(np.sqrt(np.mean((x - x.mean()) ** 2))) if x.size else math.nan
-
-
-def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """RMS(estimate - truth) / RMS(truth) (NaN rows left out)."""
-    ok = np.isfinite(estimate) & np.isfinite(truth)
-    e, t = np.asarray(estimate)[ok], np.asarray(truth)[ok]
-    return float(np.sqrt(np.mean((e - t) ** 2)) / np.sqrt(np.mean(t**2))) if t.size else math.nan
 
 
 @dataclass

@@ -32,6 +32,7 @@ from scipy.optimize import differential_evolution, least_squares, lsq_linear
 from sashil.identify.data import Record
 from sashil.identify.progress import Progress
 from sashil.identify.rig_models import MODELS, RigModel
+from sashil.stats import nrmse
 
 #: parameters a linear solve keeps >= 0 (physical torques and damping); Bingham's offset f0 is free
 FREE_SIGN = {"f0"}
@@ -79,11 +80,6 @@ class FitResult:
     @property
     def nrmse_mean(self) -> float:
         return float(np.mean(self.nrmse))
-
-
-def nrmse(simulated: np.ndarray, measured: np.ndarray) -> float:
-    """RMS error over the standard deviation of the measured angle."""
-    return float(np.sqrt(np.mean((simulated - measured) ** 2)) / max(np.std(measured), 1e-15))
 
 
 class Problem:

@@ -107,10 +107,6 @@ def table1_tests() -> list[tuple[float, float]]:
     return [(f, a) for f, amps in TABLE1.items() for a in amps]
 
 
-def force_nrmse(fit: np.ndarray, true: np.ndarray) -> float:
-    return float(np.sqrt(np.mean((fit - true) ** 2)) / np.std(true))
-
-
 @dataclass
 class FrictionFit:
     params: FrictionDamperParams

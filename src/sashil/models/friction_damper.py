@@ -79,17 +79,3 @@ def bouc_wen_friction_rate(z: float, x_dot: float, A: float, beta: float, gamma:
     """z' of eq. 8."""
     a = abs(z)
     return A * x_dot - beta * abs(x_dot) * math.copysign(a**n, z) - gamma * x_dot * a**n
-
-
-def harmonic_test(
-    params: FrictionDamperParams,
-    law: str,
-    frequency_hz: float,
-    amplitude_mm: float,
-    periods: int = 2,
-    samples_per_period: int = 400,
-):
-    """Steady-state last period of a harmonic test: (time, Y, Y', X, F) arrays (compiled kernel)."""
-    from sashil.identify.friction import simulate_harmonic
-
-    return simulate_harmonic(params, law, frequency_hz, amplitude_mm, periods, samples_per_period)

@@ -25,6 +25,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from sashil.drivers.interface import clamp_current
 from sashil.models._jit import jit
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
 
@@ -33,7 +34,7 @@ RoadProfile = Callable[[float], "tuple[float, float, float]"]
 
 
 @dataclass(slots=True)
-class RigState:
+class PlantState:
     """The true state of the simulated rig."""
 
     time_s: float = 0.0
@@ -130,7 +131,7 @@ class RigPlant:
         self.max_step_s = float(max_step_s)
         self.road = road
         self.torque_in = torque_in
-        self.state = RigState()
+        self.state = PlantState()
         self._held_at: float | None = None
         self._split_dt = -1.0
         self._split = (1, 0.0, 0.0)  # sub-steps, their length and the coil's decay over one
@@ -163,7 +164,7 @@ class RigPlant:
         st = self.state
         return self.params.torque(st.z, st.theta_dot_rad_s, st.current_a)
 
-    def step(self, dt: float, current_cmd_a: float) -> RigState:
+    def step(self, dt: float, current_cmd_a: float) -> PlantState:
         """Advance the rig by ``dt`` seconds with the coil driven towards ``current_cmd_a``."""
         if dt <= 0.0:
             return self.state
@@ -174,7 +175,7 @@ class RigPlant:
             self._split_dt, self._split = dt, (count, h, decay)
         count, h, decay = self._split
         # floats only: numba compiles one signature (an int here would compile another mid-run)
-        cmd = float(min(max(current_cmd_a, 0.0), self.current_max_a))
+        cmd = clamp_current(float(current_cmd_a), self.current_max_a)
         st = self.state
         theta, v, z, i, t = st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s
         road, torque_in = self.road, self.torque_in
