@@ -58,3 +58,23 @@ class DeadlineMissedError(SashilError):
     """The loop missed a deadline and its overrun policy is ``fail``."""
 
     exit_code = 4
+
+
+#: the exit code of a clean stop on SIGINT/SIGTERM (128 + SIGINT, the shell's convention)
+EXIT_STOPPED = 130
+
+#: summary.json ``exit_status`` -> process exit code ("error": 1 unless the error carries its own)
+EXIT_STATUS_CODES: dict[str, int] = {
+    "ok": 0,
+    "stopped": EXIT_STOPPED,
+    "safety_trip": SafetyTrip.exit_code,
+    "deadline_missed": DeadlineMissedError.exit_code,
+    "error": SashilError.exit_code,
+}
+
+
+def exit_code_of(status: str, error: BaseException | None = None) -> int:
+    """The process exit code of a run that ended with ``status`` (and ``error``, if any)."""
+    if status == "error" and isinstance(error, SashilError):
+        return error.exit_code
+    return EXIT_STATUS_CODES.get(status, SashilError.exit_code)

@@ -13,7 +13,14 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from sashil.errors import SashilError
+from sashil.errors import (
+    EXIT_STATUS_CODES,
+    EXIT_STOPPED,
+    ConfigError,
+    DeadlineMissedError,
+    SafetyTrip,
+    SashilError,
+)
 
 #: verb -> module (DESIGN.md fixed verbs)
 VERBS: dict[str, str] = {
@@ -26,13 +33,14 @@ VERBS: dict[str, str] = {
     "report": "sashil.cli.report",
 }
 
+#: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
 EXIT_CODES = {
-    0: "success",
-    1: "the run failed (driver I/O error, unexpected error); the damper was set to 0 A first",
-    2: "bad input: a config key, parameter file, data file, CLI argument or port; nothing energised",
-    3: "a safety trip stopped the run (angle interlock, sensor timeout, stale samples)",
-    4: "a deadline was missed with overrun policy 'fail'",
-    130: "stopped by SIGINT/SIGTERM after a clean shutdown (0 A, data and summary written)",
+    EXIT_STATUS_CODES["ok"]: "success",
+    SashilError.exit_code: "the run failed (driver I/O error, unexpected error); the damper was set to 0 A first",
+    ConfigError.exit_code: "bad input: a config key, parameter file, data file, CLI argument or port; nothing energised",
+    SafetyTrip.exit_code: "a safety trip stopped the run (angle interlock, sensor timeout, stale samples)",
+    DeadlineMissedError.exit_code: "a deadline was missed with overrun policy 'fail'",
+    EXIT_STOPPED: "stopped by SIGINT/SIGTERM after a clean shutdown (0 A, data and summary written)",
 }
 
 
@@ -79,7 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_code
     except KeyboardInterrupt:
         print(f"sashil {args.verb}: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_STOPPED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -12,6 +12,7 @@ from typing import Any
 
 from sashil.config import Config, apply_params, load_config
 from sashil.config.overrides import apply_overrides
+from sashil.drivers import BACKENDS
 from sashil.errors import ConfigError
 from sashil.recording.formats import FORMATS, check_formats
 from sashil.recording.formats import HELP as FORMAT_HELP
@@ -34,7 +35,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 
 def add_driver_options(parser: argparse.ArgumentParser) -> None:
     """``--driver`` and ``--port`` (every verb that talks to a rig)."""
-    parser.add_argument("--driver", choices=("sim", "serial", "can"), help="override driver.name")
+    parser.add_argument("--driver", choices=tuple(BACKENDS), help="override driver.name")
     parser.add_argument(
         "--port", metavar="PORT", help="pyserial URL/device path, or CAN channel (override driver.port)"
     )

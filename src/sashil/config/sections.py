@@ -10,20 +10,8 @@ Each issue's section lives here so that a config file has one place that says wh
 from __future__ import annotations
 
 from sashil.config.schema import Field, Section
-
-#: Bouc-Wen rig model parameters (DESIGN.md; seed 001 eqs. 9-17, section 8 tables).
-BOUC_WEN_SEED = {
-    "J": 1.0,
-    "k": 109.0,
-    "c1": 0.7,
-    "c2": 1.5,
-    "alpha1": 1.0,
-    "alpha2": 1.0,
-    "beta": 873.0,
-    "gamma": 1.0,
-    "delta": 700.0,
-    "n": 0.099,
-}
+from sashil.drivers import BACKENDS
+from sashil.models.seed import BOUC_WEN_SEED
 
 MODEL = Section(
     {
@@ -51,7 +39,7 @@ RIG = Section(
 
 DRIVER = Section(
     {
-        "name": Field("choice", "sim", choices=("sim", "serial", "can")),
+        "name": Field("choice", "sim", choices=tuple(BACKENDS)),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
         "clock": Field("choice", "virtual", choices=("virtual", "real"), doc="sim backend only"),
         # serial and can backends (drivers/protocol.md)

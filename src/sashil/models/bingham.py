@@ -12,13 +12,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sashil.models.seed import SEED_J, SEED_K
+
 
 @dataclass(frozen=True)
 class BinghamParams:
     """Bingham rig-model parameters (registry symbols J, k, c0, c0_i, fc, fc_i, f0)."""
 
-    J: float = 1.0
-    k: float = 109.0
+    J: float = SEED_J
+    k: float = SEED_K
     c0: float = 0.7
     c0_i: float = 1.5
     fc: float = 0.1

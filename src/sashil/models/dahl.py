@@ -14,13 +14,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sashil.models.seed import SEED_J, SEED_K
+
 
 @dataclass(frozen=True)
 class DahlParams:
     """Dahl rig-model parameters (registry symbols J, k, c1, c2, kwa, kwb, rho)."""
 
-    J: float = 1.0
-    k: float = 109.0
+    J: float = SEED_J
+    k: float = SEED_K
     c1: float = 0.15  # seed 'kx'
     c2: float = 0.0
     kwa: float = 0.6

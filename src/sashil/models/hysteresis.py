@@ -36,6 +36,7 @@ from typing import TypeVar
 import numpy as np
 
 from sashil.models._jit import jit
+from sashil.models.seed import BOUC_WEN_SEED
 
 #: a float, or an array of them (the laws apply element-wise)
 Value = TypeVar("Value", float, np.ndarray)
@@ -45,16 +46,16 @@ Value = TypeVar("Value", float, np.ndarray)
 class BoucWenParams:
     """Parameters of the Bouc-Wen rig model (DESIGN.md names; seed 001 section 8 values)."""
 
-    J: float = 1.0
-    k: float = 109.0
-    c1: float = 0.7
-    c2: float = 1.5
-    alpha1: float = 1.0
-    alpha2: float = 1.0
-    beta: float = 873.0
-    gamma: float = 1.0
-    delta: float = 700.0
-    n: float = 0.099
+    J: float = BOUC_WEN_SEED["J"]
+    k: float = BOUC_WEN_SEED["k"]
+    c1: float = BOUC_WEN_SEED["c1"]
+    c2: float = BOUC_WEN_SEED["c2"]
+    alpha1: float = BOUC_WEN_SEED["alpha1"]
+    alpha2: float = BOUC_WEN_SEED["alpha2"]
+    beta: float = BOUC_WEN_SEED["beta"]
+    gamma: float = BOUC_WEN_SEED["gamma"]
+    delta: float = BOUC_WEN_SEED["delta"]
+    n: float = BOUC_WEN_SEED["n"]
 
     @classmethod
     def from_mapping(cls, params: dict) -> BoucWenParams:

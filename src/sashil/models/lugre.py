@@ -13,13 +13,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sashil.models.seed import SEED_J, SEED_K
+
 
 @dataclass(frozen=True)
 class LuGreParams:
     """LuGre rig-model parameters (registry symbols J, k, sigma_a, sigma_b, sigma0, sigma1, sigma2, a0)."""
 
-    J: float = 1.0
-    k: float = 109.0
+    J: float = SEED_J
+    k: float = SEED_K
     sigma_a: float = 10.0
     sigma_b: float = 1.5
     sigma0: float = 10.0

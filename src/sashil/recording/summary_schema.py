@@ -29,10 +29,10 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from sashil.errors import exit_code_of
+
 SCHEMA_VERSION = 1
 
-#: exit_status -> exit code when the summary does not say (sashil.cli.EXIT_CODES)
-STATUS_CODES = {"ok": 0, "stopped": 130, "safety_trip": 3, "deadline_missed": 4, "error": 1}
 
 #: the common keys and their value when a verb does not set them
 COMMON_DEFAULTS: dict[str, Any] = {
@@ -64,7 +64,7 @@ def normalise(summary: Mapping[str, Any], verb: str | None) -> dict[str, Any]:
     if not isinstance(status, str):  # an old writer's 0 / non-zero
         status = "ok" if status == 0 else "error"
     doc["exit_status"] = status
-    doc["exit_code"] = summary.get("exit_code", STATUS_CODES.get(status, 1))
+    doc["exit_code"] = summary.get("exit_code", exit_code_of(status))
     for key, default in COMMON_DEFAULTS.items():
         doc[key] = summary.get(key, list(default) if isinstance(default, list) else default)
     if not doc["trips"] and doc["runs"]:

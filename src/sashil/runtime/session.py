@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sashil.errors import SashilError
+from sashil.errors import exit_code_of
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
@@ -27,9 +27,6 @@ from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import catch_stop_signals
 from sashil.safety import SafetySupervisor
-
-#: LoopResult.exit_status -> process exit code (sashil.cli.EXIT_CODES); "error" uses the error's
-STATUS_EXIT_CODES = {"ok": 0, "stopped": 130, "safety_trip": 3, "deadline_missed": 4}
 
 
 def _stderr(line: str) -> None:
@@ -42,14 +39,6 @@ class SessionOutcome:
     summary: dict[str, Any]
     error: BaseException | None
     exit_code: int
-
-
-def exit_code_of(status: str, error: BaseException | None) -> int:
-    if status in STATUS_EXIT_CODES:
-        return STATUS_EXIT_CODES[status]
-    if isinstance(error, SashilError):
-        return error.exit_code
-    return 1
 
 
 def run_session(
