@@ -70,6 +70,12 @@ def relaxed_config(tmp: Path, **driver) -> str:
     return str(path)
 
 
+def over_link(verb: str, driver: str, emu: Emulator, out: Path, *flags: str) -> subprocess.CompletedProcess:
+    """``sashil VERB`` over ``driver`` to the emulator ``emu``, writing ``out``, with the relaxed link config."""
+    config = relaxed_config(out.parent)
+    return sashil(verb, "--driver", driver, "--port", emu.link, "--out", str(out), "--config", config, *flags)
+
+
 @pytest.fixture(scope="module")
 def sim_drop(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "drop"
@@ -82,19 +88,7 @@ def sim_drop(tmp_path_factory):
 def test_drop_test_over_the_link_matches_the_sim_backend(transport, driver, emulator, tmp_path, sim_drop):
     emu = emulator(transport, "--hold-deg", "-5", "--release-after", "1")
     out = tmp_path / "drop"
-    done = sashil(
-        "drop-test",
-        "--driver",
-        driver,
-        "--port",
-        emu.link,
-        "--duration",
-        "3",
-        "--out",
-        str(out),
-        "--config",
-        relaxed_config(tmp_path),
-    )
+    done = over_link("drop-test", driver, emu, out, "--duration", "3")
     assert done.returncode == 0, done.stderr
     run = json.loads((out / "summary.json").read_text())["runs"][0]
     assert run["release_estimated"]  # found from the data: nobody told the host when the operator let go
@@ -108,19 +102,7 @@ def test_drop_test_over_the_link_matches_the_sim_backend(transport, driver, emul
 def test_run_over_the_link_with_corrupt_frames_completes_and_counts_them(transport, driver, emulator, tmp_path):
     emu = emulator(transport, "--corrupt-rate", "0.01", "--seed", "7")
     out = tmp_path / "run"
-    done = sashil(
-        "run",
-        "--driver",
-        driver,
-        "--port",
-        emu.link,
-        "--duration",
-        "3",
-        "--out",
-        str(out),
-        "--config",
-        relaxed_config(tmp_path),
-    )
+    done = over_link("run", driver, emu, out, "--duration", "3")
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["timing"]["cycles"] >= 2500
@@ -198,12 +180,11 @@ def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transp
     truth_path = tmp_path / "truth.csv"
     emu = emulator(transport, "--truth", str(truth_path))
     out = tmp_path / "sweep"
-    done = sashil(
+    done = over_link(
         "sweep",
-        "--driver",
         driver,
-        "--port",
-        emu.link,
+        emu,
+        out,
         "--f-start",
         "1.5",
         "--f-stop",
@@ -214,10 +195,6 @@ def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transp
         "1",
         "--current",
         "0.3",
-        "--out",
-        str(out),
-        "--config",
-        relaxed_config(tmp_path),
     )
     assert done.returncode == 0, done.stderr
     emu.stop()

@@ -134,35 +134,18 @@ def identify_two_stage(
     def rms(r):
         return float(np.sqrt(np.mean(r**2)))
 
+    def search(cost, bounds):  # the seed's genetic stage (differential evolution, same settings both times)
+        return differential_evolution(
+            cost, bounds, popsize=8, maxiter=25, seed=seed, polish=False, tol=1e-6, init="sobol"
+        )
+
     # Table 2 ranges (k1 N/mm, c N s/mm, F_max N)
     lin_bounds = [(50.0, 300.0), (0.0, 10.0), (0.0, 10.0), (40.0, 65.0)]
-    s1 = differential_evolution(
-        lambda x: rms(residual(replace(start, k1=x[0], c1=x[1], c2=x[2], f_max=x[3]), "coulomb")),
-        lin_bounds,
-        popsize=8,
-        maxiter=25,
-        seed=seed,
-        polish=False,
-        tol=1e-6,
-        init="sobol",
-    )
+    s1 = search(lambda x: rms(residual(replace(start, k1=x[0], c1=x[1], c2=x[2], f_max=x[3]), "coulomb")), lin_bounds)
     p1 = replace(start, k1=s1.x[0], c1=s1.x[1], c2=s1.x[2], f_max=s1.x[3])
     # Table 3 ranges
     bw_bounds = [(5.0, 50.0), (5.0, 70.0), (-30.0, 30.0), (1.1, 4.0)]
-
-    def bw(p, x):
-        return replace(p, alpha=x[0], beta=x[1], gamma=x[2], n=x[3])
-
-    s2 = differential_evolution(
-        lambda x: rms(residual(bw(p1, x), "bouc-wen")),
-        bw_bounds,
-        popsize=8,
-        maxiter=25,
-        seed=seed,
-        polish=False,
-        tol=1e-6,
-        init="sobol",
-    )
+    s2 = search(lambda x: rms(residual(replace(p1, alpha=x[0], beta=x[1], gamma=x[2], n=x[3]), "bouc-wen")), bw_bounds)
     x0 = np.array([p1.k1, p1.c1, p1.c2, *s2.x])
     lo = np.array([50.0, 0.0, 0.0, 5.0, 5.0, -30.0, 1.1])
     hi = np.array([300.0, 10.0, 10.0, 50.0, 70.0, 30.0, 4.0])
