@@ -67,7 +67,16 @@ def test_sweep_cli_stepped_writes_table_and_plot(tmp_path):
     lines = (out / "transmissibility.csv").read_text().splitlines()
     assert lines[0].startswith("frequency_hz,body_rms_rad") and len(lines) == 3
     assert (out / "transmissibility.png").stat().st_size > 1000
-    assert json.loads((out / "summary.json").read_text())["exit_status"] == "ok"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "ok"
+    # each frequency's time series is kept in a sub-folder, a run folder of its own
+    import sashil
+
+    run = sashil.load_run(out)
+    assert [r.name for r in run.runs] == ["f1.000Hz", "f3.000Hz"]
+    assert run.run("f3.000Hz").metrics["transmissibility"] == summary["points"][1]["transmissibility"]
+    assert run.runs[0].data["time_s"][-1] > 10.0 and run.runs[0].config["controller"]["current_a"] == 0.5
+    assert list(run.tables["transmissibility"]["frequency_hz"]) == [1.0, 3.0]
 
 
 def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
@@ -97,6 +106,7 @@ def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
     rows = [dict(zip(header, map(float, line.split(",")), strict=True)) for line in lines[1:]]
     late = [r for r in rows if r["time_s"] >= 1.0]  # after the 1 s ramp: theta1 = sin(2 pi 1.25 t), 1 deg
     assert max(abs(math.degrees(r["theta_road_rad"]) - math.sin(2 * math.pi * 1.25 * r["time_s"])) for r in late) < 0.1
+    assert (out / "chirp.png").stat().st_size > 20_000  # road, body and current against time
 
 
 @pytest.mark.parametrize("mode", [[], ["--stepped", "--steps", "2"]])

@@ -227,3 +227,102 @@ def test_road_stage_sends_the_road_speed_and_keeps_the_signals():
     sample = RigSample(1, 0, 0, 0, 0, 0.0, 0, 4096)
     assert stage.step(sample, 1_000, 1_000).road_speed_rad_s == pytest.approx(2 * np.pi * 2 * np.radians(1))
     assert stage.z_hat == 0.5
+
+
+# the rerun viewer -----------------------------------------------------------------------------
+def test_spawned_viewer_listens_on_loopback_only(monkeypatch):
+    import subprocess
+
+    from sashil.recording import viewer
+
+    started = []
+
+    class FakeViewer:
+        returncode = None
+
+        def __init__(self, argv, **kwargs):
+            started.append((argv, kwargs))
+
+        def poll(self):
+            return None
+
+    calls = iter([False, False, True])  # nothing there yet; then the spawned viewer listens
+    monkeypatch.setattr(viewer, "listening", lambda host, port, timeout_s=0.2: next(calls))
+    monkeypatch.setattr(subprocess, "Popen", FakeViewer)
+    assert viewer.spawn_viewer("/opt/rerun", 9876) is not None
+    argv, kwargs = started[0]
+    assert argv[argv.index("--bind") + 1] == "127.0.0.1" and argv[argv.index("--port") + 1] == "9876"
+    assert kwargs["start_new_session"] is True
+    assert viewer.reachable_host("0.0.0.0") == "127.0.0.1" and viewer.reachable_host("10.0.0.2") == "10.0.0.2"
+
+
+def test_a_viewer_already_listening_is_reused(monkeypatch):
+    from sashil.recording import viewer
+
+    monkeypatch.setattr(viewer, "listening", lambda host, port, timeout_s=0.2: True)
+    assert viewer.spawn_viewer("/nonexistent/rerun") is None
+
+
+# drop test: operator prompts, labels, plots ---------------------------------------------------
+class _HandRig:
+    """The simulated rig, but a 'person' holds and releases the arm: the host is not told when."""
+
+    def __init__(self, rig):
+        self.rig = rig
+
+    def __getattr__(self, name):
+        return getattr(self.rig, name)
+
+    def operator_hold(self, theta_rad, release_after_s):
+        self.rig.operator_hold(theta_rad, release_after_s + 0.4)
+        return False
+
+
+def test_a_held_drop_test_prompts_the_operator_and_shows_the_release(config):
+    from sashil.drivers import open_rig
+    from sashil.experiments.drop_test import run_drop_test
+
+    lines: list[str] = []
+    record = run_drop_test(config, -5.0, 0.0, 1.0, rig=_HandRig(open_rig(config)), notify=lines.append)
+    assert record.error is None and record.release_estimated
+    assert len(lines) == 3
+    assert lines[0].startswith("press the arm to -5 deg (within ±0.5 deg) and hold it still")
+    assert lines[1].startswith("hold detected at -5.0") and "release the arm when ready" in lines[1]
+    assert lines[2].startswith("release detected: the arm left -5.0") and "recording 1 s" in lines[2]
+
+
+def test_the_simulated_operator_needs_no_prompt(config):
+    from sashil.experiments.drop_test import run_drop_test
+
+    lines: list[str] = []
+    run_drop_test(config, -5.0, 0.0, 0.5, notify=lines.append)
+    assert lines == []
+
+
+def test_drop_test_under_a_controller_is_labelled_by_its_law(tmp_path, capsys):
+    out = tmp_path / "td"
+    argv = ["drop-test", "--duration", "2", "--out", str(out)]
+    assert main([*argv, "--set", "controller.law=target-damping", "--set", "controller.zeta=0.08"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["controller"] == "target-damping"
+    assert summary["runs"][0]["controller"] == "target-damping (from 0 A until the release)"
+    assert "target-damping" in capsys.readouterr().err
+    assert (out / "drop_test.png").stat().st_size > 20_000
+
+
+def test_bad_controller_parameters_leave_no_folder(tmp_path, capsys):
+    out = tmp_path / "td"
+    argv = ["drop-test", "--out", str(out), "--set", "controller.law=target-damping", "--set", "controller.zeta=0.3"]
+    assert main(argv) == 2
+    assert "controller.zeta" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_timing_plot_of_percentiles(tmp_path):
+    from sashil.recording.plots import plot_timing
+
+    rng = np.random.default_rng(1)
+    lateness = rng.exponential(5_000, 20_000).astype(np.int64)
+    lateness[::5000] = 3_000_000  # a few outliers
+    path = plot_timing(tmp_path / "timing.png", [("a", {"lateness_ns": lateness, "compute_ns": lateness // 10})])
+    assert path.stat().st_size > 20_000

@@ -66,6 +66,12 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
     group = parser.add_argument_group("live view and output formats")
     group.add_argument("--rerun", action="store_true", help="spawn the rerun viewer and stream the run to it live")
     group.add_argument(
+        "--rerun-bind",
+        metavar="ADDR",
+        default="127.0.0.1",
+        help="address the spawned viewer listens on (default 127.0.0.1: this machine only; 0.0.0.0: every interface)",
+    )
+    group.add_argument(
         "--rerun-connect",
         metavar="URL",
         help="stream to a running rerun viewer (e.g. rerun+http://127.0.0.1:9876/proxy)",
@@ -104,6 +110,7 @@ def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str, fold
         viewer=bool(args.rerun),
         connect=getattr(args, "rerun_connect", None),
         name=name,
+        bind=getattr(args, "rerun_bind", "127.0.0.1"),
     )
 
 

@@ -23,7 +23,7 @@ from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
-from sashil.recording.plots import plot_angle_overlay
+from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 
 HELP = "drop test: hold the arm at theta0, release, record the free oscillation at constant current(s)"
@@ -63,6 +63,11 @@ def _controller(config: dict) -> object | None:
     return make_controller(law, config)
 
 
+def _prompt(line: str) -> None:
+    """Operator prompts and detections: shown even with --quiet (someone at the bench needs them)."""
+    print(f"  {line}", file=sys.stderr, flush=True)
+
+
 def _label(current: float) -> str:
     return f"i{current:.3f}A"
 
@@ -77,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if len(set(currents)) != len(currents):
         raise ConfigError(f"--current: each current once, got {currents}")
 
+    _controller(config)  # bad controller parameters fail here, before a folder exists
     folder = RunFolder.create(args.out, "drop-test")
     columns = DROP_COLUMNS + (CONTROLLER_COLUMNS if config["controller"]["law"] != "passive" else ())
     live = open_rerun(args, columns, "sashil drop-test", folder.path)
@@ -94,7 +100,9 @@ def run(args: argparse.Namespace) -> int:
         rig = open_rig(config)
         trace = start_can_trace(args, rig, target.path)
         try:
-            record = run_drop_test(config, args.theta0_deg, current, duration, rig=rig, controller=_controller(config))
+            record = run_drop_test(
+                config, args.theta0_deg, current, duration, rig=rig, controller=_controller(config), notify=_prompt
+            )
         finally:
             trace_stats = trace.close() if trace is not None else None
         if several:
@@ -144,9 +152,9 @@ def run(args: argparse.Namespace) -> int:
         if record.error is not None:
             failure = record.error
             exit_status = entry["exit_status"]
-            overlay.append((f"{current:g} A (stopped)", record.columns["time_s"], record.columns["theta_rad"]))
+            overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
             break
-        overlay.append((f"{current:g} A", record.columns["time_s"], record.columns["theta_rad"]))
+        overlay.append({**entry, **record.columns, "label": label})
         period = "-" if entry["period_s"] is None else f"{entry['period_s']:.3f} s"
         peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
         settle = entry["settling_time_s"]
@@ -155,10 +163,11 @@ def run(args: argparse.Namespace) -> int:
             args,
             f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}",
         )
-    plot = plot_angle_overlay(
+    under = f", under {law}" if law != "passive" else ""
+    plot = plot_drop_test(
         folder.file("drop_test.png"),
         overlay,
-        f"Drop test from {args.theta0_deg:g}° ({config['driver']['name']} rig)",
+        f"Drop test from {args.theta0_deg:g}°{under} ({config['driver']['name']} rig)",
         band_deg=config["drop_test"]["settle_band_deg"],
     )
     if live is not None:

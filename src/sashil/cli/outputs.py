@@ -19,7 +19,8 @@ from sashil.recording.run_folder import RunFolder
 
 def start_can_trace(args: argparse.Namespace, rig: Any, folder: Path) -> CanTrace | None:
     """The running CAN frame trace ``--format blf|asc|log|mf4`` asks for, attached to ``rig``, or None."""
-    trace = CanTrace.for_formats(folder, can_formats(formats(args)))
+    port = getattr(getattr(rig, "settings", None), "port", None)
+    trace = CanTrace.for_formats(folder, can_formats(formats(args)), port)
     if trace is None:
         return None
     trace.attach(rig)

@@ -106,21 +106,10 @@ def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
 
 
 def _plot(folder: RunFolder, points, label: str) -> None:
-    import matplotlib
+    from sashil.recording.plots import plot_transmissibility
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot([p.frequency_hz for p in points], [p.transmissibility for p in points], "o-", label=label)
-    ax.set_xlabel("road frequency [Hz]")
-    ax.set_ylabel("body RMS / road RMS")
-    ax.set_title("transmissibility (stepped sine)")
-    ax.grid(True)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(folder.file("transmissibility.png"), dpi=100)
-    plt.close(fig)
+    freq = [p.frequency_hz for p in points]
+    plot_transmissibility(folder.file("transmissibility.png"), [(label, freq, [p.transmissibility for p in points])])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -160,6 +149,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _freq_label(f_hz: float) -> str:
+    """Sub-folder of one stepped-sine frequency, e.g. ``f1.650Hz``."""
+    return f"f{f_hz:.3f}Hz"
+
+
 def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> dict:
     """Run the stepped sine or the chirp; returns the summary."""
     sweep = config["sweep"]
@@ -167,9 +161,23 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
         freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
         bar = Progress(len(freqs), "stepped sine", enabled=not args.quiet)
         points = []
+        kept: list[dict] = []
+
+        def keep(f: float, cols: dict) -> None:
+            """Each frequency's time series in its own sub-folder (a run folder of its own)."""
+            sub = RunFolder.create(folder.path / _freq_label(f), "sweep")
+            sub.write_config(config)
+            sub.write_data(cols)
+            write_formats(args, sub.path, config, "sweep", cols, controller=label, frequency_hz=f)
+            kept.append({"folder": _freq_label(f), "frequency_hz": f})
+            sub.write_summary(
+                {"exit_status": "ok", "driver": config["driver"]["name"], "controller": label, "mode": "stepped",
+                 "runs": [{"folder": ".", "frequency_hz": f}]}
+            )  # fmt: skip
+
         try:
             for f in freqs:  # one frequency at a time, for the progress bar
-                points += stepped_sine(config, lambda: make_controller(name, config), [f], rig_factory)
+                points += stepped_sine(config, lambda: make_controller(name, config), [f], rig_factory, keep)
                 bar.advance(1, f"{f:.3g} Hz")
         except SashilError as err:  # the frequencies done so far are kept
             _write_failed(folder, err, {"mode": "stepped", "controller": label, "points": [p.__dict__ for p in points]})
@@ -196,6 +204,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
             "controller": label,
             "integrated_body_rms_rad": integrated,
             "points": [p.__dict__ for p in points],
+            "runs": [{**entry, **p.__dict__} for entry, p in zip(kept, points, strict=True)],
         }
     else:
         amplitude = math.radians(sweep["amplitude_deg"])
@@ -214,6 +223,13 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
             _write_failed(folder, err, {"mode": "chirp", "controller": label})
             raise
         write_formats(args, folder.path, config, "sweep", cols, controller=label)
+        from sashil.recording.plots import plot_chirp
+
+        plot_chirp(
+            folder.file("chirp.png"),
+            cols,
+            f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg road ({label})",
+        )
         if live is not None:
             shown = dict(cols)
             if config["model"]["name"] == "bouc-wen":

@@ -202,8 +202,8 @@ SWEEP = Section(
         "measure_s": Field(
             "float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"
         ),
-        "steps": Field("int", 10, low=2, high=1000, doc="stepped sine: number of frequencies"),
-        "spacing": Field("choice", "linear", choices=("linear", "log")),
+        "steps": Field("int", 24, low=2, high=1000, doc="stepped sine: number of frequencies"),
+        "spacing": Field("choice", "log", choices=("linear", "log")),
     },
     doc="road-side excitation: chirp and stepped sine (issue 5)",
 )

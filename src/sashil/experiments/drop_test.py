@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -106,8 +107,16 @@ def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: fl
 class DropTestPlan:
     """Loop stage: constant current; wait for the hold; detect the release; record ``duration_s``."""
 
-    def __init__(self, settings: DropTestSettings, counts_per_rev: int, controller: Any = None):
+    def __init__(
+        self,
+        settings: DropTestSettings,
+        counts_per_rev: int,
+        controller: Any = None,
+        notify: Callable[[str], None] | None = None,
+    ):
         self.s = settings
+        # operator prompts and what the plan detected (one line at each phase change, never per cycle)
+        self.notify = notify
         # optional loop stage (sashil.control) that commands the damper after the release
         self.controller = controller
         self.command = RigCommand(settings.current_a)
@@ -131,6 +140,12 @@ class DropTestPlan:
         theta = sample.theta_rad
         if self._start_ns is None:
             self._start_ns = t_ns
+            if self.notify is not None and self.s.known_release_after_s is None:
+                self.notify(
+                    f"press the arm to {math.degrees(self.s.theta0_rad):g} deg (within "
+                    f"±{math.degrees(self.s.hold_tolerance_rad):g} deg) and hold it still; now at "
+                    f"{math.degrees(theta):.2f} deg"
+                )
         ctl = None
         if self.controller is not None:
             self.controller.held = self.phase != "record"  # the operator's hand is outside the model
@@ -167,6 +182,11 @@ class DropTestPlan:
             if (t_ns - self._still_since) * 1e-9 >= self.s.hold_time_s:
                 self.phase = "held"
                 self.hold_angle = self._hold_sum / self._hold_count
+                if self.notify is not None and self.s.known_release_after_s is None:
+                    self.notify(
+                        f"hold detected at {math.degrees(self.hold_angle):.2f} deg: release the arm when ready "
+                        f"(detected when it moves {math.degrees(self.s.release_threshold_rad):g} deg)"
+                    )
         else:
             self._still_since = None
         assert self._start_ns is not None  # step() sets it on the first cycle
@@ -188,6 +208,11 @@ class DropTestPlan:
             )
             self.release_estimated = True
         self.phase = "record"
+        if self.notify is not None and self.release_estimated:  # a person let go (the backend knows when it did)
+            self.notify(
+                f"release detected: the arm left {math.degrees(self.hold_angle):.2f} deg; the release is dated "
+                f"{(t_ns - self.release_ns) * 1e-6:.1f} ms before the detection; recording {self.s.duration_s:g} s"
+            )
         for row in recent:
             if row[0] >= self.release_ns and self._record(row) is None:
                 break
@@ -262,6 +287,7 @@ def run_drop_test(
     rig: RigInterface | None = None,
     clock: Clock | None = None,
     controller: Any = None,
+    notify: Callable[[str], None] | None = None,
 ) -> DropRecord:
     """One drop test at a constant current (or, after the release, under ``controller``).
 
@@ -278,7 +304,7 @@ def run_drop_test(
         set_current = getattr(rig, "set_initial_current", None)
         if set_current is not None:
             set_current(current_a)
-    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller)
+    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
     loop = ControlLoop(
         rig,
         plan,

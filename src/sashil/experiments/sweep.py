@@ -228,8 +228,10 @@ def stepped_sine(
     make_controller: Callable[[], Any],
     freqs: list[float],
     rig_factory: RigFactory | None = None,
+    keep: Callable[[float, dict[str, np.ndarray]], None] | None = None,
 ) -> list[SteppedPoint]:
-    """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section)."""
+    """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section).
+    ``keep(frequency_hz, columns)`` gets each frequency's time series once it has run."""
     sweep = config["sweep"]
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
@@ -243,6 +245,8 @@ def stepped_sine(
         cols = run_profile(
             config, controller, sine_profile(amplitude, f, sweep["ramp_s"], stop), stop + sweep["ramp_s"], rig_factory
         )
+        if keep is not None:
+            keep(f, cols)
         window = (cols["time_s"] >= start - 1e-9) & (cols["time_s"] < stop - 1e-9)
         body = cols["theta_rad"][window] + cols["theta_road_rad"][window]
         road = cols["theta_road_rad"][window]

@@ -107,21 +107,34 @@ def comparison_table(results: Sequence[FitResult]) -> str:
 
 
 def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: str | Path) -> Path:
-    """Recorded angle and every model's simulation, one panel per run (PNG)."""
+    """Recorded angle and every model's simulation, one panel per run, each with a residual panel
+    (simulated − recorded) below it, so a misfit reads as structure rather than a thick line (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(records), 1, figsize=(9, 2.8 * len(records)), squeeze=False, sharex=False)
-    for ax, record in zip(axes[:, 0], records, strict=True):
+    n = len(records)
+    fig, axes = plt.subplots(2 * n, 1, figsize=(9, 3.6 * n), squeeze=False, gridspec_kw={"height_ratios": [3, 1.3] * n})
+    for k, record in enumerate(records):
+        ax, res = axes[2 * k, 0], axes[2 * k + 1, 0]
         ax.plot(record.time_s, np.degrees(record.theta), color="k", lw=1.2, label="recorded")
         for r in ranked(results):
             sim = MODELS[r.model].simulate(r.params, record)
-            ax.plot(record.time_s, np.degrees(sim), lw=0.9, label=f"{r.model} (RMS {np.degrees(r.rms_total):.3g} deg)")
-        ax.set_title(Path(record.name).name + f"  (mean current {record.mean_current:.2f} A)", fontsize=9)
+            (line,) = ax.plot(
+                record.time_s, np.degrees(sim), lw=0.9, label=f"{r.model} (RMS {np.degrees(r.rms_total):.3g} deg)"
+            )
+            res.plot(record.time_s, np.degrees(sim - record.theta), lw=0.7, color=line.get_color())
+        ax.set_title(
+            "/".join(Path(record.name).parts[-2:]) + f"  (mean current {record.mean_current:.2f} A)", fontsize=9
+        )
         ax.set_ylabel("theta [deg]")
         ax.grid(alpha=0.3)
+        ax.sharex(res)
+        ax.tick_params(labelbottom=False)
+        res.axhline(0.0, color="k", lw=0.6)
+        res.set_ylabel("residual [deg]", fontsize=8)
+        res.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=8)
     fig.tight_layout()

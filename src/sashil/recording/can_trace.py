@@ -7,8 +7,10 @@ CanutilsLogWriter, MF4Writer), so the files open in CANalyzer/CANoe, asammdf, ``
 The cycle does not write: the CAN backend hands each frame to :meth:`CanTrace.put` (a
 ``deque.append``: no lock held across I/O, nothing allocated beyond the frame object the backend
 already has), and a writer thread at normal priority drains the queue every ``interval_s`` into
-the loggers. Received frames keep python-can's receive timestamp; sent frames are stamped when
-sent. ``is_rx`` says the direction (BLF and ASC record it as Rx/Tx).
+the loggers, in slices of :data:`SLICE_FRAMES` between which it gives up the interpreter lock.
+Received frames keep python-can's receive timestamp; sent frames are stamped when sent. ``is_rx``
+says the direction (BLF and ASC record it as Rx/Tx). MF4 is recorded as BLF during the run and
+converted when it stops (python-can's MF4Writer is too slow to run beside the loop).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import collections
 import os
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,13 +27,27 @@ from sashil.errors import ConfigError
 
 #: how often the writer thread drains the queue [s]
 DRAIN_INTERVAL_S = 0.05
+#: frames written per slice; between slices the writer gives up the interpreter lock (a BLF/ASC
+#: frame costs 2-5 µs, so the loop never waits more than ~80 µs for the writer)
+SLICE_FRAMES = 16
+#: formats recorded as BLF during the run and converted when it ends: python-can's MF4Writer
+#: costs ~80 µs per frame (asammdf), too much beside a 1 kHz loop in the same interpreter
+CONVERTED_AFTER = (".mf4",)
 
 
 class CanTrace:
     """Queue of frames + a writer thread feeding one ``can.Logger`` per file."""
 
-    def __init__(self, paths: Sequence[str | Path], interval_s: float = DRAIN_INTERVAL_S):
+    def __init__(self, paths: Sequence[str | Path], interval_s: float = DRAIN_INTERVAL_S, channel: str = "can0"):
         self.paths = [Path(p) for p in paths]
+        #: the files written while the run goes on (a BLF stands in for the formats converted after)
+        self._live_paths = [p for p in self.paths if p.suffix not in CONVERTED_AFTER]
+        self._converted = [p for p in self.paths if p.suffix in CONVERTED_AFTER]
+        self._staging: Path | None = None
+        if self._converted and not any(p.suffix == ".blf" for p in self._live_paths):
+            self._staging = self._converted[0].with_name(self._converted[0].name + ".part.blf")
+            self._live_paths.append(self._staging)
+        self.channel = channel  # the channel name frames without one are logged under
         self.interval_s = interval_s
         self._queue: collections.deque[Any] = collections.deque()
         self._loggers: list[Any] = []
@@ -43,9 +60,13 @@ class CanTrace:
         self.put = self._queue.append
 
     @classmethod
-    def for_formats(cls, folder: Path, formats: Sequence[str]) -> CanTrace | None:
-        """``can.<ext>`` in ``folder`` for each CAN format, or None when none is asked for."""
-        return cls([folder / f"can.{fmt}" for fmt in formats]) if formats else None
+    def for_formats(cls, folder: Path, formats: Sequence[str], port: str | None = None) -> CanTrace | None:
+        """``can.<ext>`` in ``folder`` for each CAN format, or None when none is asked for. Frames
+        are logged on channel ``port`` when it is a bus name (``can0``), else ``slcan0`` (a tty)."""
+        if not formats:
+            return None
+        channel = port if port and "/" not in port else "slcan0"
+        return cls([folder / f"can.{fmt}" for fmt in formats], channel=channel)
 
     def attach(self, rig: Any) -> Any:
         """Give ``rig`` (a backend with CAN frames: ``frame_sink``) this trace; returns the rig."""
@@ -61,7 +82,7 @@ class CanTrace:
         """Open the files (python-can's writers) and start the writer thread."""
         import can
 
-        for path in self.paths:
+        for path in self._live_paths:
             try:
                 self._loggers.append(can.Logger(str(path)))
             except (ImportError, ValueError, OSError) as err:
@@ -80,7 +101,26 @@ class CanTrace:
         if self.error is None:
             self._drain()
         self._stop_loggers()
+        if self._converted:
+            self._convert()
         return self.summary()
+
+    def _convert(self) -> None:
+        """Write the formats converted after the run from the BLF recorded during it."""
+        import can
+
+        source = self._staging or next(p for p in self._live_paths if p.suffix == ".blf")
+        try:
+            for target in self._converted:
+                with can.Logger(str(target)) as writer:
+                    for msg in can.LogReader(str(source)):
+                        writer.on_message_received(msg)
+        except Exception as err:  # reported in the summary; the other files are complete
+            if self.error is None:
+                self.error = err
+        finally:
+            if self._staging is not None:
+                self._staging.unlink(missing_ok=True)
 
     def __enter__(self) -> CanTrace:
         return self.start()
@@ -108,16 +148,20 @@ class CanTrace:
         except BaseException as err:  # reported in the summary; the run goes on without the trace
             self.error = err
 
-    def _drain(self) -> None:
-        queue, loggers = self._queue, self._loggers
+    def _drain(self, slice_frames: int = SLICE_FRAMES) -> None:
+        queue, loggers, channel = self._queue, self._loggers, self.channel
         while queue:
-            msg = queue.popleft()
-            if msg.is_rx:
-                self.frames_rx += 1
-            else:
-                self.frames_tx += 1
-            for logger in loggers:
-                logger.on_message_received(msg)
+            for _ in range(min(slice_frames, len(queue))):
+                msg = queue.popleft()
+                if msg.channel is None:
+                    msg.channel = channel
+                if msg.is_rx:
+                    self.frames_rx += 1
+                else:
+                    self.frames_tx += 1
+                for logger in loggers:
+                    logger.on_message_received(msg)
+            time.sleep(0)  # let the loop thread have the interpreter between slices
 
     def _stop_loggers(self) -> None:
         loggers, self._loggers = self._loggers, []

@@ -9,8 +9,8 @@ multi-current drop test) the report collects the recorded traces and writes:
   torque), the torque the rig equation implies, seed 001 eq. 13: ``T_d = −k·θ − J·θ̈`` with θ̇, θ̈
   from a Savitzky–Golay fit (k, J from the run's config.yaml);
 * ``transmissibility.png`` — when a run holds a sweep table (``transmissibility.csv``);
-* ``timing.png`` — a histogram of loop lateness and compute time when a run holds per-cycle
-  timing (``timing.npz``);
+* ``timing.png`` — loop lateness and compute time as percentile curves (p50, p99, p99.9, …, the
+  maximum) when a run holds per-cycle timing (``timing.npz``);
 * ``report.md`` — the runs side by side: exit status, drop-test metrics per current, timing.
 """
 
@@ -85,6 +85,8 @@ def load_run(path: str | Path) -> RunRecord:
     summary = _read_json(path / "summary.json")
     record = RunRecord(path, path.name, summary)
     runs = summary.get("runs") if isinstance(summary.get("runs"), list) else None
+    if summary.get("mode") == "stepped":
+        runs = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
     if runs:
         for entry in runs:
             sub = path / str(entry.get("folder", "."))
@@ -191,31 +193,20 @@ def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarra
 
 
 def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
-    for run in runs:
-        if run.sweep is not None:
-            ax.plot(run.sweep["frequency_hz"], run.sweep["transmissibility"], "o-", label=run.label)
-    ax.axhline(1.0, color="0.4", linewidth=0.6)
-    _axes(ax, "road frequency [Hz]", "transmissibility RMS(θ2) / RMS(θ1)", "transmissibility")
-    ax.legend(fontsize=8)
-    return _save(plt, fig, path)
+    """Transmissibility of every stepped sweep among ``runs``, log-log."""
+    from sashil.recording import plots
+
+    curves = [
+        (run.label, run.sweep["frequency_hz"], run.sweep["transmissibility"]) for run in runs if run.sweep is not None
+    ]
+    return plots.plot_transmissibility(path, curves)
 
 
 def plot_timing(path: Path, runs: Sequence[RunRecord]) -> Path:
-    plt = _pyplot()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
-    for run in runs:
-        if run.timing is None:
-            continue
-        for ax, key in ((left, "lateness_ns"), (right, "compute_ns")):
-            if key in run.timing and run.timing[key].size:
-                ax.hist(run.timing[key] * 1e-3, bins=100, histtype="step", log=True, label=run.label)
-    _axes(left, "wake-up lateness [µs]", "cycles")
-    _axes(right, "compute time per cycle [µs]", "cycles")
-    for ax in (left, right):
-        ax.legend(fontsize=8)
-    return _save(plt, fig, path)
+    """Loop timing of every run with ``timing.npz`` as percentile curves (p50 ... max)."""
+    from sashil.recording import plots
+
+    return plots.plot_timing(path, [(run.label, run.timing) for run in runs if run.timing is not None])
 
 
 # summary -------------------------------------------------------------------------------------
@@ -313,7 +304,7 @@ def write_report(
         progress("plotting transmissibility")
         plots.append(plot_transmissibility(out / "transmissibility.png", runs))
     if any(run.timing is not None for run in runs):
-        progress("plotting timing histograms")
+        progress("plotting timing percentiles")
         plots.append(plot_timing(out / "timing.png", runs))
     summary = out / "report.md"
     summary.write_text(markdown_summary(runs, plots), encoding="utf-8")

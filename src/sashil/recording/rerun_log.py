@@ -163,6 +163,7 @@ class RerunLog:
         viewer: bool = False,
         connect: str | None = None,
         name: str | None = None,
+        bind: str = "127.0.0.1",
     ) -> RerunLog:
         """Open a stream to ``save`` (``.rrd``), a spawned viewer (``viewer``), a viewer at
         ``connect`` (a ``rerun+http://…/proxy`` URL), or several of them; sends the blueprint."""
@@ -182,13 +183,10 @@ class RerunLog:
                 raise ConfigError(
                     "--rerun: no rerun viewer executable (pip install rerun-sdk); use --rerun-save FILE.rrd"
                 )
-            try:
-                rr.spawn(connect=False, executable_path=executable, recording=rec)
-            except Exception as err:
-                first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-                raise ConfigError(
-                    f"--rerun: cannot start the rerun viewer ({first}); use --rerun-save FILE.rrd"
-                ) from None
+            from sashil.recording.viewer import DEFAULT_PORT, reachable_host, spawn_viewer
+
+            spawn_viewer(executable, DEFAULT_PORT, bind)  # on the loopback interface unless asked
+            connect = f"rerun+http://{reachable_host(bind)}:{DEFAULT_PORT}/proxy"
         if viewer or connect is not None:
             sinks.append(rr.GrpcSink(connect) if connect else rr.GrpcSink())
         if save is not None:
