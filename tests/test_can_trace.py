@@ -62,6 +62,7 @@ def test_attach_refuses_a_backend_without_can_frames(tmp_path):
         CanTrace([tmp_path / "can.blf"]).attach(NotCan())
 
 
+@pytest.mark.e2e  # the emulator in its own process, a run on the wall clock over a pty
 def test_run_over_slcan_traces_both_directions(tmp_path):
     from test_link_e2e import Emulator, relaxed_config, sashil
 
