@@ -108,6 +108,25 @@ def test_watchdog_cuts_the_current_within_its_time_plus_one_cycle():
     assert not samples(got)[-1].flags & FLAG_WATCHDOG and device.drive_a == 0.3
 
 
+def test_watchdog_trips_at_exactly_its_time_not_a_cycle_later():
+    device = build_device(default_config())
+    device.handle(Configure(1000, 50, PACING_DEVICE), 0)
+    device.handle(Command(0.8, CMD_ENABLE), 10 * MS)
+    device.tick(10 * MS + 50 * MS - 1)
+    assert device.drive_a == 0.8 and device.watchdog_trips == 0
+    device.tick(10 * MS + 50 * MS)
+    assert device.drive_a == 0.0 and device.watchdog_trips == 1
+
+
+def test_configure_accepts_a_watchdog_of_1_ms_and_refuses_0():
+    device = build_device(default_config())
+    ((_, status),) = device.handle(Configure(1000, 1, PACING_DEVICE), 0)
+    assert status.fault_code == 0 and device.watchdog_ns == MS
+    other = build_device(default_config())
+    ((_, refused),) = other.handle(Configure(1000, 0, PACING_DEVICE), 0)
+    assert refused.fault_code == FAULT_BAD_CONFIGURE and not other.configured
+
+
 def test_command_without_enable_drives_zero():
     device = build_device(default_config())
     device.handle(Configure(1000, 50, PACING_DEVICE), 0)

@@ -109,3 +109,35 @@ def test_from_config(config):
     assert s.slew_a_per_s == 50.0 and s.sensor_timeout_cycles == 20
     config["safety"]["angle_interlock"] = False
     assert SafetySupervisor.from_config(config).angle_limit_rad is None
+
+
+# boundaries (each kills a mutant of tools/mutate_safety.py) ---------------------------------------
+def test_the_angle_limit_itself_is_inside():
+    edge = sample(1, 30.0).theta_rad
+    s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=edge)
+    s.check(sample(1, 30.0), 0)
+    s.check(sample(2, -30.0), 1)
+    assert s.trips == []
+
+
+def test_a_jump_of_half_the_sequence_counter_is_stale_just_under_it_is_fresh():
+    s = supervisor(sensor_timeout_cycles=5)
+    s.check(sample(100), 0)
+    s.check(sample(100 + 32767), 1)  # ahead by 2**15 - 1: fresh
+    assert s.stale_samples == 0
+    s.check(sample((100 + 32767 + 32768) % 65536), 2)  # ahead by exactly 2**15: ambiguous, stale
+    assert s.stale_samples == 1
+
+
+def test_a_change_of_exactly_one_slew_step_is_not_limited():
+    s = supervisor(slew_a_per_s=100.0)
+    step = 100.0 * 1_000_000 * 1e-9  # what limit() allows over a 1 ms period
+    assert s.limit(RigCommand(step), 1_000_000).current_a == step
+    assert s.limit(RigCommand(0.0), 1_000_000).current_a == 0.0
+    assert s.slew_limited_cycles == 0
+
+
+def test_summary_reports_the_limits():
+    summary = supervisor(slew_a_per_s=5.0).summary()
+    assert summary["angle_limit_deg"] == pytest.approx(30.0) and summary["slew_a_per_s"] == 5.0
+    assert SafetySupervisor(current_max_a=1.0).summary()["angle_limit_deg"] is None
