@@ -1,6 +1,11 @@
 """sashil: hardware-in-the-loop control of the SAS rig with a rotary MR damper."""
 
-__version__ = "0.1.0"
+from importlib.metadata import PackageNotFoundError, version
+
+try:  # the one version is pyproject.toml's [project] version, read from the installed metadata
+    __version__ = version("sashil")
+except PackageNotFoundError:  # pragma: no cover - running from a tree that was never installed
+    __version__ = "0+unknown"
 
 from sashil.api import Run, load_run  # the Python API: sashil.load_run(folder)
 
