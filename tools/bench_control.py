@@ -56,17 +56,6 @@ def torque_tracking(config: dict, inverse: str, f_hz: float, amplitude_deg: floa
     }
 
 
-class ObserverProbe:
-    """Wraps a drop-test plan; records T-hat and the true plant torque after the release."""
-
-    def __init__(self, rig, controller):
-        self.rig, self.controller, self.rows = rig, controller, []
-
-    def record(self, plan) -> None:
-        if plan.phase == "record":
-            self.rows.append((self.controller.torque_hat_nm, self.rig.plant.damper_torque()))
-
-
 def drop(config: dict, law: str | None, current_a: float, duration_s: float):
     rig = open_sim_rig(config)
     ctl = make_controller(law, config) if law else None

@@ -129,10 +129,6 @@ def open_live_tap(args: argparse.Namespace, config: Config, columns: Sequence[st
     return LiveTap(open_rerun(args, tuple(columns) + extra, name, folder), band=band)
 
 
-def wants_mat(args: argparse.Namespace) -> bool:
-    return "mat" in (getattr(args, "format", None) or ())
-
-
 def formats(args: argparse.Namespace) -> tuple[str, ...]:
     """The ``--format`` values, each once (checked by :func:`resolve_config`)."""
     return tuple(dict.fromkeys(getattr(args, "format", None) or ()))

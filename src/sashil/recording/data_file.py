@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -105,8 +104,3 @@ def read_data_csv(
             line = int(np.argmax(steps <= 0)) + 3
             raise DataFileError(f"{path}: line {line}: time_s not increasing")
     return columns
-
-
-def finite_or_none(value: float) -> float | None:
-    """JSON-friendly float (None for NaN/inf)."""
-    return float(value) if value is not None and math.isfinite(value) else None

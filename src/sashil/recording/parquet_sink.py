@@ -75,17 +75,6 @@ def write_parquet(
     return path
 
 
-def export_parquet(
-    data_csv: str | Path, config: Mapping[str, Any] | None = None, meta: Mapping[str, Any] | None = None
-) -> Path:
-    """``data.csv`` -> ``data.parquet`` beside it, the same rows (after a loop run has closed its CSV)."""
-    from sashil.recording.data_file import read_data_csv
-
-    data_csv = Path(data_csv)
-    columns = read_data_csv(data_csv, required=("time_s",), min_rows=0)
-    return write_parquet(data_csv.with_suffix(".parquet"), columns, config, meta)
-
-
 def read_parquet(path: str | Path) -> dict[str, np.ndarray]:
     """Columns of a ``data.parquet`` (column name -> numpy array)."""
     _, pq = _pyarrow()
