@@ -80,12 +80,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _plot(path: Path, columns: dict, model: str) -> None:
-    import matplotlib
+    from sashil.recording.plots import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 3))
+    fig, ax = pyplot().subplots(figsize=(8, 3))
     if "theta_measured_rad" in columns:
         ax.plot(columns["time_s"], np.degrees(columns["theta_measured_rad"]), "k", lw=1.2, label="input record")
     ax.plot(columns["time_s"], np.degrees(columns["theta_rad"]), lw=0.9, label=f"{model} simulation")
@@ -93,6 +90,4 @@ def _plot(path: Path, columns: dict, model: str) -> None:
     ax.set_ylabel("theta [deg]")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

@@ -109,11 +109,9 @@ def comparison_table(results: Sequence[FitResult]) -> str:
 def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: str | Path) -> Path:
     """Recorded angle and every model's simulation, one panel per run, each with a residual panel
     (simulated − recorded) below it, so a misfit reads as structure rather than a thick line (PNG)."""
-    import matplotlib
+    from sashil.recording.plots import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     n = len(records)
     fig, axes = plt.subplots(2 * n, 1, figsize=(9, 3.6 * n), squeeze=False, gridspec_kw={"height_ratios": [3, 1.3] * n})
     for k, record in enumerate(records):
@@ -137,7 +135,4 @@ def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: 
         res.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path, dpi=110)

@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 
-def _pyplot():
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (imported on first use: the loop never pays for it)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -18,13 +19,22 @@ def _pyplot():
     return plt
 
 
+def save_figure(fig: Any, path: str | Path, dpi: float | None = None) -> Path:
+    """Lay out, write and close ``fig``; returns the path written."""
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=dpi if dpi is not None else "figure")
+    pyplot().close(fig)
+    return path
+
+
 def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) -> Path:
     """``run.png`` of a loop run folder: angles (θ, and the road θ1 when it moves), coil current
     (measured and commanded) and torque (observer T̂ and target T* when a controller recorded them)."""
     from sashil.recording.data_file import read_data_csv
 
     cols = read_data_csv(Path(folder) / "data.csv", required=("time_s",), min_rows=0)
-    plt = _pyplot()
+    plt = pyplot()
     has_torque = any(name in cols and np.isfinite(cols[name]).any() for name in ("torque_hat_nm", "torque_cmd_nm"))
     rows = 3 if has_torque else 2
     fig, axes = plt.subplots(rows, 1, figsize=(9, 2.4 * rows + 0.6), dpi=110, sharex=True)
@@ -64,11 +74,7 @@ def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) 
         if summary.get("trips"):
             title += f", {len(summary['trips'])} trip(s)"
     axes[0].set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_drop_test(
@@ -84,7 +90,7 @@ def plot_drop_test(
     (``peak_times_s``, ``peaks_deg``, ``log_decrement``, ``damping_ratio``, ``period_s``), plus
     ``release_estimated`` (the release found from the data, or known from the backend).
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.8), dpi=110)
     for run in runs:
         theta_deg = np.degrees(run["theta_rad"])
@@ -117,11 +123,7 @@ def plot_drop_test(
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def transmissibility_axes(ax: Any) -> None:
@@ -145,18 +147,14 @@ def plot_transmissibility(
 ) -> Path:
     """``transmissibility.png``: body RMS / road RMS against frequency on log-log axes;
     ``curves`` = [(label, frequency_hz, transmissibility), ...]."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
     for label, freq, trans in curves:
         ax.plot(freq, trans, "o-", markersize=3, label=label)
     transmissibility_axes(ax)
     ax.set_title("transmissibility (stepped sine)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 #: the percentiles a timing plot marks (the tail is what a real-time loop is judged by)
@@ -167,7 +165,7 @@ def plot_timing(path: str | Path, runs: Sequence[tuple[str, dict]]) -> Path:
     """``timing.png``: wake-up lateness and compute time as percentile curves ("how late is the
     worst x % of cycles"), on a log axis of 1/(1 − p) so p50, p99, p99.9 and the maximum are evenly
     spaced; a few outliers no longer hide the distribution. ``runs`` = [(label, timing.npz arrays)]."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
     for ax, key, title in (
         (axes[0], "lateness_ns", "wake-up lateness"),
@@ -195,17 +193,13 @@ def plot_timing(path: str | Path, runs: Sequence[tuple[str, dict]]) -> Path:
         ax.grid(True, which="major", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_chirp(path: str | Path, columns: dict, title: str) -> Path:
     """``chirp.png`` of a chirp sweep: road θ1 and body θ2 against time (the chirp's frequency
     range in ``title``), and the measured and commanded coil current."""
-    plt = _pyplot()
+    plt = pyplot()
     t = np.asarray(columns["time_s"])
     road = np.asarray(columns["theta_road_rad"])
     body = np.asarray(columns["theta_rad"]) + road
@@ -221,8 +215,4 @@ def plot_chirp(path: str | Path, columns: dict, title: str) -> Path:
     for ax in axes:
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -27,6 +27,7 @@ import numpy as np
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
+from sashil.recording.plots import pyplot, save_figure
 
 #: Savitzky-Golay window for the drop-test torque estimate [s] and polynomial order
 SG_WINDOW_S = 0.121
@@ -145,20 +146,6 @@ def hysteresis_of(trace: Trace) -> tuple[np.ndarray, np.ndarray, np.ndarray, str
 
 
 # plots ---------------------------------------------------------------------------------------
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(plt: Any, fig: Any, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
 
 
 def _axes(ax: Any, xlabel: str, ylabel: str, title: str | None = None) -> None:
@@ -170,18 +157,18 @@ def _axes(ax: Any, xlabel: str, ylabel: str, title: str | None = None) -> None:
 
 
 def plot_theta(path: Path, traces: Sequence[Trace]) -> Path:
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
     for trace in traces:
         ax.plot(trace.columns["time_s"], np.degrees(trace.columns["theta_rad"]), linewidth=1.0, label=trace.label)
     ax.axhline(0.0, color="0.4", linewidth=0.6)
     _axes(ax, "time [s]", "arm angle θ [deg]", "θ(t)")
     ax.legend(loc="upper right", fontsize=8)
-    return _save(plt, fig, path)
+    return save_figure(fig, path)
 
 
 def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, str]]) -> Path:
-    plt = _pyplot()
+    plt = pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
     for label, theta, velocity, torque, source in loops:
         left.plot(velocity, torque, linewidth=0.7, label=f"{label} ({source})")
@@ -189,7 +176,7 @@ def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarra
     _axes(left, "θ̇ [rad/s]", "damper torque [N·m]", "torque against velocity")
     _axes(right, "θ [deg]", "damper torque [N·m]", "torque against angle")
     left.legend(fontsize=7)
-    return _save(plt, fig, path)
+    return save_figure(fig, path)
 
 
 def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
