@@ -148,6 +148,19 @@ def test_operator_holds_then_releases_from_configure():
     assert got[-1].arm_counts != hold_counts  # let go: the arm swings
 
 
+def test_operator_holds_at_each_angle_in_turn_one_per_configure():
+    device = build_device(default_config(), operator=Operator(-5.0, 10.0, (-2.5,)))
+    counts = []
+    for session in range(3):  # -5, -2.5, then round again to -5
+        start = session * 100 * MS
+        device.handle(Configure(1000, 1000, PACING_DEVICE), start)
+        got = samples(run_ticks(device, start, start + 50 * MS, command=Command(0.0, CMD_ENABLE)))
+        assert all(s.flags & FLAG_HELD for s in got)
+        counts.append(got[-1].arm_counts)
+    per_deg = 4096 / 360
+    assert counts == [round(-5.0 * per_deg), round(-2.5 * per_deg), round(-5.0 * per_deg)]
+
+
 def test_stuck_sensor_freezes_both_encoders_and_flags_it():
     device = build_device(default_config(), operator=Operator(-5.0, 0.0), faults=Faults(stuck_sensor_after_s=0.05))
     device.handle(Configure(1000, 1000, PACING_DEVICE), 0)

@@ -67,10 +67,22 @@ class Faults:
 
 @dataclass
 class Operator:
-    """The person of a drop test: press the arm to ``hold_deg``, let go ``release_after_s`` later."""
+    """The person of a drop test: press the arm to ``hold_deg``, let go ``release_after_s`` later.
+
+    With ``then_deg`` the hold angle of each later session is the next of ``hold_deg, *then_deg``,
+    round and round (a calibration's plan: drops from several angles, one session each)."""
 
     hold_deg: float
     release_after_s: float
+    then_deg: tuple[float, ...] = ()
+    sessions: int = 0
+
+    def next_hold_deg(self) -> float:
+        """The hold angle of the next session."""
+        angles = (self.hold_deg, *self.then_deg)
+        angle = angles[self.sessions % len(angles)]
+        self.sessions += 1
+        return angle
 
 
 class RoadWheel:
@@ -187,7 +199,7 @@ class RigDevice:
         self._last_cmd_ns = None
         self.watchdog_tripped = False
         if self.operator is not None:
-            self.rig.operator_hold(math.radians(self.operator.hold_deg), self.operator.release_after_s)
+            self.rig.operator_hold(math.radians(self.operator.next_hold_deg()), self.operator.release_after_s)
         return Status(self.flags(), FAULT_NONE, self.bad_frames, self.watchdog_trips)
 
     def _command(self, msg: Command, now_ns: int) -> list[tuple[int, Message]]:

@@ -28,6 +28,7 @@ VERBS: dict[str, str] = {
     "drop-test": "sashil.cli.drop_test",
     "run": "sashil.cli.run",
     "sweep": "sashil.cli.sweep",
+    "calibrate": "sashil.cli.calibrate",
     "identify": "sashil.cli.identify",
     "simulate": "sashil.cli.simulate",
     "emulate": "sashil.cli.emulate",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 from typing import Any
@@ -40,7 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "z_true, current_true_a, torque_true_nm; join with the host's data.csv on seq",
     )
     op = parser.add_argument_group("operator (drop test)")
-    op.add_argument("--hold-deg", type=float, metavar="DEG", help="hold the arm at DEG when the host connects")
+    op.add_argument(
+        "--hold-deg",
+        type=float,
+        nargs="+",
+        metavar="DEG",
+        help="hold the arm at DEG when the host connects (Configure); several: the next one at each Configure, "
+        "round and round (a calibration plan's drop angles)",
+    )
     op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
     parser.add_argument(
         "--priority",
@@ -111,7 +119,11 @@ def run(args: argparse.Namespace) -> int:
     )
     operator = None
     if args.hold_deg is not None:
-        operator = Operator(args.hold_deg, _seconds_or_none("--release-after", args.release_after) or 0.0)
+        for angle in args.hold_deg:
+            if not (math.isfinite(angle) and abs(angle) <= 90.0):
+                raise ConfigError(f"--hold-deg: expected angles within ±90 deg, got {angle:g}")
+        release = _seconds_or_none("--release-after", args.release_after) or 0.0
+        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]))
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     truth = None
     if args.truth is not None:

@@ -208,6 +208,30 @@ SWEEP = Section(
     doc="road-side excitation: chirp and stepped sine (issue 5)",
 )
 
+CALIBRATE = Section(
+    {
+        "theta0_deg": Field("float", -5.0, low=-30.0, high=30.0, doc="the large drops: hold angle"),
+        "currents_a": Field("float_list", [0.0, 0.5, 1.0], doc="the large drops: one per current"),
+        "small_theta0_deg": Field("float", -2.5, low=-30.0, high=30.0, doc="the small drops: hold angle"),
+        "small_currents_a": Field("float_list", [0.0, 1.0], doc="the small drops: one per current"),
+        "drop_duration_s": Field("float", 6.0, low=0.5, high=120.0, doc="record length after each release"),
+        "road_currents_a": Field(
+            "float_list", [0.5, 1.0], doc="road excitation through the resonance: one per current"
+        ),
+        "road_amplitude_deg": Field("float", 1.0, low=0.0, low_open=True, high=20.0),
+        "road_f_start_hz": Field("float", 0.8, low=0.0, low_open=True, high=100.0),
+        "road_f_stop_hz": Field("float", 3.0, low=0.0, low_open=True, high=100.0),
+        "road_duration_s": Field("float", 12.0, low=1.0, high=600.0, doc="record length of a road run, ramps included"),
+        "road_ramp_s": Field("float", 1.0, low=0.0, high=60.0, doc="raised-cosine amplitude ramps at both ends"),
+        "validate_theta0_deg": Field("float", -3.5, low=-30.0, high=30.0, doc="held-out drops: hold angle"),
+        "validate_currents_a": Field("float_list", [0.25, 0.75], doc="held-out drops (the fit never sees them)"),
+        "validate_road_currents_a": Field("float_list", [], doc="held-out road runs"),
+        "max_rig_time_s": Field("float", 180.0, low=1.0, doc="a plan estimated to take longer is refused"),
+        "model": Field("choice", "bouc-wen", choices=("bouc-wen", "dahl", "lugre", "bingham", "all")),
+    },
+    doc="the plan of `sashil calibrate`: drops and road runs to fit, and held-out runs to validate (issue 16)",
+)
+
 SCHEMA = {
     "model": MODEL,
     "rig": RIG,
@@ -218,4 +242,5 @@ SCHEMA = {
     "controller": CONTROLLER,
     "mismatch": MISMATCH,
     "sweep": SWEEP,
+    "calibrate": CALIBRATE,
 }

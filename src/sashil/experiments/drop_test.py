@@ -14,6 +14,7 @@ counts and the release threshold).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from collections.abc import Callable
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from sashil.drivers import open_rig
-from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample
 from sashil.errors import DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
@@ -127,6 +128,7 @@ class DropTestPlan:
         self._hold_sum = 0.0
         self._hold_count = 0
         self.hold_angle = settings.theta0_rad
+        self.held_elsewhere = False  # a simulated operator held the arm away from theta0
         self._recent: deque[tuple] = deque(maxlen=max(16, int(settings.rate_hz)))  # rows before the release
         self.release_ns: int | None = None
         self.release_estimated = False
@@ -155,7 +157,7 @@ class DropTestPlan:
             return out if out is None or ctl is None else ctl
         self._recent.append(self._row(t_ns, theta, sample.theta_road_rad, sample.current_a))
         if self.phase == "wait-hold":
-            self._wait_hold(t_ns, theta)
+            self._wait_hold(t_ns, theta, sample.flags)
         elif self.phase == "held":
             if abs(theta - self.hold_angle) > self.s.release_threshold_rad:
                 self._released(t_ns)
@@ -170,8 +172,21 @@ class DropTestPlan:
             return ctl
         return self.command
 
-    def _wait_hold(self, t_ns: int, theta: float) -> None:
-        if abs(theta - self.s.theta0_rad) <= self.s.hold_tolerance_rad:
+    def _wait_hold(self, t_ns: int, theta: float, flags: int = 0) -> None:
+        target = self.s.theta0_rad
+        if flags & FLAG_HELD and abs(theta - target) > self.s.hold_tolerance_rad:
+            # a simulated operator (the emulator's --hold-deg) says it holds the arm: take the hold
+            # where it is rather than wait for an angle it will never press to
+            if not self.held_elsewhere:
+                logging.getLogger("sashil").warning(
+                    "drop test: the rig's operator holds the arm at %.2f deg, not at theta0 = %.2f deg; "
+                    "the drop starts from there",
+                    math.degrees(theta),
+                    math.degrees(target),
+                )
+            self.held_elsewhere = True
+            target = theta
+        if abs(theta - target) <= self.s.hold_tolerance_rad:
             if (
                 self._still_since is None
                 or abs(theta - self._hold_sum / max(self._hold_count, 1)) > 2 * self.resolution

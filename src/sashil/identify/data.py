@@ -39,6 +39,7 @@ class Record:
     theta_ddot: np.ndarray = field(repr=False)
     theta_smooth: np.ndarray = field(repr=False)
     start_at_rest: bool = True  # drop tests start at standstill; else v0 from the first 20 ms
+    z0_sign: float | None = None  # the hysteretic state's sign at the start, when known otherwise
 
     @property
     def v0(self) -> float:
@@ -59,7 +60,10 @@ class Record:
 
     def initial_state_sign(self) -> float:
         """Sign of the hysteretic state at the start: a drop test was pressed towards theta0,
-        so z0 = sign(theta0)*bound; a moving start follows its velocity."""
+        so z0 = sign(theta0)*bound; a moving start follows its velocity; ``z0_sign`` overrides both
+        (a record that starts at a turning point: the sign of the motion before it)."""
+        if self.z0_sign is not None:
+            return self.z0_sign
         v0 = self.v0
         if v0 != 0.0:
             return math.copysign(1.0, v0)
@@ -93,7 +97,9 @@ def smooth_derivatives(time_s: np.ndarray, theta: np.ndarray, window_s: float | 
     return smooth, vel, acc
 
 
-def record_from_columns(name: str, columns: dict[str, np.ndarray], start_at_rest: bool = True) -> Record:
+def record_from_columns(
+    name: str, columns: dict[str, np.ndarray], start_at_rest: bool = True, z0_sign: float | None = None
+) -> Record:
     """Build a record from data.csv columns (checked by the caller)."""
     t = np.asarray(columns["time_s"], dtype=float)
     theta = np.asarray(columns["theta_rad"], dtype=float)
@@ -106,7 +112,7 @@ def record_from_columns(name: str, columns: dict[str, np.ndarray], start_at_rest
     else:
         acc_road = np.zeros_like(t)
     smooth, vel, acc = smooth_derivatives(t, theta)
-    return Record(name, t, theta, current, acc_road, torque_in, vel, acc, smooth, start_at_rest)
+    return Record(name, t, theta, current, acc_road, torque_in, vel, acc, smooth, start_at_rest, z0_sign)
 
 
 def load_records(

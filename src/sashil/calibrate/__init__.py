@@ -1,0 +1,13 @@
+"""``sashil calibrate``: from an unknown damper to a validated model, over any link (issue 16).
+
+Modules: :mod:`.plan` (the runs to make, from the config's ``calibrate`` section), :mod:`.rig`
+(running one step on the rig: the one adapter to the experiment code), :mod:`.analysis` (fit,
+held-out validation, identifiability), :mod:`.report` (params.yaml, report.md, plots),
+:mod:`.session` (:func:`calibrate_rig`: all of it in order) and :mod:`.emulated`
+(:func:`calibrate_emulated`: the same against an emulated damper over a pty, for benchmarks).
+"""
+
+from sashil.calibrate.emulated import calibrate_emulated
+from sashil.calibrate.session import Outcome, calibrate_rig
+
+__all__ = ["Outcome", "calibrate_emulated", "calibrate_rig"]

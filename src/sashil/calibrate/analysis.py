@@ -1,0 +1,268 @@
+"""From the plan's records to a validated model: fit, held-out prediction, identifiability.
+
+* The fit (:func:`sashil.identify.fit.fit_model`, output error of seed 000 eq. 10 on the rig model
+  of seed 001 eqs. 13-17) sees only the ``fit`` steps; drop records are cut 0.5 s after the arm
+  has come to rest (what follows carries no information and costs fit time); a record whose
+  release was estimated from the data starts at its first turning point (:func:`from_turning_point`).
+* Held-out validation: the fitted model is driven by each ``validate`` record's own inputs
+  (initial angle, current, road motion) and its angle compared with the recorded one
+  (NRMSE = RMS error / standard deviation of the recorded angle).
+* Identifiability: the Jacobian's 1-sigma assumes white residuals; the residuals of a fit to
+  encoder-quantised records are strongly correlated, so each standard error is inflated by the
+  square root of the residuals' integrated autocorrelation time (in samples). For Bouc-Wen the
+  exponent n is profiled: with n held at several values the rest is refitted (a short output-error
+  refinement from the best fit) and the output error and held-out NRMSE reported for each, which
+  shows how (un)determined n is and what that costs in prediction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import savgol_filter
+
+from sashil.calibrate.rig import StepResult
+from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
+from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model, nrmse
+from sashil.identify.rig_models import MODELS
+
+#: the arm is at rest once it stays within this many encoder counts of its final angle
+REST_COUNTS = 2
+#: kept after the arm came to rest [s]
+REST_TAIL_S = 0.5
+#: values of n the profile refits at (geometric over the fit's bounds)
+N_PROFILE = (0.1, 0.25, 0.6, 1.5)
+#: output-error evaluations of each profile point's refinement (each costs a Jacobian)
+PROFILE_NFEV = 8
+
+
+def trimmed(columns: dict[str, np.ndarray], counts_per_rev: int) -> dict[str, np.ndarray]:
+    """The record up to REST_TAIL_S after the arm last moved more than REST_COUNTS counts from its
+    final angle (a drop at high current stops within a cycle; the rest is a flat line)."""
+    theta, t = columns["theta_rad"], columns["time_s"]
+    if theta.size == 0:
+        return columns
+    q = 2.0 * math.pi / counts_per_rev
+    moving = np.nonzero(np.abs(theta - theta[-1]) > REST_COUNTS * q)[0]
+    last = int(moving[-1]) if moving.size else 0
+    end_t = max(t[last] + REST_TAIL_S, t[0] + MIN_DURATION_S + 0.1)
+    keep = t <= end_t
+    return {k: v[keep] for k, v in columns.items()}
+
+
+def from_turning_point(
+    columns: dict[str, np.ndarray], counts_per_rev: int
+) -> tuple[dict[str, np.ndarray], float] | None:
+    """The record from its first turning point after the release, and the sign of the motion before it.
+
+    Where the release time is estimated from the data (a person, or the emulator, let go) it can be
+    off by the ~10 ms the arm needs to move its first encoder count; an output-error fit reads that
+    as damping. At a turning point the state is known without it: theta_dot = 0, theta the vertex
+    of a parabola through the samples within 30 ms, and z at its bound with the sign of the motion
+    that ended there (a swing of degrees saturates it). None when the arm does not turn and move on.
+    """
+    t, theta = columns["time_s"], columns["theta_rad"]
+    q = 2.0 * math.pi / counts_per_rev
+    if t.size < 50:
+        return None
+    dt = float(np.median(np.diff(t)))
+    window = max(5, int(round(0.04 / dt)) | 1)
+    smooth = savgol_filter(theta, window, 2, deriv=1, delta=dt, mode="interp")
+    moved = np.nonzero(np.abs(theta - theta[0]) > 10 * q)[0]
+    if moved.size == 0:
+        return None
+    start = int(moved[0])
+    sign = math.copysign(1.0, float(smooth[start]))
+    turns = np.nonzero(np.sign(smooth[start:]) == -sign)[0]
+    if turns.size == 0:
+        return None
+    k = start + int(turns[0])
+    near = np.abs(t - t[k]) <= 0.03
+    a, b, _ = np.polyfit(t[near] - t[k], theta[near], 2)
+    vertex_t = t[k] + (-b / (2 * a) if a != 0 else 0.0)
+    first = int(np.argmin(np.abs(t - vertex_t)))
+    rest = {name: v[first:].copy() for name, v in columns.items()}
+    rest["theta_rad"][0] = float(np.polyval([a, b, _], vertex_t - t[k]))
+    if rest["time_s"].size < 200 or np.ptp(rest["theta_rad"]) < 4 * q:
+        return None
+    return rest, sign
+
+
+def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Record]:
+    """Fit records of the steps: drops cut once at rest; a step whose release was estimated from
+    the data (a link: the bench or the emulator) starts at its first turning point."""
+    out = []
+    for r in results:
+        cols = trimmed(r.columns, counts_per_rev) if r.step.road is None else r.columns
+        z0_sign = None
+        if r.release_estimated:
+            turned = from_turning_point(cols, counts_per_rev)
+            if turned is not None:
+                cols, z0_sign = turned
+        out.append(record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign))
+    return out
+
+
+@dataclass
+class Validation:
+    name: str
+    nrmse: float
+    rms_rad: float
+    time_s: np.ndarray
+    measured: np.ndarray
+    simulated: np.ndarray
+
+
+@dataclass
+class ProfilePoint:
+    n: float
+    rms_rad: float  # output error over the fit records with n held here, the rest refitted
+    validation_nrmse: float  # mean held-out NRMSE of that model (nan without held-out runs)
+    fitted: bool = False  # the fit's own n (the reference of the others)
+
+
+@dataclass
+class Calibration:
+    """Everything the report needs."""
+
+    results: list[FitResult]  # ranked, best first
+    fit_records: list[Record]
+    validate_records: list[Record]
+    validations: list[Validation]
+    inflation: float  # sqrt of the residuals' integrated autocorrelation time [samples]
+    profile: list[ProfilePoint] = field(default_factory=list)
+    fit_s: float = 0.0
+    analysis_s: float = 0.0
+
+    @property
+    def best(self) -> FitResult:
+        return self.results[0]
+
+    @property
+    def validation_nrmse(self) -> float:
+        return float(np.mean([v.nrmse for v in self.validations])) if self.validations else math.nan
+
+
+def validate(result: FitResult, records: Sequence[Record]) -> list[Validation]:
+    model = MODELS[result.model]
+    out = []
+    for record in records:
+        sim = model.simulate(result.params, record)
+        rms = float(np.sqrt(np.mean((sim - record.theta) ** 2)))
+        out.append(Validation(record.name, nrmse(sim, record.theta), rms, record.time_s, record.theta, sim))
+    return out
+
+
+def residual_inflation(result: FitResult, records: Sequence[Record], max_lag: int = 2000) -> float:
+    """sqrt of the integrated autocorrelation time of the fit residuals (Sokal's window, c = 5):
+    the factor by which white-noise standard errors understate the real ones."""
+    model = MODELS[result.model]
+    taus = []
+    for record in records:
+        e = model.simulate(result.params, record) - record.theta
+        e = e - e.mean()
+        var = float(np.dot(e, e))
+        if var <= 0.0 or e.size < 8:
+            continue
+        size = 1 << int(math.ceil(math.log2(2 * e.size)))
+        spectrum = np.fft.rfft(e, size)
+        acf = np.fft.irfft(spectrum * np.conj(spectrum), size)[: min(max_lag, e.size)] / var
+        tau = 1.0
+        for lag in range(1, acf.size):
+            tau += 2.0 * acf[lag]
+            if lag >= 5.0 * tau:
+                break
+        taus.append(max(tau, 1.0))
+    return float(math.sqrt(np.median(taus))) if taus else 1.0
+
+
+def n_profile(
+    result: FitResult,
+    records: Sequence[Record],
+    held_out: Sequence[Record],
+    options: FitOptions,
+    values: Sequence[float] = N_PROFILE,
+) -> list[ProfilePoint]:
+    """Bouc-Wen only: with n held at each value, every other parameter refitted on the output error
+    (a short trust-region refinement from the best fit), then the fit's RMS and the held-out NRMSE
+    of that model."""
+    if result.model != "bouc-wen":
+        return []
+    problem = Problem(MODELS["bouc-wen"], records, options)
+    lo, hi = problem.bounds()
+    names = problem.free
+    index = names.index("n")
+    keep = [j for j in range(len(names)) if j != index]
+    p = result.params
+    coordinate = {"log10_S": math.log10(p["delta"]), "b": p["beta"] / p["delta"]}
+    best = np.array([coordinate.get(name, p.get(name, 0.0)) for name in names])
+    points = [ProfilePoint(float(best[index]), float(np.sqrt(np.mean(problem.residuals(best) ** 2))), math.nan, True)]
+    if held_out:
+        points[0].validation_nrmse = float(np.mean([v.nrmse for v in validate(result, held_out)]))
+    # continuation: outwards from the best n on each side, each point starting from its neighbour's
+    below = sorted((n for n in values if n < best[index]), reverse=True)
+    above = sorted(n for n in values if n >= best[index])
+    for side in (below, above):
+        x = best.copy()
+        for n in side:
+
+            def residuals(v: np.ndarray, n: float = n, x: np.ndarray = x) -> np.ndarray:
+                y = x.copy()
+                y[keep] = v
+                y[index] = n
+                return problem.residuals(y)
+
+            fit = least_squares(
+                residuals, _inside(x, lo, hi)[keep], bounds=(lo[keep], hi[keep]), x_scale="jac", max_nfev=PROFILE_NFEV
+            )
+            x = x.copy()
+            x[keep] = fit.x
+            x[index] = n
+            trial = dataclasses.replace(result, params=problem.params_of(x))
+            held = float(np.mean([v.nrmse for v in validate(trial, held_out)])) if held_out else math.nan
+            points.append(ProfilePoint(float(n), float(np.sqrt(np.mean(fit.fun**2))), held))
+    return sorted(points, key=lambda point: point.n)
+
+
+def analyse(
+    fit_results: Sequence[StepResult],
+    validate_results: Sequence[StepResult],
+    model: str,
+    inertia: float,
+    counts_per_rev: int,
+    progress: Callable[[str], None] | None = None,
+    profile: bool = True,
+) -> Calibration:
+    """Fit ``model`` (or all four, ranked by output error) to the fit runs, validate on the others."""
+    say = progress or (lambda text: None)
+    fit_records = records_of(fit_results, counts_per_rev)
+    validate_records = records_of(validate_results, counts_per_rev)
+    options = FitOptions(J=inertia)
+    names = ["bouc-wen", "dahl", "lugre", "bingham"] if model == "all" else [model]
+    started = time.perf_counter()
+    results = []
+    for name in names:
+        say(f"fitting {name} to {len(fit_records)} runs ...")
+        result = fit_model(name, fit_records, options)
+        say(
+            f"  {name}: RMS {math.degrees(result.rms_total):.4f} deg, {result.wall_s:.1f} s, "
+            f"{result.convergence.get('message', '')}"
+        )
+        results.append(result)
+    results.sort(key=lambda r: r.rms_total)
+    fit_s = time.perf_counter() - started
+    best = results[0]
+    validations = validate(best, validate_records)
+    cal = Calibration(results, fit_records, validate_records, validations, residual_inflation(best, fit_records))
+    cal.fit_s = fit_s
+    if profile and best.model == "bouc-wen":
+        say(f"profiling n at {', '.join(f'{v:g}' for v in N_PROFILE)} ...")
+        cal.profile = n_profile(best, fit_records, validate_records, options)
+    cal.analysis_s = time.perf_counter() - started - fit_s
+    return cal

@@ -1,0 +1,83 @@
+"""Calibrating an emulated damper over a real link, as a lab user would (benchmarks, other tools).
+
+``sashil emulate`` runs the plant of a config (after its ``mismatch`` section) behind a pty in its
+own process and plays the operator at each Configure, holding the arm at the plan's angles in
+order (``--hold-deg A B ...``); ``sashil calibrate`` then runs against it over pyserial
+(``transport="serial"``) or python-can's slcan interface (``transport="slcan"``).
+"""
+
+from __future__ import annotations
+
+import copy
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from sashil.calibrate.plan import plan_from_config
+from sashil.config import dump_config
+from sashil.errors import DriverIOError
+
+TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
+SASHIL = [sys.executable, "-m", "sashil"]
+
+
+def calibrate_emulated(
+    plant_config: dict[str, Any],
+    out: str | Path,
+    transport: str = "serial",
+    inertia: float | None = None,
+    model: str | None = None,
+    truth: str | Path | None = None,
+    timeout_s: float = 900.0,
+) -> Path:
+    """Calibrate the damper of ``plant_config`` emulated over ``transport``; returns params.yaml's path.
+
+    ``plant_config``: a resolved config (``sashil.config.load_config``/``default_config``) whose
+    ``model.params`` (and ``mismatch``, ``rig``) describe the true damper; its ``calibrate``
+    section is the plan. The host runs with ``driver.sample_timeout_ms`` 20 and ``link_lost_ms``
+    500 so that a shared machine's pauses of a few ms do not end a run. ``out``: the calibration
+    folder (must not exist or be empty). ``inertia``: J given to ``--inertia`` (None: J = 1).
+    ``model``: ``--model``. ``truth``: also write the emulator's ground truth CSV (``--truth``).
+    A failed calibration raises :class:`~sashil.errors.DriverIOError` with its last error line;
+    the emulator process is always stopped.
+    """
+    if transport not in TRANSPORTS:
+        raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
+    config = copy.deepcopy(plant_config)
+    config["driver"].update(sample_timeout_ms=20.0, link_lost_ms=500.0)
+    angles = plan_from_config(config).operator_angles_deg()
+    with tempfile.TemporaryDirectory(prefix="sashil-cal-") as tmp:
+        config_path = Path(tmp) / "plant.yaml"
+        config_path.write_text(dump_config(config), encoding="utf-8")
+        link = str(Path(tmp) / "rig")
+        emulate = [*SASHIL, "emulate", "--config", str(config_path), "--transport", transport, "--link", link]
+        emulate += ["--hold-deg", *(f"{a:g}" for a in angles), "--release-after", "1"]
+        if truth is not None:
+            emulate += ["--truth", str(truth)]
+        emulator = subprocess.Popen(emulate, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            line = emulator.stdout.readline() if emulator.stdout else ""
+            if "rig on" not in line:
+                raise DriverIOError(f"sashil emulate did not start: {line.strip() or 'no output'}")
+            command = [*SASHIL, "calibrate", "--driver", TRANSPORTS[transport], "--port", link]
+            command += ["--config", str(config_path), "--out", str(out), "-q"]
+            if inertia is not None:
+                command += ["--inertia", repr(float(inertia))]
+            if model is not None:
+                command += ["--model", model]
+            done = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
+        finally:
+            if emulator.poll() is None:
+                emulator.send_signal(signal.SIGTERM)
+            try:
+                emulator.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                emulator.kill()
+                emulator.communicate()
+    if done.returncode != 0:
+        lines = done.stderr.strip().splitlines()
+        raise DriverIOError(f"sashil calibrate exit {done.returncode}: {lines[-1] if lines else '?'}")
+    return Path(out) / "params.yaml"

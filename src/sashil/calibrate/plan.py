@@ -1,0 +1,185 @@
+"""The calibration plan: which runs to make on the rig, in what order, and what each is for.
+
+Every step is a drop test (seed 001 section 8): the arm is pressed to ``theta0_deg`` and released
+with the coil already at ``current_a``; a *road* step also drives the road wheel from the release
+on with a chirp theta1(t) = A*w(t)*sin(phi(t)) through the resonance (sqrt(k/J)/2pi, ~1.66 Hz with
+the seed values), so that the damper keeps moving at high current where a drop stops within a
+cycle. Each step has a role: ``fit`` (the identification sees it) or ``validate`` (held out: the
+fitted model predicts it from its inputs alone). The plan comes from the config's ``calibrate``
+section (:func:`plan_from_config`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from sashil.errors import ConfigError
+
+#: rig time a step costs beyond its record (connect, the operator's hold and release), an estimate
+STEP_OVERHEAD_S = 2.0
+#: a road run's record goes on this long after its chirp has ended (the wheel at rest)
+ROAD_REST_S = 0.5
+
+
+@dataclass(frozen=True)
+class RoadChirp:
+    """theta1(t) = A*w(t)*sin(phi(t)), phi' = 2*pi*f(t), f linear from f0 to f1 between the ramps;
+    w(t) a raised-cosine ramp up over ``ramp_s`` and down over the last ``ramp_s`` of ``duration_s``
+    (the wheel ends at rest, so the next run starts with a still road)."""
+
+    amplitude_rad: float
+    f_start_hz: float
+    f_stop_hz: float
+    duration_s: float
+    ramp_s: float
+
+    def _window(self, t: float) -> tuple[float, float]:
+        """w(t) and w'(t)."""
+        r, d = self.ramp_s, self.duration_s
+        if t <= 0.0 or t >= d:
+            return 0.0, 0.0
+        if r > 0.0 and t < r:
+            return 0.5 - 0.5 * math.cos(math.pi * t / r), 0.5 * math.pi / r * math.sin(math.pi * t / r)
+        if r > 0.0 and t > d - r:
+            u = d - t
+            return 0.5 - 0.5 * math.cos(math.pi * u / r), -0.5 * math.pi / r * math.sin(math.pi * u / r)
+        return 1.0, 0.0
+
+    def _phase(self, t: float) -> tuple[float, float]:
+        """phi(t) and phi'(t) (the frequency sweeps over the whole record)."""
+        rate = (self.f_stop_hz - self.f_start_hz) / self.duration_s
+        return 2.0 * math.pi * (self.f_start_hz * t + 0.5 * rate * t * t), 2.0 * math.pi * (self.f_start_hz + rate * t)
+
+    def angle(self, t: float) -> float:
+        w, _ = self._window(t)
+        return self.amplitude_rad * w * math.sin(self._phase(t)[0])
+
+    def speed(self, t: float) -> float:
+        """theta1'(t) [rad/s]: the road wheel's speed command."""
+        w, dw = self._window(t)
+        phi, dphi = self._phase(t)
+        return self.amplitude_rad * (dw * math.sin(phi) + w * dphi * math.cos(phi))
+
+
+@dataclass(frozen=True)
+class Step:
+    """One run of the plan: a drop from ``theta0_deg`` at ``current_a``, with a road chirp or not."""
+
+    name: str
+    role: str  # "fit" | "validate"
+    theta0_deg: float
+    current_a: float
+    duration_s: float
+    road: RoadChirp | None = None
+
+    @property
+    def kind(self) -> str:
+        return "road" if self.road is not None else "drop"
+
+    def describe(self) -> str:
+        what = f"road chirp {self.road.f_start_hz:g}-{self.road.f_stop_hz:g} Hz" if self.road else "drop"
+        return f"{what} from {self.theta0_deg:g} deg at {self.current_a:g} A, {self.duration_s:g} s ({self.role})"
+
+
+@dataclass(frozen=True)
+class Plan:
+    steps: tuple[Step, ...]
+    model: str
+
+    @property
+    def rig_time_s(self) -> float:
+        """Estimated rig time: every record plus :data:`STEP_OVERHEAD_S` per step."""
+        return sum(step.duration_s + STEP_OVERHEAD_S for step in self.steps)
+
+    def operator_angles_deg(self) -> list[float]:
+        """The hold angle of every step in order (``sashil emulate --hold-deg`` plays them)."""
+        return [step.theta0_deg for step in self.steps]
+
+    def fit_steps(self) -> list[Step]:
+        return [s for s in self.steps if s.role == "fit"]
+
+    def validate_steps(self) -> list[Step]:
+        return [s for s in self.steps if s.role == "validate"]
+
+
+def plan_from_config(config: dict[str, Any], source: str = "config") -> Plan:
+    """The plan of the config's ``calibrate`` section, checked against the rig (one-line ConfigError).
+
+    Currents must lie in [0, rig.current_max_a]; the fit needs at least two currents when the model
+    has current terms (checked by the caller, which knows whether they are asked for); the estimated
+    rig time must stay within ``max_rig_time_s``; the road chirp must stay below a tenth of the
+    loop rate."""
+    section = config["calibrate"]
+    i_max = float(config["rig"]["current_max_a"])
+    limit = float(config["rig"]["angle_limit_deg"])
+
+    def currents(key: str) -> list[float]:
+        values = section[key]
+        for value in values:
+            if not 0.0 <= value <= i_max:
+                raise ConfigError(
+                    f"{source}: calibrate.{key}: expected currents in [0, {i_max:g}] A (rig.current_max_a), got {value:g}"
+                )
+        if len(set(values)) != len(values):
+            raise ConfigError(f"{source}: calibrate.{key}: each current once, got {values}")
+        return [float(v) for v in values]
+
+    for key in ("theta0_deg", "small_theta0_deg", "validate_theta0_deg"):
+        angle = section[key]
+        if not 0.0 < abs(angle) < limit:
+            raise ConfigError(
+                f"{source}: calibrate.{key}: expected an angle away from 0 and within ±{limit:g} deg "
+                f"(rig.angle_limit_deg), got {angle:g}"
+            )
+    f0, f1 = section["road_f_start_hz"], section["road_f_stop_hz"]
+    if f1 < f0:
+        raise ConfigError(f"{source}: calibrate.road_f_stop_hz: expected >= road_f_start_hz ({f0:g}), got {f1:g}")
+    if f1 > config["loop"]["rate_hz"] / 10:
+        raise ConfigError(
+            f"{source}: calibrate.road_f_stop_hz: expected at most a tenth of loop.rate_hz, got {f1:g} Hz"
+        )
+    if 2 * section["road_ramp_s"] >= section["road_duration_s"] - ROAD_REST_S:
+        raise ConfigError(
+            f"{source}: calibrate.road_ramp_s: the two ramps must fit in road_duration_s "
+            f"({section['road_duration_s']:g} s), got {section['road_ramp_s']:g} s"
+        )
+    # the chirp ends ROAD_REST_S before the record does: its last speed command is exactly 0 (a
+    # wheel left turning would move the road under the next run)
+    road = RoadChirp(
+        math.radians(section["road_amplitude_deg"]),
+        f0,
+        f1,
+        section["road_duration_s"] - ROAD_REST_S,
+        section["road_ramp_s"],
+    )
+    drop_s = section["drop_duration_s"]
+    big, small, held_out = section["theta0_deg"], section["small_theta0_deg"], section["validate_theta0_deg"]
+    # (role, theta0, current, road) in rig order: fit drops, fit road runs, held-out runs
+    specs: list[tuple[str, float, float, RoadChirp | None]] = []
+    specs += [("fit", big, i, None) for i in currents("currents_a")]
+    specs += [("fit", small, i, None) for i in currents("small_currents_a")]
+    specs += [("fit", big, i, road) for i in currents("road_currents_a")]
+    specs += [("validate", held_out, i, None) for i in currents("validate_currents_a")]
+    specs += [("validate", big, i, road) for i in currents("validate_road_currents_a")]
+    steps = [
+        Step(
+            f"{n:02d}-{role}-{'road' if chirp else 'drop'}-{abs(theta0):g}deg-{current:.2f}A",
+            role,
+            theta0,
+            current,
+            section["road_duration_s"] if chirp else drop_s,
+            chirp,
+        )
+        for n, (role, theta0, current, chirp) in enumerate(specs, start=1)
+    ]
+    if not any(s.role == "fit" for s in steps):
+        raise ConfigError(f"{source}: calibrate: the plan has no run to fit (all current lists are empty)")
+    plan = Plan(tuple(steps), section["model"])
+    if plan.rig_time_s > section["max_rig_time_s"]:
+        raise ConfigError(
+            f"{source}: calibrate: the plan would take about {plan.rig_time_s:.0f} s of rig time, more than "
+            f"calibrate.max_rig_time_s = {section['max_rig_time_s']:g} s (fewer currents or shorter runs)"
+        )
+    return plan

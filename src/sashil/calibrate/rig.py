@@ -1,0 +1,165 @@
+"""Running one plan step on the rig: the one adapter between calibrate and the experiment code.
+
+A step is a drop test (:func:`sashil.experiments.drop_test.run_drop_test`: hold, release, record;
+on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does, on the
+bench a person) whose "controller" (:class:`StepStage`) commands the step's constant current and,
+from the release on, the road wheel's speed for a road step. When the runner of issue 13 turns
+the experiments into plans, only this module changes.
+
+On the simulated rig the road wheel follows speed commands as the emulator's does
+(:class:`~sashil.drivers.emulator.device.RoadWheel`: a step of the wheel's speed changes the
+relative rate by the same amount), through :class:`SimRoadRig`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sashil.calibrate.plan import Step
+from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.errors import DriverError, SashilError
+from sashil.experiments.drop_test import CONTROLLER_COLUMNS, run_drop_test
+
+#: a record whose angle spans fewer encoder counts than this did not move
+MIN_COUNTS_MOVED = 4
+
+
+class StuckEncoderError(DriverError):
+    """The rig reports a frozen encoder, or the arm never moved: nothing to calibrate (exit 2)."""
+
+
+@dataclass
+class StepResult:
+    step: Step
+    columns: dict[str, np.ndarray]
+    hold_angle_deg: float
+    release_estimated: bool
+    error: SashilError | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class StepStage:
+    """The drop test's controller stage of a step: the constant current throughout, and after the
+    release (``held`` False, set by the drop test) the road chirp's speed. A sample flagged with a
+    stuck encoder ends the step at once."""
+
+    def __init__(self, step: Step):
+        self.step_def = step
+        self.held = True
+        self.current_cmd_a = step.current_a
+        self.theta_dot_rad_s = self.z_hat = self.torque_hat_nm = self.torque_cmd_nm = math.nan
+        self._t0_ns: int | None = None
+        # every cycle's host time, device time and sequence number: the record's time base
+        self.host_ns: list[int] = []
+        self.device_us: list[int] = []
+        self.seq: list[int] = []
+
+    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
+        self.host_ns.append(t_ns)
+        self.device_us.append(sample.device_time_us)
+        self.seq.append(sample.seq)
+        if sample.flags & FLAG_STUCK_SENSOR:
+            raise StuckEncoderError(f"{self.step_def.name}: the rig reports a stuck encoder (the angle is frozen)")
+        road = self.step_def.road
+        if self.held or road is None:
+            return RigCommand(self.step_def.current_a)
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        return RigCommand(self.step_def.current_a, road.speed((t_ns - self._t0_ns) * 1e-9))
+
+
+class SimRoadRig(RigInterface):
+    """The simulated rig with its road wheel driven by speed commands (as the emulator's)."""
+
+    name = "sim"
+
+    def __init__(self, inner: Any):
+        super().__init__()
+        from sashil.drivers.emulator.device import RoadWheel
+
+        self.inner = inner
+        self.wheel = RoadWheel()
+        inner.plant.road = self.wheel
+
+    def __getattr__(self, name: str) -> Any:  # plant, set_initial_current, ...
+        return getattr(self.inner, name)
+
+    def configure(self) -> None:
+        self.inner.configure()
+
+    def activate(self) -> None:
+        self.inner.activate()
+
+    def read(self, t_ns: int, dt_ns: int) -> RigSample:
+        return self.inner.read(t_ns, dt_ns)
+
+    def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
+        speed = cmd.road_speed_rad_s
+        if speed is not None and speed != self.wheel.speed_rad_s:
+            self.wheel.set_speed(self.inner.plant, speed)
+        self.inner.write(cmd, t_ns, dt_ns)
+
+    def deactivate(self) -> None:
+        self.inner.deactivate()
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
+        return bool(self.inner.operator_hold(theta_rad, release_after_s))
+
+
+def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: StepStage) -> dict[str, np.ndarray]:
+    """The record on the device's clock: each row's time is the device time of its sample (the
+    instant the board sampled the encoders) minus the device time at the release, and its ``seq``
+    is the sample's sequence number. Over a link the host's times carry the link's latency jitter
+    (rows 0.03-11 ms apart at 1 kHz on a busy machine), which an output-error fit reads as
+    dynamics; a repeated sample (a link gap) is dropped."""
+    host = np.asarray(stage.host_ns, dtype=np.int64)
+    if host.size == 0 or columns["time_s"].size == 0:
+        return columns
+    device = np.asarray(stage.device_us, dtype=np.float64) * 1e-6
+    rows_ns = release_ns + np.round(columns["time_s"] * 1e9).astype(np.int64)
+    index = np.clip(np.searchsorted(host, rows_ns), 1, host.size - 1)
+    index = np.where(np.abs(host[index - 1] - rows_ns) <= np.abs(host[index] - rows_ns), index - 1, index)
+    t = device[index] - float(np.interp(release_ns, host, device))
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
+    out = {k: v[keep] for k, v in columns.items()}
+    out["time_s"] = t[keep]
+    out["seq"] = np.asarray(stage.seq, dtype=np.int64)[index][keep]
+    return out
+
+
+def run_step(config: dict[str, Any], step: Step) -> StepResult:
+    """Run one step on the config's rig; errors that end it early are in ``result.error`` (the rig is
+    already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError."""
+    rig = None
+    if config["driver"]["name"] == "sim":
+        from sashil.models.mismatch import open_sim_rig
+
+        rig = SimRoadRig(open_sim_rig(config))
+    stage = StepStage(step)
+    record = run_drop_test(config, step.theta0_deg, step.current_a, step.duration_s, rig=rig, controller=stage)
+    columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
+    columns = on_device_clock(columns, record.release_time_ns, stage)
+    error = record.error
+    counts = config["rig"]["encoder_counts_per_rev"]
+    theta = columns.get("theta_rad", np.zeros(0))
+    if error is None and (theta.size == 0 or np.ptp(theta) < MIN_COUNTS_MOVED * TWO_PI / counts):
+        error = StuckEncoderError(
+            f"{step.name}: the arm did not move after the release (the angle spans "
+            f"{np.ptp(theta) * counts / TWO_PI if theta.size else 0:.0f} encoder counts): a stuck encoder or a blocked arm"
+        )
+    extra: dict[str, Any] = {}
+    if record.metrics is not None:
+        extra["metrics"] = record.metrics.as_dict()
+    if "link" in record.extra:
+        extra["link"] = record.extra["link"]
+    if record.loop is not None:
+        extra["trips"] = record.loop.trips
+    return StepResult(step, columns, math.degrees(record.hold_angle_rad), record.release_estimated, error, extra)

@@ -1,0 +1,171 @@
+"""One calibration from start to finish: run the plan, fit, validate, write the folder."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sashil.calibrate.analysis import Calibration, analyse
+from sashil.calibrate.plan import Plan, plan_from_config
+from sashil.calibrate.report import params_document, write_report
+from sashil.calibrate.rig import StepResult, run_step
+from sashil.errors import ConfigError, SashilError
+from sashil.identify.data import MIN_CURRENT_SPREAD_A
+from sashil.identify.report import write_params
+from sashil.recording.run_folder import RunFolder
+
+
+@dataclass
+class Outcome:
+    folder: Path
+    params_path: Path
+    report_path: Path
+    calibration: Calibration
+    rig_s: float
+
+
+def check_inertia(inertia: float | None) -> float:
+    """``--inertia``: a finite J > 0, or None (J = 1, torques relative to it)."""
+    if inertia is None:
+        return 1.0
+    if not (math.isfinite(inertia) and inertia > 0.0):
+        raise ConfigError(f"--inertia: expected the arm's inertia J > 0 [kg m^2], got {inertia:g}")
+    return float(inertia)
+
+
+def check_plan(plan: Plan, source: str) -> None:
+    """The fit runs must span two currents: alpha2 and c2 are always identified."""
+    currents = {s.current_a for s in plan.fit_steps()}
+    if max(currents) - min(currents) < MIN_CURRENT_SPREAD_A:
+        raise ConfigError(
+            f"{source}: calibrate: every run to fit is at {min(currents):g} A, so the current terms (alpha2, c2) "
+            f"cannot be identified; give calibrate.currents_a at least two currents {MIN_CURRENT_SPREAD_A:g} A apart"
+        )
+
+
+def _summary_row(res: StepResult) -> dict[str, Any]:
+    s = res.step
+    return {
+        "name": s.name,
+        "role": s.role,
+        "kind": s.kind,
+        "theta0_deg": s.theta0_deg,
+        "hold_angle_deg": round(res.hold_angle_deg, 4),
+        "current_a": s.current_a,
+        "duration_s": s.duration_s,
+        "release_estimated": res.release_estimated,
+        "exit_status": "ok" if res.error is None else "error",
+        "error": None if res.error is None else str(res.error),
+        "link": res.extra.get("link"),
+    }
+
+
+def calibrate_rig(
+    config: dict[str, Any],
+    out: str | Path | None = None,
+    inertia: float | None = None,
+    model: str | None = None,
+    say: Callable[[str], None] | None = None,
+    source: str = "config",
+    profile: bool = True,
+) -> Outcome:
+    """Calibrate the rig of ``config`` (its ``driver`` section says which: sim, serial, can).
+
+    Runs the plan of ``config['calibrate']`` (:func:`sashil.calibrate.plan.plan_from_config`),
+    fits the model (seed 001 eqs. 9-17 for Bouc-Wen) to the ``fit`` runs, validates it on the
+    held-out ones and writes ``out`` (default ``runs/<UTC>-calibrate/``): ``params.yaml`` (the
+    shape ``sashil identify`` writes, accepted by ``--params`` on every verb), ``report.md`` with
+    ``fit.png``, ``validation.png``, ``n_profile.png``, ``summary.json``, ``config.yaml`` and
+    every raw run under ``runs/<step>/`` (``data.csv``, ``summary.json``).
+
+    ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
+    ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
+    Bad input (config, inertia, a plan at one current) raises ConfigError before anything is
+    energised or written. A step that fails (a lost link, a stuck encoder, a safety trip) ends the
+    plan: the runs so far and ``summary.json`` are written and the step's error is raised.
+    Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
+    """
+    say = say or (lambda text: None)
+    J = check_inertia(inertia)
+    if model is not None:
+        config = {**config, "calibrate": {**config["calibrate"], "model": model}}
+    plan = plan_from_config(config, source)
+    check_plan(plan, source)
+    folder = RunFolder.create(out, "calibrate")
+    folder.write_config(config)
+    runs = RunFolder.create(folder.path / "runs", "calibrate")
+    say(
+        f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
+        f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
+    )
+    results: list[StepResult] = []
+    started = time.perf_counter()
+    failure: SashilError | None = None
+    for number, step in enumerate(plan.steps, start=1):
+        say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
+        result = run_step(config, step)
+        results.append(result)
+        target = RunFolder.create(runs.path / step.name, "calibrate")
+        if result.columns.get("time_s") is not None and result.columns["time_s"].size:
+            target.write_data(result.columns)
+        row = _summary_row(result)
+        target.write_summary({**row, "exit_status": row["exit_status"], "metrics": result.extra.get("metrics")})
+        if result.error is not None:
+            failure = result.error
+            break
+    rig_s = time.perf_counter() - started
+    rows = [_summary_row(r) for r in results]
+    if failure is not None:
+        folder.write_summary(
+            {
+                "exit_status": "error",
+                "exit_code": failure.exit_code,
+                "error": str(failure),
+                "rig_time_s": round(rig_s, 2),
+                "runs": rows,
+                "note": "the plan was cut short: the runs recorded so far are kept; nothing was fitted",
+            }
+        )
+        say(f"the plan stopped at {results[-1].step.name}; the runs so far are in {folder.path}")
+        raise failure
+    say(f"rig time {rig_s:.0f} s; fitting ...")
+    cal = analyse(
+        [r for r in results if r.step.role == "fit"],
+        [r for r in results if r.step.role == "validate"],
+        plan.model,
+        J,
+        config["rig"]["encoder_counts_per_rev"],
+        progress=say,
+        profile=profile,
+    )
+    params_path = write_params(folder.file("params.yaml"), params_document(cal, inertia is not None, rig_s, rows))
+    report_path = write_report(
+        folder.path,
+        cal,
+        results,
+        J,
+        inertia is not None,
+        config["rig"]["encoder_counts_per_rev"],
+        config["rig"]["current_max_a"],
+        rig_s,
+    )
+    folder.write_summary(
+        {
+            "exit_status": "ok",
+            "model": cal.best.model,
+            "inertia_given": inertia is not None,
+            "held_out_nrmse": {v.name: v.nrmse for v in cal.validations},
+            "held_out_nrmse_mean": None if math.isnan(cal.validation_nrmse) else cal.validation_nrmse,
+            "fit_nrmse": dict(zip(cal.best.record_names, cal.best.nrmse, strict=True)),
+            "rig_time_s": round(rig_s, 2),
+            "fit_s": round(cal.fit_s, 2),
+            "identifiability_s": round(cal.analysis_s, 2),
+            "convergence": cal.best.convergence,
+            "runs": rows,
+        }
+    )
+    return Outcome(folder.path, params_path, report_path, cal, rig_s)

@@ -1,0 +1,67 @@
+"""``sashil calibrate``: from an unknown damper to a validated model, over any link (issue 16)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from sashil.cli.common import (
+    add_driver_options,
+    add_output_options,
+    add_verbosity_options,
+    resolve_config,
+    say,
+    setup_logging,
+)
+
+HELP = "calibrate: run the drop-test/road plan on the rig, fit the damper model, validate it on held-out runs"
+EXAMPLE = "sashil calibrate --driver serial --port /dev/ttyACM0 --inertia 0.95 --out runs/cal"
+
+MODEL_CHOICES = ("bouc-wen", "dahl", "lugre", "bingham", "all")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config", metavar="FILE", help="YAML config; its calibrate: section is the plan (default: the simulated rig)"
+    )
+    add_driver_options(parser)
+    parser.add_argument(
+        "--inertia",
+        type=float,
+        metavar="J",
+        help="the arm's inertia J [kg m^2] (datasheet); without it every torque is relative to J = 1",
+    )
+    parser.add_argument("--model", choices=MODEL_CHOICES, help="model to fit (override calibrate.model); all: ranked")
+    parser.add_argument(
+        "--no-profile", action="store_true", help="skip the profile of the Bouc-Wen exponent n (a few seconds)"
+    )
+    add_output_options(parser)
+    add_verbosity_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sashil.calibrate.session import calibrate_rig, check_inertia
+
+    setup_logging(args)
+    check_inertia(args.inertia)  # before the config: a bad number is the first thing to say
+    config = resolve_config(args)
+    outcome = calibrate_rig(
+        config,
+        args.out,
+        inertia=args.inertia,
+        model=args.model,
+        say=lambda text: say(args, text),
+        source=args.config or "config",
+        profile=not args.no_profile,
+    )
+    cal = outcome.calibration
+    best = cal.best
+    if args.inertia is None:
+        print("all torques are relative to J = 1 (no --inertia): multiply them by the rig's J")
+    held = ", ".join(f"{v.name} {100 * v.nrmse:.2f} %" for v in cal.validations) or "none (no held-out runs)"
+    print(f"model {best.model}: fit RMS {math.degrees(best.rms_total):.4f} deg; held-out NRMSE: {held}")
+    print(f"rig time {outcome.rig_s:.0f} s, fit {cal.fit_s:.1f} s; {best.convergence.get('message', '')}")
+    print(f"wrote {outcome.params_path} and {outcome.report_path}")
+    print(f"calibration folder: {outcome.folder}", file=sys.stderr)
+    return 0

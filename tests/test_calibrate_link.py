@@ -1,0 +1,116 @@
+"""``sashil calibrate`` over a real link: the emulator in its own process behind a pty (issue 16).
+
+Real processes on the real clock (pyserial); they wait on real time with generous timeouts, and
+the host rides through link gaps of up to 0.5 s (a shared CI machine pauses processes)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sashil.calibrate import calibrate_emulated
+from sashil.config import default_config, load_params
+
+SASHIL = [sys.executable, "-m", "sashil"]
+SMALL_PLAN = {
+    "currents_a": [0.0, 1.0],
+    "small_currents_a": [],
+    "road_currents_a": [1.0],
+    "validate_currents_a": [0.5],
+    "drop_duration_s": 3.0,
+    "road_duration_s": 6.0,
+    "road_f_start_hz": 1.2,
+    "road_f_stop_hz": 2.2,
+}
+
+
+def test_calibrate_an_emulated_damper_over_serial(tmp_path):
+    config = default_config()
+    config["calibrate"].update(SMALL_PLAN)
+    config["model"]["params"].update(k=100.0, c1=0.5, c2=1.0)
+    params = calibrate_emulated(config, tmp_path / "cal", transport="serial")
+    p = load_params(params)["params"]
+    assert p["k"] == pytest.approx(100.0, rel=0.01)
+    for i in (0.0, 1.0):
+        assert p["c1"] + p["c2"] * i == pytest.approx(0.5 + 1.0 * i, rel=0.10)
+    summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
+    runs = summary["runs"]
+    assert all(r["release_estimated"] for r in runs)  # found in the data: nobody told the host
+    road = next(r for r in runs if r["kind"] == "road")
+    data = (tmp_path / "cal" / "runs" / road["name"] / "data.csv").read_text().splitlines()
+    header = data[0].split(",")
+    road_col = [float(line.split(",")[header.index("theta_road_rad")]) for line in data[1:]]
+    assert max(road_col) - min(road_col) > 0.02  # the wheel moved (about 2 deg peak to peak)
+
+
+class Emulator:
+    def __init__(self, tmp: Path, *flags: str):
+        self.link = str(tmp / "rig")
+        self.proc = subprocess.Popen(
+            [*SASHIL, "emulate", "--link", self.link, "--duration", "120", "--hold-deg", "-5", *flags],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        line = self.proc.stdout.readline()
+        assert "rig on /dev/" in line, line + self.proc.stderr.read()
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        self.proc.communicate(timeout=30)
+
+
+@pytest.fixture
+def emulator(tmp_path):
+    started: list[Emulator] = []
+
+    def start(*flags: str) -> Emulator:
+        emu = Emulator(tmp_path, *flags)
+        started.append(emu)
+        return emu
+
+    yield start
+    for emu in started:
+        emu.stop()
+
+
+def calibrate(tmp_path: Path, link: str) -> tuple[subprocess.CompletedProcess, Path]:
+    config = tmp_path / "link.yaml"
+    config.write_text(yaml.safe_dump({"driver": {"link_lost_ms": 500.0}, "calibrate": SMALL_PLAN}))
+    out = tmp_path / "cal"
+    done = subprocess.run(
+        [*SASHIL, "calibrate", "--driver", "serial", "--port", link, "--config", str(config), "--out", str(out), "-q"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    return done, out
+
+
+def test_a_stuck_encoder_stops_the_plan_with_one_line_and_exit_2(tmp_path, emulator):
+    emu = emulator("--stuck-sensor-after", "0")
+    done, out = calibrate(tmp_path, emu.link)
+    assert done.returncode == 2, done.stderr
+    errors = [line for line in done.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "stuck encoder" in errors[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "error" and len(summary["runs"]) == 1
+    assert not (out / "params.yaml").exists()
+
+
+def test_a_plan_cut_short_keeps_its_data_and_exits_1(tmp_path, emulator):
+    emu = emulator("--disconnect-after", "2.5")  # 1 s held, then 1.5 s of the first drop
+    done, out = calibrate(tmp_path, emu.link)
+    assert done.returncode == 1, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "error" and "cut short" in summary["note"]
+    first = out / "runs" / summary["runs"][0]["name"] / "data.csv"
+    assert first.is_file() and len(first.read_text().splitlines()) > 500  # over a second of the drop kept
+    assert not (out / "params.yaml").exists()
