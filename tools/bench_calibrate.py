@@ -38,9 +38,9 @@ from sashil.calibrate.analysis import records_of
 from sashil.calibrate.plan import plan_from_config
 from sashil.calibrate.rig import StepResult
 from sashil.config import default_config, load_params
-from sashil.identify.fit import nrmse
 from sashil.identify.rig_models import MODELS
 from sashil.recording.data_file import read_data_csv
+from sashil.stats import nrmse
 
 # true dampers: yield torque at i A is (alpha1 + alpha2*i) * z_u with z_u = (delta/(beta+gamma))^(1/n)
 DAMPERS = [

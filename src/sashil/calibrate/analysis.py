@@ -29,8 +29,9 @@ from scipy.signal import savgol_filter
 
 from sashil.calibrate.rig import StepResult
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
-from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model, nrmse
+from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model
 from sashil.identify.rig_models import MODELS
+from sashil.stats import nrmse
 
 #: the arm is at rest once it stays within this many encoder counts of its final angle
 REST_COUNTS = 2
