@@ -57,7 +57,9 @@ def calibrate_emulated(
         emulate += ["--hold-deg", *(f"{a:g}" for a in angles), "--release-after", "1"]
         if truth is not None:
             emulate += ["--truth", str(truth)]
-        emulator = subprocess.Popen(emulate, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # the emulator's log goes to a file: a pipe nobody reads fills up and stalls the device
+        log = open(Path(tmp) / "emulator.log", "w", encoding="utf-8")
+        emulator = subprocess.Popen(emulate, stdout=subprocess.PIPE, stderr=log, text=True)
         try:
             line = emulator.stdout.readline() if emulator.stdout else ""
             if "rig on" not in line:
@@ -77,6 +79,7 @@ def calibrate_emulated(
             except subprocess.TimeoutExpired:
                 emulator.kill()
                 emulator.communicate()
+            log.close()
     if done.returncode != 0:
         lines = done.stderr.strip().splitlines()
         raise DriverIOError(f"sashil calibrate exit {done.returncode}: {lines[-1] if lines else '?'}")
