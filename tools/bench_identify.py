@@ -52,8 +52,8 @@ def params_from(x) -> dict[str, float]:
 def ivp_simulate(p: dict[str, float], record, deadline: float) -> np.ndarray:
     """theta of a drop test by solve_ivp on (theta, theta_dot, z), z-law in time (seed 001 eq. 17)."""
     i = record.mean_current
-    c = p["c1"] + p["c2"] * i
-    a = p["alpha1"] + p["alpha2"] * i
+    model = BoucWenParams.from_mapping(p)
+    c, a = model.damping(i), model.hysteretic_gain(i)
     zu = (p["delta"] / (p["beta"] + p["gamma"])) ** (1.0 / p["n"])
 
     def rhs(t, y):
@@ -121,16 +121,9 @@ def main() -> None:
     def describe(label, params, wall, evals, train):
         sim = MODELS["bouc-wen"].simulate(params, held)
         errs = {k: 100.0 * (params[k] - truth[k]) / truth[k] for k in ("k", "c1", "c2", "alpha1", "alpha2")}
-        at = {
-            f"c({i:g})": 100 * ((params["c1"] + params["c2"] * i) / (truth["c1"] + truth["c2"] * i) - 1) for i in (0, 1)
-        }
-        at.update(
-            {
-                f"alpha({i:g})": 100
-                * ((params["alpha1"] + params["alpha2"] * i) / (truth["alpha1"] + truth["alpha2"] * i) - 1)
-                for i in (0, 1)
-            }
-        )
+        fit, true = BoucWenParams.from_mapping(params), BoucWenParams.from_mapping(truth)
+        at = {f"c({i:g})": 100 * (fit.damping(i) / true.damping(i) - 1) for i in (0, 1)}
+        at.update({f"alpha({i:g})": 100 * (fit.hysteretic_gain(i) / true.hysteretic_gain(i) - 1) for i in (0, 1)})
         print(
             f"{label:<34} {wall:>9.2f} {evals:>7d} {100 * train:>10.3f}% {100 * nrmse(sim, held.theta):>10.3f}% "
             f"{100 * nrmse(sim, clean):>10.3f}%"

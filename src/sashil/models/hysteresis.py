@@ -80,7 +80,7 @@ class BoucWenParams:
 
     def torque(self, z: Value, theta_dot: Value, current_a: float) -> Value:
         """Damper torque T = alpha(i)*z + c(i)*theta_dot (seed 001 eq. 9)."""
-        return (self.alpha1 + self.alpha2 * current_a) * z + (self.c1 + self.c2 * current_a) * theta_dot
+        return self.hysteretic_gain(current_a) * z + self.damping(current_a) * theta_dot
 
 
 @jit
