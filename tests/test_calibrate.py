@@ -69,6 +69,7 @@ def calibration(tmp_path_factory):
     return out
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 def test_calibration_folder_holds_params_report_plots_and_raw_runs(calibration):
     for name in (
         "params.yaml",
@@ -87,6 +88,7 @@ def test_calibration_folder_holds_params_report_plots_and_raw_runs(calibration):
     assert set(summary["held_out_nrmse"]) == {r for r in runs if "validate" in r}
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 def test_calibration_report_says_j_is_one_and_validates_on_held_out_runs(calibration):
     text = (calibration / "report.md").read_text()
     assert text.splitlines()[0].startswith("**All torques are relative to J = 1**")
@@ -96,6 +98,7 @@ def test_calibration_report_says_j_is_one_and_validates_on_held_out_runs(calibra
     assert all(v < 0.035 for v in summary["held_out_nrmse"].values())
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 def test_calibrated_parameters_match_the_seed_damper(calibration):
     p = load_params(calibration / "params.yaml")["params"]
     seed = default_config()["model"]["params"]
@@ -108,6 +111,7 @@ def test_calibrated_parameters_match_the_seed_damper(calibration):
         assert yield_fit == pytest.approx((seed["alpha1"] + seed["alpha2"] * i) * zu, rel=0.05)
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 @pytest.mark.parametrize(
     "verb",
     [
@@ -125,6 +129,7 @@ def test_every_verb_accepts_the_calibrated_parameter_file(calibration, verb, tmp
     assert main(args) == 0, capsys.readouterr().err
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 def test_inertia_given_scales_the_torques(tmp_path, capsys):
     truth = {"J": 1.1, "k": 120.0}
     config = write_config(tmp_path, SMALL_PLAN, truth)
@@ -160,6 +165,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, args
     assert not out.exists()
 
 
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
 def test_identify_takes_a_multi_current_drop_test_folder(tmp_path, capsys):
     drops = tmp_path / "drops"
     assert main(["drop-test", "--current", "0", "--current", "1", "--duration", "3", "--out", str(drops)]) == 0

@@ -17,6 +17,8 @@ import yaml
 from sashil.calibrate import calibrate_emulated
 from sashil.config import default_config, load_params
 
+pytestmark = pytest.mark.e2e  # the emulator in a child process over a pty, on the wall clock
+
 SASHIL = [sys.executable, "-m", "sashil"]
 SMALL_PLAN = {
     "currents_a": [0.0, 1.0],
