@@ -327,3 +327,18 @@ def test_timing_plot_of_percentiles(tmp_path):
     lateness[::5000] = 3_000_000  # a few outliers
     path = plot_timing(tmp_path / "timing.png", [("a", {"lateness_ns": lateness, "compute_ns": lateness // 10})])
     assert path.stat().st_size > 20_000
+
+
+def test_road_profile_file(tmp_path):
+    from sashil.experiments.road_option import parse_road
+
+    path = tmp_path / "road.csv"
+    path.write_text("time_s,theta_road_rad\n1.0,0.0\n2.0,0.01\n3.0,0.0\n")
+    road, text = parse_road(str(path), default_config())
+    assert text == f"profile {path} (2 s)"
+    assert road(0.5)[0] == pytest.approx(0.005) and road(0.5)[1] > 0  # from the first sample on, interpolated
+    assert road(5.0) == (0.0, 0.0, 0.0)  # held at the last angle
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,theta_rad\n0,0\n1,0\n")
+    with pytest.raises(ConfigError, match=r"--road .*bad\.csv: missing column"):
+        parse_road(str(bad), default_config())

@@ -1,8 +1,10 @@
 """``sashil run --road``: road-side excitation θ1(t) of a closed-loop run.
 
 ``--road sine:F_HZ[:AMP_DEG]`` (a sine, raised-cosine ramp of ``sweep.ramp_s``),
-``--road chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG]`` (a linear chirp, then F1 held) or ``--road none``;
-the amplitude defaults to ``sweep.amplitude_deg``. On the simulated rig with no ``--road`` the run
+``--road chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG]`` (a linear chirp, then F1 held), ``--road FILE.csv``
+(a recorded or designed profile: columns ``time_s`` and ``theta_road_rad``, linearly interpolated,
+held at its last angle after its end; e.g. another run's ``data.csv``) or ``--road none``; the
+amplitude defaults to ``sweep.amplitude_deg``. On the simulated rig with no ``--road`` the run
 gets :data:`DEFAULT_SIM_ROAD`, so a first run shows the arm moving instead of a flat line.
 
 On the simulated rig the profile drives the plant's road angle directly; over a link
@@ -15,6 +17,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError
 from sashil.experiments.sweep import chirp_profile, sine_profile
@@ -22,13 +26,15 @@ from sashil.models.plant import RoadProfile
 
 #: the excitation of ``sashil run`` on the simulated rig when no --road is given (below resonance)
 DEFAULT_SIM_ROAD = "sine:1.0"
-SYNTAX = "sine:F_HZ[:AMP_DEG], chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG] or none"
+SYNTAX = "sine:F_HZ[:AMP_DEG], chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG], FILE.csv (time_s, theta_road_rad) or none"
 
 
 def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | None, str]:
     """``(profile, description)`` of a ``--road`` value (``(None, "none")`` for ``none``)."""
     if text is None or text.strip() == "none":
         return None, "none"
+    if text.strip().endswith(".csv"):
+        return file_profile(text.strip())
     kind, _, rest = text.strip().partition(":")
     try:
         values = [float(part) for part in rest.split(":")] if rest else []
@@ -54,6 +60,35 @@ def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | 
             f"chirp {f0:g}-{f1:g} Hz over {seconds:g} s, {amp_deg:g} deg",
         )
     raise ConfigError(f"--road {text}: expected {SYNTAX}")
+
+
+def file_profile(path: str) -> tuple[RoadProfile, str]:
+    """The road profile of a CSV file (``time_s``, ``theta_road_rad``), from its first sample on."""
+    from sashil.errors import DataFileError
+    from sashil.recording.data_file import read_data_csv
+
+    try:
+        cols = read_data_csv(path, required=("time_s", "theta_road_rad"), min_rows=2)
+    except DataFileError as err:
+        raise ConfigError(f"--road {err}") from None
+    t = cols["time_s"] - cols["time_s"][0]
+    theta = cols["theta_road_rad"]
+    if not np.all(np.isfinite(theta)) or np.max(np.abs(theta)) > math.radians(20.0):
+        raise ConfigError(f"--road {path}: theta_road_rad: expected finite angles within ±20 deg")
+    rate = np.gradient(theta, t)
+    accel = np.gradient(rate, t)
+    end = float(t[-1])
+
+    def road(time_s: float) -> tuple[float, float, float]:
+        if time_s >= end:
+            return float(theta[-1]), 0.0, 0.0
+        return (
+            float(np.interp(time_s, t, theta)),
+            float(np.interp(time_s, t, rate)),
+            float(np.interp(time_s, t, accel)),
+        )
+
+    return road, f"profile {path} ({end:g} s)"
 
 
 def _check(text: str, f_hz: float, amp_deg: float, nyquist: float) -> None:
