@@ -66,7 +66,7 @@ def test_bad_override_is_one_line_naming_key_and_type(override, message):
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
-@pytest.mark.parametrize("verb", ["drop-test", "run", "sweep", "simulate"])
+@pytest.mark.parametrize("verb", ["drop-test", "run", "sweep", "simulate", "calibrate"])
 def test_bad_set_on_any_verb_exits_2_and_writes_nothing(tmp_path, capsys, verb):
     out = tmp_path / "out"
     assert main([verb, "--set", "loop.rate_hz=fast", "--out", str(out)]) == 2

@@ -9,6 +9,7 @@ import sys
 from sashil.cli.common import (
     add_driver_options,
     add_output_options,
+    add_set_option,
     add_verbosity_options,
     resolve_config,
     say,
@@ -25,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config", metavar="FILE", help="YAML config; its calibrate: section is the plan (default: the simulated rig)"
     )
+    add_set_option(parser)
     add_driver_options(parser)
     parser.add_argument(
         "--inertia",

@@ -22,6 +22,11 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     """``--config``, ``--params`` and ``--set`` (every verb that reads a config)."""
     parser.add_argument("--config", metavar="FILE", help="YAML config (default: simulated rig, seed parameters)")
     parser.add_argument("--params", metavar="FILE", help="parameter file from `sashil identify` (replaces the model)")
+    add_set_option(parser)
+
+
+def add_set_option(parser: argparse.ArgumentParser) -> None:
+    """``--set section.key=value`` (repeatable), applied by :func:`resolve_config`."""
     parser.add_argument(
         "--set",
         action="append",
