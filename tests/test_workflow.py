@@ -182,6 +182,18 @@ def test_load_run_of_a_loop_run_with_road(tmp_path):
     assert np.ptp(run.data["theta_road_rad"]) > 0  # the default road excitation of the sim backend
     assert run.timing is not None and run.timing["lateness_ns"].size == 500
     assert (out / "run.png").stat().st_size > 10_000
+    assert (out / "timing.png").stat().st_size > 10_000
+    assert all(key in run.summary for key in COMMON_KEYS)
+
+
+def test_sweep_summaries_have_the_common_keys(tmp_path):
+    chirp, stepped = tmp_path / "chirp", tmp_path / "stepped"
+    assert main(["sweep", "--duration", "2", "--f-start", "1", "--f-stop", "2", "--out", str(chirp), "-q"]) == 0
+    assert main(["sweep", "--stepped", "--steps", "2", "--current", "0", "--out", str(stepped), "-q"]) == 0
+    for folder in (chirp, stepped, stepped / "f0.500Hz"):
+        summary = sashil.load_run(folder).summary
+        assert all(key in summary for key in COMMON_KEYS), folder
+        assert summary["verb"] == "sweep" and summary["driver"] == "sim"
 
 
 def test_load_run_of_something_else_is_one_clear_error(tmp_path):

@@ -46,13 +46,17 @@ def finish_loop_run(
     summary: dict[str, Any],
     trace_stats: dict[str, Any] | None,
 ) -> None:
-    """After a loop run (``sashil run``): the ``--format`` files, ``run.png``, and the summary
-    again with the trace's counts."""
-    from sashil.recording.plots import plot_run
+    """After a loop run (``sashil run``): the ``--format`` files, ``run.png``, ``timing.png`` (loop
+    timing percentiles), and the summary again with the trace's counts."""
+    from sashil.api import load_run
+    from sashil.recording.plots import plot_run, plot_timing
 
     if (folder.path / "data.csv").exists():
         write_formats(args, folder.path, config, summary.get("verb", "run"), controller=summary.get("controller"))
         plot_run(folder.path / "run.png", folder.path, summary)
+    timing = load_run(folder.path).timing
+    if timing is not None and timing.get("lateness_ns", ()).size:
+        plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
     if trace_stats is not None:
         summary["can_trace"] = trace_stats
         folder.write_summary(summary)
