@@ -55,7 +55,7 @@ def finish_loop_run(
         write_formats(args, folder.path, config, summary.get("verb", "run"), controller=summary.get("controller"))
         plot_run(folder.path / "run.png", folder.path, summary)
     timing = load_run(folder.path).timing
-    if timing is not None and timing.get("lateness_ns", ()).size:
+    if timing is not None and len(timing.get("lateness_ns", ())):
         plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
     if trace_stats is not None:
         summary["can_trace"] = trace_stats
