@@ -180,6 +180,7 @@ def test_load_run_of_a_loop_run_with_road(tmp_path):
     assert run.summary["verb"] == "run" and run.summary["timing"]["cycles"] == 500
     assert run.data["seq"].dtype == np.int64
     assert np.ptp(run.data["theta_road_rad"]) > 0  # the default road excitation of the sim backend
+    assert run.summary["road"] == "sine 1 Hz, 1 deg"
     assert run.timing is not None and run.timing["lateness_ns"].size == 500
     assert (out / "run.png").stat().st_size > 10_000
     assert (out / "timing.png").stat().st_size > 10_000

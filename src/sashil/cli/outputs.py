@@ -45,9 +45,10 @@ def finish_loop_run(
     config: Mapping[str, Any],
     summary: dict[str, Any],
     trace_stats: dict[str, Any] | None,
+    **extra: Any,
 ) -> None:
     """After a loop run (``sashil run``): the ``--format`` files, ``run.png``, ``timing.png`` (loop
-    timing percentiles), and the summary again with the trace's counts."""
+    timing percentiles), and the summary again with ``extra`` keys (the road) and the trace's counts."""
     from sashil.api import load_run
     from sashil.recording.plots import plot_run, plot_timing
 
@@ -58,5 +59,7 @@ def finish_loop_run(
     if timing is not None and len(timing.get("lateness_ns", ())):
         plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
     if trace_stats is not None:
-        summary["can_trace"] = trace_stats
+        extra["can_trace"] = trace_stats
+    if extra:  # what the verb knows beside the session's summary (the road, the trace's counts)
+        summary.update(extra)
         folder.write_summary(summary)

@@ -144,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
     finally:
         trace_stats = trace.close() if trace is not None else None
-    finish_loop_run(args, folder, config, outcome.summary, trace_stats)
+    finish_loop_run(args, folder, config, outcome.summary, trace_stats, road=road_text)
     say(args, format_timing(outcome.summary["timing"]))
     for trip in outcome.summary["trips"]:
         print(f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", file=sys.stderr)
