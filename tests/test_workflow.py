@@ -370,3 +370,18 @@ def test_the_readme_python_example_runs(drop_runs, capsys):
     exec(compile(code, "README.md", "exec"), {})
     lines = capsys.readouterr().out.splitlines()
     assert [line.split()[0] for line in lines] == ["i0.000A", "i1.000A"]
+
+
+def test_set_completion_lists_the_config_keys():
+    from sashil.cli.completion import set_completer
+
+    assert set_completer("loop.rt.p") == ["loop.rt.priority="]
+    assert "controller.c_sky=" in set_completer("controller.")
+    assert "model.params.k=" in set_completer("model.params.")
+    every = set_completer("")
+    assert all(k.count(".") >= 1 and k.endswith("=") for k in every)
+    for key in every:  # each completed key is one --set accepts
+        path = key[:-1].split(".")
+        node = default_config()
+        for part in path:
+            node = node[part]

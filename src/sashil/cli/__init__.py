@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK
 """The ``sashil`` command: one verb per module in this package, loaded on use.
 
 Each verb module defines ``HELP`` (one line), ``EXAMPLE`` (a command line), ``add_arguments(parser)``
@@ -82,6 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
+    if argv is None:  # a shell asking for completions (argcomplete, when installed) is answered here
+        from sashil.cli.completion import enable
+
+        enable(parser)
     args = parser.parse_args(argv)
     try:
         return int(args._module.run(args) or 0)

@@ -1,0 +1,46 @@
+"""Shell completion of the ``sashil`` command line (optional: ``pip install 'sashil[completion]'``).
+
+With argcomplete installed, ``eval "$(register-python-argcomplete sashil)"`` in the shell's start-up
+file completes verbs, options, choices and ``--set`` keys (``--set loop.<TAB>`` lists
+``loop.rate_hz=``, ``loop.rt.priority=``, ... from the config schema). Without it, nothing changes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator, Mapping
+from typing import Any
+
+from sashil.config.schema import Section
+
+
+def config_keys(schema: Mapping[str, Any], prefix: str = "") -> Iterator[str]:
+    """Every settable dotted key of a config schema (``loop.rate_hz``, ``loop.rt.priority``, ...)."""
+    for key, spec in schema.items():
+        if isinstance(spec, Section):
+            yield from config_keys(spec.fields, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}"
+
+
+def set_completer(prefix: str, **_: Any) -> list[str]:
+    """argcomplete completer of ``--set``: the dotted keys that start with ``prefix``, each with ``=``."""
+    from sashil.config.sections import SCHEMA
+
+    return [f"{key}=" for key in config_keys(SCHEMA) if key.startswith(prefix)]
+
+
+def enable(parser: argparse.ArgumentParser) -> None:
+    """Attach the ``--set`` completer and hand the parser to argcomplete, when it is installed (it
+    answers the shell and exits when the shell asks for completions, and does nothing otherwise)."""
+    try:
+        import argcomplete
+    except ImportError:
+        return
+    subparsers = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    for sub in subparsers:
+        for verb_parser in sub.choices.values():
+            for action in verb_parser._actions:
+                if "--set" in action.option_strings:
+                    action.completer = set_completer
+    argcomplete.autocomplete(parser)
