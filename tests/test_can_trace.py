@@ -5,6 +5,9 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import json
+import signal
+import subprocess
+import sys
 import time
 
 import can
@@ -62,21 +65,41 @@ def test_attach_refuses_a_backend_without_can_frames(tmp_path):
         CanTrace([tmp_path / "can.blf"]).attach(NotCan())
 
 
-@pytest.mark.e2e  # the emulator in its own process, a run on the wall clock over a pty
-def test_run_over_slcan_traces_both_directions(tmp_path):
-    from test_link_e2e import Emulator, relaxed_config, sashil
+SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 
-    emu = Emulator(tmp_path, "slcan")
+
+@pytest.fixture
+def slcan_rig(tmp_path):
+    """``sashil emulate --transport slcan`` in its own process; yields the link path, stops it after."""
+    link = str(tmp_path / "rig-slcan")
+    proc = subprocess.Popen(
+        [*SASHIL, "emulate", "--transport", "slcan", "--link", link, "--duration", "120"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
-        out = tmp_path / "run"
-        cfg = relaxed_config(tmp_path)
-        done = sashil(
-            "run", "--driver", "can", "--port", emu.link, "--config", cfg, "--duration", "0.5", "--current", "0.3",
-            "--set", "loop.rt.priority=0", "--set", "loop.rt.mlockall=false",
-            "--format", "blf", "--format", "asc", "--out", str(out), "-q",
-        )  # fmt: skip
+        line = proc.stdout.readline()  # "sashil emulate: slcan rig on /dev/pts/N (link ...)"
+        assert "rig on /dev/" in line, line + proc.stderr.read()
+        yield link
     finally:
-        emu.stop()
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+
+
+@pytest.mark.e2e  # the emulator in its own process, a run on the wall clock over a pty
+def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
+    out = tmp_path / "run"
+    config = tmp_path / "link.yaml"  # a loaded machine may starve the emulator: relaxed link timeouts
+    config.write_text(
+        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\nloop:\n  rt:\n    priority: 0\n    mlockall: false\n"
+    )
+    done = subprocess.run(
+        [*SASHIL, "run", "--driver", "can", "--port", slcan_rig, "--config", str(config), "--duration", "0.5",
+         "--current", "0.3", "--format", "blf", "--format", "asc", "--out", str(out), "-q"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     stats = json.loads((out / "summary.json").read_text())["can_trace"]
     assert stats["files"] == ["can.blf", "can.asc"] and stats["error"] is None
