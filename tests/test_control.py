@@ -85,14 +85,39 @@ def test_inverse_hand_values_band_and_clipping():
     assert (inv.band_lo_nm, inv.band_hi_nm) == pytest.approx((0.8, 2.4))
     assert inv.current(3.0, 0.1, 1.0) == 1.0 and inv.clipped and inv.clip_count == 1
     assert inv.current(0.5, 0.1, 1.0) == 0.0 and inv.clip_count == 2
-    assert inv.current(-1.0, 0.1, 1.0) == 0.0 and inv.passive_count == 1  # T*·v <= 0: cannot push
-    assert inv.current(1.0, -0.001, 0.0) == 0.0  # T*·v = 0
-    assert inv.current(0.01, -0.0015, 0.001) == 0.0 and inv.passive_count == 3  # |alpha2 z + c2 v| < 1e-3
+    assert inv.current(-1.0, 0.1, 1.0) == 0.0 and inv.clip_count == 3  # below the band: its nearer end
+    assert inv.current(0.01, -0.0015, 0.001) == 0.0 and inv.passive_count == 1  # |alpha2 z + c2 v| < 1e-3
+    assert inv.current(float("nan"), 0.1, 1.0) == 0.0  # never a NaN current
+
+
+def test_inverse_picks_the_band_current_closest_to_the_target_just_after_a_reversal():
+    # v = 0.05 > 0 but z = -0.1 has not followed yet: T(0) = -0.1 + 0.035 = -0.065,
+    # T(1) = -0.2 + 0.11 = -0.09, slope -0.025 N m/A. T* = -0.08 lies inside the band at
+    # i = (-0.08 + 0.065) / -0.025 = 0.6 A; the T*·v rule would have commanded 0 A (-0.065 N m).
+    full, rule = HysteresisInverse(SEED, 1.0), HysteresisInverse(SEED, 1.0, mode="rule")
+    assert full.current(-0.08, -0.1, 0.05) == pytest.approx(0.6)
+    assert (full.band_lo_nm, full.band_hi_nm) == pytest.approx((-0.065, -0.09))
+    assert rule.current(-0.08, -0.1, 0.05) == 0.0 and rule.passive_count == 1
+    # outside the band the nearer end: -0.2 is beyond T(1) = -0.09, so 1 A
+    assert full.current(-0.2, -0.1, 0.05) == 1.0 and full.clipped
+
+
+@pytest.mark.parametrize("target", [-3.0, -0.5, 0.0, 0.3, 0.9, 1.7, 2.4, 5.0])
+@pytest.mark.parametrize(("z", "v"), [(0.1, 1.0), (-0.1, 0.05), (0.05, -0.4), (-0.1, -2.0)])
+def test_inverse_current_minimises_the_torque_error_over_the_current_range(target, z, v):
+    inv = HysteresisInverse(SEED, 1.0)
+    i = inv.current(target, z, v)
+    grid = [k / 1000 for k in range(1001)]
+    best = min(abs(SEED.torque(z, v, c) - target) for c in grid)
+    assert abs(SEED.torque(z, v, i) - target) <= best + 1e-12
 
 
 def test_viscous_only_inverse_ignores_alpha():
-    inv = HysteresisInverse(SEED, 1.0, viscous_only=True)
+    inv = HysteresisInverse(SEED, 1.0, mode="viscous")
     assert inv.current(1.45, 0.1, 1.0) == pytest.approx(0.5)  # (1.45 - 0.7) / 1.5
+    assert inv.current(-1.0, 0.1, 1.0) == 0.0 and inv.passive_count == 1  # keeps the T*·v rule
+    with pytest.raises(ValueError, match="inverse mode"):
+        HysteresisInverse(SEED, 1.0, mode="exact")
 
 
 def test_coil_lead_speeds_up_the_coil_current():

@@ -145,6 +145,28 @@ CONTROLLER = Section(
             "float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"
         ),
         "tracking_seed": Field("int", 0, low=0),
+        "estimator": Field(
+            "choice",
+            "kalman",
+            choices=("kalman", "tracking"),
+            doc="kalman: the rig model's Kalman filter over both encoders; tracking: fixed-bandwidth filters",
+        ),
+        "kalman_accel_psd": Field(
+            "float", 1.0e-4, low=0.0, low_open=True, high=1e12, doc="kalman: arm acceleration noise [rad^2/s^3]"
+        ),
+        "kalman_road_jerk_psd": Field(
+            "float", 100.0, low=0.0, low_open=True, high=1e15, doc="kalman: road jerk noise [rad^2/s^5]"
+        ),
+        "kalman_bias_psd": Field(
+            "float", 1.0e-4, low=0.0, low_open=True, high=1e15, doc="kalman: model-error drift [rad^2/s^5]"
+        ),
+        "innovation_limit_counts": Field(
+            "float",
+            6.0,
+            low=1.0,
+            high=1e6,
+            doc="kalman: a residual beyond this many counts means the model is wrong: fall back to 0 A",
+        ),
         "estimator_bandwidth_hz": Field(
             "float", 10.0, low=0.0, low_open=True, high=1000.0, doc="relative-angle alpha-beta filter"
         ),
@@ -156,7 +178,11 @@ CONTROLLER = Section(
         ),
         "model_aided": Field("bool", True, doc="feed the rig model's acceleration to the rate estimator"),
         "inverse": Field(
-            "choice", "full", choices=("full", "viscous"), doc="full Bouc-Wen inverse, or viscous-only (alpha ignored)"
+            "choice",
+            "full",
+            choices=("full", "rule", "viscous"),
+            doc="full: the current closest to T* in the feasible band; rule: also 0 A when T*·v <= 0; "
+            "viscous: alpha ignored",
         ),
         "min_authority_nm_per_a": Field(
             "float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"

@@ -11,8 +11,11 @@ The estimator's model acceleration for the next cycle comes from the rig model
 
 from __future__ import annotations
 
+import math
+
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
+from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.laws import Law
 from sashil.control.observer import BoucWenObserver
 from sashil.drivers.interface import RigCommand, RigSample
@@ -26,7 +29,7 @@ class Controller:
     def __init__(
         self,
         law: Law,
-        estimator: RigEstimator,
+        estimator: RigEstimator | KalmanRigEstimator,
         observer: BoucWenObserver,
         inverse: HysteresisInverse,
         lead: CoilLagCompensator,
@@ -66,6 +69,30 @@ class Controller:
         self.current_cmd_a = 0.0
         self.cycles = 0
         self.unsafe_count = 0  # commands the safety clamp had to change (NaN or outside [0, i_max])
+        self.fallback = False  # latched when the estimator fails: 0 A for the rest of the run
+        self.fallback_at_s: float | None = None
+        self.fallback_cycles = 0
+
+    def _fallback_step(self) -> RigCommand:
+        """0 A (the safe state of an MR damper) once the estimator has failed; counted per cycle."""
+        self.fallback_cycles += 1
+        self.cycles += 1
+        self.torque_cmd_nm = NAN
+        self.current_target_a = self.current_cmd_a = 0.0
+        self.command.current_a = 0.0
+        return self.command
+
+    def stats(self) -> dict[str, object]:
+        """Counters for summary.json: clipped/passive cycles, unsafe commands, the estimator fallback."""
+        return {
+            "clipped_cycles": self.inverse.clip_count,
+            "passive_cycles": self.inverse.passive_count,
+            "unsafe_commands": self.unsafe_count,
+            "fallback": self.fallback,
+            "fallback_at_s": self.fallback_at_s,
+            "fallback_cycles": self.fallback_cycles,
+            "innovations_out": int(getattr(self.estimator, "innovations_out", 0)),
+        }
 
     @property
     def name(self) -> str:
@@ -84,6 +111,13 @@ class Controller:
         est = self.estimator
         est.update(sample, dt, self._accel)  # model body acceleration of the last cycle
         theta, v = est.theta_rad, est.theta_dot_rad_s
+        if not self.fallback and (getattr(est, "diverged", False) or not math.isfinite(v) or not math.isfinite(theta)):
+            # the model cannot explain the motion (innovation out of bounds) or the estimate is not a number:
+            # the safe law (0 A: the damper fails passive) for the rest of the run
+            self.fallback = True
+            self.fallback_at_s = self.time_s
+        if self.fallback:
+            return self._fallback_step()
         self.theta_rad, self.theta_dot_rad_s = theta, v
         self.body_dot_rad_s, self.road_dot_rad_s = est.body_dot_rad_s, est.road_dot_rad_s
         measured = sample.current_a

@@ -4,13 +4,18 @@ Seed 001 eqs. 9-12 solved for the current (research/peers_boucwen.md section 4.2
 
     T(i)  = (alpha1 + alpha2*i)*z + (c1 + c2*i)*v      linear in i, slope D = alpha2*z + c2*v
     i*    = (T* - alpha1*z - c1*v) / D,  clipped to [0, i_max]
-    i*    = 0  when T*·v <= 0 (the damper can only dissipate) or |D| < min_authority
+    i*    = 0  when |D| < min_authority (the current changes nothing)
 
-Every call also reports the feasible band [T(0), T(i_max)] (the damper's torque range at this
-state); a T* outside it is clipped to the nearer end (T is monotone in i) and counted.
+Because T is linear (so monotone) in i, the clipped i* is the current whose predicted torque is
+closest to T* inside the feasible band [T(0), T(i_max)] at the observed (z, v): a T* outside the
+band gets the nearer end, counted as clipped. This holds also just after a reversal, when z has not
+yet followed the rate and T(0) has the opposite sign to v.
 
-``viscous_only=True`` is the comparison inverse that ignores the hysteresis (alpha = 0):
-i* = (T* - c1*v) / (c2*v).
+``mode="rule"`` is the earlier comparison inverse that, in addition, commands 0 A whenever
+T*·v <= 0 ("the damper can only dissipate"): right for the viscous part, wrong while z lags the rate.
+
+``mode="viscous"`` is the comparison inverse that ignores the hysteresis (alpha = 0) and keeps the
+T*·v <= 0 rule: i* = (T* - c1*v) / (c2*v).
 
 Coil lag (:class:`CoilLagCompensator`): the coil follows its command with a first-order lag tau,
 ``i(t+H) = i_cmd + (i_now - i_cmd)*exp(-H/tau)``; commanding
@@ -24,6 +29,9 @@ from __future__ import annotations
 import math
 
 from sashil.models.hysteresis import BoucWenParams
+
+#: the inverses by name: the band-closest one, the T*·v rule, the viscous-only one
+INVERSE_MODES = ("full", "rule", "viscous")
 
 
 class HysteresisInverse:
@@ -40,22 +48,26 @@ class HysteresisInverse:
         "clipped",
         "i_max",
         "min_authority",
+        "mode",
         "passive_count",
+        "rule",
         "viscous_only",
     )
 
-    def __init__(
-        self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, viscous_only: bool = False
-    ):
+    def __init__(self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, mode: str = "full"):
+        if mode not in INVERSE_MODES:
+            raise ValueError(f"inverse mode must be one of {', '.join(INVERSE_MODES)}, got {mode!r}")
         self.a1, self.a2, self.c1, self.c2 = params.alpha1, params.alpha2, params.c1, params.c2
         self.i_max = float(i_max)
         self.min_authority = float(min_authority_nm_per_a)
-        self.viscous_only = bool(viscous_only)
+        self.mode = mode
+        self.viscous_only = mode == "viscous"
+        self.rule = mode != "full"  # 0 A when T*·v <= 0
         self.band_lo_nm = 0.0
         self.band_hi_nm = 0.0
         self.clipped = False
         self.clip_count = 0  # cycles whose T* lay outside the feasible band
-        self.passive_count = 0  # cycles with T*·v <= 0 or too little authority (0 A)
+        self.passive_count = 0  # cycles at 0 A by the T*·v rule or for too little authority
 
     def band(self, z: float, v: float) -> None:
         """Set the feasible band [T(0), T(i_max)] at state (z, v)."""
@@ -68,7 +80,7 @@ class HysteresisInverse:
         self.band(z, v)
         if self.viscous_only:
             z = 0.0
-        if torque_nm * v <= 0.0:
+        if self.rule and torque_nm * v <= 0.0:
             self.clipped = False
             self.passive_count += 1
             return 0.0
@@ -86,6 +98,10 @@ class HysteresisInverse:
             self.clipped = True
             self.clip_count += 1
             return self.i_max
+        if i != i:  # a NaN target: the damper's safe state
+            self.clipped = True
+            self.clip_count += 1
+            return 0.0
         self.clipped = False
         return i
 

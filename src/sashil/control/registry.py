@@ -15,6 +15,7 @@ from sashil.config.sections import CONTROL_LAWS
 from sashil.control.controller import Controller
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
+from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.laws import (
     Groundhook,
     Law,
@@ -127,6 +128,26 @@ def make_law(name: str, section: dict[str, Any], params: BoucWenParams, i_max: f
     raise ConfigError(f"controller.law: unknown law {name!r} (known: {', '.join(LAWS)})")
 
 
+def make_estimator(
+    section: dict[str, Any], config: dict[str, Any], rate_hz: float
+) -> RigEstimator | KalmanRigEstimator:
+    """The ``controller.estimator``: the rig-model Kalman filter or the fixed-bandwidth tracking filters."""
+    if section.get("estimator", "kalman") == "kalman":
+        return KalmanRigEstimator(
+            1.0 / rate_hz,
+            accel_psd=float(section["kalman_accel_psd"]),
+            road_jerk_psd=float(section["kalman_road_jerk_psd"]),
+            bias_psd=float(section["kalman_bias_psd"]),
+            angle_noise_rad=float(config["rig"].get("angle_noise_rad") or 0.0),
+            innovation_limit=float(section["innovation_limit_counts"]),
+        )
+    return RigEstimator(
+        float(section["estimator_bandwidth_hz"]),
+        float(section["road_bandwidth_hz"]),
+        order=3 if section.get("estimator_order", 2) == 3 else 2,
+    )
+
+
 def make_controller(
     name: str | None,
     config: dict[str, Any],
@@ -154,15 +175,9 @@ def make_controller(
     tau = float(rig["coil_tau_s"] if tau is None else tau)
     return Controller(
         law=law,
-        estimator=RigEstimator(
-            float(section["estimator_bandwidth_hz"]),
-            float(section["road_bandwidth_hz"]),
-            order=3 if section.get("estimator_order", 2) == 3 else 2,
-        ),
+        estimator=make_estimator(section, config, rate_hz),
         observer=BoucWenObserver(params),
-        inverse=HysteresisInverse(
-            params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"] == "viscous"
-        ),
+        inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"]),
         lead=CoilLagCompensator(tau, float(section["lead_horizon_s"]), i_max),
         current_max_a=i_max,
         model_aided=bool(section["model_aided"]),
