@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import math
+import random
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,7 +63,11 @@ def damper_config(params: dict[str, float], counts_per_rev: int = 4096, **contro
 
 
 def run_condition(
-    config: dict[str, Any], true_params: dict[str, float], cond: Condition, law: str = "torque-tracking"
+    config: dict[str, Any],
+    true_params: dict[str, float],
+    cond: Condition,
+    law: str = "torque-tracking",
+    command_road: bool = True,
 ) -> dict[str, np.ndarray]:
     """Run ``law`` (the config's model) on a plant with ``true_params``; returns recorded columns."""
     cfg = copy.deepcopy(config)
@@ -95,6 +100,8 @@ def run_condition(
         ctl.held = plant.held
         out["true"][k] = plant.damper_torque()
         cmd = ctl.step(sample, t_ns, dt_ns)
+        if road is not None and command_road:
+            cmd.road_speed_rad_s = road(k / RATE_HZ)[1]  # as the sweep plan does
         rig.write(cmd, t_ns, dt_ns)
         out["time_s"][k] = k / RATE_HZ
         out["cmd"][k] = ctl.torque_cmd_nm
@@ -121,7 +128,8 @@ def figures(cols: dict[str, np.ndarray], keep_after_s: float) -> dict[str, float
     }
 
 
-#: a spread of dampers (not the seed alone): n 0.1-0.6, yield torque alpha(1 A)*z_u 0.2-2.5 N m, J 0.8-1.2
+#: a spread of dampers (not the seed alone): n 0.1-0.6, yield torque alpha(1 A)*z_u 0.2-2.5 N m, J 0.8-1.2:
+#: the seed, four chosen to span the corners, six drawn at random (seed 7)
 def _damper(J, k, c1, c2, n, delta, beta, gamma, yield0, yield1) -> dict[str, float]:
     z_u = (delta / (beta + gamma)) ** (1.0 / n)
     return {
@@ -131,6 +139,21 @@ def _damper(J, k, c1, c2, n, delta, beta, gamma, yield0, yield1) -> dict[str, fl
     }  # fmt: skip
 
 
+def _drawn_dampers(count: int, seed: int = 7) -> dict[str, dict[str, float]]:
+    """``count`` dampers drawn at random over the spread (n 0.1-0.6, J 0.8-1.2, yield at 1 A 0.2-2.5 N m)."""
+    rng = random.Random(seed)
+    out = {}
+    for index in range(count):
+        n, J, yield1 = rng.uniform(0.1, 0.6), rng.uniform(0.8, 1.2), rng.uniform(0.2, 2.5)
+        yield0 = yield1 * rng.uniform(0.15, 0.6)
+        delta, ratio, gamma_fraction = rng.uniform(150, 900), rng.uniform(0.7, 0.9), rng.uniform(0.0, 0.3)
+        gamma = delta / ratio * gamma_fraction
+        beta = delta / ratio - gamma
+        k, c1, c2 = rng.uniform(80, 130), rng.uniform(0.3, 1.0), rng.uniform(0.8, 2.5)
+        out[f"V{index} n{n:.2f} J{J:.2f} y{yield1:.1f}"] = _damper(J, k, c1, c2, n, delta, beta, gamma, yield0, yield1)
+    return out
+
+
 DAMPERS = {
     "seed": _damper(1.0, 109.0, 0.7, 1.5, 0.099, 700.0, 873.0, 1.0, 0.1066, 0.2132),
     "A n0.3 J0.8": _damper(0.8, 95.0, 0.5, 2.0, 0.3, 300.0, 330.0, 30.0, 0.38, 1.2),
@@ -138,3 +161,10 @@ DAMPERS = {
     "C n0.45 J1.1": _damper(1.1, 80.0, 0.4, 1.2, 0.45, 500.0, 600.0, 50.0, 0.15, 0.6),
     "D n0.2 J0.9": _damper(0.9, 120.0, 0.6, 2.5, 0.2, 800.0, 900.0, 100.0, 0.49, 1.8),
 }
+DAMPERS.update(_drawn_dampers(6))
+
+
+def mismatched(params: dict[str, float], fraction: float = 0.10) -> dict[str, float]:
+    """Every Bouc-Wen parameter off by ``fraction``, signs alternating (J+, k-, c1+, ...): a stress model."""
+    keys = ("J", "k", "c1", "c2", "alpha1", "alpha2", "beta", "gamma", "delta", "n")
+    return {key: params[key] * (1.0 + fraction if index % 2 == 0 else 1.0 - fraction) for index, key in enumerate(keys)}

@@ -52,6 +52,7 @@ class Controller:
         self.held = False
         self._t0_ns: int | None = None
         self._accel = 0.0
+        self._road_speed: float | None = None
         self._v_prev = 0.0
         # per-cycle values (recorded by the caller)
         self.time_s = 0.0
@@ -109,7 +110,16 @@ class Controller:
         dt = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
         self.time_s = (t_ns - self._t0_ns) * 1e-9
         est = self.estimator
-        est.update(sample, dt, self._accel)  # model body acceleration of the last cycle
+        # the road speed a plan put on last cycle's command (sweeps): its change is the road's
+        # acceleration, known to the estimator instead of inferred from the road encoder alone
+        speed = self.command.road_speed_rad_s
+        if speed is None or speed != speed:
+            road_accel = None
+            self._road_speed = None
+        else:
+            road_accel = 0.0 if self._road_speed is None else (speed - self._road_speed) / dt
+            self._road_speed = speed
+        est.update(sample, dt, self._accel, road_accel)  # model body acceleration of the last cycle
         theta, v = est.theta_rad, est.theta_dot_rad_s
         if not self.fallback and (getattr(est, "diverged", False) or not math.isfinite(v) or not math.isfinite(theta)):
             # the model cannot explain the motion (innovation out of bounds) or the estimate is not a number:

@@ -174,7 +174,8 @@ class RigEstimator:
         self.road_ddot_rad_s2 = 0.0
         self.body_dot_rad_s = 0.0
 
-    def update(self, sample: RigSample, dt: float, body_accel: float = 0.0) -> None:
+    def update(self, sample: RigSample, dt: float, body_accel: float = 0.0, road_accel: float | None = None) -> None:
+        """``road_accel`` (the commanded road acceleration) is not used: the road filter infers it."""
         scale = TWO_PI / sample.counts_per_rev
         road_counts = sample.road_counts
         road = self.road

@@ -32,9 +32,11 @@ gains (less lag) than a 4096-count one, with the same settings. The noise densit
 over the whole condition set (drop, chirp, stepped sines; a spread of dampers), see
 ``tools/bench_truth_chain.py``.
 
-Innovation check: ``innovation_limit`` counts; a residual larger than that on either encoder (the
-model cannot explain the motion, e.g. a wildly wrong J) sets :attr:`diverged`; the controller then
-falls back to a safe law.
+Innovation check: ``innovation_limit`` counts; a residual larger than that on either encoder for
+:data:`PERSIST_CYCLES` cycles in a row after the first :data:`WARMUP_S` (the model cannot explain the
+motion, e.g. a wildly wrong J) sets :attr:`diverged`; the controller then falls back to a safe law.
+With the right model the largest residual over the benchmark's conditions is 1-2 counts; a J off by
+a factor 20 or 1/20 gives 7-35 counts.
 """
 
 from __future__ import annotations
@@ -45,6 +47,18 @@ import numpy as np
 from scipy.linalg import expm, solve_discrete_are
 
 from sashil.drivers.interface import TWO_PI, RigSample
+
+#: how a count is read: "noise" (the angle plus white noise of variance q^2/12), "cell" (the angle lies
+#: somewhere in the count's cell: the innovation is the distance from the prediction to the cell, 0 inside
+#: it), "auto" (cell up to CELL_MODEL_MAX_COUNTS counts/rev, noise above; measured crossover, README)
+QUANTISATION_MODELS = ("auto", "cell", "noise")
+CELL_MODEL_MAX_COUNTS = 16384
+DEADZONE_COUNTS = 1.0
+
+#: the innovation check: diverged after this many consecutive cycles beyond the limit, not in the first
+#: WARMUP_S seconds (the filter starts at rest: a rig already moving gives large residuals at first)
+PERSIST_CYCLES = 10
+WARMUP_S = 0.5
 
 #: state indices
 THETA, THETA_DOT, ROAD, ROAD_DOT, ROAD_DDOT, BIAS = range(6)
@@ -93,14 +107,21 @@ class KalmanRigEstimator:
         "_counts_per_rev",
         "_dt",
         "_gain",
+        "_gain_commanded",
+        "_cycles",
+        "_outside",
+        "_warmup_cycles",
         "accel_psd",
         "angle_noise_rad",
         "bias_psd",
         "body_dot_rad_s",
+        "commanded_road_jerk_psd",
+        "deadzone",
         "diverged",
         "innovation_limit",
         "innovation_max_counts",
         "innovations_out",
+        "quantisation",
         "road_ddot_rad_s2",
         "road_dot_rad_s",
         "road_jerk_psd",
@@ -114,11 +135,13 @@ class KalmanRigEstimator:
     def __init__(
         self,
         nominal_dt_s: float,
-        accel_psd: float = 1.0e-4,
+        accel_psd: float = 1.0e-2,
         road_jerk_psd: float = 100.0,
         bias_psd: float = 1.0e-4,
         angle_noise_rad: float = 0.0,
         innovation_limit: float = 6.0,
+        commanded_road_jerk_psd: float = 1e-2,
+        quantisation: str = "auto",
     ):
         if not nominal_dt_s > 0.0:
             raise ValueError(f"Kalman estimator: nominal period must be > 0 s, got {nominal_dt_s!r}")
@@ -128,6 +151,14 @@ class KalmanRigEstimator:
         self._dt = float(nominal_dt_s)
         self.accel_psd, self.road_jerk_psd, self.bias_psd = float(accel_psd), float(road_jerk_psd), float(bias_psd)
         self.angle_noise_rad = float(angle_noise_rad)
+        self.commanded_road_jerk_psd = float(commanded_road_jerk_psd)
+        if quantisation not in QUANTISATION_MODELS:
+            raise ValueError(
+                f"Kalman estimator: quantisation must be one of {', '.join(QUANTISATION_MODELS)}, got {quantisation!r}"
+            )
+        self.quantisation = quantisation
+        self.deadzone = 0.0
+        self._gain_commanded: tuple[tuple[float, float], ...] = ()
         self.innovation_limit = float(innovation_limit)
         self._counts_per_rev = 0
         self._gain: tuple[tuple[float, float], ...] = ()
@@ -136,6 +167,9 @@ class KalmanRigEstimator:
         self.diverged = False
         self.innovations_out = 0  # cycles with an innovation beyond the limit
         self.innovation_max_counts = 0.0  # the largest residual so far [counts]
+        self._outside = 0  # consecutive cycles beyond the limit
+        self._cycles = 0
+        self._warmup_cycles = round(WARMUP_S / self._dt)
         self.theta_rad = 0.0
         self.theta_dot_rad_s = 0.0
         self.theta_road_rad = 0.0
@@ -146,12 +180,17 @@ class KalmanRigEstimator:
     def _set_resolution(self, counts_per_rev: int) -> None:
         q = TWO_PI / counts_per_rev
         var = q * q / 12.0 + self.angle_noise_rad**2
+        cell = self.quantisation == "cell" or (self.quantisation == "auto" and counts_per_rev <= CELL_MODEL_MAX_COUNTS)
+        self.deadzone = DEADZONE_COUNTS if cell else 0.0
         gain = steady_state_gain(self._dt, var, self.accel_psd, self.road_jerk_psd, self.bias_psd)
         self._gain = tuple((float(row[0]), float(row[1])) for row in gain)
+        gain = steady_state_gain(self._dt, var, self.accel_psd, self.commanded_road_jerk_psd, self.bias_psd)
+        self._gain_commanded = tuple((float(row[0]), float(row[1])) for row in gain)
         self._counts_per_rev = counts_per_rev
 
-    def update(self, sample: RigSample, dt: float, body_accel: float = 0.0) -> None:
-        """Take one sample ``dt`` [s] after the previous one; ``body_accel``: the model's arm acceleration."""
+    def update(self, sample: RigSample, dt: float, body_accel: float = 0.0, road_accel: float | None = None) -> None:
+        """Take one sample ``dt`` [s] after the previous one; ``body_accel``: the model's arm acceleration;
+        ``road_accel``: the road acceleration the plan commanded over the period (None: not commanded)."""
         if sample.counts_per_rev != self._counts_per_rev:
             self._set_resolution(sample.counts_per_rev)
         scale = TWO_PI / sample.counts_per_rev
@@ -164,23 +203,38 @@ class KalmanRigEstimator:
         elif dt > 0.0:
             theta, v, r, rv, ra, b = x
             half = 0.5 * dt * dt
+            if road_accel is None:
+                g = self._gain
+            else:
+                g = self._gain_commanded
+                ra += road_accel  # the state is then the part of the road's acceleration not commanded
             accel = body_accel + b - ra
             r_pred = r + dt * rv + half * ra
             theta_pred = theta + dt * v + half * accel
             e_arm = arm - (theta_pred + r_pred)
             e_road = road - r_pred
+            dz = self.deadzone * scale  # half a count in the cell model
+            if dz > 0.0:
+                # a count only says the angle lies in its cell: no correction while the prediction does
+                e_arm = e_arm - dz if e_arm > dz else (e_arm + dz if e_arm < -dz else 0.0)
+                if road_accel is not None:  # the road's cell only where its motion is commanded
+                    e_road = e_road - dz if e_road > dz else (e_road + dz if e_road < -dz else 0.0)
             worst = max(abs(e_arm), abs(e_road)) / scale
             if worst > self.innovation_max_counts:
                 self.innovation_max_counts = worst
             if worst > self.innovation_limit:
                 self.innovations_out += 1
-                self.diverged = True
-            g = self._gain
+                self._outside += 1
+                if self._outside >= PERSIST_CYCLES and self._cycles >= self._warmup_cycles:
+                    self.diverged = True
+            else:
+                self._outside = 0
+            self._cycles += 1
             x[0] = theta_pred + g[0][0] * e_arm + g[0][1] * e_road
             x[1] = v + dt * accel + g[1][0] * e_arm + g[1][1] * e_road
             x[2] = r_pred + g[2][0] * e_arm + g[2][1] * e_road
             x[3] = rv + dt * ra + g[3][0] * e_arm + g[3][1] * e_road
-            x[4] = ra + g[4][0] * e_arm + g[4][1] * e_road
+            x[4] = ra - (road_accel or 0.0) + g[4][0] * e_arm + g[4][1] * e_road
             x[5] = b + g[5][0] * e_arm + g[5][1] * e_road
         self.theta_rad = x[0]
         self.theta_dot_rad_s = x[1]

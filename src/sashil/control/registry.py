@@ -140,6 +140,8 @@ def make_estimator(
             bias_psd=float(section["kalman_bias_psd"]),
             angle_noise_rad=float(config["rig"].get("angle_noise_rad") or 0.0),
             innovation_limit=float(section["innovation_limit_counts"]),
+            commanded_road_jerk_psd=float(section["kalman_road_jerk_psd_commanded"]),
+            quantisation=str(section["kalman_quantisation"]),
         )
     return RigEstimator(
         float(section["estimator_bandwidth_hz"]),

@@ -1,0 +1,245 @@
+#!/usr/bin/env python3
+"""Issue 14's truth chain: identify each damper of a spread, then track torque on the identified model.
+
+For every damper of :data:`truth_chain_sim.DAMPERS` (the seed and four others: n 0.1-0.6, yield
+torque at 1 A 0.2-2.5 N m, J 0.8-1.2):
+
+1. identify the Bouc-Wen model from two simulated 10 s drop tests from -5 deg at 0 A and 1 A
+   (4096-count encoder, 1 kHz, J given) with ``sashil identify``'s fit (``fit_model``);
+2. run the torque-tracking law (T* a band-limited random 0.1-0.9 fraction of the feasible band) on
+   the simulated rig (the true damper) over the condition set of :mod:`truth_chain_sim` — a drop
+   from -5 deg, the road sine at 1.2 Hz, a chirp 0.5-5 Hz, sines at 1, 2 and 3 Hz (road 1 deg) —
+   with the controller on the identified model (and, for reference, on the exact one), 4096-count
+   encoders and 16-bit (65536-count) encoders;
+3. (``--link``) the 1.2 Hz sine over the serial link: ``sashil emulate`` with the true damper, the
+   host running ``sashil sweep --controller torque-tracking --f-start 1.2 --f-stop 1.2 --params
+   identified.yaml`` over pyserial; the host's data.csv joined with the emulator's ``--truth`` on
+   ``seq``.
+
+Printed per damper and condition: tracking NRMSE = RMS(T_true,k+1 - T*_k)/RMS(T*_k) [%], the same
+RMS as a fraction of the torque authority T(i_max) - T(0) [%], observer NRMSE = RMS(T_hat - T_true) /
+RMS(T_true) [%]; the worst and the median over the spread; the previous controller (fixed-bandwidth
+tracking filters, the "0 A when T*·v <= 0" inverse) from the same run as the baseline; the median
+compute time of one controller cycle (Kalman vs tracking filters).
+
+    .venv/bin/python tools/bench_truth_chain.py [--link] [--dampers seed,A,...]
+
+Wall time: about 3 min in-process (2 cores, shared), plus about 2 min with --link.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from truth_chain_sim import CONDITIONS, DAMPERS, damper_config, figures, mismatched, run_condition
+
+from sashil.identify.data import record_from_columns
+from sashil.identify.fit import FitOptions, fit_model
+from sashil.identify.synthetic import drop_test_columns
+from sashil.models.hysteresis import BoucWenParams
+
+BASELINE = {"estimator": "tracking", "inverse": "rule"}
+
+
+def identify(true: dict[str, float]) -> tuple[dict[str, float], float]:
+    """Bouc-Wen parameters fitted to drop tests at 0 A and 1 A of the damper ``true`` (J given)."""
+    params = BoucWenParams.from_mapping(true)
+    records = [record_from_columns(f"drop {i:g} A", drop_test_columns(params, -5.0, i)) for i in (0.0, 1.0)]
+    started = time.perf_counter()
+    result = fit_model("bouc-wen", records, FitOptions(J=true["J"]))
+    return dict(result.params), time.perf_counter() - started
+
+
+def condition_table(model: dict[str, float], true: dict[str, float], counts: int, **controller) -> list[dict]:
+    """Figures per condition; also the encoder floor k*q/sqrt(12) / RMS(T*) (module docstring)."""
+    cfg = damper_config(model, counts, **controller)
+    rows = []
+    q = 2.0 * math.pi / counts
+    for cond in CONDITIONS:
+        cols = run_condition(cfg, true, cond)
+        row = figures(cols, cond.keep_after_s)
+        keep = cols["time_s"] >= cond.keep_after_s
+        row["floor"] = true["k"] * q / math.sqrt(12.0) / float(np.sqrt(np.mean(cols["cmd"][keep] ** 2)))
+        rows.append(row)
+    return rows
+
+
+def passive_observer(model: dict[str, float], true: dict[str, float], counts: int) -> list[float]:
+    """Observer NRMSE at constant 0 A and 1 A on the chirp (both currents)."""
+    out = []
+    for current in (0.0, 1.0):
+        cfg = damper_config(model, counts, current_a=current)
+        out.append(
+            figures(run_condition(cfg, true, CONDITIONS[2], law="passive"), CONDITIONS[2].keep_after_s)["observer"]
+        )
+    return out
+
+
+def compute_time_us(model: dict[str, float], counts: int, **controller) -> float:
+    """Median wall time of one Controller.step over the 1.2 Hz sine [us] (shared machine: noisy)."""
+    from sashil.control import registry
+
+    made = []
+    original = registry.make_controller
+
+    def timed(*args, **kwargs):
+        ctl = original(*args, **kwargs)
+        inner = ctl.step
+        times = []
+
+        def step(sample, t_ns, dt_ns):
+            t0 = time.perf_counter_ns()
+            cmd = inner(sample, t_ns, dt_ns)
+            times.append(time.perf_counter_ns() - t0)
+            return cmd
+
+        ctl.step = step  # type: ignore[method-assign]
+        made.append(times)
+        return ctl
+
+    import truth_chain_sim
+
+    truth_chain_sim.make_controller = timed
+    try:
+        run_condition(damper_config(model, counts, **controller), model, CONDITIONS[1])
+    finally:
+        truth_chain_sim.make_controller = original
+    return statistics.median(made[0]) / 1000.0
+
+
+def fmt(rows: list[dict], key: str) -> str:
+    return " ".join(f"{100 * r[key]:6.1f}" for r in rows)
+
+
+def link_sine(name: str, true: dict[str, float], fitted: dict[str, float], tmp: Path) -> dict | None:
+    """The 1.2 Hz sine over serial against ``sashil emulate`` with the true damper (module docstring)."""
+    import yaml
+    from bench_control_link import Bench, tracking_figures
+
+    config = damper_config(true, 4096)
+    config["driver"].update(sample_timeout_ms=20.0, link_lost_ms=500.0)
+    config["controller"]["law"] = "torque-tracking"
+    params_path = tmp / f"{name.split()[0]}-params.yaml"  # the identified model, as `identify` writes it
+    params_path.write_text(yaml.safe_dump({"model": "bouc-wen", "params": fitted}))
+    folder = tmp / name.split()[0]
+    folder.mkdir()
+    bench = Bench("serial", folder)
+    out, truth = bench.cli(
+        config,
+        "sweep",
+        "--controller",
+        "torque-tracking",
+        "--f-start",
+        "1.2",
+        "--f-stop",
+        "1.2",
+        "--amplitude-deg",
+        "1",
+        "--duration",
+        "12",
+        "--params",
+        str(params_path),
+    )
+    return None if out is None else tracking_figures(out, truth)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--link", action="store_true", help="also the 1.2 Hz sine over the serial link")
+    parser.add_argument("--dampers", help="comma-separated name prefixes (default: all)")
+    args = parser.parse_args()
+    chosen = {
+        k: v for k, v in DAMPERS.items() if not args.dampers or any(k.startswith(p) for p in args.dampers.split(","))
+    }
+    names = [c.name for c in CONDITIONS]
+    print(f"conditions: {', '.join(names)}; road 1 deg; 1 kHz; figures in % (tracking / authority / observer)")
+    worst: dict[str, list[tuple[float, str]]] = {}
+    sine: dict[str, list[float]] = {}
+    timing: list[tuple[float, float]] = []
+    links: dict[str, dict | None] = {}
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        for name, true in chosen.items():
+            fitted, fit_s = identify(true)
+            p_true, p_fit = BoucWenParams.from_mapping(true), BoucWenParams.from_mapping(fitted)
+            yield_err = [
+                100 * (p_fit.hysteretic_gain(i) * p_fit.z_bound / (p_true.hysteretic_gain(i) * p_true.z_bound) - 1)
+                for i in (0.0, 1.0)
+            ]
+            print(
+                f"\n{name}: identified in {fit_s:.1f} s; yield torque error at 0/1 A {yield_err[0]:+.1f}/{yield_err[1]:+.1f} %, "
+                f"c(0)/c(1) {100 * (p_fit.damping(0) / p_true.damping(0) - 1):+.1f}/{100 * (p_fit.damping(1) / p_true.damping(1) - 1):+.1f} %, "
+                f"k {100 * (p_fit.k / p_true.k - 1):+.2f} %"
+            )
+            print(f"  {'':34s} " + " ".join(f"{n[:6]:>6s}" for n in names))
+            for label, model, counts, controller in (
+                ("exact model, 4096 counts", true, 4096, {}),
+                ("identified, 4096 counts", fitted, 4096, {}),
+                ("identified, 65536 counts", fitted, 65536, {}),
+                ("model 10 % off, 4096 counts", mismatched(true), 4096, {}),
+                ("baseline (tracking+rule), 4096", fitted, 4096, BASELINE),
+                ("baseline (tracking+rule), 65536", fitted, 65536, BASELINE),
+            ):
+                rows = condition_table(model, true, counts, **controller)
+                print(f"  {label:34s} {fmt(rows, 'tracking')}   tracking")
+                if label.startswith("identified"):
+                    print(f"  {'':34s} {fmt(rows, 'authority')}   of authority")
+                    print(f"  {'':34s} {fmt(rows, 'observer')}   observer")
+                    print(f"  {'':34s} {fmt(rows, 'floor')}   encoder floor k*q/sqrt(12)/RMS(T*)")
+                for row, cond in zip(rows, names, strict=True):
+                    worst.setdefault(label, []).append((row["tracking"], f"{name}, {cond}"))
+                    worst.setdefault(label + " observer", []).append((row["observer"], f"{name}, {cond}"))
+                sine.setdefault(label, []).append(rows[1]["tracking"])
+            obs = passive_observer(fitted, true, 4096)
+            print(
+                f"  observer NRMSE on the chirp at constant 0 A / 1 A (identified, 4096): {100 * obs[0]:.1f} / {100 * obs[1]:.1f} %"
+            )
+            for current, value in zip((0, 1), obs, strict=True):
+                worst.setdefault("identified, 4096 counts observer", []).append(
+                    (value, f"{name}, chirp at {current} A")
+                )
+            timing.append((compute_time_us(fitted, 4096), compute_time_us(fitted, 4096, **BASELINE)))
+            if args.link:
+                r = link_sine(name, true, fitted, Path(tmp_dir))
+                links[name] = r
+                if r is None:
+                    print("  serial link, 1.2 Hz sine: run failed")
+                else:
+                    print(
+                        f"  serial link, 1.2 Hz sine (identified, 4096): tracking {100 * r['nrmse_rms']:.1f} %, "
+                        f"observer {100 * r['observer_nrmse']:.1f} % ({r['joined']} of {r['rows']} rows joined)"
+                    )
+    print("\nover the spread (worst / median) [%]:")
+    for label, pairs in worst.items():
+        v = 100 * np.asarray([value for value, _ in pairs])
+        where = max(pairs)[1]
+        extra = ""
+        if label in sine:
+            s = 100 * np.asarray(sine[label])
+            extra = f";  1.2 Hz sine worst {s.max():.1f}, median {np.median(s):.1f}"
+        print(f"  {label:42s} worst {v.max():6.1f} ({where}), median {np.median(v):5.1f}{extra}")
+    if links:
+        ok = [r["nrmse_rms"] for r in links.values() if r]
+        if ok:
+            print(
+                f"  serial link 1.2 Hz sine tracking: worst {100 * max(ok):.1f}, median {100 * statistics.median(ok):.1f}"
+            )
+    kal = statistics.median(t[0] for t in timing)
+    base = statistics.median(t[1] for t in timing)
+    print(
+        f"controller cycle compute, median: Kalman + band inverse {kal:.1f} us; baseline tracking filters {base:.1f} us"
+    )
+    print(f"(measured {time.strftime('%Y-%m-%d %H:%M')} on a shared 2-core machine; {math.nan if False else ''})")
+
+
+if __name__ == "__main__":
+    main()
