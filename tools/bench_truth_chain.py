@@ -238,7 +238,7 @@ def main() -> None:
     print(
         f"controller cycle compute, median: Kalman + band inverse {kal:.1f} us; baseline tracking filters {base:.1f} us"
     )
-    print(f"(measured {time.strftime('%Y-%m-%d %H:%M')} on a shared 2-core machine; {math.nan if False else ''})")
+    print(f"(measured {time.strftime('%Y-%m-%d %H:%M')} on a shared 2-core machine)")
 
 
 if __name__ == "__main__":

@@ -247,6 +247,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
             "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),
             "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
             "clipped_cycles": int(getattr(controller, "clip_count", 0)),
+            "controller_stats": controller.stats() if hasattr(controller, "stats") else None,
         }
         print(
             f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "

@@ -7,6 +7,14 @@ reused (no allocation per cycle).
 
 The estimator's model acceleration for the next cycle comes from the rig model
 (seed 001 eq. 13): ``theta2_ddot = (-k*theta - T_hat)/J`` (the relative channel subtracts theta1_ddot).
+
+Road feed-forward: a plan that drives the road sets ``road_speed_rad_s`` on the command this stage
+returns (the sweep does); the change of that speed from one cycle to the next is the road
+acceleration the estimator is given for the next period (:mod:`sashil.control.kalman`).
+
+Fallback: when the estimator reports divergence (its innovation out of bounds, e.g. a wildly wrong
+J) or a non-finite estimate, the stage commands 0 A (the MR damper's passive, safe state) for the
+rest of the run; :meth:`Controller.stats` reports it for summary.json.
 """
 
 from __future__ import annotations

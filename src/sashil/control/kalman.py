@@ -7,36 +7,50 @@ acceleration the model gets wrong)::
     x = [theta, theta_dot, theta1, theta1_dot, theta1_ddot, b]
 
 Continuous model, with ``u`` the arm (body) acceleration the rig model predicts from the previous
-cycle (seed 001 eq. 13: ``J*theta2_ddot = -k*theta - T_damper``, so ``u = (-k*theta - T_hat)/J``)::
+cycle (seed 001 eq. 13: ``J*theta2_ddot = -k*theta - T_damper``, so ``u = (-k*theta - T_hat)/J``)
+and ``a_cmd`` the road acceleration a plan commands (the change of the road speed it sends; 0 when it
+sends none)::
 
-    theta_ddot   = u + b - theta1_ddot + w_a     (theta = theta2 - theta1)
-    theta1_dddot = w_j                            (the road's jerk: nobody models the road)
-    b_dot        = w_b                            (model error, a random walk)
+    theta_ddot   = u + b - (a_cmd + theta1_ddot) + w_a     (theta = theta2 - theta1)
+    theta1_dddot = w_j                                      (the road's jerk beyond the command)
+    b_dot        = w_b                                      (model error, a random walk)
 
-with white noises of spectral densities ``accel_psd`` (w_a), ``road_jerk_psd`` (w_j) and
-``bias_psd`` (w_b). Measurements each cycle: the arm encoder ``y_arm = theta + theta1`` and the road
-encoder ``y_road = theta1``, each quantised to one count ``q = 2*pi/counts_per_rev``; the
-quantisation is taken as white noise of variance ``q^2/12`` (plus the configured angle noise).
+with white noises of spectral densities ``accel_psd`` (w_a), ``road_jerk_psd`` (w_j; the smaller
+``commanded_road_jerk_psd`` while a plan commands the road) and ``bias_psd`` (w_b). Measurements
+each cycle: the arm encoder ``y_arm = theta + theta1`` and the road encoder ``y_road = theta1``,
+each quantised to one count ``q = 2*pi/counts_per_rev``, read in one of two ways:
+
+* ``noise``: the angle plus white noise of variance ``q^2/12`` (plus the configured angle noise);
+  right where the count is fine next to the motion;
+* ``cell``: a count only says that the angle lies near it. The innovation is the distance from the
+  prediction to the zone of :data:`DEADZONE_COUNTS` (one count) either side of the count, 0 inside
+  it: while the prediction stays there the filter follows the model alone instead of being kicked
+  by every count edge. One count, not the half-count cell of one encoder: the relative angle is the
+  difference of two quantised angles. The road's zone applies only while the plan commands the road
+  (otherwise the road's acceleration comes from its counts alone, and the noise reading serves).
+
+``auto`` uses the cell reading up to :data:`CELL_MODEL_MAX_COUNTS` counts/rev and the noise reading
+above: measured over the benchmark's dampers and conditions (``tools/bench_truth_chain.py``), the cell
+reading wins at 4096-16384 counts/rev, the noise reading at 32768 and more.
 
 The period's transition ``F`` and process noise ``Q`` come from Van Loan's matrix exponential; the
-gain is the steady-state one (``scipy.linalg.solve_discrete_are``), computed once for the nominal
-period, so a cycle costs a few dozen float operations. The prediction uses the measured period::
+gains are the steady-state ones (``scipy.linalg.solve_discrete_are``), computed once per encoder
+resolution for the nominal period, so a cycle costs a few dozen float operations. The prediction uses
+the measured period ``T``::
 
-    predict:  theta1 += T*theta1_dot + T^2/2*theta1_ddot,  theta1_dot += T*theta1_ddot
-              theta  += T*theta_dot  + T^2/2*(u + b - theta1_ddot),  theta_dot += T*(u + b - theta1_ddot)
-    correct:  x += K @ [y_arm - (theta + theta1), y_road - theta1]
+    predict:  theta1 += T*theta1_dot + T^2/2*a1,  theta1_dot += T*a1          (a1 = a_cmd + theta1_ddot)
+              theta  += T*theta_dot  + T^2/2*(u + b - a1),  theta_dot += T*(u + b - a1)
+    correct:  x += K @ [e_arm, e_road]        (innovations, after the cell's zone when reading cells)
 
-Unlike the fixed-bandwidth tracking filters (:mod:`sashil.control.estimator`) the trade between
-lag and quantisation noise follows from the encoders' resolution: a 16-bit encoder gets higher
-gains (less lag) than a 4096-count one, with the same settings. The noise densities were chosen
-over the whole condition set (drop, chirp, stepped sines; a spread of dampers), see
-``tools/bench_truth_chain.py``.
+The noise densities were chosen over the whole condition set (drop, chirp, stepped sines; eleven
+dampers with identified and with 10 %-off models), not on one case; see the README's control figures.
 
 Innovation check: ``innovation_limit`` counts; a residual larger than that on either encoder for
 :data:`PERSIST_CYCLES` cycles in a row after the first :data:`WARMUP_S` (the model cannot explain the
-motion, e.g. a wildly wrong J) sets :attr:`diverged`; the controller then falls back to a safe law.
-With the right model the largest residual over the benchmark's conditions is 1-2 counts; a J off by
-a factor 20 or 1/20 gives 7-35 counts.
+motion, e.g. a J 20 times too small) sets :attr:`diverged`; the controller then falls back to 0 A.
+With the right model the largest residual over the benchmark's conditions is under 2 counts; a J 20
+times too small gives 8-10 counts on drops and chirps. A J too large only makes the model's
+acceleration negligible: the filter then tracks the counts alone, stable, and is not flagged.
 """
 
 from __future__ import annotations
@@ -48,12 +62,10 @@ from scipy.linalg import expm, solve_discrete_are
 
 from sashil.drivers.interface import TWO_PI, RigSample
 
-#: how a count is read: "noise" (the angle plus white noise of variance q^2/12), "cell" (the angle lies
-#: somewhere in the count's cell: the innovation is the distance from the prediction to the cell, 0 inside
-#: it), "auto" (cell up to CELL_MODEL_MAX_COUNTS counts/rev, noise above; measured crossover, README)
+#: how a count is read (module docstring): "noise", "cell", or "auto" (cell up to CELL_MODEL_MAX_COUNTS)
 QUANTISATION_MODELS = ("auto", "cell", "noise")
 CELL_MODEL_MAX_COUNTS = 16384
-DEADZONE_COUNTS = 1.0
+DEADZONE_COUNTS = 1.0  # the cell reading's zone either side of the count
 
 #: the innovation check: diverged after this many consecutive cycles beyond the limit, not in the first
 #: WARMUP_S seconds (the filter starts at rest: a rig already moving gives large residuals at first)
@@ -105,10 +117,10 @@ class KalmanRigEstimator:
 
     __slots__ = (
         "_counts_per_rev",
+        "_cycles",
         "_dt",
         "_gain",
         "_gain_commanded",
-        "_cycles",
         "_outside",
         "_warmup_cycles",
         "accel_psd",

@@ -133,7 +133,8 @@ class DropTestPlan:
         self.release_ns: int | None = None
         self.release_estimated = False
         self._capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
-        self.column_names = DROP_COLUMNS + (CONTROLLER_COLUMNS if controller is not None else ())
+        # seq last: the sample's number on the wire, so a run over a link joins the emulator's truth
+        self.column_names = DROP_COLUMNS + (CONTROLLER_COLUMNS if controller is not None else ()) + ("seq",)
         self._data: tuple[list[float], ...] = tuple([] for _ in self.column_names)
         self._n = 0
 
@@ -153,9 +154,9 @@ class DropTestPlan:
             self.controller.held = self.phase != "record"  # the operator's hand is outside the model
             ctl = self.controller.step(sample, t_ns, dt_ns)
         if self.phase == "record":
-            out = self._record_cycle(t_ns, theta, sample.theta_road_rad, sample.current_a)
+            out = self._record_cycle(t_ns, theta, sample.theta_road_rad, sample.current_a, sample.seq)
             return out if out is None or ctl is None else ctl
-        self._recent.append(self._row(t_ns, theta, sample.theta_road_rad, sample.current_a))
+        self._recent.append(self._row(t_ns, theta, sample.theta_road_rad, sample.current_a, sample.seq))
         if self.phase == "wait-hold":
             self._wait_hold(t_ns, theta, sample.flags)
         elif self.phase == "held":
@@ -232,11 +233,11 @@ class DropTestPlan:
             if row[0] >= self.release_ns and self._record(row) is None:
                 break
 
-    def _row(self, t_ns: int, theta: float, road: float, current: float) -> tuple:
+    def _row(self, t_ns: int, theta: float, road: float, current: float, seq: int) -> tuple:
         """One cycle's values in column order (time still in host ns)."""
         ctl = self.controller
         if ctl is None:
-            return (t_ns, theta, road, current, self.s.current_a)
+            return (t_ns, theta, road, current, self.s.current_a, seq)
         return (
             t_ns,
             theta,
@@ -247,12 +248,13 @@ class DropTestPlan:
             ctl.z_hat,
             ctl.torque_hat_nm,
             ctl.torque_cmd_nm,
+            seq,
         )
 
-    def _record_cycle(self, t_ns: int, theta: float, road: float, current: float) -> RigCommand | None:
+    def _record_cycle(self, t_ns: int, theta: float, road: float, current: float, seq: int) -> RigCommand | None:
         """Record this cycle (the common case, without building a row tuple)."""
         if self.controller is not None:
-            return self._record(self._row(t_ns, theta, road, current))
+            return self._record(self._row(t_ns, theta, road, current, seq))
         assert self.release_ns is not None  # recording starts at the release
         time_s = (t_ns - self.release_ns) * 1e-9
         if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
@@ -264,6 +266,7 @@ class DropTestPlan:
         data[2].append(road)
         data[3].append(current)
         data[4].append(self.s.current_a)
+        data[5].append(seq)
         self._n += 1
         return self.command
 
@@ -282,7 +285,8 @@ class DropTestPlan:
 
     def columns(self) -> dict[str, np.ndarray]:
         return {
-            name: np.asarray(values, dtype=float) for name, values in zip(self.column_names, self._data, strict=True)
+            name: np.asarray(values, dtype=np.int64 if name == "seq" else float)
+            for name, values in zip(self.column_names, self._data, strict=True)
         }
 
 

@@ -115,6 +115,7 @@ def run_session(
             "error": result.error if error is not None else None,
             "stop_reason": result.stop_reason,
             "controller": controller,
+            "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
             "duration_s": duration_s,
             "driver": config["driver"]["name"],
             "safety": safety.summary(),
