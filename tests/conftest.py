@@ -1,8 +1,10 @@
 """Shared fixtures: the default config, and a guard that fails any test that leaks a resource.
 
 The guard (autouse) compares what is open after a test with what was open before it: python-can
-buses not shut down, threads still alive, pseudo-terminal fds still open and child processes still
-running (or not waited for). A leaked bus or pty keeps a channel busy for the tests that follow; a
+buses not shut down, threads still alive, pseudo-terminal fds still open, child processes still
+running (or not waited for), and the process's scheduling (SCHED_FIFO, priority, CPU affinity) or
+SIGINT/SIGTERM handlers not restored after a run (every child started later would inherit the
+scheduling; a stale handler stops a run that is long gone). A leaked bus or pty keeps a channel busy for the tests that follow; a
 leaked thread or child keeps driving an emulated rig. Threads and children get a short grace to end
 on their own (a join, not a sleep).
 """
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import os
+import signal
 import threading
 import time
 import weakref
@@ -84,14 +87,27 @@ def _settle(check, before, deadline: float):
     return extra
 
 
+def _process_state() -> tuple[object, ...]:
+    """This thread's scheduling policy, priority and CPU affinity (the loop's real-time set-up), and
+    the SIGINT/SIGTERM handlers (a verb's clean-stop handlers)."""
+    return (
+        os.sched_getscheduler(0),
+        os.sched_getparam(0).sched_priority,
+        sorted(os.sched_getaffinity(0)),
+        signal.getsignal(signal.SIGINT),
+        signal.getsignal(signal.SIGTERM),
+    )
+
+
 def _threads() -> set[threading.Thread]:
     return {t for t in threading.enumerate() if t.is_alive()}
 
 
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
-    """Fail a test that leaves a CAN bus, a thread, a pty fd or a child process behind."""
-    buses, threads, ptys, children = _open_buses(), _threads(), _pty_fds(), _children()
+    """Fail a test that leaves a CAN bus, a thread, a pty fd, a child process, real-time scheduling or
+    signal handlers behind."""
+    buses, threads, ptys, children, state = _open_buses(), _threads(), _pty_fds(), _children(), _process_state()
     yield
     deadline = time.monotonic() + GRACE_S
     for thread in _threads() - threads:
@@ -105,5 +121,9 @@ def no_leaks() -> Iterator[None]:
         leaks.append("pty fds still open: " + ", ".join(f"{fd} -> {path}" for fd, path in sorted(left)))
     if left := _settle(_children, children, deadline):
         leaks.append(f"child processes still running or not waited for: pids {sorted(left)}")
+    if (now := _process_state()) != state:
+        leaks.append(
+            f"real-time set-up or signal handlers not restored (policy, priority, cpus, SIGINT, SIGTERM): {state} -> {now}"
+        )
     if leaks:
         pytest.fail("leaked: " + "; ".join(leaks), pytrace=False)

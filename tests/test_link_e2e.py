@@ -63,16 +63,20 @@ def sashil(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([*SASHIL, *args], capture_output=True, text=True, timeout=timeout)
 
 
-def over_link(verb: str, driver: str, emu: Emulator, out: Path, *flags: str) -> subprocess.CompletedProcess:
-    """``sashil VERB`` over ``driver`` to the emulator ``emu``, writing ``out``.
+def relaxed_config(tmp: Path) -> str:
+    """A config file that relaxes the link's timeouts (sample timeout, hence the write timeout, 250 ms;
+    link lost 500 ms): the runs that use it compare what they record, and a loaded machine can starve
+    the emulator process for longer than the bench defaults allow (the timeouts themselves are tested
+    with the defaults)."""
+    path = tmp / "link.yaml"
+    path.write_text("driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n")
+    return str(path)
 
-    The link's timeouts are relaxed (sample timeout, hence the write timeout, 250 ms; link lost 500 ms):
-    these tests compare what a run records, and a loaded machine can starve the emulator process for
-    longer than the bench defaults allow (the timeouts themselves are tested with the defaults).
-    """
-    config = out.parent / "link.yaml"
-    config.write_text("driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n")
-    return sashil(verb, "--driver", driver, "--port", emu.link, "--out", str(out), "--config", str(config), *flags)
+
+def over_link(verb: str, driver: str, emu: Emulator, out: Path, *flags: str) -> subprocess.CompletedProcess:
+    """``sashil VERB`` over ``driver`` to the emulator ``emu``, writing ``out``, with :func:`relaxed_config`."""
+    config = relaxed_config(out.parent)
+    return sashil(verb, "--driver", driver, "--port", emu.link, "--out", str(out), "--config", config, *flags)
 
 
 @pytest.fixture(scope="module")

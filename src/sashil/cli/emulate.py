@@ -143,14 +143,17 @@ def run(args: argparse.Namespace) -> int:
     # a device's sample timer is not starved by the host: best-effort SCHED_FIFO above the loop's 50
     from sashil.runtime.rt_setup import RealtimeSetup
 
-    RealtimeSetup(priority=args.priority).apply()
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
+    realtime = RealtimeSetup(priority=args.priority)
+    realtime.apply()
+    handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     link = f" (link {args.link})" if args.link else ""
     print(f"sashil emulate: {args.transport} rig on {pty.path}{link}", flush=True)
     try:
         why = emulator.run(duration)
-    finally:
+    finally:  # the caller's scheduling and signal handlers back (sashil emulate may run in-process)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+        realtime.restore()
         if truth is not None:  # stopped by SIGINT/SIGTERM, --duration, a disconnect or an error
             truth.write_csv(args.truth)
             print(f"sashil emulate: truth: {len(truth)} samples written to {args.truth}", file=sys.stderr, flush=True)
