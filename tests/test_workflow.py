@@ -385,3 +385,18 @@ def test_set_completion_lists_the_config_keys():
         node = default_config()
         for part in path:
             node = node[part]
+
+
+def test_report_exports_parquet_of_runs_recorded_earlier(drop_runs, tmp_path):
+    import shutil
+
+    from sashil.recording.parquet_sink import read_metadata
+
+    multi = tmp_path / "multi"  # a copy: the module's folders stay as the drop test wrote them
+    shutil.copytree(drop_runs[1], multi)
+    assert main(["report", str(multi), "--format", "parquet", "--out", str(tmp_path / "rep"), "-q"]) == 0
+    for sub in ("i0.000A", "i1.000A"):
+        run = sashil.load_run(multi / sub)
+        assert run.data_file.name == "data.parquet"
+        assert read_metadata(run.data_file)["config"]["loop"]["rate_hz"] == 1000.0
+    assert read_metadata(multi / "i1.000A" / "data.parquet")["run"]["verb"] == "drop-test"

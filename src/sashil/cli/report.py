@@ -6,7 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from sashil.api import load_run as load_run_api
 from sashil.cli.common import add_output_options, add_verbosity_options, say
+from sashil.recording.formats import check_formats, write_data_formats
 from sashil.recording.matlab import export_mat
 from sashil.recording.report import write_report
 from sashil.recording.run_folder import RunFolder
@@ -21,9 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--format",
         action="append",
-        choices=("mat",),
+        choices=("mat", "parquet"),
         metavar="FMT",
-        help="also export each run's data.csv files: mat (MATLAB data.mat beside each data.csv)",
+        help="also export each run's data.csv files: mat (MATLAB data.mat) or parquet (data.parquet, units "
+        "and the run's config.yaml in its metadata) beside each data.csv; repeatable",
     )
     add_verbosity_options(parser)
 
@@ -35,12 +38,19 @@ def run(args: argparse.Namespace) -> int:
 
     for run_dir in args.run_dirs:
         load_run(run_dir)
+    check_formats(args.format, None)  # a missing library is named before anything is written
     folder = RunFolder.create(args.out, "report")
     _runs, files = write_report(args.run_dirs, folder.path, progress)
-    if "mat" in (args.format or ()):
-        for run_dir in args.run_dirs:
-            for data in sorted(Path(run_dir).rglob("data.csv")):
+    formats = args.format or ()
+    for run_dir in args.run_dirs if formats else ():
+        for data in sorted(Path(run_dir).rglob("data.csv")):
+            if "mat" in formats:
                 progress(f"wrote {export_mat(data)}")
+            if "parquet" in formats:
+                run = load_run_api(data.parent)
+                meta = {"verb": run.summary.get("verb"), "controller": run.summary.get("controller")}
+                for path in write_data_formats(data.parent, ["parquet"], None, run.config or None, meta):
+                    progress(f"wrote {path}")
     for path in files:
         say(args, f"  {path}")
     print(f"report: {folder.path / 'report.md'}", file=sys.stderr)
