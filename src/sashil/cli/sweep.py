@@ -25,9 +25,9 @@ from sashil.control.registry import LAWS, make_controller
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import (
     SWEEP_COLUMNS,
-    _default_rig,
     ac_rms,
     chirp_profile,
+    default_rig,
     frequencies,
     run_profile,
     stepped_sine,
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     trace_box: list = []  # the CAN frame trace (--format blf|asc|log|mf4), started with the first rig
 
     def rig_factory(cfg: dict, road):  # every rig of the sweep feeds the one trace
-        rig = _default_rig(cfg, road)
+        rig = default_rig(cfg, road)
         if trace_box:
             trace_box[0].attach(rig)
         else:

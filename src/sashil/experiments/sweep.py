@@ -162,7 +162,9 @@ class SweepStage:
 RigFactory = Callable[[dict, RoadProfile], RigInterface]
 
 
-def _default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
+def default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
+    """The rig a sweep runs on: the simulated rig with ``road`` as its road angle, or the config's
+    backend (whose road motor gets the profile's speed from the sweep's commands)."""
     if config["driver"]["name"] == "sim":
         from sashil.models.mismatch import open_sim_rig
 
@@ -192,7 +194,7 @@ def run_profile(
     from sashil.experiments.drop_test import default_clock
 
     rate = float(config["loop"]["rate_hz"])
-    rig = (rig_factory or _default_rig)(config, road)
+    rig = (rig_factory or default_rig)(config, road)
     stage = SweepStage(controller, road, int(math.ceil(duration_s * rate)) + 2, rig)
     clock = clock if clock is not None else default_clock(config)
     realtime = None if getattr(clock, "virtual", False) else RealtimeSetup.from_config(config["loop"])
