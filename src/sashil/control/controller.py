@@ -26,7 +26,7 @@ from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.laws import Law
 from sashil.control.observer import BoucWenObserver
-from sashil.drivers.interface import RigCommand, RigSample
+from sashil.drivers.interface import RigCommand, RigSample, clamp_current
 
 NAN = float("nan")
 
@@ -167,9 +167,10 @@ class Controller:
         self.current_target_a = target
         cmd = self.lead.command(target, measured)
         # safety clamp: the coil only ever sees a finite current in [0, i_max]
-        if not (0.0 <= cmd <= self.current_max_a):
+        safe = clamp_current(cmd, self.current_max_a)
+        if safe != cmd:  # outside [0, i_max], or NaN (never equal to itself)
             self.unsafe_count += 1
-            cmd = 0.0 if cmd != cmd or cmd < 0.0 else self.current_max_a
+        cmd = safe
         self.current_cmd_a = cmd
         if self.model_aided:
             # an arm held by hand does not accelerate, whatever the model's torques say

@@ -38,17 +38,14 @@ class HysteresisInverse:
     """T* -> i* for the Bouc-Wen damper (per-cycle, plain floats, no allocation)."""
 
     __slots__ = (
-        "a1",
-        "a2",
         "band_hi_nm",
         "band_lo_nm",
-        "c1",
-        "c2",
         "clip_count",
         "clipped",
         "i_max",
         "min_authority",
         "mode",
+        "params",
         "passive_count",
         "rule",
         "viscous_only",
@@ -57,7 +54,7 @@ class HysteresisInverse:
     def __init__(self, params: BoucWenParams, i_max: float, min_authority_nm_per_a: float = 1e-3, mode: str = "full"):
         if mode not in INVERSE_MODES:
             raise ValueError(f"inverse mode must be one of {', '.join(INVERSE_MODES)}, got {mode!r}")
-        self.a1, self.a2, self.c1, self.c2 = params.alpha1, params.alpha2, params.c1, params.c2
+        self.params = params
         self.i_max = float(i_max)
         self.min_authority = float(min_authority_nm_per_a)
         self.mode = mode
@@ -69,27 +66,27 @@ class HysteresisInverse:
         self.clip_count = 0  # cycles whose T* lay outside the feasible band
         self.passive_count = 0  # cycles at 0 A by the T*·v rule or for too little authority
 
-    def band(self, z: float, v: float) -> None:
-        """Set the feasible band [T(0), T(i_max)] at state (z, v)."""
-        lo = self.a1 * z + self.c1 * v
-        self.band_lo_nm = lo
-        self.band_hi_nm = lo + (self.a2 * z + self.c2 * v) * self.i_max
+    def band(self, z: float, v: float) -> tuple[float, float]:
+        """Set the feasible band [T(0), T(i_max)] at state (z, v); returns eq. 9's line (T(0), dT/di)."""
+        at_zero, per_ampere = self.params.torque_line(z, v)
+        self.band_lo_nm = at_zero
+        self.band_hi_nm = at_zero + per_ampere * self.i_max
+        return at_zero, per_ampere
 
     def current(self, torque_nm: float, z: float, v: float) -> float:
         """i* for the desired torque ``torque_nm`` at the observed z and rate v."""
-        self.band(z, v)
-        if self.viscous_only:
-            z = 0.0
+        at_zero, authority = self.band(z, v)
+        if self.viscous_only:  # the comparison inverse without the hysteresis (alpha = 0)
+            at_zero, authority = self.params.torque_line(0.0, v)
         if self.rule and torque_nm * v <= 0.0:
             self.clipped = False
             self.passive_count += 1
             return 0.0
-        authority = self.a2 * z + self.c2 * v
         if -self.min_authority < authority < self.min_authority:
             self.clipped = False
             self.passive_count += 1
             return 0.0
-        i = (torque_nm - self.a1 * z - self.c1 * v) / authority
+        i = (torque_nm - at_zero) / authority
         if i < 0.0:
             self.clipped = True
             self.clip_count += 1

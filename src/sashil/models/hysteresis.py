@@ -80,7 +80,16 @@ class BoucWenParams:
 
     def torque(self, z: Value, theta_dot: Value, current_a: float) -> Value:
         """Damper torque T = alpha(i)*z + c(i)*theta_dot (seed 001 eq. 9)."""
-        return self.hysteretic_gain(current_a) * z + self.damping(current_a) * theta_dot
+        at_zero, per_ampere = self.torque_line(z, theta_dot)
+        return at_zero + per_ampere * current_a
+
+    def torque_line(self, z: Value, theta_dot: Value) -> tuple[Value, Value]:
+        """Eq. 9 as the line in the current it is: T(i) = T(0) + D*i, returns (T(0), D).
+
+        T(0) = alpha1*z + c1*theta_dot, D = dT/di = alpha2*z + c2*theta_dot (eqs. 9, 11-12); the
+        inverse hysteresis solves this line for i, the feasible band is [T(0), T(i_max)].
+        """
+        return self.alpha1 * z + self.c1 * theta_dot, self.alpha2 * z + self.c2 * theta_dot
 
 
 @jit
