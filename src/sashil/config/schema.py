@@ -89,9 +89,6 @@ class Field:
         return number
 
 
-Schema = Mapping[str, "Field | Schema"]
-
-
 @dataclass
 class Section:
     """A mapping of keys to Fields or nested Sections; ``open_keys`` allows free-form keys."""

@@ -26,7 +26,7 @@ MAX_STEP_S = 2e-5
 def _harmonic(law, amp, freq, periods, per_period, M, m, k1, c1, c2, fmax, A, alpha, beta, gamma, n, eps):
     w = 2.0 * math.pi * freq
     T = 1.0 / freq
-    sub = max(1, int(math.ceil(T / per_period / 2e-5)))
+    sub = max(1, int(math.ceil(T / per_period / MAX_STEP_S)))
     h = T / per_period / sub
     zu = (A / (beta + gamma)) ** (1.0 / n) if law == 2 else 0.0
     X = 0.0

@@ -31,7 +31,7 @@ from operator import attrgetter
 from typing import Any, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
-from sashil.errors import EXIT_STATUS_CODES, DeadlineMissedError, DriverIOError, SafetyTrip
+from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
 from sashil.runtime.timing import TimingStats
@@ -45,8 +45,6 @@ TAIL_COLUMNS = ("seq", "trip_code")
 #: DESIGN.md data.csv columns a stage may provide as per-cycle attributes
 STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
 
-#: how the loop ended -> summary.json ``exit_status``
-EXIT_STATUSES = tuple(EXIT_STATUS_CODES)
 
 #: the recorder may use the interpreter until this long before the loop's next wake-up
 WRITER_GUARD_NS = 50_000
