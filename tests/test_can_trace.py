@@ -110,3 +110,28 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
         rx = [m for m in frames if m.is_rx]
         assert len(tx) >= 500 and len(rx) >= 2 * 450  # a command per cycle; two frames per sample
         assert {m.arbitration_id for m in rx} >= {0x110, 0x111}  # the sample frames
+
+
+def test_a_failing_writer_ends_the_trace_not_the_run_and_the_queue_stays_bounded(tmp_path):
+    trace = CanTrace([tmp_path / "can.asc"], interval_s=0.005).start()
+
+    class Broken:
+        def on_message_received(self, msg):
+            raise OSError(28, "No space left on device")
+
+        def stop(self):
+            pass
+
+    trace._loggers.append(Broken())
+    frames = _frames(100)
+    for msg in frames[:50]:
+        trace.put(msg)
+    deadline = time.monotonic() + 5
+    while trace.error is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    for msg in frames[50:]:  # the cycle keeps handing frames over; they are counted and dropped
+        trace.put(msg)
+    stats = trace.close()
+    assert stats["error"] == "OSError: [Errno 28] No space left on device"
+    assert stats["frames_rx"] + stats["frames_tx"] + stats["frames_dropped"] == 100
+    assert stats["frames_dropped"] >= 50 and not trace._queue

@@ -55,6 +55,7 @@ class CanTrace:
         self._thread: threading.Thread | None = None
         self.frames_rx = 0
         self.frames_tx = 0
+        self.frames_dropped = 0  # queued after the writer failed (counted, not written)
         self.error: BaseException | None = None
         #: the hot-path entry point: ``trace.put(message)``
         self.put = self._queue.append
@@ -100,6 +101,8 @@ class CanTrace:
             self._thread = None
         if self.error is None:
             self._drain()
+        else:
+            self._discard()
         self._stop_loggers()
         if self._converted:
             self._convert()
@@ -133,7 +136,8 @@ class CanTrace:
             "files": [p.name for p in self.paths],
             "frames_rx": self.frames_rx,
             "frames_tx": self.frames_tx,
-            "error": None if self.error is None else str(self.error),
+            "frames_dropped": self.frames_dropped,
+            "error": None if self.error is None else f"{type(self.error).__name__}: {self.error}",
         }
 
     # writer thread ---------------------------------------------------------------------------
@@ -147,6 +151,15 @@ class CanTrace:
                 self._drain()
         except BaseException as err:  # reported in the summary; the run goes on without the trace
             self.error = err
+            while not self._stop.wait(self.interval_s):
+                self._discard()  # the queue must not grow for the rest of the run
+
+    def _discard(self) -> None:
+        """Drop the queued frames (after a writer error), counting them."""
+        count = len(self._queue)
+        for _ in range(count):
+            self._queue.popleft()
+        self.frames_dropped += count
 
     def _drain(self, slice_frames: int = SLICE_FRAMES) -> None:
         queue, loggers, channel = self._queue, self._loggers, self.channel
