@@ -11,8 +11,10 @@ import sys
 import time
 
 import can
+import numpy as np
 import pytest
 
+from sashil.drivers.can_codec import ID_ROAD_SPEED
 from sashil.errors import ConfigError
 from sashil.recording.can_trace import CanTrace
 
@@ -97,7 +99,7 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
     )
     done = subprocess.run(
         [*SASHIL, "run", "--driver", "can", "--port", slcan_rig, "--config", str(config), "--duration", "0.5",
-         "--current", "0.3", "--format", "blf", "--format", "asc", "--out", str(out), "-q"],
+         "--current", "0.3", "--road", "sine:2:1", "--format", "blf", "--format", "asc", "--out", str(out), "-q"],
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -110,6 +112,11 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
         rx = [m for m in frames if m.is_rx]
         assert len(tx) >= 500 and len(rx) >= 2 * 450  # a command per cycle; two frames per sample
         assert {m.arbitration_id for m in rx} >= {0x110, 0x111}  # the sample frames
+        assert ID_ROAD_SPEED in {m.arbitration_id for m in tx}  # road speed commands went out (--road over a link)
+    import sashil
+
+    road = sashil.load_run(out).data["theta_road_rad"]
+    assert np.ptp(road) > np.radians(0.2)  # the emulated road wheel followed the profile
 
 
 def test_a_failing_writer_ends_the_trace_not_the_run_and_the_queue_stays_bounded(tmp_path):
