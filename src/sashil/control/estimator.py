@@ -133,7 +133,28 @@ def rate_response(bandwidth_hz: float, rate_hz: float, f_hz: float, order: int =
     return abs(response), -cmath.phase(response) / w, math.sqrt(total) * q / math.sqrt(12.0)
 
 
-class RigEstimator:
+class EstimatorOutputs:
+    """What every rig estimator sets each cycle, for the controller and the recorder to read."""
+
+    __slots__ = (
+        "body_dot_rad_s",
+        "road_ddot_rad_s2",
+        "road_dot_rad_s",
+        "theta_dot_rad_s",
+        "theta_rad",
+        "theta_road_rad",
+    )
+
+    def __init__(self) -> None:
+        self.theta_rad = 0.0
+        self.theta_dot_rad_s = 0.0
+        self.theta_road_rad = 0.0
+        self.road_dot_rad_s = 0.0
+        self.road_ddot_rad_s2 = 0.0
+        self.body_dot_rad_s = 0.0
+
+
+class RigEstimator(EstimatorOutputs):
     """theta, theta_dot (relative, damper), theta1 rate/acceleration (road), theta2_dot (body).
 
     Three channels: the relative angle (arm minus road counts) and the body angle (arm counts)
@@ -145,17 +166,7 @@ class RigEstimator:
     resonance) while the road moves a lot.
     """
 
-    __slots__ = (
-        "body",
-        "body_dot_rad_s",
-        "relative",
-        "road",
-        "road_ddot_rad_s2",
-        "road_dot_rad_s",
-        "theta_dot_rad_s",
-        "theta_rad",
-        "theta_road_rad",
-    )
+    __slots__ = ("body", "relative", "road")
 
     def __init__(
         self,
@@ -167,12 +178,7 @@ class RigEstimator:
         self.relative = TrackingFilter(bandwidth_hz, order=order)
         self.road = TrackingFilter(road_bandwidth_hz, order=3)
         self.body = TrackingFilter(body_bandwidth_hz or bandwidth_hz, order=order)
-        self.theta_rad = 0.0
-        self.theta_dot_rad_s = 0.0
-        self.theta_road_rad = 0.0
-        self.road_dot_rad_s = 0.0
-        self.road_ddot_rad_s2 = 0.0
-        self.body_dot_rad_s = 0.0
+        super().__init__()
 
     def update(self, sample: RigSample, dt: float, body_accel: float = 0.0, road_accel: float | None = None) -> None:
         """``road_accel`` (the commanded road acceleration) is not used: the road filter infers it."""

@@ -60,6 +60,7 @@ import math
 import numpy as np
 from scipy.linalg import expm, solve_discrete_are
 
+from sashil.control.estimator import EstimatorOutputs
 from sashil.drivers.interface import TWO_PI, RigSample
 
 #: how a count is read (module docstring): "noise", "cell", or "auto" (cell up to CELL_MODEL_MAX_COUNTS)
@@ -110,7 +111,7 @@ def steady_state_gain(
     return p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
 
 
-class KalmanRigEstimator:
+class KalmanRigEstimator(EstimatorOutputs):
     """theta, theta_dot (relative), theta1 rate/acceleration (road), theta2_dot (body): the rig model's
     steady-state Kalman filter (module docstring). Same attributes and ``update`` as
     :class:`sashil.control.estimator.RigEstimator`."""
@@ -126,7 +127,6 @@ class KalmanRigEstimator:
         "accel_psd",
         "angle_noise_rad",
         "bias_psd",
-        "body_dot_rad_s",
         "commanded_road_jerk_psd",
         "deadzone",
         "diverged",
@@ -134,13 +134,8 @@ class KalmanRigEstimator:
         "innovation_max_counts",
         "innovations_out",
         "quantisation",
-        "road_ddot_rad_s2",
-        "road_dot_rad_s",
         "road_jerk_psd",
         "started",
-        "theta_dot_rad_s",
-        "theta_rad",
-        "theta_road_rad",
         "x",
     )
 
@@ -182,12 +177,7 @@ class KalmanRigEstimator:
         self._outside = 0  # consecutive cycles beyond the limit
         self._cycles = 0
         self._warmup_cycles = round(WARMUP_S / self._dt)
-        self.theta_rad = 0.0
-        self.theta_dot_rad_s = 0.0
-        self.theta_road_rad = 0.0
-        self.road_dot_rad_s = 0.0
-        self.road_ddot_rad_s2 = 0.0
-        self.body_dot_rad_s = 0.0
+        super().__init__()
 
     def _set_resolution(self, counts_per_rev: int) -> None:
         q = TWO_PI / counts_per_rev
