@@ -174,3 +174,26 @@ def test_identify_takes_a_multi_current_drop_test_folder(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "i0.000A" in printed and "i1.000A" in printed
     assert load_params(out)["params"]["k"] == pytest.approx(109.0, rel=0.01)
+
+
+def test_params_with_a_config_mismatch_warns_that_it_is_applied_on_top(calibration, tmp_path):
+    import argparse
+    import logging
+
+    from sashil.cli.common import resolve_config
+
+    seen: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: seen.append(record.getMessage())  # type: ignore[method-assign]
+    logger = logging.getLogger("sashil")
+    logger.addHandler(handler)
+    try:
+        config = tmp_path / "mm.yaml"
+        config.write_text("mismatch: {fraction: 0.1}\n")
+        params = str(calibration / "params.yaml")
+        resolve_config(argparse.Namespace(config=str(config), params=params))
+        assert len(seen) == 1 and "mismatch: section is applied on top of these parameters" in seen[0]
+        resolve_config(argparse.Namespace(config=None, params=params))  # no mismatch: no warning
+        assert len(seen) == 1
+    finally:
+        logger.removeHandler(handler)

@@ -37,8 +37,9 @@ def calibrate_emulated(
 
     ``plant_config``: a resolved config (``sashil.config.load_config``/``default_config``) whose
     ``model.params`` (and ``mismatch``, ``rig``) describe the true damper; its ``calibrate``
-    section is the plan. The host runs with ``driver.sample_timeout_ms`` 20 and ``link_lost_ms``
-    500 so that a shared machine's pauses of a few ms do not end a run. ``out``: the calibration
+    section is the plan. The host runs with ``driver.sample_timeout_ms`` 100 and ``link_lost_ms``
+    1000 so that a shared machine's pauses (100 ms seen with other real-time processes running)
+    do not end a run. ``out``: the calibration
     folder (must not exist or be empty). ``inertia``: J given to ``--inertia`` (None: J = 1).
     ``model``: ``--model``. ``truth``: also write the emulator's ground truth CSV (``--truth``).
     A failed calibration raises :class:`~sashil.errors.DriverIOError` with its last error line;
@@ -47,7 +48,7 @@ def calibrate_emulated(
     if transport not in TRANSPORTS:
         raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
     config = copy.deepcopy(plant_config)
-    config["driver"].update(sample_timeout_ms=20.0, link_lost_ms=500.0)
+    config["driver"].update(sample_timeout_ms=100.0, link_lost_ms=1000.0)
     angles = plan_from_config(config).operator_angles_deg()
     with tempfile.TemporaryDirectory(prefix="sashil-cal-") as tmp:
         config_path = Path(tmp) / "plant.yaml"

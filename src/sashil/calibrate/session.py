@@ -13,7 +13,7 @@ from sashil.calibrate.analysis import Calibration, analyse
 from sashil.calibrate.plan import Plan, plan_from_config
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, run_step
-from sashil.errors import ConfigError, SashilError
+from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
 from sashil.recording.run_folder import RunFolder
@@ -85,8 +85,9 @@ def calibrate_rig(
     ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
     ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
     Bad input (config, inertia, a plan at one current) raises ConfigError before anything is
-    energised or written. A step that fails (a lost link, a stuck encoder, a safety trip) ends the
-    plan: the runs so far and ``summary.json`` are written and the step's error is raised.
+    energised or written. A step that fails on the link is repeated once; a step that fails (a
+    lost link, a stuck encoder, a safety trip) ends the plan: the runs so far and ``summary.json``
+    are written and the step's error is raised.
     Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
     """
     say = say or (lambda text: None)
@@ -108,6 +109,9 @@ def calibrate_rig(
     for number, step in enumerate(plan.steps, start=1):
         say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
         result = run_step(config, step)
+        if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
+            say(f"  {step.name} failed on the link ({result.error}); repeating it once")
+            result = run_step(config, step)
         results.append(result)
         target = RunFolder.create(runs.path / step.name, "calibrate")
         if result.columns.get("time_s") is not None and result.columns["time_s"].size:

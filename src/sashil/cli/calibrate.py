@@ -7,9 +7,9 @@ import math
 import sys
 
 from sashil.cli.common import (
+    add_config_options,
     add_driver_options,
     add_output_options,
-    add_set_option,
     add_verbosity_options,
     resolve_config,
     say,
@@ -23,10 +23,7 @@ MODEL_CHOICES = ("bouc-wen", "dahl", "lugre", "bingham", "all")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--config", metavar="FILE", help="YAML config; its calibrate: section is the plan (default: the simulated rig)"
-    )
-    add_set_option(parser)
+    add_config_options(parser)  # the config's calibrate: section is the plan; --params: the simulated rig's damper
     add_driver_options(parser)
     parser.add_argument(
         "--inertia",

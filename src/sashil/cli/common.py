@@ -179,12 +179,28 @@ def resolve_config(args: argparse.Namespace) -> Config:
     if getattr(args, "params", None):
         config = apply_params(config, args.params)
     config = apply_overrides(config, getattr(args, "overrides", None) or ())
+    if getattr(args, "params", None) and _mismatched(config.get("mismatch") or {}):
+        logging.getLogger("sashil").warning(
+            "--params %s: the config's mismatch: section is applied on top of these parameters "
+            "(the simulated plant differs from them)",
+            args.params,
+        )
     if getattr(args, "driver", None):
         config["driver"]["name"] = args.driver
     if getattr(args, "port", None):
         config["driver"]["port"] = args.port
     check_formats(getattr(args, "format", None), config["driver"]["name"])  # before anything runs
     return config
+
+
+def _mismatched(section: dict[str, Any]) -> bool:
+    """Whether a ``mismatch`` section changes the simulated plant at all."""
+    return bool(
+        section.get("fraction")
+        or any(section.get("params", {}).values())
+        or section.get("coil_tau")
+        or any(section.get(key) is not None for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"))
+    )
 
 
 def positive_seconds(option: str, value: float) -> float:
