@@ -21,6 +21,7 @@ from sashil.config import dump_config
 from sashil.errors import DriverIOError
 
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
+HOST_PRIORITY, EMULATOR_PRIORITY = 65, 70  # above other real-time tests on a shared machine
 SASHIL = [sys.executable, "-m", "sashil"]
 
 
@@ -37,9 +38,9 @@ def calibrate_emulated(
 
     ``plant_config``: a resolved config (``sashil.config.load_config``/``default_config``) whose
     ``model.params`` (and ``mismatch``, ``rig``) describe the true damper; its ``calibrate``
-    section is the plan. The host runs with ``driver.sample_timeout_ms`` 100 and ``link_lost_ms``
-    1000 so that a shared machine's pauses (100 ms seen with other real-time processes running)
-    do not end a run. ``out``: the calibration
+    section is the plan. The host runs with ``driver.sample_timeout_ms`` 300 and ``link_lost_ms``
+    2000, at SCHED_FIFO priority 65 (best effort) and the emulator at 70, so that a shared
+    machine's pauses (100 ms seen with other real-time processes at priority 60) do not end a run. ``out``: the calibration
     folder (must not exist or be empty). ``inertia``: J given to ``--inertia`` (None: J = 1).
     ``model``: ``--model``. ``truth``: also write the emulator's ground truth CSV (``--truth``).
     A failed calibration raises :class:`~sashil.errors.DriverIOError` with its last error line;
@@ -48,7 +49,8 @@ def calibrate_emulated(
     if transport not in TRANSPORTS:
         raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
     config = copy.deepcopy(plant_config)
-    config["driver"].update(sample_timeout_ms=100.0, link_lost_ms=1000.0)
+    config["driver"].update(sample_timeout_ms=300.0, link_lost_ms=2000.0)
+    config["loop"]["rt"]["priority"] = max(config["loop"]["rt"]["priority"], HOST_PRIORITY)
     angles = plan_from_config(config).operator_angles_deg()
     with tempfile.TemporaryDirectory(prefix="sashil-cal-") as tmp:
         config_path = Path(tmp) / "plant.yaml"
@@ -56,6 +58,7 @@ def calibrate_emulated(
         link = str(Path(tmp) / "rig")
         emulate = [*SASHIL, "emulate", "--config", str(config_path), "--transport", transport, "--link", link]
         emulate += ["--hold-deg", *(f"{a:g}" for a in angles), "--release-after", "1"]
+        emulate += ["--priority", str(EMULATOR_PRIORITY)]
         if truth is not None:
             emulate += ["--truth", str(truth)]
         # the emulator's log goes to a file: a pipe nobody reads fills up and stalls the device
