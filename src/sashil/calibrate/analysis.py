@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
 from sashil.calibrate.rig import StepResult
+from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
 from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model
 from sashil.identify.rig_models import MODELS
@@ -37,6 +38,12 @@ from sashil.stats import nrmse
 REST_COUNTS = 2
 #: kept after the arm came to rest [s]
 REST_TAIL_S = 0.5
+#: consecutive samples further apart than this are a link gap; a record is cut at its first one
+#: (below the device watchdog's 50 ms nothing but samples is lost: the host skips to the newest
+#: sample after a pause, and the commanded current and road speed hold)
+GAP_S = 0.040
+#: a record shorter than this (samples) after the cuts is left out
+MIN_RECORD_SAMPLES = 300
 #: values of n the profile refits at (geometric over the fit's bounds)
 N_PROFILE = (0.1, 0.25, 0.6, 1.5)
 #: output-error evaluations of each profile point's refinement (each costs a Jacobian)
@@ -95,19 +102,49 @@ def from_turning_point(
     return rest, sign
 
 
+def until_gap(columns: dict[str, np.ndarray], gap_s: float = GAP_S) -> dict[str, np.ndarray]:
+    """The record up to its first link gap (consecutive samples more than ``gap_s`` apart on the
+    device's clock): in a gap the device's watchdog may have cut the current, which no sample shows,
+    and the host commanded 0 A after ``driver.sample_timeout_ms``."""
+    t = columns["time_s"]
+    gaps = np.nonzero(np.diff(t) > gap_s)[0]
+    if gaps.size == 0:
+        return columns
+    end = int(gaps[0]) + 1
+    return {k: v[:end] for k, v in columns.items()}
+
+
 def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Record]:
     """Fit records of the steps: drops cut once at rest; a step whose release was estimated from
     the data (a link: the bench or the emulator) starts at its first turning point."""
     out = []
     for r in results:
-        cols = trimmed(r.columns, counts_per_rev) if r.step.road is None else r.columns
+        cols = until_gap(trimmed(r.columns, counts_per_rev) if r.step.road is None else r.columns)
+        if cols["time_s"].size < MIN_RECORD_SAMPLES:
+            continue  # cut too short by a link gap: left out (the report lists it without NRMSE)
         z0_sign = None
         if r.release_estimated:
             turned = from_turning_point(cols, counts_per_rev)
             if turned is not None:
                 cols, z0_sign = turned
-        out.append(record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign))
+        record = record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign)
+        if "road_speed_cmd_rad_s" in cols:
+            record = dataclasses.replace(
+                record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
+            )
+        out.append(record)
     return out
+
+
+def road_acceleration(time_s: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
+    """The road wheel's acceleration from the speeds commanded each cycle: the wheel steps to the
+    cycle's command right after the cycle's sample (the emulator's wheel, a motor with a fast
+    speed loop), so the speed changes by ``cmd[j] - cmd[j-1]`` within the interval after sample j.
+    Smoothing the recorded road angle instead (11 encoder counts for a 1 deg road) overstated the
+    forcing by half at 3 Hz, and a fit to a 1 A road run could not follow it."""
+    step = np.diff(speed_cmd, prepend=speed_cmd[:1])
+    dt = np.diff(time_s, append=time_s[-1] + (time_s[-1] - time_s[-2] if time_s.size > 1 else 1e-3))
+    return step / np.maximum(dt, 1e-6)
 
 
 @dataclass
@@ -244,6 +281,11 @@ def analyse(
     say = progress or (lambda text: None)
     fit_records = records_of(fit_results, counts_per_rev)
     validate_records = records_of(validate_results, counts_per_rev)
+    if len(fit_records) < 2:
+        raise DataFileError(
+            f"calibrate: only {len(fit_records)} of the {len(fit_results)} runs to fit are usable (link gaps cut "
+            "the others short); repeat the calibration on a quieter link"
+        )
     options = FitOptions(J=inertia)
     names = ["bouc-wen", "dahl", "lugre", "bingham"] if model == "all" else [model]
     started = time.perf_counter()

@@ -26,6 +26,9 @@ from sashil.experiments.drop_test import CONTROLLER_COLUMNS, run_drop_test
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
+#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase the fit
+#: follows exactly (the commanded speeds are recorded), at a quarter of the link traffic per cycle
+ROAD_UPDATE_CYCLES = 4
 
 
 class StuckEncoderError(DriverError):
@@ -57,6 +60,9 @@ class StepStage:
         self.host_ns: list[int] = []
         self.device_us: list[int] = []
         self.seq: list[int] = []
+        self.road_cmd: list[float] = []  # the road wheel speed commanded in each cycle [rad/s]
+        self._road_speed = 0.0
+        self._cycle = 0
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
         self.host_ns.append(t_ns)
@@ -65,11 +71,16 @@ class StepStage:
         if sample.flags & FLAG_STUCK_SENSOR:
             raise StuckEncoderError(f"{self.step_def.name}: the rig reports a stuck encoder (the angle is frozen)")
         road = self.step_def.road
-        if self.held or road is None:
-            return RigCommand(self.step_def.current_a)
-        if self._t0_ns is None:
-            self._t0_ns = t_ns
-        return RigCommand(self.step_def.current_a, road.speed((t_ns - self._t0_ns) * 1e-9))
+        if not self.held and road is not None:
+            if self._t0_ns is None:
+                self._t0_ns = t_ns
+            if self._cycle % ROAD_UPDATE_CYCLES == 0:
+                self._road_speed = road.speed((t_ns - self._t0_ns) * 1e-9)
+            self._cycle += 1
+            self.road_cmd.append(self._road_speed)
+            return RigCommand(self.step_def.current_a, self._road_speed)
+        self.road_cmd.append(self._road_speed)
+        return RigCommand(self.step_def.current_a)
 
 
 class SimRoadRig(RigInterface):
@@ -118,7 +129,8 @@ def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: Step
     instant the board sampled the encoders) minus the device time at the release, and its ``seq``
     is the sample's sequence number. Over a link the host's times carry the link's latency jitter
     (rows 0.03-11 ms apart at 1 kHz on a busy machine), which an output-error fit reads as
-    dynamics; a repeated sample (a link gap) is dropped."""
+    dynamics; a repeated sample (a link gap) is dropped. A road step adds the wheel speed commanded
+    in each row's cycle (``road_speed_cmd_rad_s``)."""
     host = np.asarray(stage.host_ns, dtype=np.int64)
     if host.size == 0 or columns["time_s"].size == 0:
         return columns
@@ -132,6 +144,8 @@ def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: Step
     out = {k: v[keep] for k, v in columns.items()}
     out["time_s"] = t[keep]
     out["seq"] = np.asarray(stage.seq, dtype=np.int64)[index][keep]
+    if stage.step_def.road is not None:
+        out["road_speed_cmd_rad_s"] = np.asarray(stage.road_cmd, dtype=np.float64)[index][keep]
     return out
 
 
