@@ -135,6 +135,7 @@ def write_report(
     counts_per_rev: int,
     current_max_a: float,
     rig_s: float,
+    virtual: bool = False,
 ) -> Path:
     """``report.md`` and its plots in ``folder``; returns the report's path."""
     best = cal.best
@@ -166,7 +167,8 @@ def write_report(
     worst = max((v.nrmse for v in cal.validations), default=math.nan)
     lines.append(
         f"Held-out NRMSE (runs the fit never saw): mean {100 * held:.2f} %, worst {100 * worst:.2f} %. "
-        f"Rig time {rig_s:.0f} s, fit {cal.fit_s:.1f} s (+{cal.analysis_s:.1f} s identifiability). "
+        f"Rig time {rig_s:.0f} s{' (simulated rig on the virtual clock: wall time)' if virtual else ''}, "
+        f"fit {cal.fit_s:.1f} s (+{cal.analysis_s:.1f} s identifiability). "
         f"Convergence: {best.convergence.get('message', '?')} ({best.convergence.get('refinements_within_0_5pct', '?')} "
         f"of {best.convergence.get('refinements', '?')} refinements reached the best cost within 0.5 %)."
     )

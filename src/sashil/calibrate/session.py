@@ -156,6 +156,7 @@ def calibrate_rig(
         config["rig"]["encoder_counts_per_rev"],
         config["rig"]["current_max_a"],
         rig_s,
+        virtual=config["driver"]["name"] == "sim" and config["driver"]["clock"] == "virtual",
     )
     folder.write_summary(
         {
