@@ -197,3 +197,12 @@ def test_params_with_a_config_mismatch_warns_that_it_is_applied_on_top(calibrati
         assert len(seen) == 1
     finally:
         logger.removeHandler(handler)
+
+
+def test_a_port_that_does_not_exist_is_one_line_exit_2_and_nothing_written(tmp_path, capsys):
+    out = tmp_path / "never"
+    port = str(tmp_path / "no-such-tty")
+    assert main(["calibrate", "--driver", "serial", "--port", port, "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no-such-tty" in err[0]
+    assert not out.exists()

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import math
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sashil.calibrate.analysis import Calibration, analyse
 from sashil.calibrate.plan import Plan, plan_from_config
 from sashil.calibrate.report import params_document, write_report
-from sashil.calibrate.rig import StepResult, run_step
+from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
@@ -108,10 +111,31 @@ def calibrate_rig(
     failure: SashilError | None = None
     for number, step in enumerate(plan.steps, start=1):
         say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
-        result = run_step(config, step)
+        try:
+            result = run_step(config, step)
+        except SashilError:
+            if not results:  # the rig could not be opened (a bad port): bad input, nothing written
+                shutil.rmtree(folder.path, ignore_errors=True)
+            raise
         if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
             say(f"  {step.name} failed on the link ({result.error}); repeating it once")
-            result = run_step(config, step)
+            try:
+                again = run_step(config, step)
+            except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
+                say(f"  the repeat failed too ({err})")
+            else:
+                if again.error is None:
+                    result = again
+        error = result.error
+        if (
+            not results
+            and error is not None
+            and error.exit_code == 2
+            and not isinstance(error, StuckEncoderError)
+            and not result.columns.get("time_s", np.zeros(0)).size
+        ):  # the rig could not be opened (a bad port, another device): bad input, nothing written
+            shutil.rmtree(folder.path, ignore_errors=True)
+            raise error
         results.append(result)
         target = RunFolder.create(runs.path / step.name, "calibrate")
         if result.columns.get("time_s") is not None and result.columns["time_s"].size:
