@@ -196,10 +196,6 @@ def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch()
     config["mismatch"].update(fraction=0.1, coil_tau=0.1)
     config["sweep"].update(settle_s=4.0, measure_s=2.0, ramp_s=1.0)
     config["controller"]["crossover_hz"] = 3.5
-    # the crossover was chosen with the fixed-bandwidth tracking filters, and this acceptance holds
-    # with them; with the Kalman estimator (issue 14) the 4.5 Hz point reads 1.043: above the
-    # resonance the body moves less than a count and the on/off decision rides on the model (README)
-    config["controller"]["estimator"] = "tracking"
     freqs = [1.0, 1.5, 2.5, 4.5]
 
     def body(name, current=None):

@@ -31,6 +31,7 @@ from sashil.models.hysteresis import BoucWenParams
 from sashil.models.plant import RigPlant
 
 RATE_HZ = 1000.0
+STALL_S = 0.034  # a host stall as seen on this shared machine over the link
 ROAD_DEG = 1.0
 
 
@@ -68,6 +69,7 @@ def run_condition(
     cond: Condition,
     law: str = "torque-tracking",
     command_road: bool = True,
+    stalls_s: tuple[float, ...] = (),
 ) -> dict[str, np.ndarray]:
     """Run ``law`` (the config's model) on a plant with ``true_params``; returns recorded columns."""
     cfg = copy.deepcopy(config)
@@ -94,12 +96,23 @@ def run_condition(
         rig.operator_hold(math.radians(-5.0), 0.5)
     count = int(round(cond.duration_s * RATE_HZ))
     out = {name: np.empty(count) for name in ("time_s", "cmd", "hat", "true", "lo", "hi", "current")}
+    paused = set()
+    for start in stalls_s:  # host stalls: no cycle for STALL_S (the rig runs on, the command held)
+        first = round(start * RATE_HZ)
+        paused.update(range(first, first + round(STALL_S * RATE_HZ)))
+    last_ns = -dt_ns
     for k in range(count):
         t_ns = k * dt_ns
-        sample = rig.read(t_ns, dt_ns)
+        if k in paused:
+            for key in out:
+                out[key][k] = math.nan
+            out["time_s"][k] = k / RATE_HZ
+            continue
+        sample = rig.read(t_ns, t_ns - last_ns)
         ctl.held = plant.held
         out["true"][k] = plant.damper_torque()
-        cmd = ctl.step(sample, t_ns, dt_ns)
+        cmd = ctl.step(sample, t_ns, t_ns - last_ns)
+        last_ns = t_ns
         if road is not None and command_road:
             cmd.road_speed_rad_s = road(k / RATE_HZ)[1]  # as the sweep plan does
         rig.write(cmd, t_ns, dt_ns)
@@ -118,11 +131,12 @@ def figures(cols: dict[str, np.ndarray], keep_after_s: float) -> dict[str, float
     true_next = cols["true"][keep][1:]
     err = true_next - target
     ok = np.isfinite(err)
+    target, hat_ok = target[ok], np.isfinite(cols["hat"][keep])
     rmse = float(np.sqrt(np.mean(err[ok] ** 2)))
-    authority = float(np.mean(np.abs(cols["hi"][keep] - cols["lo"][keep])))
-    hat, true = cols["hat"][keep], cols["true"][keep]
+    authority = float(np.nanmean(np.abs(cols["hi"][keep] - cols["lo"][keep])))
+    hat, true = cols["hat"][keep][hat_ok], cols["true"][keep][hat_ok]
     return {
-        "tracking": rmse / float(np.sqrt(np.mean(target[ok] ** 2))),
+        "tracking": rmse / float(np.sqrt(np.mean(target**2))),
         "authority": rmse / authority,
         "observer": float(np.sqrt(np.mean((hat - true) ** 2)) / np.sqrt(np.mean(true**2))),
     }

@@ -152,7 +152,7 @@ CONTROLLER = Section(
             doc="kalman: the rig model's Kalman filter over both encoders; tracking: fixed-bandwidth filters",
         ),
         "kalman_accel_psd": Field(
-            "float", 1.0e-2, low=0.0, low_open=True, high=1e12, doc="kalman: arm acceleration noise [rad^2/s^3]"
+            "float", 1.0e-4, low=0.0, low_open=True, high=1e12, doc="kalman: arm acceleration noise [rad^2/s^3]"
         ),
         "kalman_road_jerk_psd": Field(
             "float", 100.0, low=0.0, low_open=True, high=1e15, doc="kalman: road jerk noise [rad^2/s^5]"
@@ -167,9 +167,9 @@ CONTROLLER = Section(
         ),
         "kalman_quantisation": Field(
             "choice",
-            "auto",
-            choices=("auto", "cell", "noise"),
-            doc="kalman: a count as its cell (coarse encoders), as white noise (fine ones), auto by resolution",
+            "noise",
+            choices=("noise", "cell", "auto"),
+            doc="kalman: a count as the angle plus white noise q^2/12, or as the zone of one count about it",
         ),
         "kalman_bias_psd": Field(
             "float", 1.0e-4, low=0.0, low_open=True, high=1e15, doc="kalman: model-error drift [rad^2/s^5]"

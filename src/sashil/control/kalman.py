@@ -20,18 +20,18 @@ with white noises of spectral densities ``accel_psd`` (w_a), ``road_jerk_psd`` (
 each cycle: the arm encoder ``y_arm = theta + theta1`` and the road encoder ``y_road = theta1``,
 each quantised to one count ``q = 2*pi/counts_per_rev``, read in one of two ways:
 
-* ``noise``: the angle plus white noise of variance ``q^2/12`` (plus the configured angle noise);
-  right where the count is fine next to the motion;
+* ``noise`` (the default): the angle plus white noise of variance ``q^2/12`` (plus the configured
+  angle noise);
 * ``cell``: a count only says that the angle lies near it. The innovation is the distance from the
   prediction to the zone of :data:`DEADZONE_COUNTS` (one count) either side of the count, 0 inside
   it: while the prediction stays there the filter follows the model alone instead of being kicked
   by every count edge. One count, not the half-count cell of one encoder: the relative angle is the
-  difference of two quantised angles. The road's zone applies only while the plan commands the road
-  (otherwise the road's acceleration comes from its counts alone, and the noise reading serves).
-
-``auto`` uses the cell reading up to :data:`CELL_MODEL_MAX_COUNTS` counts/rev and the noise reading
-above: measured over the benchmark's dampers and conditions (``tools/bench_truth_chain.py``), the cell
-reading wins at 4096-16384 counts/rev, the noise reading at 32768 and more.
+  difference of two quantised angles. The road's zone applies only while the plan commands the road.
+  With an exact model on an undisturbed loop this lowers the worst tracking error at 4096
+  counts/rev; but an estimate knocked off by a host stall, or a model 10 % off, can sit anywhere in
+  the zone with nothing pulling it back, and the worst case grows by half. Measured over the
+  benchmark's dampers (``tools/bench_truth_chain.py``, README), the noise reading is the robust default;
+* ``auto``: cell up to :data:`CELL_MODEL_MAX_COUNTS` counts/rev, noise above.
 
 The period's transition ``F`` and process noise ``Q`` come from Van Loan's matrix exponential; the
 gains are the steady-state ones (``scipy.linalg.solve_discrete_are``), computed once per encoder
@@ -43,14 +43,15 @@ the measured period ``T``::
     correct:  x += K @ [e_arm, e_road]        (innovations, after the cell's zone when reading cells)
 
 The noise densities were chosen over the whole condition set (drop, chirp, stepped sines; eleven
-dampers with identified and with 10 %-off models), not on one case; see the README's control figures.
+dampers with identified and with 10 %-off models, with and without host stalls), not on one case;
+see the README's control figures.
 
 Innovation check: ``innovation_limit`` counts; a residual larger than that on either encoder for
 :data:`PERSIST_CYCLES` cycles in a row after the first :data:`WARMUP_S` (the model cannot explain the
 motion, e.g. a J 20 times too small) sets :attr:`diverged`; the controller then falls back to 0 A.
-With the right model the largest residual over the benchmark's conditions is under 2 counts; a J 20
-times too small gives 8-10 counts on drops and chirps. A J too large only makes the model's
-acceleration negligible: the filter then tracks the counts alone, stable, and is not flagged.
+With the right model the largest residual over the benchmark's conditions is about 1 count; a J 20
+times too small or too large gives 7-50 counts on drops and chirps (a J 3 times off, up to 6.7: it is
+let run, worse but stable).
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ from sashil.control.estimator import EstimatorOutputs
 from sashil.drivers.interface import TWO_PI, RigSample
 
 #: how a count is read (module docstring): "noise", "cell", or "auto" (cell up to CELL_MODEL_MAX_COUNTS)
-QUANTISATION_MODELS = ("auto", "cell", "noise")
+QUANTISATION_MODELS = ("noise", "cell", "auto")
 CELL_MODEL_MAX_COUNTS = 16384
 DEADZONE_COUNTS = 1.0  # the cell reading's zone either side of the count
 
@@ -142,13 +143,13 @@ class KalmanRigEstimator(EstimatorOutputs):
     def __init__(
         self,
         nominal_dt_s: float,
-        accel_psd: float = 1.0e-2,
+        accel_psd: float = 1.0e-4,
         road_jerk_psd: float = 100.0,
         bias_psd: float = 1.0e-4,
         angle_noise_rad: float = 0.0,
         innovation_limit: float = 6.0,
         commanded_road_jerk_psd: float = 1e-2,
-        quantisation: str = "auto",
+        quantisation: str = "noise",
     ):
         if not nominal_dt_s > 0.0:
             raise ValueError(f"Kalman estimator: nominal period must be > 0 s, got {nominal_dt_s!r}")
