@@ -16,15 +16,22 @@ torque at 1 A 0.2-2.5 N m, J 0.8-1.2):
    identified.yaml`` over pyserial; the host's data.csv joined with the emulator's ``--truth`` on
    ``seq``.
 
+Rows per damper: the controller on the exact model; on the identified model (4096 counts/rev, also
+with two 34 ms host stalls as this shared machine makes over the link, and 65536 counts/rev); on a
+model 10 % off in every parameter (a stress case); with the Kalman filter's cell reading of a count
+(an option, also with the stalls); and the previous controller as the baseline.
+
 Printed per damper and condition: tracking NRMSE = RMS(T_true,k+1 - T*_k)/RMS(T*_k) [%], the same
 RMS as a fraction of the torque authority T(i_max) - T(0) [%], observer NRMSE = RMS(T_hat - T_true) /
 RMS(T_true) [%]; the worst and the median over the spread; the previous controller (fixed-bandwidth
 tracking filters, the "0 A when T*·v <= 0" inverse) from the same run as the baseline; the median
 compute time of one controller cycle (Kalman vs tracking filters).
 
-    .venv/bin/python tools/bench_truth_chain.py [--link] [--dampers seed,A,...]
+    .venv/bin/python tools/bench_truth_chain.py [--link] [--calibrate] [--dampers seed,A,...]
 
-Wall time: about 3 min in-process (2 cores, shared), plus about 2 min with --link.
+``--calibrate`` calibrates each damper with ``sashil calibrate`` over serial (the emulator playing the
+operator) instead of fitting two simulated drops. Wall time: about 6 min in-process (2 cores,
+shared), plus about 3 min with --link, plus about 3 min per damper with --calibrate.
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ from sashil.identify.synthetic import drop_test_columns
 from sashil.models.hysteresis import BoucWenParams
 
 BASELINE = {"estimator": "tracking", "inverse": "rule"}
+STALLS = (4.0, 6.6)  # two host stalls of truth_chain_sim.STALL_S (34 ms), as seen over the link here
 
 
 def identify(true: dict[str, float]) -> tuple[dict[str, float], float]:
@@ -80,13 +88,15 @@ def calibrate_over_serial(name: str, true: dict[str, float], tmp: Path) -> tuple
     return dict(yaml.safe_load(path.read_text())["params"]), time.perf_counter() - started
 
 
-def condition_table(model: dict[str, float], true: dict[str, float], counts: int, **controller) -> list[dict]:
-    """Figures per condition; also the encoder floor k*q/sqrt(12) / RMS(T*) (module docstring)."""
+def condition_table(
+    model: dict[str, float], true: dict[str, float], counts: int, stalls: tuple[float, ...] = (), **controller
+) -> list[dict]:
+    """Figures per condition; also the static resolution k*q/sqrt(12) / RMS(T*) (module docstring)."""
     cfg = damper_config(model, counts, **controller)
     rows = []
     q = 2.0 * math.pi / counts
     for cond in CONDITIONS:
-        cols = run_condition(cfg, true, cond)
+        cols = run_condition(cfg, true, cond, stalls_s=stalls)
         row = figures(cols, cond.keep_after_s)
         keep = cols["time_s"] >= cond.keep_after_s
         row["floor"] = true["k"] * q / math.sqrt(12.0) / float(np.sqrt(np.mean(cols["cmd"][keep] ** 2)))
@@ -247,20 +257,23 @@ def main() -> None:
                 f"k {100 * (p_fit.k / p_true.k - 1):+.2f} %"
             )
             print(f"  {'':34s} " + " ".join(f"{n[:6]:>6s}" for n in names))
-            for label, model, counts, controller in (
-                ("exact model, 4096 counts", true, 4096, {}),
-                ("identified, 4096 counts", fitted, 4096, {}),
-                ("identified, 65536 counts", fitted, 65536, {}),
-                ("model 10 % off, 4096 counts", mismatched(true), 4096, {}),
-                ("baseline (tracking+rule), 4096", fitted, 4096, BASELINE),
-                ("baseline (tracking+rule), 65536", fitted, 65536, BASELINE),
+            for label, model, counts, stalls, controller in (
+                ("exact model, 4096 counts", true, 4096, (), {}),
+                ("identified, 4096 counts", fitted, 4096, (), {}),
+                ("identified, 4096, two host stalls", fitted, 4096, STALLS, {}),
+                ("identified, 65536 counts", fitted, 65536, (), {}),
+                ("model 10 % off, 4096 counts", mismatched(true), 4096, (), {}),
+                ("cell reading, identified, 4096", fitted, 4096, (), {"kalman_quantisation": "cell"}),
+                ("cell reading, 4096, two host stalls", fitted, 4096, STALLS, {"kalman_quantisation": "cell"}),
+                ("baseline (tracking+rule), 4096", fitted, 4096, (), BASELINE),
+                ("baseline (tracking+rule), 65536", fitted, 65536, (), BASELINE),
             ):
-                rows = condition_table(model, true, counts, **controller)
+                rows = condition_table(model, true, counts, stalls, **controller)
                 print(f"  {label:34s} {fmt(rows, 'tracking')}   tracking")
-                if label.startswith("identified"):
+                if label in ("identified, 4096 counts", "identified, 65536 counts"):
                     print(f"  {'':34s} {fmt(rows, 'authority')}   of authority")
                     print(f"  {'':34s} {fmt(rows, 'observer')}   observer")
-                    print(f"  {'':34s} {fmt(rows, 'floor')}   encoder floor k*q/sqrt(12)/RMS(T*)")
+                    print(f"  {'':34s} {fmt(rows, 'floor')}   static resolution k*q/sqrt(12)/RMS(T*)")
                 for row, cond in zip(rows, names, strict=True):
                     worst.setdefault(label, []).append((row["tracking"], f"{name}, {cond}"))
                     worst.setdefault(label + " observer", []).append((row["observer"], f"{name}, {cond}"))
