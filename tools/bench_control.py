@@ -83,9 +83,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pattern", default="alternate", choices=("alternate", "plus", "minus", "random"))
     parser.add_argument("--quick", action="store_true", help="fewer sweep frequencies, shorter runs")
+    parser.add_argument(
+        "--estimator", default="kalman", choices=("kalman", "tracking"), help="controller.estimator (default kalman)"
+    )
     args = parser.parse_args()
     config = mismatched_config(args.pattern)
-    print(f"plant mismatch: 10 % per parameter, pattern {args.pattern}; coil lag +10 %; 4096 counts/rev")
+    config["controller"]["estimator"] = args.estimator
+    print(
+        f"plant mismatch: 10 % per parameter, pattern {args.pattern}; coil lag +10 %; 4096 counts/rev; "
+        f"estimator {args.estimator}"
+    )
 
     # 1. torque tracking -------------------------------------------------------------------------
     print("\n[1] torque tracking (road 1.2 Hz, 1 deg; T* = band-limited 2 Hz random fraction 0.1-0.9 of the band)")
