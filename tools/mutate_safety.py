@@ -12,6 +12,7 @@ compiles the mutated syntax tree, so the work tree stays as it is whatever happe
 
     .venv/bin/python tools/mutate_safety.py            # all mutants, a table and the kill rate
     .venv/bin/python tools/mutate_safety.py --list     # the mutants only
+    .venv/bin/python tools/mutate_safety.py --quiet    # the kill rate and the survivors (CI)
 
 Exit status 0 when every mutant is killed, 1 otherwise.
 """
@@ -178,6 +179,7 @@ def run(mutant: Mutant | None, timeout_s: float) -> tuple[bool, str]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--list", action="store_true", help="list the mutants, run nothing")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only the kill rate and the survivors")
     parser.add_argument("--timeout", type=float, default=120.0, metavar="S", help="per mutant (default 120)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -197,7 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     for n, m in enumerate(found, 1):
         passed, why = run(m, args.timeout)
         verdict = "SURVIVED" if passed else f"killed by {why}"
-        print(f"[{n:2}/{len(found)}] {m.label:36} {m.text:60} {verdict}", flush=True)
+        if not args.quiet:
+            print(f"[{n:2}/{len(found)}] {m.label:36} {m.text:60} {verdict}", flush=True)
         if passed:
             survivors.append(m)
     killed = len(found) - len(survivors)
