@@ -18,7 +18,10 @@ the default plan) and prints:
 Targets (issue 16): held-out NRMSE <= 2 %, yield within 3 %, c(i) within 8 %, k within 1 %, fit
 <= 30 s. The worst damper is printed beside the median.
 
-    .venv/bin/python tools/bench_calibrate.py [--dampers 1,3] [--transport serial|slcan]
+    .venv/bin/python tools/bench_calibrate.py [--dampers 1,3] [--transport serial|slcan|sim]
+
+``--transport sim`` runs the same plan on the in-process simulated rig (virtual clock): the
+identification's accuracy without the link's timing noise, as a reference.
 
 About 2 minutes of rig time per damper (plus the fit): ~12 minutes for all five.
 """
@@ -33,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sashil.calibrate import calibrate_emulated
+from sashil.calibrate import calibrate_emulated, calibrate_rig
 from sashil.calibrate.analysis import records_of
 from sashil.calibrate.plan import plan_from_config
 from sashil.calibrate.rig import StepResult
@@ -85,7 +88,10 @@ def run_damper(index: int, truth: dict, tmp: Path, transport: str) -> dict:
     config["model"]["params"].update(truth)
     out = tmp / f"damper{index}"
     started = time.perf_counter()
-    params = calibrate_emulated(config, out, transport=transport, inertia=truth["J"])
+    if transport == "sim":  # the same plan on the in-process simulated rig (virtual clock): no link
+        params = calibrate_rig(config, out, inertia=truth["J"]).params_path
+    else:
+        params = calibrate_emulated(config, out, transport=transport, inertia=truth["J"])
     wall = time.perf_counter() - started
     fitted = load_params(params)["params"]
     summary = json.loads((out / "summary.json").read_text())
@@ -141,7 +147,12 @@ def print_table(rows: list[dict]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dampers", help="comma-separated indices into DAMPERS (default: all)")
-    parser.add_argument("--transport", choices=("serial", "slcan"), default="serial")
+    parser.add_argument(
+        "--transport",
+        choices=("serial", "slcan", "sim"),
+        default="serial",
+        help="the emulated rig over serial or slcan, or sim: the in-process simulated rig (no link, reference)",
+    )
     args = parser.parse_args()
     chosen = [int(x) for x in args.dampers.split(",")] if args.dampers else list(range(len(DAMPERS)))
     rows = []
