@@ -54,6 +54,10 @@ log = logging.getLogger(__name__)
 
 #: a receive wait that overruns its timeout by more than this was a pause of the host process
 HOST_PAUSE_S = 0.5e-3
+#: deactivate waits this long for a sample that shows the coil at rest, resending 0 A meanwhile
+SAFE_CONFIRM_S = 0.5
+#: a measured coil current at most this (or 2 % of the range) confirms the coil is off
+SAFE_CURRENT_A = 0.02
 
 
 class LinkSettings:
@@ -104,6 +108,8 @@ class LinkRig(RigInterface):
             "gap_max_ms": 0.0,
             "zero_current_after_ms": 0.0,
         }
+        #: the last deactivate after an active session: did a sample show the coil at rest, how soon
+        self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
 
     # subclass hooks --------------------------------------------------------------------------
     @abstractmethod
@@ -134,9 +140,9 @@ class LinkRig(RigInterface):
     def codec_counters(self) -> dict[str, int]:
         return {}
 
-    def link_stats(self) -> dict[str, float]:
-        """Sample bookkeeping plus the decoder's counters (bad frames, ...)."""
-        return {**self.stats, **self.codec_counters()}
+    def link_stats(self) -> dict[str, Any]:
+        """Sample bookkeeping, the decoder's counters (bad frames, ...) and the last safe-state check."""
+        return {**self.stats, **self.codec_counters(), **self.safe_state}
 
     # lifecycle -------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -199,14 +205,53 @@ class LinkRig(RigInterface):
         self.state = RigState.ACTIVE
 
     def deactivate(self) -> None:
+        """0 A and the road at rest, then (after an active session) wait for a sample that shows the
+        coil current at rest, resending 0 A, for up to :data:`SAFE_CONFIRM_S`; says so when none does
+        (the device's watchdog still cuts the coil ``watchdog_ms`` after the last Command)."""
         self._setpoint = 0.0
-        if self.state is RigState.ACTIVE:
+        was_active = self.state is RigState.ACTIVE
+        if was_active:
             self.state = RigState.CONFIGURED
-        if self._link_up:
-            try:
-                self._send_msg(Command(0.0, 0))
-            except Exception:
-                pass
+        if not self._link_up:
+            return
+        try:
+            if self._road_speed not in (None, 0.0):
+                self._send_msg(RoadSpeed(0.0))
+                self._road_speed = 0.0
+            self._send_msg(Command(0.0, 0))
+            if was_active:
+                self._confirm_safe_state()
+        except Exception as err:  # the link is failing: the device watchdog takes over
+            log.warning("%s: deactivate: %s (the device watchdog cuts the coil)", self.describe(), error_reason(err))
+
+    def _confirm_safe_state(self) -> None:
+        """Wait for a sample that shows the coil at rest (module constants); record how it went."""
+        limit = max(SAFE_CURRENT_A, 0.02 * self.settings.current_max_a)
+        start = time.monotonic()
+        deadline = start + SAFE_CONFIRM_S
+        self._pending = 0
+        while time.monotonic() < deadline:
+            if self.settings.pacing == PACING_HOST:
+                self._send_command()  # disabled: 0 A, and the poll for the sample that answers it
+            got = self._wait_for_sample(None, min(deadline, time.monotonic() + self.settings.sample_timeout_s))
+            measured = None if got is None else got[1].current_a
+            # no current sense (NaN): in host pacing the sample answering a disabled Command confirms it
+            unsensed = measured is not None and measured != measured and self.settings.pacing == PACING_HOST
+            if measured is not None and (abs(measured) <= limit or unsensed):
+                self.safe_state["safe_state_confirmed"] = True
+                self.safe_state["safe_state_ms"] = round((time.monotonic() - start) * 1e3, 3)
+                return
+            if self.settings.pacing != PACING_HOST:
+                self._send_msg(Command(0.0, 0))  # a lost frame must not leave the coil on
+        self._pending = 0
+        self.safe_state["safe_state_confirmed"] = False
+        log.warning(
+            "%s: deactivate: no sample showed the coil below %.3g A within %g ms of 0 A commanded "
+            "(the device watchdog cuts it after watchdog_ms)",
+            self.describe(),
+            limit,
+            SAFE_CONFIRM_S * 1e3,
+        )
 
     def close(self) -> None:
         if self.state is RigState.CLOSED:

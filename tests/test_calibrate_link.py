@@ -99,14 +99,13 @@ def calibrate(tmp_path: Path, link: str) -> tuple[subprocess.CompletedProcess, P
     return done, out
 
 
-def test_a_stuck_encoder_stops_the_plan_with_one_line_and_exit_2(tmp_path, emulator):
+def test_a_device_reporting_a_stuck_encoder_trips_the_plan_with_one_line(tmp_path, emulator):
+    # the board flags the frozen encoder: the safety supervisor trips at once (issue 13), exit 3
     emu = emulator("--stuck-sensor-after", "0")
     done, out = calibrate(tmp_path, emu.link)
-    assert done.returncode == 2, done.stderr
+    assert done.returncode == 3, done.stderr
     errors = [line for line in done.stderr.splitlines() if "error" in line]
-    assert len(errors) == 1 and "stuck encoder" in errors[0]
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["exit_status"] == "error" and len(summary["runs"]) == 1
+    assert len(errors) == 1 and "stuck sensor" in errors[0]
     assert not (out / "params.yaml").exists()
 
 

@@ -18,6 +18,7 @@ from sashil.drivers.messages import (
     Command,
     Configure,
     Hello,
+    RoadSpeed,
     Sample,
     Status,
     Version,
@@ -228,6 +229,40 @@ def test_stall_sends_nothing_after_its_time():
     assert emulator.run(duration_s=0.15) == "duration"
     assert emulator.stats.stalled
     assert 45 <= len(link.sent) <= 53 and max(t for t, *_ in link.sent) <= 51 * MS
+
+
+def _commanded_then_silent(faults: Faults) -> tuple[ListTransport, Emulator]:
+    """Configure, the road at 1 rad/s, 0.8 A commanded every ms up to 40 ms; then the host is silent."""
+    script = [(0, Configure(1000, 50, PACING_DEVICE)), (MS, RoadSpeed(1.0))]
+    script += [(k * MS, Command(0.8, CMD_ENABLE)) for k in range(2, 41)]
+    link = ListTransport(script)
+    emulator = Emulator(build_device(default_config(), faults=faults), link, clock=lambda: link.clock_ns)
+
+    def wait(timeout_s):  # simulated time passes while the unlinked board waits
+        link.clock_ns += max(int(timeout_s * 1e9), 1000)
+        return False
+
+    emulator.stop_event.wait = wait
+    return link, emulator
+
+
+def test_a_stalled_link_does_not_stop_the_boards_watchdog():
+    link, emulator = _commanded_then_silent(Faults(stall_after_s=0.045))
+    drives = []
+    emulator.device.on_drive = lambda t, drive: drives.append((t, drive))
+    assert emulator.run(duration_s=0.2) == "duration" and emulator.stats.stalled
+    device = emulator.device
+    assert device.drive_a == 0.0 and device.road.speed_rad_s == 0.0 and device.watchdog_trips == 1
+    assert drives[-1] == (drives[-1][0], 0.0) and 90 * MS <= drives[-1][0] <= 91 * MS  # 40 ms + 50 ms
+    assert max(t for t, *_ in link.sent) <= 46 * MS  # silent on the link all the while
+
+
+def test_a_disconnect_returns_once_the_watchdog_has_put_coil_and_road_to_rest():
+    link, emulator = _commanded_then_silent(Faults(disconnect_after_s=0.045))
+    assert emulator.run() == "disconnect"
+    device = emulator.device
+    assert device.drive_a == 0.0 and device.road.speed_rad_s == 0.0 and device.watchdog_trips == 1
+    assert 90 * MS <= link.clock_ns <= 92 * MS
 
 
 def test_corrupted_serial_frame_fails_the_crc_only():

@@ -57,7 +57,11 @@ def test_backend_session_drives_and_stops_the_coil(transport, driver, interface,
             assert seqs == sorted(seqs)
             wait_for(rig, lambda s: s.current_a > 0.3, current=0.7)  # coil lag, then the current flows
             assert emu.device.drive_a == pytest.approx(0.7, abs=0.0005)
-            rig.deactivate()
+            rig.write(RigCommand(0.7, road_speed_rad_s=1.5), 0, 0)  # the road wheel turning (a sweep)
+            rig.read(0, 0)
+            rig.deactivate()  # returns once a sample shows the coil at rest
+            assert rig.link_stats()["safe_state_confirmed"] is True
+            assert emu.device.drive_a == 0.0 and emu.device.road.speed_rad_s == 0.0
             rig.read(0, 0)
             assert emu.device.drive_a == 0.0
             rig.close()

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from sashil.drivers.interface import FLAG_FAULT, FLAG_HELD, FLAG_OVERCURRENT, RigCommand, RigSample
+from sashil.drivers.interface import FLAG_FAULT, FLAG_HELD, FLAG_OVERCURRENT, FLAG_STUCK_SENSOR, RigCommand, RigSample
 from sashil.errors import SafetyTrip
 from sashil.safety import SafetySupervisor
 
@@ -100,6 +100,13 @@ def test_device_fault_flags_trip_but_held_does_not():
     quiet = SafetySupervisor(1.0, trip_on_device_fault=False)
     quiet.check(sample(1, flags=FLAG_FAULT), 0)
     assert quiet.trips == []
+
+
+def test_a_stuck_sensor_trips_the_supervisor():
+    s = supervisor()
+    with pytest.raises(SafetyTrip, match="stuck sensor"):
+        s.check(sample(1, flags=FLAG_STUCK_SENSOR | FLAG_HELD), 0)
+    assert s.trips[0].kind == "device_fault"
 
 
 def test_from_config(config):

@@ -228,6 +228,8 @@ class RigDevice:
             self.watchdog_tripped = True
             self.watchdog_trips += 1
             self._set_drive(0.0, now_ns)
+            if self.road.speed_rad_s != 0.0:  # coil and road to rest
+                self.road.set_speed(self.rig.plant, 0.0)
             out.append(self._reply(Status(self.flags(), FAULT_NONE, self.bad_frames, self.watchdog_trips)))
         if self.configured and self.pacing == PACING_DEVICE and now_ns >= self._next_sample_ns:
             out.append(self._sample(now_ns))

@@ -3,8 +3,10 @@
 One loop: wait for host bytes until the device's next event (sample due, watchdog deadline) or a
 delayed frame is due; hand what arrived to the device; let the device tick; send its output
 through the fault injection (drop, corrupt, latency). The stall and disconnect faults are the
-loop's: after ``stall_after_s`` it neither reads nor sends, after ``disconnect_after_s`` it closes
-the link and returns.
+link's: after ``stall_after_s`` it neither reads nor sends, after ``disconnect_after_s`` it closes
+the link and returns. In both the board itself keeps running, as a real one does whatever its link
+does: its timer ticks, so its watchdog still puts coil and road to rest ``watchdog_ms`` after the
+last Command (the disconnect returns only once it has).
 """
 
 from __future__ import annotations
@@ -82,10 +84,12 @@ class Emulator:
                     and faults.disconnect_after_s is not None
                     and session >= faults.disconnect_after_s
                 ):
+                    transport.close()
+                    self._run_unlinked(now)
                     return self._stopped("disconnect")
                 if session is not None and faults.stall_after_s is not None and session >= faults.stall_after_s:
                     self.stats.stalled = True
-                    self.stop_event.wait(MAX_WAIT_S)
+                    self._tick_unlinked(now)
                     continue
                 wait_ns = int(MAX_WAIT_S * 1e9)
                 for event in (device.next_event_ns(), self._next_delayed_ns(), end):
@@ -104,6 +108,20 @@ class Emulator:
             return self._stopped("stop")
         finally:
             transport.close()
+
+    def _tick_unlinked(self, now: int) -> None:
+        """One wait and tick of the board with its link silent: the watchdog runs, nothing is sent."""
+        event = self.device.next_event_ns()
+        wait_ns = int(MAX_WAIT_S * 1e9) if event is None else min(int(MAX_WAIT_S * 1e9), max(event - now, 0))
+        self.stop_event.wait(wait_ns * 1e-9)
+        self.device.tick(self.clock())  # what it would send goes nowhere
+
+    def _run_unlinked(self, now: int) -> None:
+        """After a disconnect: tick until the watchdog has put the coil and road at rest (or stop)."""
+        device = self.device
+        while not self.stop_event.is_set() and device.drive_a != 0.0 and device.configured:
+            self._tick_unlinked(now)
+            now = self.clock()
 
     def _stopped(self, why: str) -> str:
         self.stats.stopped_by = why

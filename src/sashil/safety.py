@@ -23,7 +23,14 @@ import math
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
-from sashil.drivers.interface import FLAG_FAULT, FLAG_OVERCURRENT, RigCommand, RigSample, clamp_current
+from sashil.drivers.interface import (
+    FLAG_FAULT,
+    FLAG_OVERCURRENT,
+    FLAG_STUCK_SENSOR,
+    RigCommand,
+    RigSample,
+    clamp_current,
+)
 from sashil.errors import SafetyTrip
 
 #: the data.csv ``trip_code`` column: 0 = no trip, else the kind below
@@ -49,6 +56,10 @@ class Trip:
         return {"time_s": round(self.time_s, 9), "kind": self.kind, "code": self.code, "reason": self.reason}
 
 
+#: the sample flags that trip the supervisor (``safety.trip_on_device_fault``) and their names
+DEVICE_FAULTS = ((FLAG_FAULT, "fault"), (FLAG_OVERCURRENT, "overcurrent"), (FLAG_STUCK_SENSOR, "a stuck sensor"))
+
+
 class SafetySupervisor:
     """Limits and interlocks between the control law and the damper (see module doc)."""
 
@@ -64,7 +75,7 @@ class SafetySupervisor:
         self.angle_limit_rad = None if angle_limit_rad is None else float(angle_limit_rad)
         self.slew_a_per_s = float(slew_a_per_s)
         self.sensor_timeout_cycles = int(sensor_timeout_cycles)
-        self.fault_mask = (FLAG_FAULT | FLAG_OVERCURRENT) if trip_on_device_fault else 0
+        self.fault_mask = (FLAG_FAULT | FLAG_OVERCURRENT | FLAG_STUCK_SENSOR) if trip_on_device_fault else 0
         self.trips: list[Trip] = []
         self.clamped_cycles = 0  # commands outside [0, i_max] or NaN
         self.slew_limited_cycles = 0
@@ -105,9 +116,7 @@ class SafetySupervisor:
             return  # a stale sample is not judged again
         self._not_fresh = 0
         if sample.flags & self.fault_mask:
-            kinds = [
-                name for bit, name in ((FLAG_FAULT, "fault"), (FLAG_OVERCURRENT, "overcurrent")) if sample.flags & bit
-            ]
+            kinds = [name for bit, name in DEVICE_FAULTS if sample.flags & bit]
             self._trip(t_ns, "device_fault", f"device reports {' and '.join(kinds)} (flags 0x{sample.flags:02x})")
         limit = self.angle_limit_rad
         if limit is not None:
