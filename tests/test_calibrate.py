@@ -206,3 +206,25 @@ def test_a_port_that_does_not_exist_is_one_line_exit_2_and_nothing_written(tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no-such-tty" in err[0]
     assert not out.exists()
+
+
+def _sample(seq: int, theta_deg: float, flags: int) -> object:
+    from sashil.drivers.interface import RigSample
+
+    counts = round(theta_deg * 4096 / 360)
+    return RigSample(seq, seq * 1_000_000, seq * 1000, counts, 0, 0.0, flags, 4096)
+
+
+@pytest.mark.parametrize("flags, held", [(0x02, True), (0x00, False)])
+def test_a_drop_test_takes_a_simulated_operators_flagged_hold_wherever_it_is(flags, held):
+    # the emulator with one --hold-deg holds every drop at -5 deg; a plan step asks for -2.5 deg
+    from sashil.config import default_config
+    from sashil.experiments.drop_test import DropTestPlan, DropTestSettings
+
+    settings = DropTestSettings.from_config(default_config(), -2.5, 0.0, 1.0)
+    plan = DropTestPlan(settings, 4096)
+    for seq in range(1, 400):  # 0.4 s held still at -5 deg (hold_time_s is 0.2 s)
+        plan.step(_sample(seq, -5.0, flags), seq * 1_000_000, 1_000_000)
+    assert (plan.phase == "held") is held
+    if held:  # flagged by the device: taken where it is, with the warning in held_elsewhere
+        assert plan.held_elsewhere and plan.hold_angle == pytest.approx(math.radians(-5.0), abs=math.radians(0.1))
