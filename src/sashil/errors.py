@@ -60,8 +60,15 @@ class DeadlineMissedError(SashilError):
     exit_code = 4
 
 
-#: the exit code of a clean stop on SIGINT/SIGTERM (128 + SIGINT, the shell's convention)
+#: the exit code of a clean stop on SIGINT/SIGTERM/SIGHUP (128 + SIGINT, the shell's convention)
 EXIT_STOPPED = 130
+
+
+class Stopped(SashilError):
+    """A signal stopped the run after a clean shutdown (0 A, road at rest; the data up to it kept)."""
+
+    exit_code = EXIT_STOPPED
+
 
 #: summary.json ``exit_status`` -> process exit code ("error": 1 unless the error carries its own)
 EXIT_STATUS_CODES: dict[str, int] = {
@@ -71,6 +78,17 @@ EXIT_STATUS_CODES: dict[str, int] = {
     "deadline_missed": DeadlineMissedError.exit_code,
     "error": SashilError.exit_code,
 }
+
+
+def status_of(error: BaseException) -> str:
+    """summary.json ``exit_status`` of a run that ended with ``error``."""
+    if isinstance(error, (Stopped, KeyboardInterrupt)):
+        return "stopped"
+    if isinstance(error, SafetyTrip):
+        return "safety_trip"
+    if isinstance(error, DeadlineMissedError):
+        return "deadline_missed"
+    return "error"
 
 
 def exit_code_of(status: str, error: BaseException | None = None) -> int:

@@ -22,7 +22,7 @@ from sashil.cli.common import (
 )
 from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.control.registry import LAWS, make_controller
-from sashil.errors import ConfigError, SashilError
+from sashil.errors import ConfigError, SashilError, status_of
 from sashil.experiments.sweep import (
     SWEEP_COLUMNS,
     ac_rms,
@@ -270,5 +270,5 @@ def _write_summary(folder: RunFolder, summary: dict) -> None:
 
 def _write_failed(folder: RunFolder, err: SashilError, summary: dict) -> None:
     """The summary of a sweep that ended early (a link fault, a safety trip); the error is raised on."""
-    _write_summary(folder, {"exit_status": "error", "error": str(err), **summary})
+    _write_summary(folder, {"exit_status": status_of(err), "error": str(err), **summary})
     print(f"run folder: {folder.path} (the sweep ended early; what was recorded is kept)", file=sys.stderr)

@@ -25,15 +25,17 @@ Per cycle the loop allocates no dicts or strings: timing goes into preallocated 
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import attrgetter
 from typing import Any, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
-from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip
+from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip, Stopped, status_of
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
+from sashil.runtime.signals import catch_stop_signals
 from sashil.runtime.timing import TimingStats
 
 log = logging.getLogger("sashil.loop")
@@ -131,6 +133,23 @@ class ControlLoop:
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
+        """Run the loop. Without a ``stop`` flag of the caller's, the loop takes SIGINT, SIGTERM and
+        SIGHUP itself (on the main thread): it stops at the next cycle through the ordinary shutdown
+        (0 A, road at rest, deactivate, close) and then raises :class:`~sashil.errors.Stopped`, so
+        every verb keeps what it recorded, writes its summary with ``exit_status: stopped`` and exits 130."""
+        if self.stop is not None or threading.current_thread() is not threading.main_thread():
+            return self._run()
+        with catch_stop_signals() as flag:
+            self.stop = flag
+            try:
+                result = self._run()
+            finally:
+                self.stop = None
+        if result.exit_status == "stopped" and flag.requested:
+            raise Stopped(f"stopped by {flag.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+        return result
+
+    def _run(self) -> LoopResult:
         rig, stage, clock, result, timing = self.rig, self.stage, self.clock, self.result, self.timing
         safety, recorder, stop = self.safety, self.recorder, self.stop
         period = self.period_ns
@@ -274,13 +293,7 @@ class ControlLoop:
 
     @staticmethod
     def _status_of(err: BaseException) -> str:
-        if isinstance(err, SafetyTrip):
-            return "safety_trip"
-        if isinstance(err, DeadlineMissedError):
-            return "deadline_missed"
-        if isinstance(err, KeyboardInterrupt):
-            return "stopped"
-        return "error"
+        return status_of(err)
 
     def _finish(self, t_ns: int) -> None:
         """Safe state: 0 A, deactivate, close (each once), whatever failed before."""

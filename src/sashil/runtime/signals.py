@@ -1,4 +1,4 @@
-"""SIGINT/SIGTERM -> a stop flag the loop checks once per cycle -> a clean stop (0 A, data, summary).
+"""SIGINT/SIGTERM/SIGHUP -> a stop flag the loop checks once per cycle -> a clean stop (0 A, data, summary).
 
 The handler only sets a flag (nothing else is safe inside a signal handler in the middle of a
 cycle); the loop sees it at the top of the next cycle, at most one period later, and ends through
@@ -13,7 +13,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class StopFlag:
@@ -32,7 +32,7 @@ class StopFlag:
 
 @contextmanager
 def catch_stop_signals(flag: StopFlag | None = None) -> Iterator[StopFlag]:
-    """Route SIGINT and SIGTERM to ``flag`` for the duration of the block (main thread only)."""
+    """Route SIGINT, SIGTERM and SIGHUP to ``flag`` for the duration of the block (main thread only)."""
     flag = flag if flag is not None else StopFlag()
     if threading.current_thread() is not threading.main_thread():
         yield flag  # signals are delivered to the main thread only; nothing to install

@@ -1,0 +1,77 @@
+"""Issue 13: SIGINT, SIGTERM and SIGHUP stop every rig verb cleanly: data kept, summary written, exit 130."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.e2e
+
+REAL_CLOCK = ["--set", "driver.clock=real"]
+
+
+def _stop_when_running(args: list[str], out: Path, sig: int, started: str) -> subprocess.CompletedProcess:
+    """Start ``sashil ARGS --out OUT`` on the real clock; once ``OUT/started`` exists plus 0.5 s of
+    running, send ``sig``; return the finished process."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sashil", *args, *REAL_CLOCK, "--out", str(out), "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / started).exists():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the run never started"
+            time.sleep(0.05)
+        time.sleep(0.5)  # into the loop (the process compiles and configures first)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
+def _rows(path: Path) -> int:
+    return len(path.read_text().splitlines()) - 1
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_during_a_drop_test_keeps_its_data_and_summary(tmp_path, sig):
+    out = tmp_path / "drop"
+    done = _stop_when_running(["drop-test", "--duration", "30"], out, sig, "config.yaml")
+    assert done.returncode == 130, done.stderr
+    assert len([line for line in done.stderr.splitlines() if "error" in line]) <= 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "stopped" and summary["exit_code"] == 130
+    assert summary["runs"][0]["exit_status"] == "stopped"
+    assert (out / "data.csv").exists()
+
+
+def test_sighup_during_a_sweep_keeps_its_data_and_summary(tmp_path):
+    out = tmp_path / "sweep"
+    done = _stop_when_running(
+        ["sweep", "--f-start", "1", "--f-stop", "1", "--duration", "30"], out, signal.SIGHUP, "config.yaml"
+    )
+    assert done.returncode == 130, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "stopped" and "SIGHUP" in summary["error"]
+    assert _rows(out / "data.csv") > 100  # what ran before the signal (0.5 s and more at 1 kHz)
+
+
+def test_sighup_during_a_run_writes_its_summary(tmp_path):
+    out = tmp_path / "run"
+    done = _stop_when_running(["run", "--duration", "30", "--current", "0.3"], out, signal.SIGHUP, "config.yaml")
+    assert done.returncode == 130, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_status"] == "stopped"
+    assert _rows(out / "data.csv") > 100
