@@ -91,6 +91,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args._module.run(args) or 0)
     except SashilError as err:
+        if err.exit_code == ConfigError.exit_code:  # bad input: nothing written (issue 13)
+            from sashil.recording.run_folder import discard_unused
+
+            discard_unused()
         print(f"sashil {args.verb}: error: {err}", file=sys.stderr)
         return err.exit_code
     except KeyboardInterrupt:

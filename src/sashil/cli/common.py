@@ -188,6 +188,10 @@ def resolve_config(args: argparse.Namespace) -> Config:
     if getattr(args, "driver", None):
         config["driver"]["name"] = args.driver
     if getattr(args, "port", None):
+        if config["driver"]["name"] == "sim":
+            raise ConfigError(
+                f"--port {args.port}: the driver is sim, which has no port; add --driver serial or --driver can"
+            )
         config["driver"]["port"] = args.port
     check_formats(getattr(args, "format", None), config["driver"]["name"])  # before anything runs
     return config

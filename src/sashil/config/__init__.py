@@ -1,4 +1,4 @@
-"""Config loading: YAML (``yaml.safe_load`` only), validated against :mod:`sashil.config.sections`."""
+"""Config loading: YAML (a safe loader that refuses duplicate keys), validated against :mod:`sashil.config.sections`."""
 
 from __future__ import annotations
 
@@ -22,20 +22,46 @@ def default_config() -> Config:
     return defaults(SCHEMA)
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a mapping with the same key twice (YAML says keys are
+    unique; PyYAML silently keeps the last, so a doubled ``rate_hz:`` would change a run unseen)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} given twice (each key once)", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def _read_yaml(path: Path) -> Any:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
+    except UnicodeDecodeError as err:
+        at = text_line_of(err.object, err.start)
+        raise ConfigError(
+            f"{path}: line {at}: byte 0x{err.object[err.start]:02x} is not UTF-8 (save the file as UTF-8)"
+        ) from None
     except OSError as err:
         raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         line = f" line {mark.line + 1}" if mark is not None else ""
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
         raise ConfigError(f"{path}:{line}: not valid YAML ({problem})") from None
+
+
+def text_line_of(data: bytes, offset: int) -> int:
+    """The 1-based line number of byte ``offset`` in ``data``."""
+    return data.count(b"\n", 0, offset) + 1
 
 
 def load_config(path: str | Path | None = None) -> Config:

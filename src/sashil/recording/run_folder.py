@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import platform
+import shutil
 import socket
 import subprocess
 import sys
@@ -59,6 +60,38 @@ def provenance() -> dict[str, Any]:
     }
 
 
+#: the run folders this process created (path, whether it made the folder itself): bad input found
+#: after a folder was made (a port that cannot be opened, ...) leaves nothing behind (discard_unused)
+CREATED: list[tuple[Path, bool]] = []
+
+
+def _has_rows(data_csv: Path) -> bool:
+    """Whether a data.csv holds at least one row below its header."""
+    with data_csv.open("rb") as handle:
+        return sum(1 for _ in zip(range(2), handle, strict=False)) > 1
+
+
+def discard_unused() -> list[Path]:
+    """Remove the run folders this process created that hold no recorded data (no ``data.csv``
+    with a row, no ``params.yaml``) — what bad input leaves behind; a folder given with ``--out`` that existed
+    (empty) is emptied again instead. Returns what was removed."""
+    removed = []
+    for path, made in CREATED:
+        if not path.is_dir() or any(_has_rows(f) for f in path.rglob("data.csv")) or any(path.rglob("params.yaml")):
+            continue
+        if made:
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            for child in path.iterdir():
+                if child.is_dir():
+                    shutil.rmtree(child, ignore_errors=True)
+                else:
+                    child.unlink(missing_ok=True)
+        removed.append(path)
+    CREATED.clear()
+    return removed
+
+
 class RunFolder:
     """One run's folder; every writer is atomic (temp file + rename)."""
 
@@ -80,10 +113,12 @@ class RunFolder:
             path = Path(out)
             if path.exists() and (not path.is_dir() or any(path.iterdir())):
                 raise ConfigError(f"--out {path}: exists and is not an empty folder (choose another)")
+        made = not path.exists()
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise ConfigError(f"--out {path}: cannot create folder ({err.strerror})") from None
+        CREATED.append((path, made))
         return cls(path, verb)
 
     def file(self, name: str) -> Path:
