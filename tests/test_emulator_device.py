@@ -292,3 +292,29 @@ def test_road_speed_step_moves_the_road_and_kicks_the_relative_rate():
     device.handle(RoadSpeed(0.0), 49 * MS)  # at the plant's present time: only the step acts
     assert plant.state.theta_road_dot_rad_s == 0.0
     assert math.isclose(plant.state.theta_dot_rad_s, absolute, rel_tol=1e-12)
+
+
+def test_a_link_in_use_is_refused_and_a_stale_one_replaced(tmp_path):
+    import os
+
+    import pytest
+
+    from sashil.drivers.emulator.transports import Pty
+    from sashil.errors import DriverError
+
+    link = str(tmp_path / "rig")
+    first = Pty.open(link)
+    try:
+        with pytest.raises(DriverError, match="in use"):
+            Pty.open(link)
+    finally:
+        first.close()
+    os.symlink(str(tmp_path / "gone"), link)  # a stale link (its pty gone) is taken over
+    second = Pty.open(link)
+    try:
+        assert os.readlink(link) == second.path
+    finally:
+        second.close()
+    (tmp_path / "rig").write_text("not a link")
+    with pytest.raises(DriverError, match="not an emulator's link"):
+        Pty.open(link)

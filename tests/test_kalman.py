@@ -156,3 +156,9 @@ def test_estimator_settings_are_checked_like_the_rest_of_the_config(tmp_path):
     path.write_text("controller:\n  kalman_accel_psd: -1\n")
     with pytest.raises(ConfigError, match=r"controller\.kalman_accel_psd"):
         load_config(path)
+
+
+def test_the_gains_are_ready_before_the_first_sample():
+    # the first real-time cycle must not solve a Riccati equation (issue 13: first cycle on time)
+    ctl = make_controller("torque-tracking", default_config())
+    assert ctl.estimator._counts_per_rev == 4096 and len(ctl.estimator._gain) == 6

@@ -20,8 +20,20 @@ import can
 
 from sashil.drivers import can_codec
 from sashil.drivers.messages import Message
+from sashil.errors import DriverError
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.slcan_codec import SlcanAdapter, format_frame
+
+
+def check_link_free(link: str) -> None:
+    """Raise DriverError unless ``link`` is free: absent, or a symlink whose pty is gone."""
+    if os.path.islink(link):
+        target = os.readlink(link)
+        if os.path.exists(link):  # the pty it names is alive: another emulator serves it
+            raise DriverError(f"--link {link}: in use (it points to {target}, a live pty); stop that emulator or choose another")
+        return
+    if os.path.exists(link):
+        raise DriverError(f"--link {link}: a file is there that is not an emulator's link; choose another path")
 
 
 @dataclass
@@ -35,6 +47,10 @@ class Pty:
 
     @classmethod
     def open(cls, link: str | None = None) -> Pty:
+        """A new pty; ``link``: a symlink to it. A link that points to a live pty (another emulator's)
+        is refused; a stale one (its pty gone) is replaced; any other file there is refused."""
+        if link:
+            check_link_free(link)
         master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no line editing: bytes pass unchanged
         os.set_blocking(master, False)

@@ -180,6 +180,11 @@ class KalmanRigEstimator(EstimatorOutputs):
         self._warmup_cycles = round(WARMUP_S / self._dt)
         super().__init__()
 
+    def prepare(self, counts_per_rev: int) -> None:
+        """Compute the gains for an encoder of ``counts_per_rev`` now (before the loop starts); a
+        sample with another resolution recomputes them."""
+        self._set_resolution(int(counts_per_rev))
+
     def _set_resolution(self, counts_per_rev: int) -> None:
         q = TWO_PI / counts_per_rev
         var = q * q / 12.0 + self.angle_noise_rad**2

@@ -24,6 +24,9 @@ class BoucWenObserver:
     def __init__(self, params: BoucWenParams, z0: float = 0.0):
         self.params = params
         self.hysteresis = BoucWenZ.from_params(params)
+        # compile (or load from numba's cache) the z-update now, not in the first real-time cycle:
+        # over a link that first cycle would otherwise stall about 0.5 s (issue 13)
+        self.hysteresis.advance(0.0, 1e-9)
         self.z = float(z0)
         self.torque_nm = 0.0
         self._theta = 0.0

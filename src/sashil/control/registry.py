@@ -133,7 +133,7 @@ def make_estimator(
 ) -> RigEstimator | KalmanRigEstimator:
     """The ``controller.estimator``: the rig-model Kalman filter or the fixed-bandwidth tracking filters."""
     if section.get("estimator", "kalman") == "kalman":
-        return KalmanRigEstimator(
+        estimator = KalmanRigEstimator(
             1.0 / rate_hz,
             accel_psd=float(section["kalman_accel_psd"]),
             road_jerk_psd=float(section["kalman_road_jerk_psd"]),
@@ -143,6 +143,9 @@ def make_estimator(
             commanded_road_jerk_psd=float(section["kalman_road_jerk_psd_commanded"]),
             quantisation=str(section["kalman_quantisation"]),
         )
+        # the gains now, not in the first real-time cycle (the device confirms the resolution)
+        estimator.prepare(int(config["rig"]["encoder_counts_per_rev"]))
+        return estimator
     return RigEstimator(
         float(section["estimator_bandwidth_hz"]),
         float(section["road_bandwidth_hz"]),
