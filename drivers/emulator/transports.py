@@ -20,9 +20,9 @@ import can
 
 from sashil.drivers import can_codec
 from sashil.drivers.messages import Message
-from sashil.errors import DriverError
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.slcan_codec import SlcanAdapter, format_frame
+from sashil.errors import DriverError
 
 
 def check_link_free(link: str) -> None:
@@ -30,7 +30,9 @@ def check_link_free(link: str) -> None:
     if os.path.islink(link):
         target = os.readlink(link)
         if os.path.exists(link):  # the pty it names is alive: another emulator serves it
-            raise DriverError(f"--link {link}: in use (it points to {target}, a live pty); stop that emulator or choose another")
+            raise DriverError(
+                f"--link {link}: in use (it points to {target}, a live pty); stop that emulator or choose another"
+            )
         return
     if os.path.exists(link):
         raise DriverError(f"--link {link}: a file is there that is not an emulator's link; choose another path")
