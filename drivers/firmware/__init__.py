@@ -1,0 +1,100 @@
+"""The interface board's logic in portable C (issue 17), built for the host and loaded with ctypes.
+
+So far: the serial framing of protocol v1 (``sashil_frame.c``: CRC-16, COBS, frame encode/decode, a
+stream decoder), tested byte for byte against :mod:`sashil.drivers.serial_codec`. The board logic
+(session, watchdog, samples), the CAN frames, ``emulate --board c`` and the Cortex-M4 build are not
+written yet.
+
+:func:`load` compiles the C sources with the system C compiler (``$CC``, else ``cc``) into a shared
+library in a cache folder named by the hash of the sources and the flags (``$SASHIL_CACHE`` or
+``~/.cache/sashil``), once, and loads it with ctypes: no build step at install time, a changed
+source rebuilds itself, and a machine without a compiler gets one line saying so.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from sashil.errors import DriverError
+
+SOURCES = ("sashil_frame.c",)
+HEADERS = ("sashil_frame.h",)
+CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fPIC", "-shared")
+HERE = Path(__file__).resolve().parent
+
+
+def compiler() -> str | None:
+    """The C compiler to use: ``$CC`` or ``cc``/``gcc``/``clang`` on the PATH, else None."""
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return name
+    return None
+
+
+def library_path() -> Path:
+    """Build (once per source hash) and return the shared library's path; DriverError if impossible."""
+    cc = compiler()
+    if cc is None:
+        raise DriverError("firmware: no C compiler found (install gcc or set CC) to build the board's C code")
+    digest = hashlib.sha256(" ".join(CFLAGS).encode())
+    for name in (*SOURCES, *HEADERS):
+        digest.update((HERE / name).read_bytes())
+    cache = Path(os.environ.get("SASHIL_CACHE") or Path.home() / ".cache" / "sashil") / "firmware"
+    target = cache / f"libsashil_board-{digest.hexdigest()[:16]}.so"
+    if target.exists():
+        return target
+    cache.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        built = Path(tmp) / target.name
+        done = subprocess.run(
+            [cc, *CFLAGS, "-o", str(built), *(str(HERE / s) for s in SOURCES)],
+            capture_output=True,
+            text=True,
+        )
+        if done.returncode != 0:
+            first = (done.stderr.strip().splitlines() or ["?"])[0]
+            raise DriverError(f"firmware: {cc} could not build the board's C code: {first}")
+        os.replace(built, target)  # atomic: a concurrent build of the same sources is harmless
+    return target
+
+
+def load() -> ctypes.CDLL:
+    """The C board library with its function signatures declared."""
+    lib = ctypes.CDLL(str(library_path()))
+    u8p = ctypes.POINTER(ctypes.c_uint8)
+    lib.sashil_crc16.argtypes = (u8p, ctypes.c_size_t)
+    lib.sashil_crc16.restype = ctypes.c_uint16
+    lib.sashil_frame_encode.argtypes = (ctypes.c_uint8, ctypes.c_uint16, u8p, ctypes.c_uint8, u8p, ctypes.c_size_t)
+    lib.sashil_frame_encode.restype = ctypes.c_size_t
+    lib.sashil_frame_decode.argtypes = (
+        u8p,
+        ctypes.c_size_t,
+        u8p,
+        ctypes.POINTER(ctypes.c_uint16),
+        u8p,
+        u8p,
+    )
+    lib.sashil_frame_decode.restype = ctypes.c_int
+    lib.sashil_stream_feed.argtypes = (ctypes.c_void_p, ctypes.c_uint8, u8p, ctypes.POINTER(ctypes.c_uint16), u8p, u8p)
+    lib.sashil_stream_feed.restype = ctypes.c_int
+    lib.sashil_stream_init.argtypes = (ctypes.c_void_p,)
+    lib.sashil_stream_init.restype = None
+    return lib
+
+
+class StreamState(ctypes.Structure):
+    """``sashil_stream`` of sashil_frame.h (the same layout)."""
+
+    _fields_ = [
+        ("buf", ctypes.c_uint8 * 40),
+        ("n", ctypes.c_size_t),
+        ("skipping", ctypes.c_int),
+        ("frames", ctypes.c_uint32),
+        ("bad_frames", ctypes.c_uint32),
+    ]
