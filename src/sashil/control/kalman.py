@@ -18,7 +18,7 @@ sends none)::
 with white noises of spectral densities ``accel_psd`` (w_a), ``road_jerk_psd`` (w_j; the smaller
 ``commanded_road_jerk_psd`` while a plan commands the road) and ``bias_psd`` (w_b). Measurements
 each cycle: the arm encoder ``y_arm = theta + theta1`` and the road encoder ``y_road = theta1``,
-each quantised to one count ``q = 2*pi/counts_per_rev``, read in one of two ways:
+each quantised to one count ``q = 2*pi/counts_per_rev``, read in one of these ways:
 
 * ``noise`` (the default): the angle plus white noise of variance ``q^2/12`` (plus the configured
   angle noise);
@@ -27,10 +27,11 @@ each quantised to one count ``q = 2*pi/counts_per_rev``, read in one of two ways
   it: while the prediction stays there the filter follows the model alone instead of being kicked
   by every count edge. One count, not the half-count cell of one encoder: the relative angle is the
   difference of two quantised angles. The road's zone applies only while the plan commands the road.
-  With an exact model on an undisturbed loop this lowers the worst tracking error at 4096
-  counts/rev; but an estimate knocked off by a host stall, or a model 10 % off, can sit anywhere in
-  the zone with nothing pulling it back, and the worst case grows by half. Measured over the
-  benchmark's dampers (``tools/bench_truth_chain.py``, README), the noise reading is the robust default;
+  On an undisturbed loop this lowers the error at 4096 counts/rev (1.2 Hz sine, identified models:
+  median 3.7 % against 6.6 %); but an estimate knocked off by a host stall can sit anywhere in the
+  zone with nothing pulling it back (the same runs with two 34 ms stalls: 18.7 % against 7.4 %).
+  Measured over the benchmark's dampers (``tools/bench_truth_chain.py``, README), the noise reading
+  is the robust default;
 * ``auto``: cell up to :data:`CELL_MODEL_MAX_COUNTS` counts/rev, noise above.
 
 The period's transition ``F`` and process noise ``Q`` come from Van Loan's matrix exponential; the
