@@ -21,6 +21,7 @@ from sashil.cli.common import (
     setup_logging,
 )
 from sashil.cli.outputs import finish_loop_run, start_can_trace
+from sashil.config.sections import LOOP
 from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.road_option import DEFAULT_SIM_ROAD, RoadStage, parse_road
@@ -70,11 +71,16 @@ def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
 
 
 def check_rate(rate: float, rig: Any, backend: str) -> float:
+    """``rate`` if the loop and the backend (``rig``'s ``max_rate_hz``, or the backend's default;
+    ``rig`` None: before it is opened) can run at it; ConfigError naming --rate otherwise."""
     if not (math.isfinite(rate) and rate > 0):
         raise ConfigError(f"--rate: expected a loop rate in Hz > 0, got {rate:g}")
     limit = backend_max_rate_hz(rig, backend)
     if limit is not None and rate > limit:
         raise ConfigError(f"--rate: {rate:g} Hz is above what the {backend} backend can do ({limit:g} Hz)")
+    top = LOOP.fields["rate_hz"].high
+    if rate > top:
+        raise ConfigError(f"--rate: {rate:g} Hz is above the loop's limit ({top:g} Hz, loop.rate_hz)")
     return float(rate)
 
 
@@ -114,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
     config = resolve_config(args)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     backend = config["driver"]["name"]
+    # the rate first: the controller's estimator gains and the device's Configure both use it
+    config["loop"]["rate_hz"] = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, None, backend)
     label, stage = build_stage(args.controller, config, args.current)
     road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if backend == "sim" else None), config)
     if backend == "sim" and road is not None:
@@ -124,8 +132,11 @@ def run(args: argparse.Namespace) -> int:
         rig = open_rig(config)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
-    rate = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, rig, backend)
-    config["loop"]["rate_hz"] = rate
+    try:  # the device's own limit, now that it is open (nothing configured or energised yet)
+        rate = check_rate(config["loop"]["rate_hz"], rig, backend)
+    except ConfigError:
+        rig.close()
+        raise
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
     folder = RunFolder.create(args.out, "run")
     live = open_live_tap(args, config, record_columns(stage), "sashil run", folder.path)

@@ -1,0 +1,37 @@
+"""Issue 13: --rate reaches the device (Configure) and the controller, and is checked before anything runs."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from sashil.cli import main
+from sashil.config import default_config
+from sashil.drivers.emulator import EmulatorThread
+
+
+def test_an_impossible_rate_is_one_line_exit_2_and_no_folder(tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["run", "--driver", "serial", "--port", "/dev/null", "--rate", "1e9", "--duration", "0.1", "--out", str(out)]
+    assert main(argv) == 2  # refused before the port is opened
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(errors) == 1 and "--rate: 1e+09 Hz is above the loop's limit (20000 Hz" in errors[0]
+    assert not out.exists()
+
+
+@pytest.mark.e2e
+def test_the_rate_is_configured_on_the_device(tmp_path):
+    with EmulatorThread(default_config(), "serial", channel="t-rate") as emu:
+        out = tmp_path / "run"
+        code = main(
+            [
+                "run", "--driver", "serial", "--port", emu.port, "--rate", "500", "--duration", "0.4",
+                "--set", "driver.sample_timeout_ms=200", "--set", "driver.link_lost_ms=2000",
+                "--out", str(out), "-q",
+            ]
+        )  # fmt: skip
+        assert code == 0
+        assert emu.device.rate_hz == 500  # Configure carried --rate
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["timing"]["rate_hz"] == 500.0
