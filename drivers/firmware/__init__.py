@@ -1,9 +1,10 @@
 """The interface board's logic in portable C (issue 17), built for the host and loaded with ctypes.
 
 So far: the serial framing of protocol v1 (``sashil_frame.c``: CRC-16, COBS, frame encode/decode, a
-stream decoder), tested byte for byte against :mod:`sashil.drivers.serial_codec`. The board logic
-(session, watchdog, samples), the CAN frames, ``emulate --board c`` and the Cortex-M4 build are not
-written yet.
+stream decoder), tested byte for byte against :mod:`sashil.drivers.serial_codec`, and the board's
+session logic (``sashil_board.c``: Hello/Version, Configure/Status, Command and RoadSpeed, samples
+in both pacings, the watchdog for coil and road) behind a hardware-interface struct, tested through
+ctypes callbacks. The CAN frames, ``emulate --board c`` and the Cortex-M4 build are not written yet.
 
 :func:`load` compiles the C sources with the system C compiler (``$CC``, else ``cc``) into a shared
 library in a cache folder named by the hash of the sources and the flags (``$SASHIL_CACHE`` or
@@ -23,8 +24,8 @@ from pathlib import Path
 
 from sashil.errors import DriverError
 
-SOURCES = ("sashil_frame.c",)
-HEADERS = ("sashil_frame.h",)
+SOURCES = ("sashil_frame.c", "sashil_board.c")
+HEADERS = ("sashil_frame.h", "sashil_board.h")
 CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fPIC", "-shared")
 HERE = Path(__file__).resolve().parent
 
@@ -85,7 +86,43 @@ def load() -> ctypes.CDLL:
     lib.sashil_stream_feed.restype = ctypes.c_int
     lib.sashil_stream_init.argtypes = (ctypes.c_void_p,)
     lib.sashil_stream_init.restype = None
+    lib.sashil_board_size.argtypes = ()
+    lib.sashil_board_size.restype = ctypes.c_size_t
+    lib.sashil_board_init.argtypes = (
+        ctypes.c_void_p,
+        ctypes.c_void_p,
+        ctypes.c_uint32,
+        ctypes.c_uint16,
+        ctypes.c_uint16,
+    )
+    lib.sashil_board_init.restype = None
+    lib.sashil_board_receive.argtypes = (ctypes.c_void_p, u8p, ctypes.c_size_t, ctypes.c_uint64)
+    lib.sashil_board_receive.restype = None
+    lib.sashil_board_tick.argtypes = (ctypes.c_void_p, ctypes.c_uint64)
+    lib.sashil_board_tick.restype = None
     return lib
+
+
+ReadEncoders = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_int32))
+ReadCurrent = ctypes.CFUNCTYPE(ctypes.c_int16, ctypes.c_void_p)
+SetCoil = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_uint16)
+SetRoadSpeed = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int32)
+SensorFlags = ctypes.CFUNCTYPE(ctypes.c_uint8, ctypes.c_void_p)
+Send = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8), ctypes.c_size_t)
+
+
+class Hal(ctypes.Structure):
+    """``sashil_hal`` of sashil_board.h: the board's hardware interface as callbacks."""
+
+    _fields_ = [
+        ("ctx", ctypes.c_void_p),
+        ("read_encoders", ReadEncoders),
+        ("read_current", ReadCurrent),
+        ("set_coil", SetCoil),
+        ("set_road_speed", SetRoadSpeed),
+        ("sensor_flags", SensorFlags),
+        ("send", Send),
+    ]
 
 
 class StreamState(ctypes.Structure):

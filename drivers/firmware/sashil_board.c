@@ -1,0 +1,171 @@
+/* The interface board's logic, protocol v1: see sashil_board.h. */
+#include "sashil_board.h"
+
+enum { T_SAMPLE = 1, T_COMMAND = 2, T_ROAD_SPEED = 3, T_STATUS = 4, T_HELLO = 5, T_VERSION = 6, T_CONFIGURE = 7 };
+
+static void put16(uint8_t *p, uint16_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); }
+static void put32(uint8_t *p, uint32_t v) { put16(p, (uint16_t)v); put16(p + 2, (uint16_t)(v >> 16)); }
+static uint16_t get16(const uint8_t *p) { return (uint16_t)(p[0] | ((uint16_t)p[1] << 8)); }
+static uint32_t get32(const uint8_t *p) { return (uint32_t)get16(p) | ((uint32_t)get16(p + 2) << 16); }
+
+static void emit(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t *payload, uint8_t len)
+{
+    uint8_t frame[SASHIL_MAX_FRAME];
+    size_t n = sashil_frame_encode(type, seq, payload, len, frame, sizeof frame);
+    if (n > 0) {
+        b->hal.send(b->hal.ctx, frame, n);
+    }
+}
+
+static uint8_t board_flags(const sashil_board *b) { return b->watchdog_tripped ? SASHIL_FLAG_WATCHDOG : 0u; }
+
+static void reply_status(sashil_board *b, uint8_t fault)
+{
+    uint8_t p[6];
+    p[0] = board_flags(b);
+    p[1] = fault;
+    put16(p + 2, (uint16_t)b->rx.bad_frames);
+    put16(p + 4, b->watchdog_trips);
+    emit(b, T_STATUS, ++b->tx_seq, p, sizeof p);
+}
+
+static void set_drive(sashil_board *b, uint16_t counts)
+{
+    if (counts > b->current_max_counts) {
+        counts = b->current_max_counts;
+    }
+    b->drive_counts = counts;
+    b->hal.set_coil(b->hal.ctx, counts);
+}
+
+static void set_road(sashil_board *b, int32_t urad_s)
+{
+    b->road_urad_s = urad_s;
+    b->hal.set_road_speed(b->hal.ctx, urad_s);
+}
+
+static void send_sample(sashil_board *b, uint64_t now_us)
+{
+    uint8_t p[15];
+    int32_t arm = 0, road = 0;
+    b->hal.read_encoders(b->hal.ctx, &arm, &road);
+    put32(p, (uint32_t)(now_us - b->boot_us)); /* the device clock, wraps at 2^32 us */
+    put32(p + 4, (uint32_t)arm);
+    put32(p + 8, (uint32_t)road);
+    put16(p + 12, (uint16_t)b->hal.read_current(b->hal.ctx));
+    p[14] = (uint8_t)(b->hal.sensor_flags(b->hal.ctx) | board_flags(b));
+    emit(b, T_SAMPLE, ++b->sample_seq, p, sizeof p);
+}
+
+static void configure(sashil_board *b, const uint8_t *p, uint64_t now_us)
+{
+    uint16_t rate = get16(p), watchdog = get16(p + 2);
+    uint8_t pacing = p[4];
+    int rate_ok = rate >= 1u && rate <= 20000u && (b->fixed_rate_hz == 0u || rate == b->fixed_rate_hz);
+    if (!rate_ok || watchdog < 1u || pacing > SASHIL_PACING_HOST) {
+        reply_status(b, SASHIL_FAULT_BAD_CONFIGURE);
+        return;
+    }
+    b->rate_hz = rate;
+    b->watchdog_ms = watchdog;
+    b->pacing = pacing;
+    b->configured = 1;
+    b->next_sample_us = now_us;
+    set_drive(b, 0);
+    b->commanded = 0;
+    b->watchdog_tripped = 0;
+    reply_status(b, SASHIL_FAULT_NONE);
+}
+
+static void handle(sashil_board *b, uint8_t type, const uint8_t *p, uint64_t now_us)
+{
+    switch (type) {
+    case T_HELLO: {
+        uint8_t v[7];
+        v[0] = SASHIL_PROTOCOL_VERSION;
+        put32(v + 1, b->counts_per_rev);
+        put16(v + 5, b->current_max_counts);
+        emit(b, T_VERSION, ++b->tx_seq, v, sizeof v);
+        break;
+    }
+    case T_CONFIGURE:
+        configure(b, p, now_us);
+        break;
+    case T_COMMAND:
+        if (!b->configured) {
+            break; /* a Command before Configure drives nothing */
+        }
+        b->last_cmd_us = now_us;
+        b->commanded = 1;
+        b->watchdog_tripped = 0;
+        set_drive(b, (p[2] & 0x01u) ? get16(p) : 0u);
+        if (b->pacing == SASHIL_PACING_HOST) {
+            send_sample(b, now_us);
+        }
+        break;
+    case T_ROAD_SPEED:
+        set_road(b, (int32_t)get32(p));
+        break;
+    default:
+        break; /* device-to-host messages coming back: ignored */
+    }
+}
+
+void sashil_board_init(sashil_board *b, const sashil_hal *hal, uint32_t counts_per_rev, uint16_t current_max_counts,
+                       uint16_t fixed_rate_hz)
+{
+    sashil_board zero = {0};
+    *b = zero;
+    b->hal = *hal;
+    b->counts_per_rev = counts_per_rev;
+    b->current_max_counts = current_max_counts;
+    b->fixed_rate_hz = fixed_rate_hz;
+    b->rate_hz = 1000;
+    b->watchdog_ms = 50;
+    sashil_stream_init(&b->rx);
+}
+
+static void boot(sashil_board *b, uint64_t now_us)
+{
+    if (!b->booted) {
+        b->booted = 1;
+        b->boot_us = now_us;
+    }
+}
+
+void sashil_board_receive(sashil_board *b, const uint8_t *bytes, size_t n, uint64_t now_us)
+{
+    uint8_t type = 0, len = 0, payload[SASHIL_MAX_PAYLOAD];
+    uint16_t seq = 0;
+    boot(b, now_us);
+    for (size_t i = 0; i < n; i++) {
+        if (sashil_stream_feed(&b->rx, bytes[i], &type, &seq, payload, &len) == 1) {
+            handle(b, type, payload, now_us);
+        }
+    }
+}
+
+void sashil_board_tick(sashil_board *b, uint64_t now_us)
+{
+    boot(b, now_us);
+    if (b->commanded && !b->watchdog_tripped && now_us - b->last_cmd_us >= (uint64_t)b->watchdog_ms * 1000u) {
+        b->watchdog_tripped = 1;
+        b->watchdog_trips++;
+        set_drive(b, 0);
+        if (b->road_urad_s != 0) {
+            set_road(b, 0); /* coil and road to rest */
+        }
+        reply_status(b, SASHIL_FAULT_NONE);
+    }
+    if (b->configured && b->pacing == SASHIL_PACING_DEVICE && now_us >= b->next_sample_us) {
+        send_sample(b, now_us);
+        uint64_t period = 1000000u / b->rate_hz;
+        b->next_sample_us += period;
+        if (b->next_sample_us <= now_us) { /* fell behind by a whole period: do not burst */
+            b->overruns++;
+            b->next_sample_us = now_us + period;
+        }
+    }
+}
+
+size_t sashil_board_size(void) { return sizeof(sashil_board); }

@@ -1,0 +1,141 @@
+"""Issue 17 (started): the board's session logic in C, driven through its hardware interface from Python.
+
+The C board gets protocol frames made by serial_codec.py; what it sends is decoded with the Python
+stream decoder; the hardware interface is a set of Python callbacks (encoders, current sense, coil,
+road motor). Time is simulated (microseconds passed to receive/tick).
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import pytest
+
+from sashil.drivers import firmware
+from sashil.drivers.interface import FLAG_HELD, FLAG_WATCHDOG
+from sashil.drivers.messages import (
+    CMD_ENABLE,
+    FAULT_BAD_CONFIGURE,
+    PACING_DEVICE,
+    PACING_HOST,
+    Command,
+    Configure,
+    Hello,
+    RoadSpeed,
+    Sample,
+    Status,
+    Version,
+)
+from sashil.drivers.serial_codec import StreamDecoder, encode_frame
+
+if firmware.compiler() is None:  # pragma: no cover - the machine has no C compiler
+    pytest.skip("no C compiler on this machine (install gcc or set CC)", allow_module_level=True)
+
+LIB = firmware.load()
+MS = 1000  # us
+
+
+class Board:
+    """The C board with a fake rig behind its hardware interface."""
+
+    def __init__(self, counts_per_rev: int = 4096, current_max_counts: int = 2000, fixed_rate_hz: int = 0):
+        self.arm, self.road, self.current_counts, self.hw_flags = 100, -7, 321, FLAG_HELD
+        self.coil: list[tuple[int, int]] = []  # (time us, setpoint counts)
+        self.road_speed: list[tuple[int, int]] = []
+        self.now = 0
+        self.out = StreamDecoder()
+        self.sent: list[tuple[int, object]] = []
+
+        def read_encoders(_ctx, arm, road):
+            arm[0], road[0] = self.arm, self.road
+
+        def send(_ctx, data, n):
+            self.sent += self.out.feed(bytes(data[:n]))
+
+        self._callbacks = (  # kept alive as long as the board
+            firmware.ReadEncoders(read_encoders),
+            firmware.ReadCurrent(lambda _ctx: self.current_counts),
+            firmware.SetCoil(lambda _ctx, counts: self.coil.append((self.now, counts))),
+            firmware.SetRoadSpeed(lambda _ctx, speed: self.road_speed.append((self.now, speed))),
+            firmware.SensorFlags(lambda _ctx: self.hw_flags),
+            firmware.Send(send),
+        )
+        self.hal = firmware.Hal(None, *self._callbacks)
+        self.board = ctypes.create_string_buffer(LIB.sashil_board_size())
+        LIB.sashil_board_init(self.board, ctypes.byref(self.hal), counts_per_rev, current_max_counts, fixed_rate_hz)
+        self._seq = 0
+
+    def send_host(self, msg, at_us: int) -> list:
+        """Deliver one host message at ``at_us``; returns what the board sent in reply."""
+        self.now = at_us
+        self._seq += 1
+        frame = encode_frame(msg, self._seq)
+        before = len(self.sent)
+        LIB.sashil_board_receive(self.board, (ctypes.c_uint8 * len(frame)).from_buffer_copy(frame), len(frame), at_us)
+        return [m for _, m in self.sent[before:]]
+
+    def ticks(self, start_us: int, stop_us: int, step_us: int = MS, command=None) -> list:
+        before = len(self.sent)
+        for t in range(start_us, stop_us, step_us):
+            if command is not None:
+                self.send_host(command, t)
+            self.now = t
+            LIB.sashil_board_tick(self.board, t)
+        return [m for _, m in self.sent[before:]]
+
+
+def test_hello_and_configure_answer_as_the_protocol_says():
+    b = Board()
+    assert b.send_host(Hello(1), 0) == [Version(1, 4096, 1.0)]  # 2000 counts of 0.5 mA
+    assert b.send_host(Configure(1000, 50, PACING_DEVICE), 0) == [Status(0, 0, 0, 0)]
+    assert [s for s, _ in b.sent] == [1, 2]  # replies numbered in order
+    fixed = Board(fixed_rate_hz=500)
+    assert fixed.send_host(Configure(1000, 50, PACING_DEVICE), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+    assert fixed.send_host(Configure(500, 0, PACING_DEVICE), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+
+
+def test_device_pacing_sends_one_sample_per_period_with_the_rigs_readings():
+    b = Board()
+    assert b.ticks(0, 5 * MS) == []  # nothing before Configure
+    b.send_host(Configure(1000, 50, PACING_DEVICE), 5 * MS)
+    got = [m for m in b.ticks(5 * MS, 105 * MS, step_us=MS // 4) if isinstance(m, Sample)]
+    assert len(got) == 100
+    assert [s.device_time_us for s in got[:3]] == [5000, 6000, 7000]  # the clock from the board's boot
+    assert got[0] == Sample(5000, 100, -7, 321 * 0.0005, FLAG_HELD)
+
+
+def test_command_drives_the_coil_clamped_and_host_pacing_answers_with_a_sample():
+    b = Board()
+    b.send_host(Configure(1000, 50, PACING_HOST), 0)
+    assert b.send_host(Command(0.8, CMD_ENABLE), MS) == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD)]
+    assert b.coil[-1] == (MS, 1600)
+    b.send_host(Command(5.0, CMD_ENABLE), 2 * MS)
+    assert b.coil[-1] == (2 * MS, 2000)  # clamped to i_max
+    b.send_host(Command(0.9, 0), 3 * MS)
+    assert b.coil[-1] == (3 * MS, 0)  # no ENABLE bit: 0 A
+    assert Board().send_host(Command(0.9, CMD_ENABLE), 0) == [] and Board().coil == []  # before Configure: nothing
+
+
+def test_watchdog_rests_coil_and_road_at_its_time_and_the_next_command_clears_it():
+    b = Board()
+    b.send_host(Configure(1000, 50, PACING_DEVICE), 0)
+    b.send_host(RoadSpeed(1.5), MS)
+    b.ticks(MS, 20 * MS, command=Command(0.8, CMD_ENABLE))  # last command at 19 ms
+    got = b.ticks(20 * MS, 100 * MS)
+    assert b.coil[-1] == (69 * MS, 0) and b.road_speed[-1] == (69 * MS, 0)  # 19 + 50 ms
+    statuses = [m for m in got if isinstance(m, Status)]
+    assert statuses == [Status(FLAG_WATCHDOG, 0, 0, 1)]
+    flagged = [s for s in got if isinstance(s, Sample) and s.flags & FLAG_WATCHDOG]
+    assert flagged and flagged[0].device_time_us == 69 * MS
+    got = b.ticks(100 * MS, 102 * MS, command=Command(0.3, CMD_ENABLE))
+    assert not [s for s in got if isinstance(s, Sample)][-1].flags & FLAG_WATCHDOG and b.coil[-1][1] == 600
+
+
+def test_garbage_from_the_host_is_counted_and_reported_never_drives_the_coil():
+    b = Board()
+    b.send_host(Configure(1000, 50, PACING_DEVICE), 0)
+    junk = bytes(range(1, 200)) + b"\x00" + b"\x05\x01\x02\x00"
+    LIB.sashil_board_receive(b.board, (ctypes.c_uint8 * len(junk)).from_buffer_copy(junk), len(junk), MS)
+    assert b.coil == [(0, 0)]  # only Configure's 0 A
+    status = b.send_host(Configure(1000, 50, PACING_DEVICE), 2 * MS)
+    assert status[0].bad_frames == 2
