@@ -88,6 +88,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         enable(parser)
     args = parser.parse_args(argv)
+    from sashil.recording.run_folder import CREATED
+
+    CREATED.clear()  # this invocation's folders only (main() may run many times in one process)
     try:
         return int(args._module.run(args) or 0)
     except SashilError as err:
