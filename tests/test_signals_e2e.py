@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -16,29 +18,37 @@ pytestmark = pytest.mark.e2e
 REAL_CLOCK = ["--set", "driver.clock=real"]
 
 
-def _stop_when_running(args: list[str], out: Path, sig: int, started: str) -> subprocess.CompletedProcess:
-    """Start ``sashil ARGS --out OUT`` on the real clock; once ``OUT/started`` exists plus 0.5 s of
-    running, send ``sig``; return the finished process."""
+def _stop_when_running(args: list[str], out: Path, sig: int) -> subprocess.CompletedProcess:
+    """Start ``sashil ARGS --out OUT -v`` on the real clock; once its loop says it is running, send
+    ``sig``; return the finished process."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sashil", *args, *REAL_CLOCK, "--out", str(out), "-q"],
+        [sys.executable, "-m", "sashil", *args, *REAL_CLOCK, "--out", str(out), "-v"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+    lines: queue.Queue[str] = queue.Queue()
+    reader = threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr], daemon=True)  # type: ignore[union-attr]
+    reader.start()
+    seen = []
     try:
-        deadline = time.monotonic() + 60
-        while not (out / started).exists():
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "the run never started"
-            time.sleep(0.05)
-        time.sleep(0.5)  # into the loop (the process compiles and configures first)
+        while True:
+            line = lines.get(timeout=120)
+            seen.append(line)
+            if line.startswith("loop: running"):
+                break
+        time.sleep(0.3)  # some cycles into the loop
         proc.send_signal(sig)
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout = proc.stdout.read() if proc.stdout else ""
+        proc.wait(timeout=60)
+        reader.join(timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
-            proc.communicate()
-    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+            proc.wait()
+    while not lines.empty():
+        seen.append(lines.get())
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, "".join(seen))
 
 
 def _rows(path: Path) -> int:
@@ -48,7 +58,7 @@ def _rows(path: Path) -> int:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_a_signal_during_a_drop_test_keeps_its_data_and_summary(tmp_path, sig):
     out = tmp_path / "drop"
-    done = _stop_when_running(["drop-test", "--duration", "30"], out, sig, "config.yaml")
+    done = _stop_when_running(["drop-test", "--duration", "30"], out, sig)
     assert done.returncode == 130, done.stderr
     assert len([line for line in done.stderr.splitlines() if "error" in line]) <= 1
     summary = json.loads((out / "summary.json").read_text())
@@ -59,9 +69,7 @@ def test_a_signal_during_a_drop_test_keeps_its_data_and_summary(tmp_path, sig):
 
 def test_sighup_during_a_sweep_keeps_its_data_and_summary(tmp_path):
     out = tmp_path / "sweep"
-    done = _stop_when_running(
-        ["sweep", "--f-start", "1", "--f-stop", "1", "--duration", "30"], out, signal.SIGHUP, "config.yaml"
-    )
+    done = _stop_when_running(["sweep", "--f-start", "1", "--f-stop", "1", "--duration", "30"], out, signal.SIGHUP)
     assert done.returncode == 130, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "stopped" and "SIGHUP" in summary["error"]
@@ -70,7 +78,7 @@ def test_sighup_during_a_sweep_keeps_its_data_and_summary(tmp_path):
 
 def test_sighup_during_a_run_writes_its_summary(tmp_path):
     out = tmp_path / "run"
-    done = _stop_when_running(["run", "--duration", "30", "--current", "0.3"], out, signal.SIGHUP, "config.yaml")
+    done = _stop_when_running(["run", "--duration", "30", "--current", "0.3"], out, signal.SIGHUP)
     assert done.returncode == 130, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "stopped"

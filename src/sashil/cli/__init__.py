@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import NoReturn
 
 from sashil import __version__
@@ -22,6 +25,7 @@ from sashil.errors import (
     DeadlineMissedError,
     SafetyTrip,
     SashilError,
+    Stopped,
 )
 
 #: verb -> module (DESIGN.md fixed verbs)
@@ -81,6 +85,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextmanager
+def _stop_outside_the_loop() -> Iterator[None]:
+    """SIGTERM and SIGHUP outside the control loop (starting up, writing the results) end the verb
+    like SIGINT does: :class:`~sashil.errors.Stopped`, one line, exit 130 — not a death by signal.
+    Inside the loop, the loop's own handlers stop it cleanly at the next cycle (data and summary)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: object) -> None:
+        raise Stopped(f"stopped by {signal.Signals(signum).name} before the loop ran or after it ended")
+
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     if argv is None:  # a shell asking for completions (argcomplete, when installed) is answered here
@@ -92,7 +116,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     CREATED.clear()  # this invocation's folders only (main() may run many times in one process)
     try:
-        return int(args._module.run(args) or 0)
+        with _stop_outside_the_loop():
+            return int(args._module.run(args) or 0)
     except SashilError as err:
         if err.exit_code == ConfigError.exit_code:  # bad input: nothing written (issue 13)
             from sashil.recording.run_folder import discard_unused

@@ -163,6 +163,7 @@ class ControlLoop:
         try:
             rig.configure()
             rig.activate()
+            log.debug("loop: running at %g Hz", self.rate_hz)  # after activate: stops from here are clean
             read, write, step = rig.read, rig.write, stage.step
             check = safety.check if safety is not None else None
             limit = safety.limit if safety is not None else None
