@@ -228,3 +228,55 @@ def test_a_drop_test_takes_a_simulated_operators_flagged_hold_wherever_it_is(fla
     assert (plan.phase == "held") is held
     if held:  # flagged by the device: taken where it is, with the warning in held_elsewhere
         assert plan.held_elsewhere and plan.hold_angle == pytest.approx(math.radians(-5.0), abs=math.radians(0.1))
+
+
+def _drop_result(step, gap_at_s: float | None):
+    from sashil.calibrate.rig import StepResult
+
+    t = np.arange(0.0, 3.0, 1e-3)
+    theta = -0.087 * np.exp(-t) * np.cos(10 * t)  # a decaying swing: the fit would use all of it
+    keep = np.ones(t.size, dtype=bool)
+    if gap_at_s is not None:
+        keep &= ~((t > gap_at_s) & (t < gap_at_s + 0.08))  # 80 ms of samples lost to a host pause
+    columns = {"time_s": t[keep], "theta_rad": theta[keep], "current_a": np.full(keep.sum(), step.current_a)}
+    return StepResult(step, columns, -5.0, True, None, {})
+
+
+def test_gap_cut_finds_a_host_pause_inside_the_record_and_ignores_one_after_it():
+    from sashil.calibrate.analysis import gap_cut
+
+    step = plan_from_config(default_config()).fit_steps()[0]
+    assert gap_cut(_drop_result(step, None), 4096) is None
+    assert gap_cut(_drop_result(step, 0.42), 4096) == pytest.approx(0.42, abs=2e-3)
+
+
+def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tmp_path, monkeypatch):
+    from sashil.calibrate import session
+
+    calls: list[str] = []
+
+    def run_step(config, step):  # the first run of each step loses samples to a host pause
+        calls.append(step.name)
+        return _drop_result(step, 0.42 if calls.count(step.name) == 1 else None)
+
+    monkeypatch.setattr(session, "run_step", run_step)
+
+    class PlanDone(Exception):
+        pass
+
+    def analyse(*args, **kwargs):  # the plan ran to its end: stop before the fit
+        raise PlanDone
+
+    monkeypatch.setattr(session, "analyse", analyse)
+    said: list[str] = []
+    config = default_config()
+    config["calibrate"].update(SMALL_PLAN)
+    with pytest.raises(PlanDone):
+        session.calibrate_rig(config, tmp_path / "c", say=said.append)
+    names = [s.name for s in plan_from_config(config).steps]
+    assert calls == [name for name in names for _ in (1, 2)]  # each step once more, no more
+    repeats = [line for line in said if "link gap" in line]
+    assert len(repeats) == len(names) and "0.42 s after the release" in repeats[0] and "(1 of 2)" in repeats[0]
+    for name in names:
+        data = (tmp_path / "c" / "runs" / name / "data.csv").read_text().splitlines()
+        assert len(data) == 3001  # the repeat's whole record, header included

@@ -114,6 +114,17 @@ def until_gap(columns: dict[str, np.ndarray], gap_s: float = GAP_S) -> dict[str,
     return {k: v[:end] for k, v in columns.items()}
 
 
+def gap_cut(result: StepResult, counts_per_rev: int) -> float | None:
+    """Where a link gap cuts the part of ``result``'s record the fit would use: the time of the last
+    row kept [s from the release], or None when no gap falls inside it (see :func:`until_gap`)."""
+    cols = trimmed(result.columns, counts_per_rev) if result.step.road is None else result.columns
+    t = cols.get("time_s")
+    if t is None or t.size == 0:
+        return None
+    kept = until_gap(cols)["time_s"]
+    return None if kept.size == t.size else float(kept[-1])
+
+
 def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Record]:
     """Fit records of the steps: drops cut once at rest; a step whose release was estimated from
     the data (a link: the bench or the emulator) starts at its first turning point."""

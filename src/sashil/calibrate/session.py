@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from sashil.calibrate.analysis import Calibration, analyse
+from sashil.calibrate.analysis import Calibration, analyse, gap_cut
 from sashil.calibrate.plan import Plan, plan_from_config
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
@@ -20,6 +20,9 @@ from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
 from sashil.recording.run_folder import RunFolder
+
+#: times a step is repeated when a link gap (a host pause that lost samples) cuts its record short
+GAP_REPEATS = 2
 
 
 @dataclass
@@ -64,6 +67,7 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
         "exit_status": "ok" if res.error is None else "error",
         "error": None if res.error is None else str(res.error),
         "link": res.extra.get("link"),
+        "gap_repeats": res.extra.get("gap_repeats", 0),
     }
 
 
@@ -88,7 +92,10 @@ def calibrate_rig(
     ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
     ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
     Bad input (config, inertia, a plan at one current) raises ConfigError before anything is
-    energised or written. A step that fails on the link is repeated once; a step that fails (a
+    energised or written. A step that fails on the link is repeated once, and one whose record a
+    link gap cut short (a host pause lost samples the fit needs) up to GAP_REPEATS times, keeping
+    the longest record (on the emulator, whose operator cannot hear the prompt, a repeat shifts the
+    angles it holds at; the fit uses the angle each record starts from); a step that fails (a
     lost link, a stuck encoder, a safety trip) ends the plan: the runs so far and ``summary.json``
     are written and the step's error is raised.
     Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
@@ -106,6 +113,7 @@ def calibrate_rig(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
         f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
+    counts_per_rev = config["rig"]["encoder_counts_per_rev"]
     results: list[StepResult] = []
     started = time.perf_counter()
     failure: SashilError | None = None
@@ -126,6 +134,25 @@ def calibrate_rig(
             else:
                 if again.error is None:
                     result = again
+        for attempt in range(1, GAP_REPEATS + 1):  # a host pause lost samples inside the record
+            cut_at = gap_cut(result, counts_per_rev) if result.error is None else None
+            if cut_at is None:
+                break
+            say(
+                f"  {step.name}: a link gap {cut_at:.2f} s after the release cut the record short; "
+                f"repeating it ({attempt} of {GAP_REPEATS})"
+            )
+            try:
+                again = run_step(config, step)
+            except SashilError as err:  # cannot even open the link again: keep the cut record
+                say(f"  the repeat failed ({err})")
+                break
+            if again.error is not None:
+                break  # keep the record cut short (the fit leaves it out if too short)
+            again_cut = gap_cut(again, counts_per_rev)
+            if again_cut is None or again_cut > cut_at:
+                result = again
+            result.extra["gap_repeats"] = attempt
         error = result.error
         if (
             not results
