@@ -1,7 +1,8 @@
 /* Sanitizer harness for the C firmware (built with -fsanitize=address,undefined by
  * tests/test_firmware_fuzz.py): garbage of every length 0..2047 bytes into the COBS decoder, the frame
  * decoder, the byte stream decoder and the board itself (behind a stub hardware interface), and
- * good frames cut and corrupted at every byte. Exit 0 and "ok ..." when every bad frame was counted
+ * good frames cut and corrupted at every byte, and random CAN frames of every length on every id into a
+ * board on the CAN link. Exit 0 and "ok ..." when every bad frame was counted
  * and nothing good came out of garbage longer than a frame. */
 #include <stdio.h>
 #include <string.h>
@@ -38,11 +39,21 @@ static void send(void *ctx, const uint8_t *bytes, size_t n) {
     for (i = 0; i < n; i++) sent_bytes += bytes[i] != 0xA5u; /* touch every byte (ASan checks the reads) */
 }
 
+static unsigned long can_sent;
+static void send_can(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
+    uint8_t i;
+    (void)ctx;
+    if (len > 8u || id > 0x7FFu) can_sent += 1000000ul; /* a frame no CAN controller could send */
+    for (i = 0; i < len; i++) can_sent += data[i] != 0xA5u;
+}
+
 int main(void) {
     static uint8_t data[2048], out[64];
     sashil_stream stream;
     static sashil_board board;
-    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send};
+    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send, send_can};
+    static sashil_board can_board;
+    static const uint16_t can_ids[] = {0x100u, 0x110u, 0x111u, 0x120u, 0x180u, 0x1F0u, 0x1F1u, 0x1F2u, 0x7FFu};
     uint8_t type, payload[SASHIL_MAX_PAYLOAD], len, frame[SASHIL_MAX_FRAME];
     uint16_t seq;
     size_t n, i, cap, out_len, flen;
@@ -96,6 +107,26 @@ int main(void) {
             sashil_board_receive(&board, bent, flen, now);
             sashil_board_tick(&board, now);
         }
+    }
+    /* CAN: every host id (and others) with every length 0..8 and random data, into a live session */
+    sashil_board_init(&can_board, &hal, 4096u, 2000u, 0u);
+    sashil_board_set_link(&can_board, SASHIL_LINK_CAN);
+    {
+        static const uint8_t can_configure[5] = {0xE8u, 0x03u, 50u, 0u, 0u};
+        unsigned long wrong = 0;
+        sashil_board_receive_can(&can_board, 0x1F0u, can_configure, 5u, now);
+        for (n = 0; n < 20000u; n++) {
+            uint8_t d[8], l = (uint8_t)(next_byte() % 9u);
+            uint16_t id = can_ids[next_byte() % (sizeof can_ids / sizeof can_ids[0])];
+            for (i = 0; i < 8u; i++) d[i] = next_byte();
+            wrong += (id == 0x100u && l != 5u) || (id == 0x120u && l != 4u) || (id == 0x1F0u && l != 5u) ||
+                     (id == 0x1F1u && l != 1u);
+            now += 50u;
+            sashil_board_receive_can(&can_board, id, d, l, now);
+            sashil_board_tick(&can_board, now);
+        }
+        if (sashil_board_bad_frames(&can_board) != wrong) return 6; /* every wrong length counted, no other */
+        if (can_sent == 0u || can_sent >= 1000000ul) return 7;
     }
     if (stream.frames != good || stream.bad_frames != bad) return 4;
     if (sent_bytes == 0u) return 5; /* the session was answered between the garbage */

@@ -15,6 +15,7 @@ from sashil.drivers.can_codec import database
 from sashil.drivers.emulator import EmulatorThread, Faults
 from sashil.drivers.emulator import device as device_module
 from sashil.drivers.emulator.transports import Pty
+from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import RigCommand, RigState
 from sashil.errors import DriverError, DriverIOError
 
@@ -30,6 +31,7 @@ def host_config(driver: str, port: str, interface: str = "slcan", pacing: str = 
 
 
 LINKS = [("serial", "serial", "slcan"), ("slcan", "can", "slcan"), ("virtual", "can", "virtual")]
+BOARDS = ["python", pytest.param("c", marks=pytest.mark.skipif(compiler() is None, reason="no C compiler"))]
 
 
 def wait_for(rig, predicate, cycles=2000, current=0.0):
@@ -41,11 +43,12 @@ def wait_for(rig, predicate, cycles=2000, current=0.0):
     raise AssertionError("condition not reached")
 
 
+@pytest.mark.parametrize("board", BOARDS)
 @pytest.mark.parametrize("transport, driver, interface", LINKS)
 @pytest.mark.parametrize("pacing", ["device", "host"])
-def test_backend_session_drives_and_stops_the_coil(transport, driver, interface, pacing):
+def test_backend_session_drives_and_stops_the_coil(transport, driver, interface, pacing, board):
     config = default_config()
-    with EmulatorThread(config, transport, channel=f"t-{transport}-{pacing}") as emu:
+    with EmulatorThread(config, transport, channel=f"t-{transport}-{pacing}", board=board) as emu:
         with open_rig(host_config(driver, emu.port, interface, pacing)) as rig:  # closed however the test ends
             rig.configure()
             assert emu.device.configured and emu.device.drive_a == 0.0
@@ -137,9 +140,10 @@ def test_unknown_can_interface_and_missing_port():
         open_rig(config)
 
 
+@pytest.mark.parametrize("board", BOARDS)
 @pytest.mark.parametrize("transport, driver", [("serial", "serial"), ("slcan", "can")])
-def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, driver):
-    emu = EmulatorThread(default_config(), transport, faults=Faults(disconnect_after_s=0.05))
+def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, driver, board):
+    emu = EmulatorThread(default_config(), transport, faults=Faults(disconnect_after_s=0.05), board=board)
     with emu:
         with open_rig(host_config(driver, emu.port)) as rig:
             rig.configure()
@@ -152,8 +156,9 @@ def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, d
             rig.close()
 
 
-def test_corrupt_frames_are_counted_and_the_run_goes_on():
-    with EmulatorThread(default_config(), "serial", faults=Faults(corrupt_rate=0.05, seed=1)) as emu:
+@pytest.mark.parametrize("board", BOARDS)
+def test_corrupt_frames_are_counted_and_the_run_goes_on(board):
+    with EmulatorThread(default_config(), "serial", faults=Faults(corrupt_rate=0.05, seed=1), board=board) as emu:
         with open_rig(host_config("serial", emu.port)) as rig:
             rig.configure()
             rig.activate()

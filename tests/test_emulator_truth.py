@@ -19,12 +19,15 @@ from sashil.cli import main
 from sashil.config import default_config
 from sashil.drivers import open_rig
 from sashil.drivers.emulator import TRUTH_COLUMNS, EmulatorThread, TruthLog, read_truth_csv
+from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import TWO_PI, RigCommand
 from sashil.errors import DataFileError
 from sashil.models.plant import RigPlant
 from sashil.models.registry import rig_params
 
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
+
+NEEDS_CC = pytest.mark.skipif(compiler() is None, reason="no C compiler")
 
 
 def mismatched_config() -> dict:
@@ -81,11 +84,12 @@ def test_read_truth_csv_header_only_and_bad_header(tmp_path):
 
 
 @pytest.mark.e2e
+@pytest.mark.parametrize("board", ["python", pytest.param("c", marks=NEEDS_CC)])
 @pytest.mark.parametrize("transport, driver", [("serial", "serial"), ("slcan", "can")])
-def test_truth_rows_match_the_samples_the_host_received(transport, driver):
+def test_truth_rows_match_the_samples_the_host_received(transport, driver, board):
     config = mismatched_config()
     truth = TruthLog()
-    with EmulatorThread(config, transport, truth=truth) as emu:
+    with EmulatorThread(config, transport, truth=truth, board=board) as emu:
         samples = host_session(driver, emu.port, 300)
         plant = emu.device.rig.plant
     # the emulator's plant is the mismatched one (SimulatedRig.from_config applies config["mismatch"])

@@ -11,7 +11,8 @@ import ctypes
 
 import pytest
 
-from sashil.drivers import firmware
+from sashil.drivers import can_codec, firmware
+from sashil.drivers.can_codec import CanDecoder
 from sashil.drivers.interface import FLAG_HELD, FLAG_WATCHDOG
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -45,12 +46,20 @@ class Board:
         self.now = 0
         self.out = StreamDecoder()
         self.sent: list[tuple[int, object]] = []
+        self.can_frames: list[tuple[int, bytes]] = []  # what the board put on the bus, exactly
+        self.can_out = CanDecoder()
 
         def read_encoders(_ctx, arm, road):
             arm[0], road[0] = self.arm, self.road
 
         def send(_ctx, data, n):
             self.sent += self.out.feed(bytes(data[:n]))
+
+        def send_can(_ctx, can_id, data, n):
+            self.can_frames.append((can_id, bytes(data[:n])))
+            got = self.can_out.feed(can_id, bytes(data[:n]))
+            if got is not None:
+                self.sent.append(got)
 
         self._callbacks = (  # kept alive as long as the board
             firmware.ReadEncoders(read_encoders),
@@ -59,11 +68,25 @@ class Board:
             firmware.SetRoadSpeed(lambda _ctx, speed: self.road_speed.append((self.now, speed))),
             firmware.SensorFlags(lambda _ctx: self.hw_flags),
             firmware.Send(send),
+            firmware.SendCan(send_can),
         )
         self.hal = firmware.Hal(None, *self._callbacks)
         self.board = ctypes.create_string_buffer(LIB.sashil_board_size())
         LIB.sashil_board_init(self.board, ctypes.byref(self.hal), counts_per_rev, current_max_counts, fixed_rate_hz)
         self._seq = 0
+
+    def use_can(self) -> Board:
+        LIB.sashil_board_set_link(self.board, 1)
+        return self
+
+    def send_can(self, msg, at_us: int, seq: int = 0) -> list:
+        """Deliver one host message as the DBC's CAN frames at ``at_us``; returns the board's replies."""
+        self.now = at_us
+        before = len(self.sent)
+        for can_id, data in can_codec.encode(msg, seq):
+            buf = (ctypes.c_uint8 * len(data)).from_buffer_copy(data)
+            LIB.sashil_board_receive_can(self.board, can_id, buf, len(data), at_us)
+        return [m for _, m in self.sent[before:]]
 
     def send_host(self, msg, at_us: int) -> list:
         """Deliver one host message at ``at_us``; returns what the board sent in reply."""
@@ -139,3 +162,56 @@ def test_garbage_from_the_host_is_counted_and_reported_never_drives_the_coil():
     assert b.coil == [(0, 0)]  # only Configure's 0 A
     status = b.send_host(Configure(1000, 50, PACING_DEVICE), 2 * MS)
     assert status[0].bad_frames == 2
+
+
+def test_over_can_the_board_sends_exactly_the_frames_of_the_python_codec():
+    b = Board().use_can()
+    assert b.send_can(Hello(1), 0) == [Version(1, 4096, 1.0)]
+    assert b.send_can(Configure(1000, 50, PACING_HOST), 0) == [Status(0, 0, 0, 0)]
+    sample = b.send_can(Command(0.8, CMD_ENABLE), MS, seq=7)
+    assert sample == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD)] and b.coil[-1] == (MS, 1600)
+    expected = [
+        *can_codec.encode(Version(1, 4096, 1.0)),
+        *can_codec.encode(Status(0, 0, 0, 0)),
+        *can_codec.encode(Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD), seq=1),
+    ]
+    assert b.can_frames == expected  # ids, lengths and bytes (the sample split in SampleA + SampleB)
+    assert b.can_frames[-2:] == [
+        (0x110, bytes.fromhex("64000000f9ffffff")),  # arm 100, road -7
+        (0x111, bytes.fromhex("0100e80300410102")),  # seq 1, 1000 us, 321 counts, flags 0x02 (held)
+    ]
+
+
+def test_over_can_the_device_clock_wraps_at_24_bits_and_road_speed_and_watchdog_act():
+    b = Board().use_can()
+    b.send_can(Configure(1000, 50, PACING_DEVICE), 0)
+    b.send_can(RoadSpeed(-1.25), MS)
+    assert b.road_speed[-1] == (MS, -1_250_000)
+    LIB.sashil_board_tick(b.board, (1 << 24) + 5)  # past the 24-bit device time of SampleB
+    assert b.can_frames[-1][0] == 0x111 and b.can_frames[-1][1][2:5] == bytes([5, 0, 0])
+
+
+def test_a_can_frame_of_the_wrong_length_is_counted_and_ignored_others_ids_too():
+    b = Board().use_can()
+    b.send_can(Configure(1000, 50, PACING_HOST), 0)
+    short = (ctypes.c_uint8 * 3)(1, 2, 3)
+    LIB.sashil_board_receive_can(b.board, 0x100, short, 3, MS)  # a Command of 3 bytes
+    LIB.sashil_board_receive_can(b.board, 0x7FF, short, 3, MS)  # another node's frame: not ours
+    LIB.sashil_board_receive_can(b.board, 0x111, short, 3, MS)  # the board's own id: ignored
+    assert b.coil == [(0, 0)] and LIB.sashil_board_bad_frames(b.board) == 1
+    assert b.send_can(Configure(1000, 50, PACING_HOST), 2 * MS) == [Status(0, 0, 1, 0)]
+
+
+def test_next_event_is_the_due_sample_or_the_watchdog_deadline_and_sessions_count():
+    b = Board()
+    assert LIB.sashil_board_next_event_us(b.board) == (1 << 64) - 1  # nothing to do before Configure
+    b.send_host(Configure(500, 50, PACING_DEVICE), 10 * MS)
+    assert LIB.sashil_board_next_event_us(b.board) == 10 * MS and LIB.sashil_board_sessions(b.board) == 1
+    b.ticks(10 * MS, 11 * MS)
+    assert LIB.sashil_board_next_event_us(b.board) == 12 * MS  # 500 Hz
+    host = Board()
+    host.send_host(Configure(1000, 20, PACING_HOST), 0)
+    host.send_host(Command(0.1, CMD_ENABLE), 3 * MS)
+    assert LIB.sashil_board_next_event_us(host.board) == 23 * MS  # only the watchdog, 20 ms on
+    host.send_host(Configure(1000, 20, PACING_HOST), 4 * MS)
+    assert LIB.sashil_board_sessions(host.board) == 2

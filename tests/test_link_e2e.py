@@ -18,24 +18,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sashil.drivers.firmware import compiler
+
 pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
 
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 COUNT_DEG = 360.0 / 4096  # encoder resolution (rig.encoder_counts_per_rev default)
 DRIVERS = [("serial", "serial"), ("slcan", "can")]
+BOARDS = ["python", pytest.param("c", marks=pytest.mark.skipif(compiler() is None, reason="no C compiler"))]
 
 
 class Emulator:
-    def __init__(self, tmp: Path, transport: str, *flags: str):
+    def __init__(self, tmp: Path, transport: str, board: str, *flags: str):
         self.link = str(tmp / f"rig-{transport}")
+        command = [*SASHIL, "emulate", "--transport", transport, "--link", self.link, "--duration", "120"]
         self.proc = subprocess.Popen(
-            [*SASHIL, "emulate", "--transport", transport, "--link", self.link, "--duration", "120", *flags],
+            [*command, "--board", board, *flags],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
         line = self.proc.stdout.readline()  # "sashil emulate: serial rig on /dev/pts/N (link ...)"
         assert "rig on /dev/" in line, line + self.proc.stderr.read()
+        assert f"({board} board)" in line
         assert os.path.islink(self.link)
 
     def stop(self) -> str:
@@ -45,12 +50,13 @@ class Emulator:
         return err
 
 
-@pytest.fixture
-def emulator(tmp_path):
+@pytest.fixture(params=BOARDS)
+def emulator(tmp_path, request):
+    """``sashil emulate`` with each board: the firmware's C logic and the Python one (issue 17)."""
     started = []
 
     def start(transport, *flags):
-        emu = Emulator(tmp_path, transport, *flags)
+        emu = Emulator(tmp_path, transport, request.param, *flags)
         started.append(emu)
         return emu
 

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sashil.drivers.emulator.truth import TruthLog
+from sashil.drivers.emulator.wire import Payload
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample, clamp_current
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -168,7 +169,7 @@ class RigDevice:
         return min(events) if events else None
 
     # host messages ---------------------------------------------------------------------------
-    def handle(self, msg: Message, now_ns: int) -> list[tuple[int, Message]]:
+    def handle(self, msg: Payload, now_ns: int) -> list[tuple[int, Message]]:
         """Act on one message from the host; returns the replies as (seq, message)."""
         if self.boot_ns is None:
             self.boot_ns = now_ns
@@ -183,7 +184,7 @@ class RigDevice:
             self._advance(now_ns)
             self.road.set_speed(self.rig.plant, msg.speed_rad_s)
             return []
-        return []  # device-to-host messages coming back: ignore
+        return []  # device-to-host messages coming back, or raw wire (for a C board): ignore
 
     def _configure(self, msg: Configure, now_ns: int) -> Status:
         rate_ok = 1 <= msg.rate_hz <= 20_000 and self.fixed_rate_hz in (None, msg.rate_hz)

@@ -16,7 +16,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.transports import (
@@ -27,10 +27,18 @@ from sashil.drivers.emulator.transports import (
     VirtualCanTransport,
 )
 from sashil.drivers.emulator.truth import TruthLog
-from sashil.drivers.messages import Message
+from sashil.drivers.emulator.wire import Payload
 from sashil.drivers.sim import SimulatedRig
 
 MAX_WAIT_S = 0.02  # upper bound of one wait (keeps stop requests responsive)
+
+if TYPE_CHECKING:
+    from sashil.drivers.emulator.c_board import CBoardDevice
+
+    Board = RigDevice | CBoardDevice
+
+
+BOARDS = ("python", "c")
 
 
 def build_device(
@@ -39,10 +47,22 @@ def build_device(
     faults: Faults | None = None,
     fixed_rate_hz: int | None = None,
     truth: TruthLog | None = None,
-) -> RigDevice:
+    board: str = "python",
+    link: str = "serial",
+) -> Board:
     """The emulated board around the simulated rig the config describes (model, rig and mismatch
-    sections: ``SimulatedRig.from_config``); ``truth`` records the plant's state at each sample."""
-    device = RigDevice(SimulatedRig.from_config(config), operator, faults, fixed_rate_hz)
+    sections: ``SimulatedRig.from_config``); ``truth`` records the plant's state at each sample.
+    ``board``: ``python`` (:class:`RigDevice`) or ``c`` (the firmware's C logic,
+    :class:`~sashil.drivers.emulator.c_board.CBoardDevice`, which needs a C compiler; DriverError
+    if there is none); ``link``: ``serial`` or ``can``, the frames the C board speaks."""
+    rig = SimulatedRig.from_config(config)
+    if board == "c":
+        from sashil.drivers.emulator.c_board import CBoardDevice
+
+        return CBoardDevice(rig, link, operator, faults, fixed_rate_hz, truth)
+    if board != "python":
+        raise ValueError(f"board: expected one of {', '.join(BOARDS)}, got {board!r}")
+    device = RigDevice(rig, operator, faults, fixed_rate_hz)
     device.truth = truth
     return device
 
@@ -51,13 +71,13 @@ def build_device(
 class EmulatorStats:
     stopped_by: str = ""  # "stop", "duration", "disconnect"
     stalled: bool = False
-    delayed: list[tuple[int, int, int, Message, bool]] = field(default_factory=list)
+    delayed: list[tuple[int, int, int, Payload, bool]] = field(default_factory=list)
 
 
 class Emulator:
     """The device loop (see module docstring)."""
 
-    def __init__(self, device: RigDevice, transport: DeviceTransport, clock: Callable[[], int] = time.monotonic_ns):
+    def __init__(self, device: Board, transport: DeviceTransport, clock: Callable[[], int] = time.monotonic_ns):
         self.device = device
         self.transport = transport
         self.clock = clock
@@ -98,7 +118,7 @@ class Emulator:
                 received = transport.receive(max(wait_ns, 0) * 1e-9)
                 now = self.clock()
                 device.bad_frames = transport.bad_frames
-                out: list[tuple[int, Message]] = []
+                out: list[tuple[int, Payload]] = []
                 for _seq, msg in received:
                     out += device.handle(msg, now)
                 out += device.tick(now)
@@ -128,7 +148,7 @@ class Emulator:
         return why
 
     # output with fault injection ---------------------------------------------------------
-    def _emit(self, seq: int, msg: Message, now: int) -> None:
+    def _emit(self, seq: int, msg: Payload, now: int) -> None:
         faults = self.device.faults
         if faults.drop():
             return
@@ -150,11 +170,23 @@ class Emulator:
             self.transport.send(seq, msg, corrupt)
 
 
+def open_transport(
+    transport: str, raw: bool, channel: str = "sashil-emulator", link: str | None = None
+) -> DeviceTransport:
+    """The device side of ``transport``: ``serial`` or ``slcan`` on a new pty (``link``: a symlink
+    to it), or ``virtual`` (python-can's bus ``channel``); ``raw`` for a board that frames itself."""
+    if transport == "virtual":
+        return VirtualCanTransport(channel, raw)
+    pty = Pty.open(link)
+    return SerialPtyTransport(pty, raw) if transport == "serial" else SlcanPtyTransport(pty, raw)
+
+
 class EmulatorThread:
     """An emulator serving in a thread of this process (tests, benchmarks).
 
     ``transport``: ``serial`` or ``slcan`` (a pty; the host opens :attr:`port`) or ``virtual``
-    (python-can's virtual bus; :attr:`port` is the channel name). ``truth``: see :func:`build_device`.
+    (python-can's virtual bus; :attr:`port` is the channel name). ``truth``, ``board``: see
+    :func:`build_device`.
     """
 
     def __init__(
@@ -165,15 +197,12 @@ class EmulatorThread:
         faults: Faults | None = None,
         channel: str = "sashil-emulator",
         truth: TruthLog | None = None,
+        board: str = "python",
     ):
-        self.device = build_device(config, operator, faults, truth=truth)
-        if transport == "virtual":
-            self.link: DeviceTransport = VirtualCanTransport(channel)
-            self.port = channel
-        else:
-            pty = Pty.open()
-            self.link = SerialPtyTransport(pty) if transport == "serial" else SlcanPtyTransport(pty)
-            self.port = pty.path
+        link = "serial" if transport == "serial" else "can"
+        self.device = build_device(config, operator, faults, truth=truth, board=board, link=link)
+        self.link = open_transport(transport, board == "c", channel)
+        self.port = channel if transport == "virtual" else self.link.description
         self.emulator = Emulator(self.device, self.link)
         self.result: str | None = None
         self._thread = threading.Thread(target=self._run, name="sashil-emulator", daemon=True)

@@ -14,12 +14,13 @@ import os
 import select
 import tty
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import can
 
 from sashil.drivers import can_codec
-from sashil.drivers.messages import Message
+from sashil.drivers.emulator.wire import Payload, WireBytes, WireCan
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.slcan_codec import SlcanAdapter, format_frame
 from sashil.errors import DriverError
@@ -82,7 +83,8 @@ class DeviceTransport(ABC):
 
     description = "link"
 
-    def __init__(self) -> None:
+    def __init__(self, raw: bool = False) -> None:
+        self.raw = raw  # hand the board the wire (WireBytes/WireCan) instead of decoded messages
         self.tx_frames = 0
         self.tx_dropped = 0  # frames the link could not take (host not reading, channel closed)
         self.tx_corrupted = 0
@@ -93,18 +95,18 @@ class DeviceTransport(ABC):
         """Frames from the host that could not be decoded."""
 
     @abstractmethod
-    def receive(self, timeout_s: float) -> list[tuple[int, Message]]: ...
+    def receive(self, timeout_s: float) -> list[tuple[int, Payload]]: ...
 
     @abstractmethod
-    def send(self, seq: int, msg: Message, corrupt: bool = False) -> None: ...
+    def send(self, seq: int, msg: Payload, corrupt: bool = False) -> None: ...
 
     @abstractmethod
     def close(self) -> None: ...
 
 
 class _PtyTransport(DeviceTransport):
-    def __init__(self, pty: Pty):
-        super().__init__()
+    def __init__(self, pty: Pty, raw: bool = False):
+        super().__init__(raw)
         self.pty = pty
         self.description = pty.path
 
@@ -139,20 +141,26 @@ class _PtyTransport(DeviceTransport):
 class SerialPtyTransport(_PtyTransport):
     """sashil serial frames (serial_codec) on a pty."""
 
-    def __init__(self, pty: Pty):
-        super().__init__(pty)
+    def __init__(self, pty: Pty, raw: bool = False):
+        super().__init__(pty, raw)
         self.decoder = StreamDecoder()
 
     @property
     def bad_frames(self) -> int:
         return self.decoder.counters.bad_frames
 
-    def receive(self, timeout_s: float) -> list[tuple[int, Message]]:
+    def receive(self, timeout_s: float) -> list[tuple[int, Payload]]:
         data = self._read(timeout_s)
-        return self.decoder.feed(data) if data else []
+        if not data:
+            return []
+        if self.raw:
+            return [(0, WireBytes(data))]
+        return list(self.decoder.feed(data))
 
-    def send(self, seq: int, msg: Message, corrupt: bool = False) -> None:
-        frame = encode_frame(msg, seq)
+    def send(self, seq: int, msg: Payload, corrupt: bool = False) -> None:
+        if isinstance(msg, WireCan):
+            raise TypeError("a serial link carries no CAN frames")
+        frame = msg.data if isinstance(msg, WireBytes) else encode_frame(msg, seq)
         if corrupt:
             frame = corrupt_frame(frame)
             self.tx_corrupted += 1
@@ -169,11 +177,37 @@ def corrupt_frame(frame: bytes) -> bytes:
     return bytes(damaged)
 
 
-class SlcanPtyTransport(_PtyTransport):
+def can_frames(msg: Payload, seq: int) -> list[tuple[int, bytes]]:
+    """The CAN frames carrying ``msg`` (a board's own frame passes unchanged)."""
+    if isinstance(msg, WireCan):
+        return [(msg.can_id, msg.data)]
+    if isinstance(msg, WireBytes):
+        raise TypeError("a CAN link carries no serial bytes")
+    return can_codec.encode(msg, seq)
+
+
+class _CanSide:
+    """What a CAN transport does with the frames on the bus: decode them, or hand them over raw."""
+
+    raw: bool
+    decoder: can_codec.CanDecoder
+
+    def _on_bus(self, frames: Iterable[tuple[int, bytes]]) -> list[tuple[int, Payload]]:
+        if self.raw:
+            return [(0, WireCan(can_id, data)) for can_id, data in frames]
+        out: list[tuple[int, Payload]] = []
+        for can_id, data in frames:
+            got = self.decoder.feed(can_id, data)
+            if got is not None:
+                out.append(got)
+        return out
+
+
+class SlcanPtyTransport(_CanSide, _PtyTransport):
     """An SLCAN (LAWICEL) adapter on a pty with the rig on its CAN bus."""
 
-    def __init__(self, pty: Pty):
-        super().__init__(pty)
+    def __init__(self, pty: Pty, raw: bool = False):
+        super().__init__(pty, raw)
         self.adapter = SlcanAdapter()
         self.decoder = can_codec.CanDecoder()
 
@@ -181,39 +215,32 @@ class SlcanPtyTransport(_PtyTransport):
     def bad_frames(self) -> int:
         return self.decoder.counters.bad_frames + self.adapter.errors
 
-    def receive(self, timeout_s: float) -> list[tuple[int, Message]]:
+    def receive(self, timeout_s: float) -> list[tuple[int, Payload]]:
         data = self._read(timeout_s)
         if not data:
             return []
         replies, frames = self.adapter.feed(data)
         if replies:
             self._write(replies)
-        out = []
-        for can_id, payload, extended in frames:
-            if extended:
-                continue
-            got = self.decoder.feed(can_id, payload)
-            if got is not None:
-                out.append(got)
-        return out
+        return self._on_bus(((can_id, payload) for can_id, payload, extended in frames if not extended))
 
-    def send(self, seq: int, msg: Message, corrupt: bool = False) -> None:
+    def send(self, seq: int, msg: Payload, corrupt: bool = False) -> None:
         if corrupt:
             self.tx_corrupted += 1
             return  # a bad-CRC frame never reaches the host's CAN controller
         if not self.adapter.is_open:
             self.tx_dropped += 1  # adapter channel closed: bus traffic is not forwarded
             return
-        lines = b"".join(format_frame(can_id, data) for can_id, data in can_codec.encode(msg, seq))
+        lines = b"".join(format_frame(can_id, data) for can_id, data in can_frames(msg, seq))
         if self._write(lines):
             self.tx_frames += 1
 
 
-class VirtualCanTransport(DeviceTransport):
+class VirtualCanTransport(_CanSide, DeviceTransport):
     """The rig as a node on python-can's in-process ``virtual`` bus (tests)."""
 
-    def __init__(self, channel: str):
-        super().__init__()
+    def __init__(self, channel: str, raw: bool = False):
+        super().__init__(raw)
         self.channel = channel
         self.description = f"virtual:{channel}"
         self.bus = can.Bus(interface="virtual", channel=channel)
@@ -223,21 +250,20 @@ class VirtualCanTransport(DeviceTransport):
     def bad_frames(self) -> int:
         return self.decoder.counters.bad_frames
 
-    def receive(self, timeout_s: float) -> list[tuple[int, Message]]:
-        out = []
+    def receive(self, timeout_s: float) -> list[tuple[int, Payload]]:
+        frames = []
         frame = self.bus.recv(max(timeout_s, 0.0))
         while frame is not None:
-            got = self.decoder.feed(frame.arbitration_id, bytes(frame.data))
-            if got is not None:
-                out.append(got)
+            if not frame.is_extended_id:
+                frames.append((frame.arbitration_id, bytes(frame.data)))
             frame = self.bus.recv(0.0)
-        return out
+        return self._on_bus(frames)
 
-    def send(self, seq: int, msg: Message, corrupt: bool = False) -> None:
+    def send(self, seq: int, msg: Payload, corrupt: bool = False) -> None:
         if corrupt:
             self.tx_corrupted += 1
             return
-        for can_id, data in can_codec.encode(msg, seq):
+        for can_id, data in can_frames(msg, seq):
             self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
         self.tx_frames += 1
 

@@ -100,6 +100,20 @@ def load() -> ctypes.CDLL:
     lib.sashil_board_receive.restype = None
     lib.sashil_board_tick.argtypes = (ctypes.c_void_p, ctypes.c_uint64)
     lib.sashil_board_tick.restype = None
+    lib.sashil_board_set_link.argtypes = (ctypes.c_void_p, ctypes.c_uint8)
+    lib.sashil_board_set_link.restype = None
+    lib.sashil_board_receive_can.argtypes = (ctypes.c_void_p, ctypes.c_uint16, u8p, ctypes.c_uint8, ctypes.c_uint64)
+    lib.sashil_board_receive_can.restype = None
+    lib.sashil_board_next_event_us.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_next_event_us.restype = ctypes.c_uint64
+    lib.sashil_board_sessions.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_sessions.restype = ctypes.c_uint16
+    lib.sashil_board_watchdog_trips.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_watchdog_trips.restype = ctypes.c_uint16
+    lib.sashil_board_overruns.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_overruns.restype = ctypes.c_uint32
+    lib.sashil_board_bad_frames.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_bad_frames.restype = ctypes.c_uint32
     return lib
 
 
@@ -109,6 +123,7 @@ SetCoil = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_uint16)
 SetRoadSpeed = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int32)
 SensorFlags = ctypes.CFUNCTYPE(ctypes.c_uint8, ctypes.c_void_p)
 Send = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8), ctypes.c_size_t)
+SendCan = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_uint16, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint8)
 
 
 class Hal(ctypes.Structure):
@@ -122,6 +137,7 @@ class Hal(ctypes.Structure):
         ("set_road_speed", SetRoadSpeed),
         ("sensor_flags", SensorFlags),
         ("send", Send),
+        ("send_can", SendCan),
     ]
 
 

@@ -8,9 +8,41 @@ static void put32(uint8_t *p, uint32_t v) { put16(p, (uint16_t)v); put16(p + 2, 
 static uint16_t get16(const uint8_t *p) { return (uint16_t)(p[0] | ((uint16_t)p[1] << 8)); }
 static uint32_t get32(const uint8_t *p) { return (uint32_t)get16(p) | ((uint32_t)get16(p + 2) << 16); }
 
+/* A message as the DBC's CAN frames: the payloads are the serial ones, but for the Sample (split in
+ * SampleA: arm, road; SampleB: seq, 24-bit device time, current, flags) and the Command (seq first). */
+static void emit_can(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t *p, uint8_t len)
+{
+    uint8_t d[8];
+    switch (type) {
+    case T_SAMPLE:
+        b->hal.send_can(b->hal.ctx, SASHIL_CAN_SAMPLE_A, p + 4, 8);
+        put16(d, seq);
+        d[2] = p[0];
+        d[3] = p[1];
+        d[4] = p[2]; /* device time, low 24 bits */
+        d[5] = p[12];
+        d[6] = p[13];
+        d[7] = p[14];
+        b->hal.send_can(b->hal.ctx, SASHIL_CAN_SAMPLE_B, d, 8);
+        break;
+    case T_STATUS:
+        b->hal.send_can(b->hal.ctx, SASHIL_CAN_STATUS, p, len);
+        break;
+    case T_VERSION:
+        b->hal.send_can(b->hal.ctx, SASHIL_CAN_VERSION, p, len);
+        break;
+    default:
+        break; /* the board sends nothing else */
+    }
+}
+
 static void emit(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t *payload, uint8_t len)
 {
     uint8_t frame[SASHIL_MAX_FRAME];
+    if (b->link == SASHIL_LINK_CAN) {
+        emit_can(b, type, seq, payload, len);
+        return;
+    }
     size_t n = sashil_frame_encode(type, seq, payload, len, frame, sizeof frame);
     if (n > 0) {
         b->hal.send(b->hal.ctx, frame, n);
@@ -24,7 +56,7 @@ static void reply_status(sashil_board *b, uint8_t fault)
     uint8_t p[6];
     p[0] = board_flags(b);
     p[1] = fault;
-    put16(p + 2, (uint16_t)b->rx.bad_frames);
+    put16(p + 2, (uint16_t)sashil_board_bad_frames(b));
     put16(p + 4, b->watchdog_trips);
     emit(b, T_STATUS, ++b->tx_seq, p, sizeof p);
 }
@@ -70,6 +102,7 @@ static void configure(sashil_board *b, const uint8_t *p, uint64_t now_us)
     b->watchdog_ms = watchdog;
     b->pacing = pacing;
     b->configured = 1;
+    b->sessions++;
     b->next_sample_us = now_us;
     set_drive(b, 0);
     b->commanded = 0;
@@ -167,5 +200,56 @@ void sashil_board_tick(sashil_board *b, uint64_t now_us)
         }
     }
 }
+
+void sashil_board_set_link(sashil_board *b, uint8_t link) { b->link = link; }
+
+void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data, uint8_t len, uint64_t now_us)
+{
+    uint8_t type, want;
+    boot(b, now_us);
+    switch (id) {
+    case SASHIL_CAN_COMMAND:
+        type = T_COMMAND, want = 5;
+        break;
+    case SASHIL_CAN_ROAD_SPEED:
+        type = T_ROAD_SPEED, want = 4;
+        break;
+    case SASHIL_CAN_CONFIGURE:
+        type = T_CONFIGURE, want = 5;
+        break;
+    case SASHIL_CAN_HELLO:
+        type = T_HELLO, want = 1;
+        break;
+    default:
+        return; /* another node's frame, or the board's own ids */
+    }
+    if (len != want) {
+        b->can_bad_frames++;
+        return;
+    }
+    /* a CAN Command carries its sequence number first; the rest are the serial payloads */
+    handle(b, type, type == T_COMMAND ? data + 2 : data, now_us);
+}
+
+uint64_t sashil_board_next_event_us(const sashil_board *b)
+{
+    uint64_t next = UINT64_MAX;
+    if (b->configured && b->pacing == SASHIL_PACING_DEVICE) {
+        next = b->next_sample_us;
+    }
+    if (b->commanded && !b->watchdog_tripped) {
+        uint64_t deadline = b->last_cmd_us + (uint64_t)b->watchdog_ms * 1000u;
+        next = deadline < next ? deadline : next;
+    }
+    return next;
+}
+
+uint16_t sashil_board_sessions(const sashil_board *b) { return b->sessions; }
+
+uint16_t sashil_board_watchdog_trips(const sashil_board *b) { return b->watchdog_trips; }
+
+uint32_t sashil_board_overruns(const sashil_board *b) { return b->overruns; }
+
+uint32_t sashil_board_bad_frames(const sashil_board *b) { return b->rx.bad_frames + b->can_bad_frames; }
 
 size_t sashil_board_size(void) { return sizeof(sashil_board); }

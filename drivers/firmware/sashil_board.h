@@ -22,6 +22,18 @@
 #define SASHIL_FAULT_BAD_CONFIGURE 1u
 #define SASHIL_PACING_DEVICE 0u
 #define SASHIL_PACING_HOST 1u
+#define SASHIL_LINK_SERIAL 0u /* sashil serial frames (COBS + CRC-16) through hal.send */
+#define SASHIL_LINK_CAN 1u    /* the DBC's CAN frames (drivers/sashil.dbc) through hal.send_can */
+
+/* CAN identifiers (11-bit) of drivers/sashil.dbc */
+#define SASHIL_CAN_COMMAND 0x100u
+#define SASHIL_CAN_SAMPLE_A 0x110u
+#define SASHIL_CAN_SAMPLE_B 0x111u
+#define SASHIL_CAN_ROAD_SPEED 0x120u
+#define SASHIL_CAN_STATUS 0x180u
+#define SASHIL_CAN_CONFIGURE 0x1F0u
+#define SASHIL_CAN_HELLO 0x1F1u
+#define SASHIL_CAN_VERSION 0x1F2u
 
 typedef struct {
     void *ctx;
@@ -30,7 +42,8 @@ typedef struct {
     void (*set_coil)(void *ctx, uint16_t counts); /* coil current setpoint, 0.5 mA counts */
     void (*set_road_speed)(void *ctx, int32_t urad_s);
     uint8_t (*sensor_flags)(void *ctx);           /* flags the hardware adds (held, overcurrent, ...) */
-    void (*send)(void *ctx, const uint8_t *bytes, size_t n);
+    void (*send)(void *ctx, const uint8_t *bytes, size_t n);               /* one whole serial frame */
+    void (*send_can)(void *ctx, uint16_t id, const uint8_t *data, uint8_t len); /* one CAN frame */
 } sashil_hal;
 
 typedef struct {
@@ -41,7 +54,9 @@ typedef struct {
     /* session */
     int configured;
     uint16_t rate_hz, watchdog_ms;
-    uint8_t pacing;
+    uint8_t pacing, link;
+    uint16_t sessions; /* Configures honoured since boot */
+    uint32_t can_bad_frames; /* CAN frames with a known id and the wrong length */
     uint64_t boot_us, next_sample_us;
     int booted, commanded, watchdog_tripped;
     uint64_t last_cmd_us;
@@ -60,6 +75,27 @@ void sashil_board_receive(sashil_board *b, const uint8_t *bytes, size_t n, uint6
 
 /* The board's timer: watchdog, and in device pacing the sample that is due. */
 void sashil_board_tick(sashil_board *b, uint64_t now_us);
+
+/* Choose the link (SASHIL_LINK_SERIAL, the default after init, or SASHIL_LINK_CAN). */
+void sashil_board_set_link(sashil_board *b, uint8_t link);
+
+/* One CAN frame from the bus (any id: the board takes its host ids, ignores others). */
+void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data, uint8_t len, uint64_t now_us);
+
+/* When sashil_board_tick next has something to do (sample due, watchdog deadline), or UINT64_MAX:
+ * a board may sleep until then or until bytes arrive. */
+uint64_t sashil_board_next_event_us(const sashil_board *b);
+
+/* Configures honoured since boot (a new host session each). */
+uint16_t sashil_board_sessions(const sashil_board *b);
+
+/* Watchdog trips since boot (as Status reports them), and device-paced samples that fell a whole
+ * period behind. */
+uint16_t sashil_board_watchdog_trips(const sashil_board *b);
+uint32_t sashil_board_overruns(const sashil_board *b);
+
+/* Frames from the host that could not be decoded (as Status reports them). */
+uint32_t sashil_board_bad_frames(const sashil_board *b);
 
 /* sizeof(sashil_board), for a host that allocates it (the ctypes harness). */
 size_t sashil_board_size(void);

@@ -6,7 +6,6 @@ import argparse
 import math
 import signal
 import sys
-from typing import Any
 
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
 from sashil.errors import ConfigError
@@ -22,6 +21,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("serial", "slcan"),
         default="serial",
         help="sashil serial frames, or an SLCAN (LAWICEL) CAN adapter (default serial)",
+    )
+    parser.add_argument(
+        "--board",
+        choices=("auto", "c", "python"),
+        default="auto",
+        help="the board's logic: c (the firmware's C code, drivers/firmware, built with the system C compiler), "
+        "python (drivers/emulator/device.py), or auto: c where a C compiler is found (default)",
     )
     parser.add_argument(
         "--rate",
@@ -97,10 +103,20 @@ def _start_truth_file(path: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.drivers import firmware
     from sashil.drivers.emulator import Emulator, Faults, Operator, TruthLog, build_device
-    from sashil.drivers.emulator.transports import Pty, SerialPtyTransport, SlcanPtyTransport
+    from sashil.drivers.emulator.runner import open_transport
+    from sashil.errors import DriverError
 
     config = resolve_config(args)
+    board = args.board
+    if board == "auto":
+        board = "c" if firmware.compiler() is not None else "python"
+    if board == "c":
+        try:
+            firmware.library_path()  # built once per source hash; a machine that cannot build it is told why
+        except DriverError as err:
+            raise ConfigError(f"--board c: {err} (--board python runs the Python board)") from None
     rate = None
     if args.rate is not None:
         rate = int(round(positive_seconds("--rate", args.rate)))
@@ -129,12 +145,12 @@ def run(args: argparse.Namespace) -> int:
     if args.truth is not None:
         truth = TruthLog()
         _start_truth_file(args.truth)
-    device = build_device(config, operator, faults, rate, truth)
+    link_kind = "serial" if args.transport == "serial" else "can"
+    device = build_device(config, operator, faults, rate, truth, board=board, link=link_kind)
     try:
-        pty = Pty.open(args.link)
+        transport = open_transport(args.transport, raw=board == "c", link=args.link)
     except OSError as err:
         raise ConfigError(f"--link {args.link}: cannot create the link ({err.strerror})") from None
-    transport: Any = SerialPtyTransport(pty) if args.transport == "serial" else SlcanPtyTransport(pty)
     emulator = Emulator(device, transport)
 
     def _stop(signum: int, frame: object) -> None:
@@ -147,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     realtime.apply()
     handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     link = f" (link {args.link})" if args.link else ""
-    print(f"sashil emulate: {args.transport} rig on {pty.path}{link}", flush=True)
+    print(f"sashil emulate: {args.transport} rig on {transport.description}{link} ({board} board)", flush=True)
     try:
         why = emulator.run(duration)
     finally:  # the caller's scheduling and signal handlers back (sashil emulate may run in-process)
@@ -158,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
             truth.write_csv(args.truth)
             print(f"sashil emulate: truth: {len(truth)} samples written to {args.truth}", file=sys.stderr, flush=True)
     print(
-        f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {transport.bad_frames}, "
+        f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {device.bad_frames}, "
         f"frames corrupted {transport.tx_corrupted}, watchdog trips {device.watchdog_trips}, late samples {device.overruns}",
         file=sys.stderr,
         flush=True,
