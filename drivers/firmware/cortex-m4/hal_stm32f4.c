@@ -1,0 +1,335 @@
+/*
+ * The reference hardware layer of the interface board on an STM32F405/F407 (register addresses and
+ * bits from RM0090 rev 19; the registers are declared here, no vendor headers).
+ *
+ * Assumptions, to adapt to a board: an 8 MHz crystal (HSE), SYSCLK 168 MHz from the PLL (M 8, N 336,
+ * P 2, Q 7), APB1 42 MHz (timer clock 84 MHz), APB2 84 MHz (timer clock 168 MHz), 5 flash wait states
+ * (RM0090 6.3.2, 3.5.1).
+ *   arm encoder   TIM2 (32 bit) encoder mode, both edges: PA15 = CH1, PB3 = CH2 (AF1)  (RM0090 18.3.16)
+ *   road encoder  TIM5 (32 bit) encoder mode, both edges: PA0 = CH1, PA1 = CH2 (AF2)
+ *   coil driver   TIM1 CH1 PWM at 20 kHz on PA8 (AF1) into the coil's half bridge; current sense on
+ *                 ADC1 channel 10 (PC0), SENSE_MV_PER_A mV per ampere. A proportional-integral current
+ *                 loop at 10 kHz (TIM6 interrupt) sets the duty so the measured current follows the
+ *                 setpoint; above OVERCURRENT_COUNTS the drive is cut and the overcurrent flag raised.
+ *   road motor    TIM8 CH1 PWM at 20 kHz on PC6 (AF3), direction on PC7; a proportional-integral speed
+ *                 loop at 1 kHz on the road encoder's counts.
+ *   host link     USART1 at 1 Mbit/s, 8N1: PA9 = TX, PA10 = RX (AF7); received bytes go to a ring buffer
+ *                 in the receive interrupt; frames to send go to a ring emptied by the transmit interrupt
+ *                 (TXE), so the board's logic never waits for the wire: a 23-byte sample frame takes
+ *                 230 us on the wire, which caps device pacing at about 4.3 kHz on this link.
+ *   clock         the core's cycle counter (DWT CYCCNT) accumulated into microseconds.
+ * bxCAN is not wired up in this reference layer: the board logic speaks the DBC's CAN frames
+ * (sashil_board_set_link), and a CAN variant adds CAN1 on PB8/PB9 with hal.send_can.
+ */
+#include "hal_stm32f4.h"
+
+#define REG(addr) (*(volatile uint32_t *)(addr))
+
+/* RCC (RM0090 7.3) */
+#define RCC 0x40023800u
+#define RCC_CR REG(RCC + 0x00u)
+#define RCC_PLLCFGR REG(RCC + 0x04u)
+#define RCC_CFGR REG(RCC + 0x08u)
+#define RCC_AHB1ENR REG(RCC + 0x30u)
+#define RCC_APB1ENR REG(RCC + 0x40u)
+#define RCC_APB2ENR REG(RCC + 0x44u)
+#define FLASH_ACR REG(0x40023C00u)
+
+/* GPIO (RM0090 8.4) */
+#define GPIOA 0x40020000u
+#define GPIOB 0x40020400u
+#define GPIOC 0x40020800u
+#define GPIO_MODER(p) REG((p) + 0x00u)
+#define GPIO_OSPEEDR(p) REG((p) + 0x08u)
+#define GPIO_BSRR(p) REG((p) + 0x18u)
+#define GPIO_AFR(p, n) REG((p) + 0x20u + 4u * (n))
+
+/* timers (RM0090 17.4, 18.4, 20.4) */
+#define TIM1 0x40010000u
+#define TIM2 0x40000000u
+#define TIM5 0x40000C00u
+#define TIM6 0x40001000u
+#define TIM8 0x40010400u
+#define TIM_CR1(t) REG((t) + 0x00u)
+#define TIM_SMCR(t) REG((t) + 0x08u)
+#define TIM_DIER(t) REG((t) + 0x0Cu)
+#define TIM_SR(t) REG((t) + 0x10u)
+#define TIM_EGR(t) REG((t) + 0x14u)
+#define TIM_CCMR1(t) REG((t) + 0x18u)
+#define TIM_CCER(t) REG((t) + 0x20u)
+#define TIM_CNT(t) REG((t) + 0x24u)
+#define TIM_PSC(t) REG((t) + 0x28u)
+#define TIM_ARR(t) REG((t) + 0x2Cu)
+#define TIM_CCR1(t) REG((t) + 0x34u)
+#define TIM_BDTR(t) REG((t) + 0x44u)
+
+/* ADC1 (RM0090 13.13) */
+#define ADC1 0x40012000u
+#define ADC_SR REG(ADC1 + 0x00u)
+#define ADC_CR2 REG(ADC1 + 0x08u)
+#define ADC_SMPR1 REG(ADC1 + 0x0Cu)
+#define ADC_SQR3 REG(ADC1 + 0x34u)
+#define ADC_DR REG(ADC1 + 0x4Cu)
+#define ADC_CCR REG(0x40012304u)
+
+/* USART1 (RM0090 30.6) */
+#define USART1 0x40011000u
+#define USART_SR REG(USART1 + 0x00u)
+#define USART_DR REG(USART1 + 0x04u)
+#define USART_BRR REG(USART1 + 0x08u)
+#define USART_CR1 REG(USART1 + 0x0Cu)
+
+/* core: NVIC (PM0214 4.3), DWT cycle counter (ARMv7-M C1.8) */
+#define NVIC_ISER(n) REG(0xE000E100u + 4u * (n))
+#define DEMCR REG(0xE000EDFCu)
+#define DWT_CTRL REG(0xE0001000u)
+#define DWT_CYCCNT REG(0xE0001004u)
+
+#define SYSCLK_MHZ 168u
+#define PWM_PERIOD 8400u                 /* 168 MHz / 20 kHz */
+#define SENSE_MV_PER_A 1500u             /* the current-sense amplifier's gain */
+#define ADC_MV_FULL 3300u                /* 12-bit ADC, 3.3 V reference */
+#define OVERCURRENT_COUNTS 5000          /* 2.5 A in 0.5 mA counts */
+#define ENCODER_COUNTS_PER_REV 4096.0f   /* the road encoder, for the speed loop */
+#define FLAG_OVERCURRENT 0x08u           /* drivers/protocol.md, sample flags bit 3 */
+#define RX_RING 256u                     /* a power of two */
+#define TX_RING 512u                     /* a power of two: twenty sample frames */
+
+static volatile uint8_t rx_ring[RX_RING];
+static volatile uint32_t rx_head, rx_tail;
+static volatile uint8_t tx_ring[TX_RING];
+static volatile uint32_t tx_head, tx_tail;
+static volatile uint16_t coil_setpoint;  /* 0.5 mA counts */
+static volatile int16_t coil_measured;   /* 0.5 mA counts */
+static volatile uint8_t overcurrent;
+static volatile int32_t road_setpoint;   /* urad/s */
+static float coil_integral, road_integral;
+static int32_t road_last_counts;
+static uint32_t ticks;
+
+static void pin_af(uint32_t port, unsigned pin, unsigned af)
+{
+    GPIO_MODER(port) = (GPIO_MODER(port) & ~(3u << (2u * pin))) | (2u << (2u * pin));
+    GPIO_OSPEEDR(port) |= 3u << (2u * pin);
+    GPIO_AFR(port, pin / 8u) = (GPIO_AFR(port, pin / 8u) & ~(0xFu << (4u * (pin % 8u)))) | (af << (4u * (pin % 8u)));
+}
+
+static void clock_init(void)
+{
+    RCC_CR |= 1u << 16; /* HSEON */
+    while (!(RCC_CR & (1u << 17))) {
+    }
+    /* PLLM 8, PLLN 336, PLLP 2 (bits 00), PLLSRC HSE, PLLQ 7 */
+    RCC_PLLCFGR = 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    RCC_CR |= 1u << 24; /* PLLON */
+    while (!(RCC_CR & (1u << 25))) {
+    }
+    FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10); /* 5 wait states, prefetch, I- and D-cache */
+    RCC_CFGR = (5u << 10) | (4u << 13) | 2u;             /* APB1 /4, APB2 /2, SYSCLK = PLL */
+    while ((RCC_CFGR & (3u << 2)) != (2u << 2)) {
+    }
+}
+
+static void encoder_init(uint32_t tim)
+{
+    TIM_ARR(tim) = 0xFFFFFFFFu;
+    TIM_CCMR1(tim) = 1u | (1u << 8); /* CC1S = TI1, CC2S = TI2 */
+    TIM_SMCR(tim) = 3u;              /* encoder mode 3: count on both edges of both inputs */
+    TIM_CNT(tim) = 0u;
+    TIM_CR1(tim) = 1u;
+}
+
+static void pwm_init(uint32_t tim)
+{
+    TIM_PSC(tim) = 0u;
+    TIM_ARR(tim) = PWM_PERIOD - 1u;
+    TIM_CCMR1(tim) = (6u << 4) | (1u << 3); /* PWM mode 1, preload */
+    TIM_CCR1(tim) = 0u;
+    TIM_CCER(tim) = 1u;       /* CC1E */
+    TIM_BDTR(tim) = 1u << 15; /* MOE: advanced timers drive their outputs only with it */
+    TIM_EGR(tim) = 1u;
+    TIM_CR1(tim) = 1u | (1u << 7);
+}
+
+void hal_init(void)
+{
+    clock_init();
+    RCC_AHB1ENR |= 7u;                                            /* GPIOA, GPIOB, GPIOC */
+    RCC_APB1ENR |= (1u << 0) | (1u << 3) | (1u << 4);             /* TIM2, TIM5, TIM6 */
+    RCC_APB2ENR |= (1u << 0) | (1u << 1) | (1u << 4) | (1u << 8); /* TIM1, TIM8, USART1, ADC1 */
+
+    pin_af(GPIOA, 15u, 1u); /* TIM2 CH1 */
+    pin_af(GPIOB, 3u, 1u);  /* TIM2 CH2 */
+    pin_af(GPIOA, 0u, 2u);  /* TIM5 CH1 */
+    pin_af(GPIOA, 1u, 2u);  /* TIM5 CH2 */
+    encoder_init(TIM2);
+    encoder_init(TIM5);
+
+    pin_af(GPIOA, 8u, 1u); /* TIM1 CH1: coil */
+    pin_af(GPIOC, 6u, 3u); /* TIM8 CH1: road motor */
+    GPIO_MODER(GPIOC) = (GPIO_MODER(GPIOC) & ~(3u << 14)) | (1u << 14); /* PC7 output: direction */
+    pwm_init(TIM1);
+    pwm_init(TIM8);
+
+    GPIO_MODER(GPIOC) |= 3u;     /* PC0 analog: current sense */
+    ADC_CCR = 1u << 16;          /* ADCCLK = PCLK2 / 4 = 21 MHz */
+    ADC_SMPR1 = 3u;              /* channel 10: 56 cycles */
+    ADC_SQR3 = 10u;
+    ADC_CR2 = 1u;                /* ADON */
+
+    pin_af(GPIOA, 9u, 7u);
+    pin_af(GPIOA, 10u, 7u);
+    USART_BRR = 84u;             /* 84 MHz / 1 Mbit/s, oversampling by 16: 5 + 4/16 */
+    USART_CR1 = (1u << 13) | (1u << 5) | (1u << 3) | (1u << 2); /* UE, RXNEIE, TE, RE */
+    NVIC_ISER(37u / 32u) = 1u << (37u % 32u);
+
+    TIM_PSC(TIM6) = 0u;
+    TIM_ARR(TIM6) = 8399u;       /* 84 MHz / 8400 = 10 kHz */
+    TIM_DIER(TIM6) = 1u;
+    TIM_CR1(TIM6) = 1u;
+    NVIC_ISER(54u / 32u) = 1u << (54u % 32u);
+
+    DEMCR |= 1u << 24; /* TRCENA */
+    DWT_CYCCNT = 0u;
+    DWT_CTRL |= 1u;
+}
+
+#define USART_TXEIE (1u << 7)
+
+void USART1_IRQHandler(void)
+{
+    uint32_t sr = USART_SR;
+    if ((sr & (1u << 7)) && (USART_CR1 & USART_TXEIE)) { /* TXE: the next byte to send */
+        if (tx_tail != tx_head) {
+            USART_DR = tx_ring[tx_tail];
+            tx_tail = (tx_tail + 1u) & (TX_RING - 1u);
+        } else {
+            USART_CR1 &= ~USART_TXEIE; /* nothing left: quiet until hal_send */
+        }
+    }
+    if (sr & ((1u << 5) | (1u << 3))) { /* RXNE, or an overrun (reading DR clears it) */
+        uint8_t byte = (uint8_t)USART_DR;
+        uint32_t next = (rx_head + 1u) & (RX_RING - 1u);
+        if (next != rx_tail) { /* full: the byte is lost and the frame's CRC will say so */
+            rx_ring[rx_head] = byte;
+            rx_head = next;
+        }
+    }
+}
+
+static uint32_t clamp_duty(float duty)
+{
+    if (duty <= 0.0f) {
+        return 0u;
+    }
+    return duty >= (float)PWM_PERIOD ? PWM_PERIOD : (uint32_t)duty;
+}
+
+/* 10 kHz: the coil's current loop; every 10th tick the road motor's speed loop */
+void TIM6_DAC_IRQHandler(void)
+{
+    TIM_SR(TIM6) = 0u;
+    ADC_CR2 |= 1u << 30; /* SWSTART */
+    while (!(ADC_SR & 2u)) {
+    }
+    uint32_t mv = (ADC_DR & 0xFFFu) * ADC_MV_FULL / 4095u;
+    int32_t counts = (int32_t)(mv * 2000u / SENSE_MV_PER_A); /* 0.5 mA counts */
+    coil_measured = (int16_t)counts;
+    if (counts > OVERCURRENT_COUNTS) {
+        overcurrent = 1u;
+    }
+    if (overcurrent || coil_setpoint == 0u) {
+        coil_integral = 0.0f;
+        TIM_CCR1(TIM1) = 0u;
+    } else {
+        float error = (float)coil_setpoint - (float)counts;
+        coil_integral += 0.02f * error;
+        TIM_CCR1(TIM1) = clamp_duty(2.0f * error + coil_integral);
+    }
+    if (++ticks % 10u == 0u) {
+        int32_t now = (int32_t)TIM_CNT(TIM5);
+        float speed = (float)(now - road_last_counts) * (6.2831853f / ENCODER_COUNTS_PER_REV) * 1000.0f; /* rad/s */
+        road_last_counts = now;
+        float error = (float)road_setpoint * 1e-6f - speed;
+        road_integral = road_setpoint == 0 ? 0.0f : road_integral + 5.0f * error;
+        float drive = 800.0f * error + road_integral;
+        if (drive < 0.0f) {
+            GPIO_BSRR(GPIOC) = 1u << (7u + 16u);
+            drive = -drive;
+        } else {
+            GPIO_BSRR(GPIOC) = 1u << 7u;
+        }
+        TIM_CCR1(TIM8) = road_setpoint == 0 && speed == 0.0f ? 0u : clamp_duty(drive);
+    }
+}
+
+void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts)
+{
+    (void)ctx;
+    *arm_counts = (int32_t)TIM_CNT(TIM2);
+    *road_counts = (int32_t)TIM_CNT(TIM5);
+}
+
+int16_t hal_read_current(void *ctx)
+{
+    (void)ctx;
+    return coil_measured;
+}
+
+void hal_set_coil(void *ctx, uint16_t counts)
+{
+    (void)ctx;
+    coil_setpoint = counts;
+    if (counts == 0u) {
+        overcurrent = 0u; /* the host's 0 A re-arms the driver */
+    }
+}
+
+void hal_set_road_speed(void *ctx, int32_t urad_s)
+{
+    (void)ctx;
+    road_setpoint = urad_s;
+}
+
+uint8_t hal_sensor_flags(void *ctx)
+{
+    (void)ctx;
+    return overcurrent ? FLAG_OVERCURRENT : 0u;
+}
+
+void hal_send(void *ctx, const uint8_t *bytes, size_t n)
+{
+    (void)ctx;
+    uint32_t head = tx_head, free_bytes = (tx_tail - head - 1u) & (TX_RING - 1u);
+    if (n > free_bytes) {
+        return; /* the wire is behind by a whole ring: drop the frame whole (the host counts a missed sample) */
+    }
+    for (size_t i = 0; i < n; i++) {
+        tx_ring[head] = bytes[i];
+        head = (head + 1u) & (TX_RING - 1u);
+    }
+    tx_head = head;
+    USART_CR1 |= USART_TXEIE;
+}
+
+uint64_t hal_now_us(void)
+{
+    static uint32_t last_cycles, spare_cycles;
+    static uint64_t us;
+    uint32_t cycles = DWT_CYCCNT;
+    uint32_t elapsed = cycles - last_cycles + spare_cycles; /* modulo 2^32: one wrap between calls */
+    last_cycles = cycles;
+    us += elapsed / SYSCLK_MHZ;
+    spare_cycles = elapsed % SYSCLK_MHZ;
+    return us;
+}
+
+size_t hal_uart_take(uint8_t *out, size_t cap)
+{
+    size_t n = 0;
+    while (n < cap && rx_tail != rx_head) {
+        out[n++] = rx_ring[rx_tail];
+        rx_tail = (rx_tail + 1u) & (RX_RING - 1u);
+    }
+    return n;
+}

@@ -1,0 +1,24 @@
+/* The reference hardware layer of the interface board on an STM32F405/F407: see hal_stm32f4.c. */
+#ifndef SASHIL_HAL_STM32F4_H
+#define SASHIL_HAL_STM32F4_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+void hal_init(void);
+
+/* the sashil_hal callbacks (sashil_board.h), in the wire's units */
+void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts);
+int16_t hal_read_current(void *ctx);
+void hal_set_coil(void *ctx, uint16_t counts);
+void hal_set_road_speed(void *ctx, int32_t urad_s);
+uint8_t hal_sensor_flags(void *ctx);
+void hal_send(void *ctx, const uint8_t *bytes, size_t n);
+
+/* the microsecond clock (64 bits: never wraps); call at least every 25 s (the main loop does) */
+uint64_t hal_now_us(void);
+
+/* bytes received by the UART since the last call (at most cap); from the receive interrupt's ring */
+size_t hal_uart_take(uint8_t *out, size_t cap);
+
+#endif

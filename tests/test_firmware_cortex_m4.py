@@ -1,0 +1,72 @@
+"""``make -C drivers/firmware cortex-m4``: the board's firmware for an STM32F4-class Cortex-M4F, built
+with the zig C compiler of the ``ziglang`` package, checked in the ELF it produces (issue 17)."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sashil.drivers.firmware import elf
+
+pytestmark = pytest.mark.e2e  # a cross build (seconds on a cold zig cache)
+
+FIRMWARE = Path(elf.__file__).resolve().parent
+
+
+@pytest.fixture(scope="module")
+def firmware(tmp_path_factory) -> tuple[elf.Elf, str]:
+    if importlib.util.find_spec("ziglang") is None or shutil.which("make") is None:
+        pytest.skip("needs make and the ziglang package (pip install ziglang)")
+    build = tmp_path_factory.mktemp("m4")
+    done = subprocess.run(
+        ["make", "-C", str(FIRMWARE), "cortex-m4", f"PYTHON={sys.executable}", f"BUILD={build}"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    return elf.read_elf(build / "cortex-m4" / "sashil-board.elf"), done.stdout
+
+
+def test_the_elf_is_arm_with_its_vector_table_at_the_start_of_flash(firmware):
+    image, _ = firmware
+    flash_start, flash_size = elf.FLASH
+    sram_start, sram_size = elf.SRAM
+    assert image.machine == elf.EM_ARM
+    initial_sp, reset = image.word_at(flash_start), image.word_at(flash_start + 4)
+    assert sram_start < initial_sp <= sram_start + sram_size and initial_sp % 8 == 0
+    assert reset == image.symbols["Reset_Handler"] | 1 or reset == image.symbols["Reset_Handler"]
+    assert reset & 1 and flash_start <= reset < flash_start + flash_size  # Thumb code in flash
+    assert image.entry == reset
+    usart1 = image.word_at(flash_start + 4 * (16 + 37))  # RM0090 table 61: USART1 is IRQ 37
+    assert usart1 & ~1 == image.symbols["USART1_IRQHandler"] & ~1
+
+
+def test_the_real_board_logic_is_linked_and_it_fits_the_part_with_room(firmware):
+    image, printed = firmware
+    for name in ("sashil_board_receive", "sashil_board_tick", "sashil_stream_feed", "main"):
+        assert name in image.symbols, name
+    assert image.flash_bytes() < 32 * 1024 and image.ram_bytes() < 8 * 1024  # the issue's budget
+    assert f"flash {image.flash_bytes()} B" in printed and f"RAM {image.ram_bytes()} B" in printed
+
+
+def test_without_ziglang_make_says_so_in_one_line(tmp_path):
+    if shutil.which("make") is None:
+        pytest.skip("no make")
+    bare = tmp_path / "python3"
+    bare.write_text('#!/bin/sh\nexec /usr/bin/env python3 -I -S "$@"\n')  # no site-packages: no ziglang
+    bare.chmod(0o755)
+    done = subprocess.run(
+        ["make", "-C", str(FIRMWARE), "cortex-m4", f"PYTHON={bare}", f"BUILD={tmp_path / 'b'}"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode != 0
+    assert "pip install ziglang" in done.stderr
+    assert not (tmp_path / "b" / "cortex-m4" / "sashil-board.elf").exists()
