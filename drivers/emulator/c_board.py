@@ -24,8 +24,8 @@ from collections.abc import Callable
 
 from sashil.drivers import firmware
 from sashil.drivers.emulator.device import Faults, Operator, RoadWheel
-from sashil.drivers.emulator.wire import WireBytes, WireCan
 from sashil.drivers.emulator.truth import TruthLog
+from sashil.drivers.emulator.wire import WireBytes, WireCan
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, RigCommand, RigSample
 from sashil.drivers.messages import CURRENT_LSB_A, ROAD_SPEED_LSB_RAD_S, current_to_wire
 from sashil.drivers.sim import SimulatedRig
