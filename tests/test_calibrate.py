@@ -255,7 +255,7 @@ def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tm
 
     calls: list[str] = []
 
-    def run_step(config, step):  # the first run of each step loses samples to a host pause
+    def run_step(config, step, data_path=None):  # the first run of each step loses samples to a host pause
         calls.append(step.name)
         return _drop_result(step, 0.42 if calls.count(step.name) == 1 else None)
 

@@ -7,6 +7,7 @@ import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from sashil.cli import main
@@ -16,11 +17,19 @@ from sashil.recording.data_file import REQUIRED_COLUMNS, read_data_csv
 def test_single_current_run_folder(tmp_path, capsys):
     out = tmp_path / "D"
     assert main(["drop-test", "--current", "0", "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "data.csv", "drop_test.png", "summary.json"]
+    names = ["config.yaml", "cycles.csv", "data.csv", "drop_test.png", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == names
     data = read_data_csv(out / "data.csv", required=REQUIRED_COLUMNS)
     assert data["time_s"][0] == 0.0
     assert data["time_s"][-1] == pytest.approx(10.0)
     assert data["theta_rad"][0] == pytest.approx(math.radians(-5.0), abs=2 * math.pi / 4096)
+    # the runner's stream of every cycle: the hold before the release, then the same drop
+    cycles = read_data_csv(out / "cycles.csv", required=REQUIRED_COLUMNS)
+    held = int(np.argmax(np.abs(cycles["theta_rad"] - cycles["theta_rad"][0]) > 1e-9))
+    assert held > 100 and cycles["time_s"][held] > 0.3  # held still for the hold time first
+    assert cycles["time_s"].size > data["time_s"].size + 250  # the record from the release, plus the hold
+    moving = cycles["theta_rad"][held:]
+    assert np.max(moving) == pytest.approx(np.max(data["theta_rad"]), abs=1e-12)  # the same first peak
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "ok"
     (run,) = summary["runs"]

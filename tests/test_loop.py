@@ -340,3 +340,95 @@ def test_real_clock_spin_margin_is_capped_at_a_quarter_period():
     assert RealClock.for_rate(200.0, 1000.0).spin_ns == 200_000
     assert RealClock.for_rate(200.0, 5000.0).spin_ns == 50_000
     assert RealClock.for_rate(0.0, 1000.0).spin_ns == 0
+
+
+class FailingRecorder:
+    """A recorder whose disk fills up after ``rows`` rows (the writer thread sets ``error``)."""
+
+    def __init__(self, rows):
+        self.rows, self.committed = rows, 0
+        self.window_end_ns = None
+        self.error = None
+        self.path = "runs/x/data.csv"
+        self._row = [0.0] * 16
+
+    def begin_row(self):
+        return self._row
+
+    def commit_row(self):
+        self.committed += 1
+        if self.committed == self.rows:
+            self.error = OSError(28, "No space left on device")
+
+
+def test_a_recording_failure_mid_run_stops_the_loop_at_0_a():
+    from sashil.errors import RecordingError, exit_code_of
+
+    rig = FaultyRig()
+    recorder = FailingRecorder(rows=25)
+    loop = ControlLoop(rig, ConstantCurrent(0.8), VirtualClock(), 1000.0, 10.0, recorder=recorder)
+    with pytest.raises(RecordingError) as err:
+        loop.run()
+    assert "runs/x/data.csv: recording failed" in str(err.value) and "No space left" in str(err.value)
+    assert rig.calls["write"] == 25 and rig.currents[-2:] == [0.0, 0.0]  # 24 at 0.8 A, then 0 A, deactivate
+    assert rig.calls["deactivate"] == 1 and rig.calls["close"] == 1
+    assert loop.result.exit_status == "error" and exit_code_of("error", err.value) == 1
+
+
+def test_a_disk_full_under_the_session_is_exit_1_and_the_rows_so_far_kept(tmp_path, config, monkeypatch):
+    from sashil.recording import recorder as recorder_module
+
+    real_write, calls = recorder_module.os.write, []
+
+    def write(fd, data):  # the header and one batch of rows, then the disk is full
+        calls.append(len(data))
+        if len(calls) > 2:
+            raise OSError(28, "No space left on device")
+        return real_write(fd, data)
+
+    monkeypatch.setattr(recorder_module.os, "write", write)
+    rig = FaultyRig()
+    config["loop"]["rt"]["priority"] = 0
+    folder = RunFolder(tmp_path / "run")
+    folder.path.mkdir()
+    outcome = run_session(
+        config, rig, ConstantCurrent(0.5), folder, _SlowClock(), 60.0, say=lambda line: None, realtime=False
+    )
+    summary = json.loads((folder.path / "summary.json").read_text())
+    assert outcome.exit_code == 1 and summary["exit_status"] == "error"
+    assert "No space left on device" in summary["error"]
+    assert rig.currents[-1] == 0.0 and rig.calls["deactivate"] == 1
+    assert outcome.result.cycles < 60_000  # stopped when the writer failed, not at the end
+    assert len(_rows(folder.path)["time_s"]) >= 1  # what reached the disk parses
+
+
+class _SlowClock(VirtualClock):
+    """Simulated time whose cycles take a little real time, so that the writer thread runs beside."""
+
+    def sleep_until(self, t_ns):
+        import time
+
+        time.sleep(0)  # yield the interpreter to the writer thread (no wall-clock wait)
+        super().sleep_until(t_ns)
+
+
+def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tmp_path, config, monkeypatch):
+    import shutil
+
+    from sashil.errors import DiskSpaceError
+    from sashil.runtime import runner
+
+    monkeypatch.setattr(
+        runner.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 5 * 10**6, 5 * 10**6)
+    )
+    rig = FaultyRig()
+    with pytest.raises(DiskSpaceError) as err:
+        runner.run_plan(config, rig, ConstantCurrent(0.5), VirtualClock(), 3600.0, data_path=tmp_path / "data.csv")
+    text = str(err.value)
+    assert text.startswith(f"{tmp_path}: 5.0 MB free on its disk") and "3600 s at 1000 Hz" in text
+    assert rig.calls["configure"] == 0 and not (tmp_path / "data.csv").exists()
+    assert DiskSpaceError.exit_code == 2
+    monkeypatch.setattr(runner.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 9 * 10**8, 10**8))
+    assert runner.check_disk(tmp_path, 7, 1000.0, 60.0) == 60 * 7 * 1000 * runner.BYTES_PER_VALUE  # 9 MB: fits
+    with pytest.raises(DiskSpaceError, match="10 minutes \\(no --duration\\) at 5000 Hz"):
+        runner.check_disk(tmp_path, 40, 5000.0, None)  # 264 MB for an open-ended run: refused

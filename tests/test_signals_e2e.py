@@ -83,3 +83,35 @@ def test_sighup_during_a_run_writes_its_summary(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "stopped"
     assert _rows(out / "data.csv") > 100
+
+
+@pytest.mark.parametrize(
+    "verb", [["drop-test", "--duration", "30"], ["sweep", "--f-start", "1", "--f-stop", "1", "--duration", "30"]]
+)
+def test_after_kill_9_the_stream_of_cycles_holds_all_but_the_last_second(tmp_path, verb):
+    # no handler runs on SIGKILL: what is on disk is what the runner's recorder streamed (at least once a second)
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sashil", *verb, *REAL_CLOCK, "--out", str(out), "-v"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        for line in proc.stderr:  # type: ignore[union-attr]
+            if line.startswith("loop: running"):
+                break
+        started = time.monotonic()
+        time.sleep(2.5)
+        ran_s = time.monotonic() - started
+        proc.kill()
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    lines = (out / "cycles.csv").read_text().splitlines()
+    header, last = lines[0].split(","), lines[-1].split(",")
+    assert header[:2] == ["time_s", "theta_rad"] and len(last) == len(header)  # whole lines only
+    assert float(last[0]) >= ran_s - 1.2  # at most about a second lost
+    assert not (out / "summary.json").exists()

@@ -48,6 +48,18 @@ class ProtocolError(DriverIOError):
     """A frame from the device is malformed, or the device speaks another protocol version."""
 
 
+class RecordingError(SashilError):
+    """Writing the run's data failed mid-run (a full or read-only disk): the loop stops at 0 A."""
+
+    exit_code = 1
+
+
+class DiskSpaceError(SashilError):
+    """The disk of the run folder cannot hold the run's data: refused before anything is energised."""
+
+    exit_code = 2
+
+
 class SafetyTrip(SashilError):
     """The safety supervisor stopped the run (angle interlock, sensor timeout, stale samples...)."""
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -149,16 +150,19 @@ def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: Step
     return out
 
 
-def run_step(config: dict[str, Any], step: Step) -> StepResult:
+def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = None) -> StepResult:
     """Run one step on the config's rig; errors that end it early are in ``result.error`` (the rig is
-    already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError."""
+    already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError.
+    ``data_path``: where the runner streams the step's every cycle as it runs."""
     rig = None
     if config["driver"]["name"] == "sim":
         from sashil.models.mismatch import open_sim_rig
 
         rig = SimRoadRig(open_sim_rig(config))
     stage = StepStage(step)
-    record = run_drop_test(config, step.theta0_deg, step.current_a, step.duration_s, rig=rig, controller=stage)
+    record = run_drop_test(
+        config, step.theta0_deg, step.current_a, step.duration_s, rig=rig, controller=stage, data_path=data_path
+    )
     columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
     columns = on_device_clock(columns, record.release_time_ns, stage)
     error = record.error

@@ -20,6 +20,7 @@ from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime.runner import CYCLES_FILE
 
 #: times a step is repeated when a link gap (a host pause that lost samples) cuts its record short
 GAP_REPEATS = 2
@@ -119,8 +120,17 @@ def calibrate_rig(
     failure: SashilError | None = None
     for number, step in enumerate(plan.steps, start=1):
         say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
+        target = RunFolder.create(runs.path / step.name, "calibrate")
+        attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
+
+        def stream() -> Path:
+            return target.file(CYCLES_FILE)
+
+        def stream_again() -> Path:
+            return target.file(CYCLES_FILE.replace(".csv", f"-{next(attempts)}.csv"))
+
         try:
-            result = run_step(config, step)
+            result = run_step(config, step, stream())
         except SashilError:
             if not results:  # the rig could not be opened (a bad port): bad input, nothing written
                 shutil.rmtree(folder.path, ignore_errors=True)
@@ -128,7 +138,7 @@ def calibrate_rig(
         if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
             say(f"  {step.name} failed on the link ({result.error}); repeating it once")
             try:
-                again = run_step(config, step)
+                again = run_step(config, step, stream_again())
             except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
                 say(f"  the repeat failed too ({err})")
             else:
@@ -143,7 +153,7 @@ def calibrate_rig(
                 f"repeating it ({attempt} of {GAP_REPEATS})"
             )
             try:
-                again = run_step(config, step)
+                again = run_step(config, step, stream_again())
             except SashilError as err:  # cannot even open the link again: keep the cut record
                 say(f"  the repeat failed ({err})")
                 break
@@ -164,7 +174,6 @@ def calibrate_rig(
             shutil.rmtree(folder.path, ignore_errors=True)
             raise error
         results.append(result)
-        target = RunFolder.create(runs.path / step.name, "calibrate")
         if result.columns.get("time_s") is not None and result.columns["time_s"].size:
             target.write_data(result.columns)
         row = _summary_row(result)

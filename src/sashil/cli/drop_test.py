@@ -25,6 +25,7 @@ from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime.runner import CYCLES_FILE
 
 HELP = "drop test: hold the arm at theta0, release, record the free oscillation at constant current(s)"
 EXAMPLE = "sashil drop-test --current 0 --current 1 --duration 10 --out runs/drop"
@@ -101,7 +102,14 @@ def run(args: argparse.Namespace) -> int:
         trace = start_can_trace(args, rig, target.path)
         try:
             record = run_drop_test(
-                config, args.theta0_deg, current, duration, rig=rig, controller=_controller(config), notify=_prompt
+                config,
+                args.theta0_deg,
+                current,
+                duration,
+                rig=rig,
+                controller=_controller(config),
+                notify=_prompt,
+                data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             )
         finally:
             trace_stats = trace.close() if trace is not None else None

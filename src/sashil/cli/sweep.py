@@ -6,6 +6,7 @@ import argparse
 import copy
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from sashil.cli.common import (
@@ -35,6 +36,7 @@ from sashil.experiments.sweep import (
 from sashil.identify.progress import Progress
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime.runner import CYCLES_FILE
 from sashil.stats import nrmse
 
 HELP = "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)"
@@ -163,10 +165,16 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
         points = []
         kept: list[dict] = []
 
+        subs: dict[float, RunFolder] = {}
+
+        def stream_to(f: float) -> Path:
+            """Each frequency in its own sub-folder (a run folder of its own), its cycles streamed there."""
+            subs[f] = RunFolder.create(folder.path / _freq_label(f), "sweep")
+            subs[f].write_config(config)
+            return subs[f].file(CYCLES_FILE)
+
         def keep(f: float, cols: dict) -> None:
-            """Each frequency's time series in its own sub-folder (a run folder of its own)."""
-            sub = RunFolder.create(folder.path / _freq_label(f), "sweep")
-            sub.write_config(config)
+            sub = subs[f]
             sub.write_data(cols)
             write_formats(args, sub.path, config, "sweep", cols, controller=label, frequency_hz=f)
             kept.append({"folder": _freq_label(f), "frequency_hz": f})
@@ -177,7 +185,9 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
 
         try:
             for f in freqs:  # one frequency at a time, for the progress bar
-                points += stepped_sine(config, lambda: make_controller(name, config), [f], rig_factory, keep)
+                points += stepped_sine(
+                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
+                )
                 bar.advance(1, f"{f:.3g} Hz")
         except SashilError as err:  # the frequencies done so far are kept
             _write_failed(folder, err, {"mode": "stepped", "controller": label, "points": [p.__dict__ for p in points]})
@@ -218,6 +228,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
                 total,
                 rig_factory,
                 keep=folder.write_data,
+                data_path=folder.file(CYCLES_FILE),  # every cycle streamed as it runs
             )
         except SashilError as err:
             _write_failed(folder, err, {"mode": "chirp", "controller": label})

@@ -19,18 +19,18 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample
-from sashil.errors import DriverTimeoutError, SashilError
+from sashil.errors import DriverTimeoutError, SashilError, Stopped
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
-from sashil.runtime.loop import ControlLoop, LoopResult
-from sashil.runtime.rt_setup import RealtimeSetup
-from sashil.safety import SafetySupervisor
+from sashil.runtime.loop import LoopResult
+from sashil.runtime.runner import run_plan
 
 #: columns of a drop test's data.csv (DESIGN.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
@@ -307,8 +307,12 @@ def run_drop_test(
     clock: Clock | None = None,
     controller: Any = None,
     notify: Callable[[str], None] | None = None,
+    data_path: str | Path | None = None,
 ) -> DropRecord:
     """One drop test at a constant current (or, after the release, under ``controller``).
+
+    ``data_path``: where the runner streams every cycle of the loop as it runs (the hold included,
+    time from the loop's start); the record returned is the part from the release.
 
     Returns the record from the release on. An error that ends the test early (a driver error, a
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
@@ -324,34 +328,25 @@ def run_drop_test(
         if set_current is not None:
             set_current(current_a)
     plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
-    loop = ControlLoop(
-        rig,
-        plan,
-        clock,
-        settings.rate_hz,
-        safety=SafetySupervisor.from_config(config),
-        overrun_policy=config["loop"]["overrun_policy"],
+    log = logging.getLogger("sashil")
+    # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
+    outcome = run_plan(
+        config, rig, plan, clock, data_path=data_path, rate_hz=settings.rate_hz, say=log.warning, note=log.debug
     )
-    error: SashilError | None = None
-    # on the real clock (bench, emulator) the loop gets the same best-effort real-time set-up as
-    # `sashil run`; simulated time needs none
-    realtime = None if getattr(clock, "virtual", False) else RealtimeSetup.from_config(config["loop"])
-    if realtime is not None:
-        realtime.apply()
-    try:
-        loop.run()  # whatever ends it, the rig is at 0 A, deactivated and closed
-    except SashilError as err:
-        error = err
-    finally:
-        if realtime is not None:
-            realtime.restore()
+    error = outcome.error  # whatever ended the test early, the rig is at 0 A, deactivated and closed
+    if error is None and outcome.stop.requested and outcome.result.exit_status == "stopped":
+        error = Stopped(f"stopped by {outcome.stop.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+    if error is not None and not isinstance(error, SashilError):
+        raise error
     columns = plan.columns()
-    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, loop.result)
+    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, outcome.result)
     record.error = error
-    if hasattr(rig, "link_stats"):
-        record.extra["link"] = rig.link_stats()
-    if realtime is not None:
-        record.extra["realtime"] = realtime.report()
+    if outcome.link is not None:
+        record.extra["link"] = outcome.link
+    if outcome.realtime:
+        record.extra["realtime"] = outcome.realtime
+    if outcome.recording is not None:
+        record.extra["recording"] = outcome.recording
     record.metrics = drop_metrics(
         columns["time_s"],
         columns["theta_rad"],

@@ -20,9 +20,11 @@ loop's real-time set-up, as a drop test does. Each row records the sample's sequ
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,9 +32,7 @@ import numpy as np
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
-from sashil.runtime.loop import run_loop
-from sashil.runtime.rt_setup import RealtimeSetup
-from sashil.safety import SafetySupervisor
+from sashil.runtime.runner import run_plan
 from sashil.stats import nrmse
 
 #: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
@@ -182,14 +182,17 @@ def run_profile(
     rig_factory: RigFactory | None = None,
     clock: Clock | None = None,
     keep: Callable[[dict[str, np.ndarray]], object] | None = None,
+    data_path: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
-    """One run of ``controller`` under the road profile, under the safety supervisor of the config's
-    ``safety`` section; returns the recorded columns.
+    """One run of ``controller`` under the road profile through the one runner
+    (:func:`~sashil.runtime.runner.run_plan`: safety, signals, real-time set-up on the real clock,
+    the road at rest and 0 A at the end); returns the recorded columns.
 
     Clock: ``clock``, else the config's (:func:`~sashil.experiments.drop_test.default_clock`: the
-    virtual one for the simulated rig, the real one for a link); on the real clock the loop gets
-    the best-effort real-time set-up of ``loop.rt``. ``keep`` gets the columns recorded so far
-    however the run ends (a link fault, a safety trip, a stop), before the error propagates.
+    virtual one for the simulated rig, the real one for a link). ``keep`` gets the columns recorded
+    so far however the run ends (a link fault, a safety trip, a stop), before the error
+    propagates. ``data_path``: the runner streams every cycle there as it runs. A signal ends the
+    run cleanly and raises :class:`~sashil.errors.Stopped` (exit 130) after ``keep``.
     """
     from sashil.experiments.drop_test import default_clock
 
@@ -197,16 +200,13 @@ def run_profile(
     rig = (rig_factory or default_rig)(config, road)
     stage = SweepStage(controller, road, int(math.ceil(duration_s * rate)) + 2, rig)
     clock = clock if clock is not None else default_clock(config)
-    realtime = None if getattr(clock, "virtual", False) else RealtimeSetup.from_config(config["loop"])
-    if realtime is not None:
-        realtime.apply()
-    try:
-        run_loop(rig, stage, clock, rate, duration_s, safety=SafetySupervisor.from_config(config))
-    finally:
-        if realtime is not None:
-            realtime.restore()
-        if keep is not None:
-            keep(stage.columns())
+    log = logging.getLogger("sashil")
+    outcome = run_plan(config, rig, stage, clock, duration_s, data_path=data_path, say=log.warning, note=log.debug)
+    if keep is not None:
+        keep(stage.columns())
+    if outcome.error is not None:
+        raise outcome.error
+    outcome.raise_stop()
     return stage.columns()
 
 
@@ -231,9 +231,11 @@ def stepped_sine(
     freqs: list[float],
     rig_factory: RigFactory | None = None,
     keep: Callable[[float, dict[str, np.ndarray]], None] | None = None,
+    stream_to: Callable[[float], Path] | None = None,
 ) -> list[SteppedPoint]:
     """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section).
-    ``keep(frequency_hz, columns)`` gets each frequency's time series once it has run."""
+    ``keep(frequency_hz, columns)`` gets each frequency's time series once it has run;
+    ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to."""
     sweep = config["sweep"]
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
@@ -245,7 +247,12 @@ def stepped_sine(
         # starts the next one at rest instead of with a step of the road speed
         stop = start + measure
         cols = run_profile(
-            config, controller, sine_profile(amplitude, f, sweep["ramp_s"], stop), stop + sweep["ramp_s"], rig_factory
+            config,
+            controller,
+            sine_profile(amplitude, f, sweep["ramp_s"], stop),
+            stop + sweep["ramp_s"],
+            rig_factory,
+            data_path=stream_to(f) if stream_to is not None else None,
         )
         if keep is not None:
             keep(f, cols)

@@ -63,6 +63,8 @@ def provenance() -> dict[str, Any]:
 #: the run folders this process created (path, whether it made the folder itself): bad input found
 #: after a folder was made (a port that cannot be opened, ...) leaves nothing behind (discard_unused)
 CREATED: list[tuple[Path, bool]] = []
+#: files that hold a run's recorded rows (the verb's record, the runner's stream of every cycle)
+DATA_FILES = ("data.csv", "cycles.csv")
 
 
 def _has_rows(data_csv: Path) -> bool:
@@ -72,12 +74,13 @@ def _has_rows(data_csv: Path) -> bool:
 
 
 def discard_unused() -> list[Path]:
-    """Remove the run folders this process created that hold no recorded data (no ``data.csv``
-    with a row, no ``params.yaml``) — what bad input leaves behind; a folder given with ``--out`` that existed
+    """Remove the run folders this process created that hold no recorded data (no ``data.csv`` or
+    ``cycles.csv`` with a row, no ``params.yaml``) — what bad input leaves behind; a folder given with ``--out`` that existed
     (empty) is emptied again instead. Returns what was removed."""
     removed = []
     for path, made in CREATED:
-        if not path.is_dir() or any(_has_rows(f) for f in path.rglob("data.csv")) or any(path.rglob("params.yaml")):
+        recorded = [f for name in DATA_FILES for f in path.rglob(name)]
+        if not path.is_dir() or any(_has_rows(f) for f in recorded) or any(path.rglob("params.yaml")):
             continue
         if made:
             shutil.rmtree(path, ignore_errors=True)

@@ -32,7 +32,7 @@ from operator import attrgetter
 from typing import Any, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
-from sashil.errors import DeadlineMissedError, DriverIOError, SafetyTrip, Stopped, status_of
+from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, SafetyTrip, Stopped, status_of
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
 from sashil.runtime.signals import catch_stop_signals
@@ -58,6 +58,8 @@ class CycleStage(Protocol):
 
 class _Recorder(Protocol):
     window_end_ns: int | None
+    error: BaseException | None
+    path: Any
 
     def begin_row(self) -> list[Any]: ...
 
@@ -217,6 +219,8 @@ class ControlLoop:
                     cmd = limit(cmd, dt)
                 if record is not None:
                     record(t, sample, cmd.current_a, 0)
+                    if recorder is not None and recorder.error is not None:  # the disk failed: 0 A now
+                        raise RecordingError(f"{recorder.path}: recording failed: {recorder.error}")
                 t_write = now()
                 write(cmd, t, dt)
                 t_end = now()

@@ -19,14 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sashil.errors import exit_code_of
-from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
-from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
-from sashil.runtime.rt_setup import RealtimeSetup
-from sashil.runtime.signals import catch_stop_signals
-from sashil.safety import SafetySupervisor
+from sashil.runtime.loop import LoopResult
+from sashil.runtime.runner import run_plan
 
 
 def _stderr(line: str) -> None:
@@ -55,75 +51,23 @@ def run_session(
     realtime: bool = True,
     live: Any = None,
 ) -> SessionOutcome:
-    """Run ``stage`` on ``rig`` in closed loop, recording into ``folder`` (see module doc)."""
-    loop_cfg = config["loop"]
+    """Run ``stage`` on ``rig`` in closed loop through the one runner
+    (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
+    timing file and ``summary.json`` (see module doc)."""
     folder.write_config(config)
-    safety = SafetySupervisor.from_config(config)
-    recorder = Recorder(folder.file("data.csv"), record_columns(stage))
-    rt = RealtimeSetup.from_config(loop_cfg) if realtime else None
-    if rt is not None and live is not None:
-        rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
-    loop = ControlLoop(
-        rig,
-        stage,
-        clock,
-        loop_cfg["rate_hz"],
-        duration_s,
-        safety=safety,
-        recorder=recorder,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
-        warn=say,
+    outcome = run_plan(
+        config, rig, stage, clock, duration_s, data_path=folder.file("data.csv"), say=say, realtime=realtime, live=live
     )
-    error: BaseException | None = None
-    with catch_stop_signals() as stop:
-        loop.stop = stop
-        recorder.start()
-        if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
-            live.start(recorder, loop.timing)
-        try:
-            if rt is not None:
-                rt.apply()
-                for line in rt.lines():
-                    say(line)
-            try:
-                loop.run()
-            except BaseException as err:
-                error = err
-            finally:
-                if rt is not None:
-                    rt.restore()
-        finally:
-            try:
-                recorder.close()
-            except OSError as err:
-                if error is None:
-                    error = err
-                    loop.result.exit_status = "error"
-                    loop.result.error = str(err)
-        result = loop.result
-        live_stats = live.close(result.trips) if live is not None else None
-        folder.write_timing(loop.timing)
-        status = result.exit_status
-        code = exit_code_of(status, error)
-        summary: dict[str, Any] = {
-            "verb": verb,
-            "exit_status": status,
-            "timing": loop.timing.summary(),
-            "trips": result.trips,
-            "exit_code": code,
-            "error": result.error if error is not None else None,
-            "stop_reason": result.stop_reason,
-            "controller": controller,
-            "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-            "duration_s": duration_s,
-            "driver": config["driver"]["name"],
-            "safety": safety.summary(),
-            "realtime": rt.report() if rt is not None else {},
-            "recording": recorder.summary(),
-            "live_view": live_stats,
-            "link": rig.link_stats() if hasattr(rig, "link_stats") else None,
-            "shutdown_errors": result.shutdown_errors,
-        }
-        folder.write_summary(summary)
-    return SessionOutcome(result, summary, error, code)
+    result = outcome.result
+    live_stats = live.close(result.trips) if live is not None else None
+    folder.write_timing(outcome.loop.timing)
+    summary: dict[str, Any] = {
+        "verb": verb,
+        **outcome.summary(),
+        "controller": controller,
+        "duration_s": duration_s,
+        "driver": config["driver"]["name"],
+        "live_view": live_stats,
+    }
+    folder.write_summary(summary)
+    return SessionOutcome(result, summary, outcome.error, outcome.exit_code)

@@ -1,0 +1,201 @@
+"""The one loop runner: every verb that drives a rig runs its plan through :func:`run_plan`.
+
+A *plan* is a loop stage (``step(sample, t_ns, dt_ns) -> RigCommand | None``): what to command and
+when, what to measure. The runner owns everything around it, the same for ``run``, ``drop-test``,
+``sweep`` and the calibration plan:
+
+* the disk checked before anything is energised (:func:`check_disk`, a :class:`DiskSpaceError`,
+  exit 2, when the run folder's disk cannot hold the run);
+* the best-effort real-time set-up on the real clock (``loop.rt``), undone afterwards;
+* SIGINT, SIGTERM and SIGHUP → a stop flag → a clean stop at the next cycle;
+* the safety supervisor of the config's ``safety`` section;
+* recording: the loop's every cycle streamed to ``data_path`` by the threaded recorder (written at
+  least once a second, so a kill -9 loses at most about a second); a write error mid-run stops the
+  loop at 0 A (:class:`~sashil.errors.RecordingError`, exit 1);
+* the rig's lifecycle: configure, activate, and whatever ends the run, 0 A, the road at rest,
+  deactivate (which waits for the device to confirm it), close;
+* the common part of ``summary.json`` (:meth:`RunOutcome.summary`).
+
+Plans never record their own files: what a verb writes beyond the stream (a drop test's record
+from the release, a sweep's transmissibility) it derives from the plan's in-memory result after
+the run.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sashil.errors import DiskSpaceError, Stopped, exit_code_of
+from sashil.recording.recorder import Recorder
+from sashil.recording.run_folder import DATA_FILES
+from sashil.runtime.clock import Clock
+from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
+from sashil.runtime.rt_setup import RealtimeSetup
+from sashil.runtime.signals import StopFlag, catch_stop_signals
+from sashil.safety import SafetySupervisor
+
+#: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
+#: (drop-test, sweep, calibrate: columns as ``sashil run``'s data.csv, time from the loop's start)
+CYCLES_FILE = DATA_FILES[1]
+#: bytes of CSV per data.csv value (a float's repr and its comma), for the disk check
+BYTES_PER_VALUE = 22
+#: a run of unknown length must find room for this many seconds of data
+OPEN_ENDED_S = 600.0
+#: headroom kept free beside the run's data (the summary, plots, the file system's own)
+DISK_MARGIN_BYTES = 16 * 1024 * 1024
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | None) -> int:
+    """Bytes the run will write; DiskSpaceError if ``folder``'s disk has not that much free (plus
+    a margin). A run without a duration is checked for OPEN_ENDED_S seconds."""
+    seconds = OPEN_ENDED_S if duration_s is None else duration_s
+    need = int(seconds * rate_hz * columns * BYTES_PER_VALUE)
+    free = shutil.disk_usage(folder).free
+    if free < need + DISK_MARGIN_BYTES:
+        span = "10 minutes (no --duration)" if duration_s is None else f"{seconds:g} s"
+        raise DiskSpaceError(
+            f"{folder}: {free / 1e6:.1f} MB free on its disk; the run writes about {need / 1e6:.1f} MB "
+            f"({span} at {rate_hz:g} Hz, {columns} columns) plus {DISK_MARGIN_BYTES // 2**20} MB of headroom: "
+            "free some space or choose --out on another disk"
+        )
+    return need
+
+
+@dataclass
+class RunOutcome:
+    """What :func:`run_plan` leaves: the loop's result, the error that ended the run (None: it ended
+    normally or by a signal), and the pieces of the summary the runner owns."""
+
+    loop: ControlLoop
+    error: BaseException | None
+    stop: StopFlag
+    realtime: dict[str, Any] = field(default_factory=dict)
+    recording: dict[str, Any] | None = None
+    link: dict[str, Any] | None = None
+
+    @property
+    def result(self) -> LoopResult:
+        return self.loop.result
+
+    @property
+    def exit_code(self) -> int:
+        return exit_code_of(self.result.exit_status, self.error)
+
+    def summary(self) -> dict[str, Any]:
+        """The common keys of summary.json (the verb adds its own)."""
+        result = self.result
+        stage = self.loop.stage
+        return {
+            "exit_status": result.exit_status,
+            "timing": self.loop.timing.summary(),
+            "trips": result.trips,
+            "exit_code": self.exit_code,
+            "error": result.error if self.error is not None else None,
+            "stop_reason": result.stop_reason,
+            "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
+            "safety": self.loop.safety.summary() if self.loop.safety is not None else None,
+            "realtime": self.realtime,
+            "recording": self.recording,
+            "link": self.link,
+            "shutdown_errors": result.shutdown_errors,
+        }
+
+    def raise_stop(self) -> None:
+        """Raise :class:`~sashil.errors.Stopped` if a signal stopped the run (exit 130)."""
+        if self.result.exit_status == "stopped" and self.stop.requested:
+            raise Stopped(f"stopped by {self.stop.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+
+
+def run_plan(
+    config: dict[str, Any],
+    rig: Any,
+    plan: Any,
+    clock: Clock,
+    duration_s: float | None = None,
+    *,
+    data_path: str | Path | None = None,
+    rate_hz: float | None = None,
+    say: Callable[[str], None] = _stderr,
+    note: Callable[[str], None] | None = None,
+    realtime: bool = True,
+    live: Any = None,
+    stop: StopFlag | None = None,
+) -> RunOutcome:
+    """Run ``plan`` on ``rig`` (see the module docstring); never raises for what ends the loop.
+
+    ``data_path``: stream every cycle there (None: no stream). ``rate_hz``: the loop's rate (default
+    ``loop.rate_hz``). ``say``: the loop's warnings (overruns); ``note``: the real-time set-up's
+    report, one line per step (default ``say``). ``realtime``: apply ``loop.rt`` on the real clock. ``live``: the rerun live
+    view. ``stop``: a stop flag of the caller's (a calibration plan shares one across its runs); the
+    signals are routed to it for the run. A disk too full for the run raises DiskSpaceError before
+    the rig is touched.
+    """
+    loop_cfg = config["loop"]
+    rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
+    columns = record_columns(plan)
+    recorder = None
+    if data_path is not None:
+        data_path = Path(data_path)
+        check_disk(data_path.parent, len(columns), rate, duration_s)
+        recorder = Recorder(data_path, columns)
+    real_clock = not getattr(clock, "virtual", False)
+    rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
+    if rt is not None and live is not None:
+        rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
+    loop = ControlLoop(
+        rig,
+        plan,
+        clock,
+        rate,
+        duration_s,
+        safety=SafetySupervisor.from_config(config),
+        recorder=recorder,
+        overrun_policy=loop_cfg["overrun_policy"],
+        warn_interval_s=loop_cfg["warn_interval_s"],
+        warn=say,
+    )
+    error: BaseException | None = None
+    with catch_stop_signals(stop) as flag:
+        loop.stop = flag
+        if recorder is not None:
+            recorder.start()
+        if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
+            live.start(recorder, loop.timing)
+        try:
+            if rt is not None:
+                rt.apply()
+                for line in rt.lines():
+                    (note or say)(line)
+            try:
+                loop.run()
+            except BaseException as err:  # the rig is already at 0 A, deactivated and closed
+                error = err
+            finally:
+                if rt is not None:
+                    rt.restore()
+        finally:
+            if recorder is not None:
+                try:
+                    recorder.close()
+                except OSError as err:
+                    if error is None:
+                        error = err
+                        loop.result.exit_status = "error"
+                        loop.result.error = str(err)
+    return RunOutcome(
+        loop,
+        error,
+        flag,
+        realtime=rt.report() if rt is not None else {},
+        recording=recorder.summary() if recorder is not None else None,
+        link=rig.link_stats() if hasattr(rig, "link_stats") else None,
+    )
