@@ -72,6 +72,11 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
     }
 
 
+def _stream(target: RunFolder, attempt: int) -> Path:
+    """Where the runner streams a step's cycles: cycles.csv, and cycles-2.csv, ... for its repeats."""
+    return target.file(CYCLES_FILE if attempt == 1 else CYCLES_FILE.replace(".csv", f"-{attempt}.csv"))
+
+
 def calibrate_rig(
     config: dict[str, Any],
     out: str | Path | None = None,
@@ -122,15 +127,8 @@ def calibrate_rig(
         say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
         target = RunFolder.create(runs.path / step.name, "calibrate")
         attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
-
-        def stream() -> Path:
-            return target.file(CYCLES_FILE)
-
-        def stream_again() -> Path:
-            return target.file(CYCLES_FILE.replace(".csv", f"-{next(attempts)}.csv"))
-
         try:
-            result = run_step(config, step, stream())
+            result = run_step(config, step, _stream(target, 1))
         except SashilError:
             if not results:  # the rig could not be opened (a bad port): bad input, nothing written
                 shutil.rmtree(folder.path, ignore_errors=True)
@@ -138,7 +136,7 @@ def calibrate_rig(
         if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
             say(f"  {step.name} failed on the link ({result.error}); repeating it once")
             try:
-                again = run_step(config, step, stream_again())
+                again = run_step(config, step, _stream(target, next(attempts)))
             except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
                 say(f"  the repeat failed too ({err})")
             else:
@@ -153,7 +151,7 @@ def calibrate_rig(
                 f"repeating it ({attempt} of {GAP_REPEATS})"
             )
             try:
-                again = run_step(config, step, stream_again())
+                again = run_step(config, step, _stream(target, next(attempts)))
             except SashilError as err:  # cannot even open the link again: keep the cut record
                 say(f"  the repeat failed ({err})")
                 break
