@@ -67,6 +67,7 @@ class CanRig(LinkRig):
     """The rig over CAN (``driver.name: can``)."""
 
     name = "can"
+    carries_can_frames = True
     device_time_bits = 24
 
     def __init__(

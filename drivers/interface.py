@@ -78,11 +78,40 @@ class RigState(Enum):
     CLOSED = "closed"
 
 
+@dataclass(frozen=True)
+class RigCapabilities:
+    """What a backend can do, declared by it (as ros2_control's hardware description) so that the
+    runner and the verbs ask instead of probing attributes."""
+
+    #: the backend plays the drop test's operator (holds the arm, lets go): ``operator_hold`` returns True
+    operator_hold: bool = False
+    #: the coil can start a run already carrying a current (``set_initial_current``)
+    initial_current: bool = False
+    #: ``RigCommand.road_speed_rad_s`` drives the road wheel (a motor, or a simulated one)
+    road_actuator: bool = False
+    #: the device's sample timer paces the loop (``read`` blocks until the next sample)
+    device_paced: bool = False
+    #: a link with counters (``link_stats()``) and a safe state the device confirms
+    link: bool = False
+    #: CAN frames a trace can tap (``frame_sink``)
+    can_frames: bool = False
+    #: the highest loop rate the backend supports [Hz] (None: the loop's own limit)
+    max_rate_hz: float | None = None
+
+
+def capabilities_of(rig: object) -> RigCapabilities:
+    """``rig.capabilities``; a bare rig's for a duck-typed stand-in that declares none (a test double)."""
+    declared = getattr(rig, "capabilities", None)
+    return declared if isinstance(declared, RigCapabilities) else RigCapabilities()
+
+
 class RigInterface(ABC):
     """Abstract rig: one damper coil to command, two encoders and a current sensor to read."""
 
     #: backend name in the registry
     name: str = "abstract"
+    #: what this backend can do (backends override; the default is a bare rig)
+    capabilities: RigCapabilities = RigCapabilities()
 
     def __init__(self) -> None:
         self.state = RigState.UNCONFIGURED

@@ -32,7 +32,7 @@ import time
 from abc import abstractmethod
 from typing import Any
 
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, RigState, clamp_current
+from sashil.drivers.interface import RigCapabilities, RigCommand, RigInterface, RigSample, RigState, clamp_current
 from sashil.drivers.messages import (
     CMD_ENABLE,
     PACING_DEVICE,
@@ -127,6 +127,15 @@ class LinkRig(RigInterface):
     @abstractmethod
     def describe(self) -> str:
         """Where the rig is, for messages ("serial /dev/ttyACM0")."""
+
+    #: the link carries CAN frames a trace can tap (CanRig)
+    carries_can_frames = False
+
+    @property
+    def capabilities(self) -> RigCapabilities:  # type: ignore[override]  # depends on the configured pacing
+        return RigCapabilities(
+            road_actuator=True, device_paced=self.device_paced, link=True, can_frames=self.carries_can_frames
+        )
 
     @property
     def device_paced(self) -> bool:

@@ -15,6 +15,7 @@ from typing import Any
 from sashil.drivers.interface import (
     FLAG_HELD,
     TWO_PI,
+    RigCapabilities,
     RigCommand,
     RigInterface,
     RigSample,
@@ -30,6 +31,7 @@ class SimulatedRig(RigInterface):
     """The SAS rig simulated in-process (seed 001 model + coil lag + encoder + noise)."""
 
     name = "sim"
+    capabilities = RigCapabilities(operator_hold=True, initial_current=True, max_rate_hz=10_000.0)
 
     def __init__(
         self,

@@ -13,6 +13,7 @@ relative rate by the same amount), through :class:`SimRoadRig`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.plan import Step
-from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, run_drop_test
 
@@ -96,6 +97,10 @@ class SimRoadRig(RigInterface):
         self.inner = inner
         self.wheel = RoadWheel()
         inner.plant.road = self.wheel
+
+    @property
+    def capabilities(self) -> RigCapabilities:  # type: ignore[override]  # the inner rig's, with a road motor
+        return dataclasses.replace(self.inner.capabilities, road_actuator=True)
 
     def __getattr__(self, name: str) -> Any:  # plant, set_initial_current, ...
         return getattr(self.inner, name)

@@ -23,6 +23,7 @@ from sashil.cli.common import (
 from sashil.cli.outputs import finish_loop_run, start_can_trace
 from sashil.config.sections import LOOP
 from sashil.drivers import open_rig
+from sashil.drivers.interface import capabilities_of
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.road_option import DEFAULT_SIM_ROAD, RoadStage, parse_road
 from sashil.experiments.road_option import SYNTAX as ROAD_SYNTAX
@@ -63,8 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
-    """What the backend can do: its ``max_rate_hz`` attribute, else DEFAULT_MAX_RATE_HZ."""
-    value = getattr(rig, "max_rate_hz", None)
+    """What the backend declares (``capabilities.max_rate_hz``), else DEFAULT_MAX_RATE_HZ (before it is opened)."""
+    value = capabilities_of(rig).max_rate_hz if rig is not None else None
     if value is None:
         value = DEFAULT_MAX_RATE_HZ.get(backend)
     return None if value is None else float(value)

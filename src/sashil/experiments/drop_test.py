@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from sashil.drivers import open_rig
-from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import DriverTimeoutError, SashilError, Stopped
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
@@ -324,9 +324,8 @@ def run_drop_test(
     release_after = max(settings.hold_time_s + 0.1, 0.3)
     if rig.operator_hold(settings.theta0_rad, release_after):
         settings.known_release_after_s = release_after
-        set_current = getattr(rig, "set_initial_current", None)
-        if set_current is not None:
-            set_current(current_a)
+        if capabilities_of(rig).initial_current:
+            rig.set_initial_current(current_a)  # type: ignore[attr-defined]  # declared by the backend
     plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
     log = logging.getLogger("sashil")
     # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle

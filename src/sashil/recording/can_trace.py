@@ -71,7 +71,9 @@ class CanTrace:
 
     def attach(self, rig: Any) -> Any:
         """Give ``rig`` (a backend with CAN frames: ``frame_sink``) this trace; returns the rig."""
-        if not hasattr(rig, "frame_sink"):
+        from sashil.drivers.interface import capabilities_of
+
+        if not capabilities_of(rig).can_frames:
             raise ConfigError(
                 f"--format: the {getattr(rig, 'name', type(rig).__name__)} backend has no CAN frames to trace"
             )

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from operator import attrgetter
 from typing import Any, Protocol
 
-from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, SafetyTrip, Stopped, status_of
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
@@ -174,7 +174,7 @@ class ControlLoop:
             capacity = timing.capacity
             # a device-paced link (sashil.drivers.link_rig) streams samples on its own clock; sleeping
             # to a host deadline as well would beat the two clocks against each other
-            paced = bool(getattr(rig, "device_paced", False))
+            paced = capabilities_of(rig).device_paced
             late = 0
             start = deadline = last = now()
             self.start_ns = start

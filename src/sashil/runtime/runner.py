@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sashil.drivers.interface import capabilities_of
 from sashil.errors import DiskSpaceError, Stopped, exit_code_of
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -197,5 +198,5 @@ def run_plan(
         flag,
         realtime=rt.report() if rt is not None else {},
         recording=recorder.summary() if recorder is not None else None,
-        link=rig.link_stats() if hasattr(rig, "link_stats") else None,
+        link=rig.link_stats() if capabilities_of(rig).link else None,
     )
