@@ -364,13 +364,11 @@ class LiveTap:
         columns = {name: block[:, i] for i, name in enumerate(rec.columns)}
         timing = self.timing
         if timing is not None:
-            cycles = timing.cycles
             lateness = np.full(len(rows), np.nan)
-            picks = np.arange(first, first + len(rows) * self.every, self.every)
-            ok = picks < cycles
-            if ok.any():
-                data = np.frombuffer(timing.lateness, dtype=np.int64, count=cycles)
-                lateness[ok] = data[picks[ok]] * 1e-3
+            for k, cycle in enumerate(range(first, first + len(rows) * self.every, self.every)):
+                value = timing.value_ns("lateness", cycle)  # None once the ring moved past it
+                if value is not None:
+                    lateness[k] = value * 1e-3
             columns["lateness_us"] = lateness
         if self.band is not None:
             feasible_band(columns, *self.band)

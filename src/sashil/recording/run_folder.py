@@ -142,17 +142,17 @@ class RunFolder:
 
     def write_timing(self, timing: Any, name: str = "timing.npz") -> Path:
         """Per-cycle loop timing (``lateness_ns``, ``read_ns``, ``compute_ns``, ``write_ns``, int64
-        arrays, one entry per cycle) of a :class:`~sashil.runtime.timing.TimingStats`, for reports."""
+        arrays, one entry per cycle; ``first_cycle``) of a :class:`~sashil.runtime.timing.TimingStats`,
+        for reports: the last ``window`` cycles (all of a run of up to about a minute at 1 kHz)."""
         import numpy as np
 
         target = self.file(name)
         tmp = target.with_name(target.name + ".part")
-        arrays = {
-            f"{column}_ns": np.frombuffer(getattr(timing, column), dtype=np.int64, count=timing.cycles).copy()
-            for column in ("lateness", "read", "compute", "write")
-        }
+        arrays = {f"{column}_ns": timing.recent(column) for column in ("lateness", "read", "compute", "write")}
         with open(tmp, "wb") as handle:
-            np.savez_compressed(handle, rate_hz=np.float64(timing.rate_hz), **arrays)
+            np.savez_compressed(
+                handle, rate_hz=np.float64(timing.rate_hz), first_cycle=np.int64(timing.first_recent_cycle()), **arrays
+            )
         tmp.replace(target)
         return target
 

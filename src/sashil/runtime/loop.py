@@ -36,7 +36,7 @@ from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, Sa
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
 from sashil.runtime.signals import catch_stop_signals
-from sashil.runtime.timing import TimingStats
+from sashil.runtime.timing import FOLD, TimingStats
 
 log = logging.getLogger("sashil.loop")
 
@@ -123,8 +123,7 @@ class ControlLoop:
         self.overrun_policy = overrun_policy
         self.warn_interval_ns = int(warn_interval_s * 1e9)
         self.warn = warn if warn is not None else log.warning
-        capacity = (self.max_cycles + 2) if self.max_cycles is not None else 65536
-        self.timing = TimingStats(rate_hz, capacity=capacity)
+        self.timing = TimingStats(rate_hz)
         self.result = LoopResult(timing=self.timing)
         self.start_ns = 0
         self._last_warn_ns: int | None = None
@@ -171,7 +170,7 @@ class ControlLoop:
             limit = safety.limit if safety is not None else None
             record = self._record if recorder is not None else None
             lateness, read_ns, compute_ns, write_ns = timing.lateness, timing.read, timing.compute, timing.write
-            capacity = timing.capacity
+            mask, fold_mask = timing.mask, FOLD - 1
             # a device-paced link (sashil.drivers.link_rig) streams samples on its own clock; sleeping
             # to a host deadline as well would beat the two clocks against each other
             paced = capabilities_of(rig).device_paced
@@ -224,16 +223,15 @@ class ControlLoop:
                 t_write = now()
                 write(cmd, t, dt)
                 t_end = now()
-                if cycles == capacity:
-                    timing.grow()
-                    capacity = timing.capacity
-                    lateness, read_ns, compute_ns, write_ns = timing.lateness, timing.read, timing.compute, timing.write
-                lateness[cycles] = late
-                read_ns[cycles] = t_read - t
-                compute_ns[cycles] = t_write - t_read
-                write_ns[cycles] = t_end - t_write
+                slot = cycles & mask  # the timing rings: constant memory however long the run
+                lateness[slot] = late
+                read_ns[slot] = t_read - t
+                compute_ns[slot] = t_write - t_read
+                write_ns[slot] = t_end - t_write
                 cycles += 1
                 timing.cycles = cycles
+                if not cycles & fold_mask:  # every FOLD cycles, after the write: into the histograms
+                    timing.fold()
                 deadline += period
         except BaseException as err:
             result.exit_status = self._status_of(err)

@@ -1,17 +1,25 @@
-"""Per-cycle timing of the control loop and its summary statistics.
+"""Per-cycle timing of the control loop and its summary statistics, in constant memory.
 
-Each cycle stores four integers (nanoseconds) in preallocated ``array('q')`` columns: wake-up
-lateness (wake-up time minus the absolute deadline), read latency (``rig.read``), compute
-(stage, safety and the recording hand-off, between read and write) and write latency
-(``rig.write``). Nothing is allocated per cycle except when a column fills up (it then doubles,
-once per ~65 s at 1 kHz for an open-ended run). The statistics (p50/p99/p99.9/max in µs) are
-computed after the run; ``summary()`` gives the ``timing`` block of ``summary.json`` with the
-fixed keys of DESIGN.md (``rate_hz``, ``cycles``, ``missed_deadlines``, ``lateness_us``,
-``compute_us``) and, beside them, ``read_us``, ``write_us`` and ``cycle_us`` (read+compute+write).
+Each cycle stores four integers (nanoseconds) in preallocated ``array('q')`` rings of ``window``
+entries (default 65 536: about a minute at 1 kHz): wake-up lateness (wake-up time minus the
+absolute deadline), read latency (``rig.read``), compute (stage, safety and the recording hand-off,
+between read and write) and write latency (``rig.write``). Every ``FOLD`` cycles the loop folds the
+block just completed into log-spaced histograms (``BUCKETS_PER_OCTAVE`` buckets per doubling: a
+quantile read from them is within 0.6 % of the exact one), so a run of any length — 24 h at 5 kHz
+is 432 million cycles — keeps the same memory: the rings (2 MB) and five histograms (200 kB).
+Nothing is allocated per cycle.
+
+``summary()`` gives the ``timing`` block of ``summary.json`` with the fixed keys of DESIGN.md
+(``rate_hz``, ``cycles``, ``missed_deadlines``, ``lateness_us``, ``compute_us``) and, beside them,
+``read_us``, ``write_us`` and ``cycle_us`` (read+compute+write): p50/p99/p99.9 exact while the run
+fits in the ring, from the histograms beyond it (``quantiles_from``: ``exact`` or ``histogram``);
+``max`` always exact. ``recent(name)`` is the ring's content in cycle order (what ``timing.npz``
+holds: the last ``window`` cycles).
 """
 
 from __future__ import annotations
 
+import math
 from array import array
 from typing import Any
 
@@ -19,6 +27,17 @@ import numpy as np
 
 #: quantiles reported for each timing column (key -> fraction)
 QUANTILES = (("p50", 0.50), ("p99", 0.99), ("p99_9", 0.999))
+COLUMNS = ("lateness", "read", "compute", "write")
+#: the histograms: the four columns and the whole cycle (read + compute + write)
+HISTOGRAMS = (*COLUMNS, "cycle")
+#: histogram resolution: bucket edges at 2**(k / BUCKETS_PER_OCTAVE) ns
+BUCKETS_PER_OCTAVE = 128
+#: octaves covered (1 ns .. 2**40 ns = 18 min); longer values land in the last bucket
+OCTAVES = 40
+N_BUCKETS = 2 + BUCKETS_PER_OCTAVE * OCTAVES
+#: cycles per fold of the rings into the histograms (a power of two, dividing the window)
+FOLD = 4096
+DEFAULT_WINDOW = 65536
 
 
 def quantiles_us(values: np.ndarray) -> dict[str, float | None]:
@@ -30,7 +49,30 @@ def quantiles_us(values: np.ndarray) -> dict[str, float | None]:
     return out
 
 
-COLUMNS = ("lateness", "read", "compute", "write")
+def bucket_of(values_ns: np.ndarray) -> np.ndarray:
+    """Histogram bucket of each duration: 0 for < 1 ns, then BUCKETS_PER_OCTAVE per doubling."""
+    v = np.asarray(values_ns, dtype=np.float64)
+    out = np.zeros(v.shape, dtype=np.int64)
+    positive = v >= 1.0
+    out[positive] = 1 + np.floor(np.log2(v[positive]) * BUCKETS_PER_OCTAVE).astype(np.int64)
+    return np.minimum(out, N_BUCKETS - 1)
+
+
+def bucket_value_ns(bucket: int) -> float:
+    """The duration a bucket stands for: the geometric middle of its edges (0 for bucket 0)."""
+    if bucket <= 0:
+        return 0.0
+    return float(2.0 ** ((bucket - 1 + 0.5) / BUCKETS_PER_OCTAVE))
+
+
+def histogram_quantile_ns(counts: np.ndarray, q: float) -> float:
+    """The ``q`` quantile of the durations counted in ``counts`` (within half a bucket: 0.3 %)."""
+    total = int(counts.sum())
+    if total == 0:
+        return math.nan
+    rank = max(1, math.ceil(q * total))
+    bucket = int(np.searchsorted(np.cumsum(counts), rank))
+    return bucket_value_ns(bucket)
 
 
 def _zeros(n: int) -> array:
@@ -38,38 +80,78 @@ def _zeros(n: int) -> array:
 
 
 class TimingStats:
-    """Preallocated per-cycle timing columns (ns) plus the loop's miss counters."""
+    """Per-cycle timing rings (ns), their histograms, and the loop's miss counters (see module doc)."""
 
-    def __init__(self, rate_hz: float, capacity: int = 65536):
+    def __init__(self, rate_hz: float, window: int = DEFAULT_WINDOW):
+        if window < FOLD or window & (window - 1):
+            raise ValueError(f"window must be a power of two >= {FOLD}, got {window}")
         self.rate_hz = float(rate_hz)
-        self.capacity = max(int(capacity), 16)
-        self.lateness = _zeros(self.capacity)
-        self.read = _zeros(self.capacity)
-        self.compute = _zeros(self.capacity)
-        self.write = _zeros(self.capacity)
+        self.window = int(window)
+        #: index mask of the rings (the loop writes column[cycle & mask])
+        self.mask = self.window - 1
+        self.lateness = _zeros(self.window)
+        self.read = _zeros(self.window)
+        self.compute = _zeros(self.window)
+        self.write = _zeros(self.window)
+        self.histograms = {name: np.zeros(N_BUCKETS, dtype=np.int64) for name in HISTOGRAMS}
+        self.max_ns = dict.fromkeys(HISTOGRAMS, 0)
+        self.folded = 0  # cycles already in the histograms
         self.cycles = 0
         self.missed_deadlines = 0  # whole periods skipped because a cycle started too late
         self.overruns = 0  # occasions on which periods were skipped
 
-    def grow(self) -> None:
-        """Double every column (called by the loop when ``cycles`` reaches ``capacity``)."""
-        for name in COLUMNS:
-            getattr(self, name).extend(_zeros(self.capacity))
-        self.capacity *= 2
+    # the loop's side -------------------------------------------------------------------------
+    def fold(self) -> None:
+        """Add the cycles recorded since the last fold to the histograms (the loop calls this every
+        FOLD cycles, after the cycle's write; and ``summary`` for the rest)."""
+        start, stop = self.folded, self.cycles
+        if stop <= start:
+            return
+        index = np.arange(start, stop, dtype=np.int64) & self.mask
+        block = {name: np.frombuffer(getattr(self, name), dtype=np.int64)[index] for name in COLUMNS}
+        block["cycle"] = block["read"] + block["compute"] + block["write"]
+        for name, values in block.items():
+            self.histograms[name] += np.bincount(bucket_of(values), minlength=N_BUCKETS)
+            self.max_ns[name] = max(self.max_ns[name], int(values.max()))
+        self.folded = stop
+
+    # readers ---------------------------------------------------------------------------------
+    def recent(self, name: str) -> np.ndarray:
+        """The ring of one column in cycle order: the last ``min(cycles, window)`` cycles (int64 ns)."""
+        data = np.frombuffer(getattr(self, name), dtype=np.int64)
+        if self.cycles <= self.window:
+            return data[: self.cycles].copy()
+        start = self.cycles & self.mask
+        return np.concatenate([data[start:], data[:start]])
+
+    def first_recent_cycle(self) -> int:
+        """The cycle number of ``recent(...)[0]``."""
+        return max(0, self.cycles - self.window)
+
+    def value_ns(self, name: str, cycle: int) -> int | None:
+        """One column's value at ``cycle`` while it is still in the ring (else None)."""
+        if not self.first_recent_cycle() <= cycle < self.cycles:
+            return None
+        return int(getattr(self, name)[cycle & self.mask])
 
     def column_us(self, name: str) -> np.ndarray:
-        """One column of the cycles so far, in microseconds."""
-        data = np.frombuffer(getattr(self, name), dtype=np.int64, count=self.cycles)
-        return data.astype(float) * 1e-3
+        """One column of the cycles in the ring, in microseconds."""
+        return self.recent(name).astype(float) * 1e-3
 
     def stats_us(self, name: str) -> dict[str, float | None]:
-        """``{p50, p99, p99_9, max}`` of a column in µs (None for an empty run)."""
-        return quantiles_us(self.column_us(name))
+        """``{p50, p99, p99_9, max}`` of a column (or ``cycle``) in µs (None for an empty run)."""
+        if self.cycles <= self.window:  # all of it is in the ring: exact
+            if name == "cycle":
+                return quantiles_us(self.column_us("read") + self.column_us("compute") + self.column_us("write"))
+            return quantiles_us(self.column_us(name))
+        self.fold()
+        counts = self.histograms[name]
+        out: dict[str, float | None] = {key: round(histogram_quantile_ns(counts, q) * 1e-3, 3) for key, q in QUANTILES}
+        out["max"] = round(self.max_ns[name] * 1e-3, 3)
+        return out
 
     def summary(self) -> dict[str, Any]:
         """The ``timing`` block of summary.json (DESIGN.md fixed keys plus read/write/cycle)."""
-        cycle = self.column_us("read") + self.column_us("compute") + self.column_us("write")
-        cycle_stats = quantiles_us(cycle)
         return {
             "rate_hz": self.rate_hz,
             "cycles": self.cycles,
@@ -79,7 +161,8 @@ class TimingStats:
             "compute_us": self.stats_us("compute"),
             "read_us": self.stats_us("read"),
             "write_us": self.stats_us("write"),
-            "cycle_us": cycle_stats,
+            "cycle_us": self.stats_us("cycle"),
+            "quantiles_from": "exact" if self.cycles <= self.window else "histogram",
         }
 
 
