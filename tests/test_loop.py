@@ -432,3 +432,18 @@ def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tm
     assert runner.check_disk(tmp_path, 7, 1000.0, 60.0) == 60 * 7 * 1000 * runner.BYTES_PER_VALUE  # 9 MB: fits
     with pytest.raises(DiskSpaceError, match="10 minutes \\(no --duration\\) at 5000 Hz"):
         runner.check_disk(tmp_path, 40, 5000.0, None)  # 264 MB for an open-ended run: refused
+
+
+def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monkeypatch):
+    from sashil.runtime import runner
+
+    order: list[str] = []
+    monkeypatch.setattr(runner, "compile_kernels", lambda: order.append("compile"))
+
+    class Watched(FaultyRig):
+        def configure(self):
+            order.append("configure")
+            super().configure()
+
+    runner.run_plan(config, Watched(), ConstantCurrent(0.1), VirtualClock(), 0.01, realtime=False)
+    assert order == ["compile", "configure"]

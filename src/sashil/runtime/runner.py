@@ -4,6 +4,7 @@ A *plan* is a loop stage (``step(sample, t_ns, dt_ns) -> RigCommand | None``): w
 when, what to measure. The runner owns everything around it, the same for ``run``, ``drop-test``,
 ``sweep`` and the calibration plan:
 
+* the per-cycle kernels compiled (numba) before the rig is touched, so the first cycle is on time;
 * the disk checked before anything is energised (:func:`check_disk`, a :class:`DiskSpaceError`,
   exit 2, when the run folder's disk cannot hold the run);
 * the best-effort real-time set-up on the real clock (``loop.rt``), undone afterwards;
@@ -32,6 +33,7 @@ from typing import Any
 
 from sashil.drivers.interface import capabilities_of
 from sashil.errors import DiskSpaceError, Stopped, exit_code_of
+from sashil.models.hysteresis import compile_kernels
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
 from sashil.runtime.clock import Clock
@@ -164,6 +166,7 @@ def run_plan(
         warn_interval_s=loop_cfg["warn_interval_s"],
         warn=say,
     )
+    compile_kernels()  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None
     with catch_stop_signals(stop) as flag:
         loop.stop = flag
