@@ -9,6 +9,8 @@ that reboot when the port opens; set ``driver.can_options: {sleep_after_open: 2}
 
 from __future__ import annotations
 
+import fcntl
+import os
 import select
 import time
 from collections.abc import Callable
@@ -89,6 +91,7 @@ class CanRig(LinkRig):
         #: frame trace (``sashil.recording.can_trace.CanTrace.put``): gets every frame sent and received
         self.frame_sink: Callable[[can.Message], None] | None = None
         self._bus: Any = None
+        self._lock_fd: int | None = None  # the SLCAN tty, locked for this process (_lock_tty)
         self._fd: int | None = None
 
     @classmethod
@@ -103,8 +106,35 @@ class CanRig(LinkRig):
         return self.decoder.counters.as_dict()
 
     # link ------------------------------------------------------------------------------------
+    def _lock_tty(self) -> None:
+        """Take the SLCAN adapter's tty for this process alone before the bus opens it (python-can's
+        slcan sends the adapter its open commands, which would disturb a host already using it): an
+        advisory exclusive lock, the one pyserial's ``exclusive=True`` takes, so that a second sashil
+        on the same port, serial or CAN, is refused with one line."""
+        port = self.settings.port
+        if self.interface != "slcan" or not port or not os.path.exists(port):
+            return
+        try:
+            fd = os.open(port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return  # python-can reports what is wrong with the port
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise DriverError(
+                f"{self.describe()}: cannot open the CAN bus ({port} is in use by another process)"
+            ) from None
+        self._lock_fd = fd
+
+    def _unlock_tty(self) -> None:
+        fd, self._lock_fd = self._lock_fd, None
+        if fd is not None:
+            os.close(fd)
+
     def _open(self) -> None:
         filters = [{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in RIG_IDS]
+        self._lock_tty()
         try:
             self._bus = can.Bus(
                 interface=self.interface,
@@ -114,10 +144,12 @@ class CanRig(LinkRig):
                 **self.options,
             )
         except can.CanInterfaceNotImplementedError as err:
+            self._unlock_tty()
             raise DriverError(
                 f"driver.can_interface: {self.interface!r} is not available ({error_reason(err)})"
             ) from None
         except (can.CanError, ValueError, TypeError, OSError, ImportError) as err:
+            self._unlock_tty()
             raise DriverError(f"{self.describe()}: cannot open the CAN bus ({error_reason(err)})") from None
         self._fd = None
         port = getattr(self._bus, "serialPortOrig", None)
@@ -184,6 +216,9 @@ class CanRig(LinkRig):
         return frame
 
     def _close_link(self) -> None:
-        if self._bus is not None:
-            bus, self._bus = self._bus, None
-            bus.shutdown()
+        try:
+            if self._bus is not None:
+                bus, self._bus = self._bus, None
+                bus.shutdown()
+        finally:
+            self._unlock_tty()

@@ -130,6 +130,27 @@ def test_missing_port_busy_port_and_silent_port():
         pty.close()
 
 
+def test_a_second_host_on_a_busy_slcan_port_is_refused_without_disturbing_the_first():
+    with EmulatorThread(default_config(), "slcan", channel="t-busy") as emu:
+        with open_rig(host_config("can", emu.port)) as first:
+            first.configure()
+            first.activate()
+            before = first.link_stats()["samples"]
+            second = open_rig(host_config("can", emu.port))
+            with pytest.raises(DriverError) as err:
+                second.configure()
+            second.close()
+            assert err.value.exit_code == 2 and "in use by another process" in str(err.value)
+            assert "\n" not in str(err.value)
+            for _ in range(50):  # the first host's session goes on: no adapter reset, no lost link
+                first.read(0, 0)
+                first.write(RigCommand(0.2), 0, 0)
+            stats = first.link_stats()
+            assert stats["samples"] >= before + 50 and stats["timeouts"] == 0 and stats["bad_frames"] == 0
+        with open_rig(host_config("can", emu.port)) as again:  # released when the first closed
+            again.configure()
+
+
 def test_unknown_can_interface_and_missing_port():
     with pytest.raises(DriverError) as err:
         open_rig(host_config("can", "can0", interface="no-such-bus")).configure()
