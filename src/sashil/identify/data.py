@@ -21,6 +21,12 @@ from sashil.recording.data_file import read_data_csv
 #: fewest samples and shortest duration a record may have to be fitted
 MIN_SAMPLES = 200
 MIN_DURATION_S = 0.5
+#: magnitudes no rig record reaches (angles in rad, current in A, torque in N m): beyond them a
+#: value is a corrupt file, whose derivatives would overflow
+PLAUSIBLE = {"theta_rad": 1e3, "theta_road_rad": 1e3, "current_a": 1e3, "torque_in_nm": 1e6}
+#: the sample periods a rig record can have [s] (20 kHz .. 10 Hz, with margin)
+MIN_PERIOD_S = 1e-5
+MAX_PERIOD_S = 0.5
 #: a current spread below this (A) across all records cannot separate alpha1/alpha2, c1/c2
 MIN_CURRENT_SPREAD_A = 0.05
 
@@ -126,7 +132,20 @@ def load_records(
             if name in columns and not np.all(np.isfinite(columns[name])):
                 line = int(np.argmax(~np.isfinite(columns[name]))) + 2
                 raise DataFileError(f"{path}: line {line}, column {name}: NaN or inf")
+        for name, limit in PLAUSIBLE.items():
+            if name in columns and np.any(np.abs(columns[name]) > limit):
+                line = int(np.argmax(np.abs(columns[name]) > limit)) + 2
+                value = float(columns[name][line - 2])
+                raise DataFileError(
+                    f"{path}: line {line}, column {name}: {value:g} is beyond ±{limit:g} (not a rig value)"
+                )
         t = columns["time_s"]
+        period = float(np.median(np.diff(t)))
+        if not MIN_PERIOD_S <= period <= MAX_PERIOD_S:
+            raise DataFileError(
+                f"{path}: time_s advances {period:.3g} s per sample (median); expected a sample period "
+                f"between {MIN_PERIOD_S:g} and {MAX_PERIOD_S:g} s (a rig record, time in seconds)"
+            )
         if t[-1] - t[0] < MIN_DURATION_S:
             raise DataFileError(f"{path}: record too short ({t[-1] - t[0]:.3g} s; need at least {MIN_DURATION_S} s)")
         if np.ptp(columns["theta_rad"]) == 0.0:
