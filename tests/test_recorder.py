@@ -45,13 +45,29 @@ def test_a_full_ring_drops_and_counts_instead_of_blocking(tmp_path):
 
 
 def test_closed_window_delays_the_writer_but_close_writes_everything(tmp_path):
-    recorder = Recorder(tmp_path / "data.csv", COLUMNS, capacity=128).start()
-    recorder.window_end_ns = 0  # the loop never sleeps: the writer must not start a slice ...
+    recorder = Recorder(tmp_path / "data.csv", COLUMNS, capacity=128, flush_interval_s=1.0).start()
+    recorder.window_end_ns = 0  # the loop never sleeps: the writer must not start a slice at once ...
     fill(recorder, 10)
-    recorder._stop.wait(0.05)
-    assert recorder.rows_written == 0
+    assert recorder.rows_written == 0  # (its first chance to write is 3 flush intervals away)
     recorder.close()  # ... but close() drains it
     assert recorder.rows_written == 10
+
+
+def test_a_window_that_stays_closed_still_gets_the_rows_written_within_a_second(tmp_path):
+    # under load the loop never sleeps long enough for a slice: the writer writes anyway once rows
+    # have waited 3 flush intervals (the "at least once a second" promise); it used to reset its
+    # flush clock while it had nothing formatted, and so never wrote until close()
+    recorder = Recorder(tmp_path / "data.csv", COLUMNS, capacity=128, flush_interval_s=0.05).start()
+    recorder.window_end_ns = 0
+    fill(recorder, 10)
+    for _ in range(500):  # up to 5 s for a writer due after 0.15 s (a loaded machine is slow, not wrong)
+        if recorder.rows_written == 10:
+            break
+        recorder._stop.wait(0.01)
+    written = recorder.rows_written
+    on_disk = len((tmp_path / "data.csv").read_text().splitlines()) - 1
+    recorder.close()
+    assert written == 10 and on_disk == 10
 
 
 def test_data_survives_sigkill_mid_run(tmp_path):

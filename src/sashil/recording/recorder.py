@@ -146,7 +146,7 @@ class Recorder:
                     self._write_all("".join(pending).encode())
                     pending.clear()
                     last_write = time.perf_counter_ns()
-                elif not pending:
+                elif not pending and self._tail >= self._head:
                     last_write = now  # nothing waits: the flush clock starts with the next row
                 self._stop.wait(POLL_S)
             if pending:
