@@ -318,3 +318,37 @@ def test_a_link_in_use_is_refused_and_a_stale_one_replaced(tmp_path):
     (tmp_path / "rig").write_text("not a link")
     with pytest.raises(DriverError, match="not an emulator's link"):
         Pty.open(link)
+
+
+def test_a_stop_request_from_a_signal_handler_takes_no_lock():
+    # `sashil emulate` deadlocked when a second SIGTERM arrived while the first handler's
+    # Event.set() held the Event's lock (seen: pkill and timeout both signalling it); the handler
+    # now only sets a flag, so even inside set() a request returns at once
+    import threading
+
+    emulator = Emulator(build_device(default_config()), _NullTransport())
+    done = threading.Event()
+
+    def inside_set() -> None:
+        with emulator.stop_event._cond:  # as if interrupted inside Event.set()
+            emulator.request_stop()
+        done.set()
+
+    worker = threading.Thread(target=inside_set, daemon=True)
+    worker.start()
+    worker.join(timeout=5.0)
+    assert done.is_set() and emulator.stop_requested
+    assert emulator.run(duration_s=10.0) == "stop"  # the loop sees the request at its next turn
+
+
+class _NullTransport(DeviceTransport):
+    bad_frames = 0
+
+    def receive(self, timeout_s):
+        return []
+
+    def send(self, seq, msg, corrupt=False):
+        pass
+
+    def close(self):
+        pass

@@ -115,3 +115,26 @@ def test_after_kill_9_the_stream_of_cycles_holds_all_but_the_last_second(tmp_pat
     assert header[:2] == ["time_s", "theta_rad"] and len(last) == len(header)  # whole lines only
     assert float(last[0]) >= ran_s - 1.2  # at most about a second lost
     assert not (out / "summary.json").exists()
+
+
+def test_a_burst_of_sigterms_stops_the_emulator(tmp_path):
+    # pkill and a supervising `timeout` both signal it: the second signal must not deadlock the first
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sashil", "emulate", "--link", str(tmp_path / "rig"), "--duration", "60"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert "rig on /dev/" in proc.stdout.readline()  # type: ignore[union-attr]
+        for _ in range(50):
+            proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+            pytest.fail("sashil emulate hung after a burst of SIGTERM")
+        proc.stdout.close()  # type: ignore[union-attr]
+        proc.stderr.close()  # type: ignore[union-attr]
+    assert not (tmp_path / "rig").exists()  # its link removed on the way out

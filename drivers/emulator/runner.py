@@ -82,11 +82,20 @@ class Emulator:
         self.transport = transport
         self.clock = clock
         self.stop_event = threading.Event()
+        #: set by a signal handler (request_stop): a plain attribute, no lock — a handler that took the
+        #: Event's lock deadlocked when a second signal arrived while the first one's set() held it
+        self.stop_requested = False
         self.stats = EmulatorStats()
         self._order = 0
 
     def stop(self) -> None:
+        """Stop from another thread (wakes a wait at once)."""
+        self.stop_requested = True
         self.stop_event.set()
+
+    def request_stop(self) -> None:
+        """Stop from a signal handler: async-signal-safe (no lock); seen within MAX_WAIT_S."""
+        self.stop_requested = True
 
     def run(self, duration_s: float | None = None) -> str:
         """Serve the host until stopped, ``duration_s`` passed, or the disconnect fault; returns why."""
@@ -94,7 +103,7 @@ class Emulator:
         start = self.clock()
         end = None if duration_s is None else start + int(duration_s * 1e9)
         try:
-            while not self.stop_event.is_set():
+            while not self.stop_requested:
                 now = self.clock()
                 if end is not None and now >= end:
                     return self._stopped("duration")
@@ -139,7 +148,7 @@ class Emulator:
     def _run_unlinked(self, now: int) -> None:
         """After a disconnect: tick until the watchdog has put the coil and road at rest (or stop)."""
         device = self.device
-        while not self.stop_event.is_set() and device.drive_a != 0.0 and device.configured:
+        while not self.stop_requested and device.drive_a != 0.0 and device.configured:
             self._tick_unlinked(now)
             now = self.clock()
 

@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     emulator = Emulator(device, transport)
 
     def _stop(signum: int, frame: object) -> None:
-        emulator.stop()
+        emulator.request_stop()  # no lock in a handler: a second signal must not deadlock the first
 
     # a device's sample timer is not starved by the host: best-effort SCHED_FIFO above the loop's 50
     from sashil.runtime.rt_setup import RealtimeSetup
