@@ -26,11 +26,12 @@ import numpy as np
 
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
-from sashil.errors import DriverTimeoutError, SashilError, Stopped
+from sashil.errors import DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
+from sashil.runtime.signals import stopped_error
 
 #: columns of a drop test's data.csv (DESIGN.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
@@ -334,7 +335,7 @@ def run_drop_test(
     )
     error = outcome.error  # whatever ended the test early, the rig is at 0 A, deactivated and closed
     if error is None and outcome.stop.requested and outcome.result.exit_status == "stopped":
-        error = Stopped(f"stopped by {outcome.stop.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+        error = stopped_error(outcome.stop)
     if error is not None and not isinstance(error, SashilError):
         raise error
     columns = plan.columns()

@@ -32,10 +32,10 @@ from operator import attrgetter
 from typing import Any, Protocol
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample, capabilities_of
-from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, SafetyTrip, Stopped, status_of
+from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, SafetyTrip, status_of
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
-from sashil.runtime.signals import catch_stop_signals
+from sashil.runtime.signals import catch_stop_signals, stopped_error
 from sashil.runtime.timing import FOLD, TimingStats
 
 log = logging.getLogger("sashil.loop")
@@ -147,7 +147,7 @@ class ControlLoop:
             finally:
                 self.stop = None
         if result.exit_status == "stopped" and flag.requested:
-            raise Stopped(f"stopped by {flag.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+            raise stopped_error(flag)
         return result
 
     def _run(self) -> LoopResult:

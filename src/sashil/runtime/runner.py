@@ -32,14 +32,14 @@ from pathlib import Path
 from typing import Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DiskSpaceError, Stopped, exit_code_of
+from sashil.errors import DiskSpaceError, exit_code_of
 from sashil.models.hysteresis import compile_kernels
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
-from sashil.runtime.signals import StopFlag, catch_stop_signals
+from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
 from sashil.safety import SafetySupervisor
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
@@ -115,7 +115,7 @@ class RunOutcome:
     def raise_stop(self) -> None:
         """Raise :class:`~sashil.errors.Stopped` if a signal stopped the run (exit 130)."""
         if self.result.exit_status == "stopped" and self.stop.requested:
-            raise Stopped(f"stopped by {self.stop.signal_name} after a clean shutdown (0 A; the data up to it kept)")
+            raise stopped_error(self.stop)
 
 
 def run_plan(

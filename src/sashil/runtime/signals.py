@@ -13,6 +13,8 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from sashil.errors import Stopped
+
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -28,6 +30,11 @@ class StopFlag:
     def request(self, reason: str = "stop requested") -> None:
         self.signal_name = self.signal_name or reason
         self.requested = True
+
+
+def stopped_error(flag: StopFlag) -> Stopped:
+    """The error a verb ends with after ``flag`` stopped its loop cleanly (exit 130)."""
+    return Stopped(f"stopped by {flag.signal_name} after a clean shutdown (0 A; the data up to it kept)")
 
 
 @contextmanager
