@@ -1,8 +1,10 @@
 """The rig emulator: the interface board of the SAS rig, simulated, speaking the sashil protocols.
 
-``device`` holds the board's logic (pure, simulated time), ``transports`` its links (serial or SLCAN
-on a pty, python-can's virtual bus), ``runner`` the real-time loop that joins them (a process via
-``sashil emulate``, or a thread in tests), ``truth`` the plant's true state per sample sent.
+``device`` holds the board's logic in Python (pure, simulated time) and ``c_board`` the same board
+running the firmware's C code (``sashil emulate --board c``), ``transports`` their links (serial or
+SLCAN on a pty, python-can's virtual bus) carrying decoded messages or the raw wire (``wire``),
+``runner`` the real-time loop that joins them (a process via ``sashil emulate``, or a thread in
+tests), ``truth`` the plant's true state per sample sent.
 """
 
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
