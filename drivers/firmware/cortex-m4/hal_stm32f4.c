@@ -5,12 +5,16 @@
  * Assumptions, to adapt to a board: an 8 MHz crystal (HSE), SYSCLK 168 MHz from the PLL (M 8, N 336,
  * P 2, Q 7), APB1 42 MHz (timer clock 84 MHz), APB2 84 MHz (timer clock 168 MHz), 5 flash wait states
  * (RM0090 6.3.2, 3.5.1).
- *   arm encoder   TIM2 (32 bit) encoder mode, both edges: PA15 = CH1, PB3 = CH2 (AF1)  (RM0090 18.3.16)
+ *   arm encoder   TIM2 (32 bit) encoder mode, both edges: PA15 = CH1, PB3 = CH2 (AF1)  (RM0090 18.3.16);
+ *                 PA15 and PB3 are JTDI and JTDO after reset: taking them leaves SWD (PA13/PA14) to debug
  *   road encoder  TIM5 (32 bit) encoder mode, both edges: PA0 = CH1, PA1 = CH2 (AF2)
  *   coil driver   TIM1 CH1 PWM at 20 kHz on PA8 (AF1) into the coil's half bridge; current sense on
- *                 ADC1 channel 10 (PC0), SENSE_MV_PER_A mV per ampere. A proportional-integral current
- *                 loop at 10 kHz (TIM6 interrupt) sets the duty so the measured current follows the
- *                 setpoint; above OVERCURRENT_COUNTS the drive is cut and the overcurrent flag raised.
+ *                 ADC1 channel 10 (PC0), SENSE_MV_PER_A mV per ampere (1.2 V/A: 2.75 A at the 3.3 V
+ *                 full scale, so the 2.5 A trip below reads on the ADC). Closed loop: a
+ *                 proportional-integral current loop at 10 kHz (TIM6 interrupt) sets the duty so the
+ *                 measured current follows the setpoint (integrator clamped to the duty range: no
+ *                 wind-up); above OVERCURRENT_COUNTS the drive is cut and the overcurrent flag raised.
+ *                 The gains are placeholders for a first bench test, to be tuned on the coil's L and R.
  *   road motor    TIM8 CH1 PWM at 20 kHz on PC6 (AF3), direction on PC7; a proportional-integral speed
  *                 loop at 1 kHz on the road encoder's counts.
  *   host link     USART1 at 1 Mbit/s, 8N1: PA9 = TX, PA10 = RX (AF7); received bytes go to a ring buffer
@@ -87,7 +91,7 @@
 
 #define SYSCLK_MHZ 168u
 #define PWM_PERIOD 8400u                 /* 168 MHz / 20 kHz */
-#define SENSE_MV_PER_A 1500u             /* the current-sense amplifier's gain */
+#define SENSE_MV_PER_A 1200u             /* the current-sense amplifier's gain */
 #define ADC_MV_FULL 3300u                /* 12-bit ADC, 3.3 V reference */
 #define OVERCURRENT_COUNTS 5000          /* 2.5 A in 0.5 mA counts */
 #define ENCODER_COUNTS_PER_REV 4096.0f   /* the road encoder, for the speed loop */
@@ -104,7 +108,7 @@ static volatile int16_t coil_measured;   /* 0.5 mA counts */
 static volatile uint8_t overcurrent;
 static volatile int32_t road_setpoint;   /* urad/s */
 static float coil_integral, road_integral;
-static int32_t road_last_counts;
+static uint32_t road_last_counts;
 static uint32_t ticks;
 
 static void pin_af(uint32_t port, unsigned pin, unsigned af)
@@ -119,13 +123,14 @@ static void clock_init(void)
     RCC_CR |= 1u << 16; /* HSEON */
     while (!(RCC_CR & (1u << 17))) {
     }
-    /* PLLM 8, PLLN 336, PLLP 2 (bits 00), PLLSRC HSE, PLLQ 7 */
-    RCC_PLLCFGR = 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    /* PLLM 8, PLLN 336, PLLP 2 (bits 00), PLLSRC HSE, PLLQ 7; the reserved bits keep their reset value */
+    RCC_PLLCFGR = (RCC_PLLCFGR & 0xF0BC8000u) | 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
     RCC_CR |= 1u << 24; /* PLLON */
     while (!(RCC_CR & (1u << 25))) {
     }
     FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10); /* 5 wait states, prefetch, I- and D-cache */
-    RCC_CFGR = (5u << 10) | (4u << 13) | 2u;             /* APB1 /4, APB2 /2, SYSCLK = PLL */
+    RCC_CFGR = (5u << 10) | (4u << 13);                  /* APB1 /4, APB2 /2 before the switch */
+    RCC_CFGR |= 2u;                                      /* SYSCLK = PLL */
     while ((RCC_CFGR & (3u << 2)) != (2u << 2)) {
     }
 }
@@ -133,7 +138,8 @@ static void clock_init(void)
 static void encoder_init(uint32_t tim)
 {
     TIM_ARR(tim) = 0xFFFFFFFFu;
-    TIM_CCMR1(tim) = 1u | (1u << 8); /* CC1S = TI1, CC2S = TI2 */
+    /* CC1S = TI1, CC2S = TI2; input filters IC1F = IC2F = 3 (8 samples at the timer clock, ~95 ns) */
+    TIM_CCMR1(tim) = 1u | (3u << 4) | (1u << 8) | (3u << 12);
     TIM_SMCR(tim) = 3u;              /* encoder mode 3: count on both edges of both inputs */
     TIM_CNT(tim) = 0u;
     TIM_CR1(tim) = 1u;
@@ -217,6 +223,11 @@ void USART1_IRQHandler(void)
     }
 }
 
+static float clamp(float x, float lo, float hi)
+{
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
 static uint32_t clamp_duty(float duty)
 {
     if (duty <= 0.0f) {
@@ -243,15 +254,17 @@ void TIM6_DAC_IRQHandler(void)
         TIM_CCR1(TIM1) = 0u;
     } else {
         float error = (float)coil_setpoint - (float)counts;
-        coil_integral += 0.02f * error;
+        coil_integral = clamp(coil_integral + 0.02f * error, 0.0f, (float)PWM_PERIOD);
         TIM_CCR1(TIM1) = clamp_duty(2.0f * error + coil_integral);
     }
     if (++ticks % 10u == 0u) {
-        int32_t now = (int32_t)TIM_CNT(TIM5);
-        float speed = (float)(now - road_last_counts) * (6.2831853f / ENCODER_COUNTS_PER_REV) * 1000.0f; /* rad/s */
+        uint32_t now = TIM_CNT(TIM5);
+        int32_t step = (int32_t)(now - road_last_counts); /* modulo 2^32: right across the counter's wrap */
+        float speed = (float)step * (6.2831853f / ENCODER_COUNTS_PER_REV) * 1000.0f; /* rad/s */
         road_last_counts = now;
         float error = (float)road_setpoint * 1e-6f - speed;
-        road_integral = road_setpoint == 0 ? 0.0f : road_integral + 5.0f * error;
+        road_integral =
+            road_setpoint == 0 ? 0.0f : clamp(road_integral + 5.0f * error, -(float)PWM_PERIOD, (float)PWM_PERIOD);
         float drive = 800.0f * error + road_integral;
         if (drive < 0.0f) {
             GPIO_BSRR(GPIOC) = 1u << (7u + 16u);
