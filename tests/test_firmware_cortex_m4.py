@@ -37,14 +37,27 @@ def test_the_elf_is_arm_with_its_vector_table_at_the_start_of_flash(firmware):
     image, _ = firmware
     flash_start, flash_size = elf.FLASH
     sram_start, sram_size = elf.SRAM
+    assert image.data[:6] == b"\x7fELF\x01\x01"  # ELF32 (class 1), little-endian (data 1)
     assert image.machine == elf.EM_ARM
     initial_sp, reset = image.word_at(flash_start), image.word_at(flash_start + 4)
     assert sram_start < initial_sp <= sram_start + sram_size and initial_sp % 8 == 0
     assert reset == image.symbols["Reset_Handler"] | 1 or reset == image.symbols["Reset_Handler"]
     assert reset & 1 and flash_start <= reset < flash_start + flash_size  # Thumb code in flash
     assert image.entry == reset
+    assert initial_sp == image.symbols["_estack"]
     usart1 = image.word_at(flash_start + 4 * (16 + 37))  # RM0090 table 61: USART1 is IRQ 37
     assert usart1 & ~1 == image.symbols["USART1_IRQHandler"] & ~1
+
+
+def test_data_is_loaded_from_flash_into_sram_by_the_symbols_the_reset_handler_uses(firmware):
+    image, _ = firmware
+    flash_start, flash_size = elf.FLASH
+    sram_start, sram_size = elf.SRAM
+    s = image.symbols
+    assert flash_start <= s["_sidata"] < flash_start + flash_size  # .data's initial values, in flash
+    assert sram_start <= s["_sdata"] <= s["_edata"] <= s["_sbss"] <= s["_ebss"] < s["_estack"]
+    assert s["_estack"] <= sram_start + sram_size
+    assert all(s[k] % 4 == 0 for k in ("_sidata", "_sdata", "_edata", "_sbss", "_ebss"))  # word loops
 
 
 def test_the_real_board_logic_is_linked_and_it_fits_the_part_with_room(firmware):
@@ -70,3 +83,13 @@ def test_without_ziglang_make_says_so_in_one_line(tmp_path):
     assert done.returncode != 0
     assert "pip install ziglang" in done.stderr
     assert not (tmp_path / "b" / "cortex-m4" / "sashil-board.elf").exists()
+
+
+def test_tools_elf_size_prints_what_make_printed(firmware, tmp_path):
+    image, printed = firmware
+    elf_file = tmp_path / "board.elf"
+    elf_file.write_bytes(image.data)
+    tool = Path(__file__).resolve().parents[1] / "tools" / "elf_size.py"
+    done = subprocess.run([sys.executable, str(tool), str(elf_file)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split(": ", 1)[1] in printed

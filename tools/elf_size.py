@@ -1,0 +1,52 @@
+"""Flash and RAM use of Cortex-M4 ELF files, without binutils for ARM (no ``arm-none-eabi-size`` here).
+
+The reader is ``drivers/firmware/elf.py`` (one copy: ELF32 section headers and symbol table read with
+``struct``); ``make -C drivers/firmware cortex-m4`` runs that file directly, since the Makefile ships
+with the package and ``tools/`` does not. This is the same line for any ELF, from the repository:
+
+    python tools/elf_size.py drivers/firmware/build/cortex-m4/sashil-board.elf
+    -> flash 4206 B (0.4 % of 1024 KiB), RAM 5104 B (3.9 % of 128 KiB, the 4 KiB stack included)
+
+Flash: the allocated sections with contents (.isr_vector, .text, .rodata, .ARM.exidx, .data's
+initial values); RAM: the allocated sections in SRAM (.data, .bss, .stack). Exit 1 on a file that is
+not an ELF32 little-endian file.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+ELF_PY = Path(__file__).resolve().parent.parent / "drivers" / "firmware" / "elf.py"
+
+
+def load_elf_module() -> ModuleType:
+    """drivers/firmware/elf.py as a module (by path: the sashil package need not be installed)."""
+    spec = importlib.util.spec_from_file_location("sashil_firmware_elf", ELF_PY)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot load {ELF_PY}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the class is made
+    spec.loader.exec_module(module)
+    return module
+
+
+def main(argv: list[str]) -> int:
+    if not argv:
+        print("usage: python tools/elf_size.py FILE.elf [FILE.elf ...]", file=sys.stderr)
+        return 2
+    elf = load_elf_module()
+    status = 0
+    for name in argv:
+        try:
+            print(f"{name}: {elf.usage_line(elf.read_elf(name))}")
+        except (OSError, ValueError) as err:
+            print(f"elf_size: {err}", file=sys.stderr)
+            status = 1
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
