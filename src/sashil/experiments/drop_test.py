@@ -31,7 +31,6 @@ from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
-from sashil.runtime.signals import stopped_error
 
 #: columns of a drop test's data.csv (DESIGN.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
@@ -333,9 +332,8 @@ def run_drop_test(
     outcome = run_plan(
         config, rig, plan, clock, data_path=data_path, rate_hz=settings.rate_hz, say=log.warning, note=log.debug
     )
-    error = outcome.error  # whatever ended the test early, the rig is at 0 A, deactivated and closed
-    if error is None and outcome.stop.requested and outcome.result.exit_status == "stopped":
-        error = stopped_error(outcome.stop)
+    # whatever ended the test early, the rig is at 0 A, deactivated and closed
+    error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
     columns = plan.columns()

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DiskSpaceError, exit_code_of
+from sashil.errors import DiskSpaceError, Stopped, exit_code_of
 from sashil.models.hysteresis import compile_kernels
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -112,10 +112,17 @@ class RunOutcome:
             "shutdown_errors": result.shutdown_errors,
         }
 
-    def raise_stop(self) -> None:
-        """Raise :class:`~sashil.errors.Stopped` if a signal stopped the run (exit 130)."""
+    def stop_error(self) -> Stopped | None:
+        """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""
         if self.result.exit_status == "stopped" and self.stop.requested:
-            raise stopped_error(self.stop)
+            return stopped_error(self.stop)
+        return None
+
+    def raise_stop(self) -> None:
+        """Raise :meth:`stop_error` if a signal stopped the run."""
+        stopped = self.stop_error()
+        if stopped is not None:
+            raise stopped
 
 
 def run_plan(
