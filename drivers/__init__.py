@@ -1,23 +1,21 @@
 """sashil.drivers: the rig interface, its backends, their protocol codecs and the rig emulator.
 
-Backends are found by name through a small lazy registry (after python-can's interface table):
-the module is imported only when that backend is asked for.
+Backends are found by name through the ``sashil.backends`` entry points (after python-can's
+interface table), where the built-in ``sim``, ``serial`` and ``can`` are registered exactly as a
+lab's own driver package would register its board: the module is imported only when that backend
+is asked for.
 """
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
-from sashil.errors import DriverError
+from sashil.errors import ConfigError, DriverError
+from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
 
-#: backend name -> (module, class)
-BACKENDS: dict[str, tuple[str, str]] = {
-    "sim": ("sashil.drivers.sim", "SimulatedRig"),
-    "serial": ("sashil.drivers.serial_rig", "SerialRig"),
-    "can": ("sashil.drivers.can_rig", "CanRig"),
-}
+#: backend name -> "module:Class" (the installed ``sashil.backends`` entry points)
+BACKENDS: dict[str, str] = {name: plugin.target for name, plugin in entry_point_table(BACKENDS_GROUP).items()}
 
 __all__ = ["BACKENDS", "SAFE_COMMAND", "RigCommand", "RigInterface", "RigSample", "backend_class", "open_rig"]
 
@@ -25,14 +23,13 @@ __all__ = ["BACKENDS", "SAFE_COMMAND", "RigCommand", "RigInterface", "RigSample"
 def backend_class(name: str) -> type[RigInterface]:
     """The class registered for backend ``name`` (imported on first use)."""
     try:
-        module_name, class_name = BACKENDS[name]
+        target = BACKENDS[name]
     except KeyError:
         raise DriverError(f"driver.name: unknown backend {name!r} (known: {', '.join(BACKENDS)})") from None
     try:
-        module = importlib.import_module(module_name)
-    except ImportError as err:
-        raise DriverError(f"driver {name!r} is not available: {err}") from None
-    return getattr(module, class_name)
+        return load_class(target, f"driver {name!r}")
+    except ConfigError as err:
+        raise DriverError(f"{err} (the backend is not available)") from None
 
 
 def open_rig(config: dict[str, Any]) -> RigInterface:

@@ -14,7 +14,7 @@ from sashil.control.laws import SkyhookOnOff, band_limited_fraction
 from sashil.control.observer import BoucWenObserver
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigSample
-from sashil.errors import ConfigError
+from sashil.errors import ConfigError, LawError
 from sashil.experiments.drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 from sashil.models.mismatch import mismatch_fractions, open_sim_rig, plant_config
@@ -145,9 +145,9 @@ class _State:
 
 
 def test_skyhook_onoff_switches_on_the_sign_of_body_times_relative_rate():
-    law = SkyhookOnOff(1.0)
-    assert law.output(_State(0.2, 0.5)) == 1.0
-    assert law.output(_State(-0.2, 0.5)) == 0.0
+    law = SkyhookOnOff(onoff_current_a=1.0)
+    assert law.current(_State(0.2, 0.5)) == 1.0
+    assert law.current(_State(-0.2, 0.5)) == 0.0
 
 
 def test_band_limited_fraction_stays_in_its_range_and_band():
@@ -160,12 +160,13 @@ def test_band_limited_fraction_stays_in_its_range_and_band():
     assert spectrum[freqs > 2.01].max() < 1e-9 * spectrum.max()
 
 
-def test_nan_target_ends_at_zero_current():
+def test_a_nan_target_is_a_law_error_naming_the_law():
     config = default_config()
-    ctl = make_controller("torque-tracking", config, torque=lambda t: float("nan"))
-    for k in range(5):
-        cmd = ctl.step(sample(k, 0, 0.3), k * 1_000_000, 1_000_000)
-        assert cmd.current_a == 0.0
+    ctl = make_controller("torque-tracking", config, torque=lambda t: float("nan") if t > 0.0015 else 1.0)
+    ctl.step(sample(0, 0, 0.3), 0, 1_000_000)
+    ctl.step(sample(1, 0, 0.3), 1_000_000, 1_000_000)
+    with pytest.raises(LawError, match=r"law 'torque-tracking' \(built-in\) failed at t = 0\.0020 s: returned nan"):
+        ctl.step(sample(2, 0, 0.3), 2_000_000, 1_000_000)
 
 
 def mismatched(pattern="alternate"):

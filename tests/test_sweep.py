@@ -176,7 +176,7 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--controller", "nope"], "--controller: unknown law 'nope'"),
+        (["--controller", "nope"], "--controller: controller.law: unknown law 'nope'"),
         (["--controller", "skyhook"], "controller.c_sky"),
         (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency at or above --f-start (3 Hz)"),
         (["--stepped", "--f-start", "2", "--f-stop", "2"], "--f-stop: a stepped sine needs a frequency above"),
@@ -191,7 +191,7 @@ def test_sweep_cli_bad_input_is_one_line(tmp_path, capsys, argv, message):
 
 
 def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch():
-    # issue 5 acceptance, shortened: 10 % plant mismatch, coil lag +10 %, 4096 counts/rev
+    # shortened: 10 % plant mismatch, coil lag +10 %, 4096 counts/rev
     config = default_config()
     config["mismatch"].update(fraction=0.1, coil_tau=0.1)
     config["sweep"].update(settle_s=4.0, measure_s=2.0, ramp_s=1.0)

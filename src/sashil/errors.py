@@ -48,6 +48,12 @@ class ProtocolError(DriverIOError):
     """A frame from the device is malformed, or the device speaks another protocol version."""
 
 
+class LawError(SashilError):
+    """The control law raised, or returned NaN, an infinity or a non-number: the loop stops at 0 A."""
+
+    exit_code = 1
+
+
 class RecordingError(SashilError):
     """Writing the run's data failed mid-run (a full or read-only disk): the loop stops at 0 A."""
 

@@ -38,6 +38,7 @@ VERBS: dict[str, str] = {
     "simulate": "sashil.cli.simulate",
     "emulate": "sashil.cli.emulate",
     "report": "sashil.cli.report",
+    "laws": "sashil.cli.laws",
 }
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
@@ -67,12 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
     for verb, module_name in VERBS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as err:
-            if err.name != module_name:
-                raise
-            continue  # verb not built yet
+        module = importlib.import_module(module_name)
         verb_parser = sub.add_parser(
             verb,
             help=module.HELP,
@@ -119,7 +115,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with _stop_outside_the_loop():
             return int(args._module.run(args) or 0)
     except SashilError as err:
-        if err.exit_code == ConfigError.exit_code:  # bad input: nothing written (issue 13)
+        if err.exit_code == ConfigError.exit_code:  # bad input: nothing written
             from sashil.recording.run_folder import discard_unused
 
             discard_unused()

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sashil.config import Config, apply_params, load_config
+from sashil.config import Config, apply_params, check_controller, load_config
 from sashil.config.overrides import apply_overrides
 from sashil.drivers import BACKENDS
 from sashil.errors import ConfigError
@@ -178,7 +178,17 @@ def resolve_config(args: argparse.Namespace) -> Config:
     config = load_config(getattr(args, "config", None))
     if getattr(args, "params", None):
         config = apply_params(config, args.params)
-    config = apply_overrides(config, getattr(args, "overrides", None) or ())
+        check_controller(config, args.params)  # the law's checks against the new model
+    overrides = list(getattr(args, "overrides", None) or ())
+    law = getattr(args, "controller", None)
+    if law:  # --controller LAW is controller.law=LAW, applied before the law's --set keys
+        if getattr(args, "current", None) is not None and law != "passive":
+            raise ConfigError(f"--current: only for --controller passive (got --controller {law})")
+        config = apply_overrides(
+            config, [f"controller.law={law}", *overrides], "--set" if overrides else "--controller"
+        )
+    else:
+        config = apply_overrides(config, overrides)
     if getattr(args, "params", None) and _mismatched(config.get("mismatch") or {}):
         logging.getLogger("sashil").warning(
             "--params %s: the config's mismatch: section is applied on top of these parameters "
@@ -205,6 +215,29 @@ def _mismatched(section: dict[str, Any]) -> bool:
         or section.get("coil_tau")
         or any(section.get(key) is not None for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"))
     )
+
+
+def select_law(config: Config, name: str | None) -> str:
+    """``--controller NAME``: the law the run uses, written into ``config['controller']`` (the
+    previous law's parameters dropped) and checked with its parameters; returns the law's name."""
+    section = config["controller"]
+    if name is not None and name != section["law"]:
+        from sashil.control.law_config import switch_law
+
+        switch_law(section, name)
+        check_controller(config, "--controller")
+    return str(section["law"])
+
+
+def law_help() -> str:
+    """The registered law names for ``--controller``'s help (``sashil laws`` lists their parameters)."""
+    from sashil.control.law_registry import law_names
+
+    try:
+        names = ", ".join(law_names())
+    except ConfigError as err:
+        return f"(the laws cannot be listed: {err})"
+    return f"{names}; or package.module:Class or path/file.py:Class (sashil laws lists their parameters)"
 
 
 def positive_seconds(option: str, value: float) -> float:

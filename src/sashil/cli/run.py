@@ -14,10 +14,12 @@ from sashil.cli.common import (
     add_recording_options,
     add_verbosity_options,
     current_in_range,
+    law_help,
     open_live_tap,
     positive_seconds,
     resolve_config,
     say,
+    select_law,
     setup_logging,
 )
 from sashil.cli.outputs import finish_loop_run, start_can_trace
@@ -49,8 +51,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, metavar="HZ", help="loop rate (default: loop.rate_hz, 1000)")
     parser.add_argument(
         "--controller",
-        metavar="NAME",
-        help="controller (default: the config's controller section, else passive)",
+        metavar="LAW",
+        help=f"semi-active law ({law_help()}); default controller.law",
     )
     parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
     parser.add_argument(
@@ -85,34 +87,21 @@ def check_rate(rate: float, rig: Any, backend: str) -> float:
     return float(rate)
 
 
-def _registry_make_controller() -> Any:
-    try:
-        from sashil.control.registry import make_controller
-    except ModuleNotFoundError as err:
-        if err.name not in ("sashil.control", "sashil.control.registry"):
-            raise
-        return None
-    return make_controller
-
-
 def build_stage(name: str | None, config: dict[str, Any], current: float | None) -> tuple[str, Any]:
-    """The loop stage for ``--controller``/``--current`` (passive: a constant current)."""
-    section = config.get("controller")
-    if name is None:
-        name = section.get("law", "passive") if isinstance(section, dict) and current is None else "passive"
-    if current is not None and name != "passive":
-        raise ConfigError(f"--current: only for --controller passive (got --controller {name})")
+    """The loop stage for ``--controller``/``--current``, with both written into ``config['controller']``
+    (the built-in passive law runs as a constant current: no estimator or observer needed)."""
+    if current is not None:
+        if name is not None and name != "passive":
+            raise ConfigError(f"--current: only for --controller passive (got --controller {name})")
+        name = "passive"
+    name = select_law(config, name)
+    if current is not None:
+        config["controller"]["current_a"] = current_in_range("--current", current, config)
     if name == "passive":
-        configured = section.get("current_a", 0.0) if isinstance(section, dict) else 0.0
-        value = current_in_range(
-            "--current" if current is not None else "controller.current_a",
-            configured if current is None else current,
-            config,
-        )
+        value = float(config["controller"]["current_a"])
         return f"passive {value:g} A", ConstantCurrent(value)
-    make_controller = _registry_make_controller()
-    if make_controller is None:
-        raise ConfigError(f"--controller: unknown controller {name!r} (known: passive)")
+    from sashil.control.registry import make_controller
+
     return name, make_controller(name, config)
 
 

@@ -16,13 +16,15 @@ from sashil.cli.common import (
     add_recording_options,
     add_verbosity_options,
     current_in_range,
+    law_help,
     open_rerun,
     positive_seconds,
     resolve_config,
+    select_law,
     setup_logging,
 )
 from sashil.cli.outputs import start_can_trace, write_formats
-from sashil.control.registry import LAWS, make_controller
+from sashil.control.registry import make_controller
 from sashil.errors import ConfigError, SashilError, status_of
 from sashil.experiments.sweep import (
     SWEEP_COLUMNS,
@@ -59,9 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)"
     )
     group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--controller", metavar="LAW", help=f"semi-active law ({', '.join(LAWS)}); default controller.law"
-    )
+    group.add_argument("--controller", metavar="LAW", help=f"semi-active law ({law_help()}); default controller.law")
     group.add_argument("--current", type=float, metavar="A", help="passive constant current instead of a law")
     parser.add_argument(
         "--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)"
@@ -98,13 +98,10 @@ def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
             raise ConfigError(f"--steps: expected an integer in [2, 1000], got {args.steps}")
         config["sweep"]["steps"] = args.steps
     if args.current is not None:
+        select_law(config, "passive")
         config["controller"]["current_a"] = current_in_range("--current", args.current, config)
         return "passive", config
-    name = args.controller or config["controller"]["law"]
-    if name not in LAWS:
-        raise ConfigError(f"--controller: unknown law {name!r} (known: {', '.join(LAWS)})")
-    make_controller(name, config)  # bad law parameters fail here, before a folder exists
-    return name, config
+    return select_law(config, args.controller), config
 
 
 def _plot(folder: RunFolder, points, label: str) -> None:

@@ -18,8 +18,17 @@ __all__ = ["Config", "apply_params", "default_config", "dump_config", "load_conf
 
 
 def default_config() -> Config:
-    """The default config: simulated rig, seed parameters, 1 kHz."""
-    return defaults(SCHEMA)
+    """The default config: simulated rig, seed parameters, 1 kHz, the passive law at 0 A."""
+    config = defaults(SCHEMA)
+    check_controller(config, "defaults")
+    return config
+
+
+def check_controller(config: Config, source: str) -> None:
+    """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`)."""
+    from sashil.control.law_config import check_controller as check
+
+    check(config, source)
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -86,6 +95,7 @@ def load_config(path: str | Path | None = None) -> Config:
     check_model(config["model"], str(path), "model")
     if include is not None:
         config = apply_params(config, (path.parent / include))
+    check_controller(config, str(path))
     return config
 
 

@@ -52,17 +52,27 @@ def _set(doc: dict[str, Any], path: list[str], value: Any) -> None:
     node[path[-1]] = value
 
 
-def apply_overrides(config: dict[str, Any], overrides: Iterable[str]) -> dict[str, Any]:
-    """A validated copy of ``config`` with each ``section.key=value`` override applied in order."""
+def apply_overrides(config: dict[str, Any], overrides: Iterable[str], source: str = SOURCE) -> dict[str, Any]:
+    """A validated copy of ``config`` with each ``section.key=value`` override applied in order
+    (``source``: the option named in error messages)."""
     overrides = list(overrides)
     if not overrides:
         return config
     doc = copy.deepcopy(config)
-    for text in overrides:
-        path, value = parse_override(text)
-        _set(doc, path, value)
-    out = validate(doc, SCHEMA, SOURCE)
+    parsed = [parse_override(text) for text in overrides]
+    for path, value in parsed:
+        if path == ["controller", "law"] and isinstance(doc.get("controller"), dict):
+            # the previous law's parameters go with it, unless set alongside the new law
+            from sashil.control.law_config import switch_law
+
+            keep = {p[1] for p, _ in parsed if len(p) == 2 and p[0] == "controller"}
+            switch_law(doc["controller"], value, keep)
+        else:
+            _set(doc, path, value)
+    out = validate(doc, SCHEMA, source)
+    from sashil.config import check_controller
     from sashil.models.registry import check_model
 
-    check_model(out["model"], SOURCE, "model")
+    check_model(out["model"], source, "model")
+    check_controller(out, source)
     return out

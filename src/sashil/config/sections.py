@@ -114,37 +114,14 @@ DROP_TEST = Section(
     doc="how a drop test finds the hold and the release",
 )
 
-#: the semi-active laws of issue 5 (sashil.control.registry.LAWS holds the same names)
-CONTROL_LAWS = ("passive", "target-damping", "skyhook", "skyhook-onoff", "skyhook-add", "groundhook", "torque-tracking")
-
 CONTROLLER = Section(
     {
-        "law": Field("choice", "passive", choices=CONTROL_LAWS, doc="the semi-active law (or --controller)"),
-        "current_a": Field("float", 0.0, low=0.0, high=10.0, doc="passive: the constant current"),
-        "c_target": Field("float?", None, low=0.0, low_open=True, doc="target-damping: linear damping [N m s/rad]"),
-        "zeta": Field(
-            "float?", None, low=0.0, low_open=True, high=10.0, doc="target-damping: damping ratio instead of c_target"
+        "law": Field(
+            "str",
+            "passive",
+            doc="the semi-active law: a registered name (sashil laws), package.module:Class or file.py:Class; "
+            "its parameters are further keys of this section (or --controller)",
         ),
-        "c_sky": Field("float?", None, low=0.0, low_open=True, doc="skyhook: sky damping [N m s/rad]"),
-        "crossover_hz": Field(
-            "float?",
-            None,
-            low=0.0,
-            low_open=True,
-            high=500.0,
-            doc="skyhook-add: crossover (null: sqrt(2) x natural frequency)",
-        ),
-        "c_ground": Field("float?", None, low=0.0, low_open=True, doc="groundhook: ground damping [N m s/rad]"),
-        "onoff_current_a": Field(
-            "float?", None, low=0.0, high=10.0, doc="skyhook-onoff: the 'on' current (null: rig.current_max_a)"
-        ),
-        "tracking_bandwidth_hz": Field(
-            "float", 2.0, low=0.0, low_open=True, high=500.0, doc="torque-tracking: bandwidth of the random T*"
-        ),
-        "tracking_fraction": Field(
-            "float_list", [0.1, 0.9], doc="torque-tracking: [low, high] fraction of the feasible band"
-        ),
-        "tracking_seed": Field("int", 0, low=0),
         "estimator": Field(
             "choice",
             "kalman",
@@ -206,7 +183,8 @@ CONTROLLER = Section(
             "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
         ),
     },
-    doc="the semi-active controller: estimator, Bouc-Wen observer, law, inverse (issue 5)",
+    open_keys=True,  # the law's own parameters, checked by sashil.control.law_config
+    doc="the semi-active controller: estimator, Bouc-Wen observer, law, inverse",
 )
 
 MISMATCH = Section(

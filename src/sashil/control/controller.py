@@ -12,6 +12,11 @@ Road feed-forward: a plan that drives the road sets ``road_speed_rad_s`` on the 
 returns (the sweep does); the change of that speed from one cycle to the next is the road
 acceleration the estimator is given for the next period (:mod:`sashil.control.kalman`).
 
+The law (:mod:`sashil.control.law_api`) reads a :class:`~sashil.control.law_api.LawState` the stage
+fills each cycle. Its output is checked: an exception, NaN, an infinity or a non-number ends the run
+with :class:`~sashil.errors.LawError`, naming the law and the first line of what went wrong; the
+loop then commands 0 A and deactivates the rig like any other error.
+
 Fallback: when the estimator reports divergence (its innovation out of bounds, e.g. a wildly wrong
 J) or a non-finite estimate, the stage commands 0 A (the MR damper's passive, safe state) for the
 rest of the run; :meth:`Controller.stats` reports it for summary.json.
@@ -20,15 +25,24 @@ rest of the run; :meth:`Controller.stats` reports it for summary.json.
 from __future__ import annotations
 
 import math
+from numbers import Real
+from typing import Any
 
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
-from sashil.control.laws import Law
+from sashil.control.law_api import Law, LawState
 from sashil.control.observer import BoucWenObserver
 from sashil.drivers.interface import RigCommand, RigSample, clamp_current
+from sashil.errors import LawError
 
 NAN = float("nan")
+INF = float("inf")
+
+
+def _first_line(err: BaseException) -> str:
+    text = (str(err).splitlines() or [""])[0]
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
 
 
 class Controller:
@@ -44,8 +58,14 @@ class Controller:
         current_max_a: float,
         model_aided: bool = True,
         nominal_dt_s: float = 0.001,
+        origin: str = "",
     ):
         self.law = law
+        #: where the law came from (built-in, a package, a file), for messages and summary.json
+        self.origin = origin
+        self.direct = law.output_kind() == "current"
+        self._law_output = law.current if self.direct else law.torque
+        self.state = LawState()
         self.estimator = estimator
         self.observer = observer
         self.inverse = inverse
@@ -107,6 +127,23 @@ class Controller:
     def name(self) -> str:
         return self.law.name
 
+    def law_failed(self, what: str) -> LawError:
+        """The error that ends the run when the law fails this cycle (``what``: the exception or value)."""
+        origin = f" ({self.origin})" if self.origin else ""
+        return LawError(f"law {self.law.name!r}{origin} failed at t = {self.time_s:.4f} s: {what}")
+
+    def _checked(self, value: Any) -> float:
+        """A law's output as a finite float, else LawError (off the fast path: float outputs pass inline)."""
+        if isinstance(value, Real) and not isinstance(value, bool):
+            number = float(value)
+            if math.isfinite(number):
+                return number
+            return self._raise(f"returned {number!r} (expected a finite number)")
+        return self._raise(f"returned {value!r} of type {type(value).__name__} (expected a number)")
+
+    def _raise(self, what: str) -> float:
+        raise self.law_failed(what)
+
     @property
     def clip_count(self) -> int:
         """Cycles whose target torque lay outside the damper's feasible band (clipped)."""
@@ -115,6 +152,7 @@ class Controller:
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
         if self._t0_ns is None:
             self._t0_ns = t_ns
+            self.law.reset()  # the first cycle of a run: the law starts from its own initial state
         dt = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
         self.time_s = (t_ns - self._t0_ns) * 1e-9
         est = self.estimator
@@ -152,18 +190,30 @@ class Controller:
         body_ddot = -self._k_over_j * theta - self._inv_j * torque_hat
         self.body_ddot_rad_s2 = body_ddot
         inv = self.inverse
-        law = self.law
-        if law.direct:
-            inv.band(z, v)
+        inv.band(z, v)
+        lo, hi = inv.band_lo_nm, inv.band_hi_nm
+        self.band_lo_nm, self.band_hi_nm = lo, hi
+        state = self.state
+        state.time_s, state.theta_rad, state.theta_dot_rad_s = self.time_s, theta, v
+        state.body_dot_rad_s, state.body_ddot_rad_s2, state.road_dot_rad_s = (
+            self.body_dot_rad_s,
+            body_ddot,
+            self.road_dot_rad_s,
+        )
+        state.torque_hat_nm, state.z_hat, state.band_lo_nm, state.band_hi_nm = torque_hat, z, lo, hi
+        state.current_a = measured
+        try:
+            out = self._law_output(state)
+        except Exception as err:
+            raise self.law_failed(f"raised {_first_line(err)}") from err
+        if type(out) is not float or out - out != 0.0:  # not a finite float (NaN - NaN and inf - inf are NaN)
+            out = self._checked(out)
+        if self.direct:
             self.torque_cmd_nm = NAN
-            target = law.output(self)
-            self.band_lo_nm, self.band_hi_nm = inv.band_lo_nm, inv.band_hi_nm
+            target = out
         else:
-            inv.band(z, v)
-            self.band_lo_nm, self.band_hi_nm = inv.band_lo_nm, inv.band_hi_nm
-            torque_cmd = law.output(self)
-            self.torque_cmd_nm = torque_cmd
-            target = inv.current(torque_cmd, z, v)
+            self.torque_cmd_nm = out
+            target = inv.current(out, z, v)
         self.current_target_a = target
         cmd = self.lead.command(target, measured)
         # safety clamp: the coil only ever sees a finite current in [0, i_max]

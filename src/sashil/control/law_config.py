@@ -1,0 +1,85 @@
+"""The ``controller:`` section's law and its parameters, checked like every other config key.
+
+The section holds the controller's own keys (estimator, inverse, ...: the schema's ``CONTROLLER``
+fields), ``law``, and the chosen law's parameters as ``controller.<param>``. :func:`check_controller`
+finds the law, checks each parameter with the law's own :class:`~sashil.control.law_api.Param`
+fields (the schema's code), and writes every parameter's value into the section, so a run
+folder's ``config.yaml`` says which law ran with which parameters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from sashil.control.law_api import Law, LawContext
+from sashil.control.law_registry import LawEntry, find_law
+from sashil.errors import ConfigError
+
+__all__ = ["check_controller", "law_context", "law_parameters", "switch_law"]
+
+
+def _core_keys() -> dict[str, Any]:
+    from sashil.config.sections import CONTROLLER
+
+    return CONTROLLER.fields
+
+
+def law_parameters(section: dict[str, Any]) -> dict[str, Any]:
+    """The section's keys that are law parameters (everything but the controller's own keys)."""
+    core = _core_keys()
+    return {key: value for key, value in section.items() if key not in core}
+
+
+def law_context(config: dict[str, Any]) -> LawContext | None:
+    """What a law may know of the rig: the controller's Bouc-Wen model, current range and rate
+    (None when the config's model is not the rig's Bouc-Wen model)."""
+    from sashil.models.hysteresis import BoucWenParams
+
+    model = config.get("model") or {}
+    if model.get("name", "bouc-wen") != "bouc-wen":
+        return None
+    return LawContext(
+        model=BoucWenParams.from_mapping(model.get("params") or {}),
+        current_max_a=float(config["rig"]["current_max_a"]),
+        rate_hz=float(config["loop"]["rate_hz"]),
+    )
+
+
+def build_law(entry: LawEntry, config: dict[str, Any], section: dict[str, Any]) -> Law:
+    """An instance of ``entry``'s law with the section's parameters (ConfigError naming the key)."""
+    return entry.cls(law_context(config), **law_parameters(section))
+
+
+def check_controller(config: dict[str, Any], source: str) -> None:
+    """Check ``controller.law`` and its parameters in place; fill in every parameter's value.
+
+    Errors are one line ``<source>: controller.<key>: <problem>``."""
+    section = config.get("controller")
+    if not isinstance(section, dict):
+        raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
+    try:
+        law = build_law(find_law(section["law"]), config, section)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from None
+    section.update(law.parameter_values())
+
+
+def switch_law(section: dict[str, Any], new_law: str, keep: Iterable[str] = ()) -> None:
+    """Set ``section['law']`` to ``new_law`` and drop the previous law's parameters that the new
+    one does not declare (they belonged to the law being replaced), except those in ``keep``
+    (set explicitly alongside the switch)."""
+    old = section.get("law")
+    section["law"] = new_law
+    if old == new_law or not isinstance(old, str):
+        return
+    try:
+        old_params = set(find_law(old).cls.params())
+    except ConfigError:
+        old_params = set(law_parameters(section))
+    try:
+        new_params = set(find_law(new_law).cls.params())
+    except ConfigError:  # an unknown law: check_controller names it
+        return
+    for key in old_params - new_params - set(keep):
+        section.pop(key, None)

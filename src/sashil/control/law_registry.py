@@ -1,0 +1,100 @@
+"""Laws by name: the ``sashil.laws`` entry points, plus ``package.module:Class`` and ``file.py:Class``.
+
+:func:`find_law` turns ``controller.law`` (or ``--controller``) into a checked law class;
+:func:`known_laws` lists every registered one (``sashil laws``). Built-in laws come through the
+same entry-point group as a lab's package (``pyproject.toml``), so there is one table.
+
+Bad input is one line naming ``controller.law``: an unknown name (with the known ones), a module
+or file that does not import, a class that is not a :class:`~sashil.control.law_api.Law` or
+implements neither ``torque`` nor ``current``, two laws claiming one name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sashil.control.law_api import Law
+from sashil.errors import ConfigError
+from sashil.plugins import LAWS_GROUP, entry_point_table, is_class_spec, load_class
+
+__all__ = ["LawEntry", "find_law", "known_laws", "law_names"]
+
+WHERE = "controller.law"
+
+
+@dataclass(frozen=True)
+class LawEntry:
+    """A law class and where it was found (``built-in``, ``package NAME`` or ``file PATH``)."""
+
+    spec: str
+    cls: type[Law]
+    origin: str
+
+
+def law_names() -> list[str]:
+    """The registered law names (built-ins first)."""
+    return list(entry_point_table(LAWS_GROUP))
+
+
+def _checked(cls: type, spec: str, origin: str) -> LawEntry:
+    if not (isinstance(cls, type) and issubclass(cls, Law)):
+        raise ConfigError(f"{WHERE}: {spec} is not a sashil.control.Law (subclass Law and implement torque or current)")
+    kind = cls.output_kind()
+    if not kind:
+        both = cls.torque is not Law.torque
+        raise ConfigError(
+            f"{WHERE}: {spec} implements "
+            + ("both torque and current (one output only)" if both else "neither torque(state) nor current(state)")
+        )
+    if not isinstance(cls.name, str) or not cls.name:
+        raise ConfigError(f"{WHERE}: {spec} has no name (set the class attribute name = '...')")
+    from sashil.config.sections import CONTROLLER
+
+    for key in cls.params():
+        if key in CONTROLLER.fields:
+            raise ConfigError(
+                f"{WHERE}: {spec} declares a parameter {key!r}, which is the controller's own key "
+                f"controller.{key}: rename the parameter"
+            )
+    return LawEntry(spec, cls, origin)
+
+
+def find_law(spec: str) -> LawEntry:
+    """The law ``spec`` names: a registered name, ``package.module:Class`` or ``path/file.py:Class``."""
+    if not isinstance(spec, str) or not spec:
+        raise ConfigError(f"{WHERE}: expected a law name, package.module:Class or path/file.py:Class, got {spec!r}")
+    if is_class_spec(spec):
+        cls = load_class(spec, WHERE)
+        module_part = spec.rpartition(":")[0]
+        origin = f"file {module_part}" if module_part.endswith(".py") else f"module {module_part}"
+        entry = _checked(cls, spec, origin)
+        registered = entry_point_table(LAWS_GROUP).get(entry.cls.name)
+        if registered is not None and registered.target != spec and _load(registered.target) is not entry.cls:
+            raise ConfigError(
+                f"{WHERE}: {spec} claims the name {entry.cls.name!r}, which {registered.target} "
+                f"({registered.origin}) already has: rename one of them"
+            )
+        return entry
+    table = entry_point_table(LAWS_GROUP)
+    plugin = table.get(spec)
+    if plugin is None:
+        known = ", ".join(table) or "none installed: reinstall sashil (pip install -e .)"
+        raise ConfigError(
+            f"{WHERE}: unknown law {spec!r} (known: {known}; or give package.module:Class or path/file.py:Class)"
+        )
+    entry = _checked(_load(plugin.target), plugin.target, plugin.origin)
+    if entry.cls.name != spec:
+        raise ConfigError(
+            f"{WHERE}: the entry point {spec!r} ({plugin.origin}) loads {plugin.target}, whose name is "
+            f"{entry.cls.name!r}: the two must agree"
+        )
+    return entry
+
+
+def _load(target: str) -> type:
+    return load_class(target, WHERE)
+
+
+def known_laws() -> list[LawEntry]:
+    """Every registered law, loaded and checked (for ``sashil laws``)."""
+    return [find_law(name) for name in law_names()]
