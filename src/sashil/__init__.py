@@ -8,5 +8,6 @@ except PackageNotFoundError:  # pragma: no cover - running from a tree that was 
     __version__ = "0+unknown"
 
 from sashil.api import Run, load_run  # the Python API: sashil.load_run(folder)
+from sashil.scripting import drop_test, run  # experiments from Python: the CLI's verbs, the same run folder
 
-__all__ = ["Run", "__version__", "load_run"]
+__all__ = ["Run", "__version__", "drop_test", "load_run", "run"]

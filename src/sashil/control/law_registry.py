@@ -11,7 +11,9 @@ implements neither ``torque`` nor ``current``, two laws claiming one name.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
+from pathlib import Path
 
 from sashil.control.law_api import Law
 from sashil.errors import ConfigError
@@ -69,7 +71,7 @@ def find_law(spec: str) -> LawEntry:
         origin = f"file {module_part}" if module_part.endswith(".py") else f"module {module_part}"
         entry = _checked(cls, spec, origin)
         registered = entry_point_table(LAWS_GROUP).get(entry.cls.name)
-        if registered is not None and registered.target != spec and _load(registered.target) is not entry.cls:
+        if registered is not None and registered.target != spec and not _same_class(_load(registered.target), entry.cls):
             raise ConfigError(
                 f"{WHERE}: {spec} claims the name {entry.cls.name!r}, which {registered.target} "
                 f"({registered.origin}) already has: rename one of them"
@@ -93,6 +95,17 @@ def find_law(spec: str) -> LawEntry:
 
 def _load(target: str) -> type:
     return load_class(target, WHERE)
+
+
+def _same_class(a: type, b: type) -> bool:
+    """One class, possibly imported twice (by its package and by its file path)."""
+    if a is b:
+        return True
+    try:
+        same_file = Path(inspect.getfile(a)).resolve() == Path(inspect.getfile(b)).resolve()
+    except (TypeError, OSError):
+        return False
+    return same_file and a.__qualname__ == b.__qualname__
 
 
 def known_laws() -> list[LawEntry]:
