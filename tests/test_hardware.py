@@ -16,7 +16,7 @@ import pytest
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigCommand
 from sashil.runtime.clock import RealClock
-from sashil.runtime.loop import run_loop
+from sashil.runtime.runner import run_plan
 
 SERIAL_PORT = os.environ.get("SASHIL_TEST_SERIAL_PORT")
 CAN_CHANNEL = os.environ.get("SASHIL_TEST_CAN_CHANNEL")
@@ -37,8 +37,8 @@ def _exercise(config):
     rig = open_rig(config)
     probe = _Probe(cycles=int(config["loop"]["rate_hz"]))
     rate = config["loop"]["rate_hz"]
-    result = run_loop(rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate), rate)
-    assert result.exit_status == "ok"
+    outcome = run_plan(config, rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
+    assert outcome.result.exit_status == "ok" and outcome.error is None  # the safety supervisor ran beside it
     seqs = [s.seq for s in probe.samples]
     assert all((b - a) % 65536 >= 1 for a, b in itertools.pairwise(seqs)), "sequence numbers advance"
     assert abs(probe.samples[-1].current_a - 0.2) < 0.05, "the coil follows the command"

@@ -54,12 +54,18 @@ def test_parameters_take_defaults_are_checked_and_derive_in_the_hook():
 @pytest.mark.parametrize(
     "params, message",
     [
-        ({}, "controller.gain: law 'soft' needs gain: add --set controller.gain=VALUE or set it in the config's controller: section"),
+        (
+            {},
+            "controller.gain: law 'soft' needs gain: add --set controller.gain=VALUE or set it in the config's controller: section",
+        ),
         ({"gain": 0.0}, "controller.gain: expected a number > 0 and <= 5, got 0.0"),
         ({"gain": 6}, "controller.gain: expected a number > 0 and <= 5, got 6"),
         ({"gain": "big"}, "controller.gain: expected a number > 0 and <= 5, got 'big'"),
         ({"gain": 1.0, "c_sky": -1}, "controller.c_sky: expected a number >= 0, got -1"),
-        ({"gain": 1.0, "c_skyy": 1}, "controller.c_skyy: law 'soft' has no parameter c_skyy (its parameters: c_sky, gain)"),
+        (
+            {"gain": 1.0, "c_skyy": 1},
+            "controller.c_skyy: law 'soft' has no parameter c_skyy (its parameters: c_sky, gain)",
+        ),
     ],
 )
 def test_bad_parameters_are_one_line_naming_controller_key(params, message):
@@ -126,7 +132,11 @@ def test_a_law_from_a_file_and_from_a_module(tmp_path, monkeypatch):
     "body, spec, message",
     [
         ("", "bogus", "controller.law: unknown law 'bogus' (known: "),
-        ("raise RuntimeError('no numpy here\\nsecond line')\n", "{path}:X", "does not import: RuntimeError: no numpy here"),
+        (
+            "raise RuntimeError('no numpy here\\nsecond line')\n",
+            "{path}:X",
+            "does not import: RuntimeError: no numpy here",
+        ),
         ("import no_such_module_xyz\n", "{path}:X", "No module named 'no_such_module_xyz'"),
         ("class X:\n    name = 'x'\n", "{path}:X", "is not a sashil.control.Law"),
         ("class X(Law):\n    name = 'x'\n", "{path}:X", "implements neither torque(state) nor current(state)"),
@@ -172,7 +182,10 @@ def test_law_parameters_are_config_keys_checked_like_any_other(tmp_path):
 
 
 def test_sashil_laws_lists_parameters_output_and_origin(tmp_path, capsys):
-    path = write_law(tmp_path, "class Y(Law):\n    name = 'y'\n    k = Param(1.5, unit='A', high=2.0)\n    def current(self, s):\n        return self.k\n")
+    path = write_law(
+        tmp_path,
+        "class Y(Law):\n    name = 'y'\n    k = Param(1.5, unit='A', high=2.0)\n    def current(self, s):\n        return self.k\n",
+    )
     assert main(["laws", "--json", "--law", f"{path}:Y"]) == 0
     laws = {law["name"]: law for law in json.loads(capsys.readouterr().out)}
     assert BUILT_INS <= set(laws)
@@ -238,7 +251,9 @@ def test_numpy_numbers_are_numbers():
         def torque(self, state):
             return np.float64(0.5)
 
-    ctl = make_controller("skyhook", {**default_config(), "controller": {**default_config()["controller"], "c_sky": 1.0}})
+    ctl = make_controller(
+        "skyhook", {**default_config(), "controller": {**default_config()["controller"], "c_sky": 1.0}}
+    )
     ctl.law, ctl._law_output = Np(), Np().torque
     ctl.step(_sample(0), 0, 1_000_000)
     assert ctl.torque_cmd_nm == 0.5
@@ -265,7 +280,9 @@ def test_a_failing_law_in_a_drop_test_ends_at_zero_amps_with_exit_1_and_keeps_th
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "error"
     run = summary["runs"][0]
-    assert "law 'fails'" in run["error"] and ("ValueError: gain table empty" in run["error"] or "returned nan" in run["error"])
+    assert "law 'fails'" in run["error"] and (
+        "ValueError: gain table empty" in run["error"] or "returned nan" in run["error"]
+    )
     import sashil
 
     data = sashil.load_run(out).runs[0].data

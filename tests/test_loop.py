@@ -12,7 +12,7 @@ from sashil.errors import DeadlineMissedError, DriverIOError
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import VirtualClock
-from sashil.runtime.loop import ControlLoop, record_columns, run_loop
+from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.session import run_session
 from sashil.runtime.stages import ConstantCurrent
 
@@ -89,7 +89,7 @@ def test_deadlines_are_absolute_and_the_measured_period_is_passed():
     clock = VirtualClock(start_ns=5_000)
     rig = FaultyRig()
     stage = Stall(clock)
-    result = run_loop(rig, stage, clock, 1000.0, duration_s=0.01)
+    result = ControlLoop(rig, stage, clock, 1000.0, duration_s=0.01).run()
     assert result.cycles == 10 and result.exit_status == "ok"
     assert [t for t, _ in rig.read_times] == [5_000 + k * PERIOD for k in range(10)]
     assert stage.dts == [0] + [PERIOD] * 9
@@ -101,7 +101,7 @@ def test_overruns_are_counted_and_whole_periods_skipped():
     rig = FaultyRig()
     stage = Stall(clock, at=5, stall_ns=3_500_000)  # cycle 5 runs 3.5 periods long
     warnings: list[str] = []
-    result = run_loop(rig, stage, clock, 1000.0, duration_s=0.02, warn=warnings.append)
+    result = ControlLoop(rig, stage, clock, 1000.0, duration_s=0.02, warn=warnings.append).run()
     # cycle 5 started at 4 ms and ended at 7.5 ms: the deadlines 5, 6 and 7 ms are missed, the
     # next cycle runs at 7.5 ms (0.5 ms late against the 7 ms tick), then back on the grid
     times = [t for t, _ in rig.read_times]
@@ -127,7 +127,9 @@ def test_overrun_warnings_are_rate_limited():
             return self.command
 
     warnings: list[str] = []
-    result = run_loop(rig, EveryOther(clock), clock, 1000.0, duration_s=1.0, warn=warnings.append, warn_interval_s=0.5)
+    result = ControlLoop(
+        rig, EveryOther(clock), clock, 1000.0, duration_s=1.0, warn=warnings.append, warn_interval_s=0.5
+    ).run()
     # every even cycle stalls 2.2 periods: the next cycle misses one deadline (the last stall
     # has no next cycle in the 1000)
     assert result.timing.overruns == 499
@@ -140,7 +142,7 @@ def test_overrun_policy_fail_stops_in_the_safe_state():
     clock = VirtualClock()
     rig = FaultyRig()
     with pytest.raises(DeadlineMissedError, match="deadline missed: cycle 3"):
-        run_loop(rig, Stall(clock, at=3, stall_ns=2_100_000), clock, 1000.0, 1.0, overrun_policy="fail")
+        ControlLoop(rig, Stall(clock, at=3, stall_ns=2_100_000), clock, 1000.0, 1.0, overrun_policy="fail").run()
     assert rig.currents[-2:] == [0.0, 0.0]  # the 0 A write, then deactivate
     assert rig.calls["deactivate"] == 1 and rig.calls["close"] == 1
 
@@ -156,7 +158,7 @@ def test_stage_ending_the_run_and_lifecycle_order():
             self.n += 1
             return None if self.n > 3 else RigCommand(0.3)
 
-    result = run_loop(rig, Three(), clock, 500.0)
+    result = ControlLoop(rig, Three(), clock, 500.0).run()
     assert result.cycles == 3 and result.exit_status == "ok"
     assert rig.calls == {"configure": 1, "activate": 1, "read": 4, "write": 4, "deactivate": 1, "close": 1}
     assert rig.currents == [0.3, 0.3, 0.3, 0.0, 0.0]

@@ -23,11 +23,25 @@ def config_keys(schema: Mapping[str, Any], prefix: str = "") -> Iterator[str]:
             yield f"{prefix}{key}"
 
 
+def law_keys() -> Iterator[str]:
+    """``controller.<param>`` of every registered law's parameters (each once)."""
+    from sashil.control.law_registry import known_laws
+    from sashil.errors import ConfigError
+
+    try:
+        laws = known_laws()
+    except ConfigError:  # a broken plug-in: complete the rest
+        return
+    yield from dict.fromkeys(f"controller.{key}" for entry in laws for key in entry.cls.params())
+
+
 def set_completer(prefix: str, **_: Any) -> list[str]:
-    """argcomplete completer of ``--set``: the dotted keys that start with ``prefix``, each with ``=``."""
+    """argcomplete completer of ``--set``: the dotted keys that start with ``prefix``, each with ``=``
+    (the schema's keys and the registered laws' parameters)."""
     from sashil.config.sections import SCHEMA
 
-    return [f"{key}=" for key in config_keys(SCHEMA) if key.startswith(prefix)]
+    keys = [*config_keys(SCHEMA), *law_keys()]
+    return [f"{key}=" for key in dict.fromkeys(keys) if key.startswith(prefix)]
 
 
 def enable(parser: argparse.ArgumentParser) -> None:

@@ -71,7 +71,11 @@ def find_law(spec: str) -> LawEntry:
         origin = f"file {module_part}" if module_part.endswith(".py") else f"module {module_part}"
         entry = _checked(cls, spec, origin)
         registered = entry_point_table(LAWS_GROUP).get(entry.cls.name)
-        if registered is not None and registered.target != spec and not _same_class(_load(registered.target), entry.cls):
+        if (
+            registered is not None
+            and registered.target != spec
+            and not _same_class(_load(registered.target), entry.cls)
+        ):
             raise ConfigError(
                 f"{WHERE}: {spec} claims the name {entry.cls.name!r}, which {registered.target} "
                 f"({registered.origin}) already has: rename one of them"

@@ -13,6 +13,9 @@ more after its deadline has missed that deadline: with overrun policy ``skip`` t
 periods are skipped and counted (``missed_deadlines``) with a rate-limited warning; with ``fail``
 the run stops with :class:`~sashil.errors.DeadlineMissedError` (exit 4).
 
+The loop is run by :func:`sashil.runtime.runner.run_plan`, which adds the safety supervisor, the
+recorder and signal handling; it is not a second way to run a rig.
+
 Whatever ends the loop (the duration, the stage, a stop flag set by SIGINT/SIGTERM, a safety
 trip, an exception anywhere) the rig gets the safe command (0 A), then ``deactivate()`` and
 ``close()``, each exactly once, before the loop returns or re-raises. ``LoopResult`` (also on
@@ -25,7 +28,6 @@ Per cycle the loop allocates no dicts or strings: timing goes into preallocated 
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import attrgetter
@@ -35,7 +37,6 @@ from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, Rig
 from sashil.errors import DeadlineMissedError, DriverIOError, RecordingError, SafetyTrip, status_of
 from sashil.recording.data_file import OPTIONAL_COLUMNS
 from sashil.runtime.clock import Clock
-from sashil.runtime.signals import catch_stop_signals, stopped_error
 from sashil.runtime.timing import FOLD, TimingStats
 
 log = logging.getLogger("sashil.loop")
@@ -134,23 +135,8 @@ class ControlLoop:
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
-        """Run the loop. Without a ``stop`` flag of the caller's, the loop takes SIGINT, SIGTERM and
-        SIGHUP itself (on the main thread): it stops at the next cycle through the ordinary shutdown
-        (0 A, road at rest, deactivate, close) and then raises :class:`~sashil.errors.Stopped`, so
-        every verb keeps what it recorded, writes its summary with ``exit_status: stopped`` and exits 130."""
-        if self.stop is not None or threading.current_thread() is not threading.main_thread():
-            return self._run()
-        with catch_stop_signals() as flag:
-            self.stop = flag
-            try:
-                result = self._run()
-            finally:
-                self.stop = None
-        if result.exit_status == "stopped" and flag.requested:
-            raise stopped_error(flag)
-        return result
-
-    def _run(self) -> LoopResult:
+        """Run the loop once. It stops at the next cycle when ``stop.requested`` (the runner routes
+        SIGINT, SIGTERM and SIGHUP to that flag: :func:`sashil.runtime.runner.run_plan`)."""
         rig, stage, clock, result, timing = self.rig, self.stage, self.clock, self.result, self.timing
         safety, recorder, stop = self.safety, self.recorder, self.stop
         period = self.period_ns
@@ -321,19 +307,3 @@ class ControlLoop:
                 result.shutdown_errors.append(f"{name}(): {type(err).__name__}: {err}")
         if write_error is not None and result.shutdown_errors:
             result.shutdown_errors.insert(0, f"0 A write: {type(write_error).__name__}: {write_error}")
-
-
-def run_loop(
-    rig: RigInterface,
-    stage: CycleStage,
-    clock: Clock,
-    rate_hz: float,
-    duration_s: float | None = None,
-    **options: Any,
-) -> LoopResult:
-    """Run ``stage`` on ``rig`` at ``rate_hz`` until ``duration_s``, the stage ends, or a stop.
-
-    ``options`` are the keyword arguments of :class:`ControlLoop` (``safety``, ``recorder``,
-    ``stop``, ``overrun_policy``, ``warn_interval_s``, ``warn``).
-    """
-    return ControlLoop(rig, stage, clock, rate_hz, duration_s, **options).run()
