@@ -98,3 +98,14 @@ def test_signal_during_a_real_clock_run_leaves_a_complete_folder(tmp_path, sig):
     assert len(data["time_s"]) == summary["timing"]["cycles"] == summary["recording"]["rows_written"]
     assert (out / "config.yaml").exists()
     assert f"stopped by {sig.name}" in stderr
+
+
+@pytest.mark.parametrize("driver", ["serial", "can"])
+def test_a_port_that_cannot_be_opened_is_refused_before_any_output(tmp_path, capsys, driver):
+    out = tmp_path / "out"
+    code = main(
+        ["run", "--driver", driver, "--port", str(tmp_path / "NO-SUCH-TTY"), "--duration", "1", "--out", str(out)]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "cannot open" in err, err  # no set-up lines, no timing table
+    assert not out.exists()

@@ -122,9 +122,12 @@ def run(args: argparse.Namespace) -> int:
         rig = open_rig(config)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
-    try:  # the device's own limit, now that it is open (nothing configured or energised yet)
-        rate = check_rate(config["loop"]["rate_hz"], rig, backend)
-    except ConfigError:
+    try:
+        # open the port and greet the board now (configure is idempotent; the loop's own call finds
+        # it done): a port that cannot be opened is one line, before any set-up, output or folder
+        rig.configure()
+        rate = check_rate(config["loop"]["rate_hz"], rig, backend)  # the device's own limit (nothing energised)
+    except BaseException:
         rig.close()
         raise
     config["driver"]["clock"] = "real"  # `sashil run` always runs on the real clock
