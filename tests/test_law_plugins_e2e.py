@@ -90,3 +90,16 @@ def test_a_law_slower_than_its_period_lets_the_device_watchdog_rest_the_coil(tmp
     rest = last + int(np.flatnonzero(current[last:] < 0.05)[0])
     # at rest within the watchdog (50 ms) + one cycle + the coil's decay from 1 A to 0.05 A (3 tau, 30 ms)
     assert t_us[rest] - t_us[last] <= 50_000 + 1_000 + 35_000, (t_us[rest] - t_us[last]) / 1e3
+
+
+def test_the_readme_python_example_runs(tmp_path, monkeypatch):
+    import re
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("#### Write your own controller", 1)[1].split("**From Python**", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
+    monkeypatch.chdir(tmp_path)  # the runs' default folders land under runs/ here
+    scope: dict = {}
+    exec(compile(code.replace("duration_s=5", "duration_s=1"), "README.md", "exec"), scope)
+    assert scope["run"].config["controller"]["law"] == "soft-skyhook"
+    assert [r.name for r in scope["drop"].runs] == ["i0.000A", "i1.000A"]

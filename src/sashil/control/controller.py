@@ -112,8 +112,10 @@ class Controller:
         return self.command
 
     def stats(self) -> dict[str, object]:
-        """Counters for summary.json: clipped/passive cycles, unsafe commands, the estimator fallback."""
+        """For summary.json: the law (name, origin, parameters), clipped/passive cycles, unsafe commands,
+        the estimator fallback."""
         return {
+            "law": {"name": self.law.name, "origin": self.origin, "parameters": self.law.parameter_values()},
             "clipped_cycles": self.inverse.clip_count,
             "passive_cycles": self.inverse.passive_count,
             "unsafe_commands": self.unsafe_count,
