@@ -10,14 +10,24 @@ from __future__ import annotations
 
 from typing import Any
 
-from sashil.drivers.interface import SAFE_COMMAND, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import SAFE_COMMAND, RigCapabilities, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverError
 from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
 
 #: backend name -> "module:Class" (the installed ``sashil.backends`` entry points)
 BACKENDS: dict[str, str] = {name: plugin.target for name, plugin in entry_point_table(BACKENDS_GROUP).items()}
 
-__all__ = ["BACKENDS", "SAFE_COMMAND", "RigCommand", "RigInterface", "RigSample", "backend_class", "open_rig"]
+__all__ = [
+    "BACKENDS",
+    "SAFE_COMMAND",
+    "RigCommand",
+    "RigInterface",
+    "RigSample",
+    "backend_class",
+    "declared_capabilities",
+    "on_virtual_clock",
+    "open_rig",
+]
 
 
 def backend_class(name: str) -> type[RigInterface]:
@@ -35,3 +45,17 @@ def backend_class(name: str) -> type[RigInterface]:
 def open_rig(config: dict[str, Any]) -> RigInterface:
     """Build (not yet configure) the rig backend the config's ``driver`` section names."""
     return backend_class(config["driver"]["name"]).from_config(config)  # type: ignore[attr-defined]
+
+
+def declared_capabilities(config: dict[str, Any]) -> RigCapabilities:
+    """What the config's backend declares (the rig object is built; nothing is opened or sent)."""
+    rig = open_rig(config)
+    try:
+        return capabilities_of(rig)
+    finally:
+        rig.close()
+
+
+def on_virtual_clock(config: dict[str, Any]) -> bool:
+    """Whether runs of this config go on simulated time: a simulated backend with ``driver.clock: virtual``."""
+    return config["driver"]["clock"] == "virtual" and declared_capabilities(config).simulated

@@ -97,6 +97,9 @@ class RigCapabilities:
     can_frames: bool = False
     #: the highest loop rate the backend supports [Hz] (None: the loop's own limit)
     max_rate_hz: float | None = None
+    #: a simulation, not hardware: it may run on simulated time (``driver.clock: virtual``) and a
+    #: verb may pick a demonstration default (``sashil run``'s road) that would be wrong on a bench
+    simulated: bool = False
 
 
 def capabilities_of(rig: object) -> RigCapabilities:

@@ -4,7 +4,9 @@ The plant advances to the host time each ``read`` is given, so the same backend 
 virtual clock (deterministic, as fast as the CPU allows) or on the real clock; the loop chooses.
 The sensor model quantises both encoders (counts per revolution from the config) and adds
 seeded Gaussian noise to the angles and the measured current when the config asks for it.
-The backend can play the drop-test operator (:meth:`operator_hold`).
+The backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
+``RigCommand.road_speed_rad_s`` as a real board's road motor does (:class:`RoadWheel`), so a plan
+drives the road the same way on every backend.
 """
 
 from __future__ import annotations
@@ -23,15 +25,46 @@ from sashil.drivers.interface import (
     clamp_current,
 )
 from sashil.errors import DriverError
-from sashil.models.plant import RigPlant, RoadProfile
+from sashil.models.plant import RigPlant
 from sashil.models.registry import rig_params
+
+
+class RoadWheel:
+    """Road-side angle under speed commands: theta1(t) = theta1(t_k) + w_k (t - t_k) (a road profile).
+
+    A speed command is a step of the road wheel's speed (a motor with a fast speed loop), an
+    impulse of road acceleration that the plant's smooth road force -J*theta1_ddot cannot carry:
+    :meth:`set_speed` applies it to the plant as the jump it causes. The arm keeps its absolute
+    rate theta2_dot, so the relative rate theta_dot = theta2_dot - theta1_dot drops by the speed
+    change (unless the operator holds the arm).
+    """
+
+    def __init__(self) -> None:
+        self._t0 = 0.0
+        self._theta0 = 0.0
+        self.speed_rad_s = 0.0
+
+    def set_speed(self, plant: RigPlant, speed_rad_s: float) -> None:
+        """Step the wheel to ``speed_rad_s`` at the plant's present time."""
+        t_s = plant.state.time_s
+        self._theta0 = self(t_s)[0]
+        self._t0 = t_s
+        if not plant.held:
+            plant.state.theta_dot_rad_s -= speed_rad_s - self.speed_rad_s
+        plant.state.theta_road_dot_rad_s = speed_rad_s
+        self.speed_rad_s = speed_rad_s
+
+    def __call__(self, t_s: float) -> tuple[float, float, float]:
+        return self._theta0 + self.speed_rad_s * (t_s - self._t0), self.speed_rad_s, 0.0
 
 
 class SimulatedRig(RigInterface):
     """The SAS rig simulated in-process (seed 001 model + coil lag + encoder + noise)."""
 
     name = "sim"
-    capabilities = RigCapabilities(operator_hold=True, initial_current=True, max_rate_hz=10_000.0)
+    capabilities = RigCapabilities(
+        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+    )
 
     def __init__(
         self,
@@ -53,10 +86,12 @@ class SimulatedRig(RigInterface):
         self._t0_ns: int | None = None
         self._last_ns = 0
         self._release_at_s: float | None = None
-        self.road_profile: RoadProfile | None = None
+        #: the road motor: the plant's road angle under the speed commands
+        self.wheel = RoadWheel()
+        plant.road = self.wheel
 
     @classmethod
-    def from_config(cls, config: dict[str, Any], road: RoadProfile | None = None) -> SimulatedRig:
+    def from_config(cls, config: dict[str, Any]) -> SimulatedRig:
         """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
         from sashil.models.mismatch import plant_config
 
@@ -67,7 +102,6 @@ class SimulatedRig(RigInterface):
             coil_tau_s=rig["coil_tau_s"],
             current_max_a=rig["current_max_a"],
             max_step_s=rig["plant_max_step_s"],
-            road=road,
         )
         return cls(
             plant,
@@ -90,6 +124,8 @@ class SimulatedRig(RigInterface):
 
     def deactivate(self) -> None:
         self._command = 0.0
+        if self.wheel.speed_rad_s != 0.0:  # the road to rest, as a board's deactivate does
+            self.wheel.set_speed(self.plant, 0.0)
         if self.state is RigState.ACTIVE:
             self.state = RigState.CONFIGURED
 
@@ -145,6 +181,9 @@ class SimulatedRig(RigInterface):
             self._command = 0.0
             return
         self._command = clamp_current(cmd.current_a, self.plant.current_max_a)
+        speed = cmd.road_speed_rad_s
+        if speed is not None and speed == speed and speed != self.wheel.speed_rad_s:  # None/NaN: unchanged
+            self.wheel.set_speed(self.plant, speed)
 
     # operator ------------------------------------------------------------------------------
     def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:

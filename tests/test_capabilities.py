@@ -15,7 +15,9 @@ def _config(name: str, pacing: str = "device") -> dict:
 
 def test_each_backend_declares_its_capabilities():
     sim = open_rig(default_config())
-    assert sim.capabilities == RigCapabilities(operator_hold=True, initial_current=True, max_rate_hz=10_000.0)
+    assert sim.capabilities == RigCapabilities(
+        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+    )
     serial = open_rig(_config("serial"))  # nothing is opened before configure()
     assert serial.capabilities == RigCapabilities(road_actuator=True, device_paced=True, link=True)
     assert open_rig(_config("serial", "host")).capabilities.device_paced is False

@@ -13,11 +13,12 @@ from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.laws import SkyhookOnOff, band_limited_fraction
 from sashil.control.observer import BoucWenObserver
 from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
 from sashil.drivers.interface import RigSample
 from sashil.errors import ConfigError, LawError
 from sashil.experiments.drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
-from sashil.models.mismatch import mismatch_fractions, open_sim_rig, plant_config
+from sashil.models.mismatch import mismatch_fractions, plant_config
 from sashil.runtime.clock import VirtualClock
 
 SEED = BoucWenParams()
@@ -183,11 +184,11 @@ def zetas(metrics):
 def test_target_damping_drop_decays_exponentially_with_mismatch_and_constant_current_does_not():
     config = mismatched()
     ctl = make_controller("target-damping", config)
-    record = run_drop_test(config, -5.0, 0.5, 6.0, rig=open_sim_rig(config), clock=VirtualClock(), controller=ctl)
+    record = run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(config), clock=VirtualClock(), controller=ctl)
     controlled = zetas(record.metrics)
     assert len(controlled) >= 4
     assert all(abs(z / 0.07 - 1.0) <= 0.10 for z in controlled), controlled
-    constant = zetas(run_drop_test(config, -5.0, 0.5, 6.0, rig=open_sim_rig(config), clock=VirtualClock()).metrics)
+    constant = zetas(run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(config), clock=VirtualClock()).metrics)
     assert constant[-1] / constant[0] > 1.2, constant  # Coulomb-like hysteresis: decrement grows as it decays
     assert record.columns["current_cmd_a"].max() > record.columns["current_cmd_a"].min()  # the controller commanded
 

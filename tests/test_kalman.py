@@ -10,7 +10,7 @@ import pytest
 from sashil.config import default_config
 from sashil.control.kalman import KalmanRigEstimator, discrete_model, steady_state_gain
 from sashil.control.registry import make_controller
-from sashil.drivers.interface import TWO_PI, RigSample
+from sashil.drivers.interface import TWO_PI, RigCommand, RigSample
 from sashil.drivers.sim import SimulatedRig
 from sashil.errors import ConfigError
 from sashil.experiments.sweep import sine_profile
@@ -91,8 +91,10 @@ def test_model_acceleration_lets_the_filter_follow_a_known_motion_without_lag():
 
 
 def _run(config: dict, true: BoucWenParams, seconds: float, road=None, command_road: bool = True, drop: bool = False):
-    """The controller stage against the simulated rig on simulated time; returns (controller, errors, currents)."""
-    plant = RigPlant(true, road=road)
+    """The controller stage against the simulated rig on simulated time; returns (controller, errors, currents).
+    ``road``: the road wheel follows its speed; ``command_road``: the controller is told that speed
+    (the plan's command carries it) or not (the road moves unannounced)."""
+    plant = RigPlant(true)
     rig = SimulatedRig(plant, counts_per_rev=config["rig"]["encoder_counts_per_rev"])
     ctl = make_controller("torque-tracking", config)
     rig.configure()
@@ -106,9 +108,10 @@ def _run(config: dict, true: BoucWenParams, seconds: float, road=None, command_r
         ctl.held = plant.held
         truth = plant.state.theta_dot_rad_s
         cmd = ctl.step(s, t_ns, 1_000_000)
-        if road is not None and command_road:
-            cmd.road_speed_rad_s = road(k * 1e-3)[1]
-        rig.write(cmd, t_ns, 1_000_000)
+        speed = road(k * 1e-3)[1] if road is not None else None
+        if command_road:
+            cmd.road_speed_rad_s = speed
+        rig.write(RigCommand(cmd.current_a, speed), t_ns, 1_000_000)
         currents.append(cmd.current_a)
         if k > 3000:
             rate_err.append(ctl.theta_dot_rad_s - truth)

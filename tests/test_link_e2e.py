@@ -135,7 +135,7 @@ def test_link_fault_trips_to_zero_within_three_cycles(fault, transport, driver, 
     not real-time); a run that ends that way before the injected fault is retried (at most 3 tries).
     """
     for attempt in range(3):
-        emu = emulator(transport, fault, "0.5")
+        emu = emulator(transport, fault, "1.0")  # after the run is up (the handshake comes before the set-up)
         out = tmp_path / f"run{attempt}"
         done = sashil(
             "run", "--driver", driver, "--port", emu.link, "--duration", "10", "--current", "0.5", "--out", str(out)

@@ -148,16 +148,16 @@ def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_
 
 
 def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
+    from sashil.drivers import open_rig
     from sashil.errors import SafetyTrip
     from sashil.experiments.sweep import run_profile
-    from sashil.models.mismatch import open_sim_rig
 
     config = default_config()
     config["rig"]["angle_limit_deg"] = 3.0
     rigs, kept = [], []
 
     def factory(cfg, road):
-        rigs.append(open_sim_rig(cfg, road))
+        rigs.append(open_rig(cfg))
         return rigs[-1]
 
     with pytest.raises(SafetyTrip):

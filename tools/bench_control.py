@@ -23,9 +23,10 @@ import numpy as np
 
 from sashil.config import default_config
 from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
+from sashil.drivers.interface import RigCommand
 from sashil.experiments.drop_test import run_drop_test
 from sashil.experiments.sweep import chirp_profile, frequencies, run_profile, sine_profile, stepped_sine
-from sashil.models.mismatch import open_sim_rig
 from sashil.runtime.clock import VirtualClock
 from sashil.stats import nrmse
 
@@ -57,7 +58,7 @@ def torque_tracking(config: dict, inverse: str, f_hz: float, amplitude_deg: floa
 
 
 def drop(config: dict, law: str | None, current_a: float, duration_s: float):
-    rig = open_sim_rig(config)
+    rig = open_rig(config)
     ctl = make_controller(law, config) if law else None
     probe_rows: list[tuple[float, float]] = []
     if ctl is not None:
@@ -199,10 +200,14 @@ def main() -> None:
 
     # 5. cycle time -----------------------------------------------------------------------------
     print("\n[5] one controller cycle (estimator + observer + law + inverse + lead + safety clamp), wall clock")
-    rig = open_sim_rig(config, chirp_profile(math.radians(1.0), 0.5, 5.0, 10.0))
+    rig = open_rig(config)
+    road = chirp_profile(math.radians(1.0), 0.5, 5.0, 10.0)
     rig.configure()
     rig.activate()
-    samples = [rig.read(k * 1_000_000, 1_000_000) for k in range(1, 5001)]
+    samples = []
+    for k in range(1, 5001):  # the road wheel follows the chirp's speed
+        samples.append(rig.read(k * 1_000_000, 1_000_000))
+        rig.write(RigCommand(0.0, road(k * 1e-3)[1]), k * 1_000_000, 1_000_000)
     for name in ("target-damping", "skyhook-add", "torque-tracking"):
         cfg = copy.deepcopy(config)
         cfg["controller"]["zeta"] = 0.07

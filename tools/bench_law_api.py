@@ -26,10 +26,10 @@ import numpy as np
 
 from sashil.config import default_config
 from sashil.control.registry import make_controller
+from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.road_option import parse_road
 from sashil.models.hysteresis import compile_kernels
-from sashil.runtime.clock import VirtualClock
 
 #: a plain-Python skyhook of about ten lines, as a lab would write it (no numba)
 PLAIN_LAW = '''
@@ -51,19 +51,15 @@ def record_samples(cycles: int) -> list:
     """The samples of ``cycles`` cycles of the simulated rig at 1 kHz under a 1.6 Hz road sine."""
     config = default_config()
     road, _ = parse_road("sine:1.6:1.0", config)
-    rig = SimulatedRig.from_config(config, road=road)
-    clock = VirtualClock()
+    assert road is not None
+    rig = SimulatedRig.from_config(config)
     rig.configure()
     rig.activate()
     samples = []
-    from sashil.drivers.interface import RigCommand
-
-    cmd = RigCommand(0.5)
     for k in range(cycles):
         t = k * 1_000_000
-        clock.sleep_until(t)
         samples.append(rig.read(t, 1_000_000))
-        rig.write(cmd, t, 1_000_000)
+        rig.write(RigCommand(0.5, road(k * 1e-3)[1]), t, 1_000_000)  # the road wheel follows the sine
     rig.deactivate()
     rig.close()
     return samples

@@ -32,6 +32,7 @@ from pathlib import Path
 from sashil.config import load_config
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.drivers.sim import SimulatedRig
+from sashil.experiments.road_option import RoadStage
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import ControlLoop
@@ -89,11 +90,10 @@ def full_run(config: dict, rate: float, duration: float, folder: Path) -> dict:
     config = copy.deepcopy(config)
     config["loop"]["rate_hz"] = rate
     config["driver"]["clock"] = "real"
-    rig = SimulatedRig.from_config(config, road=road_sine(math.radians(2.0), 1.6))
+    rig = SimulatedRig.from_config(config)
+    stage = RoadStage(ConstantCurrent(0.5), road_sine(math.radians(2.0), 1.6))  # the road wheel follows the sine
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-    outcome = run_session(
-        config, rig, ConstantCurrent(0.5), RunFolder.create(folder, "bench"), clock, duration, say=lambda line: None
-    )
+    outcome = run_session(config, rig, stage, RunFolder.create(folder, "bench"), clock, duration, say=lambda line: None)
     if outcome.error is not None:
         raise SystemExit(f"bench_loop: the full-stack run failed: {outcome.error}")
     return outcome.summary

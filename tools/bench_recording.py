@@ -34,6 +34,7 @@ from pathlib import Path
 from sashil.config import load_config
 from sashil.control.registry import make_controller
 from sashil.drivers.sim import SimulatedRig
+from sashil.experiments.road_option import RoadStage
 from sashil.recording.recorder import Recorder
 from sashil.recording.rerun_log import LiveTap, RerunLog
 from sashil.recording.run_folder import RunFolder
@@ -90,8 +91,8 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
     config = copy.deepcopy(config)
     config["controller"]["law"] = "target-damping"
     config["controller"]["zeta"] = 0.08
-    stage = make_controller("target-damping", config)
-    rig = SimulatedRig.from_config(config, road=road_sine(math.radians(2.0), 1.6))
+    stage = RoadStage(make_controller("target-damping", config), road_sine(math.radians(2.0), 1.6))
+    rig = SimulatedRig.from_config(config)
     live = None
     if rrd is not None:
         columns = (*record_columns(stage), "lateness_us", "band_lo_nm", "band_hi_nm")

@@ -9,7 +9,7 @@ host talks to the very framing, session, pacing and watchdog code a real board r
 
 Behind the board's hardware interface is the simulated rig of the Python board (the
 :class:`~sashil.drivers.sim.SimulatedRig` sensor model around the plant of seed 001 eqs. 13-17, and
-the :class:`~sashil.drivers.emulator.device.RoadWheel`), in the wire's units: encoder counts, the
+the :class:`~sashil.drivers.sim.RoadWheel`), in the wire's units: encoder counts, the
 coil current in 0.5 mA counts, the road speed in µrad/s. The plant is advanced to the present
 before each call into the board. What is not the board's is emulated here as before: the operator
 (pressing the arm at each new session, which the board counts), a stuck encoder (the sensor
@@ -23,7 +23,7 @@ import math
 from collections.abc import Callable
 
 from sashil.drivers import firmware
-from sashil.drivers.emulator.device import Faults, Operator, RoadWheel
+from sashil.drivers.emulator.device import Faults, Operator
 from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.emulator.wire import WireBytes, WireCan
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, RigCommand, RigSample
@@ -54,8 +54,7 @@ class CBoardDevice:
         self.operator = operator
         self.faults = faults or Faults()
         self.truth = truth
-        self.road = RoadWheel()
-        rig.plant.road = self.road
+        self.road = rig.wheel  # the simulated rig's road motor
         self.link = link
         self.drive_a = 0.0
         self._link_bad_frames = 0  # the link's own (an SLCAN adapter's garbled lines)

@@ -41,7 +41,6 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.drivers.sim import SimulatedRig
-from sashil.models.plant import RigPlant
 
 
 @dataclass
@@ -86,35 +85,6 @@ class Operator:
         return angle
 
 
-class RoadWheel:
-    """Road-side angle under speed commands: theta1(t) = theta1(t_k) + w_k (t - t_k) (a road profile).
-
-    A speed command is a step of the road wheel's speed (a motor with a fast speed loop), an
-    impulse of road acceleration that the plant's smooth road force -J*theta1_ddot cannot carry:
-    :meth:`set_speed` applies it to the plant as the jump it causes. The arm keeps its absolute
-    rate theta2_dot, so the relative rate theta_dot = theta2_dot - theta1_dot drops by the speed
-    change (unless the operator holds the arm).
-    """
-
-    def __init__(self) -> None:
-        self._t0 = 0.0
-        self._theta0 = 0.0
-        self.speed_rad_s = 0.0
-
-    def set_speed(self, plant: RigPlant, speed_rad_s: float) -> None:
-        """Step the wheel to ``speed_rad_s`` at the plant's present time."""
-        t_s = plant.state.time_s
-        self._theta0 = self(t_s)[0]
-        self._t0 = t_s
-        if not plant.held:
-            plant.state.theta_dot_rad_s -= speed_rad_s - self.speed_rad_s
-        plant.state.theta_road_dot_rad_s = speed_rad_s
-        self.speed_rad_s = speed_rad_s
-
-    def __call__(self, t_s: float) -> tuple[float, float, float]:
-        return self._theta0 + self.speed_rad_s * (t_s - self._t0), self.speed_rad_s, 0.0
-
-
 class RigDevice:
     """Device logic of the emulated interface board (see module docstring)."""
 
@@ -131,8 +101,7 @@ class RigDevice:
         rig.activate()  # the simulated coil follows whatever this board drives
         self.operator = operator
         self.faults = faults or Faults()
-        self.road = RoadWheel()
-        rig.plant.road = self.road
+        self.road = rig.wheel  # the simulated rig's road motor: Command speeds go to it
         self.configured = False
         self.rate_hz = 1000
         self.watchdog_ns = 50_000_000

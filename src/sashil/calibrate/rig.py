@@ -3,17 +3,13 @@
 A step is a drop test (:func:`sashil.experiments.drop_test.run_drop_test`: hold, release, record;
 on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does, on the
 bench a person) whose "controller" (:class:`StepStage`) commands the step's constant current and,
-from the release on, the road wheel's speed for a road step. When the runner of issue 13 turns
-the experiments into plans, only this module changes.
-
-On the simulated rig the road wheel follows speed commands as the emulator's does
-(:class:`~sashil.drivers.emulator.device.RoadWheel`: a step of the wheel's speed changes the
-relative rate by the same amount), through :class:`SimRoadRig`.
+from the release on, the road wheel's speed for a road step. Every backend's road wheel obeys
+those speed commands (the simulated rig's :class:`~sashil.drivers.sim.RoadWheel` as the
+emulator's and the bench's motor).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.plan import Step
-from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, run_drop_test
 
@@ -85,51 +81,6 @@ class StepStage:
         return RigCommand(self.step_def.current_a)
 
 
-class SimRoadRig(RigInterface):
-    """The simulated rig with its road wheel driven by speed commands (as the emulator's)."""
-
-    name = "sim"
-
-    def __init__(self, inner: Any):
-        super().__init__()
-        from sashil.drivers.emulator.device import RoadWheel
-
-        self.inner = inner
-        self.wheel = RoadWheel()
-        inner.plant.road = self.wheel
-
-    @property
-    def capabilities(self) -> RigCapabilities:  # type: ignore[override]  # the inner rig's, with a road motor
-        return dataclasses.replace(self.inner.capabilities, road_actuator=True)
-
-    def __getattr__(self, name: str) -> Any:  # plant, set_initial_current, ...
-        return getattr(self.inner, name)
-
-    def configure(self) -> None:
-        self.inner.configure()
-
-    def activate(self) -> None:
-        self.inner.activate()
-
-    def read(self, t_ns: int, dt_ns: int) -> RigSample:
-        return self.inner.read(t_ns, dt_ns)
-
-    def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
-        speed = cmd.road_speed_rad_s
-        if speed is not None and speed != self.wheel.speed_rad_s:
-            self.wheel.set_speed(self.inner.plant, speed)
-        self.inner.write(cmd, t_ns, dt_ns)
-
-    def deactivate(self) -> None:
-        self.inner.deactivate()
-
-    def close(self) -> None:
-        self.inner.close()
-
-    def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
-        return bool(self.inner.operator_hold(theta_rad, release_after_s))
-
-
 def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: StepStage) -> dict[str, np.ndarray]:
     """The record on the device's clock: each row's time is the device time of its sample (the
     instant the board sampled the encoders) minus the device time at the release, and its ``seq``
@@ -159,14 +110,9 @@ def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = 
     """Run one step on the config's rig; errors that end it early are in ``result.error`` (the rig is
     already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError.
     ``data_path``: where the runner streams the step's every cycle as it runs."""
-    rig = None
-    if config["driver"]["name"] == "sim":
-        from sashil.models.mismatch import open_sim_rig
-
-        rig = SimRoadRig(open_sim_rig(config))
     stage = StepStage(step)
     record = run_drop_test(
-        config, step.theta0_deg, step.current_a, step.duration_s, rig=rig, controller=stage, data_path=data_path
+        config, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path
     )
     columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
     columns = on_device_clock(columns, record.release_time_ns, stage)

@@ -16,6 +16,7 @@ from sashil.calibrate.analysis import Calibration, analyse, gap_cut
 from sashil.calibrate.plan import Plan, plan_from_config
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
+from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
@@ -214,7 +215,7 @@ def calibrate_rig(
         config["rig"]["encoder_counts_per_rev"],
         config["rig"]["current_max_a"],
         rig_s,
-        virtual=config["driver"]["name"] == "sim" and config["driver"]["clock"] == "virtual",
+        virtual=on_virtual_clock(config),
     )
     folder.write_summary(
         {

@@ -12,7 +12,7 @@ from typing import Any
 
 from sashil.config import Config, apply_params, check_controller, load_config
 from sashil.config.overrides import apply_overrides
-from sashil.drivers import BACKENDS
+from sashil.drivers import BACKENDS, declared_capabilities
 from sashil.errors import ConfigError
 from sashil.recording.formats import FORMATS, check_formats
 from sashil.recording.formats import HELP as FORMAT_HELP
@@ -198,11 +198,12 @@ def resolve_config(args: argparse.Namespace) -> Config:
     if getattr(args, "driver", None):
         config["driver"]["name"] = args.driver
     if getattr(args, "port", None):
-        if config["driver"]["name"] == "sim":
-            raise ConfigError(
-                f"--port {args.port}: the driver is sim, which has no port; add --driver serial or --driver can"
-            )
         config["driver"]["port"] = args.port
+        if not declared_capabilities(config).link:
+            raise ConfigError(
+                f"--port {args.port}: the driver is {config['driver']['name']}, which has no port; "
+                "add --driver serial or --driver can"
+            )
     check_formats(getattr(args, "format", None), config["driver"]["name"])  # before anything runs
     return config
 

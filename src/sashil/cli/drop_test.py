@@ -20,7 +20,7 @@ from sashil.cli.common import (
     setup_logging,
 )
 from sashil.cli.outputs import start_can_trace, write_formats
-from sashil.drivers import open_rig
+from sashil.drivers import on_virtual_clock, open_rig
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
 from sashil.recording.plots import plot_drop_test
@@ -181,9 +181,7 @@ def run(args: argparse.Namespace) -> int:
     if live is not None:
         live.close()
     driver = config["driver"]
-    clock = (
-        "virtual" if driver["name"] == "sim" and driver["clock"] == "virtual" else "real"
-    )  # timing is simulated on the virtual clock
+    clock = "virtual" if on_virtual_clock(config) else "real"  # timing is simulated on the virtual clock
     summary = {
         "exit_status": exit_status,
         "verb": "drop-test",

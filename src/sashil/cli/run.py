@@ -40,9 +40,6 @@ from sashil.runtime.timing import format_timing
 HELP = "run the rig in closed loop at a fixed rate (real clock), recording data.csv and timing"
 EXAMPLE = "sashil run --duration 10 --controller passive --current 0.5 --out runs/passive-0.5A"
 
-#: highest loop rate each backend supports when the backend does not say (``max_rate_hz``)
-DEFAULT_MAX_RATE_HZ = {"sim": 10_000.0}
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
@@ -65,22 +62,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_verbosity_options(parser)
 
 
-def backend_max_rate_hz(rig: Any, backend: str) -> float | None:
-    """What the backend declares (``capabilities.max_rate_hz``), else DEFAULT_MAX_RATE_HZ (before it is opened)."""
-    value = capabilities_of(rig).max_rate_hz if rig is not None else None
-    if value is None:
-        value = DEFAULT_MAX_RATE_HZ.get(backend)
-    return None if value is None else float(value)
-
-
-def check_rate(rate: float, rig: Any, backend: str) -> float:
-    """``rate`` if the loop and the backend (``rig``'s ``max_rate_hz``, or the backend's default;
-    ``rig`` None: before it is opened) can run at it; ConfigError naming --rate otherwise."""
-    if not (math.isfinite(rate) and rate > 0):
-        raise ConfigError(f"--rate: expected a loop rate in Hz > 0, got {rate:g}")
-    limit = backend_max_rate_hz(rig, backend)
+def check_rate(rate: float, rig: Any) -> float:
+    """``rate`` (> 0) if the loop and ``rig``'s backend (its declared ``max_rate_hz``) can run at
+    it; ConfigError naming --rate otherwise."""
+    limit = capabilities_of(rig).max_rate_hz
     if limit is not None and rate > limit:
-        raise ConfigError(f"--rate: {rate:g} Hz is above what the {backend} backend can do ({limit:g} Hz)")
+        name = getattr(rig, "name", type(rig).__name__)
+        raise ConfigError(f"--rate: {rate:g} Hz is above what the {name} backend can do ({limit:g} Hz)")
     top = LOOP.fields["rate_hz"].high
     if rate > top:
         raise ConfigError(f"--rate: {rate:g} Hz is above the loop's limit ({top:g} Hz, loop.rate_hz)")
@@ -111,22 +99,21 @@ def run(args: argparse.Namespace) -> int:
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     backend = config["driver"]["name"]
     # the rate first: the controller's estimator gains and the device's Configure both use it
-    config["loop"]["rate_hz"] = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, None, backend)
-    label, stage = build_stage(args.controller, config, args.current)
-    road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if backend == "sim" else None), config)
-    if backend == "sim" and road is not None:
-        from sashil.models.mismatch import open_sim_rig
-
-        rig = open_sim_rig(config, road)  # the plant's road angle follows the profile
-    else:
-        rig = open_rig(config)
+    rate = float(config["loop"]["rate_hz"] if args.rate is None else args.rate)
+    if not (math.isfinite(rate) and rate > 0):
+        raise ConfigError(f"--rate: expected a loop rate in Hz > 0, got {rate:g}")
+    config["loop"]["rate_hz"] = rate
+    rig = open_rig(config)  # built, not opened: its declared capabilities (rate limit, simulated)
+    try:
+        check_rate(rate, rig)
+        label, stage = build_stage(args.controller, config, args.current)
+        simulated = capabilities_of(rig).simulated
+        road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if simulated else None), config)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
-    try:
         # open the port and greet the board now (configure is idempotent; the loop's own call finds
         # it done): a port that cannot be opened is one line, before any set-up, output or folder
         rig.configure()
-        rate = check_rate(config["loop"]["rate_hz"], rig, backend)  # the device's own limit (nothing energised)
     except BaseException:
         rig.close()
         raise

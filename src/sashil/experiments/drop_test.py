@@ -291,9 +291,11 @@ class DropTestPlan:
 
 
 def default_clock(config: dict[str, Any]) -> Clock:
-    """The sim backend on the virtual clock unless the config asks for the real one."""
-    driver = config["driver"]
-    if driver["name"] == "sim" and driver["clock"] == "virtual":
+    """Simulated time for a simulated backend unless the config asks for the real clock
+    (:func:`sashil.drivers.on_virtual_clock`), else the real clock."""
+    from sashil.drivers import on_virtual_clock
+
+    if on_virtual_clock(config):
         return VirtualClock()
     return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
 

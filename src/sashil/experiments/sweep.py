@@ -10,9 +10,8 @@ through the ~1.6 Hz resonance), A(t) rising over ``ramp_s`` with a raised cosine
   the mean). Then the amplitude ramps back to 0 over ``ramp_s``, so that a rig that stays up
   between frequencies starts the next one at rest.
 
-The simulated rig takes the profile as its road (``SimulatedRig.from_config(config, road=...)``);
-every cycle's command also carries ``road_speed_rad_s = theta1_dot(t)`` for a real rig's road motor
-(and the emulator's road wheel). The simulated rig runs on the virtual clock unless the config asks
+Every cycle's command carries ``road_speed_rad_s = theta1_dot(t)``, which every backend's road
+motor obeys (a real rig's, the emulator's and the simulated rig's road wheel). The simulated rig runs on the virtual clock unless the config asks
 for the real one; a link (serial, CAN: the emulator or the bench) runs on the real clock with the
 loop's real-time set-up, as a drop test does. Each row records the sample's sequence number
 (``seq``, as on the wire), so a link run joins with the emulator's ``--truth`` file.
@@ -163,12 +162,8 @@ RigFactory = Callable[[dict, RoadProfile], RigInterface]
 
 
 def default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
-    """The rig a sweep runs on: the simulated rig with ``road`` as its road angle, or the config's
-    backend (whose road motor gets the profile's speed from the sweep's commands)."""
-    if config["driver"]["name"] == "sim":
-        from sashil.models.mismatch import open_sim_rig
-
-        return open_sim_rig(config, road)
+    """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
+    from the sweep's commands (the simulated rig's road wheel as a board's)."""
     from sashil.drivers import open_rig
 
     return open_rig(config)

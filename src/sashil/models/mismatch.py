@@ -19,7 +19,6 @@ from typing import Any
 
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
-from sashil.models.plant import RoadProfile
 
 PARAMETER_ORDER = tuple(BoucWenParams.__dataclass_fields__)  # J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n
 
@@ -68,10 +67,3 @@ def plant_config(config: dict[str, Any]) -> dict[str, Any]:
         if section.get(key) is not None:
             rig[key] = section[key]
     return out
-
-
-def open_sim_rig(config: dict[str, Any], road: RoadProfile | None = None):
-    """The simulated rig of the mismatched plant (``SimulatedRig.from_config`` applies the mismatch)."""
-    from sashil.drivers.sim import SimulatedRig
-
-    return SimulatedRig.from_config(config, road=road)
