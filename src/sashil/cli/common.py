@@ -14,6 +14,7 @@ from sashil.config import Config, apply_params, load_config
 from sashil.config.overrides import apply_overrides
 from sashil.drivers import BACKENDS
 from sashil.errors import ConfigError
+from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
 from sashil.recording.formats import FORMATS, check_formats
 from sashil.recording.formats import HELP as FORMAT_HELP
 
@@ -172,13 +173,15 @@ def say(args: argparse.Namespace, message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def resolve_config(args: argparse.Namespace) -> Config:
+def resolve_config(args: argparse.Namespace, models: Sequence[str] = RIG_MODELS) -> Config:
     """The config the verb runs with: file (or defaults), then --params, then each --set, then
-    --driver/--port. Every step is validated before anything is opened or written."""
+    --driver/--port. Every step is validated before anything is opened or written; a model the
+    verb cannot run (not in ``models``) is refused."""
     config = load_config(getattr(args, "config", None))
     if getattr(args, "params", None):
         config = apply_params(config, args.params)
     config = apply_overrides(config, getattr(args, "overrides", None) or ())
+    check_runnable_model(config, args, models)
     if getattr(args, "params", None) and _mismatched(config.get("mismatch") or {}):
         logging.getLogger("sashil").warning(
             "--params %s: the config's mismatch: section is applied on top of these parameters "
@@ -197,6 +200,26 @@ def resolve_config(args: argparse.Namespace) -> Config:
     return config
 
 
+def check_runnable_model(config: Config, args: argparse.Namespace, models: Sequence[str]) -> None:
+    """ConfigError, one line naming where the model came from (``--set model.name``, ``--params``
+    or ``--config``), when the verb cannot run the config's model."""
+    name = config["model"]["name"]
+    if name in models:
+        return
+    sets = [item for item in getattr(args, "overrides", None) or () if item.partition("=")[0].strip() == "model.name"]
+    if sets:
+        where = f"--set {sets[-1]}"
+    elif getattr(args, "params", None):
+        where = f"--params {args.params}"
+    else:
+        where = f"--config {getattr(args, 'config', None)}"
+    verb = f"sashil {args.verb}" if getattr(args, "verb", None) else "this verb"
+    raise ConfigError(
+        f"{where}: a {name} model; {verb} runs {' or '.join(models)} models only (the rig plant and the "
+        f"controller's observer are Bouc-Wen); sashil simulate runs {', '.join(MODEL_PARAMS)}"
+    )
+
+
 def _mismatched(section: dict[str, Any]) -> bool:
     """Whether a ``mismatch`` section changes the simulated plant at all."""
     return bool(
@@ -205,6 +228,15 @@ def _mismatched(section: dict[str, Any]) -> bool:
         or section.get("coil_tau")
         or any(section.get(key) is not None for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"))
     )
+
+
+def option_or_config(value: Any, option: str, config: Config, key: str) -> tuple[Any, str]:
+    """``(value, option)`` when the option was given, else the config's dotted ``key`` and its name:
+    the value a verb runs with, and what to name in a message about it."""
+    if value is not None:
+        return value, option
+    section, name = key.split(".")
+    return config[section][name], key
 
 
 def positive_seconds(option: str, value: float) -> float:

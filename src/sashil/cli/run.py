@@ -15,6 +15,7 @@ from sashil.cli.common import (
     add_verbosity_options,
     current_in_range,
     open_live_tap,
+    option_or_config,
     positive_seconds,
     resolve_config,
     say,
@@ -27,6 +28,7 @@ from sashil.drivers.interface import capabilities_of
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.road_option import DEFAULT_SIM_ROAD, RoadStage, parse_road
 from sashil.experiments.road_option import SYNTAX as ROAD_SYNTAX
+from sashil.models.plant import RoadProfile
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.runtime.clock import RealClock
@@ -45,18 +47,29 @@ DEFAULT_MAX_RATE_HZ = {"sim": 10_000.0}
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
-    parser.add_argument("--duration", type=float, metavar="S", help="seconds to run (default: until Ctrl-C / SIGTERM)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="seconds to run (default: run.duration_s, null: until Ctrl-C / SIGTERM)",
+    )
     parser.add_argument("--rate", type=float, metavar="HZ", help="loop rate (default: loop.rate_hz, 1000)")
     parser.add_argument(
         "--controller",
         metavar="NAME",
         help="controller (default: the config's controller section, else passive)",
     )
-    parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
+    parser.add_argument(
+        "--current",
+        type=float,
+        metavar="A",
+        help="coil current of the passive controller (default controller.current_a, 0)",
+    )
     parser.add_argument(
         "--road",
         metavar="SPEC",
-        help=f"road excitation theta1(t): {ROAD_SYNTAX} (default on the sim backend: {DEFAULT_SIM_ROAD}, else none)",
+        help=f"road excitation theta1(t): {ROAD_SYNTAX} "
+        f"(default run.road, else on the sim backend {DEFAULT_SIM_ROAD}, else none)",
     )
     add_output_options(parser)
     add_recording_options(parser)
@@ -109,22 +122,40 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
             configured if current is None else current,
             config,
         )
+        config["controller"].update(law=name, current_a=value)  # config.yaml says what ran
         return f"passive {value:g} A", ConstantCurrent(value)
     make_controller = _registry_make_controller()
     if make_controller is None:
         raise ConfigError(f"--controller: unknown controller {name!r} (known: passive)")
-    return name, make_controller(name, config)
+    stage = make_controller(name, config)
+    config["controller"]["law"] = name  # config.yaml says what ran
+    return name, stage
+
+
+def resolve_road(option: str | None, config: dict[str, Any], backend: str) -> tuple[RoadProfile | None, str]:
+    """The road of ``--road``, else ``run.road``, else the backend's default; the spec that runs is
+    written to ``run.road`` (``none`` for no road), so the config reruns the same excitation."""
+    spec = option or config["run"]["road"] or (DEFAULT_SIM_ROAD if backend == "sim" else "none")
+    try:
+        road, text = parse_road(spec, config)
+    except ConfigError as err:
+        if option is not None:
+            raise
+        raise ConfigError(str(err).replace("--road", "run.road", 1)) from None
+    config["run"]["road"] = spec
+    return road, text
 
 
 def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     config = resolve_config(args)
-    duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    duration, duration_name = option_or_config(args.duration, "--duration", config, "run.duration_s")
+    duration = config["run"]["duration_s"] = None if duration is None else positive_seconds(duration_name, duration)
     backend = config["driver"]["name"]
     # the rate first: the controller's estimator gains and the device's Configure both use it
     config["loop"]["rate_hz"] = check_rate(config["loop"]["rate_hz"] if args.rate is None else args.rate, None, backend)
     label, stage = build_stage(args.controller, config, args.current)
-    road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if backend == "sim" else None), config)
+    road, road_text = resolve_road(args.road, config, backend)
     if backend == "sim" and road is not None:
         from sashil.models.mismatch import open_sim_rig
 
