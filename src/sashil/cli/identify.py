@@ -149,8 +149,8 @@ def run(args: argparse.Namespace) -> int:
         if r is not best:
             other = out.with_name(f"{out.stem}.{r.model}{out.suffix or '.yaml'}")
             write_params(other, param_document(r, args.delta))
-            print(f"wrote {other}")
+            print(f"wrote {other.resolve()}")
     plot = plot_path(out, args.plot)
     overlay_plot(results, records, plot)
-    print(f"wrote {plot}")
+    print(f"wrote {plot.resolve()}")
     return 0
