@@ -119,6 +119,34 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
     assert np.ptp(road) > np.radians(0.2)  # the emulated road wheel followed the profile
 
 
+@pytest.mark.e2e  # the emulator in its own process, a drop test on the wall clock over a pty
+def test_a_single_current_can_drop_test_puts_its_trace_at_the_top_of_the_summary(tmp_path):
+    link = str(tmp_path / "rig-slcan")
+    emulator = subprocess.Popen(
+        [*SASHIL, "emulate", "--transport", "slcan", "--link", link, "--duration", "120", "--hold-deg", "-5",
+         "--release-after", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        line = emulator.stdout.readline()
+        assert "rig on /dev/" in line, line + emulator.stderr.read()
+        out = tmp_path / "drop"
+        done = subprocess.run(
+            [*SASHIL, "drop-test", "--driver", "can", "--port", link, "--duration", "1", "--format", "asc",
+             "--out", str(out), "-q"],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    finally:
+        if emulator.poll() is None:
+            emulator.send_signal(signal.SIGTERM)
+        emulator.communicate(timeout=30)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    (run,) = summary["runs"]
+    assert summary["can_trace"] == run["can_trace"] and summary["can_trace"]["files"] == ["can.asc"]
+    assert summary["can_trace"]["frames_rx"] > 0 and summary["link"] == run["link"] is not None
+
+
 def test_a_failing_writer_ends_the_trace_not_the_run_and_the_queue_stays_bounded(tmp_path):
     trace = CanTrace([tmp_path / "can.asc"], interval_s=0.005).start()
 

@@ -34,6 +34,8 @@ def test_single_current_run_folder(tmp_path, capsys):
     assert summary["exit_status"] == "ok"
     (run,) = summary["runs"]
     assert run["current_a"] == 0.0
+    for key in ("timing", "link", "realtime", "can_trace"):  # one run: its loop's keys at the top too
+        assert key in summary and summary[key] == run[key], key
     assert run["period_s"] == pytest.approx(0.600, rel=0.01)
     assert run["frequency_hz"] == pytest.approx(1 / run["period_s"])
     assert len(run["peaks_deg"]) >= 5 and run["peaks_deg"][0] == pytest.approx(4.40, abs=0.05)
@@ -53,6 +55,9 @@ def test_several_currents_have_one_subfolder_each(tmp_path):
         assert (out / folder / "data.csv").exists() and (out / folder / "summary.json").exists()
     zero, one = summary["runs"]
     assert one["peaks_deg"][0] < zero["peaks_deg"][0]
+    assert summary["timing"] is None and summary["can_trace"] is None  # each sub-run has its own
+    sub = json.loads((out / "i1.000A" / "summary.json").read_text())
+    assert sub["timing"] == one["timing"] and "can_trace" in sub
 
 
 @pytest.mark.parametrize(

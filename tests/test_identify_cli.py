@@ -70,3 +70,57 @@ def test_identify_then_simulate(drop, tmp_path, capsys):
     summary = json.loads((run / "summary.json").read_text())
     assert summary["exit_status"] == "ok" and summary["model"] == "dahl" and summary["nrmse"] < 0.05
     assert (run / "data.csv").exists() and (run / "config.yaml").exists()
+
+
+def _write_dahl(path):
+    path.write_text("model: dahl\nparams: {J: 1.0, k: 109.0, c1: 0.7, c2: 1.5, kwa: 1.0, kwb: 1.0, rho: 100.0}\n")
+    return path
+
+
+@pytest.mark.parametrize("verb", ["run", "drop-test", "sweep", "calibrate", "emulate"])
+def test_a_model_the_rig_verbs_cannot_run_is_one_line_naming_the_file(tmp_path, capsys, verb):
+    params = _write_dahl(tmp_path / "dahl.yaml")
+    out = tmp_path / "out"
+    extra = [] if verb == "emulate" else ["--out", str(out)]
+    assert main([verb, "--params", str(params), *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"--params {params}: a dahl model; sashil {verb} runs bouc-wen models only" in err
+    assert "sashil simulate runs bouc-wen, dahl, lugre, bingham" in err
+    assert not out.exists()
+
+
+def test_a_config_including_a_model_the_verb_cannot_run_names_the_config(tmp_path, capsys):
+    _write_dahl(tmp_path / "dahl.yaml")
+    config = tmp_path / "lab.yaml"
+    config.write_text("include_params: dahl.yaml\n")
+    assert main(["drop-test", "--config", str(config), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"--config {config}: a dahl model; sashil drop-test runs bouc-wen models only" in err
+
+
+def test_simulate_runs_a_dahl_parameter_file(tmp_path):
+    params = _write_dahl(tmp_path / "dahl.yaml")
+    out = tmp_path / "sim"
+    assert main(["simulate", "--params", str(params), "--duration", "1", "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["model"] == "dahl"
+
+
+def test_identify_never_overwrites_without_force_and_creates_the_out_folder(drop, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    existing = tmp_path / "params.yaml"
+    existing.write_text("keep me\n")
+    argv = ["identify", str(drop), "--model", "dahl", "--passive", "--quiet"]
+    assert main(argv) == 2  # the default --out, ./params.yaml, exists
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "params.yaml: exists; add --force to overwrite it, or choose another --out" in err
+    assert existing.read_text() == "keep me\n" and not (tmp_path / "params_fit.png").exists()
+    nested = tmp_path / "fits" / "dahl" / "params.yaml"
+    assert main([*argv, "--out", str(nested)]) == 0  # the folder is created
+    assert load_params(nested)["name"] == "dahl" and (nested.parent / "params_fit.png").exists()
+    assert f"wrote {nested.resolve()} (model dahl)" in capsys.readouterr().out
+    assert main([*argv, "--out", str(nested)]) == 2  # the second time: refused ...
+    assert f"{nested}: exists; add --force" in capsys.readouterr().err
+    assert main([*argv, "--force"]) == 0  # ... unless forced
+    assert load_params(existing)["name"] == "dahl"
+    assert f"wrote {existing.resolve()} (model dahl)" in capsys.readouterr().out

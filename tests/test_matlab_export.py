@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.io import loadmat
 
+import sashil
 from sashil.cli import main
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv, write_data_csv
@@ -32,6 +33,30 @@ def test_drop_test_format_mat_matches_data_csv(tmp_path):
     assert [str(c[0]) for c in doc["columns"][0]] == list(data)
     for name, values in data.items():
         assert np.array_equal(doc[name][:, 0], values), name
+
+
+def _struct(doc: dict) -> dict[str, str]:
+    """The ``sashil`` struct of a loaded .mat file as field -> text."""
+    meta = doc["sashil"]
+    return {name: str(np.ravel(meta[name][0, 0])[0]) for name in meta.dtype.names}
+
+
+@pytest.mark.parametrize(
+    "verb, argv, expected",
+    [
+        ("drop-test", ["--duration", "1", "--current", "0.5"], {"controller": "passive 0.5 A", "current_a": "0.5"}),
+        (
+            "sweep",
+            ["--duration", "1", "--f-start", "1", "--f-stop", "2", "--current", "0"],
+            {"controller": "passive 0 A"},
+        ),
+    ],
+)
+def test_data_mat_holds_verb_exit_status_and_version(tmp_path, verb, argv, expected):
+    out = tmp_path / "D"
+    assert main([verb, *argv, "--out", str(out), "--format", "mat", "-q"]) == 0
+    meta = _struct(loadmat(out / "data.mat"))
+    assert meta == {"verb": verb, "exit_status": "ok", "sashil_version": sashil.__version__, **expected}
 
 
 def test_export_from_a_run_folder_carries_its_metadata(tmp_path):

@@ -29,11 +29,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--inertia",
         type=float,
         metavar="J",
-        help="the arm's inertia J [kg m^2] (datasheet); without it every torque is relative to J = 1",
+        help="the arm's inertia J [kg m^2] (datasheet; default calibrate.inertia_kg_m2); "
+        "without it every torque is relative to J = 1",
     )
     parser.add_argument("--model", choices=MODEL_CHOICES, help="model to fit (override calibrate.model); all: ranked")
     parser.add_argument(
-        "--no-profile", action="store_true", help="skip the profile of the Bouc-Wen exponent n (a few seconds)"
+        "--no-profile",
+        action="store_true",
+        help="skip the profile of the Bouc-Wen exponent n (a few seconds; calibrate.profile_n: false)",
     )
     add_output_options(parser)
     add_verbosity_options(parser)
@@ -45,18 +48,25 @@ def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     check_inertia(args.inertia)  # before the config: a bad number is the first thing to say
     config = resolve_config(args)
+    section = config["calibrate"]  # the options land in the config (config.yaml says what ran)
+    if args.inertia is not None:
+        section["inertia_kg_m2"] = float(args.inertia)
+    if args.model is not None:
+        section["model"] = args.model
+    if args.no_profile:
+        section["profile_n"] = False
+    inertia = section["inertia_kg_m2"]
     outcome = calibrate_rig(
         config,
         args.out,
-        inertia=args.inertia,
-        model=args.model,
+        inertia=inertia,
         say=lambda text: say(args, text),
         source=args.config or "config",
-        profile=not args.no_profile,
+        profile=section["profile_n"],
     )
     cal = outcome.calibration
     best = cal.best
-    if args.inertia is None:
+    if inertia is None:
         print("all torques are relative to J = 1 (no --inertia): multiply them by the rig's J")
     held = ", ".join(f"{v.name} {100 * v.nrmse:.2f} %" for v in cal.validations) or "none (no held-out runs)"
     print(f"model {best.model}: fit RMS {math.degrees(best.rms_total):.4f} deg; held-out NRMSE: {held}")

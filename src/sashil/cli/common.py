@@ -14,6 +14,7 @@ from sashil.config import Config, apply_params, check_controller, load_config
 from sashil.config.overrides import apply_overrides
 from sashil.drivers import BACKENDS, declared_capabilities
 from sashil.errors import ConfigError
+from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
 from sashil.recording.formats import FORMATS, check_formats
 from sashil.recording.formats import HELP as FORMAT_HELP
 
@@ -172,9 +173,10 @@ def say(args: argparse.Namespace, message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def resolve_config(args: argparse.Namespace) -> Config:
+def resolve_config(args: argparse.Namespace, models: Sequence[str] = RIG_MODELS) -> Config:
     """The config the verb runs with: file (or defaults), then --params, then each --set, then
-    --driver/--port. Every step is validated before anything is opened or written."""
+    --driver/--port. Every step is validated before anything is opened or written; a model the
+    verb cannot run (not in ``models``) is refused."""
     config = load_config(getattr(args, "config", None))
     if getattr(args, "params", None):
         config = apply_params(config, args.params)
@@ -189,6 +191,7 @@ def resolve_config(args: argparse.Namespace) -> Config:
         )
     else:
         config = apply_overrides(config, overrides)
+    check_runnable_model(config, args, models)
     if getattr(args, "params", None) and _mismatched(config.get("mismatch") or {}):
         logging.getLogger("sashil").warning(
             "--params %s: the config's mismatch: section is applied on top of these parameters "
@@ -206,6 +209,26 @@ def resolve_config(args: argparse.Namespace) -> Config:
             )
     check_formats(getattr(args, "format", None), config["driver"]["name"])  # before anything runs
     return config
+
+
+def check_runnable_model(config: Config, args: argparse.Namespace, models: Sequence[str]) -> None:
+    """ConfigError, one line naming where the model came from (``--set model.name``, ``--params``
+    or ``--config``), when the verb cannot run the config's model."""
+    name = config["model"]["name"]
+    if name in models:
+        return
+    sets = [item for item in getattr(args, "overrides", None) or () if item.partition("=")[0].strip() == "model.name"]
+    if sets:
+        where = f"--set {sets[-1]}"
+    elif getattr(args, "params", None):
+        where = f"--params {args.params}"
+    else:
+        where = f"--config {getattr(args, 'config', None)}"
+    verb = f"sashil {args.verb}" if getattr(args, "verb", None) else "this verb"
+    raise ConfigError(
+        f"{where}: a {name} model; {verb} runs {' or '.join(models)} models only (the rig plant and the "
+        f"controller's observer are Bouc-Wen); sashil simulate runs {', '.join(MODEL_PARAMS)}"
+    )
 
 
 def _mismatched(section: dict[str, Any]) -> bool:
@@ -239,6 +262,15 @@ def law_help() -> str:
     except ConfigError as err:
         return f"(the laws cannot be listed: {err})"
     return f"{names}; or package.module:Class or path/file.py:Class (sashil laws lists their parameters)"
+
+
+def option_or_config(value: Any, option: str, config: Config, key: str) -> tuple[Any, str]:
+    """``(value, option)`` when the option was given, else the config's dotted ``key`` and its name:
+    the value a verb runs with, and what to name in a message about it."""
+    if value is not None:
+        return value, option
+    section, name = key.split(".")
+    return config[section][name], key
 
 
 def positive_seconds(option: str, value: float) -> float:

@@ -14,6 +14,7 @@ from sashil.cli.common import (
     add_verbosity_options,
     current_in_range,
     open_rerun,
+    option_or_config,
     positive_seconds,
     resolve_config,
     say,
@@ -37,17 +38,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
     parser.add_argument(
-        "--theta0-deg", type=float, default=-5.0, metavar="DEG", help="hold angle before release [deg] (default -5)"
+        "--theta0-deg",
+        type=float,
+        metavar="DEG",
+        help="hold angle before release [deg] (default drop_test.theta0_deg, -5)",
     )
     parser.add_argument(
         "--current",
         type=float,
         action="append",
         metavar="A",
-        help="constant coil current [A], flowing before release; repeat for one sub-run each (default 0)",
+        help="constant coil current [A], flowing before release; repeat for one sub-run each "
+        "(default drop_test.currents_a, [0])",
     )
     parser.add_argument(
-        "--duration", type=float, default=10.0, metavar="S", help="record length after release [s] (default 10)"
+        "--duration",
+        type=float,
+        metavar="S",
+        help="record length after release [s] (default drop_test.duration_s, 10)",
     )
     add_output_options(parser)
     add_recording_options(parser)
@@ -73,15 +81,38 @@ def _label(current: float) -> str:
     return f"i{current:.3f}A"
 
 
+def resolve_drops(args: argparse.Namespace, config: dict) -> tuple[float, list[float], float]:
+    """``(theta0_deg, currents, duration_s)`` from the options, else the config's ``drop_test``
+    section; checked, and written back to it so that config.yaml says what ran."""
+    section = config["drop_test"]
+    duration, duration_name = option_or_config(args.duration, "--duration", config, "drop_test.duration_s")
+    duration = positive_seconds(duration_name, duration)
+    theta0, theta0_name = option_or_config(args.theta0_deg, "--theta0-deg", config, "drop_test.theta0_deg")
+    if not (math.isfinite(theta0) and abs(theta0) <= THETA0_LIMIT_DEG):
+        raise ConfigError(f"{theta0_name}: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {theta0:g}")
+    values, currents_name = option_or_config(args.current, "--current", config, "drop_test.currents_a")
+    if not values:
+        raise ConfigError(f"{currents_name}: expected at least one current, got []")
+    currents = [current_in_range(currents_name, value, config) for value in values]
+    if len(set(currents)) != len(currents):
+        raise ConfigError(f"{currents_name}: each current once, got {currents}")
+    section.update(theta0_deg=float(theta0), currents_a=currents, duration_s=duration)
+    return float(theta0), currents, duration
+
+
+#: what a loop run reports about itself: at the top of summary.json when the folder holds one run
+RUN_LEVEL_KEYS = ("timing", "link", "realtime", "can_trace")
+
+
+def _run_level(entry: dict) -> dict:
+    """The :data:`RUN_LEVEL_KEYS` of one run's entry (null for a folder of several runs: ``{}``)."""
+    return {key: entry.get(key) for key in RUN_LEVEL_KEYS}
+
+
 def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     config = resolve_config(args)
-    duration = positive_seconds("--duration", args.duration)
-    if not (math.isfinite(args.theta0_deg) and abs(args.theta0_deg) <= THETA0_LIMIT_DEG):
-        raise ConfigError(f"--theta0-deg: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {args.theta0_deg:g}")
-    currents = [current_in_range("--current", value, config) for value in (args.current or [0.0])]
-    if len(set(currents)) != len(currents):
-        raise ConfigError(f"--current: each current once, got {currents}")
+    theta0_deg, currents, duration = resolve_drops(args, config)
 
     _controller(config)  # bad controller parameters fail here, before a folder exists
     folder = RunFolder.create(args.out, "drop-test")
@@ -96,14 +127,14 @@ def run(args: argparse.Namespace) -> int:
     law = config["controller"]["law"]
     for current in currents:
         label = f"{law} (from {current:g} A until the release)" if law != "passive" else f"passive {current:g} A"
-        say(args, f"drop test from {args.theta0_deg:g} deg, {label} ...")
+        say(args, f"drop test from {theta0_deg:g} deg, {label} ...")
         target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
         rig = open_rig(config)
         trace = start_can_trace(args, rig, target.path)
         try:
             record = run_drop_test(
                 config,
-                args.theta0_deg,
+                theta0_deg,
                 current,
                 duration,
                 rig=rig,
@@ -113,23 +144,33 @@ def run(args: argparse.Namespace) -> int:
             )
         finally:
             trace_stats = trace.close() if trace is not None else None
-        if several:
-            target.write_config(config)
+        if several:  # the sub-folder's config reruns its one drop
+            target.write_config({**config, "drop_test": {**config["drop_test"], "currents_a": [current]}})
         target.write_data(record.columns)
-        write_formats(args, target.path, config, "drop-test", record.columns, current_a=current, controller=label)
+        assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
+        status = "ok" if record.error is None else record.loop.exit_status
+        write_formats(
+            args,
+            target.path,
+            config,
+            "drop-test",
+            record.columns,
+            exit_status=status,
+            current_a=current,
+            controller=label,
+        )
         if live is not None:
             live.note(
                 live_offset_s,
-                f"drop test from {args.theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)",
+                f"drop test from {theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)",
             )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
-        assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
         metrics = record.metrics.as_dict()
         entry = {
             "current_a": current,
             "controller": label,
-            "theta0_deg": args.theta0_deg,
+            "theta0_deg": theta0_deg,
             "hold_angle_deg": math.degrees(record.hold_angle_rad),
             "release_estimated": record.release_estimated,
             "folder": "." if not several else _label(current),
@@ -140,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
             "trips": record.loop.trips if record.loop is not None else [],
             "link": record.extra.get("link"),
             "realtime": record.extra.get("realtime"),
-            "exit_status": "ok" if record.error is None else record.loop.exit_status,
+            "exit_status": status,
             "error": None if record.error is None else str(record.error),
             "can_trace": trace_stats,
         }
@@ -152,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
                     "verb": "drop-test",
                     "driver": config["driver"]["name"],
                     "controller": label,
-                    "timing": entry["timing"],
+                    **_run_level(entry),
                     "trips": entry["trips"],
                     "runs": [{**entry, "folder": "."}],
                 }
@@ -175,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     plot = plot_drop_test(
         folder.file("drop_test.png"),
         overlay,
-        f"Drop test from {args.theta0_deg:g}°{under} ({config['driver']['name']} rig)",
+        f"Drop test from {theta0_deg:g}°{under} ({config['driver']['name']} rig)",
         band_deg=config["drop_test"]["settle_band_deg"],
     )
     if live is not None:
@@ -188,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
         "driver": driver["name"],
         "controller": law if law != "passive" else "passive (constant current per run)",
         "clock": clock,
-        "timing": runs[0]["timing"] if len(runs) == 1 else None,
+        **_run_level(runs[0] if len(runs) == 1 else {}),
         "runs": runs,
     }
     if failure is not None:

@@ -22,7 +22,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="data.csv files, run folders, or folders of runs (a multi-current drop test: every sub-run)",
     )
     parser.add_argument("--model", choices=MODEL_CHOICES, default="bouc-wen", help="model to fit, or all to rank them")
-    parser.add_argument("--out", metavar="FILE", default="params.yaml", help="parameter file to write (best model)")
+    parser.add_argument(
+        "--out",
+        metavar="FILE",
+        default="params.yaml",
+        help="parameter file to write (best model; default ./params.yaml); its folder is created",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="overwrite files that exist (the parameter files, the plot)"
+    )
     parser.add_argument(
         "--passive", action="store_true", help="runs at one current: fix the current terms (c2, alpha2, ...) at 0"
     )
@@ -62,6 +70,37 @@ def data_paths(run: str) -> list[Path]:
     return found or [path / "data.csv"]  # the last: "no such file" from the data loader
 
 
+def output_paths(out: Path, names: list[str], plot: str | None) -> list[Path]:
+    """Every file identify may write: ``out``, with several models each model's
+    ``<stem>.<model>.yaml`` beside it (the ones not ranked best), and the overlay plot."""
+    others = [out.with_name(f"{out.stem}.{name}{out.suffix or '.yaml'}") for name in names] if len(names) > 1 else []
+    return [out, *others, plot_path(out, plot)]
+
+
+def plot_path(out: Path, plot: str | None) -> Path:
+    """``--plot``, else ``<stem>_fit.png`` beside ``out``."""
+    return Path(plot) if plot else out.with_name(f"{out.stem}_fit.png")
+
+
+def check_outputs(paths: list[Path], force: bool) -> None:
+    """ConfigError naming the first of ``paths`` that is a folder, or that exists (nothing is
+    overwritten without ``--force``)."""
+    for path in paths:
+        if path.is_dir():
+            raise ConfigError(f"{path}: is a folder (give a file name, e.g. --out {path / 'params.yaml'})")
+        if path.exists() and not force:
+            raise ConfigError(f"{path}: exists; add --force to overwrite it, or choose another --out")
+
+
+def make_folders(paths: list[Path]) -> None:
+    """Create the folders ``paths`` go into (ConfigError naming the one that cannot be made)."""
+    for path in paths:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"--out {path}: cannot create folder {path.parent} ({err.strerror})") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from sashil.identify.data import load_records
     from sashil.identify.fit import FitOptions, fit_model
@@ -79,14 +118,14 @@ def run(args: argparse.Namespace) -> int:
     if args.delta is not None and not (args.delta > 0):
         raise ConfigError(f"--delta: expected a number > 0, got {args.delta:g}")
     out = Path(args.out)
-    if not out.parent.exists():
-        raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
+    names = ["bouc-wen", "dahl", "lugre", "bingham"] if args.model == "all" else [args.model]
+    targets = output_paths(out, names, args.plot)
+    check_outputs(targets, args.force)
     records = load_records(
         [p for r in args.runs for p in data_paths(r)],
         need_current_change=not args.passive,
         start_at_rest=args.start == "rest",
     )
-    names = ["bouc-wen", "dahl", "lugre", "bingham"] if args.model == "all" else [args.model]
     options = FitOptions(
         passive=args.passive,
         two_stage=args.two_stage,
@@ -103,14 +142,15 @@ def run(args: argparse.Namespace) -> int:
     if len(results) > 1:
         print("\ncomparison (ranked by output-error RMS of theta):")
         print(comparison_table(results))
+    make_folders(targets)
     write_params(out, param_document(best, args.delta))
-    print(f"wrote {out} (model {best.model})")
+    print(f"wrote {out.resolve()} (model {best.model})")
     for r in results:
         if r is not best:
             other = out.with_name(f"{out.stem}.{r.model}{out.suffix or '.yaml'}")
             write_params(other, param_document(r, args.delta))
-            print(f"wrote {other}")
-    plot = Path(args.plot) if args.plot else out.with_name(f"{out.stem}_fit.png")
+            print(f"wrote {other.resolve()}")
+    plot = plot_path(out, args.plot)
     overlay_plot(results, records, plot)
-    print(f"wrote {plot}")
+    print(f"wrote {plot.resolve()}")
     return 0

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from sashil import __version__
 from sashil.cli.common import formats
 from sashil.recording.can_trace import CanTrace
 from sashil.recording.formats import can_formats, write_data_formats
@@ -33,10 +34,14 @@ def write_formats(
     config: Mapping[str, Any],
     verb: str,
     columns: Mapping[str, Any] | None = None,
+    *,
+    exit_status: str,
     **meta: Any,
 ) -> list[Path]:
-    """The data files ``--format mat|parquet`` asks for (from ``columns``, else from data.csv)."""
-    return write_data_formats(folder, formats(args), columns, config, {"verb": verb, **meta})
+    """The data files ``--format mat|parquet`` asks for (from ``columns``, else from data.csv), with
+    the run's verb, exit status, sashil version and ``meta`` (controller, current, ...) beside the rows."""
+    about = {"verb": verb, "exit_status": exit_status, "sashil_version": __version__, **meta}
+    return write_data_formats(folder, formats(args), columns, config, about)
 
 
 def finish_loop_run(
@@ -53,7 +58,14 @@ def finish_loop_run(
     from sashil.recording.plots import plot_run, plot_timing
 
     if (folder.path / "data.csv").exists():
-        write_formats(args, folder.path, config, summary.get("verb", "run"), controller=summary.get("controller"))
+        write_formats(
+            args,
+            folder.path,
+            config,
+            summary.get("verb", "run"),
+            exit_status=summary.get("exit_status", "ok"),
+            controller=summary.get("controller"),
+        )
         plot_run(folder.path / "run.png", folder.path, summary)
     timing = load_run(folder.path).timing
     if timing is not None and len(timing.get("lateness_ns", ())):

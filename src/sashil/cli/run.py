@@ -16,6 +16,7 @@ from sashil.cli.common import (
     current_in_range,
     law_help,
     open_live_tap,
+    option_or_config,
     positive_seconds,
     resolve_config,
     say,
@@ -29,6 +30,7 @@ from sashil.drivers.interface import capabilities_of
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.road_option import DEFAULT_SIM_ROAD, RoadStage, parse_road
 from sashil.experiments.road_option import SYNTAX as ROAD_SYNTAX
+from sashil.models.plant import RoadProfile
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.runtime.clock import RealClock
@@ -44,18 +46,29 @@ EXAMPLE = "sashil run --duration 10 --controller passive --current 0.5 --out run
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
-    parser.add_argument("--duration", type=float, metavar="S", help="seconds to run (default: until Ctrl-C / SIGTERM)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="seconds to run (default: run.duration_s, null: until Ctrl-C / SIGTERM)",
+    )
     parser.add_argument("--rate", type=float, metavar="HZ", help="loop rate (default: loop.rate_hz, 1000)")
     parser.add_argument(
         "--controller",
         metavar="LAW",
         help=f"semi-active law ({law_help()}); default controller.law",
     )
-    parser.add_argument("--current", type=float, metavar="A", help="coil current of the passive controller (default 0)")
+    parser.add_argument(
+        "--current",
+        type=float,
+        metavar="A",
+        help="coil current of the passive controller (default controller.current_a, 0)",
+    )
     parser.add_argument(
         "--road",
         metavar="SPEC",
-        help=f"road excitation theta1(t): {ROAD_SYNTAX} (default on the sim backend: {DEFAULT_SIM_ROAD}, else none)",
+        help=f"road excitation theta1(t): {ROAD_SYNTAX} "
+        f"(default run.road, else on the sim backend {DEFAULT_SIM_ROAD}, else none)",
     )
     add_output_options(parser)
     add_recording_options(parser)
@@ -93,10 +106,26 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
     return name, make_controller(name, config)
 
 
+def resolve_road(option: str | None, config: dict[str, Any], simulated: bool) -> tuple[RoadProfile | None, str]:
+    """The road of ``--road``, else ``run.road``, else the backend's default (a sine on a simulated
+    rig, none on hardware); the spec that runs is written to ``run.road`` (``none`` for no road),
+    so the config reruns the same excitation."""
+    spec = option or config["run"]["road"] or (DEFAULT_SIM_ROAD if simulated else "none")
+    try:
+        road, text = parse_road(spec, config)
+    except ConfigError as err:
+        if option is not None:
+            raise
+        raise ConfigError(str(err).replace("--road", "run.road", 1)) from None
+    config["run"]["road"] = spec
+    return road, text
+
+
 def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     config = resolve_config(args)
-    duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    duration, duration_name = option_or_config(args.duration, "--duration", config, "run.duration_s")
+    duration = config["run"]["duration_s"] = None if duration is None else positive_seconds(duration_name, duration)
     backend = config["driver"]["name"]
     # the rate first: the controller's estimator gains and the device's Configure both use it
     rate = float(config["loop"]["rate_hz"] if args.rate is None else args.rate)
@@ -107,8 +136,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         check_rate(rate, rig)
         label, stage = build_stage(args.controller, config, args.current)
-        simulated = capabilities_of(rig).simulated
-        road, road_text = parse_road(args.road or (DEFAULT_SIM_ROAD if simulated else None), config)
+        road, road_text = resolve_road(args.road, config, capabilities_of(rig).simulated)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
         # open the port and greet the board now (configure is idempotent; the loop's own call finds

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import numpy as np
 
-from sashil.cli.common import add_config_options, add_output_options, positive_seconds, resolve_config
+from sashil.cli.common import add_config_options, add_output_options, resolve_config
+from sashil.config.sections import SIMULATE
 from sashil.errors import ConfigError
+from sashil.models.registry import MODEL_PARAMS
 
 HELP = "simulate a model (from --params) on recorded inputs or a drop test, for validation"
 EXAMPLE = "sashil simulate --params params.yaml --input runs/a/data.csv --out runs/sim-a"
@@ -22,14 +23,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--input",
         metavar="CSV",
         help="inputs: time_s, current_a (or current_cmd_a), optional "
-        "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared",
+        "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared (default simulate.input)",
     )
-    parser.add_argument("--theta0-deg", type=float, default=-5.0, help="drop test without --input: initial angle")
-    parser.add_argument("--current", type=float, default=0.0, help="drop test without --input: coil current [A]")
-    parser.add_argument("--duration", type=float, default=10.0, help="drop test without --input: seconds")
     parser.add_argument(
-        "--start", choices=("rest", "moving"), default="rest", help="the input starts at rest or moving"
+        "--theta0-deg", type=float, help="drop test without --input: initial angle (default simulate.theta0_deg, -5)"
     )
+    parser.add_argument(
+        "--current", type=float, help="drop test without --input: coil current [A] (default simulate.current_a, 0)"
+    )
+    parser.add_argument(
+        "--duration", type=float, help="drop test without --input: seconds (default simulate.duration_s, 10)"
+    )
+    parser.add_argument(
+        "--start", choices=("rest", "moving"), help="the input starts at rest or moving (default simulate.start, rest)"
+    )
+
+
+#: the options that set a key of the ``simulate`` section
+OPTIONS = (
+    ("--input", "input"),
+    ("--theta0-deg", "theta0_deg"),
+    ("--current", "current_a"),
+    ("--duration", "duration_s"),
+    ("--start", "start"),
+)
+
+
+def resolve_inputs(args: argparse.Namespace, config: dict) -> dict:
+    """The config's ``simulate`` section with the options given written over it (config.yaml says
+    what ran), each checked like the config key it sets."""
+    section = config["simulate"]
+    for option, key in OPTIONS:
+        value = getattr(args, option.lstrip("-").replace("-", "_"))
+        if value is not None:
+            section[key] = SIMULATE.fields[key].check(value, option)
+    return section
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     from sashil.recording.run_folder import RunFolder
     from sashil.stats import nrmse
 
-    config = resolve_config(args)
+    config = resolve_config(args, models=tuple(MODEL_PARAMS))
+    inputs_of = resolve_inputs(args, config)
     model = config["model"]["name"]
     params = dict(config["model"]["params"])
     if model == "bouc-wen":
@@ -46,21 +75,20 @@ def run(args: argparse.Namespace) -> int:
 
         params = {**BoucWenParams().as_dict(), **params}
     measured = None
-    if args.input:
-        inputs = read_data_csv(args.input, required=("time_s",), min_rows=2)
+    if inputs_of["input"]:
+        inputs = read_data_csv(inputs_of["input"], required=("time_s",), min_rows=2)
         if "current_a" not in inputs and "current_cmd_a" not in inputs:
-            raise ConfigError(f"{args.input}: missing column current_a (or current_cmd_a)")
+            raise ConfigError(f"{inputs_of['input']}: missing column current_a (or current_cmd_a)")
         if "theta_rad" in inputs:
             measured = inputs["theta_rad"]
         else:
             inputs["theta_rad"] = np.zeros_like(inputs["time_s"])
-        source = str(args.input)
+        source = str(inputs_of["input"])
     else:
-        if not math.isfinite(args.theta0_deg) or abs(args.theta0_deg) > 90:
-            raise ConfigError(f"--theta0-deg: expected an angle within +-90 deg, got {args.theta0_deg:g}")
-        inputs = drop_test_inputs(args.theta0_deg, args.current, positive_seconds("--duration", args.duration))
-        source = f"drop test theta0 {args.theta0_deg:g} deg, {args.current:g} A"
-    columns = simulate_columns(model, params, inputs, start_at_rest=args.start == "rest")
+        theta0, current = inputs_of["theta0_deg"], inputs_of["current_a"]
+        inputs = drop_test_inputs(theta0, current, inputs_of["duration_s"])
+        source = f"drop test theta0 {theta0:g} deg, {current:g} A"
+    columns = simulate_columns(model, params, inputs, start_at_rest=inputs_of["start"] == "rest")
     folder = RunFolder.create(args.out, "simulate")
     folder.write_config(config)
     if measured is not None:

@@ -18,6 +18,7 @@ from sashil.cli.common import (
     current_in_range,
     law_help,
     open_rerun,
+    option_or_config,
     positive_seconds,
     resolve_config,
     select_law,
@@ -48,23 +49,28 @@ EXAMPLE = "sashil sweep --f-start 0.5 --f-stop 5 --duration 30 --controller skyh
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     add_driver_options(parser)
-    parser.add_argument("--f-start", type=float, default=0.5, metavar="HZ", help="start frequency [Hz] (default 0.5)")
+    parser.add_argument(
+        "--f-start", type=float, metavar="HZ", help="start frequency [Hz] (default sweep.f_start_hz, 0.5)"
+    )
     parser.add_argument(
         "--f-stop",
         type=float,
-        default=5.0,
         metavar="HZ",
-        help="stop frequency [Hz] (default 5; equal to --f-start: a sine at that frequency)",
+        help="stop frequency [Hz] (default sweep.f_stop_hz, 5; equal to --f-start: a sine at that frequency)",
     )
-    parser.add_argument("--duration", type=float, default=30.0, metavar="S", help="chirp length [s] (default 30)")
+    parser.add_argument("--duration", type=float, metavar="S", help="chirp length [s] (default sweep.duration_s, 30)")
     parser.add_argument(
         "--amplitude-deg", type=float, metavar="DEG", help="road amplitude (override sweep.amplitude_deg)"
     )
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--controller", metavar="LAW", help=f"semi-active law ({law_help()}); default controller.law")
-    group.add_argument("--current", type=float, metavar="A", help="passive constant current instead of a law")
+    group.add_argument(
+        "--current", type=float, metavar="A", help="passive constant current instead of a law (controller.current_a)"
+    )
     parser.add_argument(
-        "--stepped", action="store_true", help="stepped sine: transmissibility per frequency (sweep.steps)"
+        "--stepped",
+        action=argparse.BooleanOptionalAction,
+        help="stepped sine: transmissibility per frequency (sweep.steps); default sweep.stepped, false",
     )
     parser.add_argument(
         "--steps", type=int, metavar="N", help="stepped sine: number of frequencies (override sweep.steps)"
@@ -74,21 +80,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_verbosity_options(parser)
 
 
+def _frequencies(args: argparse.Namespace, config: dict) -> None:
+    """``--f-start``/``--f-stop``/``--stepped`` (else the config's ``sweep`` section), checked and
+    written to the config."""
+    sweep = config["sweep"]
+    f_start, start_name = option_or_config(args.f_start, "--f-start", config, "sweep.f_start_hz")
+    f_stop, stop_name = option_or_config(args.f_stop, "--f-stop", config, "sweep.f_stop_hz")
+    stepped, _ = option_or_config(args.stepped, "--stepped", config, "sweep.stepped")
+    top = config["loop"]["rate_hz"] / 10
+    for option, value in ((start_name, f_start), (stop_name, f_stop)):
+        if not (math.isfinite(value) and 0.0 < value <= top):
+            raise ConfigError(f"{option}: expected a frequency in (0, {top:g}] Hz, got {value:g}")
+    if f_stop < f_start:
+        raise ConfigError(
+            f"{stop_name}: expected a frequency at or above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+    if stepped and f_stop == f_start:
+        raise ConfigError(
+            f"{stop_name}: a stepped sine needs a frequency above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+    sweep.update(f_start_hz=float(f_start), f_stop_hz=float(f_stop), stepped=bool(stepped))
+
+
 def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
-    for option, value in (("--f-start", args.f_start), ("--f-stop", args.f_stop)):
-        if not (math.isfinite(value) and 0.0 < value <= config["loop"]["rate_hz"] / 10):
-            raise ConfigError(
-                f"{option}: expected a frequency in (0, {config['loop']['rate_hz'] / 10:g}] Hz, got {value:g}"
-            )
-    if args.f_stop < args.f_start:
-        raise ConfigError(
-            f"--f-stop: expected a frequency at or above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}"
-        )
-    if args.stepped and args.f_stop == args.f_start:
-        raise ConfigError(
-            f"--f-stop: a stepped sine needs a frequency above --f-start ({args.f_start:g} Hz), got {args.f_stop:g}"
-        )
+    """The law and the config the sweep runs with: every option in it (config.yaml says what ran)."""
     config = copy.deepcopy(config)
+    duration, duration_name = option_or_config(args.duration, "--duration", config, "sweep.duration_s")
+    config["sweep"]["duration_s"] = positive_seconds(duration_name, duration)
+    _frequencies(args, config)
     if args.amplitude_deg is not None:
         if not (math.isfinite(args.amplitude_deg) and 0.0 < args.amplitude_deg <= 20.0):
             raise ConfigError(f"--amplitude-deg: expected an angle in (0, 20] deg, got {args.amplitude_deg:g}")
@@ -104,6 +123,11 @@ def _check(args: argparse.Namespace, config: dict) -> tuple[str, dict]:
     return select_law(config, args.controller), config
 
 
+def _label(name: str, config: dict) -> str:
+    """What commanded the damper: the law, or the passive current."""
+    return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
+
+
 def _plot(folder: RunFolder, points, label: str) -> None:
     from sashil.recording.plots import plot_transmissibility
 
@@ -114,16 +138,15 @@ def _plot(folder: RunFolder, points, label: str) -> None:
 def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     config = resolve_config(args)
-    duration = positive_seconds("--duration", args.duration)
     name, config = _check(args, config)
     folder = RunFolder.create(args.out, "sweep")
     live = (
         None
-        if args.stepped
+        if config["sweep"]["stepped"]
         else open_rerun(args, (*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
     )
     folder.write_config(config)
-    label = name if args.current is None else f"passive {args.current:g} A"
+    label = _label(name, config)
     trace_box: list = []  # the CAN frame trace (--format blf|asc|log|mf4), started with the first rig
 
     def rig_factory(cfg: dict, road):  # every rig of the sweep feeds the one trace
@@ -137,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
         return rig
 
     try:
-        summary = _sweep(args, config, name, label, duration, folder, live, rig_factory)
+        summary = _sweep(args, config, name, label, folder, live, rig_factory)
     finally:
         if trace_box:
             trace_stats = trace_box[0].close()
@@ -153,11 +176,12 @@ def _freq_label(f_hz: float) -> str:
     return f"f{f_hz:.3f}Hz"
 
 
-def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> dict:
-    """Run the stepped sine or the chirp; returns the summary."""
+def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
+    """Run the stepped sine or the chirp of ``config['sweep']``; returns the summary."""
     sweep = config["sweep"]
-    if args.stepped:
-        freqs = frequencies(args.f_start, args.f_stop, sweep["steps"], sweep["spacing"])
+    f_start, f_stop, duration = sweep["f_start_hz"], sweep["f_stop_hz"], sweep["duration_s"]
+    if sweep["stepped"]:
+        freqs = frequencies(f_start, f_stop, sweep["steps"], sweep["spacing"])
         bar = Progress(len(freqs), "stepped sine", enabled=not args.quiet)
         points = []
         kept: list[dict] = []
@@ -173,7 +197,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
         def keep(f: float, cols: dict) -> None:
             sub = subs[f]
             sub.write_data(cols)
-            write_formats(args, sub.path, config, "sweep", cols, controller=label, frequency_hz=f)
+            write_formats(args, sub.path, config, "sweep", cols, exit_status="ok", controller=label, frequency_hz=f)
             kept.append({"folder": _freq_label(f), "frequency_hz": f})
             sub.write_summary(
                 {"exit_status": "ok", "driver": config["driver"]["name"], "controller": label, "mode": "stepped",
@@ -221,7 +245,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
             cols = run_profile(
                 config,
                 controller,
-                chirp_profile(amplitude, args.f_start, args.f_stop, duration, sweep["ramp_s"]),
+                chirp_profile(amplitude, f_start, f_stop, duration, sweep["ramp_s"]),
                 total,
                 rig_factory,
                 keep=folder.write_data,
@@ -230,13 +254,13 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
         except SashilError as err:
             _write_failed(folder, err, {"mode": "chirp", "controller": label})
             raise
-        write_formats(args, folder.path, config, "sweep", cols, controller=label)
+        write_formats(args, folder.path, config, "sweep", cols, exit_status="ok", controller=label)
         from sashil.recording.plots import plot_chirp
 
         plot_chirp(
             folder.file("chirp.png"),
             cols,
-            f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg road ({label})",
+            f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg road ({label})",
         )
         if live is not None:
             shown = dict(cols)
@@ -258,7 +282,7 @@ def _sweep(args, config, name, label, duration, folder, live, rig_factory) -> di
             "controller_stats": controller.stats() if hasattr(controller, "stats") else None,
         }
         print(
-            f"chirp {args.f_start:g}-{args.f_stop:g} Hz over {duration:g} s ({label}): body RMS "
+            f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}): body RMS "
             f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg"
         )
     return summary

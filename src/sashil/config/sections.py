@@ -110,8 +110,34 @@ DROP_TEST = Section(
         "release_threshold_deg": Field("float", 0.5, low=0.0, low_open=True, high=10.0),
         "hold_timeout_s": Field("float", 60.0, low=0.0, low_open=True),
         "settle_band_deg": Field("float", 0.25, low=0.0, low_open=True, high=10.0),
+        "theta0_deg": Field("float", -5.0, low=-30.0, high=30.0, doc="hold angle before the release (--theta0-deg)"),
+        "currents_a": Field(
+            "float_list", [0.0], doc="constant coil current of each drop, one sub-run each (--current)"
+        ),
+        "duration_s": Field("float", 10.0, low=0.0, low_open=True, doc="record length after the release (--duration)"),
     },
-    doc="how a drop test finds the hold and the release",
+    doc="`sashil drop-test`: the drops, and how a drop test finds the hold and the release",
+)
+
+RUN = Section(
+    {
+        "duration_s": Field("float?", None, low=0.0, low_open=True, doc="seconds to run (null: until stopped)"),
+        "road": Field(
+            "str?", None, doc="road excitation theta1(t) (--road syntax; null: sine:1.0 on the sim backend, else none)"
+        ),
+    },
+    doc="`sashil run`: how long, and the road (the law is controller.law, the rate loop.rate_hz)",
+)
+
+SIMULATE = Section(
+    {
+        "input": Field("str?", None, doc="recorded inputs (CSV or run folder); null: a drop test"),
+        "theta0_deg": Field("float", -5.0, low=-90.0, high=90.0, doc="drop test: initial angle"),
+        "current_a": Field("float", 0.0, low=0.0, high=10.0, doc="drop test: coil current"),
+        "duration_s": Field("float", 10.0, low=0.0, low_open=True, doc="drop test: seconds"),
+        "start": Field("choice", "rest", choices=("rest", "moving"), doc="the input starts at rest or moving"),
+    },
+    doc="`sashil simulate`: the inputs the model runs on",
 )
 
 CONTROLLER = Section(
@@ -222,6 +248,12 @@ SWEEP = Section(
         ),
         "steps": Field("int", 24, low=2, high=1000, doc="stepped sine: number of frequencies"),
         "spacing": Field("choice", "log", choices=("linear", "log")),
+        "f_start_hz": Field("float", 0.5, low=0.0, low_open=True, doc="start frequency (--f-start)"),
+        "f_stop_hz": Field(
+            "float", 5.0, low=0.0, low_open=True, doc="stop frequency (--f-stop; = f_start_hz: one sine)"
+        ),
+        "duration_s": Field("float", 30.0, low=0.0, low_open=True, doc="chirp length, ramp not included (--duration)"),
+        "stepped": Field("bool", False, doc="stepped sine instead of a chirp (--stepped)"),
     },
     doc="road-side excitation: chirp and stepped sine (issue 5)",
 )
@@ -246,6 +278,14 @@ CALIBRATE = Section(
         "validate_road_currents_a": Field("float_list", [], doc="held-out road runs"),
         "max_rig_time_s": Field("float", 180.0, low=1.0, doc="a plan estimated to take longer is refused"),
         "model": Field("choice", "bouc-wen", choices=("bouc-wen", "dahl", "lugre", "bingham", "all")),
+        "inertia_kg_m2": Field(
+            "float?",
+            None,
+            low=0.0,
+            low_open=True,
+            doc="the arm's inertia J (--inertia; null: torques relative to J = 1)",
+        ),
+        "profile_n": Field("bool", True, doc="profile the Bouc-Wen exponent n after the fit (--no-profile: false)"),
     },
     doc="the plan of `sashil calibrate`: drops and road runs to fit, and held-out runs to validate (issue 16)",
 )
@@ -261,4 +301,6 @@ SCHEMA = {
     "mismatch": MISMATCH,
     "sweep": SWEEP,
     "calibrate": CALIBRATE,
+    "run": RUN,
+    "simulate": SIMULATE,
 }

@@ -15,6 +15,10 @@ MODEL_PARAMS: dict[str, tuple[str, ...]] = {
     "bingham": ("J", "k", "c0", "c0_i", "fc", "fc_i", "f0"),
 }
 
+#: the models a rig verb runs: the simulated and emulated rig's plant and the controller's observer
+#: are Bouc-Wen (``sashil simulate`` runs every model of :data:`MODEL_PARAMS`)
+RIG_MODELS: tuple[str, ...] = ("bouc-wen",)
+
 
 def check_model(section: dict[str, Any], source: str, where: str, complete: bool = False) -> dict[str, Any]:
     """Check a ``{name, params}`` model section; return it with float parameters.
