@@ -54,7 +54,7 @@ def finish_loop_run(
 
     if (folder.path / "data.csv").exists():
         write_formats(args, folder.path, config, summary.get("verb", "run"), controller=summary.get("controller"))
-        plot_run(folder.path / "run.png", folder.path, summary)
+        plot_run(folder.path / "run.png", folder.path, {**summary, **extra})
     timing = load_run(folder.path).timing
     if timing is not None and len(timing.get("lateness_ns", ())):
         plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
