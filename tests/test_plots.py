@@ -261,3 +261,11 @@ def test_calibrate_fit_png_titles_apart_residual_ticks_few_and_road_shown(tmp_pa
     (ax,) = figures[1].axes
     assert ax.get_ylabel() == "fit RMS / held-out NRMSE [%]" and ax.get_xscale() == "log"
     assert tick_labels(ax.xaxis) == ["0.1", "0.44", "1.5"]
+
+
+def test_chirp_png_of_a_single_sine_has_no_frequency_axis(tmp_path, figures):
+    t = np.arange(0, 3, 1e-3)
+    road = 0.02 * np.sin(2 * np.pi * t)
+    cols = {"time_s": t, "theta_rad": road, "theta_road_rad": road, "current_a": 0 * t, "current_cmd_a": 0 * t}
+    plots.plot_chirp(tmp_path / "chirp.png", cols, "chirp 1-1 Hz", chirp=(1.0, 1.0, 2.0))
+    assert not figures[0].axes[0].child_axes

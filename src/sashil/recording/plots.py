@@ -369,15 +369,15 @@ def chirp_frequency(time_s: np.ndarray, f_start_hz: float, f_stop_hz: float, swe
 
 
 def _frequency_axis(ax: Any, f_start_hz: float, f_stop_hz: float, sweep_s: float) -> Any:
-    """A second x axis on top of ``ax`` marking the chirp's instantaneous frequency (linear in time)."""
-    top = ax.secondary_xaxis("top")
+    """A second x axis on top of ``ax`` marking the chirp's instantaneous frequency (linear in time;
+    ``f_stop_hz`` above ``f_start_hz``)."""
     from matplotlib.ticker import MaxNLocator
 
+    top = ax.secondary_xaxis("top")
     steps = MaxNLocator(nbins=10, steps=[1, 2, 2.5, 5, 10]).tick_values(f_start_hz, f_stop_hz)
     ticks = [float(f"{f:.6g}") for f in steps if f_start_hz - 1e-9 <= f <= f_stop_hz + 1e-9]
-    if f_stop_hz > f_start_hz:
-        top.set_xticks([sweep_s * (f - f_start_hz) / (f_stop_hz - f_start_hz) for f in ticks])
-        top.set_xticklabels([tick_text(f) for f in ticks])
+    top.set_xticks([sweep_s * (f - f_start_hz) / (f_stop_hz - f_start_hz) for f in ticks])
+    top.set_xticklabels([tick_text(f) for f in ticks])
     top.set_xlabel("road frequency [Hz]")
     return top
 
@@ -405,7 +405,7 @@ def plot_chirp(
         axes[1].plot(t, columns["current_cmd_a"], lw=0.6, alpha=0.7, label="commanded i*")
     axes[1].set_ylabel("coil current [A]")
     axes[1].set_xlabel("time [s]")
-    if chirp is not None:
+    if chirp is not None and chirp[1] > chirp[0]:  # a sine (f_stop = f_start) has one frequency: in the title
         _frequency_axis(axes[0], *chirp)
     axes[0].set_title(title, fontsize=10)
     for ax in axes:
