@@ -269,3 +269,10 @@ def test_chirp_png_of_a_single_sine_has_no_frequency_axis(tmp_path, figures):
     cols = {"time_s": t, "theta_rad": road, "theta_road_rad": road, "current_a": 0 * t, "current_cmd_a": 0 * t}
     plots.plot_chirp(tmp_path / "chirp.png", cols, "chirp 1-1 Hz", chirp=(1.0, 1.0, 2.0))
     assert not figures[0].axes[0].child_axes
+
+
+def test_run_png_without_a_readable_config_draws_no_band(tmp_path, figures):
+    folder = loop_folder(tmp_path, "sky", "skyhook", c_sky=2.0)
+    (folder / "config.yaml").write_text("controller: [\n")
+    plots.plot_run(folder / "run.png", folder, None)
+    assert legend_texts(figures[0].axes[2]) == ["observer T̂", "target T*"]

@@ -41,13 +41,11 @@ def has_values(cols: dict[str, np.ndarray], name: str) -> bool:
 
 def read_run_config(folder: str | Path) -> dict[str, Any]:
     """The run folder's ``config.yaml`` as a mapping ({} when absent or unreadable)."""
-    try:
-        import yaml
+    import yaml
 
+    try:
         doc = yaml.safe_load((Path(folder) / "config.yaml").read_text(encoding="utf-8"))
-    except (OSError, ValueError, ImportError):
-        return {}
-    except Exception:  # a YAML syntax error: the plot goes on without the config
+    except (OSError, ValueError, yaml.YAMLError):
         return {}
     return doc if isinstance(doc, dict) else {}
 
