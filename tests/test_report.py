@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ import pytest
 from sashil.cli import main
 from sashil.errors import DataFileError
 from sashil.recording.data_file import write_data_csv
-from sashil.recording.report import drop_torque, load_run, markdown_summary
+from sashil.recording.report import RunRecord, drop_torque, load_run, markdown_summary
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -35,7 +34,7 @@ def test_report_on_two_drop_tests_writes_plots_and_side_by_side_summary(two_drop
     (run_a,) = json.loads((a / "summary.json").read_text())["runs"]
     (run_b,) = json.loads((b / "summary.json").read_text())["runs"]
     header = next(line for line in text.splitlines() if line.startswith("| metric |"))
-    assert header == "| metric | A 0 A | B 1 A |"
+    assert header == "| metric | passive 0 A | passive 1 A |"  # named by law and current, not by folder
     period = next(line for line in text.splitlines() if line.startswith("| period [s] |"))
     assert period == f"| period [s] | {run_a['period_s']:.4g} | {run_b['period_s']:.4g} |"
     decrement = next(line for line in text.splitlines() if line.startswith("| log decrement |"))
@@ -46,14 +45,30 @@ def test_report_on_two_drop_tests_writes_plots_and_side_by_side_summary(two_drop
 
 
 def test_drop_torque_is_minus_k_theta_minus_j_theta_ddot():
-    # theta = A sin(w t): T_d = -k theta - J theta'' = A (J w^2 - k) sin(w t)
+    # theta = A (1 - cos(w t)): at rest at t = 0, as at a release; T_d = -k theta - J theta''
     k, J, A, w = 109.0, 1.0, 0.08, 7.0
     t = np.arange(0, 3, 1e-3)
-    _theta, velocity, torque = drop_torque(t, A * np.sin(w * t), k, J)
-    inner = slice(100, -100)
-    # the 0.12 s cubic Savitzky-Golay fit attenuates theta'' by ~1 % at 7 rad/s: allow 2 % of J A w^2
-    assert torque[inner] == pytest.approx(A * (J * w * w - k) * np.sin(w * t[inner]), abs=0.02 * J * A * w * w)
-    assert velocity[inner] == pytest.approx(A * w * np.cos(w * t[inner]), abs=1e-3 * A * w)
+    theta = A * (1.0 - np.cos(w * t))
+    _theta, velocity, torque, cutoff = drop_torque(t, theta, k, J, until_s=2.5)
+    assert cutoff == pytest.approx(3 * np.sqrt(k / J) / (2 * np.pi))
+    inner = (t > 0.1) & (t < 2.4)
+    # the Butterworth low-pass is flat well below its cut-off (w = 1.1 Hz, cut-off 5 Hz)
+    expected = -k * theta - J * A * w * w * np.cos(w * t)
+    assert torque[inner] == pytest.approx(expected[inner], abs=0.01 * J * A * w * w)
+    assert velocity[inner] == pytest.approx(A * w * np.sin(w * t[inner]), abs=1e-3 * A * w)
+    assert np.isnan(torque[t > 2.5]).all() and np.isnan(torque[0])  # after settling; at the release
+
+
+def test_drop_torque_of_a_quantised_record_is_smooth():
+    # a 4096-count encoder: the low-passed T_d stays within a few percent of the authority, not steps
+    k, J, A, w = 109.0, 1.0, 0.08, 10.0
+    t = np.arange(0, 3, 1e-3)
+    q = 2 * np.pi / 4096
+    theta = A * (1.0 - np.cos(w * t))
+    _theta, _velocity, torque, _cutoff = drop_torque(t, np.round(theta / q) * q, k, J)
+    inner = (t > 0.1) & (t < 2.8)
+    expected = -k * theta - J * A * w * w * np.cos(w * t)
+    assert np.sqrt(np.mean((torque[inner] - expected[inner]) ** 2)) < 0.05 * J * A * w * w
 
 
 def test_timing_and_transmissibility_plots_when_the_runs_have_them(tmp_path):
@@ -99,11 +114,7 @@ def test_bad_run_folder_is_one_line_exit_2_and_nothing_written(tmp_path, capsys)
         load_run(tmp_path / "missing")
 
 
-def test_summary_marks_missing_values():
-    class Run:
-        path, label = "x", "x"
-        traces: ClassVar[list] = []
-        summary: ClassVar[dict] = {"verb": "run", "exit_status": "stopped"}
-
-    text = markdown_summary([Run()], [])
-    assert "| x | run | stopped | – | – | – |" in text
+def test_summary_marks_missing_values(tmp_path):
+    run = RunRecord(tmp_path / "x", "x", {"verb": "run", "exit_status": "stopped"})
+    text = markdown_summary([run], [])
+    assert "| x | `x` | run | stopped | – | – | – |" in text

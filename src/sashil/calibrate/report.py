@@ -68,43 +68,74 @@ def params_document(cal: Calibration, inertia_given: bool, rig_s: float, plan_ro
     return doc
 
 
-def _overlay(records: Sequence[Record], sims: Sequence[np.ndarray], path: Path, title: str) -> Path:
-    """Recorded and simulated angle per run, with the residual below each (PNG)."""
-    import matplotlib
+#: one run's road angle for the fit plot: (time [s], θ1 [rad])
+Road = tuple[np.ndarray, np.ndarray]
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
+def road_angles(results: Sequence[StepResult]) -> dict[str, Road]:
+    """The road angle θ1 of every step that moved the road, by step name."""
+    out = {}
+    for res in results:
+        cols = res.columns
+        road = cols.get("theta_road_rad")
+        if res.step.road is not None and road is not None and cols.get("time_s") is not None and np.any(road):
+            out[res.step.name] = (np.asarray(cols["time_s"], dtype=float), np.asarray(road, dtype=float))
+    return out
+
+
+def _overlay(
+    records: Sequence[Record],
+    sims: Sequence[np.ndarray],
+    path: Path,
+    title: str,
+    roads: dict[str, Road] | None = None,
+) -> Path:
+    """Recorded and simulated angle per run (and the road angle θ1 of a road run), with the residual
+    below each (PNG)."""
+    from matplotlib.ticker import MaxNLocator
+
+    from sashil.recording.plots import BESIDE, pyplot, save_figure
+
+    plt = pyplot()
     rows = len(records)
+    height = 2.9 * rows + 0.7
     fig, axes = plt.subplots(
-        2 * rows, 1, figsize=(9, 2.6 * rows), squeeze=False, gridspec_kw={"height_ratios": [2.2, 1] * rows}
+        2 * rows, 1, figsize=(10, height), squeeze=False, gridspec_kw={"height_ratios": [2.4, 1] * rows}
     )
     for k, (record, sim) in enumerate(zip(records, sims, strict=True)):
         top, bottom = axes[2 * k, 0], axes[2 * k + 1, 0]
-        top.plot(record.time_s, np.degrees(record.theta), color="k", lw=1.0, label="recorded")
-        top.plot(record.time_s, np.degrees(sim), color="tab:red", lw=0.9, label="model")
+        bottom.sharex(top)
+        top.plot(record.time_s, np.degrees(record.theta), color="k", lw=1.0, label="recorded θ")
+        top.plot(record.time_s, np.degrees(sim), color="tab:red", lw=0.9, label="model θ")
+        road = (roads or {}).get(record.name)
+        if road is not None:
+            top.plot(road[0], np.degrees(road[1]), color="tab:green", lw=0.8, label="road θ1 (input)")
+            span = float(record.time_s[-1] - record.time_s[0])
+            top.set_xlim(record.time_s[0] - 0.03 * span, record.time_s[-1] + 0.03 * span)
         top.set_title(f"{record.name}  (mean current {record.mean_current:.2f} A)", fontsize=9)
-        top.set_ylabel("theta [deg]")
+        top.set_ylabel("angle [deg]")
         top.grid(alpha=0.3)
+        if k == 0 or road is not None:
+            top.legend(**BESIDE)
         bottom.plot(record.time_s, np.degrees(sim - record.theta), color="tab:blue", lw=0.7)
-        bottom.set_ylabel("model - rec [deg]", fontsize=8)
+        bottom.set_ylabel("model − rec\n[deg]", fontsize=8)
+        bottom.yaxis.set_major_locator(MaxNLocator(nbins=2, symmetric=True))
+        bottom.tick_params(axis="y", labelsize=8)
         bottom.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time since release [s]")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.3 / height))
+    return save_figure(fig, path, dpi=90, layout=False)
 
 
 def _profile_plot(cal: Calibration, path: Path) -> Path:
-    import matplotlib
+    """``n_profile.png``: fit RMS above the best and held-out NRMSE with n held at each value."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from sashil.recording.plots import pyplot, save_figure
 
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 3.8))
     ns = [p.n for p in cal.profile]
     ref = next(p.rms_rad for p in cal.profile if p.fitted)
     ax.plot(ns, [100 * p.rms_rad / ref - 100 for p in cal.profile], "o-", label="fit RMS above the best [%]")
@@ -112,14 +143,15 @@ def _profile_plot(cal: Calibration, path: Path) -> Path:
         ax.plot(ns, [100 * p.validation_nrmse for p in cal.profile], "s--", label="held-out NRMSE [%]")
     ax.axvline(cal.best.params["n"], color="k", lw=0.8, ls=":", label=f"fitted n = {cal.best.params['n']:.3g}")
     ax.set_xscale("log")
+    ax.xaxis.set_major_locator(FixedLocator(sorted(set(ns))))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _pos: f"{value:.3g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("n (held)")
+    ax.set_ylabel("fit RMS / held-out NRMSE [%]")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Bouc-Wen exponent n: the rest refitted at each value", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=90)
 
 
 def _row(cells: Sequence[Any]) -> str:
@@ -141,13 +173,15 @@ def write_report(
     best = cal.best
     model = MODELS[best.model]
     fit_sims = [model.simulate(best.params, r) for r in cal.fit_records]
-    _overlay(cal.fit_records, fit_sims, folder / "fit.png", f"{best.model} fit (the runs the fit saw)")
+    roads = road_angles(results)
+    _overlay(cal.fit_records, fit_sims, folder / "fit.png", f"{best.model} fit (the runs the fit saw)", roads)
     if cal.validations:
         _overlay(
             cal.validate_records,
             [v.simulated for v in cal.validations],
             folder / "validation.png",
             "held-out validation (runs the fit never saw)",
+            roads,
         )
     if cal.profile:
         _profile_plot(cal, folder / "n_profile.png")

@@ -66,7 +66,7 @@ def finish_loop_run(
             exit_status=summary.get("exit_status", "ok"),
             controller=summary.get("controller"),
         )
-        plot_run(folder.path / "run.png", folder.path, summary)
+        plot_run(folder.path / "run.png", folder.path, {**summary, **extra})
     timing = load_run(folder.path).timing
     if timing is not None and len(timing.get("lateness_ns", ())):
         plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])

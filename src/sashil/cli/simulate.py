@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
@@ -98,24 +99,91 @@ def run(args: argparse.Namespace) -> int:
     if measured is not None:
         summary["rms_rad"] = float(np.sqrt(np.mean((columns["theta_rad"] - measured) ** 2)))
         summary["nrmse"] = nrmse(columns["theta_rad"], measured)
-    _plot(folder.file("theta.png"), columns, model)
+    _plot(folder.file("theta.png"), columns, model, source, summary.get("nrmse"))
+    drops = _drop_metrics(config, columns, measured, inputs) if args.input is None or _is_drop(inputs) else None
+    if drops is not None:
+        summary["drop_test"] = {name: metrics.as_dict() for name, metrics in drops.items()}
     folder.write_summary(summary)
     print(
         f"simulated {model} on {source}: {folder.path}"
         + (f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else "")
     )
+    if drops is not None:
+        print(_drop_table(drops))
     return 0
 
 
-def _plot(path: Path, columns: dict, model: str) -> None:
-    from sashil.recording.plots import pyplot, save_figure
+def _is_drop(inputs: dict) -> bool:
+    """Whether an input record is a drop test: no road motion and no input torque."""
+    road, torque = inputs.get("theta_road_rad"), inputs.get("torque_in_nm")
+    still = road is None or not np.any(np.nan_to_num(road))
+    return still and (torque is None or not np.any(np.nan_to_num(torque)))
 
-    fig, ax = pyplot().subplots(figsize=(8, 3))
-    if "theta_measured_rad" in columns:
-        ax.plot(columns["time_s"], np.degrees(columns["theta_measured_rad"]), "k", lw=1.2, label="input record")
-    ax.plot(columns["time_s"], np.degrees(columns["theta_rad"]), lw=0.9, label=f"{model} simulation")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("theta [deg]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+
+def _drop_metrics(config: dict, columns: dict, measured: np.ndarray | None, inputs: dict) -> dict:
+    """Drop-test metrics (period, peaks, ζ) of the simulated angle and, when given, the recorded one,
+    with the config's settling band and encoder resolution."""
+    from sashil.experiments.metrics import drop_metrics
+
+    band = config["drop_test"]["settle_band_deg"]
+    resolution = 2.0 * math.pi / config["rig"]["encoder_counts_per_rev"]
+    out = {"simulated": drop_metrics(columns["time_s"], columns["theta_rad"], band, resolution)}
+    if measured is not None:
+        out["recorded"] = drop_metrics(inputs["time_s"], measured, band, resolution)
+    return out
+
+
+def _drop_table(drops: dict) -> str:
+    """Period, first peaks and ζ of each drop-test record, side by side."""
+
+    def number(value: float | None, digits: int = 3) -> str:
+        return "-" if value is None else f"{value:.{digits}f}"
+
+    rows = [
+        ("period [s]", lambda m: number(m.period_s)),
+        ("first peaks [deg]", lambda m: ", ".join(f"{p:.2f}" for p in m.peaks_deg[:4]) or "none"),
+        ("damping ratio ζ", lambda m: number(m.damping_ratio, 4)),
+    ]
+    names = list(drops)
+    width = max(12, *(len(get(drops[n])) + 3 for n in names for _, get in rows))
+    lines = [f"{'drop test':<20}" + "".join(f"{n:>{width}}" for n in names)]
+    lines += [f"{title:<20}" + "".join(f"{get(drops[n]):>{width}}" for n in names) for title, get in rows]
+    return "\n".join(lines)
+
+
+def _plot(path: Path, columns: dict, model: str, source: str, error: float | None) -> None:
+    """``theta.png``: the simulated angle (and the recorded one when given, with the residual
+    simulated − recorded below it); the title names the model, the input and the NRMSE."""
+    from sashil.recording.plots import BESIDE, pyplot, save_figure
+
+    measured = columns.get("theta_measured_rad")
+    rows = 2 if measured is not None else 1
+    fig, axes = pyplot().subplots(
+        rows, 1, figsize=(10, 2.2 + 1.6 * rows), sharex=True, squeeze=False, height_ratios=[2.5, 1][:rows]
+    )
+    top = axes[0, 0]
+    t = columns["time_s"]
+    if measured is not None:
+        top.plot(t, np.degrees(measured), "k", lw=1.2, label="recorded")
+    top.plot(t, np.degrees(columns["theta_rad"]), color="tab:red", lw=0.9, label=f"{model} simulation")
+    top.set_ylabel("θ [deg]")
+    title = f"sashil simulate: {model} on {source}"
+    top.set_title(title + (f", NRMSE {100 * error:.3g} %" if error is not None else ""), fontsize=10)
+    top.legend(**BESIDE)
+    if measured is not None:
+        bottom = axes[1, 0]
+        bottom.plot(t, np.degrees(columns["theta_rad"] - measured), color="tab:blue", lw=0.7)
+        bottom.axhline(0.0, color="0.4", lw=0.6)
+        bottom.set_ylabel("sim − rec [deg]")
+        bottom.yaxis.set_major_locator(_few_ticks())
+    for ax in axes[:, 0]:
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
     save_figure(fig, path, dpi=110)
+
+
+def _few_ticks() -> object:
+    """At most four ticks on a short residual axis, so the labels do not collide."""
+    from matplotlib.ticker import MaxNLocator
+
+    return MaxNLocator(nbins=4, symmetric=True)

@@ -128,11 +128,14 @@ def _label(name: str, config: dict) -> str:
     return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
 
 
-def _plot(folder: RunFolder, points, label: str) -> None:
+def _plot(folder: RunFolder, points, label: str, config: dict) -> None:
+    """``transmissibility.png``, the curve named by the law, its parameters and current."""
+    from sashil.recording.labels import controller_label
     from sashil.recording.plots import plot_transmissibility
 
     freq = [p.frequency_hz for p in points]
-    plot_transmissibility(folder.file("transmissibility.png"), [(label, freq, [p.transmissibility for p in points])])
+    curve = (controller_label({"controller": label}, config), freq, [p.transmissibility for p in points])
+    plot_transmissibility(folder.file("transmissibility.png"), [curve])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -225,7 +228,7 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
                 f"{p.frequency_hz:8.3f} {math.degrees(p.body_rms_rad):15.4f} {p.transmissibility:17.4f} {100 * p.observer_nrmse:14.1f}%"
             )
         folder._write_text("transmissibility.csv", "\n".join(lines) + "\n")
-        _plot(folder, points, label)
+        _plot(folder, points, label, config)
         integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
         print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
         summary: dict[str, Any] = {
@@ -233,6 +236,7 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
             "driver": config["driver"]["name"],
             "mode": "stepped",
             "controller": label,
+            "road": f"stepped sine {f_start:g}-{f_stop:g} Hz, {len(freqs)} steps, {sweep['amplitude_deg']:g} deg",
             "integrated_body_rms_rad": integrated,
             "points": [p.__dict__ for p in points],
             "runs": [{**entry, **p.__dict__} for entry, p in zip(kept, points, strict=True)],
@@ -255,12 +259,15 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
             _write_failed(folder, err, {"mode": "chirp", "controller": label})
             raise
         write_formats(args, folder.path, config, "sweep", cols, exit_status="ok", controller=label)
+        from sashil.recording.labels import controller_label
         from sashil.recording.plots import plot_chirp
 
         plot_chirp(
             folder.file("chirp.png"),
             cols,
-            f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg road ({label})",
+            f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg road "
+            f"({controller_label({'controller': label}, config)})",
+            chirp=(f_start, f_stop, duration),
         )
         if live is not None:
             shown = dict(cols)
@@ -274,6 +281,7 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
             "driver": config["driver"]["name"],
             "mode": "chirp",
             "controller": label,
+            "road": f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg",
             "body_rms_rad": ac_rms(body),
             "road_rms_rad": ac_rms(cols["theta_road_rad"]),
             "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),

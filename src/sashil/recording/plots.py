@@ -19,27 +19,61 @@ def pyplot() -> Any:
     return plt
 
 
-def save_figure(fig: Any, path: str | Path, dpi: float | None = None) -> Path:
-    """Lay out, write and close ``fig``; returns the path written."""
-    fig.tight_layout()
+def save_figure(fig: Any, path: str | Path, dpi: float | None = None, layout: bool = True) -> Path:
+    """Lay out (unless the caller did: ``layout`` False), write and close ``fig``; returns the path."""
+    if layout:
+        fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=dpi if dpi is not None else "figure")
     pyplot().close(fig)
     return path
 
 
-def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) -> Path:
-    """``run.png`` of a loop run folder: angles (θ, and the road θ1 when it moves), coil current
-    (measured and commanded) and torque (observer T̂ and target T* when a controller recorded them)."""
-    from sashil.recording.data_file import read_data_csv
+#: legend placement beside an axes (outside it, so no legend covers a trace)
+BESIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0, "fontsize": 8}
 
-    cols = read_data_csv(Path(folder) / "data.csv", required=("time_s",), min_rows=0)
-    plt = pyplot()
-    has_torque = any(name in cols and np.isfinite(cols[name]).any() for name in ("torque_hat_nm", "torque_cmd_nm"))
-    rows = 3 if has_torque else 2
-    fig, axes = plt.subplots(rows, 1, figsize=(9, 2.4 * rows + 0.6), dpi=110, sharex=True)
+
+def has_values(cols: dict[str, np.ndarray], name: str) -> bool:
+    """Whether ``cols`` holds column ``name`` with at least one finite value (a law without a
+    target torque, e.g. an on-off law, records ``torque_cmd_nm`` as all NaN)."""
+    return name in cols and bool(np.isfinite(cols[name]).any())
+
+
+def read_run_config(folder: str | Path) -> dict[str, Any]:
+    """The run folder's ``config.yaml`` as a mapping ({} when absent or unreadable)."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load((Path(folder) / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, ValueError, yaml.YAMLError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def add_feasible_band(cols: dict[str, np.ndarray], config: dict[str, Any]) -> bool:
+    """Make sure ``cols`` holds ``band_lo_nm``/``band_hi_nm``, the torque range T(0)..T(i_max) of the
+    damper at the observed state: as recorded, or computed from ``z_hat`` and ``theta_dot_rad_s`` with
+    the Bouc-Wen model of the run's config. Returns whether the band is there."""
+    if not (has_values(cols, "band_lo_nm") and has_values(cols, "band_hi_nm")):
+        model, rig = config.get("model") or {}, config.get("rig") or {}
+        if model.get("name") != "bouc-wen" or not isinstance(model.get("params"), dict):
+            return False
+        if not (has_values(cols, "z_hat") and has_values(cols, "theta_dot_rad_s")):
+            return False
+        from sashil.recording.rerun_log import feasible_band
+
+        cols.pop("band_lo_nm", None)
+        cols.pop("band_hi_nm", None)
+        try:
+            feasible_band(cols, model["params"], float(rig.get("current_max_a", 1.0)))
+        except (KeyError, TypeError, ValueError):
+            return False
+    return "band_lo_nm" in cols and "band_hi_nm" in cols
+
+
+def _angles_panel(ax: Any, cols: dict[str, np.ndarray]) -> None:
+    """θ, and the road θ1 and arm θ2 = θ + θ1 when the road moves."""
     t = cols["time_s"]
-    ax = axes[0]
     if "theta_rad" in cols:
         ax.plot(t, np.degrees(cols["theta_rad"]), lw=0.9, label="θ (relative angle)")
     road = cols.get("theta_road_rad")
@@ -48,32 +82,76 @@ def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) 
         if "theta_rad" in cols:
             ax.plot(t, np.degrees(cols["theta_rad"] + road), lw=0.8, label="θ2 (arm)")
     ax.set_ylabel("angle [deg]")
-    ax = axes[1]
+
+
+def _current_panel(ax: Any, cols: dict[str, np.ndarray]) -> None:
+    """Measured and commanded coil current."""
     for name, label in (("current_a", "measured i"), ("current_cmd_a", "commanded i*")):
-        if name in cols:
-            ax.plot(t, cols[name], lw=0.9, label=label)
+        if has_values(cols, name):
+            ax.plot(cols["time_s"], cols[name], lw=0.9, label=label)
     ax.set_ylabel("coil current [A]")
+
+
+def _torque_panel(ax: Any, cols: dict[str, np.ndarray], band: bool) -> None:
+    """Observer T̂, target T* (when the law sets one) and the feasible band T(0)..T(i_max)."""
+    t = cols["time_s"]
+    if band:
+        ax.fill_between(
+            t,
+            cols["band_lo_nm"],
+            cols["band_hi_nm"],
+            color="tab:green",
+            alpha=0.18,
+            lw=0,
+            label="feasible band, 0 A … i_max",
+        )
+    for name, label in (("torque_hat_nm", "observer T̂"), ("torque_cmd_nm", "target T*")):
+        if has_values(cols, name):
+            ax.plot(t, cols[name], lw=0.8, label=label)
+    ax.set_ylabel("damper torque [N·m]")
+
+
+def run_title(summary: dict | None, config: dict[str, Any] | None = None) -> str:
+    """``sashil run: <law and parameters>, <backend>, road …, lateness p99 …, trips``."""
+    title = "sashil run"
+    if not summary:
+        return title
+    from sashil.recording.labels import controller_label
+
+    parts = [controller_label(summary, config or {}), f"{summary.get('driver', '?')} backend"]
+    if summary.get("road"):
+        parts.append(f"road {summary['road']}")
+    late = (summary.get("timing") or {}).get("lateness_us") or {}
+    if late.get("p99") is not None:
+        parts.append(f"lateness p99 {late['p99']:.0f} µs")
+    if summary.get("trips"):
+        parts.append(f"{len(summary['trips'])} trip(s)")
+    return f"{title}: " + ", ".join(parts)
+
+
+def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) -> Path:
+    """``run.png`` of a loop run folder: angles (θ, and the road θ1 and arm θ2 when the road moves),
+    coil current (measured and commanded) and damper torque (observer T̂, target T* when the law
+    sets one, and the feasible band T(0)..T(i_max) at the observed state). Legends sit beside the
+    panels, outside the traces."""
+    from sashil.recording.data_file import read_data_csv
+
+    cols = read_data_csv(Path(folder) / "data.csv", required=("time_s",), min_rows=0)
+    config = read_run_config(folder)
+    has_torque = has_values(cols, "torque_hat_nm") or has_values(cols, "torque_cmd_nm")
+    rows = 3 if has_torque else 2
+    plt = pyplot()
+    fig, axes = plt.subplots(rows, 1, figsize=(10.5, 2.4 * rows + 0.7), dpi=110, sharex=True)
+    _angles_panel(axes[0], cols)
+    _current_panel(axes[1], cols)
     if has_torque:
-        ax = axes[2]
-        for name, label in (("torque_hat_nm", "observer T̂"), ("torque_cmd_nm", "target T*")):
-            if name in cols:
-                ax.plot(t, cols[name], lw=0.8, label=label)
-        ax.set_ylabel("damper torque [N·m]")
+        _torque_panel(axes[2], cols, add_feasible_band(cols, config))
     for ax in axes:
         ax.grid(True, alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="upper right", fontsize=8)
+            ax.legend(**BESIDE)
     axes[-1].set_xlabel("time [s]")
-    title = "sashil run"
-    if summary:
-        title += f": {summary.get('controller', '')}, {summary.get('driver', '')} backend"
-        timing = summary.get("timing") or {}
-        late = timing.get("lateness_us") or {}
-        if late.get("p99") is not None:
-            title += f", lateness p99 {late['p99']:.0f} µs"
-        if summary.get("trips"):
-            title += f", {len(summary['trips'])} trip(s)"
-    axes[0].set_title(title)
+    axes[0].set_title(run_title(summary, config), fontsize=10)
     return save_figure(fig, path)
 
 
@@ -126,39 +204,143 @@ def plot_drop_test(
     return save_figure(fig, path)
 
 
+#: mantissas of the ticks on a log axis, densest first: 1-2-3-5 (0.3, 0.5, 1, 2, 3, 5), then sparser
+LOG_TICK_MANTISSAS = ((1, 2, 3, 5), (1, 2, 5), (1, 3), (1,))
+
+
+def readable_log_ticks(low: float, high: float, most: int = 8) -> list[float]:
+    """Tick values within [low, high] (both > 0) a reader reads off a log axis: 0.3, 0.5, 1, 2, 5, …;
+    the densest 1-2-3-5 style set with at most ``most`` ticks. A range narrower than one such step
+    gets evenly spaced round values instead."""
+    low, high = sorted((float(low), float(high)))
+    if not (low > 0.0 and np.isfinite(high)):
+        return []
+    decades = range(int(np.floor(np.log10(low))), int(np.ceil(np.log10(high))) + 1)
+    ticks: list[float] = []
+    for mantissas in LOG_TICK_MANTISSAS:
+        ticks = [float(f"{m * 10.0**e:.6g}") for e in decades for m in mantissas if low <= m * 10.0**e <= high]
+        if len(ticks) <= most:
+            break
+    if len(ticks) < 2:
+        from matplotlib.ticker import MaxNLocator
+
+        steps = MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]).tick_values(low, high)
+        ticks = [float(f"{v:.6g}") for v in steps if low <= v <= high]
+    return ticks
+
+
+def tick_text(value: float, _pos: Any = None) -> str:
+    """A tick label without exponent notation: ``0.3``, ``5``, ``200``, ``1e+04`` only past 10⁵."""
+    return f"{value:g}" if abs(value) < 1e5 else f"{value:.0e}"
+
+
+def set_readable_log_ticks(axis: Any, low: float, high: float, extra: Sequence[float] = ()) -> None:
+    """Major ticks of a log (or symlog) ``axis`` at :func:`readable_log_ticks` plus ``extra`` (e.g. 0
+    on a symlog axis), labelled as plain numbers; minor ticks unlabelled."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    axis.set_major_locator(FixedLocator(sorted({*extra, *readable_log_ticks(low, high)})))
+    axis.set_major_formatter(FuncFormatter(tick_text))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def transmissibility_axes(ax: Any) -> None:
-    """Log-log axes for a transmissibility plot, with the unity line (what passes unchanged)."""
+    """Log-log axes for a transmissibility plot (call after plotting), with the unity line (what
+    passes unchanged) and readable ticks on both axes (0.3, 0.5, 1, 2, 5)."""
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.axhline(1.0, color="0.4", linewidth=0.6)
     ax.set_xlabel("road frequency [Hz]")
     ax.set_ylabel("transmissibility RMS(θ2) / RMS(θ1)")
-    ax.grid(True, which="both", alpha=0.3)
-    from matplotlib.ticker import FormatStrFormatter, NullFormatter
-
-    ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
-    ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
-    ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.grid(True, which="major", alpha=0.35)
+    ax.grid(True, which="minor", alpha=0.12)
+    ax.autoscale_view()
+    for axis, (low, high) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+        set_readable_log_ticks(axis, low, high)
 
 
 def plot_transmissibility(
-    path: str | Path, curves: Sequence[tuple[str, Sequence[float] | np.ndarray, Sequence[float] | np.ndarray]]
+    path: str | Path,
+    curves: Sequence[tuple[str, Sequence[float] | np.ndarray, Sequence[float] | np.ndarray]],
+    title: str = "transmissibility (stepped sine)",
 ) -> Path:
     """``transmissibility.png``: body RMS / road RMS against frequency on log-log axes;
-    ``curves`` = [(label, frequency_hz, transmissibility), ...]."""
+    ``curves`` = [(label, frequency_hz, transmissibility), ...], labelled by law and current."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
     for label, freq, trans in curves:
         ax.plot(freq, trans, "o-", markersize=3, label=label)
     transmissibility_axes(ax)
-    ax.set_title("transmissibility (stepped sine)")
-    ax.legend(fontsize=8)
+    ax.set_title(title)
+    ax.legend(fontsize=8, loc="lower left")
     return save_figure(fig, path)
 
 
 #: the percentiles a timing plot marks (the tail is what a real-time loop is judged by)
 TIMING_PERCENTILES = (50.0, 90.0, 99.0, 99.9, 99.99)
+
+#: below this [µs] a timing axis that holds zeros is linear (symlog), above logarithmic
+TIMING_LINEAR_US = 1.0
+
+
+def _percentile_curve(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) of a percentile curve: x = 1/(1 − p) from p0 to the last percentile below the maximum."""
+    p = np.concatenate([np.linspace(0.0, 99.0, 100), 100.0 - np.geomspace(1.0, 100.0 / values.size, 100)])
+    p = np.clip(p, 0.0, 100.0 * (1.0 - 1.0 / values.size))
+    return 100.0 / (100.0 - p), np.percentile(values, p)
+
+
+def _timing_panel(ax: Any, runs: Sequence[tuple[str, dict]], key: str, title: str) -> None:
+    """One timing quantity of every run: curve, percentile marks (●) and the maximum (×), with the
+    x axis ending just past the longest run's maximum and y ticks a reader can read."""
+    cycles, values_all = 1, []
+    for label, timing in runs:
+        values = np.asarray(timing.get(key, ()), dtype=float) * 1e-3
+        if values.size == 0:
+            continue
+        values_all.append(values)
+        cycles = max(cycles, values.size)
+        x, y = _percentile_curve(values)
+        (line,) = ax.plot(x, y, lw=1.0, label=label)
+        marks = [q for q in TIMING_PERCENTILES if q < 100.0 * (1.0 - 1.0 / values.size)]
+        ax.plot([100.0 / (100.0 - q) for q in marks], np.percentile(values, marks), "o", color=line.get_color())
+        ax.plot([values.size], [values.max()], "x", color=line.get_color(), markersize=7, mew=1.5, clip_on=False)
+    ax.set_xscale("log")
+    ticks = [q for q in TIMING_PERCENTILES if 100.0 / (100.0 - q) <= cycles]
+    ax.set_xticks([100.0 / (100.0 - q) for q in ticks])
+    ax.set_xticklabels([f"p{q:g}" for q in ticks])
+    ax.xaxis.set_minor_formatter(_null_formatter())
+    ax.set_xlim(0.9, cycles * 1.6)
+    _timing_y_axis(ax, np.concatenate(values_all) if values_all else np.zeros(0))
+    ax.set_xlabel("percentile of cycles (× : the maximum)")
+    ax.set_ylabel(f"{title} [µs]")
+    ax.set_title(title)
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _null_formatter() -> Any:
+    from matplotlib.ticker import NullFormatter
+
+    return NullFormatter()
+
+
+def _timing_y_axis(ax: Any, values: np.ndarray) -> None:
+    """Log y (symlog, linear below TIMING_LINEAR_US, when some values are 0) from the smallest to
+    above the largest value, so the maximum's × is not cut, with readable ticks."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return
+    top = max(float(finite.max()), TIMING_LINEAR_US) * 1.8
+    positive = finite[finite > 0]
+    if positive.size == finite.size:
+        bottom = float(positive.min()) / 1.5
+        ax.set_yscale("log")
+        ax.set_ylim(bottom, top)
+        set_readable_log_ticks(ax.yaxis, bottom, top)
+    else:
+        ax.set_yscale("symlog", linthresh=TIMING_LINEAR_US, linscale=0.5)
+        ax.set_ylim(0.0, top)
+        set_readable_log_ticks(ax.yaxis, TIMING_LINEAR_US, top, extra=(0.0,))
 
 
 def plot_timing(path: str | Path, runs: Sequence[tuple[str, dict]]) -> Path:
@@ -171,48 +353,60 @@ def plot_timing(path: str | Path, runs: Sequence[tuple[str, dict]]) -> Path:
         (axes[0], "lateness_ns", "wake-up lateness"),
         (axes[1], "compute_ns", "compute time per cycle"),
     ):
-        for label, timing in runs:
-            values = np.asarray(timing.get(key, ()), dtype=float) * 1e-3
-            if values.size == 0:
-                continue
-            p = np.concatenate([np.linspace(0.0, 99.0, 100), 100.0 - np.geomspace(1.0, 100.0 / values.size, 100)])
-            p = np.clip(p, 0.0, 100.0 * (1.0 - 1.0 / values.size))
-            (line,) = ax.plot(100.0 / (100.0 - p), np.percentile(values, p), lw=1.0, label=label)
-            marks = [q for q in TIMING_PERCENTILES if q < 100.0 * (1.0 - 1.0 / values.size)]
-            ax.plot([100.0 / (100.0 - q) for q in marks], np.percentile(values, marks), "o", color=line.get_color())
-            ax.plot([values.size], [values.max()], "x", color=line.get_color())
-        ticks = list(TIMING_PERCENTILES)
-        ax.set_xscale("log")
-        ax.set_yscale("symlog", linthresh=10.0)  # linear below 10 µs, logarithmic above
-        ax.set_ylim(bottom=0.0)
-        ax.set_xticks([100.0 / (100.0 - q) for q in ticks])
-        ax.set_xticklabels([f"p{q:g}" for q in ticks])
-        ax.set_xlabel("percentile of cycles (× : the maximum)")
-        ax.set_ylabel(f"{title} [µs]")
-        ax.set_title(title)
-        ax.grid(True, which="major", alpha=0.3)
+        _timing_panel(ax, runs, key, title)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="upper left")
     return save_figure(fig, path)
 
 
-def plot_chirp(path: str | Path, columns: dict, title: str) -> Path:
-    """``chirp.png`` of a chirp sweep: road θ1 and body θ2 against time (the chirp's frequency
-    range in ``title``), and the measured and commanded coil current."""
+def chirp_frequency(time_s: np.ndarray, f_start_hz: float, f_stop_hz: float, sweep_s: float) -> np.ndarray:
+    """Instantaneous road frequency of the linear chirp at ``time_s`` (held at ``f_stop_hz`` after
+    ``sweep_s``), as :func:`sashil.experiments.sweep.chirp_profile` drives it."""
+    frac = np.clip(np.asarray(time_s, dtype=float) / sweep_s, 0.0, 1.0)
+    return f_start_hz + (f_stop_hz - f_start_hz) * frac
+
+
+def _frequency_axis(ax: Any, f_start_hz: float, f_stop_hz: float, sweep_s: float) -> Any:
+    """A second x axis on top of ``ax`` marking the chirp's instantaneous frequency (linear in time;
+    ``f_stop_hz`` above ``f_start_hz``)."""
+    from matplotlib.ticker import MaxNLocator
+
+    top = ax.secondary_xaxis("top")
+    steps = MaxNLocator(nbins=10, steps=[1, 2, 2.5, 5, 10]).tick_values(f_start_hz, f_stop_hz)
+    ticks = [float(f"{f:.6g}") for f in steps if f_start_hz - 1e-9 <= f <= f_stop_hz + 1e-9]
+    top.set_xticks([sweep_s * (f - f_start_hz) / (f_stop_hz - f_start_hz) for f in ticks])
+    top.set_xticklabels([tick_text(f) for f in ticks])
+    top.set_xlabel("road frequency [Hz]")
+    return top
+
+
+def plot_chirp(
+    path: str | Path,
+    columns: dict,
+    title: str,
+    chirp: tuple[float, float, float] | None = None,
+) -> Path:
+    """``chirp.png`` of a chirp sweep: road θ1 and body θ2 against time and the measured and commanded
+    coil current; with ``chirp`` = (f_start_hz, f_stop_hz, sweep_s) a second axis on top reads the
+    instantaneous road frequency (a fast chirp's largest swing lags the resonance: for the
+    resonance itself, a stepped sweep's transmissibility)."""
     plt = pyplot()
     t = np.asarray(columns["time_s"])
     road = np.asarray(columns["theta_road_rad"])
     body = np.asarray(columns["theta_rad"]) + road
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), dpi=110, sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(10.5, 6.0), dpi=110, sharex=True)
     axes[0].plot(t, np.degrees(road), lw=0.8, label="road θ1")
     axes[0].plot(t, np.degrees(body), lw=0.8, label="body θ2 = θ + θ1")
     axes[0].set_ylabel("angle [deg]")
-    axes[0].set_title(title)
     axes[1].plot(t, columns["current_a"], lw=0.8, label="measured i")
-    axes[1].plot(t, columns["current_cmd_a"], lw=0.6, alpha=0.7, label="commanded i*")
+    if has_values(columns, "current_cmd_a"):
+        axes[1].plot(t, columns["current_cmd_a"], lw=0.6, alpha=0.7, label="commanded i*")
     axes[1].set_ylabel("coil current [A]")
     axes[1].set_xlabel("time [s]")
+    if chirp is not None and chirp[1] > chirp[0]:  # a sine (f_stop = f_start) has one frequency: in the title
+        _frequency_axis(axes[0], *chirp)
+    axes[0].set_title(title, fontsize=10)
     for ax in axes:
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        ax.legend(**BESIDE)
     return save_figure(fig, path)

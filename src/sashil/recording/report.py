@@ -1,17 +1,20 @@
 """``sashil report``: plots and a Markdown summary comparing run folders.
 
 For each run folder (``summary.json`` plus ``data.csv``, or sub-folders per current for a
-multi-current drop test) the report collects the recorded traces and writes:
+multi-current drop test) the report collects the recorded traces, names each by its law, the
+law's parameters and current (not by its folder), and writes:
 
 * ``theta.png`` — θ(t) of every trace overlaid (degrees);
 * ``hysteresis.png`` — damper torque against θ̇ and against θ. The observer's T̂
   (``torque_hat_nm``) when the run recorded it; otherwise, for a drop test (θ1 = 0, no input
-  torque), the torque the rig equation implies, seed 001 eq. 13: ``T_d = −k·θ − J·θ̈`` with θ̇, θ̈
-  from a Savitzky–Golay fit (k, J from the run's config.yaml);
+  torque), the torque the rig equation implies, seed 001 eq. 13: ``T_d = −k·θ − J·θ̈`` with θ
+  low-passed (zero phase) at three times the natural frequency before it is differentiated, up to
+  the settling time (k, J from the run's config.yaml); the legend says which;
 * ``transmissibility.png`` — when a run holds a sweep table (``transmissibility.csv``);
 * ``timing.png`` — loop lateness and compute time as percentile curves (p50, p99, p99.9, …, the
   maximum) when a run holds per-cycle timing (``timing.npz``);
-* ``report.md`` — the runs side by side: exit status, drop-test metrics per current, timing.
+* ``report.md`` — the runs side by side: controller and parameters, road, RMS body angle and
+  acceleration, clipped share, transmissibility, drop-test metrics per current, timing.
 """
 
 from __future__ import annotations
@@ -27,29 +30,49 @@ import numpy as np
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
-from sashil.recording.plots import pyplot, save_figure
+from sashil.recording.labels import (
+    changed_parameters,
+    controller_label,
+    controller_section,
+    format_parameters,
+    format_value,
+    law_name,
+    law_parameters,
+    unique_labels,
+)
+from sashil.recording.plots import BESIDE, pyplot, read_run_config, save_figure
 
-#: Savitzky-Golay window for the drop-test torque estimate [s] and polynomial order
-SG_WINDOW_S = 0.121
-SG_ORDER = 3
+#: the drop-test torque's low-pass cut-off as a multiple of the natural frequency sqrt(k/J)/2pi
+DROP_CUTOFF_RATIO = 3.0
+#: the body acceleration's low-pass cut-off [Hz] (above the sweeps' 5 Hz, below the encoder's noise)
+BODY_ACCEL_CUTOFF_HZ = 10.0
+#: order of the (zero-phase, forward-backward) Butterworth low-pass
+LOWPASS_ORDER = 4
 
 
 @dataclass
 class Trace:
+    """One recorded time series: its label (law, parameters, current), columns, drop-test metrics,
+    the model's k and J, and its run folder's summary and config (what ran)."""
+
     label: str
     columns: dict[str, np.ndarray]
     metrics: dict[str, Any] | None = None
     params: dict[str, float] | None = None
+    folder: str = ""
 
 
 @dataclass
 class RunRecord:
+    """One run folder: its summary, config, traces, sweep table and loop timing."""
+
     path: Path
     label: str
     summary: dict[str, Any]
     traces: list[Trace] = field(default_factory=list)
     sweep: dict[str, np.ndarray] | None = None
     timing: dict[str, np.ndarray] | None = None
+    config: dict[str, Any] = field(default_factory=dict)
 
 
 def _read_json(path: Path) -> dict[str, Any]:
@@ -78,28 +101,36 @@ def _model_params(folder: Path) -> dict[str, float] | None:
         return None
 
 
+def _trace_label(entry: dict[str, Any] | None, summary: dict[str, Any], config: dict[str, Any]) -> str:
+    """A trace's name: the law and its parameters; a drop-test current's own ``controller`` entry
+    (``passive 1 A``) when the summary lists one per current."""
+    if entry and isinstance(entry.get("controller"), str):
+        return controller_label({"controller": entry["controller"]}, config)
+    if entry and isinstance(entry.get("current_a"), (int, float)):
+        return controller_label({"controller": f"passive {entry['current_a']:g} A"}, config)
+    return controller_label(summary, config)
+
+
 def load_run(path: str | Path) -> RunRecord:
     """One run folder: its summary, its traces (one per drop-test current), sweep table, timing."""
     path = Path(path)
     if not path.is_dir():
         raise DataFileError(f"{path}: not a folder (expected a sashil run folder)")
     summary = _read_json(path / "summary.json")
-    record = RunRecord(path, path.name, summary)
+    config = read_run_config(path)
+    record = RunRecord(path, controller_label(summary, config), summary, config=config)
     runs = summary.get("runs") if isinstance(summary.get("runs"), list) else None
     if summary.get("mode") == "stepped":
         runs = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
     if runs:
         for entry in runs:
             sub = path / str(entry.get("folder", "."))
-            label = (
-                f"{path.name} {entry.get('current_a', '?'):g} A"
-                if isinstance(entry.get("current_a"), (int, float))
-                else path.name
-            )
             columns = read_data_csv(sub / "data.csv")
-            record.traces.append(Trace(label, columns, entry, _model_params(sub) or _model_params(path)))
+            params = _model_params(sub) or _model_params(path)
+            record.traces.append(Trace(_trace_label(entry, summary, config), columns, entry, params, path.name))
     elif (path / "data.csv").exists():
-        record.traces.append(Trace(path.name, read_data_csv(path / "data.csv"), None, _model_params(path)))
+        columns = read_data_csv(path / "data.csv")
+        record.traces.append(Trace(record.label, columns, None, _model_params(path), path.name))
     table = path / "transmissibility.csv"
     if table.exists():
         record.sweep = read_data_csv(table, required=("frequency_hz", "transmissibility"), min_rows=1)
@@ -115,33 +146,77 @@ def load_run(path: str | Path) -> RunRecord:
     return record
 
 
-def drop_torque(time_s: np.ndarray, theta: np.ndarray, k: float, J: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(θ, θ̇, T_d) (smoothed) of a drop test from the rig equation (seed 001 eq. 13 with θ1 = 0, T_in = 0):
-    ``J θ̈ = −k θ − T_d`` so ``T_d = −k θ − J θ̈``; θ̇, θ̈ from a Savitzky–Golay fit."""
-    from scipy.signal import savgol_filter
+def name_uniquely(runs: Sequence[RunRecord]) -> None:
+    """Add the folder to the labels of runs and traces that would otherwise read the same (a run's
+    label and its only trace's label are one name)."""
+    named: list[Any] = []
+    for run in runs:
+        named += [run] if len(run.traces) != 1 else []
+        named += run.traces
+    folders = [item.path.name if isinstance(item, RunRecord) else item.folder for item in named]
+    for item, label in zip(named, unique_labels([item.label for item in named], folders), strict=True):
+        item.label = label
+    for run in runs:
+        if len(run.traces) == 1:
+            run.label = run.traces[0].label
+
+
+def lowpass(time_s: np.ndarray, values: np.ndarray, cutoff_hz: float, padtype: str = "odd") -> np.ndarray:
+    """``values`` low-passed at ``cutoff_hz`` with a zero-phase Butterworth filter (forward and
+    backward), flat in its pass band so a slow oscillation keeps its amplitude. ``padtype``: how the
+    record is extended past its ends (scipy's ``sosfiltfilt``), over two periods of the cut-off."""
+    from scipy.signal import butter, sosfiltfilt
 
     dt = float(np.median(np.diff(time_s)))
-    window = max(int(round(SG_WINDOW_S / dt)) | 1, SG_ORDER + 2 | 1)
-    if theta.size <= window:
+    cutoff = min(cutoff_hz, 0.4 / dt)
+    sos = butter(LOWPASS_ORDER, cutoff, fs=1.0 / dt, output="sos")
+    padlen = min(int(round(2.0 / cutoff / dt)), values.size - 1)
+    return np.asarray(sosfiltfilt(sos, values, padtype=padtype, padlen=padlen))
+
+
+def drop_torque(
+    time_s: np.ndarray, theta: np.ndarray, k: float, J: float, until_s: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(θ, θ̇, T_d, cut-off [Hz]) of a drop test from the rig equation (seed 001 eq. 13 with θ1 = 0,
+    T_in = 0): ``J θ̈ = −k θ − T_d`` so ``T_d = −k θ − J θ̈``.
+
+    T_d is the difference of two large terms, so the encoder's steps would swamp θ̈: θ is low-passed
+    first (zero phase) at DROP_CUTOFF_RATIO times the natural frequency, then differentiated. The arm
+    is at rest at the release and at the end, so the record is mirrored (even) past both ends, which
+    keeps θ̈ continuous there. The first quarter period of the cut-off after the release and
+    everything after ``until_s`` (the settling time, when only the encoder's steps
+    move) are NaN in θ̇ and T_d."""
+    time_s, theta = np.asarray(time_s, dtype=float), np.asarray(theta, dtype=float)
+    cutoff = DROP_CUTOFF_RATIO * math.sqrt(k / J) / (2.0 * math.pi)
+    if theta.size < 16 or float(time_s[-1] - time_s[0]) < 2.0 / cutoff:
         raise DataFileError(f"drop test record of {theta.size} samples is too short for the torque estimate")
-    smooth = savgol_filter(theta, window, SG_ORDER)
-    velocity = savgol_filter(theta, window, SG_ORDER, deriv=1, delta=dt)
-    accel = savgol_filter(theta, window, SG_ORDER, deriv=2, delta=dt)
-    return smooth, velocity, -k * smooth - J * accel
+    smooth = lowpass(time_s, theta, cutoff, padtype="even")
+    velocity = np.gradient(smooth, time_s)
+    torque = -k * smooth - J * np.gradient(velocity, time_s)
+    hidden = time_s < time_s[0] + 0.25 / cutoff  # the release itself: the filter cannot follow its step in θ̈
+    if until_s is not None:
+        hidden |= time_s > until_s
+    velocity[hidden] = np.nan
+    torque[hidden] = np.nan
+    return smooth, velocity, torque, cutoff
 
 
 def hysteresis_of(trace: Trace) -> tuple[np.ndarray, np.ndarray, np.ndarray, str] | None:
-    """(θ, θ̇, torque, what the torque is) of a trace, or None when neither source exists."""
+    """(θ, θ̇, torque, what the torque is) of a trace, or None when neither source exists: the
+    observer's T̂ when recorded, else for a drop test the low-passed T_d up to the settling time."""
     cols = trace.columns
     if "torque_hat_nm" in cols and np.isfinite(cols["torque_hat_nm"]).any():
         velocity = cols.get("theta_dot_rad_s")
         if velocity is None:
             velocity = np.gradient(cols["theta_rad"], cols["time_s"])
-        return cols["theta_rad"], velocity, cols["torque_hat_nm"], "observer T̂"
+        return cols["theta_rad"], velocity, cols["torque_hat_nm"], "observer T̂, recorded"
     road = cols.get("theta_road_rad")
     if trace.params is not None and (road is None or not np.any(road)) and "torque_in_nm" not in cols:
-        theta, velocity, torque = drop_torque(cols["time_s"], cols["theta_rad"], trace.params["k"], trace.params["J"])
-        return theta, velocity, torque, "T_d = −kθ − Jθ̈"
+        settled = (trace.metrics or {}).get("settling_time_s")
+        theta, velocity, torque, cutoff = drop_torque(
+            cols["time_s"], cols["theta_rad"], trace.params["k"], trace.params["J"], settled
+        )
+        return theta, velocity, torque, f"T_d = −kθ − Jθ̈, θ low-passed at {cutoff:.1f} Hz"
     return None
 
 
@@ -157,26 +232,30 @@ def _axes(ax: Any, xlabel: str, ylabel: str, title: str | None = None) -> None:
 
 
 def plot_theta(path: Path, traces: Sequence[Trace]) -> Path:
+    """θ(t) of every trace overlaid, named by law and current."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(10.5, 4.5), dpi=110)
     for trace in traces:
         ax.plot(trace.columns["time_s"], np.degrees(trace.columns["theta_rad"]), linewidth=1.0, label=trace.label)
     ax.axhline(0.0, color="0.4", linewidth=0.6)
-    _axes(ax, "time [s]", "arm angle θ [deg]", "θ(t)")
-    ax.legend(loc="upper right", fontsize=8)
+    _axes(ax, "time [s]", "arm angle θ [deg]", "relative angle θ(t)")
+    ax.legend(**BESIDE)
     return save_figure(fig, path)
 
 
 def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, str]]) -> Path:
+    """Damper torque against θ̇ and against θ; each legend entry says where its torque comes from
+    (the observer's T̂, or T_d from the rig equation)."""
     plt = pyplot()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.8), dpi=110)
     for label, theta, velocity, torque, source in loops:
-        left.plot(velocity, torque, linewidth=0.7, label=f"{label} ({source})")
-        right.plot(np.degrees(theta), torque, linewidth=0.7, label=label)
+        (line,) = left.plot(velocity, torque, linewidth=0.7, label=f"{label}: {source}")
+        right.plot(np.degrees(theta), torque, linewidth=0.7, color=line.get_color())
     _axes(left, "θ̇ [rad/s]", "damper torque [N·m]", "torque against velocity")
     _axes(right, "θ [deg]", "damper torque [N·m]", "torque against angle")
-    left.legend(fontsize=7)
-    return save_figure(fig, path)
+    fig.legend(*left.get_legend_handles_labels(), loc="lower center", ncol=min(len(loops), 2), fontsize=8)
+    fig.tight_layout(rect=(0.0, 0.06 + 0.035 * ((len(loops) + 1) // 2), 1.0, 1.0))
+    return save_figure(fig, path, layout=False)
 
 
 def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
@@ -220,16 +299,182 @@ DROP_ROWS = (
 )
 
 
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    """A Markdown table."""
+    out = ["| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
+    return out + ["| " + " | ".join(row) + " |" for row in rows]
+
+
+@dataclass
+class Column:
+    """One column of the comparison: a trace (a run, or one current of a drop test), or a stepped
+    sweep summarised by its table."""
+
+    label: str
+    run: RunRecord
+    trace: Trace | None
+
+
+def comparison_columns(runs: Sequence[RunRecord]) -> list[Column]:
+    """Every trace of every run, and each run without a trace (a stepped sweep)."""
+    out = []
+    for run in runs:
+        out += [Column(trace.label, run, trace) for trace in run.traces] or [Column(run.label, run, None)]
+    return out
+
+
+def body_motion(trace: Trace) -> tuple[float, float]:
+    """RMS of the body (arm) angle θ2 = θ + θ1 about its mean [rad], and of its acceleration θ̈2
+    [rad/s²] from θ2 low-passed at BODY_ACCEL_CUTOFF_HZ (the encoder's steps would swamp it)."""
+    cols = trace.columns
+    road = cols.get("theta_road_rad")
+    body = cols["theta_rad"] + (np.nan_to_num(road) if road is not None else 0.0)
+    angle = float(np.sqrt(np.mean((body - body.mean()) ** 2)))
+    if body.size < 64:
+        return angle, math.nan
+    smooth = lowpass(cols["time_s"], body, BODY_ACCEL_CUTOFF_HZ)
+    accel = np.gradient(np.gradient(smooth, cols["time_s"]), cols["time_s"])
+    return angle, float(np.sqrt(np.mean(accel**2)))
+
+
+def _data_rows(csv: Path) -> int:
+    """Rows of a data.csv (lines after the header; 0 when absent)."""
+    try:
+        with csv.open("rb") as handle:
+            return max(sum(1 for _ in handle) - 1, 0)
+    except OSError:
+        return 0
+
+
+def clipped_share(column: Column) -> tuple[int, int] | None:
+    """(clipped cycles, cycles) of a column's controller: ``controller_stats.clipped_cycles`` over the
+    loop's cycles (``timing.cycles``, else the recorded rows); a stepped sweep's over all frequencies."""
+    run, trace = column.run, column.trace
+    metrics = (trace.metrics if trace else None) or {}
+    stats = metrics.get("controller_stats") or run.summary.get("controller_stats")
+    if isinstance(stats, dict) and isinstance(stats.get("clipped_cycles"), int):
+        timing = metrics.get("timing") or run.summary.get("timing") or {}
+        cycles = timing.get("cycles") if isinstance(timing, dict) else None
+        if not isinstance(cycles, int) or cycles <= 0:
+            cycles = int(trace.columns["time_s"].size) if trace is not None else 0
+        return (stats["clipped_cycles"], cycles) if cycles else None
+    points = run.summary.get("points")
+    if trace is None and isinstance(points, list) and points:
+        clipped = sum(int(p.get("clipped_cycles") or 0) for p in points)
+        folders = [entry.get("folder") for entry in run.summary.get("runs") or [] if entry.get("folder")]
+        cycles = sum(_data_rows(run.path / folder / "data.csv") for folder in folders)
+        return (clipped, cycles) if cycles else None
+    return None
+
+
+def road_of(column: Column) -> str:
+    """The road input: as the summary says it; a drop test's release angle; else none."""
+    summary, metrics = column.run.summary, (column.trace.metrics if column.trace else None) or {}
+    if isinstance(summary.get("road"), str):
+        return summary["road"]
+    if isinstance(metrics.get("theta0_deg"), (int, float)):
+        return f"none (drop from {metrics['theta0_deg']:g}°)"
+    if summary.get("verb") == "drop-test":
+        return "none (drop test)"
+    if column.trace is not None and not np.any(column.trace.columns.get("theta_road_rad", 0.0)):
+        return "none"
+    return "–"
+
+
+def _share_text(share: tuple[int, int] | None) -> str:
+    if share is None:
+        return "–"
+    clipped, cycles = share
+    return f"{100.0 * clipped / cycles:.1f} % ({clipped} of {cycles})"
+
+
+def compare_section(columns: Sequence[Column]) -> list[str]:
+    """What ran and how the body moved, one column per trace: the comparison of controllers."""
+    rows: list[tuple[str, Callable[[Column], str]]] = [
+        ("folder", lambda c: f"`{c.run.path.name}`"),
+        ("controller", lambda c: law_name((c.trace.metrics if c.trace else None) or c.run.summary, c.run.config)),
+        (
+            "parameters (set away from the defaults)",
+            lambda c: format_parameters(changed_parameters(c.run.config)) or "–",
+        ),
+        ("road", road_of),
+        ("RMS body angle θ2 [deg]", lambda c: _body_text(c, 0)),
+        ("RMS body acceleration θ̈2 [rad/s²]", lambda c: _body_text(c, 1)),
+        ("clipped share (cycles the inverse clipped T*)", lambda c: _share_text(clipped_share(c))),
+    ]
+    lines = ["", "## Controllers compared", ""]
+    lines += _table(["", *(c.label for c in columns)], [[title, *(get(c) for c in columns)] for title, get in rows])
+    lines += [
+        "",
+        f"RMS body angle about its mean; acceleration from θ2 low-passed at {BODY_ACCEL_CUTOFF_HZ:g} Hz (zero "
+        "phase). A stepped sweep gives its body RMS integrated over the frequencies.",
+    ]
+    return lines
+
+
+def _body_text(column: Column, which: int) -> str:
+    if column.trace is not None:
+        value = body_motion(column.trace)[which]
+        return _fmt(math.degrees(value) if which == 0 else value)
+    integrated = column.run.summary.get("integrated_body_rms_rad")
+    if which == 0 and isinstance(integrated, (int, float)):
+        return _fmt(math.degrees(integrated))
+    return "–"
+
+
+def settings_section(runs: Sequence[RunRecord]) -> list[str]:
+    """The controller keys each run's config.yaml set (not null) side by side: with several runs the
+    keys whose values differ, and one line for those every run shares."""
+    if not any(controller_section(run.config) for run in runs):
+        return []
+    params = [{"law": controller_section(run.config).get("law"), **law_parameters(run.config)} for run in runs]
+    keys = list(dict.fromkeys(key for p in params for key in p))
+    cells = {key: [format_value(p[key]) if p.get(key) is not None else "–" for p in params] for key in keys}
+    same = [key for key in keys if len(runs) > 1 and len(set(cells[key])) == 1]
+    rows = [[f"`{key}`", *cells[key]] for key in keys if key not in same]
+    lines = ["", "## Controller settings (config.yaml `controller:`)", ""]
+    if rows:
+        lines += _table(["key", *(run.label for run in runs)], rows)
+    if same:
+        lines += ["", "The same in every run: " + ", ".join(f"`{key}` = {cells[key][0]}" for key in same) + "."]
+    return lines
+
+
+def transmissibility_section(runs: Sequence[RunRecord]) -> list[str]:
+    """The stepped sweeps' transmissibility side by side (one table per set of frequencies)."""
+    swept = [run for run in runs if run.sweep is not None]
+    groups: dict[tuple[float, ...], list[RunRecord]] = {}
+    for run in swept:
+        key = tuple(round(float(f), 3) for f in run.sweep["frequency_hz"])  # type: ignore[index]
+        groups.setdefault(key, []).append(run)
+    lines: list[str] = []
+    for freqs, group in groups.items():
+        lines += ["", "## Transmissibility RMS(θ2) / RMS(θ1)", ""]
+        rows = [
+            [f"{f:g}", *(_fmt(float(run.sweep["transmissibility"][i])) for run in group)]  # type: ignore[index]
+            for i, f in enumerate(freqs)
+        ]
+        lines += _table(["frequency [Hz]", *(run.label for run in group)], rows)
+    return lines
+
+
 def markdown_summary(runs: Sequence[RunRecord], plots: Sequence[Path]) -> str:
+    """``report.md``: the runs, the controllers compared, their settings, transmissibility, drop
+    tests and loop timing side by side, and the plots."""
     lines = ["# sashil report", "", "Runs: " + ", ".join(f"`{run.path}`" for run in runs), ""]
-    lines += ["| run | verb | exit status | started (UTC) | sashil | git |", "|---|---|---|---|---|---|"]
+    lines += ["| run | folder | verb | exit status | started (UTC) | sashil | git |", "|---" * 7 + "|"]
     for run in runs:
         s, prov = run.summary, run.summary.get("provenance") or {}
         lines.append(
-            f"| {run.label} | {_fmt(s.get('verb'))} | {_fmt(s.get('exit_status'))} | {_fmt(s.get('started_utc'))} "
-            f"| {_fmt(prov.get('sashil_version'))} | {_fmt(prov.get('git_revision'))} |"
+            f"| {run.label} | `{Path(run.path).name}` | {_fmt(s.get('verb'))} | {_fmt(s.get('exit_status'))} "
+            f"| {_fmt(s.get('started_utc'))} | {_fmt(prov.get('sashil_version'))} | {_fmt(prov.get('git_revision'))} |"
         )
-    drops = [trace for run in runs for trace in run.traces if trace.metrics]
+    columns = comparison_columns(runs)
+    if columns:
+        lines += compare_section(columns)
+    lines += settings_section(runs)
+    lines += transmissibility_section(runs)
+    drops = [trace for run in runs for trace in run.traces if trace.metrics and "period_s" in trace.metrics]
     if drops:
         lines += ["", "## Drop tests", "", "| metric | " + " | ".join(t.label for t in drops) + " |"]
         lines.append("|---" * (len(drops) + 1) + "|")
@@ -274,6 +519,7 @@ def write_report(
     for run_dir in run_dirs:
         progress(f"reading {run_dir}")
         runs.append(load_run(run_dir))
+    name_uniquely(runs)
     traces = [trace for run in runs for trace in run.traces]
     plots: list[Path] = []
     if traces:
