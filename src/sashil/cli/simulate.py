@@ -20,8 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_output_options(parser)
     parser.add_argument(
         "--input",
-        metavar="CSV",
-        help="inputs: time_s, current_a (or current_cmd_a), optional "
+        metavar="CSV|RUN",
+        help="a data.csv or a run folder (its data.csv); inputs: time_s, current_a (or current_cmd_a), optional "
         "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared",
     )
     parser.add_argument("--theta0-deg", type=float, default=-5.0, help="drop test without --input: initial angle")
@@ -30,6 +30,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--start", choices=("rest", "moving"), default="rest", help="the input starts at rest or moving"
     )
+
+
+def input_file(value: str) -> Path:
+    """``--input``'s data file: the file itself, or a run folder's ``data.csv`` (simulate takes one run)."""
+    path = Path(value)
+    if not path.is_dir():
+        return path
+    if (path / "data.csv").is_file():
+        return path / "data.csv"
+    runs = sorted(found.parent.name for found in path.glob("*/data.csv"))
+    if runs:
+        raise ConfigError(
+            f"--input {path}: a folder of {len(runs)} runs ({', '.join(runs[:4])}{', ...' if len(runs) > 4 else ''}); "
+            f"simulate takes one, "
+            f"e.g. --input {path / runs[0]}"
+        )
+    raise ConfigError(f"--input {path}: a folder without data.csv (expected a data.csv or a run folder)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,14 +64,15 @@ def run(args: argparse.Namespace) -> int:
         params = {**BoucWenParams().as_dict(), **params}
     measured = None
     if args.input:
-        inputs = read_data_csv(args.input, required=("time_s",), min_rows=2)
+        data_file = input_file(args.input)
+        inputs = read_data_csv(data_file, required=("time_s",), min_rows=2)
         if "current_a" not in inputs and "current_cmd_a" not in inputs:
-            raise ConfigError(f"{args.input}: missing column current_a (or current_cmd_a)")
+            raise ConfigError(f"{data_file}: missing column current_a (or current_cmd_a)")
         if "theta_rad" in inputs:
             measured = inputs["theta_rad"]
         else:
             inputs["theta_rad"] = np.zeros_like(inputs["time_s"])
-        source = str(args.input)
+        source = str(data_file)
     else:
         if not math.isfinite(args.theta0_deg) or abs(args.theta0_deg) > 90:
             raise ConfigError(f"--theta0-deg: expected an angle within +-90 deg, got {args.theta0_deg:g}")
