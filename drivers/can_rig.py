@@ -19,8 +19,9 @@ from typing import Any
 import can
 
 from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
-from sashil.drivers.link_rig import LinkRig, LinkSettings, error_reason
-from sashil.drivers.messages import Message
+from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
+from sashil.drivers.messages import PROTOCOL_VERSION, Hello, Message, Version
+from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError
 
 
@@ -161,6 +162,26 @@ class CanRig(LinkRig):
             port.timeout = 0
             self._bus.serialPortOrig = BufferedPort(port)
             self._fd = self._bus.fileno()
+
+    def _other_protocol(self) -> str | None:
+        """A board that speaks sashil serial frames on the SLCAN adapter's tty (the serial driver's
+        link): it stays silent to SLCAN lines, so it is asked a Hello in a serial frame and answers
+        Version in one."""
+        port = getattr(self._bus, "serialPortOrig", None)
+        if self.interface != "slcan" or port is None:
+            return None
+
+        def answered(data: bytes) -> bool:
+            return any(isinstance(msg, Version) for _, msg in StreamDecoder().feed(data))
+
+        try:
+            port.write(b"\x00" + encode_frame(Hello(PROTOCOL_VERSION), 0))  # 0x00 first: a frame of its own
+            heard = read_raw(port, PROBE_S, answered)
+        except (OSError, ValueError):
+            return None
+        if answered(heard):
+            return "sashil serial frames, not the SLCAN lines of a CAN adapter (use --driver serial)"
+        return None
 
     def _send(self, seq: int, msg: Message) -> None:
         sink = self.frame_sink

@@ -30,9 +30,18 @@ from __future__ import annotations
 import logging
 import time
 from abc import abstractmethod
+from collections.abc import Callable
 from typing import Any
 
-from sashil.drivers.interface import RigCapabilities, RigCommand, RigInterface, RigSample, RigState, clamp_current
+from sashil.drivers.interface import (
+    FLAG_HELD,
+    RigCapabilities,
+    RigCommand,
+    RigInterface,
+    RigSample,
+    RigState,
+    clamp_current,
+)
 from sashil.drivers.messages import (
     CMD_ENABLE,
     PACING_DEVICE,
@@ -58,6 +67,8 @@ HOST_PAUSE_S = 0.5e-3
 SAFE_CONFIRM_S = 0.5
 #: a measured coil current at most this (or 2 % of the range) confirms the coil is off
 SAFE_CURRENT_A = 0.02
+#: how long a probe for the protocol a silent device speaks instead waits for the answer
+PROBE_S = 0.25
 
 
 class LinkSettings:
@@ -96,6 +107,8 @@ class LinkRig(RigInterface):
         self._dev_time_raw: int | None = None
         self._dev_time_us = 0
         self._link_up = False
+        self._held_noted = False  # said once per link that the device's operator holds the arm
+        self._drop_test = False  # a drop test asked for the operator (operator_hold): a hold is expected
         #: what the link saw (summary.json material); codec counters come from the subclass
         self.stats = {
             "samples": 0,
@@ -127,6 +140,28 @@ class LinkRig(RigInterface):
     @abstractmethod
     def describe(self) -> str:
         """Where the rig is, for messages ("serial /dev/ttyACM0")."""
+
+    def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
+        """A person (or the emulator's ``--hold-deg``) holds the arm on a link rig: the drop test waits
+        for the hold; a hold the device reports is then expected."""
+        self._drop_test = True
+        return False
+
+    def _note_held(self) -> None:
+        """Say once that the device reports its operator holding the arm when nothing asked for it
+        (an emulator started with ``--hold-deg`` holds it at every connection)."""
+        self._held_noted = True
+        if not self._drop_test:
+            log.warning(
+                "%s: the device reports the arm held by its operator (an emulator's --hold-deg holds it at every "
+                "connection); this run starts with the arm held until the operator lets go",
+                self.describe(),
+            )
+
+    def _other_protocol(self) -> str | None:
+        """When the device did not answer the handshake: the other protocol it answers instead, named
+        with the driver that speaks it (from what it sent, or a probe), or None (silence, or unknown)."""
+        return None
 
     #: the link carries CAN frames a trace can tap (CanRig)
     carries_can_frames = False
@@ -200,6 +235,12 @@ class LinkRig(RigInterface):
         while True:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
+                other = self._other_protocol()
+                if other is not None:
+                    raise DriverError(
+                        f"{self.describe()}: no {what} within {self.settings.connect_timeout_s:g} s: the board on "
+                        f"this port answers {other}"
+                    )
                 raise DriverError(
                     f"{self.describe()}: no {what} within {self.settings.connect_timeout_s:g} s "
                     "(is a sashil rig on this port, and is it powered?)"
@@ -301,6 +342,8 @@ class LinkRig(RigInterface):
             if newest is None:
                 newest = self._ride_through_gap(start)
         seq, sample = newest
+        if sample.flags & FLAG_HELD and not self._held_noted:
+            self._note_held()
         return RigSample(
             seq=seq,
             time_ns=t_ns,
@@ -408,6 +451,19 @@ class LinkRig(RigInterface):
             raise DriverIOError(f"{self.describe()}: link is closed")
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF
         self._send(self._tx_seq, msg)
+
+
+def read_raw(port: Any, seconds: float, enough: Callable[[bytes], bool]) -> bytes:
+    """The bytes a pyserial port (read timeout 0) receives within ``seconds``, or fewer once ``enough``."""
+    data = bytearray()
+    deadline = time.monotonic() + seconds
+    while not enough(bytes(data)) and time.monotonic() < deadline:
+        waiting = port.in_waiting
+        if waiting:
+            data += port.read(waiting)
+        else:
+            time.sleep(0.005)
+    return bytes(data)
 
 
 def error_reason(err: BaseException) -> str:

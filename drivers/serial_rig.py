@@ -8,15 +8,28 @@ are those of :mod:`sashil.drivers.serial_codec`; the session (handshake, pacing,
 
 from __future__ import annotations
 
+import errno
 import select
 from typing import Any
 
 import serial
 
-from sashil.drivers.link_rig import LinkRig, LinkSettings, error_reason
+from sashil.drivers import slcan_codec
+from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import Message
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
+
+#: what opening a port that another process holds fails with: its lock (pyserial's ``exclusive=True``
+#: flock: EAGAIN/EWOULDBLOCK) or the device refusing a second opener (EBUSY)
+_IN_USE_ERRNOS = frozenset({errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY})
+
+
+def open_reason(err: BaseException, port: str) -> str:
+    """Why a port did not open, in one line: "in use by another process" rather than the errno's text."""
+    if getattr(err, "errno", None) in _IN_USE_ERRNOS:
+        return f"{port} is in use by another process"
+    return error_reason(err)
 
 
 class SerialRig(LinkRig):
@@ -33,6 +46,7 @@ class SerialRig(LinkRig):
         self.decoder = StreamDecoder()
         self._port: Any = None
         self._fd: int | None = None
+        self._heard: bytearray | None = None  # the bytes received during the handshake (what answered)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SerialRig:
@@ -55,7 +69,9 @@ class SerialRig(LinkRig):
                 exclusive=True,
             )
         except (serial.SerialException, ValueError, OSError) as err:
-            raise DriverError(f"serial port {self.port_name}: cannot open ({error_reason(err)})") from None
+            raise DriverError(
+                f"serial port {self.port_name}: cannot open ({open_reason(err, self.port_name)})"
+            ) from None
         try:
             self._fd = self._port.fileno()
         except Exception:
@@ -64,6 +80,28 @@ class SerialRig(LinkRig):
             self._port.reset_input_buffer()
         except (serial.SerialException, OSError) as err:
             raise DriverError(f"serial port {self.port_name}: cannot use it ({error_reason(err)})") from None
+
+    def _handshake(self) -> None:
+        self._heard = bytearray()
+        try:
+            super()._handshake()
+        finally:
+            self._heard = None
+
+    def _other_protocol(self) -> str | None:
+        """An SLCAN adapter (the CAN driver's link) on this port: from what it sent during the
+        handshake, or from its answer to :data:`slcan_codec.PROBE` (an adapter answers a line it
+        cannot parse with BEL, and it sees no line in sashil frames until their bytes happen to hold a CR)."""
+        heard = bytes(self._heard or b"")
+        if not slcan_codec.adapter_answer(heard):
+            try:
+                self._port.write(slcan_codec.PROBE)
+                heard = read_raw(self._port, PROBE_S, lambda data: data.endswith(slcan_codec.VERSION_REPLY))
+            except (serial.SerialException, OSError):
+                return None
+        if slcan_codec.adapter_answer(heard):
+            return "SLCAN, the ASCII lines of a CAN adapter, not sashil serial frames (use --driver can)"
+        return None
 
     def _send(self, seq: int, msg: Message) -> None:
         try:
@@ -89,6 +127,8 @@ class SerialRig(LinkRig):
             data = port.read(waiting) if waiting else b""
         except (serial.SerialException, OSError) as err:
             raise DriverIOError(f"{self.describe()}: link lost ({error_reason(err)})") from None
+        if self._heard is not None and len(self._heard) < 256:
+            self._heard += data
         return self.decoder.feed(data) if data else []
 
     def _close_link(self) -> None:

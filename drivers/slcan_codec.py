@@ -36,6 +36,18 @@ class SlcanError(ValueError):
     """A line that is not a valid SLCAN command."""
 
 
+#: what a host that expects sashil serial frames sends to learn whether an SLCAN adapter is on the
+#: port: an empty line (answered CR) and ``V`` (answered with the version line)
+PROBE = b"\rV\r"
+
+
+def adapter_answer(data: bytes) -> bool:
+    """Whether bytes read from a port are an SLCAN adapter's answers: ASCII lines ended by CR, or BEL
+    (a refused line), and never the 0x00 that ends every sashil serial frame."""
+    text = all(byte in (0x07, 0x0A, 0x0D) or 0x20 <= byte < 0x7F for byte in data)
+    return bool(data) and text and (OK in data or ERROR in data)
+
+
 def format_frame(can_id: int, data: bytes, extended: bool = False) -> bytes:
     """The SLCAN line of a received data frame, e.g. ``t1102ABCD\\r``."""
     if len(data) > 8:

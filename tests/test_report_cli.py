@@ -51,7 +51,7 @@ def test_top_level_help_lists_exit_codes(capsys):
 
 
 def test_quiet_drop_test_prints_only_the_run_folder(tmp_path, capsys):
-    assert main(["drop-test", "--duration", "1", "--out", str(tmp_path / "D"), "--quiet"]) == 0
+    assert main(["drop-test", "--duration", "2", "--out", str(tmp_path / "D"), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert err.strip().splitlines() == [f"run folder: {tmp_path / 'D'} (plot drop_test.png)"]
 

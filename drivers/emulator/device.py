@@ -76,12 +76,19 @@ class Operator:
     release_after_s: float
     then_deg: tuple[float, ...] = ()
     sessions: int = 0
+    #: told of each hold as it starts (the board cannot know whether the host runs a drop test)
+    announce: Callable[[str], None] | None = None
 
     def next_hold_deg(self) -> float:
         """The hold angle of the next session."""
         angles = (self.hold_deg, *self.then_deg)
         angle = angles[self.sessions % len(angles)]
         self.sessions += 1
+        if self.announce is not None:
+            self.announce(
+                f"host connected (session {self.sessions}): the operator holds the arm at {angle:g} deg and lets go "
+                f"{self.release_after_s:g} s later, whatever the host runs (--hold-deg)"
+            )
         return angle
 
 

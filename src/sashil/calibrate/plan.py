@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sashil.errors import ConfigError
+from sashil.experiments.drop_test import check_theta0
 
 #: rig time a step costs beyond its record (connect, the operator's hold and release), an estimate
 STEP_OVERHEAD_S = 2.0
@@ -133,6 +134,7 @@ def plan_from_config(config: dict[str, Any], source: str = "config") -> Plan:
                 f"{source}: calibrate.{key}: expected an angle away from 0 and within ±{limit:g} deg "
                 f"(rig.angle_limit_deg), got {angle:g}"
             )
+        check_theta0(config, angle, f"{source}: calibrate.{key}")
     f0, f1 = section["road_f_start_hz"], section["road_f_stop_hz"]
     if f1 < f0:
         raise ConfigError(f"{source}: calibrate.road_f_stop_hz: expected >= road_f_start_hz ({f0:g}), got {f1:g}")

@@ -158,6 +158,9 @@ def setup_logging(args: argparse.Namespace) -> int:
     )
     logger = logging.getLogger("sashil")
     logger.setLevel(level)
+    for existing in logger.handlers:
+        if getattr(existing, "_sashil", False) and isinstance(existing, logging.StreamHandler):
+            existing.stream = sys.stderr  # main() again in one process: the stderr of now, not of the first call
     if not any(getattr(h, "_sashil", False) for h in logger.handlers):
         handler = logging.StreamHandler(sys.stderr)
         handler.setFormatter(logging.Formatter("%(message)s"))

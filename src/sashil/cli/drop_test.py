@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 
@@ -23,7 +24,8 @@ from sashil.cli.common import (
 from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.drivers import on_virtual_clock, open_rig
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
+from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, check_theta0, run_drop_test
+from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE
@@ -109,10 +111,27 @@ def _run_level(entry: dict) -> dict:
     return {key: entry.get(key) for key in RUN_LEVEL_KEYS}
 
 
+def result_line(metrics: DropMetrics, duration_s: float) -> str:
+    """One drop's period, first peaks, damping ratio and settling, as printed after it."""
+    period = "-" if metrics.period_s is None else f"{metrics.period_s:.3f} s"
+    peaks = ", ".join(f"{p:.2f}" for p in metrics.peaks_deg[:4])
+    return f"period {period}, peaks [{peaks}] deg, {damping_text(metrics)}, {settling_text(metrics, duration_s)}"
+
+
+def result_warnings(metrics: DropMetrics) -> list[str]:
+    """What the operator should know about a drop's figures: no peaks, or a damping ratio the record cut short."""
+    if metrics.peaks_note is not None:
+        return [f"no peaks: {metrics.peaks_note}"]
+    if metrics.damping_note is not None and (metrics.damping_ratio is None or metrics.damping_record_short):
+        return [metrics.damping_note]
+    return []
+
+
 def run(args: argparse.Namespace) -> int:
     setup_logging(args)
     config = resolve_config(args)
     theta0_deg, currents, duration = resolve_drops(args, config)
+    check_theta0(config, theta0_deg)
 
     _controller(config)  # bad controller parameters fail here, before a folder exists
     folder = RunFolder.create(args.out, "drop-test")
@@ -204,14 +223,9 @@ def run(args: argparse.Namespace) -> int:
             overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
             break
         overlay.append({**entry, **record.columns, "label": label})
-        period = "-" if entry["period_s"] is None else f"{entry['period_s']:.3f} s"
-        peaks = ", ".join(f"{p:.2f}" for p in entry["peaks_deg"][:4])
-        settle = entry["settling_time_s"]
-        settle_text = "not within the record" if settle is None else f"{settle:.3f} s"
-        say(
-            args,
-            f"  period {period}, peaks [{peaks}] deg, inside ±{entry['settle_band_deg']:g} deg after {settle_text}",
-        )
+        say(args, "  " + result_line(record.metrics, duration))
+        for note in result_warnings(record.metrics):
+            logging.getLogger("sashil").warning("drop test at %g A: %s", current, note)
     under = f", under {law}" if law != "passive" else ""
     plot = plot_drop_test(
         folder.file("drop_test.png"),

@@ -102,6 +102,11 @@ def _start_truth_file(path: str) -> None:
         raise ConfigError(f"--truth {path}: cannot write ({err.strerror})") from None
 
 
+def _announce(line: str) -> None:
+    """The emulated operator's notices, on stderr beside the emulator's other status lines."""
+    print(f"sashil emulate: {line}", file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
     from sashil.drivers import firmware
     from sashil.drivers.emulator import Emulator, Faults, Operator, TruthLog, build_device
@@ -139,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
             if not (math.isfinite(angle) and abs(angle) <= 90.0):
                 raise ConfigError(f"--hold-deg: expected angles within ±90 deg, got {angle:g}")
         release = _seconds_or_none("--release-after", args.release_after) or 0.0
-        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]))
+        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     truth = None
     if args.truth is not None:
@@ -164,6 +169,11 @@ def run(args: argparse.Namespace) -> int:
     handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     link = f" (link {args.link})" if args.link else ""
     print(f"sashil emulate: {args.transport} rig on {transport.description}{link} ({board} board)", flush=True)
+    if operator is not None:
+        _announce(
+            "--hold-deg: the arm is held at each host connection (Configure), also for a run or a sweep, "
+            "which then start with the arm held; connect with drop-test or calibrate"
+        )
     try:
         why = emulator.run(duration)
     finally:  # the caller's scheduling and signal handlers back (sashil emulate may run in-process)

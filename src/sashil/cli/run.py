@@ -163,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
         outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
     finally:
         trace_stats = trace.close() if trace is not None else None
+    if isinstance(outcome.error, SashilError) and outcome.error.exit_code == ConfigError.exit_code:
+        raise outcome.error  # bad input (a port that cannot be opened): nothing ran, the folder is removed
     finish_loop_run(args, folder, config, outcome.summary, trace_stats, road=road_text)
     say(args, format_timing(outcome.summary["timing"]))
     for trip in outcome.summary["trips"]:

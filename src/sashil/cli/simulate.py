@@ -22,8 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_output_options(parser)
     parser.add_argument(
         "--input",
-        metavar="CSV",
-        help="inputs: time_s, current_a (or current_cmd_a), optional "
+        metavar="CSV|RUN",
+        help="a data.csv or a run folder (its data.csv); inputs: time_s, current_a (or current_cmd_a), optional "
         "theta_road_rad, torque_in_nm; theta_rad gives the initial angle and is compared (default simulate.input)",
     )
     parser.add_argument(
@@ -61,6 +61,23 @@ def resolve_inputs(args: argparse.Namespace, config: dict) -> dict:
     return section
 
 
+def input_file(value: str) -> Path:
+    """``--input``'s data file: the file itself, or a run folder's ``data.csv`` (simulate takes one run)."""
+    path = Path(value)
+    if not path.is_dir():
+        return path
+    if (path / "data.csv").is_file():
+        return path / "data.csv"
+    runs = sorted(found.parent.name for found in path.glob("*/data.csv"))
+    if runs:
+        raise ConfigError(
+            f"--input {path}: a folder of {len(runs)} runs ({', '.join(runs[:4])}{', ...' if len(runs) > 4 else ''}); "
+            f"simulate takes one, "
+            f"e.g. --input {path / runs[0]}"
+        )
+    raise ConfigError(f"--input {path}: a folder without data.csv (expected a data.csv or a run folder)")
+
+
 def run(args: argparse.Namespace) -> int:
     from sashil.identify.simulate import drop_test_inputs, simulate_columns
     from sashil.recording.data_file import read_data_csv
@@ -77,14 +94,15 @@ def run(args: argparse.Namespace) -> int:
         params = {**BoucWenParams().as_dict(), **params}
     measured = None
     if inputs_of["input"]:
-        inputs = read_data_csv(inputs_of["input"], required=("time_s",), min_rows=2)
+        data_file = input_file(inputs_of["input"])
+        inputs = read_data_csv(data_file, required=("time_s",), min_rows=2)
         if "current_a" not in inputs and "current_cmd_a" not in inputs:
-            raise ConfigError(f"{inputs_of['input']}: missing column current_a (or current_cmd_a)")
+            raise ConfigError(f"{data_file}: missing column current_a (or current_cmd_a)")
         if "theta_rad" in inputs:
             measured = inputs["theta_rad"]
         else:
             inputs["theta_rad"] = np.zeros_like(inputs["time_s"])
-        source = str(inputs_of["input"])
+        source = str(data_file)
     else:
         theta0, current = inputs_of["theta0_deg"], inputs_of["current_a"]
         inputs = drop_test_inputs(theta0, current, inputs_of["duration_s"])

@@ -309,6 +309,10 @@ def _write_summary(folder: RunFolder, summary: dict) -> None:
 
 
 def _write_failed(folder: RunFolder, err: SashilError, summary: dict) -> None:
-    """The summary of a sweep that ended early (a link fault, a safety trip); the error is raised on."""
+    """The summary of a sweep that ended early (a link fault, a safety trip); the error is raised on.
+    Bad input (a port that cannot be opened) writes nothing: the folder is removed as the error is reported."""
+    if err.exit_code == ConfigError.exit_code:
+        return
     _write_summary(folder, {"exit_status": status_of(err), "error": str(err), **summary})
-    print(f"run folder: {folder.path} (the sweep ended early; what was recorded is kept)", file=sys.stderr)
+    kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
+    print(f"run folder: {folder.path} (the sweep ended early; {kept})", file=sys.stderr)

@@ -109,6 +109,31 @@ def defaults(schema: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _raise_if_unindented(doc: Mapping[Any, Any], schema: Mapping[str, Any], key: Any, source: str, prefix: str) -> None:
+    """An unknown key that belongs to the empty section just above it (``controller:`` with nothing
+    under it, then ``law: skyhook`` not indented): say that the section is not a mapping, and why."""
+    keys = list(doc)
+    holder = None
+    for earlier in reversed(keys[: keys.index(key)]):
+        spec = schema.get(earlier) if isinstance(earlier, str) else None
+        if isinstance(spec, Section) and doc[earlier] is None:
+            holder = earlier
+            break
+        if spec is not None:
+            return  # a known key between them: the unknown key is not the empty section's
+    if holder is None:
+        return
+    section = schema[holder]
+    stray = [k for k in keys[keys.index(holder) + 1 :] if isinstance(k, str) and k not in schema]
+    if not section.open_keys and key not in section.fields:
+        return
+    raise ConfigError(
+        f"{source}: {prefix}{holder}: expected a mapping, got nothing ({', '.join(stray)} "
+        f"{'follows' if len(stray) == 1 else 'follow'} it at its level: indent {'it' if len(stray) == 1 else 'them'} "
+        f"under {holder}:)"
+    )
+
+
 def validate(doc: Any, schema: Mapping[str, Any], source: str, prefix: str = "") -> dict[str, Any]:
     """Validate ``doc`` against ``schema`` and merge it over the defaults.
 
@@ -125,6 +150,7 @@ def validate(doc: Any, schema: Mapping[str, Any], source: str, prefix: str = "")
         dotted = f"{prefix}{key}"
         spec = schema.get(key) if isinstance(key, str) else None
         if spec is None:
+            _raise_if_unindented(doc, schema, key, source, prefix)
             known = ", ".join(sorted(schema)) or "(none)"
             raise ConfigError(f"{source}: {dotted}: unknown key (known keys here: {known})")
         if isinstance(spec, Section):

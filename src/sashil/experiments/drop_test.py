@@ -26,7 +26,7 @@ import numpy as np
 
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
-from sashil.errors import DriverTimeoutError, SashilError
+from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import LoopResult
@@ -36,6 +36,17 @@ from sashil.runtime.runner import run_plan
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
 #: added when a controller acts after the release (its per-cycle values, DESIGN.md names)
 CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
+
+
+def check_theta0(config: dict[str, Any], theta0_deg: float, option: str = "--theta0-deg") -> None:
+    """Refuse a hold angle the release could not be detected from: the release is the arm moving
+    ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
+    threshold = config["drop_test"]["release_threshold_deg"]
+    if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
+        raise ConfigError(
+            f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "
+            f"(the release is detected when the arm moves that far from the hold), got {theta0_deg:g}"
+        )
 
 
 @dataclass
@@ -55,6 +66,7 @@ class DropTestSettings:
         cls, config: dict[str, Any], theta0_deg: float, current_a: float, duration_s: float
     ) -> DropTestSettings:
         drop = config["drop_test"]
+        check_theta0(config, theta0_deg, "theta0_deg")
         return cls(
             theta0_rad=math.radians(theta0_deg),
             current_a=current_a,

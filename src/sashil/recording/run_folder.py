@@ -127,6 +127,10 @@ class RunFolder:
     def file(self, name: str) -> Path:
         return self.path / name
 
+    def recorded(self) -> bool:
+        """Whether any recorded row (``data.csv`` or ``cycles.csv``, here or in a sub-folder) is on disk."""
+        return any(_has_rows(f) for name in DATA_FILES for f in self.path.rglob(name))
+
     def _write_text(self, name: str, text: str) -> Path:
         target = self.file(name)
         tmp = target.with_name(target.name + ".part")
