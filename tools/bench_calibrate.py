@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark: ``sashil calibrate`` over serial against emulated dampers of a spread (issue 16).
+"""Benchmark: ``sashil calibrate`` over serial against emulated dampers of a spread.
 
 For each damper of :data:`DAMPERS` (not the seed alone: n 0.1-0.6, yield torque 0.2-2.5 N m at
 1 A, J 0.8-1.2, k and c varied too) it writes the plant config, starts ``sashil emulate`` behind a
@@ -15,15 +15,18 @@ the default plan) and prints:
 * yield torque alpha(i)*z_u and c(i) errors at 0 and 1 A, k error (the fit's J is the true J);
 * rig time (wall) and fit time (the identification; the n profile after it is listed apart).
 
-Targets (issue 16): held-out NRMSE <= 2 %, yield within 3 %, c(i) within 8 %, k within 1 %, fit
+Targets: held-out NRMSE <= 2 %, yield within 3 %, c(i) within 8 %, k within 1 %, fit
 <= 30 s. The worst damper is printed beside the median.
 
-    .venv/bin/python tools/bench_calibrate.py [--dampers 1,3] [--transport serial|slcan|sim]
+    .venv/bin/python tools/bench_calibrate.py [--dampers 1,3] [--transport serial|slcan|sim] [--quick]
 
 ``--transport sim`` runs the same plan on the in-process simulated rig (virtual clock): the
 identification's accuracy without the link's timing noise, as a reference.
 
 About 2 minutes of rig time per damper (plus the fit): ~12 minutes for all five.
+
+``--quick``: damper 0 only (unless --dampers) with :data:`QUICK_PLAN` (two 0.5 s drops to fit, one
+held out, no road run): seconds; the figures mean little.
 """
 
 from __future__ import annotations
@@ -59,14 +62,22 @@ DAMPERS = [
      "delta": 600.0, "n": 0.45},  # yield 0.5 N m at 1 A
 ]  # fmt: skip
 
+#: the ``calibrate`` plan of --quick: the fewest runs the fit and the held-out check take
+QUICK_PLAN = {
+    "currents_a": [0.0, 1.0],
+    "small_currents_a": [],
+    "road_currents_a": [],
+    "validate_currents_a": [0.5],
+    "drop_duration_s": 0.5,
+}
+
 
 def yield_torque(p: dict, i: float) -> float:
     return (p["alpha1"] + p["alpha2"] * i) * (p["delta"] / (p["beta"] + p["gamma"])) ** (1.0 / p["n"])
 
 
-def held_out_vs_truth(folder: Path, truth: dict, fitted: dict) -> list[float]:
-    """NRMSE of the fitted model against the true plant on each held-out record's inputs."""
-    config = default_config()
+def held_out_vs_truth(folder: Path, truth: dict, fitted: dict, config: dict) -> list[float]:
+    """NRMSE of the fitted model against the true plant on each held-out record's inputs (``config``'s plan)."""
     summary = json.loads((folder / "summary.json").read_text())
     plan = {s.name: s for s in plan_from_config(config).steps}
     results = []
@@ -83,9 +94,10 @@ def held_out_vs_truth(folder: Path, truth: dict, fitted: dict) -> list[float]:
     return out
 
 
-def run_damper(index: int, truth: dict, tmp: Path, transport: str) -> dict:
+def run_damper(index: int, truth: dict, tmp: Path, transport: str, plan: dict | None = None) -> dict:
     config = default_config()
     config["model"]["params"].update(truth)
+    config["calibrate"].update(plan or {})
     out = tmp / f"damper{index}"
     started = time.perf_counter()
     if transport == "sim":  # the same plan on the in-process simulated rig (virtual clock): no link
@@ -100,7 +112,7 @@ def run_damper(index: int, truth: dict, tmp: Path, transport: str) -> dict:
         "n": truth["n"],
         "yield_1A": yield_torque(truth, 1.0),
         "J": truth["J"],
-        "held_truth": max(held_out_vs_truth(out, truth, fitted)),
+        "held_truth": max(held_out_vs_truth(out, truth, fitted, config)),
         "held_recorded": max(summary["held_out_nrmse"].values()),
         "k": fitted["k"] / truth["k"] - 1.0,
         "rig_s": summary["rig_time_s"],
@@ -153,8 +165,13 @@ def main() -> None:
         default="serial",
         help="the emulated rig over serial or slcan, or sim: the in-process simulated rig (no link, reference)",
     )
+    parser.add_argument(
+        "--quick", action="store_true", help="damper 0 only, two 0.5 s drops to fit and one held out (seconds)"
+    )
     args = parser.parse_args()
-    chosen = [int(x) for x in args.dampers.split(",")] if args.dampers else list(range(len(DAMPERS)))
+    dampers = args.dampers or ("0" if args.quick else None)
+    chosen = [int(x) for x in dampers.split(",")] if dampers else list(range(len(DAMPERS)))
+    plan = QUICK_PLAN if args.quick else None
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-calibrate-") as tmp:
         for index in chosen:
@@ -164,7 +181,7 @@ def main() -> None:
                 f"{yield_torque(truth, 1.0):.3g} N m, J {truth['J']:g}",
                 flush=True,
             )
-            row = run_damper(index, truth, Path(tmp), args.transport)
+            row = run_damper(index, truth, Path(tmp), args.transport, plan)
             print(
                 f"   held-out {100 * row['held_truth']:.2f} %, fitted n {row['fitted_n']:.3g}, "
                 f"wall {row['wall_s']:.0f} s",
@@ -172,7 +189,8 @@ def main() -> None:
             )
             rows.append(row)
     print()
-    print(f"sashil calibrate over {args.transport}, default plan, --inertia J (true J), 4096 counts/rev:")
+    which = "the --quick plan" if args.quick else "default plan"
+    print(f"sashil calibrate over {args.transport}, {which}, --inertia J (true J), 4096 counts/rev:")
     print_table(rows)
     print(
         "targets: held-out NRMSE <= 2 %, yield within 3 %, c(i) within 8 %, k within 1 %, fit <= 30 s "

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 5 acceptance figures on the simulated rig with plant mismatch (printed, not asserted).
+"""Controller acceptance figures on the simulated rig with plant mismatch (printed, not asserted).
 
 Mismatch used throughout (config ``mismatch``): every Bouc-Wen parameter of the plant off by 10 %
 (sign pattern given by --pattern, default alternate: J+ k- c1+ c2- alpha1+ alpha2- beta+ gamma-
@@ -7,6 +7,9 @@ delta+ n-), plant coil lag +10 %, encoder 4096 counts/rev (quantisation). The co
 seed parameters.
 
     .venv/bin/python tools/bench_control.py [--pattern alternate|plus|minus|random] [--quick]
+
+``--quick`` runs every check on a tiny problem (4 s tracking runs, 2 s drops, 2 sweep frequencies
+with 0.5 s settle and measure, a 3 s chirp, 500 timed cycles): seconds; the figures mean little.
 
 Timing numbers are wall-clock on a shared 2-core machine: noisy.
 """
@@ -83,13 +86,18 @@ def zeta_of(decrement: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pattern", default="alternate", choices=("alternate", "plus", "minus", "random"))
-    parser.add_argument("--quick", action="store_true", help="fewer sweep frequencies, shorter runs")
+    parser.add_argument("--quick", action="store_true", help="every check on a tiny problem (seconds)")
     parser.add_argument(
         "--estimator", default="kalman", choices=("kalman", "tracking"), help="controller.estimator (default kalman)"
     )
     args = parser.parse_args()
     config = mismatched_config(args.pattern)
     config["controller"]["estimator"] = args.estimator
+    if args.quick:
+        config["sweep"].update(ramp_s=0.2, settle_s=0.5, measure_s=0.5)
+    tracking_s = 4.0 if args.quick else 30.0  # the figures keep t >= 3 s
+    drop_s = 2.0 if args.quick else 8.0
+    chirp_s = 3.0 if args.quick else 20.0
     print(
         f"plant mismatch: 10 % per parameter, pattern {args.pattern}; coil lag +10 %; 4096 counts/rev; "
         f"estimator {args.estimator}"
@@ -98,7 +106,7 @@ def main() -> None:
     # 1. torque tracking -------------------------------------------------------------------------
     print("\n[1] torque tracking (road 1.2 Hz, 1 deg; T* = band-limited 2 Hz random fraction 0.1-0.9 of the band)")
     for inverse in ("full", "viscous"):
-        r = torque_tracking(config, inverse, 1.2, 1.0, 12.0 if args.quick else 30.0)
+        r = torque_tracking(config, inverse, 1.2, 1.0, tracking_s)
         print(
             f"  {inverse:8s} inverse: NRMSE(T - T*) = {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
             f"{100 * r['nrmse_range']:.1f} % of range(T*); observer NRMSE {100 * r['observer_nrmse']:.1f} %; clipped {r['clipped']}"
@@ -117,7 +125,7 @@ def main() -> None:
     for label, update in references:
         cfg = copy.deepcopy(config)
         cfg["mismatch"].update(update)
-        r = torque_tracking(cfg, "full", 1.2, 1.0, 12.0 if args.quick else 30.0)
+        r = torque_tracking(cfg, "full", 1.2, 1.0, tracking_s)
         print(
             f"  (reference) full inverse, {label}: NRMSE {100 * r['nrmse_rms']:.1f} % of RMS(T*), "
             f"{100 * r['nrmse_range']:.1f} % of range(T*)"
@@ -127,7 +135,7 @@ def main() -> None:
     print("\n[2] drop test from -5 deg: target damping zeta = 0.07 vs constant 0.5 A")
     cfg = copy.deepcopy(config)
     cfg["controller"]["zeta"] = 0.07
-    record, ctl, rows = drop(cfg, "target-damping", 0.5, 8.0)
+    record, ctl, rows = drop(cfg, "target-damping", 0.5, drop_s)
     m = record.metrics
     print("  target-damping peaks [deg]:", " ".join(f"{p:.3f}" for p in m.peaks_deg))
     print(
@@ -138,13 +146,13 @@ def main() -> None:
     print(
         f"     clipped cycles {ctl.clip_count} of {ctl.cycles}; observer NRMSE on the drop: {100 * nrmse(rows[:, 0], rows[:, 1]):.1f} %"
     )
-    record05, _, _ = drop(cfg, None, 0.5, 8.0)
+    record05, _, _ = drop(cfg, None, 0.5, drop_s)
     m5 = record05.metrics
     print("  constant 0.5 A peaks [deg]:  ", " ".join(f"{p:.3f}" for p in m5.peaks_deg))
     print("     successive zeta:", " ".join(f"{zeta_of(d):.4f}" for d in m5.log_decrements))
 
     # 3. stepped sweep --------------------------------------------------------------------------
-    steps = 4 if args.quick else 10
+    steps = 2 if args.quick else 10
     print(
         f"\n[3] stepped sine 0.5-5 Hz ({steps} frequencies, road amplitude {config['sweep']['amplitude_deg']} deg): body RMS [deg]"
     )
@@ -191,7 +199,7 @@ def main() -> None:
     # 4. observer on a chirp --------------------------------------------------------------------
     cfg = copy.deepcopy(config)
     ctl = make_controller("skyhook-add", cfg)
-    cols = run_profile(cfg, ctl, chirp_profile(math.radians(0.5), 0.5, 5.0, 20.0), 20.0)
+    cols = run_profile(cfg, ctl, chirp_profile(math.radians(0.5), 0.5, 5.0, chirp_s), chirp_s)
     keep = cols["time_s"] >= 2.0
     print(
         f"\n[4] observer T-hat vs true plant torque on a 0.5-5 Hz chirp (skyhook-add): NRMSE "
@@ -205,7 +213,7 @@ def main() -> None:
     rig.configure()
     rig.activate()
     samples = []
-    for k in range(1, 5001):  # the road wheel follows the chirp's speed
+    for k in range(1, 501 if args.quick else 5001):  # the road wheel follows the chirp's speed
         samples.append(rig.read(k * 1_000_000, 1_000_000))
         rig.write(RigCommand(0.0, road(k * 1e-3)[1]), k * 1_000_000, 1_000_000)
     for name in ("target-damping", "skyhook-add", "torque-tracking"):

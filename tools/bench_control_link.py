@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Issue 5's controller checks over the emulated rig, beside the in-process simulation (printed, not asserted).
+"""The controller checks over the emulated rig, beside the in-process simulation (printed, not asserted).
 
-Issue 5's acceptance: the checks run "on the sim rig with ±10 % mismatch on each parameter, coil
+The acceptance: the checks run "on the sim rig with ±10 % mismatch on each parameter, coil
 lag and quantisation; also over the emulated rig once the driver layer is in". tools/bench_control.py
 runs them in-process; this runs them as a lab user would: for each transport it writes the same
 mismatched config (``bench_control.mismatched_config``: every Bouc-Wen parameter of the plant 10 %
@@ -18,7 +18,7 @@ b. torque tracking while the road shakes at 1.2 Hz, 1 deg (``sashil sweep --cont
    truth on the sample sequence number; NRMSE(T_true - T*) as % of RMS(T*) with T*_k against the
    true torque of the next sample the device took, and the observer's NRMSE(T_hat vs T_true),
    with the full and with the viscous inverse;
-c. (not with --quick) stepped sine at 1.00, 1.73, 3.00 Hz (log spacing, settle 4 s, measure 2 s) for
+c. stepped sine at 1.00, 1.73, 3.00 Hz (log spacing, settle 4 s, measure 2 s) for
    passive 0 A, passive 1 A and skyhook c_sky = 10 (``sashil sweep --stepped``, one emulator per
    law): body RMS per frequency and its ratio to min(passive 0 A, passive 1 A). The emulated plant
    is not reset between frequencies (a real rig is not either); the in-process one is.
@@ -30,7 +30,10 @@ a run; the gaps ridden through are printed.
 
     .venv/bin/python tools/bench_control_link.py [--transport serial|slcan|both] [--quick]
 
-Wall time: about 4.5 min (both transports), 1.5 min with --quick.
+Wall time: about 4.5 min (both transports). ``--quick`` runs the same checks on a tiny problem over
+serial only unless --transport is given (1 s drops, 3.3 s of tracking with the full inverse only,
+the stepped sine at 2 frequencies with 0.2 s ramps, 0.5 s settle and measure): about half a minute;
+the figures mean little.
 """
 
 from __future__ import annotations
@@ -49,6 +52,8 @@ from bench_control import drop, mismatched_config, torque_tracking, zeta_of
 from bench_link import SASHIL, EmulatorProcess
 
 from sashil.config import dump_config
+from sashil.control.law_config import law_parameters
+from sashil.control.law_registry import find_law
 from sashil.control.registry import make_controller
 from sashil.drivers.emulator import read_truth_csv
 from sashil.experiments.sweep import frequencies, stepped_sine
@@ -71,6 +76,19 @@ def link_config(pattern: str = "alternate") -> dict:
     return config
 
 
+def with_law(config: dict, law: str) -> dict:
+    """A copy of ``config`` running ``law`` whose controller section keeps only that law's parameters
+    (a config file may hold no parameter of another law)."""
+    cfg = copy.deepcopy(config)
+    section = cfg["controller"]
+    declared = find_law(law).cls.params()
+    for key in law_parameters(section):
+        if key not in declared:
+            del section[key]
+    section["law"] = law
+    return cfg
+
+
 def progress(text: str) -> None:
     print(f"  .. {time.strftime('%H:%M:%S')} {text}", flush=True)
 
@@ -90,7 +108,8 @@ class Bench:
         self.runs += 1
         name = f"{self.transport}-{self.runs}-{verb}"
         config_path = self.tmp / f"{name}.yaml"
-        config_path.write_text(dump_config(config))
+        law = args[args.index("--controller") + 1] if "--controller" in args else config["controller"]["law"]
+        config_path.write_text(dump_config(with_law(config, law)))
         link, truth_path, out = self.tmp / f"{name}.pty", self.tmp / f"{name}.truth.csv", self.tmp / name
         emulator = EmulatorProcess(
             self.transport, str(link), "--config", str(config_path), "--truth", str(truth_path), *emulator_flags
@@ -140,7 +159,7 @@ def drop_line(label: str, peaks: list[float], decrements: list[float], check: bo
     print(f"    {'':9s} zeta        " + " ".join(f"{z:.4f}" for z in zetas) + within)
 
 
-def drop_tests(bench: Bench, config: dict, sim: dict) -> None:
+def drop_tests(bench: Bench, config: dict, sim: dict, drop_s: float = 8.0) -> None:
     print(
         f"\n[a] drop test from -5 deg over {bench.transport}: target damping zeta = {ZETA}, then constant 0.5 A "
         "(0.5 A flows before the release)"
@@ -155,7 +174,7 @@ def drop_tests(bench: Bench, config: dict, sim: dict) -> None:
             "--current",
             "0.5",
             "--duration",
-            "8",
+            f"{drop_s:g}",
             emulator_flags=("--hold-deg", "-5", "--release-after", "1"),
         )
         print(f"  {label}:")
@@ -205,13 +224,16 @@ def tracking_figures(out: Path, truth: dict) -> dict:
     }
 
 
-def tracking(bench: Bench, config: dict, duration_s: float, sim: dict) -> None:
+def tracking(
+    bench: Bench, config: dict, duration_s: float, sim: dict, inverses: tuple[str, ...] = ("full", "viscous")
+) -> None:
     print(
-        f"\n[b] torque tracking over {bench.transport} (road {ROAD_HZ} Hz, {ROAD_DEG} deg, {duration_s:g} s + 1 s ramp, "
+        f"\n[b] torque tracking over {bench.transport} (road {ROAD_HZ} Hz, {ROAD_DEG} deg, {duration_s:g} s + "
+        f"{config['sweep']['ramp_s']:g} s ramp, "
         f"from t = {KEEP_AFTER_S:g} s; T* = band-limited random 0.1-0.9 of the band; T_true from the emulator's truth, "
         "joined on seq)"
     )
-    for inverse in ("full", "viscous"):
+    for inverse in inverses:
         cfg = copy.deepcopy(config)
         cfg["controller"].update(law="torque-tracking", inverse=inverse)
         progress(f"{bench.transport}: sweep, torque tracking, {inverse} inverse (about {duration_s + 4:.0f} s)")
@@ -287,25 +309,24 @@ def stepped(bench: Bench, config: dict, sim: dict) -> None:
     )
 
 
-def simulated(config: dict, quick: bool, duration_s: float) -> dict:
+def simulated(config: dict, duration_s: float, drop_s: float = 8.0) -> dict:
     """The same checks in-process on the simulated rig (virtual clock), for the side-by-side."""
     progress("in-process simulation of the same checks")
     out: dict = {}
     for law in ("target-damping", "passive"):
         cfg = copy.deepcopy(config)
         cfg["controller"]["law"] = law
-        out[law] = drop(cfg, law if law != "passive" else None, 0.5, 8.0)[0]
+        out[law] = drop(cfg, law if law != "passive" else None, 0.5, drop_s)[0]
     for inverse in ("full", "viscous"):
         out[inverse] = torque_tracking(config, inverse, ROAD_HZ, ROAD_DEG, duration_s + 1.0)
-    if not quick:
-        freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
-        out["stepped"] = {}
-        for label, name, current in STEPPED_LAWS:
-            cfg = copy.deepcopy(config)
-            if current is not None:
-                cfg["controller"]["current_a"] = current
-            points = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, cfg), freqs)
-            out["stepped"][label] = [p.body_rms_rad for p in points]
+    freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
+    out["stepped"] = {}
+    for label, name, current in STEPPED_LAWS:
+        cfg = copy.deepcopy(config)
+        if current is not None:
+            cfg["controller"]["current_a"] = current
+        points = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, cfg), freqs)
+        out["stepped"][label] = [p.body_rms_rad for p in points]
     return out
 
 
@@ -314,27 +335,31 @@ def main() -> None:
     parser.add_argument(
         "--transport",
         choices=("serial", "slcan", "both"),
-        default="both",
-        help="emulator transport (serial: --driver serial; slcan: --driver can); default both",
+        help="emulator transport (serial: --driver serial; slcan: --driver can); default both (serial with --quick)",
     )
-    parser.add_argument("--quick", action="store_true", help="shorter torque tracking (8 s), no stepped sine")
+    parser.add_argument("--quick", action="store_true", help="the same checks on a tiny problem (module docstring)")
     args = parser.parse_args()
-    duration = 8.0 if args.quick else 15.0
+    chosen = args.transport or ("serial" if args.quick else "both")
+    duration = 3.3 if args.quick else 15.0  # the figures keep t >= KEEP_AFTER_S
+    drop_s = 1.0 if args.quick else 8.0
+    if args.quick:  # before link_config, which copies settle and measure into the sweep section
+        STEPPED.update(steps=2, settle_s=0.5, measure_s=0.5)
     config = link_config()
+    if args.quick:
+        config["sweep"]["ramp_s"] = 0.2
     print(
         "plant mismatch: 10 % per parameter, pattern alternate; coil lag +10 %; 4096 counts/rev "
         "(bench_control.mismatched_config); host driver.sample_timeout_ms 20, link_lost_ms 500"
     )
     started = time.monotonic()
-    sim = simulated(config, args.quick, duration)
-    transports = ("serial", "slcan") if args.transport == "both" else (args.transport,)
+    sim = simulated(config, duration, drop_s)
+    transports = ("serial", "slcan") if chosen == "both" else (chosen,)
     with tempfile.TemporaryDirectory(prefix="bench_control_link-") as tmp:
         for transport in transports:
             bench = Bench(transport, Path(tmp))
-            drop_tests(bench, config, sim)
-            tracking(bench, config, duration, sim)
-            if not args.quick:
-                stepped(bench, config, sim["stepped"])
+            drop_tests(bench, config, sim, drop_s)
+            tracking(bench, config, duration, sim, ("full",) if args.quick else ("full", "viscous"))
+            stepped(bench, config, sim["stepped"])
     print(f"\nwall time {time.monotonic() - started:.0f} s")
 
 

@@ -1,4 +1,4 @@
-"""Benchmark of the board's C logic (issue 17): per-sample work on the host, an estimate for the
+"""Benchmark of the board's C logic: per-sample work on the host, an estimate for the
 Cortex-M4, and the firmware's flash and RAM. Prints figures; not a test.
 
 1. host: ``tools/firmware_bench.c`` built with the system C compiler (-O2), a 1 kHz device-paced
@@ -15,6 +15,9 @@ Cortex-M4, and the firmware's flash and RAM. Prints figures; not a test.
 3. ``make -C drivers/firmware cortex-m4``: flash and RAM (needs the ziglang package).
 
     .venv/bin/python tools/bench_firmware.py
+    .venv/bin/python tools/bench_firmware.py --quick   # 10000 samples, once: the code path only (seconds)
+
+Without a C compiler the full run stops with an error; ``--quick`` says so in one line and exits 0.
 """
 
 from __future__ import annotations
@@ -83,7 +86,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--quick", action="store_true", help="10000 samples once, short callgrind runs, build in a temporary folder"
+    )
     args = parser.parse_args()
+    if args.quick:
+        if firmware.compiler() is None:
+            print("bench_firmware: skipped, no C compiler (install gcc or set CC)")
+            return 0
+        args.samples, args.repeats = 10_000, 1
+    short_n, long_n = (1_000, 2_000) if args.quick else (10_000, 110_000)  # callgrind run lengths
     with tempfile.TemporaryDirectory() as tmp:
         exe = build(Path(tmp))
         c_runs = [c_ns_per_sample(exe, args.samples) for _ in range(args.repeats)]
@@ -92,9 +104,9 @@ def main() -> int:
         print(f"host, per sample (decode a Command frame, encode a Sample frame), median of {args.repeats}:")
         print(f"  C board      {c_ns / 1e3:8.3f} us  (runs {', '.join(f'{v / 1e3:.3f}' for v in c_runs)})")
         print(f"  Python codec {py_ns / 1e3:8.3f} us  (baseline, same run; x{py_ns / c_ns:.0f})")
-        short, long = instructions(exe, 10_000), instructions(exe, 110_000)
+        short, long = instructions(exe, short_n), instructions(exe, long_n)
         if short is not None and long is not None:
-            per_sample = (long - short) / 100_000
+            per_sample = (long - short) / (long_n - short_n)
             cycles = per_sample * CPI
             print(
                 f"Cortex-M4 estimate: {per_sample:.0f} instructions per sample (x86-64, callgrind) x CPI {CPI} = "
@@ -103,19 +115,12 @@ def main() -> int:
             )
         else:
             print("Cortex-M4 estimate: skipped (no valgrind)")
-    make = subprocess.run(
-        [
-            "make",
-            "-s",
-            "-C",
-            str(firmware.HERE),
-            "cortex-m4",
-            f"PYTHON={sys.executable}",
-            f"BUILD={tempfile.gettempdir()}/sashil-m4",
-        ],
-        capture_output=True,
-        text=True,
-    )
+        build_dir = f"{tmp}/m4" if args.quick else f"{tempfile.gettempdir()}/sashil-m4"
+        make = subprocess.run(
+            ["make", "-s", "-C", str(firmware.HERE), "cortex-m4", f"PYTHON={sys.executable}", f"BUILD={build_dir}"],
+            capture_output=True,
+            text=True,
+        )
     last = (make.stdout.strip().splitlines() or make.stderr.strip().splitlines() or ["?"])[-1]
     print(f"Cortex-M4 build: {last}")
     return 0

@@ -8,6 +8,7 @@
 2. Size: one ``--sizes`` s run (default 60) writing every format at once; the size of each file.
 
     .venv/bin/python tools/bench_formats.py --duration 20 --repeat 3 --sizes 60
+    .venv/bin/python tools/bench_formats.py --quick    # 0.5 s runs, csv and parquet once, then the size run
 """
 
 from __future__ import annotations
@@ -102,11 +103,20 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=20.0, help="length of each overhead run [s]")
     parser.add_argument("--repeat", type=int, default=3, help="rounds of the overhead runs")
     parser.add_argument("--sizes", type=float, default=60.0, help="length of the size run [s] (0: skip)")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="500 frames; 0.5 s overhead runs once, without --format and with parquet; a 0.5 s size run (seconds)",
+    )
     args = parser.parse_args()
-    frame_costs()
+    if args.quick:
+        args.duration, args.repeat, args.sizes = 0.5, 1, 0.5
+    frame_costs(500 if args.quick else 20000)
     print()
     traces = ["blf", "asc", "log"] + (["mf4"] if importlib.util.find_spec("asammdf") else [])
     cases = [[], ["parquet"], *([fmt] for fmt in traces)]
+    if args.quick:
+        cases = cases[:2]  # the size run writes every format
     with tempfile.TemporaryDirectory(prefix="sashil-bench-formats-") as name:
         tmp = Path(name)
         emulator, link = start_emulator(tmp)

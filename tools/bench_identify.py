@@ -8,7 +8,8 @@ different theta0 (against the recorded, quantised angle and against the noiseles
 parameter errors against the truth (normalised to a unit z bound, as identification writes them).
 
     python tools/bench_identify.py            # baseline capped at 10 minutes
-    python tools/bench_identify.py --quick    # baseline capped at 60 s (development)
+    python tools/bench_identify.py --cap 60   # baseline capped at 60 s (development)
+    python tools/bench_identify.py --quick    # 1 s drops, a tiny fit budget, baseline capped at 3 s (seconds)
 """
 
 from __future__ import annotations
@@ -108,14 +109,18 @@ def baseline(records, cap_s: float, seed: int = 0):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="cap the baseline at 60 s instead of 600 s")
+    parser.add_argument(
+        "--quick", action="store_true", help="1 s drops, a tiny fit budget, baseline capped at 3 s (seconds)"
+    )
     parser.add_argument("--cap", type=float, help="baseline cap in seconds (overrides --quick)")
     args = parser.parse_args()
-    cap = args.cap if args.cap else (60.0 if args.quick else 600.0)
+    cap = args.cap if args.cap else (3.0 if args.quick else 600.0)
+    seconds = 1.0 if args.quick else 10.0
+    options = FitOptions(design=16, starts=2, refine=1, probe_nfev=3, max_nfev=5) if args.quick else FitOptions()
 
-    records = [record_from_columns(f"drop {i:g} A", drop_test_columns(TRUTH, -5.0, i)) for i in (0.0, 1.0)]
-    held = record_from_columns("held-out 0.5 A, -4 deg", drop_test_columns(TRUTH, -4.0, 0.5))
-    clean = drop_test_columns(TRUTH, -4.0, 0.5, counts_per_rev=0)["theta_rad"]
+    records = [record_from_columns(f"drop {i:g} A", drop_test_columns(TRUTH, -5.0, i, seconds)) for i in (0.0, 1.0)]
+    held = record_from_columns("held-out 0.5 A, -4 deg", drop_test_columns(TRUTH, -4.0, 0.5, seconds))
+    clean = drop_test_columns(TRUTH, -4.0, 0.5, seconds, counts_per_rev=0)["theta_rad"]
     truth = bouc_wen_rescale(TRUTH.as_dict())
 
     def describe(label, params, wall, evals, train):
@@ -133,7 +138,7 @@ def main() -> None:
     print("truth (unit z bound):", ", ".join(f"{k}={v:.5g}" for k, v in truth.items()))
     print(f"{'method':<34} {'wall [s]':>9} {'evals':>7} {'train NRMSE':>11} {'val NRMSE':>11} {'val vs clean':>11}")
     t0 = time.perf_counter()
-    result = fit_model("bouc-wen", records, FitOptions())
+    result = fit_model("bouc-wen", records, options)
     wall = time.perf_counter() - t0
     describe("sashil identify (VP + DE + LS)", result.params, wall, result.evaluations, float(np.mean(result.nrmse)))
     x, bwall, bevals = baseline(records, cap)

@@ -9,6 +9,7 @@
    missed deadlines, lateness and read time from its summary.json, and the link's counters.
 
     .venv/bin/python tools/bench_link.py --duration 60
+    .venv/bin/python tools/bench_link.py --quick    # 50 round trips, 0.5 s runs: the code path only (seconds)
 """
 
 from __future__ import annotations
@@ -215,7 +216,8 @@ def run_over_link(
         f"    link gaps ridden through at 0 A: {link_stats.get('gaps', 0)} (longest {link_stats.get('gap_max_ms', 0.0):.1f} ms)"
     )
     if done.returncode:
-        print("    " + [line for line in done.stderr.splitlines() if "error" in line][-1])
+        errors = [line for line in done.stderr.splitlines() if "error" in line] or done.stderr.splitlines()[-1:]
+        print("    " + (errors[-1] if errors else "?"))
     for line in link_lines:
         print("    host " + line.split(": ", 1)[-1].strip())
     print("    " + emu_line.splitlines()[-1])
@@ -230,9 +232,12 @@ def main() -> None:
         type=float,
         help="driver.sample_timeout_ms of the runs (default: the config default, 2.5)",
     )
+    parser.add_argument("--quick", action="store_true", help="2000 codec calls, 50 round trips, 0.5 s runs (seconds)")
     args = parser.parse_args()
+    if args.quick:
+        args.duration, args.round_trips = 0.5, 50
     print(f"bench_link: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} (shared machine: timing is noisy)")
-    codec_cost()
+    codec_cost(2000 if args.quick else 20000)
     bus_load()
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of the real-time loop (issue 3): the full stack against a bare loop, on the real clock.
+"""Benchmark of the real-time loop: the full stack against a bare loop, on the real clock.
 
 In one process, with the same real-time set-up (``loop.rt`` of the config: SCHED_FIFO priority,
 mlockall, GC off, timer slack) and the same loop code (:class:`sashil.runtime.loop.ControlLoop`):
@@ -12,12 +12,13 @@ mlockall, GC off, timer slack) and the same loop code (:class:`sashil.runtime.lo
 3. **full at 5 kHz** (``--fast-rate``), to report its miss rate.
 
 Prints each run's lateness p50/p99/p99.9/max, missed deadlines and median compute, the ratio of
-the full stack's p99 lateness to the bare loop's, and the goal checks of the issue (p99 ratio
+the full stack's p99 lateness to the bare loop's, and the goals (p99 ratio
 <= 1.5, no missed deadline, median compute <= 50 us). Timing on a shared machine is noisy: run
 it on an otherwise idle box (and under ``chrt -f 50`` or with loop.rt.priority > 0).
 
     python tools/bench_loop.py                 # 60 s + 60 s at 1 kHz, 10 s at 5 kHz
     python tools/bench_loop.py --duration 5    # quick look
+    python tools/bench_loop.py --quick         # 0.5 s per run: the code path only (seconds)
 """
 
 from __future__ import annotations
@@ -117,7 +118,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fast-rate", type=float, default=5000.0, help="second full-stack rate (0: skip)")
     parser.add_argument("--fast-duration", type=float, default=10.0)
     parser.add_argument("--priority", type=int, help="override loop.rt.priority (0: no SCHED_FIFO)")
+    parser.add_argument("--quick", action="store_true", help="0.5 s per run (seconds; the figures mean little)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.duration = args.fast_duration = 0.5
     config = load_config(args.config)
     if args.priority is not None:
         config["loop"]["rt"]["priority"] = args.priority

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of recording at 1 kHz (issue 7): the recorder's and the rerun live view's cost per cycle.
+"""Benchmark of recording at 1 kHz: the recorder's and the rerun live view's cost per cycle.
 
 Three measurements:
 
@@ -19,6 +19,7 @@ compare the two closed-loop runs with each other rather than with absolute figur
 
     python tools/bench_recording.py                # 20 s per closed-loop run
     python tools/bench_recording.py --duration 5   # quick look
+    python tools/bench_recording.py --quick        # 0.5 s runs, exit 0 whatever the goal (the code path only)
 """
 
 from __future__ import annotations
@@ -131,9 +132,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=20.0, help="seconds per closed-loop run (default 20)")
     parser.add_argument("--batch-s", type=float, default=0.25, help="live view batch interval [s] (default 0.25)")
     parser.add_argument("--config", help="YAML config (default: simulated rig, seed parameters)")
+    parser.add_argument(
+        "--quick", action="store_true", help="2000 hot-path rows, 0.5 s runs, exit 0 whatever the goal (seconds)"
+    )
     args = parser.parse_args(argv)
+    if args.quick:
+        args.duration = 0.5
     config = load_config(args.config)
-    print(f"recorder hot path: {hot_path_ns():.0f} ns per row (begin_row + 11 values + commit_row)")
+    ns = hot_path_ns(2000 if args.quick else 200_000)
+    print(f"recorder hot path: {ns:.0f} ns per row (begin_row + 11 values + commit_row)")
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         print(f"closed loop at {config['loop']['rate_hz']:g} Hz on the real clock, {args.duration:g} s each:")
@@ -151,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     ok = plain["timing"]["missed_deadlines"] == 0 and live["timing"]["missed_deadlines"] == 0
     print(f"goal (no missed deadline either way): {'met' if ok else 'NOT met'}")
-    return 0 if ok else 1
+    return 0 if ok or args.quick else 1
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 14's truth chain: identify each damper of a spread, then track torque on the identified model.
+"""The truth chain: identify each damper of a spread, then track torque on the identified model.
 
 For every damper of :data:`truth_chain_sim.DAMPERS` (the seed and four others: n 0.1-0.6, yield
 torque at 1 A 0.2-2.5 N m, J 0.8-1.2):
@@ -27,11 +27,15 @@ RMS(T_true) [%]; the worst and the median over the spread; the previous controll
 tracking filters, the "0 A when T*·v <= 0" inverse) from the same run as the baseline; the median
 compute time of one controller cycle (Kalman vs tracking filters).
 
-    .venv/bin/python tools/bench_truth_chain.py [--link] [--calibrate] [--dampers seed,A,...]
+    .venv/bin/python tools/bench_truth_chain.py [--link] [--calibrate] [--dampers seed,A,...] [--quick]
 
 ``--calibrate`` calibrates each damper with ``sashil calibrate`` over serial (the emulator playing the
 operator) instead of fitting two simulated drops. Wall time: about 6 min in-process (2 cores,
 shared), plus about 3 min with --link, plus about 3 min per damper with --calibrate.
+
+``--quick``: the seed damper only (unless --dampers), identified from two 2 s drops with a tiny fit
+budget, every condition cut to about 1 s (``truth_chain_sim.quick_conditions``) with one host stall
+inside it: seconds; the figures mean little.
 """
 
 from __future__ import annotations
@@ -48,7 +52,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from truth_chain_sim import CONDITIONS, DAMPERS, damper_config, figures, mismatched, run_condition
+from truth_chain_sim import (
+    CONDITIONS,
+    DAMPERS,
+    Condition,
+    damper_config,
+    figures,
+    mismatched,
+    quick_conditions,
+    run_condition,
+)
 
 from sashil.identify.data import record_from_columns
 from sashil.identify.fit import FitOptions, fit_model
@@ -57,14 +70,20 @@ from sashil.models.hysteresis import BoucWenParams
 
 BASELINE = {"estimator": "tracking", "inverse": "rule"}
 STALLS = (4.0, 6.6)  # two host stalls of truth_chain_sim.STALL_S (34 ms), as seen over the link here
+QUICK_STALLS = (0.6,)  # one stall inside the cut conditions of --quick
 
 
-def identify(true: dict[str, float]) -> tuple[dict[str, float], float]:
-    """Bouc-Wen parameters fitted to drop tests at 0 A and 1 A of the damper ``true`` (J given)."""
+def identify(true: dict[str, float], quick: bool = False) -> tuple[dict[str, float], float]:
+    """Bouc-Wen parameters fitted to drop tests at 0 A and 1 A of the damper ``true`` (J given);
+    ``quick``: 2 s drops and a tiny fit budget."""
     params = BoucWenParams.from_mapping(true)
-    records = [record_from_columns(f"drop {i:g} A", drop_test_columns(params, -5.0, i)) for i in (0.0, 1.0)]
+    seconds = 2.0 if quick else 10.0
+    records = [record_from_columns(f"drop {i:g} A", drop_test_columns(params, -5.0, i, seconds)) for i in (0.0, 1.0)]
+    options = FitOptions(J=true["J"])
+    if quick:
+        options = FitOptions(J=true["J"], design=16, starts=2, refine=1, probe_nfev=3, max_nfev=5)
     started = time.perf_counter()
-    result = fit_model("bouc-wen", records, FitOptions(J=true["J"]))
+    result = fit_model("bouc-wen", records, options)
     return dict(result.params), time.perf_counter() - started
 
 
@@ -89,13 +108,18 @@ def calibrate_over_serial(name: str, true: dict[str, float], tmp: Path) -> tuple
 
 
 def condition_table(
-    model: dict[str, float], true: dict[str, float], counts: int, stalls: tuple[float, ...] = (), **controller
+    model: dict[str, float],
+    true: dict[str, float],
+    counts: int,
+    stalls: tuple[float, ...] = (),
+    conditions: tuple[Condition, ...] = CONDITIONS,
+    **controller,
 ) -> list[dict]:
     """Figures per condition; also the static resolution k*q/sqrt(12) / RMS(T*) (module docstring)."""
     cfg = damper_config(model, counts, **controller)
     rows = []
     q = 2.0 * math.pi / counts
-    for cond in CONDITIONS:
+    for cond in conditions:
         cols = run_condition(cfg, true, cond, stalls_s=stalls)
         row = figures(cols, cond.keep_after_s)
         keep = cols["time_s"] >= cond.keep_after_s
@@ -104,18 +128,21 @@ def condition_table(
     return rows
 
 
-def passive_observer(model: dict[str, float], true: dict[str, float], counts: int) -> list[float]:
+def passive_observer(
+    model: dict[str, float], true: dict[str, float], counts: int, conditions: tuple[Condition, ...] = CONDITIONS
+) -> list[float]:
     """Observer NRMSE at constant 0 A and 1 A on the chirp (both currents)."""
     out = []
+    chirp = conditions[2]
     for current in (0.0, 1.0):
         cfg = damper_config(model, counts, current_a=current)
-        out.append(
-            figures(run_condition(cfg, true, CONDITIONS[2], law="passive"), CONDITIONS[2].keep_after_s)["observer"]
-        )
+        out.append(figures(run_condition(cfg, true, chirp, law="passive"), chirp.keep_after_s)["observer"])
     return out
 
 
-def compute_time_us(model: dict[str, float], counts: int, **controller) -> float:
+def compute_time_us(
+    model: dict[str, float], counts: int, conditions: tuple[Condition, ...] = CONDITIONS, **controller
+) -> float:
     """Median wall time of one Controller.step over the 1.2 Hz sine [us] (shared machine: noisy)."""
     from sashil.control import registry
 
@@ -141,7 +168,7 @@ def compute_time_us(model: dict[str, float], counts: int, **controller) -> float
 
     truth_chain_sim.make_controller = timed
     try:
-        run_condition(damper_config(model, counts, **controller), model, CONDITIONS[1])
+        run_condition(damper_config(model, counts, **controller), model, conditions[1])
     finally:
         truth_chain_sim.make_controller = original
     return statistics.median(made[0]) / 1000.0
@@ -228,11 +255,15 @@ def main() -> None:
     parser.add_argument(
         "--calibrate", action="store_true", help="calibrate each damper with `sashil calibrate` over serial first"
     )
+    parser.add_argument(
+        "--quick", action="store_true", help="the seed damper, a tiny fit, conditions cut to about 1 s (seconds)"
+    )
     args = parser.parse_args()
-    chosen = {
-        k: v for k, v in DAMPERS.items() if not args.dampers or any(k.startswith(p) for p in args.dampers.split(","))
-    }
-    names = [c.name for c in CONDITIONS]
+    dampers = args.dampers or ("seed" if args.quick else None)
+    chosen = {k: v for k, v in DAMPERS.items() if not dampers or any(k.startswith(p) for p in dampers.split(","))}
+    conditions = quick_conditions() if args.quick else CONDITIONS
+    stall_times = QUICK_STALLS if args.quick else STALLS
+    names = [c.name for c in conditions]
     print(f"conditions: {', '.join(names)}; road 1 deg; 1 kHz; figures in % (tracking / authority / observer)")
     worst: dict[str, list[tuple[float, str]]] = {}
     sine: dict[str, list[float]] = {}
@@ -244,7 +275,7 @@ def main() -> None:
                 fitted, fit_s = calibrate_over_serial(name, true, Path(tmp_dir))
                 how = "calibrated over serial (sashil calibrate, J given)"
             else:
-                fitted, fit_s = identify(true)
+                fitted, fit_s = identify(true, args.quick)
                 how = "identified from two simulated drops (0 A, 1 A)"
             p_true, p_fit = BoucWenParams.from_mapping(true), BoucWenParams.from_mapping(fitted)
             yield_err = [
@@ -260,15 +291,15 @@ def main() -> None:
             for label, model, counts, stalls, controller in (
                 ("exact model, 4096 counts", true, 4096, (), {}),
                 ("identified, 4096 counts", fitted, 4096, (), {}),
-                ("identified, 4096, two host stalls", fitted, 4096, STALLS, {}),
+                ("identified, 4096, two host stalls", fitted, 4096, stall_times, {}),
                 ("identified, 65536 counts", fitted, 65536, (), {}),
                 ("model 10 % off, 4096 counts", mismatched(true), 4096, (), {}),
                 ("cell reading, identified, 4096", fitted, 4096, (), {"kalman_quantisation": "cell"}),
-                ("cell reading, 4096, two host stalls", fitted, 4096, STALLS, {"kalman_quantisation": "cell"}),
+                ("cell reading, 4096, two host stalls", fitted, 4096, stall_times, {"kalman_quantisation": "cell"}),
                 ("baseline (tracking+rule), 4096", fitted, 4096, (), BASELINE),
                 ("baseline (tracking+rule), 65536", fitted, 65536, (), BASELINE),
             ):
-                rows = condition_table(model, true, counts, stalls, **controller)
+                rows = condition_table(model, true, counts, stalls, conditions, **controller)
                 print(f"  {label:34s} {fmt(rows, 'tracking')}   tracking")
                 if label in ("identified, 4096 counts", "identified, 65536 counts"):
                     print(f"  {'':34s} {fmt(rows, 'authority')}   of authority")
@@ -278,7 +309,7 @@ def main() -> None:
                     worst.setdefault(label, []).append((row["tracking"], f"{name}, {cond}"))
                     worst.setdefault(label + " observer", []).append((row["observer"], f"{name}, {cond}"))
                 sine.setdefault(label, []).append(rows[1]["tracking"])
-            obs = passive_observer(fitted, true, 4096)
+            obs = passive_observer(fitted, true, 4096, conditions)
             print(
                 f"  observer NRMSE on the chirp at constant 0 A / 1 A (identified, 4096): {100 * obs[0]:.1f} / {100 * obs[1]:.1f} %"
             )
@@ -286,7 +317,9 @@ def main() -> None:
                 worst.setdefault("identified, 4096 counts observer", []).append(
                     (value, f"{name}, chirp at {current} A")
                 )
-            timing.append((compute_time_us(fitted, 4096), compute_time_us(fitted, 4096, **BASELINE)))
+            timing.append(
+                (compute_time_us(fitted, 4096, conditions), compute_time_us(fitted, 4096, conditions, **BASELINE))
+            )
             if args.link:
                 r = link_sine(name, true, fitted, Path(tmp_dir))
                 links[name] = r

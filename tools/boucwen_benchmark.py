@@ -10,6 +10,7 @@ discarded) and ``--test FILE.csv`` (simulated from rest; the last ``--test-skip`
 
     python tools/boucwen_benchmark.py
     python tools/boucwen_benchmark.py --write-data /tmp/bw    # also save the generated CSVs
+    python tools/boucwen_benchmark.py --quick                 # 2 generated periods instead of 5 (seconds)
 """
 
 from __future__ import annotations
@@ -50,15 +51,19 @@ def main() -> int:
     )
     parser.add_argument("--seed", type=int, default=7, help="seed of the generated estimation multisine")
     parser.add_argument("--write-data", metavar="DIR", help="write the generated estimation/test CSVs here")
+    parser.add_argument("--quick", action="store_true", help="generate 2 periods of estimation data instead of 5")
     args = parser.parse_args()
+    periods = 2 if args.quick else 5
     try:
         t0 = time.perf_counter()
         if args.estimation:
             u, y = read_io(args.estimation)
             source = args.estimation
         else:
-            u, y = B.generate(args.seed, 5, B.NOISE_M)
-            source = f"generated: 5 periods x {B.N_PERIOD} samples, multisine seed {args.seed}, noise 8e-3 mm RMS"
+            u, y = B.generate(args.seed, periods, B.NOISE_M)
+            source = (
+                f"generated: {periods} periods x {B.N_PERIOD} samples, multisine seed {args.seed}, noise 8e-3 mm RMS"
+            )
         gen_s = time.perf_counter() - t0
         fit = B.identify(u, y, n=args.period)
     except (DataFileError, ValueError) as err:

@@ -7,6 +7,10 @@ with the package and ``tools/`` does not. This is the same line for any ELF, fro
     python tools/elf_size.py drivers/firmware/build/cortex-m4/sashil-board.elf
     -> flash 4206 B (0.4 % of 1024 KiB), RAM 5104 B (3.9 % of 128 KiB, the 4 KiB stack included)
 
+    python tools/elf_size.py --quick    # build the firmware into a temporary folder and read that ELF
+
+``--quick`` needs make and the ziglang package (the cross build); without them it says so and exits 0.
+
 Flash: the allocated sections with contents (.isr_vector, .text, .rodata, .ARM.exidx, .data's
 initial values); RAM: the allocated sections in SRAM (.data, .bss, .stack). Exit 1 on a file that is
 not an ELF32 little-endian file.
@@ -15,7 +19,10 @@ not an ELF32 little-endian file.
 from __future__ import annotations
 
 import importlib.util
+import shutil
+import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from types import ModuleType
 
@@ -33,9 +40,25 @@ def load_elf_module() -> ModuleType:
     return module
 
 
+def quick() -> int:
+    """``make cortex-m4`` into a temporary folder, then the usage line of the ELF it wrote."""
+    if importlib.util.find_spec("ziglang") is None or shutil.which("make") is None:
+        print("elf_size: --quick skipped, needs make and the ziglang package (pip install ziglang)")
+        return 0
+    with tempfile.TemporaryDirectory(prefix="elf_size-") as tmp:
+        subprocess.run(
+            ["make", "-s", "-C", str(ELF_PY.parent), "cortex-m4", f"PYTHON={sys.executable}", f"BUILD={tmp}"],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        return main([str(Path(tmp) / "cortex-m4" / "sashil-board.elf")])
+
+
 def main(argv: list[str]) -> int:
+    if argv == ["--quick"]:
+        return quick()
     if not argv:
-        print("usage: python tools/elf_size.py FILE.elf [FILE.elf ...]", file=sys.stderr)
+        print("usage: python tools/elf_size.py FILE.elf [FILE.elf ...] | --quick", file=sys.stderr)
         return 2
     elf = load_elf_module()
     status = 0

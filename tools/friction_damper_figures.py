@@ -4,11 +4,13 @@ Bouc-Wen friction model of Tables 2-3, the Coulomb/MSTV/Bouc-Wen comparison at 1
 (cf. the seed's Fig. 13), and the seed's two-stage identification from synthetic loops.
 
     python tools/friction_damper_figures.py --out figures/friction_damper
+    python tools/friction_damper_figures.py --quick    # one training loop, PNGs to a temporary folder
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -64,24 +66,35 @@ def comparison_figure(p: FrictionDamperParams, path: Path) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="figures/friction_damper", help="folder for the PNGs")
+    parser.add_argument(
+        "--out", help="folder for the PNGs (default figures/friction_damper; with --quick a temporary folder)"
+    )
     parser.add_argument("--noise", type=float, default=0.5, help="RMS force noise [N] on the identification loops")
+    parser.add_argument(
+        "--quick", action="store_true", help="identify from one loop (10 Hz 1 mm), PNGs to a temporary folder"
+    )
     args = parser.parse_args()
-    out = Path(args.out)
+    if args.quick and args.out is None:
+        with tempfile.TemporaryDirectory(prefix="friction_damper_figures-") as tmp:
+            return figures(Path(tmp), args.noise, args.quick)
+    return figures(Path(args.out or "figures/friction_damper"), args.noise, args.quick)
+
+
+def figures(out: Path, noise: float, quick: bool) -> int:
     out.mkdir(parents=True, exist_ok=True)
     p = FrictionDamperParams()
     loops_figure(p, out / "bouc_wen_loops_table1.png")
     comparison_figure(p, out / "friction_laws_10hz_1mm.png")
     print(f"wrote {out}/bouc_wen_loops_table1.png, {out}/friction_laws_10hz_1mm.png")
 
-    train = [(10.0, 1.0), (3.0, 1.0)]
+    train = [(10.0, 1.0)] if quick else [(10.0, 1.0), (3.0, 1.0)]
     rng = np.random.default_rng(0)
-    forces = [simulate_harmonic(p, "bouc-wen", f, a)[4] + rng.normal(0.0, args.noise, 401) for f, a in train]
+    forces = [simulate_harmonic(p, "bouc-wen", f, a)[4] + rng.normal(0.0, noise, 401) for f, a in train]
     start = replace(p, k1=150.0, c1=1.0, c2=1.0, f_max=50.0, alpha=20.0, beta=20.0, gamma=0.0, n=2.0)
     fit = identify_two_stage(train, forces, start)
     print(
-        f"two-stage identification from {len(train)} synthetic loops (10 Hz 1 mm, 3 Hz 1 mm; "
-        f"{args.noise:g} N RMS noise): wall {fit.wall_s:.1f} s"
+        f"two-stage identification from {len(train)} synthetic loops "
+        f"({', '.join(f'{f:g} Hz {a:g} mm' for f, a in train)}; {noise:g} N RMS noise): wall {fit.wall_s:.1f} s"
     )
     for stage in fit.stages:
         print("  " + stage)

@@ -13,6 +13,7 @@ compiles the mutated syntax tree, so the work tree stays as it is whatever happe
     .venv/bin/python tools/mutate_safety.py            # all mutants, a table and the kill rate
     .venv/bin/python tools/mutate_safety.py --list     # the mutants only
     .venv/bin/python tools/mutate_safety.py --quiet    # the kill rate and the survivors (CI)
+    .venv/bin/python tools/mutate_safety.py --quick    # two mutants only (the supervisor's and the watchdog's first)
 
 Exit status 0 when every mutant is killed, 1 otherwise.
 """
@@ -181,11 +182,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="list the mutants, run nothing")
     parser.add_argument("-q", "--quiet", action="store_true", help="only the kill rate and the survivors")
     parser.add_argument("--timeout", type=float, default=120.0, metavar="S", help="per mutant (default 120)")
+    parser.add_argument(
+        "--quick", action="store_true", help="two mutants only: the first of the first and of the last target"
+    )
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child is not None:
         return _child(args.child)
-    found = [m for target in TARGETS for m in mutants(target)]
+    if args.quick:
+        found = [mutants(TARGETS[0])[0], mutants(TARGETS[-1])[0]]
+    else:
+        found = [m for target in TARGETS for m in mutants(target)]
     if args.list:
         for m in found:
             print(f"{m.label:36} {m.text}")

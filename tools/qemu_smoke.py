@@ -13,11 +13,17 @@ handler, the receive interrupt and ring, the frame codec and the board's session
 emulated Cortex-M4. QEMU's DWT cycle counter reads 0, so the board's clock stands still there:
 device pacing and the watchdog are not exercised. Needs ``qemu-system-arm`` (Debian:
 ``apt-get install qemu-system-arm``). Prints one line per step; exit 0 when all passed.
+
+``--quick`` without an ELF builds the QEMU variant into a temporary folder first (needs make and the
+ziglang package); without qemu-system-arm, make or ziglang it says what is missing and exits 0:
+
+    .venv/bin/python tools/qemu_smoke.py --quick
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import shutil
 import socket
 import subprocess
@@ -114,19 +120,50 @@ def smoke(elf: Path, timeout_s: float = 1.0) -> list[str]:
                 qemu.stderr.close()
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("elf", type=Path, help="the SASHIL_QEMU build (make cortex-m4-qemu)")
-    parser.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for each answer")
-    args = parser.parse_args(argv)
+def run(elf: Path, timeout_s: float) -> int:
     try:
-        for step in smoke(args.elf, args.timeout):
+        for step in smoke(elf, timeout_s):
             print(step)
     except SmokeError as err:
         print(f"qemu_smoke: {err}", file=sys.stderr)
         return 1
     print("qemu_smoke: passed")
     return 0
+
+
+def quick(elf: Path | None, timeout_s: float) -> int:
+    """The session on ``elf``, or on a fresh ``make cortex-m4-qemu`` build; exit 0 when a tool is missing."""
+    if shutil.which(QEMU) is None:
+        print(f"qemu_smoke: --quick skipped, {QEMU} is not installed (Debian: apt-get install qemu-system-arm)")
+        return 0
+    if elf is not None:
+        return run(elf, timeout_s)
+    if importlib.util.find_spec("ziglang") is None or shutil.which("make") is None:
+        print("qemu_smoke: --quick skipped, the build needs make and the ziglang package (pip install ziglang)")
+        return 0
+    firmware = Path(__file__).resolve().parents[1] / "drivers" / "firmware"
+    with tempfile.TemporaryDirectory(prefix="qemu_smoke-") as tmp:
+        subprocess.run(
+            ["make", "-s", "-C", str(firmware), "cortex-m4-qemu", f"PYTHON={sys.executable}", f"BUILD={tmp}"],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        return run(Path(tmp) / "cortex-m4" / "sashil-board-qemu.elf", timeout_s)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("elf", type=Path, nargs="?", help="the SASHIL_QEMU build (make cortex-m4-qemu)")
+    parser.add_argument("--timeout", type=float, help="seconds to wait for each answer (default 1, 5 with --quick)")
+    parser.add_argument(
+        "--quick", action="store_true", help="build the ELF when none is given; exit 0 when qemu or zig is missing"
+    )
+    args = parser.parse_args(argv)
+    if args.quick:
+        return quick(args.elf, args.timeout or 5.0)
+    if args.elf is None:
+        parser.error("the following arguments are required: elf")
+    return run(args.elf, args.timeout or 1.0)
 
 
 if __name__ == "__main__":

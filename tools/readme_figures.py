@@ -6,10 +6,14 @@
   the percentile plot of their loop timing (on the machine this runs on).
 
     .venv/bin/python tools/readme_figures.py
+    .venv/bin/python tools/readme_figures.py --quick   # a 2 s drop, 2 frequencies, 0.5 s runs; PNGs to a temporary folder
+
+``--quick`` leaves ``docs/figures/`` alone: it runs the same commands on a tiny problem (seconds).
 """
 
 from __future__ import annotations
 
+import argparse
 import shutil
 import subprocess
 import sys
@@ -25,21 +29,37 @@ def sashil(*args: str) -> None:
     subprocess.run([*SASHIL, *args, "-q"], check=True)
 
 
-def main() -> None:
-    OUT.mkdir(parents=True, exist_ok=True)
+def figures(out: Path, quick: bool) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    drop = ("--duration", "2") if quick else ()
+    steps = ("--steps", "2") if quick else ()
+    seconds = "0.5" if quick else "10"
     with tempfile.TemporaryDirectory(prefix="sashil-figures-") as name:
         tmp = Path(name)
-        sashil("drop-test", "--current", "0", "--current", "1", "--out", str(tmp / "drop"))
-        shutil.copy(tmp / "drop" / "drop_test.png", OUT / "drop_test.png")
-        sashil("sweep", "--stepped", "--current", "0", "--out", str(tmp / "sweep"))
-        shutil.copy(tmp / "sweep" / "transmissibility.png", OUT / "transmissibility.png")
-        sashil("run", "--duration", "10", "--current", "0", "--out", str(tmp / "passive"))
-        sashil("run", "--duration", "10", "--set", "controller.law=skyhook", "--set", "controller.c_sky=2",
+        sashil("drop-test", "--current", "0", "--current", "1", *drop, "--out", str(tmp / "drop"))
+        shutil.copy(tmp / "drop" / "drop_test.png", out / "drop_test.png")
+        sashil("sweep", "--stepped", "--current", "0", *steps, "--out", str(tmp / "sweep"))
+        shutil.copy(tmp / "sweep" / "transmissibility.png", out / "transmissibility.png")
+        sashil("run", "--duration", seconds, "--current", "0", "--out", str(tmp / "passive"))
+        sashil("run", "--duration", seconds, "--set", "controller.law=skyhook", "--set", "controller.c_sky=2",
                "--out", str(tmp / "skyhook"))  # fmt: skip
         sashil("report", str(tmp / "passive"), str(tmp / "skyhook"), "--out", str(tmp / "report"))
-        shutil.copy(tmp / "report" / "timing.png", OUT / "timing.png")
-    for path in sorted(OUT.glob("*.png")):
-        print(f"{path.relative_to(ROOT)}  {path.stat().st_size / 1e3:.0f} kB")
+        shutil.copy(tmp / "report" / "timing.png", out / "timing.png")
+    for path in sorted(out.glob("*.png")):
+        print(f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}  {path.stat().st_size / 1e3:.0f} kB")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--quick", action="store_true", help="a 2 s drop, 2 frequencies, 0.5 s runs; PNGs to a temporary folder"
+    )
+    args = parser.parse_args()
+    if args.quick:
+        with tempfile.TemporaryDirectory(prefix="readme_figures-") as tmp:
+            figures(Path(tmp), quick=True)
+    else:
+        figures(OUT, quick=False)
 
 
 if __name__ == "__main__":
