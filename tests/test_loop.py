@@ -195,6 +195,9 @@ def test_stage_signals_become_columns():
         "z_hat",
         "torque_hat_nm",
         "seq",
+        "device_time_us",
+        "road_speed_cmd_rad_s",
+        "phase",
         "trip_code",
     )
     assert record_columns(ConstantCurrent()) == (
@@ -204,6 +207,9 @@ def test_stage_signals_become_columns():
         "current_cmd_a",
         "theta_road_rad",
         "seq",
+        "device_time_us",
+        "road_speed_cmd_rad_s",
+        "phase",
         "trip_code",
     )
 
@@ -236,10 +242,11 @@ def test_session_ok_writes_every_row(tmp_path, config):
     outcome, summary, path = _session(tmp_path, config, rig)
     assert outcome.exit_code == 0 and summary["exit_status"] == "ok"
     data = _rows(path)
-    assert len(data["time_s"]) == 100
-    assert data["time_s"][:3].tolist() == [0.0, 0.001, 0.002]
-    assert set(data["current_cmd_a"].tolist()) == {0.5}
-    assert data["seq"].tolist() == list(range(1, 101))
+    assert len(data["time_s"]) == 101  # every cycle, then the safe state the shutdown sent
+    assert data["time_s"][:3].tolist() == [0.0, 0.001, 0.002] and data["time_s"][-1] == pytest.approx(0.1)
+    assert set(data["current_cmd_a"][:-1].tolist()) == {0.5} and data["current_cmd_a"][-1] == 0.0
+    assert data["road_speed_cmd_rad_s"][-1] == 0.0 and data["trip_code"][-1] == 0
+    assert data["seq"].tolist() == [*range(1, 101), 100]  # the last sample the shutdown saw
     assert summary["timing"]["cycles"] == 100 and summary["trips"] == []
     for key in ("rate_hz", "cycles", "missed_deadlines", "lateness_us", "compute_us"):
         assert key in summary["timing"]
@@ -252,7 +259,8 @@ def test_read_raising_on_the_nth_call(tmp_path, config):
     assert outcome.exit_code == 1 and summary["exit_status"] == "error"
     assert "read failed" in summary["error"]
     assert rig.currents[-2:] == [0.0, 0.0]
-    assert len(_rows(path)["time_s"]) == 6  # the cycles before the fault
+    data = _rows(path)
+    assert len(data["time_s"]) == 6 + 1 and data["current_cmd_a"][-1] == 0.0  # the cycles before the fault, 0 A
 
 
 def test_write_raising(tmp_path, config):
@@ -260,7 +268,7 @@ def test_write_raising(tmp_path, config):
     outcome, _summary, path = _session(tmp_path, config, rig)
     assert outcome.exit_code == 1 and isinstance(outcome.error, DriverIOError)
     assert rig.currents[-1] == 0.0 and rig.calls["write"] == 5  # 3 good, the failed one, the 0 A write
-    assert len(_rows(path)["time_s"]) == 4  # the row is recorded before the write
+    assert len(_rows(path)["time_s"]) == 4 + 1  # the row is recorded before the write; then the 0 A row
 
 
 def test_stale_sensor_trips(tmp_path, config):
@@ -314,7 +322,7 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     folder.path.mkdir()
     outcome = run_session(config, rig, StopAt(), folder, clock, None, say=lambda line: None, realtime=False)
     assert outcome.exit_code == 130 and outcome.result.stop_reason == "SIGTERM"
-    assert len(_rows(folder.path)["time_s"]) == 30
+    assert len(_rows(folder.path)["time_s"]) == 30 + 1  # and the safe state's row
     assert rig.currents[-2:] == [0.0, 0.0] and rig.calls["close"] == 1
 
 
@@ -333,7 +341,8 @@ def test_an_unexpected_error_in_the_stage_ends_at_0_a(tmp_path, config):
     assert outcome.exit_code == 1 and summary["exit_status"] == "error"
     assert summary["error"] == "division by zero in the law"
     assert rig.currents == [0.7, 0.7, 0.0, 0.0]
-    assert len(_rows(path)["time_s"]) == 2
+    data = _rows(path)
+    assert len(data["time_s"]) == 2 + 1 and data["current_cmd_a"].tolist() == [0.7, 0.7, 0.0]
 
 
 def test_real_clock_spin_margin_is_capped_at_a_quarter_period():

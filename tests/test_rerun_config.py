@@ -57,7 +57,7 @@ def test_run_config_holds_the_law_road_rate_and_duration_and_reruns_them(tmp_pat
     rerun("run", first, again, "-q")
     assert sashil.load_run(again).config["controller"]["law"] == "skyhook"
     assert_same_data(first, again)
-    assert len(read_data_csv(again / "data.csv")["time_s"]) == 300  # 0.6 s at 500 Hz
+    assert len(read_data_csv(again / "data.csv")["time_s"]) == 300 + 1  # 0.6 s at 500 Hz, and the 0 A row
     assert len(set(read_data_csv(again / "data.csv")["current_cmd_a"])) > 2  # the law commanded
 
 
@@ -72,7 +72,7 @@ def test_run_current_is_saved_as_the_passive_law_and_its_current(tmp_path, virtu
     assert sashil.load_run(first).config["run"]["road"] == "sine:1.0"  # the sim backend's default, as it ran
     rerun("run", first, again, "-q")
     assert_same_data(first, again)
-    assert set(read_data_csv(again / "data.csv")["current_cmd_a"]) == {0.3}
+    assert set(read_data_csv(again / "data.csv")["current_cmd_a"][:-1]) == {0.3}  # then the 0 A row
 
 
 def test_drop_test_config_holds_angle_currents_duration_and_reruns_them(tmp_path):

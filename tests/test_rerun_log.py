@@ -117,7 +117,7 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     )
     assert outcome.exit_code == 0
     stats = outcome.summary["live_view"]
-    assert stats["rows_sent"] == 150 and stats["rows_skipped"] == 0 and stats["error"] is None
+    assert stats["rows_sent"] == 150 + 1 and stats["rows_skipped"] == 0 and stats["error"] is None  # + the 0 A row
     data = read_data_csv(folder.file("data.csv"))
     doc = load_rrd(rrd)
     times, torque = _series(doc, "signals/torque_nm")
@@ -128,10 +128,11 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     assert torque[:, 2] == pytest.approx(lo)
     assert torque[:, 3] == pytest.approx(lo + params["alpha2"] * z + params["c2"] * v)
     _, lateness = _series(doc, "timing/lateness_us")
-    assert lateness[:, 0] == pytest.approx(0.0)  # the virtual clock is never late
+    assert lateness[:-1, 0] == pytest.approx(0.0)  # the virtual clock is never late
+    assert np.isnan(lateness[-1, 0])  # the shutdown's safe-state row is no cycle: no lateness
     # hysteresis views: every sent row as a point (θ̇ in deg/s, −T̂)
     points = [p for row in doc["/hysteresis/torque_vs_velocity"]["Points2D:positions"] for p in row]
-    assert len(points) == 150
+    assert len(points) == 150 + 1
     xs = sorted(round(p[0], 3) for p in points)
     assert xs == pytest.approx(sorted(np.round(np.degrees(v).astype(np.float32), 3)), abs=2e-3)
 

@@ -65,7 +65,8 @@ def test_short_real_clock_run_writes_a_complete_folder(tmp_path):
     assert summary["exit_status"] == "ok" and summary["timing"]["cycles"] == 300
     assert summary["realtime"]["sched_fifo"]["status"] == "skipped"
     data = read_data_csv(out / "data.csv", required=("time_s", "theta_rad", "current_a", "current_cmd_a"))
-    assert len(data["time_s"]) == 300 and set(data["current_cmd_a"]) == {0.4}
+    assert len(data["time_s"]) == 300 + 1 and set(data["current_cmd_a"][:-1]) == {0.4}
+    assert data["current_cmd_a"][-1] == 0.0  # the stream ends on the safe state the shutdown sent
     assert "clock: real" in (out / "config.yaml").read_text()
     assert "lateness" in proc.stderr and "missed deadline" in proc.stderr
 
@@ -95,7 +96,8 @@ def test_signal_during_a_real_clock_run_leaves_a_complete_folder(tmp_path, sig):
     assert summary["exit_status"] == "stopped" and summary["stop_reason"] == sig.name
     assert summary["exit_code"] == 130
     data = read_data_csv(out / "data.csv", required=("time_s", "theta_rad", "current_a", "current_cmd_a"))
-    assert len(data["time_s"]) == summary["timing"]["cycles"] == summary["recording"]["rows_written"]
+    assert len(data["time_s"]) == summary["timing"]["cycles"] + 1 == summary["recording"]["rows_written"]
+    assert data["current_cmd_a"][-1] == 0.0  # the safe state's row after the last cycle
     assert (out / "config.yaml").exists()
     assert f"stopped by {sig.name}" in stderr
 

@@ -42,9 +42,13 @@ from sashil.runtime.timing import FOLD, TimingStats
 log = logging.getLogger("sashil.loop")
 
 #: the columns the loop records for every cycle (DESIGN.md names first), then the stage's
-#: signals (see ``stage_signals``), then ``seq`` and ``trip_code`` (sashil.safety.TRIP_CODES)
+#: signals (see ``stage_signals``), then what plans derive their records from: the sample's ``seq``
+#: and device time, the road speed the cycle commanded (NaN: none), the plan's ``phase`` (its
+#: ``phase_code``: a drop test's hold, release, ...; 0 for a stage without phases) and the safety
+#: supervisor's ``trip_code`` (sashil.safety.TRIP_CODES)
 BASE_COLUMNS = ("time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad")
-TAIL_COLUMNS = ("seq", "trip_code")
+TAIL_COLUMNS = ("seq", "device_time_us", "road_speed_cmd_rad_s", "phase", "trip_code")
+NAN = float("nan")
 #: DESIGN.md data.csv columns a stage may provide as per-cycle attributes
 STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
 
@@ -203,7 +207,7 @@ class ControlLoop:
                 if limit is not None:
                     cmd = limit(cmd, dt)
                 if record is not None:
-                    record(t, sample, cmd.current_a, 0)
+                    record(t, sample, cmd.current_a, cmd.road_speed_rad_s, 0)
                     if recorder is not None and recorder.error is not None:  # the disk failed: 0 A now
                         raise RecordingError(f"{recorder.path}: recording failed: {recorder.error}")
                 t_write = now()
@@ -222,11 +226,9 @@ class ControlLoop:
         except BaseException as err:
             result.exit_status = self._status_of(err)
             result.error = str(err) or type(err).__name__
-            if isinstance(err, SafetyTrip) and recorder is not None and sample is not None:
-                self._record(t, sample, 0.0, safety.trip_code if safety is not None else 0)
-            self._finish(t)
+            self._finish(t, sample, safety.trip_code if isinstance(err, SafetyTrip) and safety is not None else 0)
             raise
-        self._finish(t)
+        self._finish(t, sample, 0)
         if result.shutdown_errors:
             result.exit_status = "error"
             result.error = "shutdown: " + "; ".join(result.shutdown_errors)
@@ -234,19 +236,22 @@ class ControlLoop:
         return result
 
     # helpers (off the per-cycle path unless noted) ---------------------------------------------
-    def _record(self, t_ns: int, sample: RigSample | None, current_cmd: float, trip_code: int) -> None:
+    def _record(
+        self, t_ns: int, sample: RigSample | None, current_cmd: float, road_speed: float | None, trip_code: int
+    ) -> None:
         """Fill one data row in the recorder's ring (per cycle; no allocation)."""
         recorder = self.recorder
         row = recorder.begin_row()  # type: ignore[union-attr]
         row[0] = (t_ns - self.start_ns) * 1e-9
         if sample is None:
-            row[1] = row[2] = row[4] = float("nan")
-            row[-2] = -1
+            row[1] = row[2] = row[4] = NAN
+            row[-5] = row[-4] = -1
         else:
             row[1] = sample.theta_rad
             row[2] = sample.current_a
             row[4] = sample.theta_road_rad
-            row[-2] = sample.seq
+            row[-5] = sample.seq
+            row[-4] = sample.device_time_us
         row[3] = current_cmd
         signals = self._signals
         if signals is not None:
@@ -254,6 +259,8 @@ class ControlLoop:
                 row[5] = signals(self.stage)
             else:
                 row[5 : 5 + self._n_signals] = signals(self.stage)
+        row[-3] = NAN if road_speed is None else road_speed
+        row[-2] = getattr(self.stage, "phase_code", 0)
         row[-1] = trip_code
         recorder.commit_row()  # type: ignore[union-attr]
 
@@ -284,8 +291,9 @@ class ControlLoop:
     def _status_of(err: BaseException) -> str:
         return status_of(err)
 
-    def _finish(self, t_ns: int) -> None:
-        """Safe state: 0 A, deactivate, close (each once), whatever failed before."""
+    def _finish(self, t_ns: int, sample: RigSample | None = None, trip_code: int = 0) -> None:
+        """Safe state: 0 A, deactivate, close (each once), whatever failed before. The stream's last
+        row is the safe command the shutdown sends (0 A, the road at rest), after the last cycle's."""
         result, rig = self.result, self.rig
         result.cycles = self.timing.cycles
         result.missed_deadlines = self.timing.missed_deadlines
@@ -294,6 +302,8 @@ class ControlLoop:
             result.trips = [trip.as_dict() for trip in self.safety.trips]
         if self.recorder is not None:
             self.recorder.window_end_ns = None
+            if sample is not None:  # dated one period on: the state the rig is left in from then
+                self._record(t_ns + self.period_ns, sample, SAFE_COMMAND.current_a, 0.0, trip_code)
         try:
             rig.write(SAFE_COMMAND, t_ns, 0)
         except Exception as err:
