@@ -102,7 +102,9 @@ def test_sweep_cli_at_one_frequency_records_seq_and_the_sine(tmp_path):
     assert rc == 0
     lines = (out / "data.csv").read_text().splitlines()
     header = lines[0].split(",")
-    assert header[-1] == "seq" and lines[1].split(",")[-1] == "1" and lines[-1].split(",")[-1] == str(len(lines) - 1)
+    # seq: the sample of each cycle, then the shutdown's 0 A row on the last sample
+    assert header[-1] == "seq" and lines[1].split(",")[-1] == "1" and lines[-2].split(",")[-1] == str(len(lines) - 2)
+    assert lines[-1].split(",")[-1] == str(len(lines) - 2) and float(lines[-1].split(",")[4]) == 0.0
     rows = [dict(zip(header, map(float, line.split(",")), strict=True)) for line in lines[1:]]
     late = [r for r in rows if r["time_s"] >= 1.0]  # after the 1 s ramp: theta1 = sin(2 pi 1.25 t), 1 deg
     assert max(abs(math.degrees(r["theta_road_rad"]) - math.sin(2 * math.pi * 1.25 * r["time_s"])) for r in late) < 0.1
@@ -140,8 +142,9 @@ def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_
     if not mode:  # the chirp's rows up to the trip are on disk; the last command is 0 A
         lines = (out / "data.csv").read_text().splitlines()
         header = lines[0].split(",")
-        last = dict(zip(header, lines[-1].split(","), strict=True))
-        assert len(lines) > 500 and float(last["current_cmd_a"]) == pytest.approx(0.5)
+        before, last = (dict(zip(header, line.split(","), strict=True)) for line in lines[-2:])
+        assert len(lines) > 500 and float(before["current_cmd_a"]) == pytest.approx(0.5)
+        assert float(last["current_cmd_a"]) == 0.0  # the stream ends on the 0 A the trip sent
         assert abs(math.degrees(float(last["theta_rad"]))) > 2.5
     else:
         assert summary["points"] == []  # the first frequency tripped: nothing measured, nothing invented
@@ -170,7 +173,8 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
             keep=kept.append,
         )
     assert rigs[0]._command == 0.0 and rigs[0].plant.state.current_a < 0.5
-    assert len(kept) == 1 and kept[0]["current_cmd_a"][-1] == pytest.approx(0.5) and len(kept[0]["time_s"]) > 500
+    assert len(kept) == 1 and kept[0]["current_cmd_a"][-2] == pytest.approx(0.5) and len(kept[0]["time_s"]) > 500
+    assert kept[0]["current_cmd_a"][-1] == 0.0  # the data ends on the safe state
 
 
 @pytest.mark.parametrize(

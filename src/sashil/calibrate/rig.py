@@ -20,7 +20,7 @@ import numpy as np
 from sashil.calibrate.plan import Step
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
-from sashil.experiments.drop_test import CONTROLLER_COLUMNS, run_drop_test
+from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
@@ -46,7 +46,8 @@ class StepResult:
 class StepStage:
     """The drop test's controller stage of a step: the constant current throughout, and after the
     release (``held`` False, set by the drop test) the road chirp's speed. A sample flagged with a
-    stuck encoder ends the step at once."""
+    stuck encoder ends the step at once. It keeps no data: the runner's stream records each
+    cycle's device time, ``seq`` and the road speed commanded."""
 
     def __init__(self, step: Step):
         self.step_def = step
@@ -54,18 +55,10 @@ class StepStage:
         self.current_cmd_a = step.current_a
         self.theta_dot_rad_s = self.z_hat = self.torque_hat_nm = self.torque_cmd_nm = math.nan
         self._t0_ns: int | None = None
-        # every cycle's host time, device time and sequence number: the record's time base
-        self.host_ns: list[int] = []
-        self.device_us: list[int] = []
-        self.seq: list[int] = []
-        self.road_cmd: list[float] = []  # the road wheel speed commanded in each cycle [rad/s]
         self._road_speed = 0.0
         self._cycle = 0
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
-        self.host_ns.append(t_ns)
-        self.device_us.append(sample.device_time_us)
-        self.seq.append(sample.seq)
         if sample.flags & FLAG_STUCK_SENSOR:
             raise StuckEncoderError(f"{self.step_def.name}: the rig reports a stuck encoder (the angle is frozen)")
         road = self.step_def.road
@@ -75,35 +68,37 @@ class StepStage:
             if self._cycle % ROAD_UPDATE_CYCLES == 0:
                 self._road_speed = road.speed((t_ns - self._t0_ns) * 1e-9)
             self._cycle += 1
-            self.road_cmd.append(self._road_speed)
             return RigCommand(self.step_def.current_a, self._road_speed)
-        self.road_cmd.append(self._road_speed)
         return RigCommand(self.step_def.current_a)
 
 
-def on_device_clock(columns: dict[str, np.ndarray], release_ns: int, stage: StepStage) -> dict[str, np.ndarray]:
+def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     """The record on the device's clock: each row's time is the device time of its sample (the
     instant the board sampled the encoders) minus the device time at the release, and its ``seq``
     is the sample's sequence number. Over a link the host's times carry the link's latency jitter
     (rows 0.03-11 ms apart at 1 kHz on a busy machine), which an output-error fit reads as
-    dynamics; a repeated sample (a link gap) is dropped. A road step adds the wheel speed commanded
-    in each row's cycle (``road_speed_cmd_rad_s``)."""
-    host = np.asarray(stage.host_ns, dtype=np.int64)
-    if host.size == 0 or columns["time_s"].size == 0:
+    dynamics; a repeated sample (a link gap) is dropped. A road step (``road``) adds the wheel
+    speed commanded in each row's cycle (``road_speed_cmd_rad_s``), all from the runner's stream."""
+    columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
+    stream = record.stream
+    if columns["time_s"].size == 0 or "device_time_us" not in stream or record.device_release_s is None:
         return columns
-    device = np.asarray(stage.device_us, dtype=np.float64) * 1e-6
-    rows_ns = release_ns + np.round(columns["time_s"] * 1e9).astype(np.int64)
-    index = np.clip(np.searchsorted(host, rows_ns), 1, host.size - 1)
-    index = np.where(np.abs(host[index - 1] - rows_ns) <= np.abs(host[index] - rows_ns), index - 1, index)
-    t = device[index] - float(np.interp(release_ns, host, device))
+    t = stream["device_time_us"] * 1e-6 - record.device_release_s
     keep = np.ones(t.size, dtype=bool)
     keep[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
     out = {k: v[keep] for k, v in columns.items()}
     out["time_s"] = t[keep]
-    out["seq"] = np.asarray(stage.seq, dtype=np.int64)[index][keep]
-    if stage.step_def.road is not None:
-        out["road_speed_cmd_rad_s"] = np.asarray(stage.road_cmd, dtype=np.float64)[index][keep]
+    if road:
+        out["road_speed_cmd_rad_s"] = held_speed(stream["road_speed_cmd_rad_s"])[keep]
     return out
+
+
+def held_speed(commanded: np.ndarray) -> np.ndarray:
+    """The road wheel's speed in each row: the last speed commanded (NaN: the cycle changed
+    nothing), 0 before the first command (the wheel starts at rest)."""
+    index = np.where(np.isfinite(commanded), np.arange(commanded.size), -1)
+    index = np.maximum.accumulate(index) if index.size else index
+    return np.where(index >= 0, commanded[np.maximum(index, 0)], 0.0)
 
 
 def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = None) -> StepResult:
@@ -114,8 +109,7 @@ def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = 
     record = run_drop_test(
         config, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path
     )
-    columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
-    columns = on_device_clock(columns, record.release_time_ns, stage)
+    columns = on_device_clock(record, step.road is not None)
     error = record.error
     counts = config["rig"]["encoder_counts_per_rev"]
     theta = columns.get("theta_rad", np.zeros(0))

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,6 +90,10 @@ class DropRecord:
     metrics: DropMetrics | None = None
     error: SashilError | None = None  # what ended the test early (the data up to it is kept)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: every stream column of the record's rows (time zero at the release)
+    stream: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the device's clock at the release [s] (between the samples around it)
+    device_release_s: float | None = None
 
 
 def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
@@ -118,7 +121,13 @@ def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: fl
 
 
 class DropTestPlan:
-    """Loop stage: constant current; wait for the hold; detect the release; record ``duration_s``."""
+    """Loop stage: constant current; wait for the hold; detect the release; run ``duration_s`` on.
+
+    The plan commands and decides; it keeps no copy of the data. Its :attr:`phase_code` (an index
+    of :data:`PHASES`) goes into every row of the runner's stream, and :func:`drop_record` derives
+    the record from that stream after the run (the release dated from the departure samples)."""
+
+    PHASES = ("wait-hold", "held", "record", "done")
 
     def __init__(
         self,
@@ -132,29 +141,43 @@ class DropTestPlan:
         self.notify = notify
         # optional loop stage (sashil.control) that commands the damper after the release
         self.controller = controller
+        #: the controller's per-cycle values go into the stream (the loop reads them after each step)
+        self.signal_names = CONTROLLER_COLUMNS if controller is not None else ()
         self.command = RigCommand(settings.current_a)
         self.resolution = TWO_PI / counts_per_rev
         self.phase = "wait-hold"
-        self._start_ns: int | None = None
+        self.phase_code = 0
+        self.start_ns: int | None = None
         self._still_since: int | None = None
         self._hold_sum = 0.0
         self._hold_count = 0
         self.hold_angle = settings.theta0_rad
         self.held_elsewhere = False  # a simulated operator held the arm away from theta0
-        self._recent: deque[tuple] = deque(maxlen=max(16, int(settings.rate_hz)))  # rows before the release
-        self.release_ns: int | None = None
-        self.release_estimated = False
-        self._capacity = int(math.ceil(settings.duration_s * settings.rate_hz)) + 8
-        # seq last: the sample's number on the wire, so a run over a link joins the emulator's truth
-        self.column_names = DROP_COLUMNS + (CONTROLLER_COLUMNS if controller is not None else ()) + ("seq",)
-        self._data: tuple[list[float], ...] = tuple([] for _ in self.column_names)
-        self._n = 0
+        #: when the plan saw the arm leave the hold (host ns); the release itself is dated after the run
+        self.detected_ns: int | None = None
+        self._end_ns: int | None = None
+
+    def __getattr__(self, name: str) -> Any:  # the controller's per-cycle signals (signal_names)
+        if name in CONTROLLER_COLUMNS and self.__dict__.get("controller") is not None:
+            return getattr(self.controller, name)
+        raise AttributeError(name)
+
+    def _enter(self, phase: str) -> None:
+        self.phase = phase
+        self.phase_code = self.PHASES.index(phase)
+
+    @property
+    def known_release_ns(self) -> int | None:
+        """The release instant when the backend plays the operator (it knows when it lets go)."""
+        if self.s.known_release_after_s is None or self.start_ns is None:
+            return None
+        return self.start_ns + round(self.s.known_release_after_s * 1e9)
 
     # the cycle -------------------------------------------------------------------------------
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
         theta = sample.theta_rad
-        if self._start_ns is None:
-            self._start_ns = t_ns
+        if self.start_ns is None:
+            self.start_ns = t_ns
             if self.notify is not None and self.s.known_release_after_s is None:
                 self.notify(
                     f"press the arm to {math.degrees(self.s.theta0_rad):g} deg (within "
@@ -166,17 +189,17 @@ class DropTestPlan:
             self.controller.held = self.phase != "record"  # the operator's hand is outside the model
             ctl = self.controller.step(sample, t_ns, dt_ns)
         if self.phase == "record":
-            out = self._record_cycle(t_ns, theta, sample.theta_road_rad, sample.current_a, sample.seq)
-            return out if out is None or ctl is None else ctl
-        self._recent.append(self._row(t_ns, theta, sample.theta_road_rad, sample.current_a, sample.seq))
+            assert self._end_ns is not None  # set at the release
+            if t_ns > self._end_ns:
+                self._enter("done")
+                return None
+            return self.command if ctl is None else ctl
         if self.phase == "wait-hold":
             self._wait_hold(t_ns, theta, sample.flags)
         elif self.phase == "held":
             if abs(theta - self.hold_angle) > self.s.release_threshold_rad:
                 self._released(t_ns)
-                if self.phase == "done":
-                    return None
-            elif (t_ns - self._start_ns) * 1e-9 > 2 * self.s.hold_timeout_s:
+            elif (t_ns - self.start_ns) * 1e-9 > 2 * self.s.hold_timeout_s:
                 raise DriverTimeoutError(
                     f"drop test: the arm was held at {math.degrees(self.hold_angle):.2f} deg but not released "
                     f"within {2 * self.s.hold_timeout_s:g} s"
@@ -208,7 +231,7 @@ class DropTestPlan:
             self._hold_sum += theta
             self._hold_count += 1
             if (t_ns - self._still_since) * 1e-9 >= self.s.hold_time_s:
-                self.phase = "held"
+                self._enter("held")
                 self.hold_angle = self._hold_sum / self._hold_count
                 if self.notify is not None and self.s.known_release_after_s is None:
                     self.notify(
@@ -217,8 +240,8 @@ class DropTestPlan:
                     )
         else:
             self._still_since = None
-        assert self._start_ns is not None  # step() sets it on the first cycle
-        if self.phase == "wait-hold" and (t_ns - self._start_ns) * 1e-9 > self.s.hold_timeout_s:
+        assert self.start_ns is not None  # step() sets it on the first cycle
+        if self.phase == "wait-hold" and (t_ns - self.start_ns) * 1e-9 > self.s.hold_timeout_s:
             raise DriverTimeoutError(
                 f"drop test: no steady hold within ±{math.degrees(self.s.hold_tolerance_rad):g} deg of "
                 f"{math.degrees(self.s.theta0_rad):g} deg for {self.s.hold_time_s:g} s within "
@@ -226,80 +249,57 @@ class DropTestPlan:
             )
 
     def _released(self, t_ns: int) -> None:
-        recent = list(self._recent)
-        assert self._start_ns is not None  # step() sets it on the first cycle
-        if self.s.known_release_after_s is not None:
-            self.release_ns = self._start_ns + round(self.s.known_release_after_s * 1e9)
-        else:
-            self.release_ns = estimate_release_ns(
-                [r[0] for r in recent], [r[1] for r in recent], self.hold_angle, self.resolution
-            )
-            self.release_estimated = True
-        self.phase = "record"
-        if self.notify is not None and self.release_estimated:  # a person let go (the backend knows when it did)
+        """The arm left the hold: record ``duration_s`` from the release (known, or at the latest now)."""
+        self.detected_ns = t_ns
+        known = self.known_release_ns
+        self._end_ns = (t_ns if known is None else known) + round(self.s.duration_s * 1e9)
+        self._enter("record")
+        if self.notify is not None and known is None:  # a person let go (the backend knows when it did)
             self.notify(
-                f"release detected: the arm left {math.degrees(self.hold_angle):.2f} deg; the release is dated "
-                f"{(t_ns - self.release_ns) * 1e-6:.1f} ms before the detection; recording {self.s.duration_s:g} s"
+                f"release detected: the arm left {math.degrees(self.hold_angle):.2f} deg; "
+                f"recording {self.s.duration_s:g} s"
             )
-        for row in recent:
-            if row[0] >= self.release_ns and self._record(row) is None:
-                break
 
-    def _row(self, t_ns: int, theta: float, road: float, current: float, seq: int) -> tuple:
-        """One cycle's values in column order (time still in host ns)."""
-        ctl = self.controller
-        if ctl is None:
-            return (t_ns, theta, road, current, self.s.current_a, seq)
-        return (
-            t_ns,
-            theta,
-            road,
-            current,
-            ctl.current_cmd_a,
-            ctl.theta_dot_rad_s,
-            ctl.z_hat,
-            ctl.torque_hat_nm,
-            ctl.torque_cmd_nm,
-            seq,
+
+#: how far before its detection the release is looked for in the stream (the departure samples)
+RELEASE_WINDOW_S = 1.0
+
+
+def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns: int) -> DropRecord:
+    """The record from the release on, derived from the runner's stream of every cycle.
+
+    The release is the backend's known instant, else the zero of the departure (see the module
+    docstring) in the stream's rows of the last :data:`RELEASE_WINDOW_S` before the detection.
+    Columns: :data:`DROP_COLUMNS` (+ :data:`CONTROLLER_COLUMNS` under a controller) and ``seq``,
+    time zero at the release; rows up to ``duration_s`` after it (the shutdown's 0 A row included
+    when the run ended earlier). ``stream`` keeps every stream column of those rows (device time,
+    road speed commanded) for a caller that needs them."""
+    names = DROP_COLUMNS + (CONTROLLER_COLUMNS if plan.controller is not None else ()) + ("seq",)
+    empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
+    if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
+        return DropRecord(empty, 0, False, plan.hold_angle)
+    t_ns = loop_start_ns + np.round(stream["time_s"] * 1e9).astype(np.int64)
+    release_ns = plan.known_release_ns
+    estimated = release_ns is None
+    if release_ns is None:
+        window = (t_ns >= plan.detected_ns - round(RELEASE_WINDOW_S * 1e9)) & (t_ns < plan.detected_ns)
+        release_ns = (
+            estimate_release_ns(
+                t_ns[window].tolist(), stream["theta_rad"][window].tolist(), plan.hold_angle, plan.resolution
+            )
+            if window.any()
+            else plan.detected_ns
         )
-
-    def _record_cycle(self, t_ns: int, theta: float, road: float, current: float, seq: int) -> RigCommand | None:
-        """Record this cycle (the common case, without building a row tuple)."""
-        if self.controller is not None:
-            return self._record(self._row(t_ns, theta, road, current, seq))
-        assert self.release_ns is not None  # recording starts at the release
-        time_s = (t_ns - self.release_ns) * 1e-9
-        if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
-            self.phase = "done"
-            return None
-        data = self._data
-        data[0].append(time_s)
-        data[1].append(theta)
-        data[2].append(road)
-        data[3].append(current)
-        data[4].append(self.s.current_a)
-        data[5].append(seq)
-        self._n += 1
-        return self.command
-
-    def _record(self, row: tuple) -> RigCommand | None:
-        assert self.release_ns is not None  # recording starts at the release
-        time_s = (row[0] - self.release_ns) * 1e-9
-        if time_s > self.s.duration_s + 1e-9 or self._n >= self._capacity:
-            self.phase = "done"
-            return None
-        data = self._data
-        data[0].append(time_s)
-        for column, value in zip(data[1:], row[1:], strict=True):
-            column.append(value)
-        self._n += 1
-        return self.command
-
-    def columns(self) -> dict[str, np.ndarray]:
-        return {
-            name: np.asarray(values, dtype=np.int64 if name == "seq" else float)
-            for name, values in zip(self.column_names, self._data, strict=True)
-        }
+    rows = (t_ns >= release_ns) & (t_ns - release_ns <= round(plan.s.duration_s * 1e9))
+    columns = {name: stream[name][rows] for name in names}
+    columns["time_s"] = (t_ns[rows] - release_ns) * 1e-9
+    columns["seq"] = columns["seq"].astype(np.int64)
+    record = DropRecord(columns, release_ns, estimated, plan.hold_angle)
+    record.stream = {name: values[rows] for name, values in stream.items()}
+    record.stream["time_s"] = columns["time_s"]
+    if "device_time_us" in stream:  # the device's clock at the release (between two samples)
+        record.device_release_s = float(np.interp(release_ns, t_ns, stream["device_time_us"] * 1e-6))
+    return record
 
 
 def default_clock(config: dict[str, Any]) -> Clock:
@@ -344,15 +344,24 @@ def run_drop_test(
     log = logging.getLogger("sashil")
     # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
     outcome = run_plan(
-        config, rig, plan, clock, data_path=data_path, rate_hz=settings.rate_hz, say=log.warning, note=log.debug
+        config,
+        rig,
+        plan,
+        clock,
+        data_path=data_path,
+        rate_hz=settings.rate_hz,
+        say=log.warning,
+        note=log.debug,
+        read_stream=True,
     )
     # whatever ended the test early, the rig is at 0 A, deactivated and closed
     error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
-    columns = plan.columns()
-    record = DropRecord(columns, plan.release_ns or 0, plan.release_estimated, plan.hold_angle, outcome.result)
+    record = drop_record(outcome.stream, plan, outcome.loop.start_ns)
+    record.loop = outcome.result
     record.error = error
+    columns = record.columns
     if outcome.link is not None:
         record.extra["link"] = outcome.link
     if outcome.realtime:

@@ -108,54 +108,45 @@ def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = 
     return [float(f) for f in np.linspace(f_start_hz, f_stop_hz, steps)]
 
 
-class SweepStage:
-    """Loop stage: run ``controller`` (any stage with the controller's attributes), command the
-    road speed, record the DESIGN.md columns (and the true damper torque on the simulated rig)."""
+#: the controller's per-cycle values a sweep records (the controller's attributes, DESIGN.md names)
+CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
-    def __init__(self, controller: Any, road: RoadProfile, capacity: int, rig: RigInterface | None = None):
+
+class SweepStage:
+    """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
+    road speed. It keeps no data: the runner's stream records every cycle, with the controller's
+    signals and the true damper torque of a simulated plant (``torque_true_nm``, NaN elsewhere)."""
+
+    signal_names = (*CONTROLLER_SIGNALS, "torque_true_nm")
+
+    def __init__(self, controller: Any, road: RoadProfile, rig: RigInterface | None = None):
         self.controller = controller
         self.road = road
         self.plant = getattr(rig, "plant", None)
-        self._data = np.full((capacity, len(SWEEP_COLUMNS)), np.nan)
-        self._seq = np.zeros(capacity, dtype=np.int64)
-        self._n = 0
+        self.torque_true_nm = math.nan
         self._t0: int | None = None
+
+    def __getattr__(self, name: str) -> Any:  # the controller's signals (NaN for a stage without them)
+        if name in CONTROLLER_SIGNALS:
+            return getattr(self.__dict__["controller"], name, math.nan)
+        raise AttributeError(name)
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
         if self._t0 is None:
             self._t0 = t_ns
         t = (t_ns - self._t0) * 1e-9
-        true_torque = self.plant.damper_torque() if self.plant is not None else math.nan
+        if self.plant is not None:
+            self.torque_true_nm = self.plant.damper_torque()
         cmd = self.controller.step(sample, t_ns, dt_ns)
         cmd.road_speed_rad_s = self.road(t)[1]
-        if self._n < self._data.shape[0]:
-            c = self.controller
-            row = self._data[self._n]
-            row[0], row[1], row[2], row[3], row[4] = (
-                t,
-                sample.theta_rad,
-                sample.theta_road_rad,
-                sample.current_a,
-                cmd.current_a,
-            )
-            row[5], row[6], row[7], row[8], row[9] = (
-                c.theta_dot_rad_s,
-                c.z_hat,
-                c.torque_hat_nm,
-                c.torque_cmd_nm,
-                true_torque,
-            )
-            self._seq[self._n] = sample.seq
-            self._n += 1
         return cmd
 
-    def columns(self) -> dict[str, np.ndarray]:
-        """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of the rows so far."""
-        data = self._data[: self._n]
-        return {
-            **{name: data[:, index].copy() for index, name in enumerate(SWEEP_COLUMNS)},
-            "seq": self._seq[: self._n].copy(),
-        }
+
+def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of a sweep's stream."""
+    if not stream:
+        return {name: np.zeros(0) for name in SWEEP_COLUMNS} | {"seq": np.zeros(0, dtype=np.int64)}
+    return {name: stream[name] for name in SWEEP_COLUMNS} | {"seq": stream["seq"].astype(np.int64)}
 
 
 RigFactory = Callable[[dict, RoadProfile], RigInterface]
@@ -191,18 +182,28 @@ def run_profile(
     """
     from sashil.experiments.drop_test import default_clock
 
-    rate = float(config["loop"]["rate_hz"])
     rig = (rig_factory or default_rig)(config, road)
-    stage = SweepStage(controller, road, int(math.ceil(duration_s * rate)) + 2, rig)
+    stage = SweepStage(controller, road, rig)
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
-    outcome = run_plan(config, rig, stage, clock, duration_s, data_path=data_path, say=log.warning, note=log.debug)
+    outcome = run_plan(
+        config,
+        rig,
+        stage,
+        clock,
+        duration_s,
+        data_path=data_path,
+        say=log.warning,
+        note=log.debug,
+        read_stream=True,
+    )
+    columns = sweep_columns(outcome.stream)
     if keep is not None:
-        keep(stage.columns())
+        keep(columns)
     if outcome.error is not None:
         raise outcome.error
     outcome.raise_stop()
-    return stage.columns()
+    return columns
 
 
 def ac_rms(x: np.ndarray) -> float:

@@ -3,7 +3,8 @@
 Hot path (the loop thread): ``row = recorder.begin_row()`` gives a preallocated list from a ring
 of ``capacity`` rows, the cycle fills it in place, ``recorder.commit_row()`` publishes it. Nothing
 is allocated, nothing blocks: when the writer falls ``capacity`` rows behind, rows are dropped and
-counted (``rows_dropped``), never waited for.
+counted (``rows_dropped``), never waited for. On simulated time (``lossless``), where no deadline
+can be missed, the loop waits for the writer instead, so the stream holds every row.
 
 Writer thread: formats committed rows as CSV text in small slices and appends them to the file
 with ``os.write`` on an ``O_APPEND`` descriptor, each write holding whole lines only, at least
@@ -41,12 +42,14 @@ class Recorder:
         columns: Sequence[str],
         capacity: int = 65536,
         flush_interval_s: float = 0.25,
+        lossless: bool = False,
     ):
         if not 0 < flush_interval_s <= 1.0:
             raise ValueError("flush_interval_s must be in (0, 1] s")
         self.path = Path(path)
         self.columns = tuple(columns)
         self.capacity = int(capacity)
+        self.lossless = bool(lossless)
         self.flush_interval_ns = int(flush_interval_s * 1e9)
         width = len(self.columns)
         self._ring: list[list[Any]] = [[0.0] * width for _ in range(self.capacity)]
@@ -99,6 +102,9 @@ class Recorder:
     def begin_row(self) -> list[Any]:
         """The row to fill this cycle (a preallocated list; a scratch row when the ring is full)."""
         head = self._head
+        if head - self._tail >= self.capacity and self.lossless:
+            while head - self._tail >= self.capacity and self.error is None and self._thread is not None:
+                time.sleep(POLL_S / 10)  # simulated time: wait for the writer rather than drop a row
         if head - self._tail < self.capacity:
             self._slot_ok = True
             return self._ring[head % self.capacity]

@@ -17,23 +17,28 @@ when, what to measure. The runner owns everything around it, the same for ``run`
   deactivate (which waits for the device to confirm it), close;
 * the common part of ``summary.json`` (:meth:`RunOutcome.summary`).
 
-Plans never record their own files: what a verb writes beyond the stream (a drop test's record
-from the release, a sweep's transmissibility) it derives from the plan's in-memory result after
-the run.
+Plans command; one stream records. A plan keeps no copy of the data: what a verb writes beyond
+the stream (a drop test's record from the release, a sweep's transmissibility, a calibration
+step on the device's clock) it derives after the run from the stream's columns
+(``read_stream=True``: :attr:`RunOutcome.stream`), whose rows carry the sample's ``seq`` and device
+time, the road speed commanded and the plan's ``phase``. Without a ``data_path`` the stream goes
+to a temporary file that is read back and removed.
 """
 
 from __future__ import annotations
 
 import shutil
 import sys
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DiskSpaceError, Stopped, exit_code_of
+from sashil.errors import DataFileError, DiskSpaceError, Stopped, exit_code_of
 from sashil.models.hysteresis import compile_kernels
+from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
 from sashil.runtime.clock import Clock
@@ -84,6 +89,9 @@ class RunOutcome:
     realtime: dict[str, Any] = field(default_factory=dict)
     recording: dict[str, Any] | None = None
     link: dict[str, Any] | None = None
+    #: the stream's columns (``run_plan(read_stream=True)``): time from the loop's start, one row per
+    #: cycle and the shutdown's safe-state row; empty when the run recorded nothing
+    stream: dict[str, Any] = field(default_factory=dict)
 
     @property
     def result(self) -> LoopResult:
@@ -139,6 +147,7 @@ def run_plan(
     realtime: bool = True,
     live: Any = None,
     stop: StopFlag | None = None,
+    read_stream: bool = False,
 ) -> RunOutcome:
     """Run ``plan`` on ``rig`` (see the module docstring); never raises for what ends the loop.
 
@@ -147,17 +156,22 @@ def run_plan(
     report, one line per step (default ``say``). ``realtime``: apply ``loop.rt`` on the real clock. ``live``: the rerun live
     view. ``stop``: a stop flag of the caller's (a calibration plan shares one across its runs); the
     signals are routed to it for the run. A disk too full for the run raises DiskSpaceError before
-    the rig is touched.
+    the rig is touched. ``read_stream``: read the stream back into :attr:`RunOutcome.stream` (a
+    temporary file holds it when there is no ``data_path``).
     """
     loop_cfg = config["loop"]
     rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
     columns = record_columns(plan)
     recorder = None
+    scratch = None
+    if data_path is None and read_stream:
+        scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-")
+        data_path = Path(scratch.name) / CYCLES_FILE
+    real_clock = not getattr(clock, "virtual", False)
     if data_path is not None:
         data_path = Path(data_path)
         check_disk(data_path.parent, len(columns), rate, duration_s)
-        recorder = Recorder(data_path, columns)
-    real_clock = not getattr(clock, "virtual", False)
+        recorder = Recorder(data_path, columns, lossless=not real_clock)
     rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
@@ -202,6 +216,14 @@ def run_plan(
                         error = err
                         loop.result.exit_status = "error"
                         loop.result.error = str(err)
+    stream: dict[str, Any] = {}
+    if read_stream and data_path is not None:
+        try:
+            stream = read_data_csv(data_path, required=(), min_rows=0)
+        except DataFileError:  # a stream the disk lost: what ended the run says why
+            stream = {}
+    if scratch is not None:
+        scratch.cleanup()
     return RunOutcome(
         loop,
         error,
@@ -209,4 +231,5 @@ def run_plan(
         realtime=rt.report() if rt is not None else {},
         recording=recorder.summary() if recorder is not None else None,
         link=rig.link_stats() if capabilities_of(rig).link else None,
+        stream=stream,
     )
