@@ -209,8 +209,9 @@ def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transp
     emu.stop()
     data = np.genfromtxt(out / "data.csv", delimiter=",", names=True)
     truth = read_truth_csv(truth_path)
-    # on the real clock (the link paces it): 3000 cycles over at least the 1 s ramp + 2 s
-    assert len(data) == 3000 and data["time_s"][-1] >= 2.9
+    # on the real clock (the link paces it): 3000 cycles over at least the 1 s ramp + 2 s, then the
+    # shutdown's 0 A row
+    assert len(data) == 3000 + 1 and data["time_s"][-1] >= 2.9 and data["current_cmd_a"][-1] == 0.0
     late = data["time_s"] >= 1.5  # after the ramp: the road wheel turns +-1 deg at 1.5 Hz
     road_deg = np.degrees(data["theta_road_rad"][late])
     assert 0.8 <= (road_deg.max() - road_deg.min()) / 2 <= 1.2
