@@ -1,4 +1,4 @@
-"""Issue 13: bad input is one line naming what and where, exit 2, nothing written, nothing energised."""
+"""Bad input is one line naming what and where, exit 2, nothing written, nothing energised."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``sashil calibrate`` on the simulated rig: the plan, the folder it writes, bad input (issue 16)."""
+"""``sashil calibrate`` on the simulated rig: the plan, the folder it writes, bad input."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``sashil calibrate`` over a real link: the emulator in its own process behind a pty (issue 16).
+"""``sashil calibrate`` over a real link: the emulator in its own process behind a pty.
 
 Real processes on the real clock (pyserial); they wait on real time with generous timeouts, and
 the host rides through link gaps of up to 0.5 s (a shared CI machine pauses processes)."""
@@ -100,7 +100,7 @@ def calibrate(tmp_path: Path, link: str) -> tuple[subprocess.CompletedProcess, P
 
 
 def test_a_device_reporting_a_stuck_encoder_trips_the_plan_with_one_line(tmp_path, emulator):
-    # the board flags the frozen encoder: the safety supervisor trips at once (issue 13), exit 3
+    # the board flags the frozen encoder: the safety supervisor trips at once, exit 3
     emu = emulator("--stuck-sensor-after", "0")
     done, out = calibrate(tmp_path, emu.link)
     assert done.returncode == 3, done.stderr

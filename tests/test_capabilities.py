@@ -1,4 +1,4 @@
-"""Backends declare what they can do (issue 13): the runner and the verbs ask, they do not probe."""
+"""Backends declare what they can do: the runner and the verbs ask, they do not probe."""
 
 from __future__ import annotations
 

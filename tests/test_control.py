@@ -1,4 +1,4 @@
-"""Issue 5: estimator, observer, inverse, laws, controller stage, registry errors, plant mismatch."""
+"""Estimator, observer, inverse, laws, controller stage, registry errors, plant mismatch."""
 
 from __future__ import annotations
 

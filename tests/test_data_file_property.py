@@ -1,4 +1,4 @@
-"""Issue 13, bad input: any CSV content through what ``identify`` and ``calibrate`` read.
+"""Bad input: any CSV content through what ``identify`` and ``calibrate`` read.
 
 Every file either loads into finite, strictly time-ordered records or is refused with one
 DataFileError line naming the file: never a traceback, a NaN in a record, or a hang."""

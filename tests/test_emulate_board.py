@@ -1,4 +1,4 @@
-"""``sashil emulate --board``: the firmware's C logic or the Python board (issue 17)."""
+"""``sashil emulate --board``: the firmware's C logic or the Python board."""
 
 from __future__ import annotations
 

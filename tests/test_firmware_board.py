@@ -1,4 +1,4 @@
-"""Issue 17 (started): the board's session logic in C, driven through its hardware interface from Python.
+"""The board's session logic in C, driven through its hardware interface from Python.
 
 The C board gets protocol frames made by serial_codec.py; what it sends is decoded with the Python
 stream decoder; the hardware interface is a set of Python callbacks (encoders, current sense, coil,

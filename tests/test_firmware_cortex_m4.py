@@ -1,5 +1,5 @@
 """``make -C drivers/firmware cortex-m4``: the board's firmware for an STM32F4-class Cortex-M4F, built
-with the zig C compiler of the ``ziglang`` package, checked in the ELF it produces (issue 17)."""
+with the zig C compiler of the ``ziglang`` package, checked in the ELF it produces."""
 
 from __future__ import annotations
 

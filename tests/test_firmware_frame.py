@@ -1,4 +1,4 @@
-"""Issue 17 (started): the board's serial framing in C gives the same bytes as serial_codec.py."""
+"""The board's serial framing in C gives the same bytes as serial_codec.py."""
 
 from __future__ import annotations
 

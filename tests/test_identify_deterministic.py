@@ -1,4 +1,4 @@
-"""The fit's answer depends on the data only; n above 1 is integrated safely; stale kernels are dropped (issue 16)."""
+"""The fit's answer depends on the data only; n above 1 is integrated safely; stale kernels are dropped."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Identification recovers known, non-seed rig parameters from simulated drop tests (issue 6)."""
+"""Identification recovers known, non-seed rig parameters from simulated drop tests."""
 
 from __future__ import annotations
 

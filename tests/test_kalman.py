@@ -1,4 +1,4 @@
-"""Issue 14: the rig-model Kalman estimator, the road feed-forward and the estimator fallback."""
+"""The rig-model Kalman estimator, the road feed-forward and the estimator fallback."""
 
 from __future__ import annotations
 
@@ -162,6 +162,6 @@ def test_estimator_settings_are_checked_like_the_rest_of_the_config(tmp_path):
 
 
 def test_the_gains_are_ready_before_the_first_sample():
-    # the first real-time cycle must not solve a Riccati equation (issue 13: first cycle on time)
+    # the first real-time cycle must not solve a Riccati equation (first cycle on time)
     ctl = make_controller("torque-tracking", default_config())
     assert ctl.estimator._counts_per_rev == 4096 and len(ctl.estimator._gain) == 6

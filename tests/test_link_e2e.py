@@ -52,7 +52,7 @@ class Emulator:
 
 @pytest.fixture(params=BOARDS)
 def emulator(tmp_path, request):
-    """``sashil emulate`` with each board: the firmware's C logic and the Python one (issue 17)."""
+    """``sashil emulate`` with each board: the firmware's C logic and the Python one."""
     started = []
 
     def start(transport, *flags):

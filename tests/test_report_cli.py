@@ -1,4 +1,4 @@
-"""CLI polish (issue 7): every verb's --help ends with an example, rig verbs share option names,
+"""CLI polish: every verb's --help ends with an example, rig verbs share option names,
 --quiet silences progress, and the recording options are refused cleanly when misused."""
 
 from __future__ import annotations

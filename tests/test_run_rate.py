@@ -1,4 +1,4 @@
-"""Issue 13: --rate reaches the device (Configure) and the controller, and is checked before anything runs."""
+"""--rate reaches the device (Configure) and the controller, and is checked before anything runs."""
 
 from __future__ import annotations
 

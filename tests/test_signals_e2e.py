@@ -1,4 +1,4 @@
-"""Issue 13: SIGINT, SIGTERM and SIGHUP stop every rig verb cleanly: data kept, summary written, exit 130."""
+"""SIGINT, SIGTERM and SIGHUP stop every rig verb cleanly: data kept, summary written, exit 130."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 5: road profiles, stepped-sine transmissibility, the ``sashil sweep`` verb."""
+"""Road profiles, stepped-sine transmissibility, the ``sashil sweep`` verb."""
 
 from __future__ import annotations
 

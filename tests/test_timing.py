@@ -1,4 +1,4 @@
-"""Loop timing in constant memory (issue 13): rings of the last cycles, log histograms for the quantiles."""
+"""Loop timing in constant memory: rings of the last cycles, log histograms for the quantiles."""
 
 from __future__ import annotations
 

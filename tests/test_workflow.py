@@ -1,4 +1,4 @@
-"""Issue 15: --set overrides, the summary.json schema, sashil.load_run, --format parquet/mat, --road."""
+"""--set overrides, the summary.json schema, sashil.load_run, --format parquet/mat, --road."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The interface board's logic in portable C (issue 17), built for the host and loaded with ctypes.
+"""The interface board's logic in portable C, built for the host and loaded with ctypes.
 
 So far: the serial framing of protocol v1 (``sashil_frame.c``: CRC-16, COBS, frame encode/decode, a
 stream decoder), tested byte for byte against :mod:`sashil.drivers.serial_codec`, and the board's

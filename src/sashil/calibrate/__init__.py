@@ -1,4 +1,4 @@
-"""``sashil calibrate``: from an unknown damper to a validated model, over any link (issue 16).
+"""``sashil calibrate``: from an unknown damper to a validated model, over any link.
 
 Modules: :mod:`.plan` (the runs to make, from the config's ``calibrate`` section), :mod:`.rig`
 (running one step on the rig: the one adapter to the experiment code), :mod:`.analysis` (fit,

@@ -1,4 +1,4 @@
-"""``sashil calibrate``: from an unknown damper to a validated model, over any link (issue 16)."""
+"""``sashil calibrate``: from an unknown damper to a validated model, over any link."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``sashil sweep``: road-side excitation through the resonance, chirp or stepped sine (issue 5)."""
+"""``sashil sweep``: road-side excitation through the resonance, chirp or stepped sine."""
 
 from __future__ import annotations
 

@@ -233,7 +233,7 @@ MISMATCH = Section(
         "angle_noise_rad": Field("float?", None, low=0.0, high=1.0, doc="plant angle noise (null: rig's)"),
         "current_noise_a": Field("float?", None, low=0.0, high=1.0, doc="plant current-sensor noise (null: rig's)"),
     },
-    doc="how the simulated plant differs from the model the controller uses (issue 5)",
+    doc="how the simulated plant differs from the model the controller uses",
 )
 
 SWEEP = Section(
@@ -255,7 +255,7 @@ SWEEP = Section(
         "duration_s": Field("float", 30.0, low=0.0, low_open=True, doc="chirp length, ramp not included (--duration)"),
         "stepped": Field("bool", False, doc="stepped sine instead of a chirp (--stepped)"),
     },
-    doc="road-side excitation: chirp and stepped sine (issue 5)",
+    doc="road-side excitation: chirp and stepped sine",
 )
 
 CALIBRATE = Section(
@@ -287,7 +287,7 @@ CALIBRATE = Section(
         ),
         "profile_n": Field("bool", True, doc="profile the Bouc-Wen exponent n after the fit (--no-profile: false)"),
     },
-    doc="the plan of `sashil calibrate`: drops and road runs to fit, and held-out runs to validate (issue 16)",
+    doc="the plan of `sashil calibrate`: drops and road runs to fit, and held-out runs to validate",
 )
 
 SCHEMA = {

@@ -25,7 +25,7 @@ class BoucWenObserver:
         self.params = params
         self.hysteresis = BoucWenZ.from_params(params)
         # compile (or load from numba's cache) the z-update now, not in the first real-time cycle:
-        # over a link that first cycle would otherwise stall about 0.5 s (issue 13)
+        # over a link that first cycle would otherwise stall about 0.5 s
         self.hysteresis.advance(0.0, 1e-9)
         self.z = float(z0)
         self.torque_nm = 0.0

@@ -1,4 +1,4 @@
-"""Identification of the rig's damper models from recorded runs (issue 6).
+"""Identification of the rig's damper models from recorded runs.
 
 Modules: :mod:`.kernels` (compiled simulators), :mod:`.data` (records and their checks),
 :mod:`.rig_models` (per-model parameters, bounds, regressors), :mod:`.fit` (global + local

@@ -1,7 +1,7 @@
-"""The simplest loop stage: a constant coil current (the ``passive`` controller of ``sashil run``).
+"""The simplest loop stage: a constant coil current (the built-in ``passive`` law as ``sashil run`` runs it).
 
-Used until (and beside) the controllers of :mod:`sashil.control`: the damper runs passive at a
-fixed current, 0 A by default. The command object is created once and returned every cycle.
+The damper runs passive at a fixed current, 0 A by default, with no estimator or observer in the
+cycle (the passive law needs none). The command object is created once and returned every cycle.
 """
 
 from __future__ import annotations
