@@ -104,7 +104,7 @@ class Run:
 
     @cached_property
     def data(self) -> dict[str, np.ndarray]:
-        """Column name -> numpy array (DESIGN.md columns: ``time_s``, ``theta_rad``, ...)."""
+        """Column name -> numpy array (docs/architecture.md columns: ``time_s``, ``theta_rad``, ...)."""
         source = self.data_file
         if source is None:
             if len(self.runs) > 1 or (self.runs and self.runs[0] is not self):

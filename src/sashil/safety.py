@@ -13,7 +13,7 @@ Two jobs, both once per cycle and free of I/O (the loop does the I/O):
   the optional **slew limit** |di/dt| <= ``safety.slew_a_per_s`` over the measured period. These
   never stop the run; the clamped cycles are counted.
 
-MR dampers fail passive, so the safe state is 0 A (DESIGN.md); the shutdown path writes it
+MR dampers fail passive, so the safe state is 0 A (docs/architecture.md); the shutdown path writes it
 directly and is not slew limited.
 """
 

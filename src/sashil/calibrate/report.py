@@ -1,7 +1,7 @@
 """What a calibration hands back: ``params.yaml``, ``report.md`` and its PNG plots.
 
 The parameter file is the one ``sashil identify`` writes (:func:`sashil.identify.report.param_document`,
-DESIGN.md shape) with a ``calibration`` block beside it. Intervals in the report are +-2 standard
+docs/architecture.md shape) with a ``calibration`` block beside it. Intervals in the report are +-2 standard
 errors from the Jacobian, widened by the residuals' correlation (:mod:`sashil.calibrate.analysis`).
 """
 

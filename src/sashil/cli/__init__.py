@@ -28,7 +28,7 @@ from sashil.errors import (
     Stopped,
 )
 
-#: verb -> module (DESIGN.md fixed verbs)
+#: verb -> module (docs/architecture.md fixed verbs)
 VERBS: dict[str, str] = {
     "drop-test": "sashil.cli.drop_test",
     "run": "sashil.cli.run",

@@ -4,7 +4,7 @@ The defaults *are* the default config: the simulated rig with the seed parameter
 seed 001 (Iskandarani & Karimi 2011, section 8) and a 1 kHz loop. ``configs/sim.yaml`` spells the
 same values out with comments (a test keeps the two equal).
 
-Each issue's section lives here so that a config file has one place that says what it accepts.
+Every section lives here so that a config file has one place that says what it accepts.
 """
 
 from __future__ import annotations

@@ -31,9 +31,9 @@ from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
 
-#: columns of a drop test's data.csv (DESIGN.md names)
+#: columns of a drop test's data.csv (docs/architecture.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
-#: added when a controller acts after the release (its per-cycle values, DESIGN.md names)
+#: added when a controller acts after the release (its per-cycle values, docs/architecture.md names)
 CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 

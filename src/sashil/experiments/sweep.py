@@ -34,7 +34,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.runner import run_plan
 from sashil.stats import nrmse
 
-#: data.csv columns of a sweep (DESIGN.md names; torque_true_nm only on the simulated rig), then ``seq``
+#: data.csv columns of a sweep (docs/architecture.md names; torque_true_nm only on the simulated rig), then ``seq``
 SWEEP_COLUMNS = (
     "time_s",
     "theta_rad",
@@ -108,7 +108,7 @@ def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = 
     return [float(f) for f in np.linspace(f_start_hz, f_stop_hz, steps)]
 
 
-#: the controller's per-cycle values a sweep records (the controller's attributes, DESIGN.md names)
+#: the controller's per-cycle values a sweep records (the controller's attributes, docs/architecture.md names)
 CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 

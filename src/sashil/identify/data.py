@@ -1,6 +1,6 @@
 """Recorded runs as identification records, with the checks identification needs.
 
-A record is what one ``data.csv`` (DESIGN.md columns) tells about the rig: time, relative angle,
+A record is what one ``data.csv`` (docs/architecture.md columns) tells about the rig: time, relative angle,
 coil current, and when present the road-side angle and an input torque. Bad input is one line
 naming the file and the problem (:class:`~sashil.errors.DataFileError`, exit 2).
 """

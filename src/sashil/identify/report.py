@@ -21,7 +21,7 @@ def ranked(results: Sequence[FitResult]) -> list[FitResult]:
 
 
 def param_document(result: FitResult, delta: float | None = None) -> dict:
-    """The parameter file (DESIGN.md shape) with uncertainties and fit statistics beside ``params``.
+    """The parameter file (docs/architecture.md shape) with uncertainties and fit statistics beside ``params``.
 
     ``delta`` re-expresses a Bouc-Wen result with that delta (z scale) instead of the unit bound.
     """

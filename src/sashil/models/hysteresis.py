@@ -8,7 +8,7 @@ Seed 001 (Iskandarani & Karimi 2011), eqs. 9-12 and 15-17::
 
 The seed prints ``z|z|^n`` in the first term; we use the standard ``z|z|^(n-1) = sign(z)|z|^n``.
 
-Numerics (DESIGN.md, research/peers_boucwen.md section 3). The law is rate-independent: dividing
+Numerics (docs/architecture.md, the model). The law is rate-independent: dividing
 eq. 17 by theta_dot gives an ODE in the angle,
 
     dz/dtheta = delta - |z|^n * (beta + gamma * sign(dtheta) * sign(z)),
@@ -44,7 +44,7 @@ Value = TypeVar("Value", float, np.ndarray)
 
 @dataclass(frozen=True)
 class BoucWenParams:
-    """Parameters of the Bouc-Wen rig model (DESIGN.md names; seed 001 section 8 values)."""
+    """Parameters of the Bouc-Wen rig model (docs/architecture.md names; seed 001 section 8 values)."""
 
     J: float = BOUC_WEN_SEED["J"]
     k: float = BOUC_WEN_SEED["k"]

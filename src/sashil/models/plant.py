@@ -7,7 +7,7 @@ torque. Rewritten in the relative angle the plant integrates:
 
     J * theta_ddot = -k*theta - c(i)*theta_dot - alpha(i)*z + T_in - J*theta1_ddot
 
-Besides the seed model the plant has what a real rig adds (DESIGN.md, issue "Foundation"): a
+Besides the seed model the plant has what a real rig adds (docs/architecture.md): a
 first-order coil lag from commanded to actual current, the current limits [0, i_max], and (in the
 sensor model of the simulated backend, not here) encoder quantisation and noise.
 

@@ -7,7 +7,7 @@ from typing import Any
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
-#: model name -> its parameter symbols (seed 001 names; DESIGN.md parameter-file shape)
+#: model name -> its parameter symbols (seed 001 names; docs/architecture.md parameter-file shape)
 MODEL_PARAMS: dict[str, tuple[str, ...]] = {
     "bouc-wen": tuple(BoucWenParams.__dataclass_fields__),
     "dahl": ("J", "k", "c1", "c2", "kwa", "kwb", "rho"),

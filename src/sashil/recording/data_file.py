@@ -1,4 +1,4 @@
-"""``data.csv``: the column-per-signal data file of a run (DESIGN.md fixed column names).
+"""``data.csv``: the column-per-signal data file of a run (docs/architecture.md fixed column names).
 
 Pure functions from columns to text and back; the reader checks what identification and reports
 rely on and fails with one line naming the file and the problem.
@@ -15,7 +15,7 @@ import numpy as np
 
 from sashil.errors import DataFileError
 
-#: DESIGN.md: the columns every data.csv has, then the ones written when known
+#: docs/architecture.md: the columns every data.csv has, then the ones written when known
 REQUIRED_COLUMNS = ("time_s", "theta_rad", "current_a", "current_cmd_a")
 OPTIONAL_COLUMNS = (
     "theta_road_rad",

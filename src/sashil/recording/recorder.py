@@ -9,7 +9,7 @@ can be missed, the loop waits for the writer instead, so the stream holds every 
 Writer thread: formats committed rows as CSV text in small slices and appends them to the file
 with ``os.write`` on an ``O_APPEND`` descriptor, each write holding whole lines only, at least
 every ``flush_interval_s`` (default 0.25 s, and always within 1 s). So after a crash or SIGKILL
-the file parses up to the last write (DESIGN.md data.csv columns; floats as ``repr``, integers as
+the file parses up to the last write (docs/architecture.md data.csv columns; floats as ``repr``, integers as
 ``str``, as :func:`sashil.recording.data_file.format_rows` writes them).
 
 The writer shares the GIL with the loop. On the real clock the loop publishes

@@ -1,4 +1,4 @@
-"""The run folder of DESIGN.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots.
+"""The run folder of docs/architecture.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots.
 
 A run folder is created only after every input has been checked, so a bad argument leaves nothing
 behind; files are written under a temporary name and renamed, so a reader never sees half a file.

@@ -1,4 +1,4 @@
-"""The unit of a data column, read from its name (DESIGN.md: every column that carries a unit names it)."""
+"""The unit of a data column, read from its name (docs/architecture.md: every column that carries a unit names it)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Clocks for the loop: integer nanoseconds from one monotonic source (DESIGN.md, Time).
+"""Clocks for the loop: integer nanoseconds from one monotonic source (docs/architecture.md, Time).
 
 ``RealClock`` sleeps to a margin before the deadline and spins the rest; ``VirtualClock`` jumps
 straight to the deadline, so simulated runs are deterministic and faster than real time.

@@ -41,7 +41,7 @@ from sashil.runtime.timing import FOLD, TimingStats
 
 log = logging.getLogger("sashil.loop")
 
-#: the columns the loop records for every cycle (DESIGN.md names first), then the stage's
+#: the columns the loop records for every cycle (docs/architecture.md names first), then the stage's
 #: signals (see ``stage_signals``), then what plans derive their records from: the sample's ``seq``
 #: and device time, the road speed the cycle commanded (NaN: none), the plan's ``phase`` (its
 #: ``phase_code``: a drop test's hold, release, ...; 0 for a stage without phases) and the safety
@@ -49,7 +49,7 @@ log = logging.getLogger("sashil.loop")
 BASE_COLUMNS = ("time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad")
 TAIL_COLUMNS = ("seq", "device_time_us", "road_speed_cmd_rad_s", "phase", "trip_code")
 NAN = float("nan")
-#: DESIGN.md data.csv columns a stage may provide as per-cycle attributes
+#: docs/architecture.md data.csv columns a stage may provide as per-cycle attributes
 STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
 
 
@@ -85,7 +85,7 @@ class LoopResult:
 
 def stage_signals(stage: object) -> tuple[str, ...]:
     """The per-cycle values a stage exposes for recording: ``stage.signal_names`` when it says,
-    else those of its attributes named like the DESIGN.md columns (``theta_dot_rad_s``, ``z_hat``,
+    else those of its attributes named like the docs/architecture.md columns (``theta_dot_rad_s``, ``z_hat``,
     ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step``."""
     names = getattr(stage, "signal_names", None)
     if names is None:

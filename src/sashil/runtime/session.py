@@ -5,7 +5,7 @@
 always writes ``summary.json`` at the end, whatever ended the loop (a signal, a trip, an error).
 The rig is already in the safe state (0 A, deactivated, closed) when the summary is written.
 
-summary.json (DESIGN.md fixed keys first): ``exit_status`` (ok | stopped | safety_trip |
+summary.json (docs/architecture.md fixed keys first): ``exit_status`` (ok | stopped | safety_trip |
 deadline_missed | error), ``timing`` ({rate_hz, cycles, missed_deadlines, lateness_us,
 compute_us} each with p50/p99/p99_9/max, plus overruns, read_us, write_us, cycle_us), ``trips``,
 then ``exit_code``, ``error``, ``stop_reason``, ``safety``, ``realtime`` (each set-up step's

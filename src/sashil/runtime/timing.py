@@ -9,7 +9,7 @@ quantile read from them is within 0.6 % of the exact one), so a run of any lengt
 is 432 million cycles — keeps the same memory: the rings (2 MB) and five histograms (200 kB).
 Nothing is allocated per cycle.
 
-``summary()`` gives the ``timing`` block of ``summary.json`` with the fixed keys of DESIGN.md
+``summary()`` gives the ``timing`` block of ``summary.json`` with the fixed keys of docs/architecture.md
 (``rate_hz``, ``cycles``, ``missed_deadlines``, ``lateness_us``, ``compute_us``) and, beside them,
 ``read_us``, ``write_us`` and ``cycle_us`` (read+compute+write): p50/p99/p99.9 exact while the run
 fits in the ring, from the histograms beyond it (``quantiles_from``: ``exact`` or ``histogram``);
@@ -151,7 +151,7 @@ class TimingStats:
         return out
 
     def summary(self) -> dict[str, Any]:
-        """The ``timing`` block of summary.json (DESIGN.md fixed keys plus read/write/cycle)."""
+        """The ``timing`` block of summary.json (docs/architecture.md fixed keys plus read/write/cycle)."""
         return {
             "rate_hz": self.rate_hz,
             "cycles": self.cycles,
