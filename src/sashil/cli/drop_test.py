@@ -23,11 +23,12 @@ from sashil.cli.common import (
 )
 from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.drivers import on_virtual_clock, open_rig
-from sashil.errors import ConfigError, SashilError
+from sashil.errors import ConfigError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, check_theta0, run_drop_test
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
 
 HELP = "drop test: hold the arm at theta0, release, record the free oscillation at constant current(s)"
@@ -102,15 +103,6 @@ def resolve_drops(args: argparse.Namespace, config: dict) -> tuple[float, list[f
     return float(theta0), currents, duration
 
 
-#: what a loop run reports about itself: at the top of summary.json when the folder holds one run
-RUN_LEVEL_KEYS = ("timing", "link", "realtime", "can_trace")
-
-
-def _run_level(entry: dict) -> dict:
-    """The :data:`RUN_LEVEL_KEYS` of one run's entry (null for a folder of several runs: ``{}``)."""
-    return {key: entry.get(key) for key in RUN_LEVEL_KEYS}
-
-
 def result_line(metrics: DropMetrics, duration_s: float) -> str:
     """One drop's period, first peaks, damping ratio and settling, as printed after it."""
     period = "-" if metrics.period_s is None else f"{metrics.period_s:.3f} s"
@@ -139,15 +131,22 @@ def run(args: argparse.Namespace) -> int:
     live = open_rerun(args, columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     folder.write_config(config)
-    several = len(currents) > 1
-    runs, overlay = [], []
-    exit_status = "ok"
-    failure: SashilError | None = None
     law = config["controller"]["law"]
+    runs = RunSet(
+        folder,
+        "drop-test",
+        {
+            "driver": config["driver"]["name"],
+            "controller": law if law != "passive" else "passive (constant current per run)",
+            "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
+        },
+        several=len(currents) > 1,
+    )
+    overlay = []
     for current in currents:
         label = f"{law} (from {current:g} A until the release)" if law != "passive" else f"passive {current:g} A"
         say(args, f"drop test from {theta0_deg:g} deg, {label} ...")
-        target = RunFolder.create(folder.path / _label(current), "drop-test") if several else folder
+        target = runs.folder_for(_label(current))
         rig = open_rig(config)
         trace = start_can_trace(args, rig, target.path)
         try:
@@ -163,18 +162,17 @@ def run(args: argparse.Namespace) -> int:
             )
         finally:
             trace_stats = trace.close() if trace is not None else None
-        if several:  # the sub-folder's config reruns its one drop
+        if runs.several:  # the sub-folder's config reruns its one drop
             target.write_config({**config, "drop_test": {**config["drop_test"], "currents_a": [current]}})
         target.write_data(record.columns)
         assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
-        status = "ok" if record.error is None else record.loop.exit_status
         write_formats(
             args,
             target.path,
             config,
             "drop-test",
             record.columns,
-            exit_status=status,
+            exit_status=ending(record.error)["exit_status"],
             current_a=current,
             controller=label,
         )
@@ -185,41 +183,24 @@ def run(args: argparse.Namespace) -> int:
             )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
-        metrics = record.metrics.as_dict()
-        entry = {
-            "current_a": current,
-            "controller": label,
-            "theta0_deg": theta0_deg,
-            "hold_angle_deg": math.degrees(record.hold_angle_rad),
-            "release_estimated": record.release_estimated,
-            "folder": "." if not several else _label(current),
-            **metrics,
-            "timing": record.loop.timing.summary()
-            if record.loop is not None and record.loop.timing is not None
-            else None,
-            "trips": record.loop.trips if record.loop is not None else [],
-            "link": record.extra.get("link"),
-            "realtime": record.extra.get("realtime"),
-            "exit_status": status,
-            "error": None if record.error is None else str(record.error),
-            "can_trace": trace_stats,
-        }
-        runs.append(entry)
-        if several:
-            target.write_summary(
-                {
-                    "exit_status": entry["exit_status"],
-                    "verb": "drop-test",
-                    "driver": config["driver"]["name"],
-                    "controller": label,
-                    **_run_level(entry),
-                    "trips": entry["trips"],
-                    "runs": [{**entry, "folder": "."}],
-                }
-            )
-        if record.error is not None:
-            failure = record.error
-            exit_status = entry["exit_status"]
+        entry = runs.add(
+            _label(current),
+            {
+                "current_a": current,
+                "controller": label,
+                "theta0_deg": theta0_deg,
+                "hold_angle_deg": math.degrees(record.hold_angle_rad),
+                "release_estimated": record.release_estimated,
+                **record.metrics.as_dict(),
+                "timing": record.loop.timing.summary() if record.loop.timing is not None else None,
+                "trips": record.loop.trips,
+                "link": record.extra.get("link"),
+                "realtime": record.extra.get("realtime"),
+                "can_trace": trace_stats,
+            },
+            record.error,
+        )
+        if runs.failed:
             overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
             break
         overlay.append({**entry, **record.columns, "label": label})
@@ -235,21 +216,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if live is not None:
         live.close()
-    driver = config["driver"]
-    clock = "virtual" if on_virtual_clock(config) else "real"  # timing is simulated on the virtual clock
-    summary = {
-        "exit_status": exit_status,
-        "verb": "drop-test",
-        "driver": driver["name"],
-        "controller": law if law != "passive" else "passive (constant current per run)",
-        "clock": clock,
-        **_run_level(runs[0] if len(runs) == 1 else {}),
-        "runs": runs,
-    }
-    if failure is not None:
-        summary.update(error=str(failure), exit_code=failure.exit_code)
-    folder.write_summary(summary)
+    runs.finish()
     print(f"run folder: {folder.path} (plot {plot.name})", file=sys.stderr)
-    if failure is not None:
-        raise failure  # one line and its exit code from the CLI; the data up to it is on disk
+    if runs.error is not None:
+        raise runs.error  # one line and its exit code from the CLI; the data up to it is on disk
     return 0

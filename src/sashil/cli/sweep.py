@@ -26,7 +26,7 @@ from sashil.cli.common import (
 )
 from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.control.registry import make_controller
-from sashil.errors import ConfigError, SashilError, status_of
+from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import (
     SWEEP_COLUMNS,
     ac_rms,
@@ -39,6 +39,7 @@ from sashil.experiments.sweep import (
 from sashil.identify.progress import Progress
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_set import RunSet
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.stats import nrmse
 
@@ -162,14 +163,29 @@ def run(args: argparse.Namespace) -> int:
                 trace_box.append(trace)
         return rig
 
+    stepped = config["sweep"]["stepped"]
+    runs = RunSet(
+        folder,
+        "sweep",
+        {"driver": config["driver"]["name"], "controller": label, "mode": "stepped" if stepped else "chirp"},
+        several=stepped,
+    )
+    extra: dict[str, Any] = {}
+    failure: SashilError | None = None
     try:
-        summary = _sweep(args, config, name, label, folder, live, rig_factory)
+        _sweep(args, config, name, label, folder, live, rig_factory, runs, extra)
+    except SashilError as err:
+        if err.exit_code == ConfigError.exit_code:
+            raise  # bad input (a port that cannot be opened): nothing is written, the folder goes
+        failure = err
     finally:
         if trace_box:
-            trace_stats = trace_box[0].close()
-    if trace_box:
-        summary["can_trace"] = trace_stats
-    _write_summary(folder, summary)
+            extra["can_trace"] = trace_box[0].close()
+    runs.finish(**extra)
+    if failure is not None:
+        kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
+        print(f"run folder: {folder.path} (the sweep ended early; {kept})", file=sys.stderr)
+        raise failure
     print(f"run folder: {folder.path}")
     return 0
 
@@ -179,43 +195,43 @@ def _freq_label(f_hz: float) -> str:
     return f"f{f_hz:.3f}Hz"
 
 
-def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
-    """Run the stepped sine or the chirp of ``config['sweep']``; returns the summary."""
+def _sweep(args, config, name, label, folder, live, rig_factory, runs: RunSet, extra: dict[str, Any]) -> None:
+    """Run the stepped sine or the chirp of ``config['sweep']``: each run's entry into ``runs``, the
+    sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
     sweep = config["sweep"]
     f_start, f_stop, duration = sweep["f_start_hz"], sweep["f_stop_hz"], sweep["duration_s"]
     if sweep["stepped"]:
         freqs = frequencies(f_start, f_stop, sweep["steps"], sweep["spacing"])
         bar = Progress(len(freqs), "stepped sine", enabled=not args.quiet)
         points = []
-        kept: list[dict] = []
 
-        subs: dict[float, RunFolder] = {}
+        extra["points"] = []
 
         def stream_to(f: float) -> Path:
             """Each frequency in its own sub-folder (a run folder of its own), its cycles streamed there."""
-            subs[f] = RunFolder.create(folder.path / _freq_label(f), "sweep")
-            subs[f].write_config(config)
-            return subs[f].file(CYCLES_FILE)
+            sub = runs.folder_for(_freq_label(f))
+            sub.write_config(config)
+            return sub.file(CYCLES_FILE)
 
         def keep(f: float, cols: dict) -> None:
-            sub = subs[f]
+            sub = runs.folder_for(_freq_label(f))
             sub.write_data(cols)
             write_formats(args, sub.path, config, "sweep", cols, exit_status="ok", controller=label, frequency_hz=f)
-            kept.append({"folder": _freq_label(f), "frequency_hz": f})
-            sub.write_summary(
-                {"exit_status": "ok", "driver": config["driver"]["name"], "controller": label, "mode": "stepped",
-                 "runs": [{"folder": ".", "frequency_hz": f}]}
-            )  # fmt: skip
 
         try:
             for f in freqs:  # one frequency at a time, for the progress bar
-                points += stepped_sine(
-                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
-                )
+                try:
+                    point = stepped_sine(
+                        config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
+                    )[0]
+                except SashilError as err:  # the frequencies done so far are kept
+                    if err.exit_code != ConfigError.exit_code:
+                        runs.add(_freq_label(f), {"frequency_hz": f}, err)
+                    raise
+                points.append(point)
+                extra["points"].append(point.__dict__)
+                runs.add(_freq_label(f), dict(point.__dict__))
                 bar.advance(1, f"{f:.3g} Hz")
-        except SashilError as err:  # the frequencies done so far are kept
-            _write_failed(folder, err, {"mode": "stepped", "controller": label, "points": [p.__dict__ for p in points]})
-            raise
         finally:
             bar.close()
         lines = ["frequency_hz,body_rms_rad,road_rms_rad,transmissibility,observer_nrmse,clipped_cycles"]
@@ -231,16 +247,10 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
         _plot(folder, points, label, config)
         integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
         print(f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})")
-        summary: dict[str, Any] = {
-            "exit_status": "ok",
-            "driver": config["driver"]["name"],
-            "mode": "stepped",
-            "controller": label,
-            "road": f"stepped sine {f_start:g}-{f_stop:g} Hz, {len(freqs)} steps, {sweep['amplitude_deg']:g} deg",
-            "integrated_body_rms_rad": integrated,
-            "points": [p.__dict__ for p in points],
-            "runs": [{**entry, **p.__dict__} for entry, p in zip(kept, points, strict=True)],
-        }
+        extra.update(
+            road=f"stepped sine {f_start:g}-{f_stop:g} Hz, {len(freqs)} steps, {sweep['amplitude_deg']:g} deg",
+            integrated_body_rms_rad=integrated,
+        )
     else:
         amplitude = math.radians(sweep["amplitude_deg"])
         controller = make_controller(name, config)
@@ -256,7 +266,8 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
                 data_path=folder.file(CYCLES_FILE),  # every cycle streamed as it runs
             )
         except SashilError as err:
-            _write_failed(folder, err, {"mode": "chirp", "controller": label})
+            if err.exit_code != ConfigError.exit_code:
+                runs.add("chirp", {}, err)
             raise
         write_formats(args, folder.path, config, "sweep", cols, exit_status="ok", controller=label)
         from sashil.recording.labels import controller_label
@@ -276,43 +287,19 @@ def _sweep(args, config, name, label, folder, live, rig_factory) -> dict:
             live.log_columns(shown)
             live.close()
         body = cols["theta_rad"] + cols["theta_road_rad"]
+        body_rms, body_peak = ac_rms(body), float(max(abs(body.max()), abs(body.min())))
         summary = {
-            "exit_status": "ok",
-            "driver": config["driver"]["name"],
-            "mode": "chirp",
-            "controller": label,
             "road": f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {sweep['amplitude_deg']:g} deg",
-            "body_rms_rad": ac_rms(body),
+            "body_rms_rad": body_rms,
             "road_rms_rad": ac_rms(cols["theta_road_rad"]),
-            "body_peak_rad": float(max(abs(body.max()), abs(body.min()))),
+            "body_peak_rad": body_peak,
             "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
             "clipped_cycles": int(getattr(controller, "clip_count", 0)),
             "controller_stats": controller.stats() if hasattr(controller, "stats") else None,
         }
         print(
             f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}): body RMS "
-            f"{math.degrees(summary['body_rms_rad']):.4f} deg, peak {math.degrees(summary['body_peak_rad']):.3f} deg"
+            f"{math.degrees(body_rms):.4f} deg, peak {math.degrees(body_peak):.3f} deg"
         )
-    return summary
-
-
-def _write_summary(folder: RunFolder, summary: dict) -> None:
-    """summary.json with NaN as null (JSON has no NaN)."""
-
-    def finite(items: dict) -> dict:
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in items.items()}
-
-    summary = finite(summary)
-    if "points" in summary:
-        summary["points"] = [finite(p) for p in summary["points"]]
-    folder.write_summary(summary)
-
-
-def _write_failed(folder: RunFolder, err: SashilError, summary: dict) -> None:
-    """The summary of a sweep that ended early (a link fault, a safety trip); the error is raised on.
-    Bad input (a port that cannot be opened) writes nothing: the folder is removed as the error is reported."""
-    if err.exit_code == ConfigError.exit_code:
-        return
-    _write_summary(folder, {"exit_status": status_of(err), "error": str(err), **summary})
-    kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
-    print(f"run folder: {folder.path} (the sweep ended early; {kept})", file=sys.stderr)
+        runs.add("chirp", {})
+        extra.update(summary)
