@@ -21,6 +21,7 @@ from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
 
 #: times a step is repeated when a link gap (a host pause that lost samples) cuts its record short
@@ -66,8 +67,7 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
         "current_a": s.current_a,
         "duration_s": s.duration_s,
         "release_estimated": res.release_estimated,
-        "exit_status": "ok" if res.error is None else "error",
-        "error": None if res.error is None else str(res.error),
+        **{key: value for key, value in ending(res.error).items() if key != "exit_code"},
         "link": res.extra.get("link"),
         "gap_repeats": res.extra.get("gap_repeats", 0),
     }
@@ -115,7 +115,8 @@ def calibrate_rig(
     check_plan(plan, source)
     folder = RunFolder.create(out, "calibrate")
     folder.write_config(config)
-    runs = RunFolder.create(folder.path / "runs", "calibrate")
+    runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
+    runs = RunSet(folder, "calibrate", {"driver": config["driver"]["name"]}, sub_root=runs_folder.path)
     say(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
         f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
@@ -123,10 +124,9 @@ def calibrate_rig(
     counts_per_rev = config["rig"]["encoder_counts_per_rev"]
     results: list[StepResult] = []
     started = time.perf_counter()
-    failure: SashilError | None = None
     for number, step in enumerate(plan.steps, start=1):
         say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
-        target = RunFolder.create(runs.path / step.name, "calibrate")
+        target = runs.folder_for(step.name)
         attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
         try:
             result = run_step(config, step, _stream(target, 1))
@@ -175,26 +175,18 @@ def calibrate_rig(
         results.append(result)
         if result.columns.get("time_s") is not None and result.columns["time_s"].size:
             target.write_data(result.columns)
-        row = _summary_row(result)
-        target.write_summary({**row, "exit_status": row["exit_status"], "metrics": result.extra.get("metrics")})
-        if result.error is not None:
-            failure = result.error
+        runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
+        if runs.failed:
             break
     rig_s = time.perf_counter() - started
     rows = [_summary_row(r) for r in results]
-    if failure is not None:
-        folder.write_summary(
-            {
-                "exit_status": "error",
-                "exit_code": failure.exit_code,
-                "error": str(failure),
-                "rig_time_s": round(rig_s, 2),
-                "runs": rows,
-                "note": "the plan was cut short: the runs recorded so far are kept; nothing was fitted",
-            }
+    if runs.error is not None:
+        runs.finish(
+            rig_time_s=round(rig_s, 2),
+            note="the plan was cut short: the runs recorded so far are kept; nothing was fitted",
         )
         say(f"the plan stopped at {results[-1].step.name}; the runs so far are in {folder.path}")
-        raise failure
+        raise runs.error
     say(f"rig time {rig_s:.0f} s; fitting ...")
     cal = analyse(
         [r for r in results if r.step.role == "fit"],
@@ -217,19 +209,15 @@ def calibrate_rig(
         rig_s,
         virtual=on_virtual_clock(config),
     )
-    folder.write_summary(
-        {
-            "exit_status": "ok",
-            "model": cal.best.model,
-            "inertia_given": inertia is not None,
-            "held_out_nrmse": {v.name: v.nrmse for v in cal.validations},
-            "held_out_nrmse_mean": None if math.isnan(cal.validation_nrmse) else cal.validation_nrmse,
-            "fit_nrmse": dict(zip(cal.best.record_names, cal.best.nrmse, strict=True)),
-            "rig_time_s": round(rig_s, 2),
-            "fit_s": round(cal.fit_s, 2),
-            "identifiability_s": round(cal.analysis_s, 2),
-            "convergence": cal.best.convergence,
-            "runs": rows,
-        }
+    runs.finish(
+        model=cal.best.model,
+        inertia_given=inertia is not None,
+        held_out_nrmse={v.name: v.nrmse for v in cal.validations},
+        held_out_nrmse_mean=None if math.isnan(cal.validation_nrmse) else cal.validation_nrmse,
+        fit_nrmse=dict(zip(cal.best.record_names, cal.best.nrmse, strict=True)),
+        rig_time_s=round(rig_s, 2),
+        fit_s=round(cal.fit_s, 2),
+        identifiability_s=round(cal.analysis_s, 2),
+        convergence=cal.best.convergence,
     )
     return Outcome(folder.path, params_path, report_path, cal, rig_s)
