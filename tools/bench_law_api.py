@@ -86,20 +86,15 @@ def main() -> int:
         try:
             for k, sample in enumerate(samples):
                 t = k * 1_000_000
-                if k & 1:  # alternate which runs first, so neither always meets a warm cache
-                    a = clock()
-                    plug_in.step(sample, t, 1_000_000)
-                    b = clock()
-                    built_in.step(sample, t, 1_000_000)
-                    c = clock()
-                    t_plug[k], t_built[k] = b - a, c - b
-                else:
-                    a = clock()
-                    built_in.step(sample, t, 1_000_000)
-                    b = clock()
-                    plug_in.step(sample, t, 1_000_000)
-                    c = clock()
-                    t_built[k], t_plug[k] = b - a, c - b
+                # alternate which runs first, so neither always meets a warm cache
+                (first, t_first), (second, t_second) = (
+                    ((plug_in, t_plug), (built_in, t_built)) if k & 1 else ((built_in, t_built), (plug_in, t_plug))
+                )
+                a = clock()
+                first.step(sample, t, 1_000_000)
+                b = clock()
+                second.step(sample, t, 1_000_000)
+                t_first[k], t_second[k] = b - a, clock() - b
         finally:
             gc.enable()
     assert built_in.current_cmd_a == plug_in.current_cmd_a  # the same law, so the same command
