@@ -287,3 +287,39 @@ def test_a_failing_law_in_a_drop_test_ends_at_zero_amps_with_exit_1_and_keeps_th
 
     data = sashil.load_run(out).runs[0].data
     assert 0.05 < data["time_s"][-1] - data["time_s"][0] < 0.5  # kept up to the failing cycle, from the release
+
+
+def test_a_law_clipped_in_most_cycles_gets_one_warning_with_the_share(capsys, tmp_path):
+    code = main(
+        [
+            "run",
+            "--controller",
+            "skyhook",
+            "--set",
+            "controller.c_sky=10",
+            "--duration",
+            "1",
+            "--out",
+            str(tmp_path / "o"),
+            "-q",
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 0
+    warnings = [line for line in err.splitlines() if "outside the damper's feasible band" in line]
+    assert len(warnings) == 1 and "law 'skyhook'" in warnings[0] and " of 1000 cycles (" in warnings[0], err
+    quiet = main(
+        [
+            "run",
+            "--controller",
+            "skyhook",
+            "--set",
+            "controller.c_sky=0.5",
+            "--duration",
+            "1",
+            "--out",
+            str(tmp_path / "p"),
+            "-q",
+        ]
+    )
+    assert quiet == 0 and "feasible band" not in capsys.readouterr().err

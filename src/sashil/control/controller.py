@@ -129,6 +129,21 @@ class Controller:
     def name(self) -> str:
         return self.law.name
 
+    #: a law clipped in more than this share of its cycles gets one warning at the end of the run
+    CLIP_WARN_SHARE = 0.5
+
+    def clip_warning(self) -> str | None:
+        """One line when the law asked for torques outside the feasible band in most cycles (more,
+        or less, or another sign than the damper can give at that instant), else None."""
+        clipped = self.inverse.clip_count
+        if not self.cycles or clipped <= self.CLIP_WARN_SHARE * self.cycles:
+            return None
+        return (
+            f"law {self.law.name!r} asked for a torque outside the damper's feasible band in {clipped} of "
+            f"{self.cycles} cycles ({100 * clipped / self.cycles:.0f} %): the damper gave the nearest torque it "
+            "could, so the run shows the band's edge more than the law (summary.json controller_stats.clipped_cycles)"
+        )
+
     def law_failed(self, what: str) -> LawError:
         """The error that ends the run when the law fails this cycle (``what``: the exception or value)."""
         origin = f" ({self.origin})" if self.origin else ""

@@ -216,6 +216,11 @@ def run_plan(
                         error = err
                         loop.result.exit_status = "error"
                         loop.result.error = str(err)
+    controller = plan if hasattr(plan, "clip_warning") else getattr(plan, "controller", None)
+    clipped = getattr(controller, "clip_warning", None)
+    clip_line = clipped() if callable(clipped) else None
+    if clip_line is not None:
+        say(clip_line)
     stream: dict[str, Any] = {}
     if read_stream and data_path is not None:
         try:
