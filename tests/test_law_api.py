@@ -311,3 +311,28 @@ def test_a_law_clipped_in_most_cycles_gets_one_warning_with_the_share(capsys, tm
     inside = ["--controller", "torque-tracking"]  # T* inside the band by construction
     quiet = main(["run", *inside, "--duration", "1", "--out", str(tmp_path / "p"), "-q"])
     assert quiet == 0 and "feasible band" not in capsys.readouterr().err
+
+
+def test_a_refused_change_leaves_the_law_as_it_was():
+    class Bounded(Law):
+        name = "bounded"
+        a = Param(1.0)
+        b = Param(2.0)
+
+        def parameters_changed(self) -> None:
+            if self.a > self.b:
+                raise ConfigError("controller.a: expected a <= b")
+            self.gap = self.b - self.a
+
+        def torque(self, state):
+            return self.gap
+
+    law = Bounded()
+    with pytest.raises(ConfigError, match="expected a <= b"):
+        law.set_parameters({"a": 5.0})
+    assert (law.a, law.b, law.gap) == (1.0, 2.0, 1.0)
+    with pytest.raises(ConfigError, match="controller.b: expected a number"):
+        law.set_parameters({"b": "x"})
+    assert law.b == 2.0
+    law.set_parameters({"a": 1.5})
+    assert law.gap == 0.5
