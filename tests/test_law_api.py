@@ -331,7 +331,7 @@ def test_a_refused_change_leaves_the_law_as_it_was():
     with pytest.raises(ConfigError, match="expected a <= b"):
         law.set_parameters({"a": 5.0})
     assert (law.a, law.b, law.gap) == (1.0, 2.0, 1.0)
-    with pytest.raises(ConfigError, match="controller.b: expected a number"):
+    with pytest.raises(ConfigError, match=r"controller\.b: expected a number"):
         law.set_parameters({"b": "x"})
     assert law.b == 2.0
     law.set_parameters({"a": 1.5})

@@ -201,7 +201,8 @@ class Law:
         """Check and set parameters (``controller.<name>`` in messages), then ``parameters_changed()``.
 
         ``defaults``: also set every parameter not in ``values`` to its default (a required one
-        missing is an error)."""
+        missing is an error). A value refused by the checks or by ``parameters_changed()`` leaves
+        the law with the values it had (a running law can be retuned safely)."""
         declared = self.params()
         for key in values:
             if key not in declared:
@@ -209,14 +210,27 @@ class Law:
                 raise ConfigError(
                     f"controller.{key}: law {self.name!r} has no parameter {key} (its parameters: {known})"
                 )
+        checked: dict[str, Any] = {}
         for key, param in declared.items():
             if key in values:
-                self.__dict__[key] = param.field.check(values[key], f"controller.{key}")
+                checked[key] = param.field.check(values[key], f"controller.{key}")
             elif defaults:
                 if param.required:
                     raise ConfigError(missing_parameter(self.name, param))
-                self.__dict__[key] = param.field.check(param.default, f"controller.{key}")
-        self.parameters_changed()
+                checked[key] = param.field.check(param.default, f"controller.{key}")
+        before = {key: self.__dict__[key] for key in checked if key in self.__dict__}
+        self.__dict__.update(checked)
+        try:
+            self.parameters_changed()
+        except BaseException:  # refused: the law keeps the values it had
+            for key in checked:
+                if key in before:
+                    self.__dict__[key] = before[key]
+                else:
+                    self.__dict__.pop(key, None)
+            if before:
+                self.parameters_changed()
+            raise
 
     def parameter_values(self) -> dict[str, Any]:
         """The current value of every parameter (what a run folder's config records)."""
