@@ -40,6 +40,7 @@ VERBS: dict[str, str] = {
     "report": "sashil.cli.report",
     "laws": "sashil.cli.laws",
     "doctor": "sashil.cli.doctor",
+    "replay": "sashil.cli.replay",
 }
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
