@@ -224,6 +224,7 @@ class LinkRig(RigInterface):
         self.counts_per_rev = version.counts_per_rev
         self._send_msg(Configure(s.rate_hz, s.watchdog_ms, s.pacing))
         status = self._expect(Status, "Status (answer to Configure)")
+        self.last_status = status
         if status.fault_code:
             raise DriverError(
                 f"{self.describe()}: the device refused rate {s.rate_hz} Hz / watchdog {s.watchdog_ms} ms "
@@ -248,6 +249,17 @@ class LinkRig(RigInterface):
             for _, msg in self._receive(remaining):
                 if isinstance(msg, kind):
                     return msg
+
+    def wait_for_status(self, timeout_s: float) -> Status | None:
+        """Listen without sending until the device sends a Status (a watchdog trip reports one) or
+        ``timeout_s`` passes; samples that arrive meanwhile are counted as usual."""
+        deadline = time.monotonic() + timeout_s
+        while (remaining := deadline - time.monotonic()) > 0:
+            before = self.stats["status_frames"]
+            self._take_samples(self._receive(remaining))
+            if self.stats["status_frames"] > before:
+                return self.last_status
+        return None
 
     def activate(self) -> None:
         if self.state is not RigState.CONFIGURED:

@@ -9,6 +9,7 @@ are those of :mod:`sashil.drivers.serial_codec`; the session (handshake, pacing,
 from __future__ import annotations
 
 import errno
+import os
 import select
 from typing import Any
 
@@ -32,6 +33,26 @@ def open_reason(err: BaseException, port: str) -> str:
     return error_reason(err)
 
 
+def request_low_latency(port: Any) -> str:
+    """Ask a serial device for low-latency mode (the kernel's ASYNC_LOW_LATENCY, through pyserial's
+    ``set_low_latency_mode``; Linux only): "on", or why it is not."""
+    setter = getattr(port, "set_low_latency_mode", None)
+    if setter is None or not isinstance(port, serial.Serial):
+        return f"not available ({type(port).__module__.rsplit('.', 1)[-1]} port, not a local serial device)"
+    if os.path.realpath(str(port.port)).startswith("/dev/pts/"):
+        return "not available on a pseudo-terminal"
+    try:
+        setter(True)
+    except NotImplementedError:
+        return "not available on this platform"
+    except (ValueError, OSError) as err:
+        reason = (
+            getattr(err, "strerror", None) or error_reason(err).rsplit("] ", 1)[-1]
+        )  # pyserial: "... [Errno N] text"
+        return f"not available on this device ({reason})"
+    return "on"
+
+
 class SerialRig(LinkRig):
     """The rig over a serial link (``driver.name: serial``)."""
 
@@ -47,6 +68,8 @@ class SerialRig(LinkRig):
         self._port: Any = None
         self._fd: int | None = None
         self._heard: bytearray | None = None  # the bytes received during the handshake (what answered)
+        #: what asking the port for low-latency mode gave ("on", or why not), for the link summary
+        self.low_latency = "not asked (port not open)"
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SerialRig:
@@ -57,6 +80,9 @@ class SerialRig(LinkRig):
 
     def codec_counters(self) -> dict[str, int]:
         return self.decoder.counters.as_dict()
+
+    def link_stats(self) -> dict[str, Any]:
+        return {**super().link_stats(), "low_latency": self.low_latency}
 
     # link ------------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -76,6 +102,7 @@ class SerialRig(LinkRig):
             self._fd = self._port.fileno()
         except Exception:
             self._fd = None
+        self.low_latency = request_low_latency(self._port)
         try:
             self._port.reset_input_buffer()
         except (serial.SerialException, OSError) as err:

@@ -39,6 +39,8 @@ VERBS: dict[str, str] = {
     "emulate": "sashil.cli.emulate",
     "report": "sashil.cli.report",
     "laws": "sashil.cli.laws",
+    "doctor": "sashil.cli.doctor",
+    "replay": "sashil.cli.replay",
 }
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
