@@ -39,6 +39,7 @@ VERBS: dict[str, str] = {
     "emulate": "sashil.cli.emulate",
     "report": "sashil.cli.report",
     "laws": "sashil.cli.laws",
+    "compare": "sashil.cli.compare",
 }
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
