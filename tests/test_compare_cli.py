@@ -4,7 +4,10 @@ a failing law's row saying why, parallel runs equal to sequential ones, and bad 
 from __future__ import annotations
 
 import csv
+import re
+import shlex
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -90,3 +93,14 @@ def test_bad_input_is_one_line_exit_2_nothing_run(tmp_path, capsys, extra, key):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and not out.exists()
     assert len(err) == 1 and key in err[0]
+
+
+def test_the_readme_compare_example_runs(tmp_path):
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("#### The laws a lab compares", 1)[1].split("\n#### ", 1)[0]
+    (command,) = re.findall(r"```sh\n(sashil compare .*?)\n```", section, flags=re.S)
+    argv = shlex.split(command)
+    assert argv[0] == "sashil"
+    assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
+    assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}
+    assert len(rows(tmp_path / "cmp")) == 6  # 4 laws + the two passive references
