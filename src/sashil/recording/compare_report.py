@@ -13,7 +13,7 @@ from sashil.recording.plots import BESIDE, pyplot, save_figure
 
 __all__ = ["best_passive", "plot_compare", "write_compare_md", "write_metrics_csv"]
 
-COLUMNS = ("law", "status", *METRICS, "vs_best_passive_pct", "wall_s")
+COLUMNS = ("law", "status", *METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
 HEADINGS = {
     "rms_accel_rad_s2": "RMS θ̈2 [rad/s²]",
     "rms_theta_deg": "RMS θ [deg]",
@@ -21,6 +21,7 @@ HEADINGS = {
     "peak_current_a": "peak i [A]",
     "coil_energy_j": "coil energy [J]",
     "vs_best_passive_pct": "θ̈2 vs best passive",
+    "share_of_bound_pct": "share of the bound",
     "wall_s": "wall [s]",
 }
 
@@ -31,24 +32,38 @@ def best_passive(results: Sequence[LawResult]) -> LawResult | None:
     return min(passive, key=lambda r: r.metrics["rms_accel_rad_s2"], default=None)
 
 
-def _rows(results: Sequence[LawResult]) -> list[dict[str, Any]]:
+def _rows(results: Sequence[LawResult], bound_gain_pct: float) -> list[dict[str, Any]]:
+    """Each law's values; its gain over the best passive run [%], and that gain as a share of the
+    bound's gain over the best constant damping [%] (NaN without a bound above passive)."""
     best = best_passive(results)
     rows = []
     for r in results:
-        gain = math.nan
+        gain = share = math.nan
         if best is not None and r.ok:
             gain = 100.0 * (1.0 - r.metrics["rms_accel_rad_s2"] / best.metrics["rms_accel_rad_s2"])
-        rows.append({"law": r.label, "status": r.status, **r.metrics, "vs_best_passive_pct": gain, "wall_s": r.wall_s})
+            if bound_gain_pct > 0.0:
+                share = 100.0 * gain / bound_gain_pct
+        rows.append(
+            {
+                "law": r.label,
+                "status": r.status,
+                **r.metrics,
+                "vs_best_passive_pct": gain,
+                "share_of_bound_pct": share,
+                "wall_s": r.wall_s,
+            }
+        )
     return rows
 
 
-def write_metrics_csv(path: Path, results: Sequence[LawResult]) -> Path:
+def write_metrics_csv(path: Path, results: Sequence[LawResult], bound_gain_pct: float = math.nan) -> Path:
     """One row per law: its status, the metrics (empty when it did not finish), the comfort gain
-    over the best passive setting [%] (positive: better) and its wall time."""
+    over the best passive setting [%] (positive: better), that gain as a share of the optimal
+    bound's [%] and its wall time."""
     with open(path, "w", newline="", encoding="utf-8") as out:
         writer = csv.writer(out)
         writer.writerow(COLUMNS)
-        for row in _rows(results):
+        for row in _rows(results, bound_gain_pct):
             writer.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in (row[c] for c in COLUMNS)])
     return path
 
@@ -57,20 +72,26 @@ def _cell(key: str, value: Any) -> str:
     if isinstance(value, float):
         if math.isnan(value):
             return "–"
-        if key == "vs_best_passive_pct":
+        if key in ("vs_best_passive_pct", "share_of_bound_pct"):
             return f"{value:+.1f} %"
         return f"{value:.4g}"
     return str(value)
 
 
-def write_compare_md(path: Path, results: Sequence[LawResult], header: dict[str, str], notes: Sequence[str]) -> Path:
+def write_compare_md(
+    path: Path,
+    results: Sequence[LawResult],
+    header: dict[str, str],
+    notes: Sequence[str],
+    bound_gain_pct: float = math.nan,
+) -> Path:
     """The comparison as a Markdown table, with what ran (``header``) and how to read it (``notes``)."""
     lines = ["# sashil compare", ""]
     lines += [f"- **{key}:** {value}" for key, value in header.items()]
-    keys = (*METRICS, "vs_best_passive_pct", "wall_s")
+    keys = (*METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
     lines += ["", "| law | " + " | ".join(HEADINGS[k] for k in keys) + " | status |"]
     lines.append("|---|" + "---:|" * len(keys) + "---|")
-    for row in _rows(results):
+    for row in _rows(results, bound_gain_pct):
         lines.append(f"| {row['law']} | " + " | ".join(_cell(k, row[k]) for k in keys) + f" | {row['status']} |")
     lines += ["", *(f"- {note}" for note in notes), ""]
     path.write_text("\n".join(lines), encoding="utf-8")
