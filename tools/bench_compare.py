@@ -12,6 +12,9 @@ alternating signs, the coil lag 10 % slower), on ISO 8608 class C at the rig's s
   acceleration (the ``sashil compare`` metric);
 - each law's RMS arm acceleration as a gain over it (positive: better), worst and median over the
   dampers. Goal (clipped-optimal and skyhook-add): >= 10 % on every damper.
+- the optimal bound (:mod:`sashil.experiments.optimal_bound`, the simulated plant's viscous envelope,
+  the road known in advance): how far it lies below the best constant damping, and each law's gain
+  as a share of it.
 - each law's own compute per cycle (its torque/current call on recorded states), median and p99.
   Goal: <= 10 us median.
 - ``sashil compare`` with 8 laws x 30 s on the simulated rig, in 1 and 2 processes. Goal: <= 30 s.
@@ -45,6 +48,10 @@ from sashil.control.law_api import LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
 from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.optimal_bound import BoundResult, optimal_bound
+from sashil.experiments.road_option import parse_road
+from sashil.models.hysteresis import BoucWenParams
+from sashil.models.mismatch import plant_config
 
 #: the laws measured, with the --set parameters they need
 LAWS: dict[str, list[str]] = {
@@ -80,6 +87,15 @@ def jobs_for(base: dict[str, Any], currents: list[float], duration: float) -> li
     for law, sets in LAWS.items():
         jobs.append(LawJob(law, apply_overrides(base, [f"controller.law={law}", *sets]), "iso8608:C", duration))
     return jobs
+
+
+def bound_of(config: dict[str, Any], duration: float) -> BoundResult:
+    """The optimal bound on the simulated plant's envelope (the truth, mismatch applied) on the road."""
+    road, _ = parse_road("iso8608:C", config)
+    plant = plant_config(config)
+    params = BoucWenParams.from_mapping(plant["model"]["params"])
+    i_max = float(config["rig"]["current_max_a"])
+    return optimal_bound(params, i_max, road, duration, float(config["compare"]["settle_s"]))
 
 
 def law_cycle_us(law_name: str, sets: list[str], samples: int) -> tuple[float, float]:
@@ -136,27 +152,35 @@ def main() -> None:
     print(
         f"ISO 8608 class C, {duration:g} s per run, {len(dampers)} dampers x {len(mismatches)} models, load {load:.2f}"
     )
-    header = f"{'damper':26s} {'model':6s} {'best i':>6s} {'best θ̈2':>8s} " + " ".join(
+    header = f"{'damper':26s} {'model':6s} {'best i':>6s} {'best θ̈2':>8s} {'bound':>6s} " + " ".join(
         f"{law[:13]:>13s}" for law in LAWS
     )
     print(header)
     gains: dict[str, list[float]] = {law: [] for law in LAWS}
+    shares: dict[str, list[float]] = {law: [] for law in LAWS}
+    bound_gains: list[float] = []
     worst_case: dict[str, str] = {}
     start = time.perf_counter()
     cases = [(name, params, m) for name, params in dampers for m in mismatches]
     all_jobs = [jobs_for(config_of(params, m), currents, duration) for _, params, m in cases]
     flat = [job for jobs in all_jobs for job in jobs]
+    configs = [config_of(params, m) for _, params, m in cases]
     if args.jobs > 1:
         with ProcessPoolExecutor(max_workers=args.jobs, mp_context=get_context("fork")) as pool:
+            bounds_future = [pool.submit(bound_of, config, duration) for config in configs]
             results = list(pool.map(run_job, flat, chunksize=4))
+            bounds = [future.result() for future in bounds_future]
     else:
         results = [run_job(job) for job in flat]
+        bounds = [bound_of(config, duration) for config in configs]
     per_case = len(all_jobs[0])
     for index, (name, _, mismatch) in enumerate(cases):
         chunk = results[index * per_case : (index + 1) * per_case]
         passive = [r for r in chunk[: len(currents)] if r.ok]
         best = min(passive, key=lambda r: r.metrics["rms_accel_rad_s2"])
         a_best = best.metrics["rms_accel_rad_s2"]
+        bound_gain = bounds[index].gain_pct
+        bound_gains.append(bound_gain)
         cells = []
         for r in chunk[len(currents) :]:
             if not r.ok:
@@ -167,9 +191,11 @@ def main() -> None:
             if not gains[r.label] or gain < min(gains[r.label]):
                 worst_case[r.label] = f"{name}, {'exact' if not mismatch else '10 % off'}"
             gains[r.label].append(gain)
+            if bound_gain > 0:
+                shares[r.label].append(100.0 * gain / bound_gain)
             cells.append(f"{gain:+12.1f}%")
         model = "exact" if not mismatch else "10%off"
-        print(f"{name:26s} {model:6s} {best.label.split()[1]:>6s} {a_best:8.3f} " + " ".join(cells))
+        print(f"{name:26s} {model:6s} {best.label.split()[1]:>6s} {a_best:8.3f} {bound_gain:5.1f}% " + " ".join(cells))
     print(f"({len(flat)} runs of {duration:g} s in {time.perf_counter() - start:.1f} s wall, {args.jobs} processes)")
     print()
     print("gain in RMS arm acceleration over the best constant current (positive: better)")
@@ -184,6 +210,15 @@ def main() -> None:
             f"  {law:18s} worst {min(values):+6.1f} % ({worst_case[law]}), median {statistics.median(values):+6.1f} %"
             + (goal if law in GOAL_LAWS else "")
         )
+    print()
+    print(
+        f"optimal bound below the best constant damping (plant's viscous envelope): worst {min(bound_gains):.1f} %, "
+        f"median {statistics.median(bound_gains):.1f} %, best {max(bound_gains):.1f} %"
+    )
+    print("each law's gain as a share of the bound's gain (100 %: all the bound allows)")
+    for law, values in shares.items():
+        if values:
+            print(f"  {law:18s} worst {min(values):+6.1f} %, median {statistics.median(values):+6.1f} %")
     print()
     samples = 2_000 if args.quick else 200_000
     print(
