@@ -9,9 +9,11 @@ import shlex
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sashil.cli import main
+from sashil.experiments.compare import arm_acceleration
 
 SHORT = ["--duration", "3", "--set", "compare.settle_s=1", "--set", "road.period_s=10"]
 
@@ -104,3 +106,15 @@ def test_the_readme_compare_example_runs(tmp_path):
     assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
     assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}
     assert len(rows(tmp_path / "cmp")) == 6  # 4 laws + the two passive references
+
+
+def test_arm_acceleration_is_the_plants_on_sim_else_the_encoders():
+    t = np.arange(0.0, 4.0, 1e-3)
+    theta2 = 0.01 * np.sin(2 * np.pi * 2.0 * t)
+    expected = -0.01 * (2 * np.pi * 2.0) ** 2 * np.sin(2 * np.pi * 2.0 * t)
+    stream = {"theta_rad": theta2 - 0.002 * t, "theta_road_rad": 0.002 * t}
+    accel, source = arm_acceleration(stream, 1000.0, 20.0)
+    assert source == "encoders"
+    assert np.max(np.abs(accel[200:-200] - expected[200:-200])) < 1e-3 * np.max(np.abs(expected))
+    accel, source = arm_acceleration({**stream, "arm_accel_true_rad_s2": expected}, 1000.0, 20.0)
+    assert source == "plant" and np.allclose(accel[200:-200], expected[200:-200], rtol=0, atol=1e-3)

@@ -145,6 +145,20 @@ def run_jobs(
     return results
 
 
+def accel_note(results: list[LawResult], bandwidth_hz: float) -> str:
+    """How θ̈2 was measured (the simulated plant's own, or the encoders'), for compare.md."""
+    sources = {r.accel_source for r in results if r.ok}
+    how = {
+        "plant": "the simulated plant's own, (−k·θ − T)/J of its true state",
+        "encoders": "the arm angle θ2 = θ + θ1 from the encoders, differentiated twice",
+    }
+    text = "; ".join(how[s] for s in sorted(sources)) or "none measured"
+    return (
+        f"θ̈2: {text}, low-passed at {bandwidth_hz:g} Hz. The road-side torque k·θ + T equals −J·θ̈2 on this "
+        "rig (seed 001 eq. 13, the road side driven), so it ranks the laws as comfort does."
+    )
+
+
 def compute_bound(config: dict[str, Any], road: Any, duration: float, args: argparse.Namespace) -> Any:
     """The optimal bound on this road for the config's model (None without a road, or when the run
     is shorter than the settling time)."""
@@ -204,9 +218,7 @@ def run(args: argparse.Namespace) -> int:
             "envelope (the hysteretic term left out), knowing the road in advance"
         )
     notes = [
-        f"θ̈2: the arm angle θ2 = θ + θ1 from the encoders, low-passed at {section['accel_bandwidth_hz']:g} Hz "
-        "and differentiated twice. The road-side torque k·θ + T equals −J·θ̈2 on this rig (seed 001 eq. 13, "
-        "the road side driven), so it ranks the laws as comfort does.",
+        accel_note(results, float(section["accel_bandwidth_hz"])),
         f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
         "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
         "Share of the bound: the law's gain over the best passive run as a share of the optimal bound's gain over "

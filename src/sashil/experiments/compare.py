@@ -7,10 +7,14 @@ the road (:class:`~sashil.experiments.road_option.RoadStage`: the road motor's s
 runs it with :func:`sashil.runtime.runner.run_plan` and derives the metrics from the stream.
 A job is picklable, so on the simulated rig jobs may run in parallel processes.
 
-Metrics (from the recorded encoders and current, the same on every backend), after ``compare.settle_s``:
+Metrics, after ``compare.settle_s``:
 
-* comfort: RMS of the arm's angular acceleration θ̈2, the arm angle θ2 = θ + θ1 low-passed at
-  ``compare.accel_bandwidth_hz`` (4th-order Butterworth, forward and back) and differentiated twice;
+* comfort: RMS of the arm's angular acceleration θ̈2 low-passed at ``compare.accel_bandwidth_hz``
+  (4th-order Butterworth, forward and back). On a simulated rig θ̈2 is the plant's own,
+  (−k·θ − T)/J of its true state (seed 001 eq. 13), recorded every cycle as
+  ``arm_accel_true_rad_s2``; on any other rig it is the arm angle θ2 = θ + θ1 of the encoders,
+  differentiated twice after the low-pass (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS
+  in quadrature at 20 Hz, the same for every law);
 * travel: RMS of the relative angle θ;
 * handling proxy: RMS of the road-side torque k·θ + T. With the road side driven (seed 001 eq. 13,
   T_in = 0) it equals −J·θ̈2, so on this rig it ranks laws exactly as comfort does;
@@ -26,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LawJob", "LawResult", "metrics_of", "run_job"]
+__all__ = ["LawJob", "LawResult", "MeasuredStage", "metrics_of", "run_job"]
 
 #: seconds of arm acceleration kept for the time-trace plot, and its decimation
 TRACE_S = 5.0
@@ -55,6 +59,8 @@ class LawResult:
     psd: list[float] = field(default_factory=list)
     trace_t: list[float] = field(default_factory=list)
     trace: list[float] = field(default_factory=list)
+    #: where θ̈2 came from: "plant" (a simulated rig's true state) or "encoders"
+    accel_source: str = ""
 
     @property
     def ok(self) -> bool:
@@ -70,23 +76,56 @@ METRICS = (
 )
 
 
-def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float) -> np.ndarray:
-    """θ̈2 [rad/s²] from the encoders: θ2 = θ + θ1, low-passed, differentiated twice."""
+class MeasuredStage:
+    """A loop stage that runs ``stage`` and records the simulated plant's true arm acceleration
+    θ̈2 = (−k·θ − T)/J (seed 001 eq. 13) as ``arm_accel_true_rad_s2`` (NaN on a rig without a plant)."""
+
+    def __init__(self, stage: Any, plant: Any):
+        from sashil.runtime.loop import stage_signals
+
+        self.stage = stage
+        self.plant = plant
+        self.signal_names = (*stage_signals(stage), "arm_accel_true_rad_s2")
+        self.arm_accel_true_rad_s2 = math.nan
+
+    def __getattr__(self, name: str) -> Any:  # the inner stage's signals
+        if name == "stage":
+            raise AttributeError(name)
+        return getattr(self.stage, name)
+
+    def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
+        plant = self.plant
+        if plant is not None:
+            p = plant.params
+            self.arm_accel_true_rad_s2 = (-p.k * plant.state.theta_rad - plant.damper_torque()) / p.J
+        return self.stage.step(sample, t_ns, dt_ns)
+
+
+def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float) -> tuple[np.ndarray, str]:
+    """θ̈2 [rad/s²] low-passed at ``bandwidth_hz``: the plant's own when the stream has it, else from
+    the encoders (θ2 = θ + θ1, low-passed, differentiated twice); and which it is."""
     from scipy.signal import butter, sosfiltfilt
 
-    theta2 = np.asarray(stream["theta_rad"], dtype=float) + np.asarray(stream["theta_road_rad"], dtype=float)
     sos = butter(4, min(bandwidth_hz, 0.45 * rate_hz), fs=rate_hz, output="sos")
-    smooth = sosfiltfilt(sos, theta2) if theta2.size > 30 else theta2
+
+    def smooth(x: np.ndarray) -> np.ndarray:
+        return np.asarray(sosfiltfilt(sos, x)) if x.size > 30 else x
+
+    true = np.asarray(stream.get("arm_accel_true_rad_s2", ()), dtype=float)
+    if true.size and np.all(np.isfinite(true)):
+        return smooth(true), "plant"
+    theta2 = np.asarray(stream["theta_rad"], dtype=float) + np.asarray(stream["theta_road_rad"], dtype=float)
     dt = 1.0 / rate_hz
-    return np.asarray(np.gradient(np.gradient(smooth, dt), dt))
+    return np.asarray(np.gradient(np.gradient(smooth(theta2), dt), dt)), "encoders"
 
 
-def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
-    """The metrics of a law's stream (module docstring), and its time and θ̈2 after the settling."""
+def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
+    """The metrics of a law's stream (module docstring), its time and θ̈2 after the settling, and
+    where θ̈2 came from."""
     rate = float(config["loop"]["rate_hz"])
     section = config["compare"]
     time_s = np.asarray(stream["time_s"], dtype=float)[:-1]  # the last row is the shutdown's safe state
-    accel = arm_acceleration(
+    accel, source = arm_acceleration(
         {k: np.asarray(v)[:-1] for k, v in stream.items()}, rate, float(section["accel_bandwidth_hz"])
     )
     keep = time_s >= float(section["settle_s"])
@@ -105,7 +144,7 @@ def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str
         "peak_current_a": float(np.max(current)),
         "coil_energy_j": float(section["coil_resistance_ohm"]) * float(np.sum(current * current)) / rate,
     }
-    return metrics, time_s[keep], a
+    return metrics, time_s[keep], a, source
 
 
 def _stage(config: dict[str, Any]) -> Any:
@@ -137,6 +176,7 @@ def run_job(job: LawJob) -> LawResult:
         if road is not None:
             stage = RoadStage(stage, road)
         rig = open_rig(config)
+        stage = MeasuredStage(stage, getattr(rig, "plant", None))
         outcome = run_plan(
             config,
             rig,
@@ -159,7 +199,7 @@ def run_job(job: LawJob) -> LawResult:
         result.status = f"{loop.exit_status}: {why}"
         return result
     try:
-        metrics, t, accel = metrics_of(outcome.stream, config)
+        metrics, t, accel, result.accel_source = metrics_of(outcome.stream, config)
     except (KeyError, ValueError) as err:
         result.status = f"no metrics: {err}"
         return result
