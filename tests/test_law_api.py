@@ -18,7 +18,19 @@ from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigSample
 from sashil.errors import ConfigError, LawError
 
-BUILT_INS = {"passive", "target-damping", "skyhook", "skyhook-onoff", "skyhook-add", "groundhook", "torque-tracking"}
+BUILT_INS = {
+    "passive",
+    "target-damping",
+    "skyhook",
+    "skyhook-onoff",
+    "skyhook-add",
+    "groundhook",
+    "torque-tracking",
+    "clipped-optimal",
+    "lqr-clipped",
+    "pdd",
+    "groundhook-hybrid",
+}
 
 
 class Soft(Law):

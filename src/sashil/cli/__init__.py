@@ -41,6 +41,7 @@ VERBS: dict[str, str] = {
     "laws": "sashil.cli.laws",
     "doctor": "sashil.cli.doctor",
     "replay": "sashil.cli.replay",
+    "compare": "sashil.cli.compare",
 }
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)

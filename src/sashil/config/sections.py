@@ -258,6 +258,41 @@ SWEEP = Section(
     doc="road-side excitation: chirp and stepped sine",
 )
 
+ROAD = Section(
+    {
+        "lever_m": Field(
+            "float", 0.5, low=0.0, low_open=True, high=10.0, doc="road height to road-wheel angle: theta1 = h / lever_m"
+        ),
+        "speed_m_s": Field(
+            "float", 10.0, low=0.0, low_open=True, high=100.0, doc="iso8608: vehicle speed (iso8608:C:SPEED)"
+        ),
+        "seed": Field("int", 0, low=0, doc="iso8608: seed of the random phases (the same seed, the same road)"),
+        "period_s": Field(
+            "float", 120.0, low=1.0, high=3600.0, doc="iso8608: length of the synthesised road, repeated after it"
+        ),
+        "bump_width_s": Field("float", 0.5, low=0.0, low_open=True, high=60.0, doc="bump: its length in time"),
+        "bump_start_s": Field("float", 1.0, low=0.0, high=3600.0, doc="bump: when it starts"),
+    },
+    doc="road profiles of --road iso8608:CLASS[:SPEED] and bump:HEIGHT_DEG: the rig's geometry and the generator",
+)
+
+COMPARE = Section(
+    {
+        "accel_bandwidth_hz": Field(
+            "float", 20.0, low=0.0, low_open=True, high=200.0, doc="low-pass of the arm angle before its acceleration"
+        ),
+        "coil_resistance_ohm": Field(
+            "float", 5.0, low=0.0, low_open=True, doc="coil resistance for the coil energy (ASSUMPTION)"
+        ),
+        "settle_s": Field("float", 2.0, low=0.0, high=600.0, doc="the start of each run the metrics leave out"),
+        "rest_s": Field(
+            "float", 5.0, low=0.0, high=600.0, doc="on a real rig: time at rest (0 A, road stopped) between laws"
+        ),
+        "jobs": Field("int", 1, low=1, high=64, doc="simulated rig: laws run in this many processes (--jobs)"),
+    },
+    doc="`sashil compare`: the metrics and how the laws are run",
+)
+
 CALIBRATE = Section(
     {
         "theta0_deg": Field("float", -5.0, low=-30.0, high=30.0, doc="the large drops: hold angle"),
@@ -303,4 +338,6 @@ SCHEMA = {
     "calibrate": CALIBRATE,
     "run": RUN,
     "simulate": SIMULATE,
+    "road": ROAD,
+    "compare": COMPARE,
 }

@@ -3,8 +3,11 @@
 ``--road sine:F_HZ[:AMP_DEG]`` (a sine, raised-cosine ramp of ``sweep.ramp_s``),
 ``--road chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG]`` (a linear chirp, then F1 held), ``--road FILE.csv``
 (a recorded or designed profile: columns ``time_s`` and ``theta_road_rad``, linearly interpolated,
-held at its last angle after its end; e.g. another run's ``data.csv``) or ``--road none``; the
-amplitude defaults to ``sweep.amplitude_deg``. On the simulated rig with no ``--road`` the run
+held at its last angle after its end; e.g. another run's ``data.csv``),
+``--road iso8608:CLASS[:SPEED_M_S]`` (an ISO 8608 road of class A-H at ``road.speed_m_s``, through
+the rig's geometry ``road.lever_m``, seeded by ``road.seed``: :mod:`sashil.experiments.iso8608`),
+``--road bump:HEIGHT_DEG`` (a raised-cosine bump of ``road.bump_width_s`` at ``road.bump_start_s``)
+or ``--road none``; the amplitude defaults to ``sweep.amplitude_deg``. On the simulated rig with no ``--road`` the run
 gets :data:`DEFAULT_SIM_ROAD`, so a first run shows the arm moving instead of a flat line.
 
 On the simulated rig the profile drives the plant's road angle directly; over a link
@@ -21,12 +24,16 @@ import numpy as np
 
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError
+from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
 from sashil.experiments.sweep import chirp_profile, sine_profile
 from sashil.models.plant import RoadProfile
 
 #: the excitation of ``sashil run`` on the simulated rig when no --road is given (below resonance)
 DEFAULT_SIM_ROAD = "sine:1.0"
-SYNTAX = "sine:F_HZ[:AMP_DEG], chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG], FILE.csv (time_s, theta_road_rad) or none"
+SYNTAX = (
+    "sine:F_HZ[:AMP_DEG], chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG], iso8608:CLASS[:SPEED_M_S] (class A-H), "
+    "bump:HEIGHT_DEG, FILE.csv (time_s, theta_road_rad) or none"
+)
 
 
 def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | None, str]:
@@ -36,6 +43,8 @@ def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | 
     if text.strip().endswith(".csv"):
         return file_profile(text.strip())
     kind, _, rest = text.strip().partition(":")
+    if kind == "iso8608":
+        return iso8608_road(text, rest, config)
     try:
         values = [float(part) for part in rest.split(":")] if rest else []
     except ValueError:
@@ -59,7 +68,38 @@ def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | 
             chirp_profile(math.radians(amp_deg), f0, f1, seconds, ramp),
             f"chirp {f0:g}-{f1:g} Hz over {seconds:g} s, {amp_deg:g} deg",
         )
+    if kind == "bump" and len(values) == 1:
+        height = values[0]
+        if not 0.0 < abs(height) <= 20.0:
+            raise ConfigError(f"--road {text}: expected a bump height in [-20, 20] deg, not 0, got {height:g}")
+        section = config["road"]
+        width, start = float(section["bump_width_s"]), float(section["bump_start_s"])
+        return bump_profile(math.radians(height), width, start), f"bump {height:g} deg over {width:g} s at {start:g} s"
     raise ConfigError(f"--road {text}: expected {SYNTAX}")
+
+
+def iso8608_road(text: str, rest: str, config: dict[str, Any]) -> tuple[RoadProfile, str]:
+    """``iso8608:CLASS[:SPEED_M_S]``: the class's road at the speed (default ``road.speed_m_s``)
+    through ``road.lever_m``, one period of ``road.period_s`` at the loop's rate, faded in over
+    ``sweep.ramp_s``."""
+    road_class, _, speed_text = rest.partition(":")
+    road_class = road_class.strip().upper()
+    if road_class not in CLASSES:
+        raise ConfigError(f"--road {text}: expected an ISO 8608 road class A-H, got {road_class or 'none'!r}")
+    section = config["road"]
+    speed = float(section["speed_m_s"])
+    if speed_text:
+        try:
+            speed = float(speed_text)
+        except ValueError:
+            raise ConfigError(f"--road {text}: expected a speed in m/s after the class, got {speed_text!r}") from None
+    if not (math.isfinite(speed) and 0.0 < speed <= 100.0):
+        raise ConfigError(f"--road {text}: expected a speed in (0, 100] m/s, got {speed:g}")
+    rate = float(config["loop"]["rate_hz"])
+    height = iso8608_height(road_class, speed, float(section["period_s"]), rate, int(section["seed"]))
+    lever = float(section["lever_m"])
+    profile = periodic_profile(height / lever, rate, float(config["sweep"]["ramp_s"]))
+    return profile, f"ISO 8608 class {road_class} at {speed:g} m/s (lever {lever:g} m, seed {section['seed']})"
 
 
 def file_profile(path: str) -> tuple[RoadProfile, str]:

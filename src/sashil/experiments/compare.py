@@ -1,0 +1,214 @@
+"""``sashil compare``: each law on the same road through the one runner, and its metrics.
+
+A :class:`LawJob` is one law's run: its label, its checked config (``controller.law`` and its
+parameters), the road spec and the duration. :func:`run_job` builds the stage (a constant current
+for ``passive``, else the controller of :func:`sashil.control.registry.make_controller`), wraps it in
+the road (:class:`~sashil.experiments.road_option.RoadStage`: the road motor's speed each cycle),
+runs it with :func:`sashil.runtime.runner.run_plan` and derives the metrics from the stream.
+A job is picklable, so on the simulated rig jobs may run in parallel processes.
+
+Metrics, after ``compare.settle_s``:
+
+* comfort: RMS of the arm's angular acceleration θ̈2 low-passed at ``compare.accel_bandwidth_hz``
+  (4th-order Butterworth, forward and back). On a simulated rig θ̈2 is the plant's own,
+  (−k·θ − T)/J of its true state (seed 001 eq. 13), recorded every cycle as
+  ``arm_accel_true_rad_s2``; on any other rig it is the arm angle θ2 = θ + θ1 of the encoders,
+  differentiated twice after the low-pass (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS
+  in quadrature at 20 Hz, the same for every law);
+* travel: RMS of the relative angle θ;
+* handling proxy: RMS of the road-side torque k·θ + T. With the road side driven (seed 001 eq. 13,
+  T_in = 0) it equals −J·θ̈2, so on this rig it ranks laws exactly as comfort does;
+* peak measured current, and the energy to the coil R·∫i² dt (R = ``compare.coil_resistance_ohm``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["LawJob", "LawResult", "MeasuredStage", "metrics_of", "run_job"]
+
+#: seconds of arm acceleration kept for the time-trace plot, and its decimation
+TRACE_S = 5.0
+TRACE_DECIMATE = 5
+
+
+@dataclass
+class LawJob:
+    """One law's run (picklable: a process runs it on the simulated rig)."""
+
+    label: str
+    config: dict[str, Any]
+    road: str
+    duration_s: float
+
+
+@dataclass
+class LawResult:
+    """A law's metrics (NaN when it did not finish), its status and what the plots show."""
+
+    label: str
+    status: str = "ok"
+    metrics: dict[str, float] = field(default_factory=dict)
+    wall_s: float = 0.0
+    psd_f: list[float] = field(default_factory=list)
+    psd: list[float] = field(default_factory=list)
+    trace_t: list[float] = field(default_factory=list)
+    trace: list[float] = field(default_factory=list)
+    #: where θ̈2 came from: "plant" (a simulated rig's true state) or "encoders"
+    accel_source: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+METRICS = (
+    "rms_accel_rad_s2",
+    "rms_theta_deg",
+    "rms_road_torque_nm",
+    "peak_current_a",
+    "coil_energy_j",
+)
+
+
+class MeasuredStage:
+    """A loop stage that runs ``stage`` and records the simulated plant's true arm acceleration
+    θ̈2 = (−k·θ − T)/J (seed 001 eq. 13) as ``arm_accel_true_rad_s2`` (NaN on a rig without a plant)."""
+
+    def __init__(self, stage: Any, plant: Any):
+        from sashil.runtime.loop import stage_signals
+
+        self.stage = stage
+        self.plant = plant
+        self.signal_names = (*stage_signals(stage), "arm_accel_true_rad_s2")
+        self.arm_accel_true_rad_s2 = math.nan
+
+    def __getattr__(self, name: str) -> Any:  # the inner stage's signals
+        if name == "stage":
+            raise AttributeError(name)
+        return getattr(self.stage, name)
+
+    def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
+        plant = self.plant
+        if plant is not None:
+            p = plant.params
+            self.arm_accel_true_rad_s2 = (-p.k * plant.state.theta_rad - plant.damper_torque()) / p.J
+        return self.stage.step(sample, t_ns, dt_ns)
+
+
+def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float) -> tuple[np.ndarray, str]:
+    """θ̈2 [rad/s²] low-passed at ``bandwidth_hz``: the plant's own when the stream has it, else from
+    the encoders (θ2 = θ + θ1, low-passed, differentiated twice); and which it is."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(4, min(bandwidth_hz, 0.45 * rate_hz), fs=rate_hz, output="sos")
+
+    def smooth(x: np.ndarray) -> np.ndarray:
+        return np.asarray(sosfiltfilt(sos, x)) if x.size > 30 else x
+
+    true = np.asarray(stream.get("arm_accel_true_rad_s2", ()), dtype=float)
+    if true.size and np.all(np.isfinite(true)):
+        return smooth(true), "plant"
+    theta2 = np.asarray(stream["theta_rad"], dtype=float) + np.asarray(stream["theta_road_rad"], dtype=float)
+    dt = 1.0 / rate_hz
+    return np.asarray(np.gradient(np.gradient(smooth(theta2), dt), dt)), "encoders"
+
+
+def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
+    """The metrics of a law's stream (module docstring), its time and θ̈2 after the settling, and
+    where θ̈2 came from."""
+    rate = float(config["loop"]["rate_hz"])
+    section = config["compare"]
+    time_s = np.asarray(stream["time_s"], dtype=float)[:-1]  # the last row is the shutdown's safe state
+    accel, source = arm_acceleration(
+        {k: np.asarray(v)[:-1] for k, v in stream.items()}, rate, float(section["accel_bandwidth_hz"])
+    )
+    keep = time_s >= float(section["settle_s"])
+    if not np.any(keep):
+        raise ValueError("nothing recorded after compare.settle_s")
+    theta = np.asarray(stream["theta_rad"], dtype=float)[:-1][keep]
+    current = np.asarray(stream["current_a"], dtype=float)[:-1][keep]
+    current = np.where(np.isfinite(current), current, 0.0)
+    a = accel[keep]
+    J = float(config["model"]["params"]["J"])
+    rms_a = float(np.sqrt(np.mean(a * a)))
+    metrics = {
+        "rms_accel_rad_s2": rms_a,
+        "rms_theta_deg": math.degrees(float(np.sqrt(np.mean(theta * theta)))),
+        "rms_road_torque_nm": J * rms_a,
+        "peak_current_a": float(np.max(current)),
+        "coil_energy_j": float(section["coil_resistance_ohm"]) * float(np.sum(current * current)) / rate,
+    }
+    return metrics, time_s[keep], a, source
+
+
+def _stage(config: dict[str, Any]) -> Any:
+    from sashil.control.registry import make_controller
+    from sashil.runtime.stages import ConstantCurrent
+
+    section = config["controller"]
+    if section["law"] == "passive":
+        return ConstantCurrent(float(section["current_a"]))
+    return make_controller(None, config)
+
+
+def run_job(job: LawJob) -> LawResult:
+    """Run one law on the road (on the clock the config's backend runs on) and measure it; a law
+    that fails, trips or stops gets a result saying why instead of metrics."""
+    from scipy.signal import welch
+
+    from sashil.drivers import open_rig
+    from sashil.experiments.drop_test import default_clock
+    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.runtime.runner import run_plan
+
+    config = job.config
+    result = LawResult(job.label, metrics=dict.fromkeys(METRICS, math.nan))
+    start = time.perf_counter()
+    try:
+        road, _ = parse_road(job.road, config)
+        stage = _stage(config)
+        if road is not None:
+            stage = RoadStage(stage, road)
+        rig = open_rig(config)
+        stage = MeasuredStage(stage, getattr(rig, "plant", None))
+        outcome = run_plan(
+            config,
+            rig,
+            stage,
+            default_clock(config),
+            job.duration_s,
+            read_stream=True,
+            realtime=False,
+            say=lambda _: None,
+        )
+    except Exception as err:  # a law that cannot even start: its row says why
+        result.status = f"failed: {type(err).__name__}: {(str(err).splitlines() or [''])[0]}"
+        result.wall_s = time.perf_counter() - start
+        return result
+    result.wall_s = time.perf_counter() - start
+    loop = outcome.result
+    if outcome.error is not None or loop.exit_status != "ok":
+        trips = "; ".join(str(trip.get("reason", trip)) for trip in loop.trips)
+        why = trips or loop.error or loop.stop_reason or loop.exit_status
+        result.status = f"{loop.exit_status}: {why}"
+        return result
+    try:
+        metrics, t, accel, result.accel_source = metrics_of(outcome.stream, config)
+    except (KeyError, ValueError) as err:
+        result.status = f"no metrics: {err}"
+        return result
+    result.metrics = metrics
+    rate = float(config["loop"]["rate_hz"])
+    f, pxx = welch(accel, fs=rate, nperseg=min(accel.size, int(8 * rate)))
+    band = f <= 4.0 * float(config["compare"]["accel_bandwidth_hz"])
+    result.psd_f, result.psd = f[band].tolist(), pxx[band].tolist()
+    window = t <= t[0] + TRACE_S
+    result.trace_t = t[window][::TRACE_DECIMATE].tolist()
+    result.trace = accel[window][::TRACE_DECIMATE].tolist()
+    return result

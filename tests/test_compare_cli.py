@@ -1,0 +1,120 @@
+"""``sashil compare``: every law on the same road through the runner, the references always there,
+a failing law's row saying why, parallel runs equal to sequential ones, and bad input."""
+
+from __future__ import annotations
+
+import csv
+import re
+import shlex
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sashil.cli import main
+from sashil.experiments.compare import arm_acceleration
+
+SHORT = ["--duration", "3", "--set", "compare.settle_s=1", "--set", "road.period_s=10"]
+
+
+def rows(folder) -> dict[str, dict[str, str]]:
+    with open(folder / "metrics.csv", newline="") as f:
+        return {row["law"]: row for row in csv.DictReader(f)}
+
+
+def test_compare_runs_each_law_beside_the_references_and_a_failing_law_says_why(tmp_path, capsys):
+    fails = tmp_path / "fails.py"
+    fails.write_text(
+        textwrap.dedent(
+            """
+            from sashil.control import Law
+
+            class Fails(Law):
+                name = "fails"
+
+                def torque(self, state):
+                    if state.time_s > 1.5:
+                        raise ValueError("gain table empty")
+                    return 0.0
+            """
+        )
+    )
+    out = tmp_path / "cmp"
+    laws = ["--controller", "clipped-optimal", "--controller", "skyhook", "--controller", f"{fails}:Fails"]
+    code = main(
+        ["compare", *SHORT, "--road", "iso8608:C", *laws, "--set", "controller.c_sky=2", "--out", str(out), "-q"]
+    )
+    err = capsys.readouterr().err
+    assert code == 1 and "1 of 5 laws did not finish" in err
+    table = rows(out)
+    assert list(table) == ["passive 0 A", "passive 1 A", "clipped-optimal", "skyhook", "fails"]
+    for label in ("passive 0 A", "passive 1 A", "clipped-optimal", "skyhook"):
+        assert table[label]["status"] == "ok" and float(table[label]["rms_accel_rad_s2"]) > 0
+    assert table["fails"]["status"].startswith("error: law 'fails'") and "gain table empty" in table["fails"]["status"]
+    assert table["fails"]["rms_accel_rad_s2"] == ""
+    assert float(table["passive 1 A"]["peak_current_a"]) == pytest.approx(1.0, abs=0.01)
+    assert float(table["passive 0 A"]["coil_energy_j"]) == 0.0
+    assert float(table["passive 1 A"]["vs_best_passive_pct"]) == 0.0  # the better passive on this road
+    md = (out / "compare.md").read_text()
+    assert "| clipped-optimal |" in md and "gain table empty" in md
+    assert (out / "compare.png").stat().st_size > 10_000
+
+
+def test_parallel_processes_give_the_sequential_numbers(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    args = ["compare", *SHORT, "--duration", "2", "--controller", "pdd", "-q"]
+    assert main([*args, "--out", str(a)]) == 0
+    assert main([*args, "--jobs", "2", "--out", str(b)]) == 0
+    ra, rb = rows(a), rows(b)
+    for label in ra:
+        assert ra[label]["rms_accel_rad_s2"] == rb[label]["rms_accel_rad_s2"]
+
+
+@pytest.mark.parametrize(
+    "extra, key",
+    [
+        (["--road", "iso8608:Q"], "--road iso8608:Q: expected an ISO 8608 road class A-H"),
+        (["--road", "iso8608:C:0"], "--road iso8608:C:0: expected a speed in (0, 100] m/s"),
+        (["--controller", "lqr-clipped", "--set", "controller.q_theta=-1"], "controller.q_theta"),
+        (
+            ["--controller", "lqr-clipped", "--set", "controller.c_sky=2"],
+            "--set controller.c_sky=2: none of the compared laws",
+        ),
+        (["--controller", "skyhook"], "controller.c_sky: law 'skyhook' needs c_sky"),
+        (["--controller", "nope"], "nope"),
+        (
+            ["--set", "controller.law=skyhook"],
+            "--set controller.law=skyhook: sashil compare takes its laws from --controller",
+        ),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_nothing_run(tmp_path, capsys, extra, key):
+    out = tmp_path / "never"
+    code = main(["compare", *SHORT, *extra, "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and not out.exists()
+    assert len(err) == 1 and key in err[0]
+
+
+def test_the_readme_compare_example_runs(tmp_path):
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("#### The laws a lab compares", 1)[1].split("\n#### ", 1)[0]
+    (command,) = re.findall(r"```sh\n(sashil compare .*?)\n```", section, flags=re.S)
+    argv = shlex.split(command)
+    assert argv[0] == "sashil"
+    assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
+    assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}
+    assert len(rows(tmp_path / "cmp")) == 6  # 4 laws + the two passive references
+
+
+def test_arm_acceleration_is_the_plants_on_sim_else_the_encoders():
+    t = np.arange(0.0, 4.0, 1e-3)
+    theta2 = 0.01 * np.sin(2 * np.pi * 2.0 * t)
+    expected = -0.01 * (2 * np.pi * 2.0) ** 2 * np.sin(2 * np.pi * 2.0 * t)
+    stream = {"theta_rad": theta2 - 0.002 * t, "theta_road_rad": 0.002 * t}
+    accel, source = arm_acceleration(stream, 1000.0, 20.0)
+    assert source == "encoders"
+    assert np.max(np.abs(accel[200:-200] - expected[200:-200])) < 1e-3 * np.max(np.abs(expected))
+    accel, source = arm_acceleration({**stream, "arm_accel_true_rad_s2": expected}, 1000.0, 20.0)
+    assert source == "plant" and np.allclose(accel[200:-200], expected[200:-200], rtol=0, atol=1e-3)
