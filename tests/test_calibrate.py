@@ -92,10 +92,26 @@ def test_calibration_folder_holds_params_report_plots_and_raw_runs(calibration):
 def test_calibration_report_says_j_is_one_and_validates_on_held_out_runs(calibration):
     text = (calibration / "report.md").read_text()
     assert text.splitlines()[0].startswith("**All torques are relative to J = 1**")
-    assert "## Held-out validation" in text and "n is poorly determined" in text
+    assert "## Held-out validation" in text and "n is not identifiable from this plan" in text
     summary = json.loads((calibration / "summary.json").read_text())
     # the seed damper, 4096 counts: the encoder alone costs 2.4-2.5 % NRMSE on these held-out drops
     assert all(v < 0.035 for v in summary["held_out_nrmse"].values())
+
+
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
+def test_params_and_report_give_95_percent_intervals_of_the_lab_quantities(calibration):
+    doc = yaml.safe_load((calibration / "params.yaml").read_text())
+    intervals, p = doc["intervals_95"], doc["params"]
+    lab = ["k", "c_0a", "c_max", "yield_0a", "yield_max"]
+    assert list(intervals)[:5] == lab
+    assert set(intervals) == {*lab, *(name for name in p if name != "J")}
+    value = {"k": p["k"], "c_0a": p["c1"], "c_max": p["c1"] + p["c2"], "yield_0a": p["alpha1"]}
+    value["yield_max"] = p["alpha1"] + p["alpha2"]  # unit z bound, i_max = 1 A
+    for name, (low, high) in intervals.items():
+        assert low <= value.get(name, p.get(name)) * (1 + 1e-5) and high >= value.get(name, p.get(name)) * (1 - 1e-5)
+    assert doc["calibration"]["intervals"]["method"].startswith("delete-one-block jackknife")
+    text = (calibration / "report.md").read_text()
+    assert "| yield torque α(i_max)·z_u [N m] |" in text and "95 % interval" in text
 
 
 @pytest.mark.e2e  # a whole calibration or identification (seconds)
@@ -152,6 +168,8 @@ def test_inertia_given_scales_the_torques(tmp_path, capsys):
         ([], {"max_rig_time_s": 30.0}, "calibrate.max_rig_time_s"),
         ([], {"road_f_stop_hz": 0.5}, "calibrate.road_f_stop_hz"),
         ([], {"colour": "red"}, "calibrate.colour"),
+        ([], {"interval_block_s": 0.01}, "calibrate.interval_block_s: expected a number >= 0.05"),
+        ([], {"interval_block_s": 20.0}, "calibrate.interval_block_s: the runs to fit hold only 7 blocks"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, args, calibrate, needle):

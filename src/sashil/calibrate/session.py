@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.analysis import Calibration, analyse, gap_cut
+from sashil.calibrate.intervals import MIN_BLOCKS_PER_PARAMETER
 from sashil.calibrate.plan import Plan, plan_from_config
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
@@ -20,6 +21,7 @@ from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
 from sashil.identify.report import write_params
+from sashil.identify.rig_models import MODELS
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE
 
@@ -45,14 +47,31 @@ def check_inertia(inertia: float | None) -> float:
     return float(inertia)
 
 
-def check_plan(plan: Plan, source: str) -> None:
-    """The fit runs must span two currents: alpha2 and c2 are always identified."""
+def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
+    """The fit runs must span two currents: alpha2 and c2 are always identified; and with
+    ``block_s`` they must hold enough jackknife blocks for the intervals (:func:`min_blocks`)."""
     currents = {s.current_a for s in plan.fit_steps()}
     if max(currents) - min(currents) < MIN_CURRENT_SPREAD_A:
         raise ConfigError(
             f"{source}: calibrate: every run to fit is at {min(currents):g} A, so the current terms (alpha2, c2) "
             f"cannot be identified; give calibrate.currents_a at least two currents {MIN_CURRENT_SPREAD_A:g} A apart"
         )
+    if block_s is not None:
+        need = min_blocks(plan.model)
+        have = sum(max(1, round(s.duration_s / block_s)) for s in plan.fit_steps())
+        if have < need:
+            longest = max(sum(s.duration_s for s in plan.fit_steps()) / need, 0.0)
+            raise ConfigError(
+                f"{source}: calibrate.interval_block_s: the runs to fit hold only {have} blocks of {block_s:g} s, "
+                f"the intervals need at least {need}; give at most {longest:.3g} s or longer runs"
+            )
+
+
+def min_blocks(model: str) -> int:
+    """Jackknife blocks the plan must hold: MIN_BLOCKS_PER_PARAMETER per free parameter (the most
+    of any model when ``model`` is all)."""
+    names = list(MODELS) if model == "all" else [model]
+    return MIN_BLOCKS_PER_PARAMETER * max(len(MODELS[n].linear) + len(MODELS[n].nonlinear) for n in names)
 
 
 def _summary_row(res: StepResult) -> dict[str, Any]:
@@ -112,7 +131,7 @@ def calibrate_rig(
     if model is not None:
         config = {**config, "calibrate": {**config["calibrate"], "model": model}}
     plan = plan_from_config(config, source)
-    check_plan(plan, source)
+    check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
     folder = RunFolder.create(out, "calibrate")
     folder.write_config(config)
     runs = RunFolder.create(folder.path / "runs", "calibrate")
@@ -204,6 +223,8 @@ def calibrate_rig(
         config["rig"]["encoder_counts_per_rev"],
         progress=say,
         profile=profile,
+        current_max_a=float(config["rig"]["current_max_a"]),
+        block_s=float(config["calibrate"]["interval_block_s"]),
     )
     params_path = write_params(folder.file("params.yaml"), params_document(cal, inertia is not None, rig_s, rows))
     report_path = write_report(
