@@ -163,13 +163,19 @@ def test_inertia_given_scales_the_torques(tmp_path, capsys):
         (["--inertia", "0"], None, "--inertia: expected the arm's inertia J > 0"),
         (["--inertia", "-1.5"], None, "--inertia: expected the arm's inertia J > 0"),
         (["--inertia", "nan"], None, "--inertia"),
+        (["--extra-steps", "12"], None, "--extra-steps: expected 0 to 9 extra steps, got 12"),
         ([], {"currents_a": [0.5], "small_currents_a": [0.5], "road_currents_a": []}, "cannot be identified"),
         ([], {"currents_a": [0.0, 2.0]}, "calibrate.currents_a: expected currents in [0, 1] A"),
         ([], {"max_rig_time_s": 30.0}, "calibrate.max_rig_time_s"),
         ([], {"road_f_stop_hz": 0.5}, "calibrate.road_f_stop_hz"),
         ([], {"colour": "red"}, "calibrate.colour"),
-        ([], {"interval_block_s": 0.01}, "calibrate.interval_block_s: expected a number >= 0.05"),
-        ([], {"interval_block_s": 20.0}, "calibrate.interval_block_s: the runs to fit hold only 7 blocks"),
+        ([], {"interval_block_s": 0.01}, "calibrate.interval_block_s: expected a number >= 0.1"),
+        (
+            [],
+            {"currents_a": [0.0, 1.0], "small_currents_a": [], "road_currents_a": [], "drop_duration_s": 0.5},
+            "calibrate.drop_duration_s: the runs to fit (1 s in all) are too short to block for the intervals: "
+            "16 blocks of at least 0.1 s are needed; give at least 0.8 s",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, args, calibrate, needle):
@@ -298,3 +304,17 @@ def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tm
     for name in names:
         data = (tmp_path / "c" / "runs" / name / "data.csv").read_text().splitlines()
         assert len(data) == 3001  # the repeat's whole record, header included
+
+
+@pytest.mark.e2e  # a whole calibration, refitted (seconds)
+def test_extra_steps_run_the_suggested_step_and_refit(tmp_path, capsys):
+    out = tmp_path / "c"
+    config = write_config(tmp_path, SMALL_PLAN)
+    assert main(["calibrate", "--config", config, "--out", str(out), "--extra-steps", "1", "--no-profile", "-q"]) == 0
+    runs = sorted(p.name for p in (out / "runs").iterdir())
+    assert len(runs) == 4 and runs[-1].startswith("04-fit-") and runs[-1].endswith("-extra")
+    doc = yaml.safe_load((out / "params.yaml").read_text())
+    assert doc["calibration"]["widest_interval"]["quantity"] in {"k", "c_0a", "c_max", "yield_0a", "yield_max"}
+    assert "## A plan that shrinks the widest interval" in (out / "report.md").read_text()
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["name"] for r in summary["runs"]] == runs

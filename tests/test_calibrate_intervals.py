@@ -125,3 +125,27 @@ def test_bootstrap_is_deterministic_and_brackets_the_estimate():
     assert a.low == b.low and a.high == b.high and a.blocks == 20
     assert all(a.low[n] <= a.value[n] <= a.high[n] for n in a.value)
     assert set(a.value) == {"k", *FREE}
+
+
+def test_an_extra_step_never_widens_and_one_along_the_quantity_shrinks_it_most():
+    from sashil.calibrate.extra import predicted_ratio
+
+    rng = np.random.default_rng(11)
+    J = rng.normal(size=(500, 3)) * np.array([1.0, 1.0, 0.01])  # the third direction barely pinned
+    H = J.T @ J
+    g = np.array([0.0, 0.0, 1.0])
+    along = np.zeros((50, 3))
+    along[:, 2] = 1.0
+    across = np.zeros((50, 3))
+    across[:, 0] = 1.0
+    assert predicted_ratio(H, along, g) < 0.5 < predicted_ratio(H, across, g) <= 1.0
+    assert predicted_ratio(H, np.zeros((10, 3)), g) == pytest.approx(1.0)
+
+
+def test_interval_bounds_stay_physical():
+    rng = np.random.default_rng(5)
+    J, noise = ar1_problem(rng, rows=2000)
+    x = np.array([100.0, 1e-4, 0.5, 0.1, 2.0, 1e-4])  # c0 and fc_i near their floor of 0
+    iv = jackknife(fake_fit(J, 50 * noise, x), [record(2.0)], 1.0, block_s=0.25)
+    assert iv.low["c0"] == 0.0 and iv.low["fc_i"] == 0.0
+    assert iv.low["f0"] < 0.0  # Bingham's offset may be negative

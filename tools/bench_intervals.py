@@ -49,8 +49,8 @@ QUICK_PLAN = {
     "small_currents_a": [],
     "road_currents_a": [],
     "validate_currents_a": [0.5],
-    "drop_duration_s": 0.5,
-    "interval_block_s": 0.05,
+    "drop_duration_s": 1.0,
+    "interval_block_s": 0.1,
 }
 RAW = ("c1", "c2", "alpha1", "alpha2", "n")
 
@@ -203,7 +203,7 @@ def main() -> None:
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--cache", type=Path, help="keep each calibration here (re-evaluate without refitting)")
-    parser.add_argument("--quick", action="store_true", help="one damper, one seed, a 0.5 s-drop plan (seconds)")
+    parser.add_argument("--quick", action="store_true", help="one damper, one seed, a 1 s-drop plan (seconds)")
     args = parser.parse_args()
     count, seeds = (1, [0]) if args.quick else (args.dampers, [int(s) for s in args.noise_seeds.split(",")])
     truths = dampers(count, args.damper_seed)

@@ -23,12 +23,13 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
-from sashil.calibrate.intervals import MIN_BLOCKS_PER_PARAMETER, Intervals, block_count, jackknife
+from sashil.calibrate.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER, Intervals, block_count, jackknife
 from sashil.calibrate.rig import StepResult
 from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
@@ -194,6 +195,7 @@ class Calibration:
     analysis_s: float = 0.0
     intervals: Intervals | None = None
     intervals_s: float = 0.0
+    suggestions: list[Any] = field(default_factory=list)  # extra steps ranked (:mod:`.extra`)
 
     @property
     def best(self) -> FitResult:
@@ -287,11 +289,11 @@ def n_profile(
 
 def interval_blocks(records: Sequence[Record], block_s: float, free: int) -> float:
     """The jackknife's block length: ``block_s``, halved until the records give at least
-    MIN_BLOCKS_PER_PARAMETER blocks per free parameter (drops cut at rest can be shorter than the
-    plan promised), but never below a tenth of it."""
+    MIN_BLOCKS_PER_PARAMETER blocks per free parameter (drops cut at rest are shorter than the plan
+    promised), but never below MIN_BLOCK_S."""
     block = block_s
-    while block_count(records, block) < MIN_BLOCKS_PER_PARAMETER * free and block > 0.1 * block_s:
-        block *= 0.5
+    while block_count(records, block) < MIN_BLOCKS_PER_PARAMETER * free and block > MIN_BLOCK_S:
+        block = max(0.5 * block, MIN_BLOCK_S)
     return block
 
 

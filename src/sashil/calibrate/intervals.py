@@ -38,8 +38,10 @@ from sashil.identify.data import Record
 from sashil.identify.fit import FREE_SIGN, FitResult
 from sashil.identify.rig_models import MODELS
 
-#: the jackknife takes at least this many blocks per free parameter
+#: the jackknife takes at least this many blocks per free parameter ...
 MIN_BLOCKS_PER_PARAMETER = 2
+#: ... of at least this length [s] (shorter blocks are shortened runs of correlated residuals)
+MIN_BLOCK_S = 0.1
 #: the normal quantile of a two-sided 95 % interval
 Z95 = 1.959964
 #: the lab's quantities, in report order (the raw parameters follow)
@@ -105,6 +107,18 @@ def search_bounds(result: FitResult) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo, float), np.array(hi, float)
 
 
+def physical_range(result: FitResult) -> tuple[dict[str, float], dict[str, float]]:
+    """Where each quantity can lie: torques, stiffness and damping >= 0 (Bingham's offset f0 free),
+    Bouc-Wen's beta, gamma, delta >= 0 and n within the fit's box."""
+    model = MODELS[result.model]
+    floor = {name: 0.0 for name in (*LAB, *result.params) if name not in FREE_SIGN}
+    ceiling: dict[str, float] = {}
+    for name, (lo, hi) in zip(model.nonlinear, model.nl_bounds, strict=True):
+        if name in result.params:
+            floor[name], ceiling[name] = lo, hi
+    return floor, ceiling
+
+
 def params_at(result: FitResult, x: np.ndarray) -> dict[str, float]:
     """The model's parameters at search vector ``x`` (the map the fit searched through)."""
     model = MODELS[result.model]
@@ -165,9 +179,11 @@ def jackknife(result: FitResult, records: Sequence[Record], current_max_a: float
             draws[name].append(q[name])
     samples = {name: np.array(v) for name, v in draws.items()}
     low, high = {}, {}
+    floor, ceiling = physical_range(result)
     for name, s in samples.items():
         spread = math.sqrt((blocks - 1) / blocks * float(np.sum((s - s.mean()) ** 2)))
-        low[name], high[name] = value[name] - Z95 * spread, value[name] + Z95 * spread
+        low[name] = max(value[name] - Z95 * spread, floor.get(name, -math.inf))
+        high[name] = min(value[name] + Z95 * spread, ceiling.get(name, math.inf))
     method = f"delete-one-block jackknife: {blocks} blocks of about {block_s:g} s, each refit one Gauss-Newton step"
     return Intervals(value, low, high, method, 0, blocks, block_s, samples)
 

@@ -77,6 +77,16 @@ def params_document(cal: Calibration, inertia_given: bool, rig_s: float, plan_ro
             "block_s": cal.intervals.block_s,
         }
         doc["intervals_95"] = interval_document(cal.intervals)
+    if cal.suggestions:
+        first = cal.suggestions[0]
+        doc["calibration"]["widest_interval"] = {
+            "quantity": first.quantity,
+            "relative_half_width": _sig(first.now, 4),
+            "extra_steps": [
+                {"step": s.step.describe(), "predicted_relative_half_width": _sig(s.predicted, 4)}
+                for s in cal.suggestions[:3]
+            ],
+        }
     return doc
 
 
@@ -328,6 +338,23 @@ def write_report(
     for name, value, unit in physical(best, current_max_a):
         lines.append(_row([name, f"{value:.5g}", unit]))
     lines += ["", f"Normalisation: {best.normalisation}.", ""]
+    if cal.suggestions:
+        first = cal.suggestions[0]
+        lines += [
+            "## A plan that shrinks the widest interval",
+            "",
+            f"The widest interval is {MEANING.get(first.quantity, first.quantity)}: ±{100 * first.now:.3g} %. "
+            f"The extra step that would shrink it most is a {first.step.describe().replace(' (fit)', '')}; "
+            "`sashil calibrate --extra-steps N` runs the first N below after the plan and refits. Predicted from "
+            "the fitted model's sensitivity to each candidate (linearised, assuming its residuals scatter like "
+            "these runs'): a ranking, not a measurement.",
+            "",
+            _row(["extra step", f"predicted ± of {first.quantity}"]),
+            _row(["---"] * 2),
+        ]
+        for s in cal.suggestions:
+            lines.append(_row([s.step.describe().replace(" (fit)", ""), f"{100 * s.predicted:.3g} %"]))
+        lines.append("")
 
     lines += ["## Correlations", ""]
     names = [n for n in best.params if n in best.correlations]
