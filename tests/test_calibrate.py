@@ -196,8 +196,10 @@ def test_identify_takes_a_multi_current_drop_test_folder(tmp_path, capsys):
     out = tmp_path / "p.yaml"
     assert main(["identify", str(drops), "--quiet", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "i0.000A" in printed and "i1.000A" in printed
+    assert "i0.000A" in printed and "i1.000A" in printed and "95 % intervals (delete-one-block jackknife" in printed
     assert load_params(out)["params"]["k"] == pytest.approx(109.0, rel=0.01)
+    low, high = yaml.safe_load(out.read_text())["intervals_95"]["k"]
+    assert low < load_params(out)["params"]["k"] < high
 
 
 def test_params_with_a_config_mismatch_warns_that_it_is_applied_on_top(calibration, tmp_path):

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from sashil.calibrate.intervals import (
+from sashil.identify.data import Record
+from sashil.identify.fit import FitResult
+from sashil.identify.intervals import (
     block_count,
     block_labels,
     block_scores,
@@ -17,8 +19,6 @@ from sashil.calibrate.intervals import (
     lab_quantities,
     yield_torque,
 )
-from sashil.identify.data import Record
-from sashil.identify.fit import FitResult
 
 FREE = ("k", "c0", "fc", "f0", "c0_i", "fc_i")  # Bingham: every parameter linear, no internal state
 

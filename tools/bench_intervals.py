@@ -8,13 +8,14 @@ and beta/gamma varied), each under several sensor-noise seeds (seed 0: encoder q
 seed s > 0: Gaussian angle noise of 0.3 counts before quantisation, ``rig.noise_seed`` s), and
 counts how often each quantity's interval contains the truth:
 
-* jackknife: the delete-one-block jackknife calibrate reports (:mod:`sashil.calibrate.intervals`);
+* jackknife: the delete-one-block jackknife calibrate reports (:mod:`sashil.identify.intervals`);
 * bootstrap: a wild block bootstrap on the same blocks (one Gauss-Newton step per replicate);
 * old: +-1.96 sigma of the Gauss-Newton covariance widened by the residual-autocorrelation
   factor (the baseline, from the same fits).
 
 Per quantity it prints coverage (fraction of (damper, seed) cases covered), the median and worst
-relative half-width, the median and worst relative error, and the worst miss in half-widths.
+relative half-width, the median and worst relative error, and the worst miss in half-widths
+(the jackknife's and the old interval's).
 
     .venv/bin/python tools/bench_intervals.py [--dampers 8] [--damper-seed 2] [--noise-seeds 0,1]
         [--block-s 2.0] [--jobs 2] [--cache DIR] [--quick]
@@ -37,11 +38,20 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from sashil.calibrate import calibrate_rig
-from sashil.calibrate.analysis import interval_blocks
-from sashil.calibrate.intervals import LAB, Intervals, bootstrap, covariance_intervals, jackknife, quantities
+from sashil.calibrate import calibrate_emulated, calibrate_rig
 from sashil.config import default_config
+from sashil.identify.intervals import (
+    LAB,
+    Intervals,
+    bootstrap,
+    covariance_intervals,
+    interval_blocks,
+    jackknife,
+    lab_quantities,
+    quantities,
+)
 from sashil.identify.rig_models import bouc_wen_rescale
 
 QUICK_PLAN = {
@@ -104,6 +114,54 @@ def calibrate_case(args: tuple[dict, int, dict | None, str]) -> dict:
     }
 
 
+def serial_case(args: tuple[dict, int, dict | None, str]) -> dict:
+    """One calibration of the emulated damper over serial (real pyserial, the wall clock): the
+    intervals as params.yaml holds them."""
+    truth, noise_seed, plan, folder = args
+    config = default_config()
+    config["model"]["params"].update(truth)
+    config["calibrate"].update(plan or {})
+    started = time.perf_counter()
+    path = calibrate_emulated(config, folder, transport="serial", inertia=truth["J"])
+    doc = yaml.safe_load(Path(path).read_text())
+    return {"truth": truth, "noise_seed": noise_seed, "params_doc": doc, "wall_s": time.perf_counter() - started}
+
+
+def report_serial(rows: list[dict]) -> None:
+    """Coverage of params.yaml's intervals_95 over serial; the old +-1.96 sigma x inflation where
+    it is a raw parameter's (k = k, c_0a = c1, yield_0a = alpha1 at a unit z bound)."""
+    raw = {"k": "k", "c_0a": "c1", "yield_0a": "alpha1"}
+    print(
+        f"{'quantity':>10} | {'old cover':>9} | {'new cover':>9} {'med hw':>7} {'worst hw':>8} | {'med err':>7} {'worst err':>9}"
+    )
+    for name in [*LAB, *RAW]:
+        cov, cov_old, hw, err = [], [], [], []
+        for case in rows:
+            doc = case["params_doc"]
+            best = doc["params"]
+            truth = lab_quantities("bouc-wen", bouc_wen_rescale(case["truth"], 1.0), 1.0)
+            truth.update({k: v for k, v in bouc_wen_rescale(case["truth"], 1.0).items() if k not in truth})
+            low, high = doc["intervals_95"][name]
+            value = lab_quantities("bouc-wen", best, 1.0).get(name, best.get(name))
+            cov.append(low <= truth[name] <= high)
+            hw.append(0.5 * (high - low) / abs(value))
+            err.append(value / truth[name] - 1.0)
+            if name in raw or name in RAW:
+                key = raw.get(name, name)
+                half = 1.959964 * doc["calibration"]["uncertainty_inflation"] * doc["uncertainty_1sigma"][key]
+                cov_old.append(abs(best[key] - truth[name]) <= half)
+        old = f"{100 * np.mean(cov_old):>8.0f}%" if cov_old else f"{'-':>9}"
+        print(
+            f"{name:>10} | {old} | {100 * np.mean(cov):>8.0f}% {100 * np.median(hw):>6.2f}% {100 * np.max(hw):>7.2f}% "
+            f"| {100 * np.median(np.abs(err)):>6.2f}% {100 * np.max(np.abs(err)):>8.2f}%"
+        )
+    fits = [case["params_doc"]["calibration"]["fit_s"] for case in rows]
+    print(
+        f"{len(rows)} calibrations over serial; fit {np.median(fits):.1f} s median, {max(fits):.1f} s worst; "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    )
+
+
 def cases(
     truths: list[dict], seeds: list[int], plan: dict | None, tmp: Path, cache: Path | None, jobs: int
 ) -> list[dict]:
@@ -151,7 +209,7 @@ def report(rows: list[dict], block_s: float) -> None:
     print(
         f"{'quantity':>10} | "
         + " | ".join(f"{m:>17}" for m in methods)
-        + f" | {'worst hw':>8} | {'med err':>7} {'worst err':>9} | {'worst miss':>10}"
+        + f" | {'worst hw':>8} | {'med err':>7} {'worst err':>9} | {'worst miss':>10} {'(old)':>10}"
     )
     for name in [*LAB, *RAW]:
         cells, err, hw, miss = [], [], [], []
@@ -163,17 +221,20 @@ def report(rows: list[dict], block_s: float) -> None:
             cells.append(f"{100 * np.mean(cov):>4.0f}% / {100 * np.median(width):>6.2f}%")
         if len(cells) < len(methods):
             continue
+        miss_old = []
         for iv, truth, _ in results:
             new, t = iv["jackknife"], truth[name]
             err.append(new.value[name] / t - 1.0)
             hw.append(new.half_width(name))
             half = 0.5 * (new.high[name] - new.low[name])
             miss.append(abs(new.value[name] - t) / half if half > 0 else math.inf)
+            half_old = 0.5 * (iv["old"].high[name] - iv["old"].low[name])
+            miss_old.append(abs(iv["old"].value[name] - t) / half_old if half_old > 0 else math.inf)
         print(
             f"{name:>10} | "
             + " | ".join(f"{c:>17}" for c in cells)
             + f" | {100 * np.max(hw):>7.2f}% | {100 * np.median(np.abs(err)):>6.2f}% {100 * np.max(np.abs(err)):>8.2f}% "
-            f"| {np.max(miss):>9.2f}x"
+            f"| {np.max(miss):>9.2f}x {np.max(miss_old):>9.1f}x"
         )
     lab = [n for n in LAB if n in results[0][1]]
     for m in methods:
@@ -203,12 +264,29 @@ def main() -> None:
     )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--cache", type=Path, help="keep each calibration here (re-evaluate without refitting)")
+    parser.add_argument(
+        "--transport",
+        choices=("sim", "serial"),
+        default="sim",
+        help="sim: the simulated rig (virtual clock); serial: the emulated damper over a pty (wall clock, one at a time)",
+    )
     parser.add_argument("--quick", action="store_true", help="one damper, one seed, a 1 s-drop plan (seconds)")
     args = parser.parse_args()
     count, seeds = (1, [0]) if args.quick else (args.dampers, [int(s) for s in args.noise_seeds.split(",")])
     truths = dampers(count, args.damper_seed)
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
+    if args.transport == "serial":
+        with tempfile.TemporaryDirectory(prefix="bench-intervals-") as tmp:
+            rows = []
+            for d, truth in enumerate(truths):
+                print(f".. {time.strftime('%H:%M:%S')} damper {d} over serial", flush=True)
+                rows.append(serial_case((truth, 0, QUICK_PLAN if args.quick else None, str(Path(tmp) / str(d)))))
+        print(
+            f"sashil calibrate over serial against the emulated damper: {count} dampers (generator seed {args.damper_seed})"
+        )
+        report_serial(rows)
+        return
     with tempfile.TemporaryDirectory(prefix="bench-intervals-") as tmp:
         rows = cases(truths, seeds, QUICK_PLAN if args.quick else None, Path(tmp), args.cache, args.jobs)
     print(

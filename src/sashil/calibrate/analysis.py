@@ -8,7 +8,7 @@
   (initial angle, current, road motion) and its angle compared with the recorded one
   (NRMSE = RMS error / standard deviation of the recorded angle).
 * Intervals: 95 % intervals of the lab's quantities and the raw parameters from a delete-one-block
-  jackknife of the fit (:mod:`sashil.calibrate.intervals`); the Jacobian's
+  jackknife of the fit (:mod:`sashil.identify.intervals`); the Jacobian's
   1-sigma, which assumes white residuals, is kept beside them widened by the square root of the
   residuals' integrated autocorrelation time (in samples). For Bouc-Wen the
   exponent n is profiled: with n held at several values the rest is refitted (a short output-error
@@ -29,11 +29,11 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
-from sashil.calibrate.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER, Intervals, block_count, jackknife
 from sashil.calibrate.rig import StepResult
 from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
 from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model
+from sashil.identify.intervals import Intervals, interval_blocks, jackknife
 from sashil.identify.rig_models import MODELS
 from sashil.stats import nrmse
 
@@ -285,16 +285,6 @@ def n_profile(
             held = float(np.mean([v.nrmse for v in validate(trial, held_out)])) if held_out else math.nan
             points.append(ProfilePoint(float(n), float(np.sqrt(np.mean(fit.fun**2))), held))
     return sorted(points, key=lambda point: point.n)
-
-
-def interval_blocks(records: Sequence[Record], block_s: float, free: int) -> float:
-    """The jackknife's block length: ``block_s``, halved until the records give at least
-    MIN_BLOCKS_PER_PARAMETER blocks per free parameter (drops cut at rest are shorter than the plan
-    promised), but never below MIN_BLOCK_S."""
-    block = block_s
-    while block_count(records, block) < MIN_BLOCKS_PER_PARAMETER * free and block > MIN_BLOCK_S:
-        block = max(0.5 * block, MIN_BLOCK_S)
-    return block
 
 
 def analyse(

@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from sashil.calibrate.analysis import road_acceleration, trimmed
-from sashil.calibrate.intervals import LAB, Intervals, params_at, quantities
 from sashil.calibrate.plan import RoadChirp, Step
 from sashil.identify.data import Record, record_from_columns
 from sashil.identify.fit import FitResult
+from sashil.identify.intervals import LAB, Intervals, params_at, quantities
 from sashil.identify.rig_models import MODELS
 
 #: sample period of a candidate's simulated record [s]

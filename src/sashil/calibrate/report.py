@@ -3,7 +3,7 @@
 The parameter file is the one ``sashil identify`` writes (:func:`sashil.identify.report.param_document`,
 DESIGN.md shape) with a ``calibration`` block and ``intervals_95`` (``[low, high]`` of k, c_0a,
 c_max, yield_0a, yield_max and every free raw parameter) beside it. The intervals are the block
-jackknife's (:mod:`sashil.calibrate.intervals`); the Jacobian's white-residual 1-sigma stays in
+jackknife's (:mod:`sashil.identify.intervals`); the Jacobian's white-residual 1-sigma stays in
 ``uncertainty_1sigma`` for comparison.
 """
 
@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.analysis import PROFILE_NFEV, Calibration
-from sashil.calibrate.intervals import LAB, Intervals
 from sashil.calibrate.rig import StepResult
 from sashil.identify.data import Record
 from sashil.identify.fit import FitResult
+from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
 from sashil.identify.rig_models import MODELS
 

@@ -15,13 +15,13 @@ import numpy as np
 
 from sashil.calibrate.analysis import Calibration, analyse, gap_cut
 from sashil.calibrate.extra import candidates, suggest
-from sashil.calibrate.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A
+from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
 from sashil.recording.run_folder import RunFolder
@@ -52,7 +52,7 @@ def check_inertia(inertia: float | None) -> float:
 def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
     """The fit runs must span two currents: alpha2 and c2 are always identified; and with
     ``block_s`` they must hold enough jackknife blocks for the intervals (:func:`min_blocks`), if
-    need be shortened down to MIN_BLOCK_S (:func:`sashil.calibrate.analysis.interval_blocks`)."""
+    need be shortened down to MIN_BLOCK_S (:func:`sashil.identify.intervals.interval_blocks`)."""
     currents = {s.current_a for s in plan.fit_steps()}
     if max(currents) - min(currents) < MIN_CURRENT_SPREAD_A:
         raise ConfigError(

@@ -74,7 +74,7 @@ class FitResult:
     stages: list[str] = field(default_factory=list)
     convergence: dict = field(default_factory=dict)
     # the optimum in search coordinates (``free``), the output-error residuals there (all records,
-    # concatenated) and their Jacobian: what :mod:`sashil.calibrate.intervals` resamples
+    # concatenated) and their Jacobian: what :mod:`sashil.identify.intervals` leaves out block by block
     free: tuple[str, ...] = ()
     x: np.ndarray | None = None
     residuals: np.ndarray | None = None

@@ -21,7 +21,7 @@ Leaving a block out moves the estimate by its leverage as well as its residuals,
 determined directions (n against beta, delta and alpha) most: that is what keeps the jackknife
 honest where a run (or part of one) alone carries a direction. The step is not damped: a
 Marquardt term of one block's share of diag(J^T J) cut the measured coverage from 95 % to 45 %. Chosen by the
-coverage tools/bench_intervals.py measures, beside the white-residual covariance and a wild block
+coverage tools/bench_intervals.py measures for calibrate, beside the white-residual covariance and a wild block
 bootstrap (:func:`bootstrap`, kept for that comparison). Everything here is arithmetic on the fit's
 Jacobian and residuals: no simulation.
 """
@@ -146,6 +146,16 @@ def block_labels(records: Sequence[Record], block_s: float) -> np.ndarray:
 
 def block_count(records: Sequence[Record], block_s: float) -> int:
     return int(block_labels(records, block_s).max()) + 1 if records else 0
+
+
+def interval_blocks(records: Sequence[Record], block_s: float, free: int) -> float:
+    """The jackknife's block length: ``block_s``, halved until the records give at least
+    MIN_BLOCKS_PER_PARAMETER blocks per free parameter (drops cut at rest are shorter than the plan
+    promised), but never below MIN_BLOCK_S."""
+    block = block_s
+    while block_count(records, block) < MIN_BLOCKS_PER_PARAMETER * free and block > MIN_BLOCK_S:
+        block = max(0.5 * block, MIN_BLOCK_S)
+    return block
 
 
 def block_scores(jacobian: np.ndarray, residuals: np.ndarray, labels: np.ndarray) -> np.ndarray:
