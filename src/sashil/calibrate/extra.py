@@ -15,6 +15,7 @@ ratio. A prediction from the linearised model, not a measurement: it ranks the c
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -81,8 +82,8 @@ def candidate_record(result: FitResult, step: Step, counts_per_rev: int) -> Reco
 
 
 def _with_road(record: Record, acc: np.ndarray) -> Record:
-    record.acc_road = acc
-    return record
+    """The record driven by the road acceleration ``acc`` (the chirp's; zero for a drop)."""
+    return dataclasses.replace(record, acc_road=acc)
 
 
 def step_jacobian(result: FitResult, record: Record) -> np.ndarray:
