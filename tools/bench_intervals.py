@@ -42,6 +42,7 @@ import yaml
 
 from sashil.calibrate import calibrate_emulated, calibrate_rig
 from sashil.config import default_config
+from sashil.errors import SashilError
 from sashil.identify.intervals import (
     LAB,
     Intervals,
@@ -104,7 +105,10 @@ def calibrate_case(args: tuple[dict, int, dict | None, str]) -> dict:
     q = 2.0 * math.pi / config["rig"]["encoder_counts_per_rev"]
     config["rig"].update(angle_noise_rad=0.3 * q if noise_seed else 0.0, noise_seed=noise_seed)
     started = time.perf_counter()
-    outcome = calibrate_rig(config, folder, inertia=truth["J"], profile=False)
+    try:
+        outcome = calibrate_rig(config, folder, inertia=truth["J"], profile=False)
+    except SashilError as err:  # the calibration itself failed: counted apart, no interval to judge
+        return {"truth": truth, "noise_seed": noise_seed, "error": str(err)}
     return {
         "truth": truth,
         "noise_seed": noise_seed,
@@ -181,7 +185,10 @@ def cases(
                 if path is not None:
                     path.write_bytes(pickle.dumps(case))
                 out[key] = case
-    return [{**out[k], "damper": k[0]} for k in sorted(out)]
+    failed = [out[k] for k in sorted(out) if "error" in out[k]]
+    for case in failed:
+        print(f"calibration failed (left out): noise seed {case['noise_seed']}: {case['error']}")
+    return [{**out[k], "damper": k[0]} for k in sorted(out) if "error" not in out[k]]
 
 
 def evaluate(case: dict, block_s: float) -> tuple[dict[str, Intervals], dict, float]:
