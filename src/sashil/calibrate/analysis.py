@@ -196,6 +196,7 @@ class Calibration:
     intervals: Intervals | None = None
     intervals_s: float = 0.0
     suggestions: list[Any] = field(default_factory=list)  # extra steps ranked (:mod:`.extra`)
+    extra_note: str = ""  # why the extra steps' refit was not kept
 
     @property
     def best(self) -> FitResult:

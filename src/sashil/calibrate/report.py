@@ -87,6 +87,8 @@ def params_document(cal: Calibration, inertia_given: bool, rig_s: float, plan_ro
                 for s in cal.suggestions[:3]
             ],
         }
+        if cal.extra_note:
+            doc["calibration"]["widest_interval"]["extra_steps_not_kept"] = cal.extra_note
     return doc
 
 
@@ -355,6 +357,8 @@ def write_report(
         for s in cal.suggestions:
             lines.append(_row([s.step.describe().replace(" (fit)", ""), f"{100 * s.predicted:.3g} %"]))
         lines.append("")
+        if cal.extra_note:
+            lines += [f"**--extra-steps: {cal.extra_note}.**", ""]
 
     lines += ["## Correlations", ""]
     names = [n for n in best.params if n in best.correlations]

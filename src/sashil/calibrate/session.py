@@ -20,7 +20,8 @@ from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
-from sashil.identify.data import MIN_CURRENT_SPREAD_A
+from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
+from sashil.identify.fit import FitResult
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
@@ -103,6 +104,18 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
 def _stream(target: RunFolder, attempt: int) -> Path:
     """Where the runner streams a step's cycles: cycles.csv, and cycles-2.csv, ... for its repeats."""
     return target.file(CYCLES_FILE if attempt == 1 else CYCLES_FILE.replace(".csv", f"-{attempt}.csv"))
+
+
+#: a refit with extra steps whose RMS over the plan's own runs exceeds this multiple of the first
+#: fit's is not kept (the extra run led the search astray)
+EXTRA_WORSE = 1.5
+
+
+def plan_rms(result: FitResult, records: Sequence[Record]) -> float:
+    """RMS output error [rad] of ``result`` over ``records`` (all samples)."""
+    model = MODELS[result.model]
+    errors = [model.simulate(result.params, r) - r.theta for r in records]
+    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
 
 
 def _stopped(
@@ -279,7 +292,16 @@ def calibrate_rig(
         if failure is not None:
             _stopped(folder, failure, results, rig_s, say)
         say("refitting with the extra steps ...")
-        cal = fit(profile)
+        first, cal = cal, fit(profile)
+        before, after = first.best.rms_total, plan_rms(cal.best, first.fit_records)
+        if after > EXTRA_WORSE * before:  # the refit lost the plan's runs: keep the fit without the extra steps
+            note = (
+                f"the refit with the extra steps fit the plan's runs worse (RMS {math.degrees(after):.4f} deg against "
+                f"{math.degrees(before):.4f} deg): kept the fit without them"
+            )
+            say(note)
+            first.extra_note = note
+            cal = first
     params_path = write_params(folder.file("params.yaml"), params_document(cal, inertia is not None, rig_s, rows))
     report_path = write_report(
         folder.path,
