@@ -110,6 +110,7 @@ def test_params_and_report_give_95_percent_intervals_of_the_lab_quantities(calib
     for name, (low, high) in intervals.items():
         assert low <= value.get(name, p.get(name)) * (1 + 1e-5) and high >= value.get(name, p.get(name)) * (1 - 1e-5)
     assert doc["calibration"]["intervals"]["method"].startswith("delete-one-block jackknife")
+    assert doc["calibration"]["intervals"]["fit_suspect"] is False
     text = (calibration / "report.md").read_text()
     assert "| yield torque α(i_max)·z_u [N m] |" in text and "95 % interval" in text
 

@@ -24,8 +24,10 @@ from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
 from sashil.identify.rig_models import MODELS
 
-#: a parameter whose +-2 sigma interval is wider than this fraction of its value is "not pinned down"
+#: a parameter whose 95 % interval is wider than +- this fraction of its value is "not pinned down"
 LOOSE = 0.25
+#: a held-out NRMSE above this says the fit went wrong: no interval around it holds (typical: 2-8 %)
+SUSPECT_NRMSE = 0.10
 
 
 def quantisation_floor(theta: np.ndarray, counts_per_rev: int) -> float:
@@ -75,6 +77,7 @@ def params_document(cal: Calibration, inertia_given: bool, rig_s: float, plan_ro
             "method": cal.intervals.method,
             "blocks": cal.intervals.blocks,
             "block_s": cal.intervals.block_s,
+            "fit_suspect": bool(cal.validation_nrmse > SUSPECT_NRMSE),
         }
         doc["intervals_95"] = interval_document(cal.intervals)
     if cal.suggestions:
@@ -211,6 +214,12 @@ def interval_table(lines: list[str], cal: Calibration, best: FitResult) -> list[
         f"params.yaml's uncertainty_1sigma, understates the scatter even ×{cal.inflation:.2f}). "
         "`intervals_95` in params.yaml holds the same numbers."
     )
+    if cal.validation_nrmse > SUSPECT_NRMSE:
+        lines += [
+            "",
+            f"**The held-out NRMSE ({100 * cal.validation_nrmse:.1f} %) is above {100 * SUSPECT_NRMSE:.0f} %: the fit "
+            "went wrong, and no interval around it holds. Repeat the calibration before using these numbers.**",
+        ]
     lines += ["", _row(["quantity", "value", "95 % interval", "± relative"]), _row(["---"] * 4)]
     for name in iv.value:
         rel = iv.half_width(name)
