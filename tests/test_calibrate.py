@@ -92,10 +92,27 @@ def test_calibration_folder_holds_params_report_plots_and_raw_runs(calibration):
 def test_calibration_report_says_j_is_one_and_validates_on_held_out_runs(calibration):
     text = (calibration / "report.md").read_text()
     assert text.splitlines()[0].startswith("**All torques are relative to J = 1**")
-    assert "## Held-out validation" in text and "n is poorly determined" in text
+    assert "## Held-out validation" in text and "n is not identifiable from this plan" in text
     summary = json.loads((calibration / "summary.json").read_text())
     # the seed damper, 4096 counts: the encoder alone costs 2.4-2.5 % NRMSE on these held-out drops
     assert all(v < 0.035 for v in summary["held_out_nrmse"].values())
+
+
+@pytest.mark.e2e  # a whole calibration or identification (seconds)
+def test_params_and_report_give_95_percent_intervals_of_the_lab_quantities(calibration):
+    doc = yaml.safe_load((calibration / "params.yaml").read_text())
+    intervals, p = doc["intervals_95"], doc["params"]
+    lab = ["k", "c_0a", "c_max", "yield_0a", "yield_max"]
+    assert list(intervals)[:5] == lab
+    assert set(intervals) == {*lab, *(name for name in p if name != "J")}
+    value = {"k": p["k"], "c_0a": p["c1"], "c_max": p["c1"] + p["c2"], "yield_0a": p["alpha1"]}
+    value["yield_max"] = p["alpha1"] + p["alpha2"]  # unit z bound, i_max = 1 A
+    for name, (low, high) in intervals.items():
+        assert low <= value.get(name, p.get(name)) * (1 + 1e-5) and high >= value.get(name, p.get(name)) * (1 - 1e-5)
+    assert doc["calibration"]["intervals"]["method"].startswith("delete-one-block jackknife")
+    assert doc["calibration"]["intervals"]["fit_suspect"] is False
+    text = (calibration / "report.md").read_text()
+    assert "| yield torque α(i_max)·z_u [N m] |" in text and "95 % interval" in text
 
 
 @pytest.mark.e2e  # a whole calibration or identification (seconds)
@@ -147,11 +164,19 @@ def test_inertia_given_scales_the_torques(tmp_path, capsys):
         (["--inertia", "0"], None, "--inertia: expected the arm's inertia J > 0"),
         (["--inertia", "-1.5"], None, "--inertia: expected the arm's inertia J > 0"),
         (["--inertia", "nan"], None, "--inertia"),
+        (["--extra-steps", "12"], None, "--extra-steps: expected 0 to 9 extra steps, got 12"),
         ([], {"currents_a": [0.5], "small_currents_a": [0.5], "road_currents_a": []}, "cannot be identified"),
         ([], {"currents_a": [0.0, 2.0]}, "calibrate.currents_a: expected currents in [0, 1] A"),
         ([], {"max_rig_time_s": 30.0}, "calibrate.max_rig_time_s"),
         ([], {"road_f_stop_hz": 0.5}, "calibrate.road_f_stop_hz"),
         ([], {"colour": "red"}, "calibrate.colour"),
+        ([], {"interval_block_s": 0.01}, "calibrate.interval_block_s: expected a number >= 0.1"),
+        (
+            [],
+            {"currents_a": [0.0, 1.0], "small_currents_a": [], "road_currents_a": [], "drop_duration_s": 0.5},
+            "calibrate.drop_duration_s: the runs to fit (1 s in all) are too short to block for the intervals: "
+            "16 blocks of at least 0.1 s are needed; give at least 0.8 s",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, args, calibrate, needle):
@@ -172,8 +197,10 @@ def test_identify_takes_a_multi_current_drop_test_folder(tmp_path, capsys):
     out = tmp_path / "p.yaml"
     assert main(["identify", str(drops), "--quiet", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "i0.000A" in printed and "i1.000A" in printed
+    assert "i0.000A" in printed and "i1.000A" in printed and "95 % intervals (delete-one-block jackknife" in printed
     assert load_params(out)["params"]["k"] == pytest.approx(109.0, rel=0.01)
+    low, high = yaml.safe_load(out.read_text())["intervals_95"]["k"]
+    assert low < load_params(out)["params"]["k"] < high
 
 
 def test_params_with_a_config_mismatch_warns_that_it_is_applied_on_top(calibration, tmp_path):
@@ -280,3 +307,17 @@ def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tm
     for name in names:
         data = (tmp_path / "c" / "runs" / name / "data.csv").read_text().splitlines()
         assert len(data) == 3001  # the repeat's whole record, header included
+
+
+@pytest.mark.e2e  # a whole calibration, refitted (seconds)
+def test_extra_steps_run_the_suggested_step_and_refit(tmp_path, capsys):
+    out = tmp_path / "c"
+    config = write_config(tmp_path, SMALL_PLAN)
+    assert main(["calibrate", "--config", config, "--out", str(out), "--extra-steps", "1", "--no-profile", "-q"]) == 0
+    runs = sorted(p.name for p in (out / "runs").iterdir())
+    assert len(runs) == 4 and runs[-1].startswith("04-fit-") and runs[-1].endswith("-extra")
+    doc = yaml.safe_load((out / "params.yaml").read_text())
+    assert doc["calibration"]["widest_interval"]["quantity"] in {"k", "c_0a", "c_max", "yield_0a", "yield_max"}
+    assert "## A plan that shrinks the widest interval" in (out / "report.md").read_text()
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["name"] for r in summary["runs"]] == runs

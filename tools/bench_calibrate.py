@@ -25,7 +25,7 @@ identification's accuracy without the link's timing noise, as a reference.
 
 About 2 minutes of rig time per damper (plus the fit): ~12 minutes for all five.
 
-``--quick``: damper 0 only (unless --dampers) with :data:`QUICK_PLAN` (two 0.5 s drops to fit, one
+``--quick``: damper 0 only (unless --dampers) with :data:`QUICK_PLAN` (two 1 s drops to fit, one
 held out, no road run): seconds; the figures mean little.
 """
 
@@ -68,7 +68,7 @@ QUICK_PLAN = {
     "small_currents_a": [],
     "road_currents_a": [],
     "validate_currents_a": [0.5],
-    "drop_duration_s": 0.5,
+    "drop_duration_s": 1.0,
 }
 
 
@@ -166,7 +166,7 @@ def main() -> None:
         help="the emulated rig over serial or slcan, or sim: the in-process simulated rig (no link, reference)",
     )
     parser.add_argument(
-        "--quick", action="store_true", help="damper 0 only, two 0.5 s drops to fit and one held out (seconds)"
+        "--quick", action="store_true", help="damper 0 only, two 1 s drops to fit and one held out (seconds)"
     )
     args = parser.parse_args()
     dampers = args.dampers or ("0" if args.quick else None)

@@ -2,7 +2,9 @@
 
 Modules: :mod:`.plan` (the runs to make, from the config's ``calibrate`` section), :mod:`.rig`
 (running one step on the rig: the one adapter to the experiment code), :mod:`.analysis` (fit,
-held-out validation, identifiability), :mod:`.report` (params.yaml, report.md, plots),
+held-out validation, identifiability, 95 % intervals by :mod:`sashil.identify.intervals`),
+:mod:`.extra` (the extra step that would most shrink the widest interval), :mod:`.report`
+(params.yaml, report.md, plots),
 :mod:`.session` (:func:`calibrate_rig`: all of it in order) and :mod:`.emulated`
 (:func:`calibrate_emulated`: the same against an emulated damper over a pty, for benchmarks).
 """

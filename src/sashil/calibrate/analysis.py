@@ -7,9 +7,10 @@
 * Held-out validation: the fitted model is driven by each ``validate`` record's own inputs
   (initial angle, current, road motion) and its angle compared with the recorded one
   (NRMSE = RMS error / standard deviation of the recorded angle).
-* Identifiability: the Jacobian's 1-sigma assumes white residuals; the residuals of a fit to
-  encoder-quantised records are strongly correlated, so each standard error is inflated by the
-  square root of the residuals' integrated autocorrelation time (in samples). For Bouc-Wen the
+* Intervals: 95 % intervals of the lab's quantities and the raw parameters from a delete-one-block
+  jackknife of the fit (:mod:`sashil.identify.intervals`); the Jacobian's
+  1-sigma, which assumes white residuals, is kept beside them widened by the square root of the
+  residuals' integrated autocorrelation time (in samples). For Bouc-Wen the
   exponent n is profiled: with n held at several values the rest is refitted (a short output-error
   refinement from the best fit) and the output error and held-out NRMSE reported for each, which
   shows how (un)determined n is and what that costs in prediction.
@@ -22,6 +23,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -31,6 +33,7 @@ from sashil.calibrate.rig import StepResult
 from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
 from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model
+from sashil.identify.intervals import Intervals, interval_blocks, jackknife
 from sashil.identify.rig_models import MODELS
 from sashil.stats import nrmse
 
@@ -143,6 +146,8 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
             record = dataclasses.replace(
                 record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
             )
+        elif r.step.road is None:  # a drop: the wheel is held at rest, its encoder's noise is no forcing
+            record = dataclasses.replace(record, acc_road=np.zeros_like(record.acc_road))
         out.append(record)
     return out
 
@@ -188,6 +193,10 @@ class Calibration:
     profile: list[ProfilePoint] = field(default_factory=list)
     fit_s: float = 0.0
     analysis_s: float = 0.0
+    intervals: Intervals | None = None
+    intervals_s: float = 0.0
+    suggestions: list[Any] = field(default_factory=list)  # extra steps ranked (:mod:`.extra`)
+    extra_note: str = ""  # why the extra steps' refit was not kept
 
     @property
     def best(self) -> FitResult:
@@ -287,8 +296,11 @@ def analyse(
     counts_per_rev: int,
     progress: Callable[[str], None] | None = None,
     profile: bool = True,
+    current_max_a: float = 1.0,
+    block_s: float = 2.0,
 ) -> Calibration:
-    """Fit ``model`` (or all four, ranked by output error) to the fit runs, validate on the others."""
+    """Fit ``model`` (or all four, ranked by output error) to the fit runs, validate on the others,
+    and give 95 % intervals (jackknife blocks of ``block_s``; see :func:`interval_blocks`)."""
     say = progress or (lambda text: None)
     fit_records = records_of(fit_results, counts_per_rev)
     validate_records = records_of(validate_results, counts_per_rev)
@@ -315,6 +327,12 @@ def analyse(
     validations = validate(best, validate_records)
     cal = Calibration(results, fit_records, validate_records, validations, residual_inflation(best, fit_records))
     cal.fit_s = fit_s
+    started_intervals = time.perf_counter()
+    block = interval_blocks(fit_records, block_s, len(best.free))
+    if block != block_s:
+        say(f"interval blocks shortened to {block:.3g} s: the records are too short for {block_s:g} s blocks")
+    cal.intervals = jackknife(best, fit_records, current_max_a, block)
+    cal.intervals_s = time.perf_counter() - started_intervals
     if profile and best.model == "bouc-wen":
         say(f"profiling n at {', '.join(f'{v:g}' for v in N_PROFILE)} ...")
         cal.profile = n_profile(best, fit_records, validate_records, options)

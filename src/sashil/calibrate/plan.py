@@ -105,6 +105,18 @@ class Plan:
         return [s for s in self.steps if s.role == "validate"]
 
 
+def road_chirp(section: dict[str, Any]) -> RoadChirp:
+    """The road chirp of a ``calibrate`` section. It ends ROAD_REST_S before the record does: its
+    last speed command is exactly 0 (a wheel left turning would move the road under the next run)."""
+    return RoadChirp(
+        math.radians(section["road_amplitude_deg"]),
+        section["road_f_start_hz"],
+        section["road_f_stop_hz"],
+        section["road_duration_s"] - ROAD_REST_S,
+        section["road_ramp_s"],
+    )
+
+
 def plan_from_config(config: dict[str, Any], source: str = "config") -> Plan:
     """The plan of the config's ``calibrate`` section, checked against the rig (one-line ConfigError).
 
@@ -147,15 +159,7 @@ def plan_from_config(config: dict[str, Any], source: str = "config") -> Plan:
             f"{source}: calibrate.road_ramp_s: the two ramps must fit in road_duration_s "
             f"({section['road_duration_s']:g} s), got {section['road_ramp_s']:g} s"
         )
-    # the chirp ends ROAD_REST_S before the record does: its last speed command is exactly 0 (a
-    # wheel left turning would move the road under the next run)
-    road = RoadChirp(
-        math.radians(section["road_amplitude_deg"]),
-        f0,
-        f1,
-        section["road_duration_s"] - ROAD_REST_S,
-        section["road_ramp_s"],
-    )
+    road = road_chirp(section)
     drop_s = section["drop_duration_s"]
     big, small, held_out = section["theta0_deg"], section["small_theta0_deg"], section["validate_theta0_deg"]
     # (role, theta0, current, road) in rig order: fit drops, fit road runs, held-out runs

@@ -1,8 +1,10 @@
 """What a calibration hands back: ``params.yaml``, ``report.md`` and its PNG plots.
 
 The parameter file is the one ``sashil identify`` writes (:func:`sashil.identify.report.param_document`,
-docs/architecture.md shape) with a ``calibration`` block beside it. Intervals in the report are +-2 standard
-errors from the Jacobian, widened by the residuals' correlation (:mod:`sashil.calibrate.analysis`).
+docs/architecture.md shape) with a ``calibration`` block and ``intervals_95`` (``[low, high]`` of k, c_0a,
+c_max, yield_0a, yield_max and every free raw parameter) beside it. The intervals are the block
+jackknife's (:mod:`sashil.identify.intervals`); the Jacobian's white-residual 1-sigma stays in
+``uncertainty_1sigma`` for comparison.
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ from sashil.calibrate.analysis import PROFILE_NFEV, Calibration
 from sashil.calibrate.rig import StepResult
 from sashil.identify.data import Record
 from sashil.identify.fit import FitResult
+from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
 from sashil.identify.rig_models import MODELS
 
-#: a parameter whose +-2 sigma interval is wider than this fraction of its value is "not pinned down"
+#: a parameter whose 95 % interval is wider than +- this fraction of its value is "not pinned down"
 LOOSE = 0.25
+#: a held-out NRMSE above this says the fit went wrong: no interval around it holds (typical: 2-8 %)
+SUSPECT_NRMSE = 0.10
 
 
 def quantisation_floor(theta: np.ndarray, counts_per_rev: int) -> float:
@@ -63,9 +68,41 @@ def params_document(cal: Calibration, inertia_given: bool, rig_s: float, plan_ro
         ],
         "rig_time_s": round(rig_s, 2),
         "fit_s": round(cal.fit_s, 2),
+        "intervals_s": round(cal.intervals_s, 2),
         "runs": plan_rows,
     }
+    if cal.intervals is not None:
+        doc["calibration"]["intervals"] = {
+            "level": 0.95,
+            "method": cal.intervals.method,
+            "blocks": cal.intervals.blocks,
+            "block_s": cal.intervals.block_s,
+            "fit_suspect": bool(cal.validation_nrmse > SUSPECT_NRMSE),
+        }
+        doc["intervals_95"] = interval_document(cal.intervals)
+    if cal.suggestions:
+        first = cal.suggestions[0]
+        doc["calibration"]["widest_interval"] = {
+            "quantity": first.quantity,
+            "relative_half_width": _sig(first.now, 4),
+            "extra_steps": [
+                {"step": s.step.describe(), "predicted_relative_half_width": _sig(s.predicted, 4)}
+                for s in cal.suggestions[:3]
+            ],
+        }
+        if cal.extra_note:
+            doc["calibration"]["widest_interval"]["extra_steps_not_kept"] = cal.extra_note
     return doc
+
+
+def interval_document(intervals: Intervals) -> dict[str, list[float]]:
+    """``intervals_95``: ``name: [low, high]`` for the lab's quantities, then the raw parameters."""
+    return {name: [_sig(intervals.low[name]), _sig(intervals.high[name])] for name in intervals.value}
+
+
+def _sig(value: float, digits: int = 6) -> float:
+    """``value`` to ``digits`` significant digits (a readable YAML number)."""
+    return float(f"{value:.{digits}g}")
 
 
 #: one run's road angle for the fit plot: (time [s], θ1 [rad])
@@ -152,6 +189,50 @@ def _profile_plot(cal: Calibration, path: Path) -> Path:
     ax.legend(fontsize=8)
     ax.set_title("Bouc-Wen exponent n: the rest refitted at each value", fontsize=9)
     return save_figure(fig, path, dpi=90)
+
+
+#: what each quantity of ``intervals_95`` is, for the report's table
+MEANING = {
+    "k": "k: stiffness [N m/rad]",
+    "c_0a": "c(0 A) = c1 [N m s/rad]",
+    "c_max": "c(i_max) = c1 + c2 i_max [N m s/rad]",
+    "yield_0a": "yield torque α(0)·z_u [N m]",
+    "yield_max": "yield torque α(i_max)·z_u [N m]",
+}
+
+
+def interval_table(lines: list[str], cal: Calibration, best: FitResult) -> list[str]:
+    """The intervals' table (lab quantities, then raw parameters) appended to ``lines``; returns the
+    raw parameters whose interval is wider than LOOSE of their value."""
+    loose: list[str] = []
+    iv = cal.intervals
+    if iv is None:
+        return loose
+    lines.append(
+        f"95 % intervals from a {iv.method}: the residuals of quantised records are correlated, so each "
+        f"block of {iv.block_s:g} s is left out as a whole (the white-residual Jacobian σ, kept in "
+        f"params.yaml's uncertainty_1sigma, understates the scatter even ×{cal.inflation:.2f}). "
+        "`intervals_95` in params.yaml holds the same numbers."
+    )
+    if cal.validation_nrmse > SUSPECT_NRMSE:
+        lines += [
+            "",
+            f"**The held-out NRMSE ({100 * cal.validation_nrmse:.1f} %) is above {100 * SUSPECT_NRMSE:.0f} %: the fit "
+            "went wrong, and no interval around it holds. Repeat the calibration before using these numbers.**",
+        ]
+    lines += ["", _row(["quantity", "value", "95 % interval", "± relative"]), _row(["---"] * 4)]
+    for name in iv.value:
+        rel = iv.half_width(name)
+        if name not in LAB and rel > LOOSE:
+            loose.append(name)
+        label = MEANING.get(name, name)
+        lines.append(
+            _row([label, f"{iv.value[name]:.5g}", f"[{iv.low[name]:.5g}, {iv.high[name]:.5g}]", f"{100 * rel:.3g} %"])
+        )
+    for name, value in best.params.items():
+        if name in best.fixed:
+            lines.append(_row([name, f"{value:.6g}", "fixed", "-"]))
+    return loose
 
 
 def _row(cells: Sequence[Any]) -> str:
@@ -262,26 +343,31 @@ def write_report(
     if cal.validations:
         lines += ["## Held-out validation", "", "![validation](validation.png)", ""]
 
-    lines += ["## Parameters", ""]
-    lines.append(
-        f"±2σ: twice the Jacobian's standard error widened ×{cal.inflation:.2f} for the residuals' correlation "
-        "(the square root of their integrated autocorrelation time; white residuals would give ×1)."
-    )
-    lines += ["", _row(["parameter", "value", "±2σ", "relative"]), _row(["---"] * 4)]
-    loose = []
-    for name, value in best.params.items():
-        if name in best.fixed:
-            lines.append(_row([name, f"{value:.6g}", "fixed", "-"]))
-            continue
-        half = 2.0 * cal.inflation * best.stderr.get(name, math.nan)
-        rel = half / abs(value) if value else math.inf
-        if rel > LOOSE:
-            loose.append(name)
-        lines.append(_row([name, f"{value:.6g}", f"{half:.3g}", f"{100 * rel:.3g} %"]))
+    lines += ["## Parameters and 95 % intervals", ""]
+    loose = interval_table(lines, cal, best)
     lines += ["", _row(["derived", "value", "unit"]), _row(["---"] * 3)]
     for name, value, unit in physical(best, current_max_a):
         lines.append(_row([name, f"{value:.5g}", unit]))
     lines += ["", f"Normalisation: {best.normalisation}.", ""]
+    if cal.suggestions:
+        first = cal.suggestions[0]
+        lines += [
+            "## A plan that shrinks the widest interval",
+            "",
+            f"The widest interval is {MEANING.get(first.quantity, first.quantity)}: ±{100 * first.now:.3g} %. "
+            f"The extra step that would shrink it most is a {first.step.describe().replace(' (fit)', '')}; "
+            "`sashil calibrate --extra-steps N` runs the first N below after the plan and refits. Predicted from "
+            "the fitted model's sensitivity to each candidate (linearised, assuming its residuals scatter like "
+            "these runs'): a ranking, not a measurement.",
+            "",
+            _row(["extra step", f"predicted ± of {first.quantity}"]),
+            _row(["---"] * 2),
+        ]
+        for s in cal.suggestions:
+            lines.append(_row([s.step.describe().replace(" (fit)", ""), f"{100 * s.predicted:.3g} %"]))
+        lines.append("")
+        if cal.extra_note:
+            lines += [f"**--extra-steps: {cal.extra_note}.**", ""]
 
     lines += ["## Correlations", ""]
     names = [n for n in best.params if n in best.correlations]
@@ -298,10 +384,10 @@ def write_report(
     lines += ["", "## Identifiability", ""]
     if loose:
         lines.append(
-            f"- Not pinned down by these runs (±2σ wider than {100 * LOOSE:.0f} % of the value): {', '.join(loose)}."
+            f"- Not pinned down by these runs (95 % interval wider than ±{100 * LOOSE:.0f} % of the value): {', '.join(loose)}."
         )
     else:
-        lines.append(f"- Every parameter's ±2σ is within {100 * LOOSE:.0f} % of its value.")
+        lines.append(f"- Every parameter's 95 % interval is within ±{100 * LOOSE:.0f} % of its value.")
     if best.model == "bouc-wen":
         lines.append(
             "- The z scale is not identifiable beside α (fixed by δ = β + γ, |z| ≤ 1); β, γ, δ then describe "
@@ -324,9 +410,10 @@ def write_report(
         text += ". "
         if len(within) > 1:
             text += (
-                f"Every n from {min(within):.3g} to {max(within):.3g} fits within 5 % of the best RMS: n is poorly "
-                "determined by these runs, and its Jacobian interval should not be read as a measurement; the "
-                "prediction barely depends on it (see the held-out NRMSE across the profile)."
+                f"**n is not identifiable from this plan: any n in [{min(within):.3g}, {max(within):.3g}] fits within "
+                "5 % of the best RMS.** Its jackknife interval is local (one Gauss-Newton step from the fit) and "
+                "should not be read as a measurement; the prediction barely depends on n (see the held-out NRMSE "
+                "across the profile), and the lab's quantities above carry its trade-off with α, β and δ."
             )
         else:
             text += "n is determined by these runs (only values near the fitted one fit within 5 % of the best RMS)."

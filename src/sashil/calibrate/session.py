@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -13,13 +14,17 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.analysis import Calibration, analyse, gap_cut
-from sashil.calibrate.plan import Plan, plan_from_config
+from sashil.calibrate.extra import candidates, suggest
+from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
-from sashil.identify.data import MIN_CURRENT_SPREAD_A
+from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
+from sashil.identify.fit import FitResult
+from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.identify.report import write_params
+from sashil.identify.rig_models import MODELS
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
@@ -46,14 +51,37 @@ def check_inertia(inertia: float | None) -> float:
     return float(inertia)
 
 
-def check_plan(plan: Plan, source: str) -> None:
-    """The fit runs must span two currents: alpha2 and c2 are always identified."""
+def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
+    """The fit runs must span two currents: alpha2 and c2 are always identified; and with
+    ``block_s`` they must hold enough jackknife blocks for the intervals (:func:`min_blocks`), if
+    need be shortened down to MIN_BLOCK_S (:func:`sashil.identify.intervals.interval_blocks`)."""
     currents = {s.current_a for s in plan.fit_steps()}
     if max(currents) - min(currents) < MIN_CURRENT_SPREAD_A:
         raise ConfigError(
             f"{source}: calibrate: every run to fit is at {min(currents):g} A, so the current terms (alpha2, c2) "
             f"cannot be identified; give calibrate.currents_a at least two currents {MIN_CURRENT_SPREAD_A:g} A apart"
         )
+    if block_s is not None:
+        need = min_blocks(plan.model)
+        fit_s = sum(s.duration_s for s in plan.fit_steps())
+        have = sum(max(1, int(s.duration_s / MIN_BLOCK_S)) for s in plan.fit_steps())
+        if have < need:
+            drops = [s for s in plan.fit_steps() if s.road is None]
+            short = (
+                math.ceil(100 * (need * MIN_BLOCK_S - (fit_s - sum(s.duration_s for s in drops))) / max(len(drops), 1))
+                / 100
+            )
+            raise ConfigError(
+                f"{source}: calibrate.drop_duration_s: the runs to fit ({fit_s:g} s in all) are too short to block "
+                f"for the intervals: {need} blocks of at least {MIN_BLOCK_S:g} s are needed; give at least {short:g} s"
+            )
+
+
+def min_blocks(model: str) -> int:
+    """Jackknife blocks the plan must hold: MIN_BLOCKS_PER_PARAMETER per free parameter (the most
+    of any model when ``model`` is all)."""
+    names = list(MODELS) if model == "all" else [model]
+    return MIN_BLOCKS_PER_PARAMETER * max(len(MODELS[n].linear) + len(MODELS[n].nonlinear) for n in names)
 
 
 def _summary_row(res: StepResult) -> dict[str, Any]:
@@ -76,6 +104,29 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
 def _stream(target: RunFolder, attempt: int) -> Path:
     """Where the runner streams a step's cycles: cycles.csv, and cycles-2.csv, ... for its repeats."""
     return target.file(CYCLES_FILE if attempt == 1 else CYCLES_FILE.replace(".csv", f"-{attempt}.csv"))
+
+
+#: a refit with extra steps whose RMS over the plan's own runs exceeds this multiple of the first
+#: fit's is not kept (the extra run led the search astray)
+EXTRA_WORSE = 1.5
+
+
+def plan_rms(result: FitResult, records: Sequence[Record]) -> float:
+    """RMS output error [rad] of ``result`` over ``records`` (all samples)."""
+    model = MODELS[result.model]
+    errors = [model.simulate(result.params, r) - r.theta for r in records]
+    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
+
+
+def _stopped(runs: RunSet, results: list[StepResult], rig_s: float, say: Callable[[str], None]) -> None:
+    """A step failed: the runs so far and summary.json are kept, nothing is fitted; raises its error."""
+    assert runs.error is not None
+    runs.finish(
+        rig_time_s=round(rig_s, 2),
+        note="the plan was cut short: the runs recorded so far are kept; nothing was fitted",
+    )
+    say(f"the plan stopped at {results[-1].step.name}; the runs so far are in {runs.folder.path}")
+    raise runs.error
 
 
 def calibrate_rig(
@@ -112,7 +163,7 @@ def calibrate_rig(
     if model is not None:
         config = {**config, "calibrate": {**config["calibrate"], "model": model}}
     plan = plan_from_config(config, source)
-    check_plan(plan, source)
+    check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
     folder = RunFolder.create(out, "calibrate")
     folder.write_config(config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
@@ -124,79 +175,126 @@ def calibrate_rig(
     counts_per_rev = config["rig"]["encoder_counts_per_rev"]
     results: list[StepResult] = []
     started = time.perf_counter()
-    for number, step in enumerate(plan.steps, start=1):
-        say(f"[{number}/{len(plan.steps)}] {step.describe()} ...")
-        target = runs.folder_for(step.name)
-        attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
-        try:
-            result = run_step(config, step, _stream(target, 1))
-        except SashilError:
-            if not results:  # the rig could not be opened (a bad port): bad input, nothing written
-                shutil.rmtree(folder.path, ignore_errors=True)
-            raise
-        if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
-            say(f"  {step.name} failed on the link ({result.error}); repeating it once")
+
+    def run_steps(steps: Sequence[Step], first: int, total: int) -> SashilError | None:
+        """Run ``steps`` (numbered from ``first`` of ``total``) into ``results``; the error that
+        stopped them, or None."""
+        for number, step in enumerate(steps, start=first):
+            say(f"[{number}/{total}] {step.describe()} ...")
+            target = runs.folder_for(step.name)
+            attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
             try:
-                again = run_step(config, step, _stream(target, next(attempts)))
-            except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
-                say(f"  the repeat failed too ({err})")
-            else:
-                if again.error is None:
+                result = run_step(config, step, _stream(target, 1))
+            except SashilError:
+                if not results:  # the rig could not be opened (a bad port): bad input, nothing written
+                    shutil.rmtree(folder.path, ignore_errors=True)
+                raise
+            if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
+                say(f"  {step.name} failed on the link ({result.error}); repeating it once")
+                try:
+                    again = run_step(config, step, _stream(target, next(attempts)))
+                except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
+                    say(f"  the repeat failed too ({err})")
+                else:
+                    if again.error is None:
+                        result = again
+            for attempt in range(1, GAP_REPEATS + 1):  # a host pause lost samples inside the record
+                cut_at = gap_cut(result, counts_per_rev) if result.error is None else None
+                if cut_at is None:
+                    break
+                say(
+                    f"  {step.name}: a link gap {cut_at:.2f} s after the release cut the record short; "
+                    f"repeating it ({attempt} of {GAP_REPEATS})"
+                )
+                try:
+                    again = run_step(config, step, _stream(target, next(attempts)))
+                except SashilError as err:  # cannot even open the link again: keep the cut record
+                    say(f"  the repeat failed ({err})")
+                    break
+                if again.error is not None:
+                    break  # keep the record cut short (the fit leaves it out if too short)
+                again_cut = gap_cut(again, counts_per_rev)
+                if again_cut is None or again_cut > cut_at:
                     result = again
-        for attempt in range(1, GAP_REPEATS + 1):  # a host pause lost samples inside the record
-            cut_at = gap_cut(result, counts_per_rev) if result.error is None else None
-            if cut_at is None:
-                break
-            say(
-                f"  {step.name}: a link gap {cut_at:.2f} s after the release cut the record short; "
-                f"repeating it ({attempt} of {GAP_REPEATS})"
-            )
-            try:
-                again = run_step(config, step, _stream(target, next(attempts)))
-            except SashilError as err:  # cannot even open the link again: keep the cut record
-                say(f"  the repeat failed ({err})")
-                break
-            if again.error is not None:
-                break  # keep the record cut short (the fit leaves it out if too short)
-            again_cut = gap_cut(again, counts_per_rev)
-            if again_cut is None or again_cut > cut_at:
-                result = again
-            result.extra["gap_repeats"] = attempt
-        error = result.error
-        if (
-            not results
-            and error is not None
-            and error.exit_code == 2
-            and not isinstance(error, StuckEncoderError)
-            and not result.columns.get("time_s", np.zeros(0)).size
-        ):  # the rig could not be opened (a bad port, another device): bad input, nothing written
-            shutil.rmtree(folder.path, ignore_errors=True)
-            raise error
-        results.append(result)
-        if result.columns.get("time_s") is not None and result.columns["time_s"].size:
-            target.write_data(result.columns)
-        runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
-        if runs.failed:
-            break
+                result.extra["gap_repeats"] = attempt
+            error = result.error
+            if (
+                not results
+                and error is not None
+                and error.exit_code == 2
+                and not isinstance(error, StuckEncoderError)
+                and not result.columns.get("time_s", np.zeros(0)).size
+            ):  # the rig could not be opened (a bad port, another device): bad input, nothing written
+                shutil.rmtree(folder.path, ignore_errors=True)
+                raise error
+            results.append(result)
+            if result.columns.get("time_s") is not None and result.columns["time_s"].size:
+                target.write_data(result.columns)
+            runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
+            if result.error is not None:
+                return result.error
+        return None
+
+    failure = run_steps(plan.steps, 1, len(plan.steps))
     rig_s = time.perf_counter() - started
     rows = [_summary_row(r) for r in results]
-    if runs.error is not None:
-        runs.finish(
-            rig_time_s=round(rig_s, 2),
-            note="the plan was cut short: the runs recorded so far are kept; nothing was fitted",
-        )
-        say(f"the plan stopped at {results[-1].step.name}; the runs so far are in {folder.path}")
-        raise runs.error
+    if failure is not None:
+        _stopped(runs, results, rig_s, say)
     say(f"rig time {rig_s:.0f} s; fitting ...")
-    cal = analyse(
-        [r for r in results if r.step.role == "fit"],
-        [r for r in results if r.step.role == "validate"],
-        plan.model,
-        J,
-        config["rig"]["encoder_counts_per_rev"],
-        progress=say,
-        profile=profile,
-    )
+    extra = int(config["calibrate"]["extra_steps"])
+    current_max_a = float(config["rig"]["current_max_a"])
+
+    def fit(profile_n: bool) -> Calibration:
+        cal = analyse(
+            [r for r in results if r.step.role == "fit"],
+            [r for r in results if r.step.role == "validate"],
+            plan.model,
+            J,
+            counts_per_rev,
+            progress=say,
+            profile=profile_n,
+            current_max_a=current_max_a,
+            block_s=float(config["calibrate"]["interval_block_s"]),
+        )
+        if cal.intervals is not None:
+            road = road_chirp(config["calibrate"])
+            cal.suggestions = suggest(
+                cal.best,
+                cal.intervals,
+                candidates(config["calibrate"], current_max_a, road),
+                current_max_a,
+                counts_per_rev,
+            )
+        return cal
+
+    cal = fit(profile and not extra)
+    if extra:
+        chosen = [
+            dataclasses.replace(
+                s.step, name=f"{n:02d}-fit-{s.step.kind}-{abs(s.step.theta0_deg):g}deg-{s.step.current_a:.2f}A-extra"
+            )
+            for n, s in enumerate(cal.suggestions[:extra], start=len(plan.steps) + 1)
+        ]
+        say(
+            f"{cal.suggestions[0].quantity} has the widest interval (±{100 * cal.suggestions[0].now:.2g} %); "
+            f"running {len(chosen)} extra step(s) that shrink it most: {', '.join(c.describe() for c in chosen)}"
+        )
+        failure = run_steps(chosen, len(plan.steps) + 1, len(plan.steps) + len(chosen))
+        rig_s = time.perf_counter() - started
+        rows = [_summary_row(r) for r in results]
+        if failure is not None:
+            _stopped(runs, results, rig_s, say)
+        say("refitting with the extra steps ...")
+        first, cal = cal, fit(profile)
+        before, after = first.best.rms_total, plan_rms(cal.best, first.fit_records)
+        if after > EXTRA_WORSE * before:  # the refit lost the plan's runs: keep the fit without the extra steps
+            note = (
+                f"the refit with the extra steps fit the plan's runs worse (RMS {math.degrees(after):.4f} deg against "
+                f"{math.degrees(before):.4f} deg): kept the fit without them"
+            )
+            say(note)
+            first.extra_note = note
+            cal = first
     params_path = write_params(folder.file("params.yaml"), params_document(cal, inertia is not None, rig_s, rows))
     report_path = write_report(
         folder.path,

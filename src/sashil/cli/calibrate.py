@@ -38,12 +38,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="skip the profile of the Bouc-Wen exponent n (a few seconds; calibrate.profile_n: false)",
     )
+    parser.add_argument(
+        "--extra-steps",
+        type=int,
+        metavar="N",
+        help="after the plan, run the N extra steps the report suggests (those that shrink the widest "
+        "interval most) and refit with them (calibrate.extra_steps; default 0)",
+    )
     add_output_options(parser)
     add_verbosity_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from sashil.calibrate.session import calibrate_rig, check_inertia
+    from sashil.errors import ConfigError
 
     setup_logging(args)
     check_inertia(args.inertia)  # before the config: a bad number is the first thing to say
@@ -55,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
         section["model"] = args.model
     if args.no_profile:
         section["profile_n"] = False
+    if args.extra_steps is not None:
+        if not 0 <= args.extra_steps <= 9:
+            raise ConfigError(f"--extra-steps: expected 0 to 9 extra steps, got {args.extra_steps}")
+        section["extra_steps"] = args.extra_steps
     inertia = section["inertia_kg_m2"]
     outcome = calibrate_rig(
         config,

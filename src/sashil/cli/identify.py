@@ -101,11 +101,19 @@ def make_folders(paths: list[Path]) -> None:
             raise ConfigError(f"--out {path}: cannot create folder {path.parent} ({err.strerror})") from None
 
 
+#: the intervals' jackknife block length [s] (shortened for short records, as in calibrate)
+BLOCK_S = 2.0
+
+
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from sashil.identify.data import load_records
     from sashil.identify.fit import FitOptions, fit_model
+    from sashil.identify.intervals import interval_blocks, jackknife
     from sashil.identify.report import (
         comparison_table,
+        format_intervals,
         format_result,
         overlay_plot,
         param_document,
@@ -134,21 +142,26 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet and sys.stderr.isatty(),
     )
     results = []
+    intervals = {}
+    current_max = max(float(np.max(r.current)) for r in records)
     for name in names:
         result = fit_model(name, records, options)
         results.append(result)
         print(format_result(result))
+        block = interval_blocks(records, BLOCK_S, len(result.free))
+        intervals[name] = jackknife(result, records, current_max, block)
+        print(format_intervals(intervals[name]))
     best = ranked(results)[0]
     if len(results) > 1:
         print("\ncomparison (ranked by output-error RMS of theta):")
         print(comparison_table(results))
     make_folders(targets)
-    write_params(out, param_document(best, args.delta))
+    write_params(out, param_document(best, args.delta, intervals[best.model]))
     print(f"wrote {out.resolve()} (model {best.model})")
     for r in results:
         if r is not best:
             other = out.with_name(f"{out.stem}.{r.model}{out.suffix or '.yaml'}")
-            write_params(other, param_document(r, args.delta))
+            write_params(other, param_document(r, args.delta, intervals[r.model]))
             print(f"wrote {other.resolve()}")
     plot = plot_path(out, args.plot)
     overlay_plot(results, records, plot)

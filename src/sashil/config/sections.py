@@ -321,6 +321,12 @@ CALIBRATE = Section(
             doc="the arm's inertia J (--inertia; null: torques relative to J = 1)",
         ),
         "profile_n": Field("bool", True, doc="profile the Bouc-Wen exponent n after the fit (--no-profile: false)"),
+        "interval_block_s": Field(
+            "float", 2.0, low=0.1, high=60.0, doc="block length of the jackknife behind the 95 % intervals"
+        ),
+        "extra_steps": Field(
+            "int", 0, low=0, high=9, doc="run this many suggested extra steps after the plan and refit (--extra-steps)"
+        ),
     },
     doc="the plan of `sashil calibrate`: drops and road runs to fit, and held-out runs to validate",
 )

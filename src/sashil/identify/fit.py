@@ -73,6 +73,12 @@ class FitResult:
     normalisation: str
     stages: list[str] = field(default_factory=list)
     convergence: dict = field(default_factory=dict)
+    # the optimum in search coordinates (``free``), the output-error residuals there (all records,
+    # concatenated) and their Jacobian: what :mod:`sashil.identify.intervals` leaves out block by block
+    free: tuple[str, ...] = ()
+    x: np.ndarray | None = None
+    residuals: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
 
     @property
     def rms_total(self) -> float:
@@ -423,6 +429,10 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
         normalisation=model.normalisation,
         stages=stages,
         convergence=convergence,
+        free=problem.free,
+        x=np.array(fit.x, dtype=float),
+        residuals=np.array(fit.fun, dtype=float),
+        jacobian=np.array(fit.jac, dtype=float),
     )
 
 

@@ -10,6 +10,7 @@ import yaml
 
 from sashil.identify.data import Record
 from sashil.identify.fit import FitResult
+from sashil.identify.intervals import Intervals
 from sashil.identify.rig_models import MODELS, bouc_wen_rescale
 
 OBJECTIVE = "output error: RMS of simulated minus recorded theta over all samples (seed 000 eq. 10)"
@@ -20,10 +21,12 @@ def ranked(results: Sequence[FitResult]) -> list[FitResult]:
     return sorted(results, key=lambda r: r.rms_total)
 
 
-def param_document(result: FitResult, delta: float | None = None) -> dict:
+def param_document(result: FitResult, delta: float | None = None, intervals: Intervals | None = None) -> dict:
     """The parameter file (docs/architecture.md shape) with uncertainties and fit statistics beside ``params``.
 
     ``delta`` re-expresses a Bouc-Wen result with that delta (z scale) instead of the unit bound.
+    ``intervals``: adds ``intervals_95`` (``name: [low, high]``, :mod:`sashil.identify.intervals`);
+    with ``delta`` only the quantities the z scale leaves alone (k, c, the yield torques, c1, c2, n).
     """
     params = dict(result.params)
     stderr = dict(result.stderr)
@@ -37,7 +40,7 @@ def param_document(result: FitResult, delta: float | None = None) -> dict:
                 stderr[key] *= abs(rescaled[key] / params[key])
         params = rescaled
         normalisation = f"z scaled so that delta = {delta:g} (z bound {zu:.6g}); J fixed"
-    return {
+    doc = {
         "model": result.model,
         "params": {k: float(v) for k, v in params.items()},
         "normalisation": normalisation,
@@ -57,6 +60,15 @@ def param_document(result: FitResult, delta: float | None = None) -> dict:
             "convergence": result.convergence,
         },
     }
+    if intervals is not None:
+        scaled = {"alpha1", "alpha2", "beta", "gamma", "delta"} if delta is not None else set()
+        doc["intervals_95"] = {
+            name: [float(f"{intervals.low[name]:.6g}"), float(f"{intervals.high[name]:.6g}")]
+            for name in intervals.value
+            if name not in scaled
+        }
+        doc["intervals_method"] = intervals.method
+    return doc
 
 
 def write_params(path: str | Path, document: dict) -> Path:
@@ -88,6 +100,17 @@ def format_result(result: FitResult) -> str:
         lines.append(f"  WARNING correlation {a}-{b} = {c:+.4f} (> 0.95: not separately identifiable)")
     lines.append(f"  normalisation: {result.normalisation}")
     lines.append("  (1-sigma from the Jacobian assume white residuals; with encoder quantisation they are optimistic)")
+    return "\n".join(lines)
+
+
+def format_intervals(intervals: Intervals) -> str:
+    """The 95 % intervals, one line each (lab quantities first)."""
+    lines = [f"  95 % intervals ({intervals.method}):"]
+    for name, value in intervals.value.items():
+        lines.append(
+            f"  {name:>9} = {value:<12.6g} [{intervals.low[name]:.6g}, {intervals.high[name]:.6g}] "
+            f"(±{100 * intervals.half_width(name):.3g} %)"
+        )
     return "\n".join(lines)
 
 
