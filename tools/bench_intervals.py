@@ -37,6 +37,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import bench_calibrate  # the sibling script (tools/ is the script's folder on sys.path)
 import numpy as np
 import yaml
 
@@ -55,14 +56,8 @@ from sashil.identify.intervals import (
 )
 from sashil.identify.rig_models import bouc_wen_rescale
 
-QUICK_PLAN = {
-    "currents_a": [0.0, 1.0],
-    "small_currents_a": [],
-    "road_currents_a": [],
-    "validate_currents_a": [0.5],
-    "drop_duration_s": 1.0,
-    "interval_block_s": 0.1,
-}
+#: --quick: bench_calibrate's short plan, with blocks short enough for its 1 s drops
+QUICK_PLAN = {**bench_calibrate.QUICK_PLAN, "interval_block_s": 0.1}
 RAW = ("c1", "c2", "alpha1", "alpha2", "n")
 
 
