@@ -163,6 +163,11 @@ def test_a_law_from_a_file_and_from_a_module(tmp_path, monkeypatch):
             "{path}:X",
             "declares a parameter 'inverse', which is the controller's own key controller.inverse",
         ),
+        (
+            "class X(Law):\n    name = 'x'\n    context = Param(1.0)\n    def torque(self, s):\n        return 0.0\n",
+            "{path}:X",
+            "declares a parameter 'context', a name the Law API uses",
+        ),
     ],
 )
 def test_a_law_that_cannot_run_is_refused_in_one_line_and_nothing_is_written(tmp_path, capsys, body, spec, message):

@@ -58,6 +58,8 @@ def _checked(cls: type, spec: str, origin: str) -> LawEntry:
                 f"{WHERE}: {spec} declares a parameter {key!r}, which is the controller's own key "
                 f"controller.{key}: rename the parameter"
             )
+        if key == "context" or hasattr(Law, key):  # Law(context, **params) and the API's own names
+            raise ConfigError(f"{WHERE}: {spec} declares a parameter {key!r}, a name the Law API uses: rename it")
     return LawEntry(spec, cls, origin)
 
 
