@@ -91,7 +91,7 @@ def test_run_progress_text_and_hooks_fan_out():
         def start(self, recorder, timing):
             calls.append(("start", self.name, recorder, timing))
 
-        def close(self, trips):
+        def close(self, trips, notes=()):
             calls.append(("close", self.name, list(trips)))
             return self.stats
 

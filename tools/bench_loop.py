@@ -5,7 +5,9 @@ In one process, with the same real-time set-up (``loop.rt`` of the config: SCHED
 mlockall, GC off, timer slack) and the same loop code (:class:`sashil.runtime.loop.ControlLoop`):
 
 1. **bare**: an empty cycle (a rig whose read returns one preallocated sample and whose write
-   does nothing, a stage returning one preallocated command; no safety, no recorder);
+   does nothing, a stage returning one preallocated command; no safety, no recorder), and the
+   same with the passive law's live tuning listening on its socket, no change pending (its cost
+   per cycle: goal <= 2 us);
 2. **full**: the simulated rig driven by a 1.6 Hz road sine (the arm keeps moving), a constant
    0.5 A, the safety supervisor and the threaded recorder writing data.csv to a temporary run folder
    (``sashil.runtime.session.run_session``, what ``sashil run`` does);
@@ -31,6 +33,7 @@ import tempfile
 from pathlib import Path
 
 from sashil.config import load_config
+from sashil.control.laws import Passive
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.road_option import RoadStage
@@ -40,6 +43,8 @@ from sashil.runtime.loop import ControlLoop
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.session import run_session
 from sashil.runtime.stages import ConstantCurrent
+from sashil.runtime.tune_socket import TuneServer
+from sashil.runtime.tuning import LiveTuning
 
 
 class NullRig(RigInterface):
@@ -75,15 +80,25 @@ def road_sine(amplitude_rad: float, freq_hz: float):
     return profile
 
 
-def bare_run(config: dict, rate: float, duration: float) -> dict:
+def bare_run(config: dict, rate: float, duration: float, tune_folder: Path | None = None) -> dict:
+    """The empty cycle; with ``tune_folder``, plus the passive law's live tuning listening on a socket
+    there with no change pending (what every cycle of ``sashil run`` pays for being tunable)."""
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     rt = RealtimeSetup.from_config(config["loop"])
+    tuning = server = None
+    stage = ConstantCurrent(0.5)
+    if tune_folder is not None:
+        stage = ConstantCurrent(law=Passive(None, current_a=0.5))
+        tuning = LiveTuning(stage.law, rate)
+        server = TuneServer(RunFolder.create(tune_folder, "bench").path, tuning).start()
     rt.apply()
     try:
-        loop = ControlLoop(NullRig(), ConstantCurrent(0.5), clock, rate, duration, warn=lambda line: None)
+        loop = ControlLoop(NullRig(), stage, clock, rate, duration, warn=lambda line: None, tuning=tuning)
         loop.run()
     finally:
         rt.restore()
+        if server is not None:
+            server.stop()
     return {"timing": loop.timing.summary(), "realtime": rt.report()}
 
 
@@ -131,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  sched_fifo: {bare['realtime']['sched_fifo']['detail']}")
     print(line(f"bare {args.rate:g} Hz", bare["timing"]), flush=True)
     with tempfile.TemporaryDirectory(prefix="bench_loop-") as tmp:
+        tuned = bare_run(config, args.rate, args.duration, Path(tmp) / "tuned")
+        print(line("bare + tuning", tuned["timing"]), flush=True)
         full = full_run(config, args.rate, args.duration, Path(tmp) / "full")
         print(line(f"full {args.rate:g} Hz", full["timing"]), flush=True)
         print(
@@ -150,6 +167,11 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"median compute (stage+safety+record): {compute:.1f} us; median whole cycle incl. sim read/write: "
         f"{full['timing']['cycle_us']['p50']:.1f} us  (goal <= 50 us)"
+    )
+    idle = tuned["timing"]["compute_us"]["p50"] - bare["timing"]["compute_us"]["p50"]
+    print(
+        f"live tuning listening, no change pending: median compute {tuned['timing']['compute_us']['p50']:.2f} us "
+        f"against {bare['timing']['compute_us']['p50']:.2f} us bare: {idle:+.2f} us per cycle  (goal <= 2 us)"
     )
     if fast is not None:
         t = fast["timing"]

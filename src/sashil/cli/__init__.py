@@ -41,6 +41,7 @@ VERBS: dict[str, str] = {
     "laws": "sashil.cli.laws",
     "doctor": "sashil.cli.doctor",
     "replay": "sashil.cli.replay",
+    "tune": "sashil.cli.tune",
     "compare": "sashil.cli.compare",
 }
 

@@ -68,15 +68,28 @@ def run(args: argparse.Namespace) -> int:
     data, config_file = _load(args.run_folder)
     args.config = args.config or str(config_file)
     config = resolve_config(args)
+    from sashil.config import load_config
     from sashil.control.registry import make_controller
-    from sashil.experiments.replay import differences, replay
+    from sashil.experiments.replay import differences, recorded_changes, replay
+    from sashil.runtime.session import EVENTS_FILE
+
+    run_config = load_config(config_file)
     from sashil.recording.run_folder import RunFolder
 
     controller = make_controller(None, config)
     folder = RunFolder.create(args.out, "replay")
     folder.write_config(config)
     started = time.perf_counter()
-    out = replay(controller, data, int(config["rig"]["encoder_counts_per_rev"]))
+    # the run's live changes (sashil tune) belong to its own law: replayed with it, not with another
+    own_law = controller.name == (run_config.get("controller") or {}).get("law", "passive")
+    changes = recorded_changes(Path(args.run_folder) / EVENTS_FILE) if own_law else {}
+    out = replay(
+        controller,
+        data,
+        int(config["rig"]["encoder_counts_per_rev"]),
+        changes,
+        rate_hz=float(config["loop"]["rate_hz"]),
+    )
     seconds = time.perf_counter() - started
     supervised = (data["trip_code"] != 0).astype(float) if "trip_code" in data else np.zeros(data["time_s"].size)
     folder.write_data({**data, **out, "supervised": supervised})
@@ -89,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
             "law": controller.stats()["law"],
             "rows": int(data["time_s"].size),
             "rows_replayed": int(out["replayed"].sum()),
+            "live_changes": sum(len(values) for values, _ in changes.values()),
             "differences": diff,
             "seconds": round(seconds, 4),
             "times_real_time": round(span / seconds, 1) if seconds > 0 else None,

@@ -99,8 +99,11 @@ def build_stage(name: str | None, config: dict[str, Any], current: float | None)
     if current is not None:
         config["controller"]["current_a"] = current_in_range("--current", current, config)
     if name == "passive":
-        value = float(config["controller"]["current_a"])
-        return f"passive {value:g} A", ConstantCurrent(value)
+        from sashil.control.law_config import law_context
+        from sashil.control.laws import Passive
+
+        law = Passive(law_context(config), current_a=float(config["controller"]["current_a"]))
+        return f"passive {law.current_a:g} A", ConstantCurrent(law=law)
     from sashil.control.registry import make_controller
 
     return name, make_controller(name, config)
@@ -160,7 +163,9 @@ def run(args: argparse.Namespace) -> int:
     report = lambda line: None if quiet and line.startswith("realtime:") else print(line, file=sys.stderr, flush=True)  # noqa: E731
     trace = start_can_trace(args, rig, folder.path)
     try:
-        outcome = run_session(config, rig, stage, folder, clock, duration, controller=label, live=live, say=report)
+        outcome = run_session(
+            config, rig, stage, folder, clock, duration, controller=label, live=live, say=report, tune=True
+        )
     finally:
         trace_stats = trace.close() if trace is not None else None
     if isinstance(outcome.error, SashilError) and outcome.error.exit_code == ConfigError.exit_code:

@@ -208,6 +208,13 @@ CONTROLLER = Section(
         "coil_tau_s": Field(
             "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
         ),
+        "ramp_s": Field(
+            "float",
+            0.0,
+            low=0.0,
+            high=3600.0,
+            doc="sashil tune: seconds over which a live change moves a law's float parameter linearly (0: a step)",
+        ),
     },
     open_keys=True,  # the law's own parameters, checked by sashil.control.law_config
     doc="the semi-active controller: estimator, Bouc-Wen observer, law, inverse",

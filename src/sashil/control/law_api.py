@@ -203,6 +203,25 @@ class Law:
         ``defaults``: also set every parameter not in ``values`` to its default (a required one
         missing is an error). A value refused by the checks or by ``parameters_changed()`` leaves
         the law with the values it had (a running law can be retuned safely)."""
+        checked = self.check_parameters(values, defaults)
+        before = {key: self.__dict__[key] for key in checked if key in self.__dict__}
+        self.__dict__.update(checked)
+        try:
+            self.parameters_changed()
+        except BaseException:  # refused: the law keeps the values it had
+            for key in checked:
+                if key in before:
+                    self.__dict__[key] = before[key]
+                else:
+                    self.__dict__.pop(key, None)
+            if before:
+                self.parameters_changed()
+            raise
+
+    def check_parameters(self, values: Mapping[str, Any], defaults: bool = False) -> dict[str, Any]:
+        """``values`` checked against the declared parameters (unknown names, kinds, bounds; the
+        same code as a config key), as the law would store them; nothing is set. ``defaults``: see
+        :meth:`set_parameters`. ConfigError naming ``controller.<name>`` for the first bad one."""
         declared = self.params()
         for key in values:
             if key not in declared:
@@ -218,19 +237,7 @@ class Law:
                 if param.required:
                     raise ConfigError(missing_parameter(self.name, param))
                 checked[key] = param.field.check(param.default, f"controller.{key}")
-        before = {key: self.__dict__[key] for key in checked if key in self.__dict__}
-        self.__dict__.update(checked)
-        try:
-            self.parameters_changed()
-        except BaseException:  # refused: the law keeps the values it had
-            for key in checked:
-                if key in before:
-                    self.__dict__[key] = before[key]
-                else:
-                    self.__dict__.pop(key, None)
-            if before:
-                self.parameters_changed()
-            raise
+        return checked
 
     def parameter_values(self) -> dict[str, Any]:
         """The current value of every parameter (what a run folder's config records)."""

@@ -11,19 +11,25 @@ It is open loop: the recorded plant responded to the recorded commands, not to t
 Replaying the run's own law and config reproduces its commands; another law's commands say what
 that law would have asked for in the states the run went through, never what would have happened.
 The run's last row (the shutdown's 0 A, after the last cycle) and rows the safety supervisor
-changed (``trip_code`` not 0) are marked, not replayed as the controller's.
+changed (``trip_code`` not 0) are marked, not replayed as the controller's. A run whose law was
+tuned live (``events.csv``) is replayed with the same changes at the same cycles.
 """
 
 from __future__ import annotations
 
+import csv
 import math
+from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from sashil.control.controller import Controller
 from sashil.drivers.interface import RigSample
 from sashil.errors import DataFileError
+from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
 
 #: what a replay needs of a recorded data.csv
 REQUIRED = ("time_s", "theta_rad", "current_a", "seq")
@@ -42,9 +48,43 @@ def check_columns(data: dict[str, np.ndarray], where: str) -> None:
         )
 
 
-def replay(controller: Controller, data: dict[str, np.ndarray], counts_per_rev: int) -> dict[str, np.ndarray]:
+def recorded_changes(path: Path) -> dict[int, tuple[dict[str, Any], float]]:
+    """The live parameter changes of a run's ``events.csv`` (:mod:`sashil.runtime.tuning`) that a
+    cycle applied: ``{cycle: ({param: value}, ramp_s)}``; {} when the run has none. Values are read
+    as YAML, as the command line gave them. DataFileError naming the file for a malformed one."""
+    if not path.is_file():
+        return {}
+    changes: dict[int, tuple[dict[str, Any], float]] = {}
+    with path.open(newline="", encoding="utf-8") as handle:
+        reader = csv.DictReader(handle)
+        missing = [name for name in EVENT_COLUMNS if name not in (reader.fieldnames or ())]
+        if missing:
+            raise DataFileError(f"{path}: no column {', '.join(missing)} (expected {', '.join(EVENT_COLUMNS)})")
+        for line, row in enumerate(reader, start=2):
+            if row["status"] != "applied":
+                continue
+            try:
+                cycle, ramp_s, value = int(row["cycle"]), float(row["ramp_s"]), yaml.safe_load(row["new"])
+            except (ValueError, yaml.YAMLError):
+                raise DataFileError(f"{path}: line {line}: expected a cycle, a ramp in s and a value") from None
+            values, ramp = changes.get(cycle, ({}, 0.0))
+            values[row["key"]] = value
+            changes[cycle] = (values, max(ramp, ramp_s))
+    return changes
+
+
+def replay(
+    controller: Controller,
+    data: dict[str, np.ndarray],
+    counts_per_rev: int,
+    changes: Mapping[int, tuple[dict[str, Any], float]] | None = None,
+    rate_hz: float = 1000.0,
+) -> dict[str, np.ndarray]:
     """The controller's outputs for every recorded row (NaN on the shutdown row); ``replayed``: 1
-    for a row the controller stepped on, 0 for the shutdown row."""
+    for a row the controller stepped on, 0 for the shutdown row. ``changes``: live parameter
+    changes to re-apply at their cycles (:func:`recorded_changes`), through the same hand-off as
+    the live loop (ramps at ``rate_hz``, the run's loop rate)."""
+    tuning = LiveTuning(controller.law, rate_hz) if changes else None
     time_s = data["time_s"]
     n = time_s.size
     theta = data["theta_rad"]
@@ -74,6 +114,12 @@ def replay(controller: Controller, data: dict[str, np.ndarray], counts_per_rev: 
         if road_cmd is not None and k:
             speed = float(road_cmd[k - 1])
             controller.command.road_speed_rad_s = speed if math.isfinite(speed) else None
+        if tuning is not None:
+            change = changes.get(k) if changes is not None else None
+            if change is not None:
+                tuning.post(*change)
+            if tuning.busy:
+                tuning.service(float(time_s[k]), k)
         controller.step(sample, int(t_ns[k]), int(t_ns[k] - prev_ns))
         prev_ns = int(t_ns[k])
         out["replay_torque_cmd_nm"][k] = controller.torque_cmd_nm

@@ -394,8 +394,9 @@ class LiveTap:
         except BaseException as err:
             self.error = err
 
-    def close(self, trips: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
-        """Stop the thread, send the rest of the rows and the trips, finish the recording."""
+    def close(self, trips: Sequence[Mapping[str, Any]] = (), notes: Sequence[tuple[float, str]] = ()) -> dict[str, Any]:
+        """Stop the thread, send the rest of the rows, the trips and the notes (``(time_s, text)``:
+        live parameter changes) on the time axis, finish the recording."""
         if self._thread is not None:
             self._stop.set()
             self._thread.join()
@@ -409,6 +410,8 @@ class LiveTap:
                     self.log.log_columns(columns)
             for trip in trips:
                 self.log.trip(float(trip.get("time_s") or 0.0), str(trip.get("reason", "trip")))
+            for time_s, text in notes:
+                self.log.note(time_s, text)
             self.log.close()
         except Exception as err:
             self.error = err

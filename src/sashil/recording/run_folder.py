@@ -6,13 +6,15 @@ behind; files are written under a temporary name and renamed, so a reader never 
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import platform
 import shutil
 import socket
 import subprocess
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -137,6 +139,14 @@ class RunFolder:
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(target)
         return target
+
+    def write_rows(self, name: str, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
+        """A small CSV table (a header, then ``rows``; None as an empty field), e.g. ``events.csv``."""
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(columns)
+        writer.writerows([["" if value is None else value for value in row] for row in rows])
+        return self._write_text(name, buffer.getvalue())
 
     def write_config(self, config: Config) -> Path:
         return self._write_text("config.yaml", dump_config(config))

@@ -76,7 +76,7 @@ class RunProgress:
             self._emit()
             next_at += self.interval_s
 
-    def close(self, trips: Sequence[Mapping[str, Any]] = ()) -> None:
+    def close(self, trips: Sequence[Mapping[str, Any]] = (), notes: Sequence[tuple[float, str]] = ()) -> None:
         if self._thread is not None:
             self._stop.set()
             self._thread.join()
@@ -97,10 +97,10 @@ class SessionHooks:
             hook.start(recorder, timing)
         return self
 
-    def close(self, trips: Sequence[Mapping[str, Any]] = ()) -> Any:
+    def close(self, trips: Sequence[Mapping[str, Any]] = (), notes: Sequence[tuple[float, str]] = ()) -> Any:
         stats = None
         for hook in self.hooks:
-            result = hook.close(trips)
+            result = hook.close(trips, notes)
             if stats is None:
                 stats = result
         return stats

@@ -3,7 +3,7 @@
 One cycle (after ros2_control's read/update/write):
 
     wait for the deadline -> sample = rig.read(t, dt) -> safety.check(sample)
-    -> cmd = stage.step(sample, t, dt) -> cmd = safety.limit(cmd, dt) -> record the row
+    -> [a pending live parameter change] -> cmd = stage.step(sample, t, dt) -> cmd = safety.limit(cmd, dt) -> record the row
     -> rig.write(cmd, t, dt)
 
 ``t`` is the measured wake-up time and ``dt`` the measured period (integer ns from the clock).
@@ -115,6 +115,7 @@ class ControlLoop:
         overrun_policy: str = "skip",
         warn_interval_s: float = 1.0,
         warn: Callable[[str], None] | None = None,
+        tuning: Any | None = None,
     ):
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
@@ -125,10 +126,14 @@ class ControlLoop:
         self.period_ns = round(1e9 / rate_hz)
         self.max_cycles = None if duration_s is None else int(round(duration_s * rate_hz))
         self.safety, self.recorder, self.stop = safety, recorder, stop
+        #: live parameter changes (sashil.runtime.tuning.LiveTuning), applied before a cycle's step
+        self.tuning = tuning
         self.overrun_policy = overrun_policy
         self.warn_interval_ns = int(warn_interval_s * 1e9)
         self.warn = warn if warn is not None else log.warning
         self.timing = TimingStats(rate_hz)
+        if tuning is not None:
+            tuning.timing = self.timing  # a change's arrival is dated in the loop's cycles
         self.result = LoopResult(timing=self.timing)
         self.start_ns = 0
         self._last_warn_ns: int | None = None
@@ -142,7 +147,7 @@ class ControlLoop:
         """Run the loop once. It stops at the next cycle when ``stop.requested`` (the runner routes
         SIGINT, SIGTERM and SIGHUP to that flag: :func:`sashil.runtime.runner.run_plan`)."""
         rig, stage, clock, result, timing = self.rig, self.stage, self.clock, self.result, self.timing
-        safety, recorder, stop = self.safety, self.recorder, self.stop
+        safety, recorder, stop, tuning = self.safety, self.recorder, self.stop, self.tuning
         period = self.period_ns
         max_cycles = self.max_cycles
         now = clock.now_ns
@@ -201,6 +206,8 @@ class ControlLoop:
                         late = 0
                 if check is not None:
                     check(sample, t)
+                if tuning is not None and tuning.busy:  # a live change: between two steps of the law
+                    tuning.service((t - start) * 1e-9, cycles)
                 cmd = step(sample, t, dt)
                 if cmd is None:
                     break

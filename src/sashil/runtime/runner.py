@@ -148,6 +148,7 @@ def run_plan(
     live: Any = None,
     stop: StopFlag | None = None,
     read_stream: bool = False,
+    tuning: Any = None,
 ) -> RunOutcome:
     """Run ``plan`` on ``rig`` (see the module docstring); never raises for what ends the loop.
 
@@ -157,7 +158,8 @@ def run_plan(
     view. ``stop``: a stop flag of the caller's (a calibration plan shares one across its runs); the
     signals are routed to it for the run. A disk too full for the run raises DiskSpaceError before
     the rig is touched. ``read_stream``: read the stream back into :attr:`RunOutcome.stream` (a
-    temporary file holds it when there is no ``data_path``).
+    temporary file holds it when there is no ``data_path``). ``tuning``: live parameter changes
+    for the plan's law (:class:`~sashil.runtime.tuning.LiveTuning`), applied between cycles.
     """
     loop_cfg = config["loop"]
     rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
@@ -186,6 +188,7 @@ def run_plan(
         overrun_policy=loop_cfg["overrun_policy"],
         warn_interval_s=loop_cfg["warn_interval_s"],
         warn=say,
+        tuning=tuning,
     )
     compile_kernels()  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None

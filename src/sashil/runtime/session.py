@@ -23,10 +23,33 @@ from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
+from sashil.runtime.tune_socket import TuneServer
+from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+
+#: the run folder's record of live parameter changes (sashil tune)
+EVENTS_FILE = "events.csv"
 
 
 def _stderr(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
+
+
+def open_tuning(
+    config: dict[str, Any], stage: Any, folder: RunFolder, say: Callable[[str], None]
+) -> tuple[LiveTuning | None, TuneServer | None]:
+    """The live tuning of ``stage``'s law on ``folder``'s socket, started; (None, None) when the
+    stage has no law or the socket cannot be made (said in one line: the run goes on untuned)."""
+    law = getattr(stage, "law", None)
+    if law is None or not hasattr(law, "check_parameters"):
+        return None, None
+    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get("ramp_s", 0.0)))
+    try:
+        server = TuneServer(folder.path, tuning).start()
+    except OSError as err:
+        say(f"live tuning: off ({folder.path}: cannot listen on a Unix socket: {err.strerror or err})")
+        return None, None
+    say(f"live tuning: sashil tune {folder.path} controller.<param>=VALUE")
+    return tuning, server
 
 
 @dataclass
@@ -50,16 +73,37 @@ def run_session(
     say: Callable[[str], None] = _stderr,
     realtime: bool = True,
     live: Any = None,
+    tune: bool = False,
 ) -> SessionOutcome:
     """Run ``stage`` on ``rig`` in closed loop through the one runner
     (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
-    timing file and ``summary.json`` (see module doc)."""
+    timing file and ``summary.json`` (see module doc). ``tune``: serve live changes of the stage's
+    law on the folder's tuning socket while the loop runs (:mod:`sashil.runtime.tune_socket`),
+    recorded in ``events.csv`` and ``summary.json``'s ``tuning``."""
     folder.write_config(config)
-    outcome = run_plan(
-        config, rig, stage, clock, duration_s, data_path=folder.file("data.csv"), say=say, realtime=realtime, live=live
-    )
+    tuning, server = open_tuning(config, stage, folder, say) if tune else (None, None)
+    try:
+        outcome = run_plan(
+            config,
+            rig,
+            stage,
+            clock,
+            duration_s,
+            data_path=folder.file("data.csv"),
+            say=say,
+            realtime=realtime,
+            live=live,
+            tuning=tuning,
+        )
+    finally:
+        if tuning is not None and server is not None:
+            tuning.close()
+            server.stop()
     result = outcome.result
-    live_stats = live.close(result.trips) if live is not None else None
+    notes = tuning.notes() if tuning is not None else ()
+    live_stats = live.close(result.trips, notes) if live is not None else None
+    if tuning is not None and tuning.events:
+        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, tuning.rows())
     folder.write_timing(outcome.loop.timing)
     summary: dict[str, Any] = {
         "verb": verb,
@@ -68,6 +112,7 @@ def run_session(
         "duration_s": duration_s,
         "driver": config["driver"]["name"],
         "live_view": live_stats,
+        "tuning": tuning.summary() if tuning is not None else None,
     }
     folder.write_summary(summary)
     return SessionOutcome(result, summary, outcome.error, outcome.exit_code)

@@ -6,17 +6,24 @@ cycle (the passive law needs none). The command object is created once and retur
 
 from __future__ import annotations
 
+from typing import Any
+
 from sashil.drivers.interface import RigCommand, RigSample
 
 
 class ConstantCurrent:
-    """Loop stage commanding ``current_a`` every cycle."""
+    """Loop stage commanding ``current_a`` every cycle; with ``law`` (the passive law), its
+    ``current_a`` instead, read each cycle, so a live change of ``controller.current_a`` applies."""
 
     name = "passive"
 
-    def __init__(self, current_a: float = 0.0):
-        self.current_a = float(current_a)
+    def __init__(self, current_a: float = 0.0, law: Any = None):
+        self.law = law
+        self.current_a = float(current_a if law is None else law.current_a)
         self.command = RigCommand(self.current_a)
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
+        law = self.law
+        if law is not None:
+            self.command.current_a = law.current_a
         return self.command

@@ -1,0 +1,74 @@
+"""``sashil tune``: change a running law's parameters, or list them, without stopping the run."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+from sashil.cli.common import add_verbosity_options, setup_logging
+from sashil.config.overrides import parse_override
+from sashil.errors import ConfigError
+from sashil.runtime.tune_socket import request
+
+HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
+EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.ramp_s=1"
+RAMP_KEY = "ramp_s"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_folder", metavar="RUN_FOLDER", help="the folder of a running `sashil run`")
+    parser.add_argument(
+        "changes",
+        nargs="*",
+        metavar="controller.PARAM=VALUE",
+        help="new values (YAML, as --set); controller.ramp_s=S moves float parameters linearly over S seconds "
+        "(default: the run's controller.ramp_s); none: list the law's parameters",
+    )
+    parser.add_argument("--json", action="store_true", help="print the answer as JSON")
+    add_verbosity_options(parser)
+
+
+def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
+    """``["controller.c_sky=2", "controller.ramp_s=1"]`` -> ``({"c_sky": 2}, 1.0)``; ConfigError
+    (one line naming the argument) for anything but ``controller.<param>=VALUE``."""
+    values: dict[str, Any] = {}
+    ramp: float | None = None
+    for text in texts:
+        path, value = parse_override(text)
+        if path[0] != "controller" or len(path) != 2:
+            raise ConfigError(
+                f"sashil tune {text!r}: only a running law's parameters can change: controller.<param>=VALUE"
+            )
+        if path[1] == RAMP_KEY:
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise ConfigError(f"controller.ramp_s: expected seconds >= 0, got {value!r}")
+            ramp = float(value)
+        else:
+            values[path[1]] = value
+    if texts and not values:
+        raise ConfigError("sashil tune: controller.ramp_s alone changes nothing: add controller.<param>=VALUE")
+    return values, ramp
+
+
+def run(args: argparse.Namespace) -> int:
+    setup_logging(args)
+    values, ramp = parse_changes(args.changes)
+    message: dict[str, Any] = {"set": values, "ramp_s": ramp} if values else {"get": True}
+    answer = request(args.run_folder, message)
+    if args.json:
+        print(json.dumps(answer, indent=2))
+        return 0
+    if "parameters" in answer:
+        print(f"law {answer['law']} (live changes ramp over {answer.get('ramp_s', 0):g} s)")
+        for key, value in answer["parameters"].items():
+            print(f"  controller.{key} = {value}")
+        return 0
+    for event in answer["events"]:
+        ramp_text = f" over {event['ramp_s']:g} s" if event["ramp_s"] else ""
+        print(
+            f"controller.{event['key']}: {event['old']} -> {event['new']}{ramp_text} "
+            f"(cycle {event['cycle']}, t = {event['time_s']:.3f} s)"
+        )
+    return 0
