@@ -220,3 +220,18 @@ def test_two_changes_racing_are_applied_one_after_the_other_each_whole():
     assert (law.gain, law.order) == (second[0].new, second[1].new)
     # every cycle saw one whole change or the other, never half of each
     assert set(loop.values) <= {1.0, 2.0, 5.0}
+
+
+def test_run_png_marks_each_applied_change_on_every_panel():
+    from sashil.recording.plots import _mark_live_changes, pyplot
+
+    law, tuning = make()
+    tuning.post({"gain": 2.0}, 0.0)
+    tuning.service(0.25, 250)
+    with pytest.raises(ConfigError):
+        tuning.submit({"gain": -1.0})
+    fig, axes = pyplot().subplots(3, 1)
+    _mark_live_changes(axes, tuning.summary())
+    assert [[line.get_xdata()[0] for line in ax.lines] for ax in axes] == [[0.25]] * 3  # the refusal is not drawn
+    assert [text.get_text() for text in axes[0].texts] == ["gain = 2.0"]
+    pyplot().close(fig)

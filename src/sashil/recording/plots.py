@@ -129,6 +129,28 @@ def run_title(summary: dict | None, config: dict[str, Any] | None = None) -> str
     return f"{title}: " + ", ".join(parts)
 
 
+def _mark_live_changes(axes: Any, tuning: dict | None) -> None:
+    """A dotted line on every panel at each live parameter change (``summary.json`` → ``tuning``),
+    named on the top panel."""
+    if not tuning:
+        return
+    for event in tuning.get("events", ()):
+        if event.get("status") != "applied" or event.get("time_s") is None:
+            continue
+        for ax in axes:
+            ax.axvline(event["time_s"], color="0.3", lw=0.8, ls=":")
+        ramp = f" ({event['ramp_s']:g} s ramp)" if event.get("ramp_s") else ""
+        axes[0].annotate(
+            f"{event['key']} = {event['new']}{ramp}",
+            (event["time_s"], 1.0),
+            xycoords=("data", "axes fraction"),
+            rotation=90,
+            fontsize=7,
+            va="top",
+            ha="right",
+        )
+
+
 def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) -> Path:
     """``run.png`` of a loop run folder: angles (θ, and the road θ1 and arm θ2 when the road moves),
     coil current (measured and commanded) and damper torque (observer T̂, target T* when the law
@@ -146,6 +168,7 @@ def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) 
     _current_panel(axes[1], cols)
     if has_torque:
         _torque_panel(axes[2], cols, add_feasible_band(cols, config))
+    _mark_live_changes(axes, (summary or {}).get("tuning"))
     for ax in axes:
         ax.grid(True, alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
