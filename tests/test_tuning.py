@@ -225,7 +225,7 @@ def test_two_changes_racing_are_applied_one_after_the_other_each_whole():
 def test_run_png_marks_each_applied_change_on_every_panel():
     from sashil.recording.plots import _mark_live_changes, pyplot
 
-    law, tuning = make()
+    _law, tuning = make()
     tuning.post({"gain": 2.0}, 0.0)
     tuning.service(0.25, 250)
     with pytest.raises(ConfigError):
