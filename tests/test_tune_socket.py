@@ -146,8 +146,8 @@ def test_a_stale_socket_of_a_killed_run_is_no_live_run(tmp_path):
     ("texts", "error"),
     [
         (["loop.rate_hz=10"], "only a running law's parameters can change"),
-        (["controller.ramp_s=1"], "controller.ramp_s alone changes nothing"),
-        (["controller.ramp_s=fast", "controller.c=1"], "controller.ramp_s: expected seconds >= 0"),
+        (["controller.tune_ramp_s=1"], "controller.tune_ramp_s alone changes nothing"),
+        (["controller.tune_ramp_s=fast", "controller.c=1"], "controller.tune_ramp_s: expected seconds >= 0"),
         (["controller"], "expected section.key=value"),
     ],
 )
@@ -157,7 +157,7 @@ def test_tune_arguments_are_checked_before_anything_is_sent(texts, error):
 
 
 def test_tune_arguments_parse_as_yaml_like_set():
-    assert parse_changes(["controller.c_sky=2", "controller.mode=hard", "controller.ramp_s=0.5"]) == (
+    assert parse_changes(["controller.c_sky=2", "controller.mode=hard", "controller.tune_ramp_s=0.5"]) == (
         {"c_sky": 2, "mode": "hard"},
         0.5,
     )

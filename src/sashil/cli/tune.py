@@ -13,8 +13,8 @@ from sashil.errors import ConfigError
 from sashil.runtime.tune_socket import request
 
 HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
-EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.ramp_s=1"
-RAMP_KEY = "ramp_s"
+EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.tune_ramp_s=1"
+RAMP_KEY = "tune_ramp_s"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,15 +23,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "changes",
         nargs="*",
         metavar="controller.PARAM=VALUE",
-        help="new values (YAML, as --set); controller.ramp_s=S moves float parameters linearly over S seconds "
-        "(default: the run's controller.ramp_s); none: list the law's parameters",
+        help="new values (YAML, as --set); controller.tune_ramp_s=S moves float parameters linearly over S seconds "
+        "(default: the run's controller.tune_ramp_s); none: list the law's parameters",
     )
     parser.add_argument("--json", action="store_true", help="print the answer as JSON")
     add_verbosity_options(parser)
 
 
 def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
-    """``["controller.c_sky=2", "controller.ramp_s=1"]`` -> ``({"c_sky": 2}, 1.0)``; ConfigError
+    """``["controller.c_sky=2", "controller.tune_ramp_s=1"]`` -> ``({"c_sky": 2}, 1.0)``; ConfigError
     (one line naming the argument) for anything but ``controller.<param>=VALUE``."""
     values: dict[str, Any] = {}
     ramp: float | None = None
@@ -43,12 +43,12 @@ def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
             )
         if path[1] == RAMP_KEY:
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-                raise ConfigError(f"controller.ramp_s: expected seconds >= 0, got {value!r}")
+                raise ConfigError(f"controller.tune_ramp_s: expected seconds >= 0, got {value!r}")
             ramp = float(value)
         else:
             values[path[1]] = value
     if texts and not values:
-        raise ConfigError("sashil tune: controller.ramp_s alone changes nothing: add controller.<param>=VALUE")
+        raise ConfigError("sashil tune: controller.tune_ramp_s alone changes nothing: add controller.<param>=VALUE")
     return values, ramp
 
 

@@ -208,7 +208,7 @@ CONTROLLER = Section(
         "coil_tau_s": Field(
             "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
         ),
-        "ramp_s": Field(
+        "tune_ramp_s": Field(
             "float",
             0.0,
             low=0.0,

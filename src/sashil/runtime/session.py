@@ -42,7 +42,7 @@ def open_tuning(
     law = getattr(stage, "law", None)
     if law is None or not hasattr(law, "check_parameters"):
         return None, None
-    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get("ramp_s", 0.0)))
+    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get("tune_ramp_s", 0.0)))
     try:
         server = TuneServer(folder.path, tuning).start()
     except OSError as err:

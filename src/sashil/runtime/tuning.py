@@ -9,7 +9,7 @@ them with ``law.set_parameters`` (so ``parameters_changed()`` may still refuse, 
 as it was) and answers the waiting caller. Changes are therefore applied whole, in the order
 they arrive, at the first cycle after they arrive.
 
-With a ramp (``controller.ramp_s`` > 0, from the config or given with the change) a float
+With a ramp (``controller.tune_ramp_s`` > 0, from the config or given with the change) a float
 parameter moves linearly from its value to the new one over that time, one step per cycle; other
 kinds step at once. A new change to a ramping parameter starts its ramp again from where it is.
 
@@ -106,7 +106,7 @@ class LiveTuning:
             raise ConfigError("nothing to change: give controller.<param>=VALUE")
         ramp = self.ramp_s if ramp_s is None else ramp_s
         if not (isinstance(ramp, (int, float)) and not isinstance(ramp, bool) and 0.0 <= ramp <= 3600.0):
-            raise ConfigError(f"controller.ramp_s: expected seconds in [0, 3600], got {ramp!r}")
+            raise ConfigError(f"controller.tune_ramp_s: expected seconds in [0, 3600], got {ramp!r}")
         return self.law.check_parameters(values), float(ramp)
 
     def submit(
