@@ -87,46 +87,49 @@ def replay(
     tuning = LiveTuning(controller.law, rate_hz) if changes else None
     time_s = data["time_s"]
     n = time_s.size
-    theta = data["theta_rad"]
-    road = data.get("theta_road_rad", np.zeros(n))
-    current = data["current_a"]
     seq = data["seq"]
-    road_cmd = data.get("road_speed_cmd_rad_s")
     scale = counts_per_rev / TWO_PI
-    out = {name: np.full(n, np.nan) for name in REPLAY_COLUMNS}
-    replayed = np.zeros(n)
+    # the encoder counts back from the recorded angles, whole columns at once (rint: the same
+    # half-to-even rounding as the counts were divided from); Python lists index fastest per row
+    road_counts = np.rint(data.get("theta_road_rad", np.zeros(n)) * scale).astype(np.int64)
+    arm_counts = (np.rint(data["theta_rad"] * scale).astype(np.int64) + road_counts).tolist()
+    road_list = road_counts.tolist()
+    current = data["current_a"].astype(float).tolist()
+    seq_list = seq.astype(np.int64).tolist()
+    t_ns = np.rint(time_s * 1e9).astype(np.int64).tolist()
+    time_list = time_s.tolist()
+    road_cmd = data.get("road_speed_cmd_rad_s")
+    speeds = None if road_cmd is None else [v if math.isfinite(v) else None for v in road_cmd.tolist()]
     # the stream ends on the shutdown's safe-state row: the last cycle's sample again, at 0 A
     last = n - 1 if n > 1 and seq[-1] == seq[-2] else n
-    t_ns = np.rint(time_s * 1e9).astype(np.int64)
+    torque_cmd, current_cmd, torque_hat, z_hat = [], [], [], []
+    command = controller.command
+    step = controller.step
     prev_ns = 0
     for k in range(last):
-        road_counts = int(round(road[k] * scale))
-        sample = RigSample(
-            seq=int(seq[k]),
-            time_ns=int(t_ns[k]),
-            device_time_us=0,
-            arm_counts=int(round(theta[k] * scale)) + road_counts,
-            road_counts=road_counts,
-            current_a=float(current[k]),
-            flags=0,
-            counts_per_rev=counts_per_rev,
-        )
-        if road_cmd is not None and k:
-            speed = float(road_cmd[k - 1])
-            controller.command.road_speed_rad_s = speed if math.isfinite(speed) else None
+        now_ns = t_ns[k]
+        sample = RigSample(seq_list[k], now_ns, 0, arm_counts[k], road_list[k], current[k], 0, counts_per_rev)
+        if speeds is not None and k:
+            command.road_speed_rad_s = speeds[k - 1]
         if tuning is not None:
             change = changes.get(k) if changes is not None else None
             if change is not None:
                 tuning.post(*change)
             if tuning.busy:
-                tuning.service(float(time_s[k]), k)
-        controller.step(sample, int(t_ns[k]), int(t_ns[k] - prev_ns))
-        prev_ns = int(t_ns[k])
-        out["replay_torque_cmd_nm"][k] = controller.torque_cmd_nm
-        out["replay_current_cmd_a"][k] = controller.current_cmd_a
-        out["replay_torque_hat_nm"][k] = controller.torque_hat_nm
-        out["replay_z_hat"][k] = controller.z_hat
-        replayed[k] = 1.0
+                tuning.service(time_list[k], k)
+        step(sample, now_ns, now_ns - prev_ns)
+        prev_ns = now_ns
+        torque_cmd.append(controller.torque_cmd_nm)
+        current_cmd.append(controller.current_cmd_a)
+        torque_hat.append(controller.torque_hat_nm)
+        z_hat.append(controller.z_hat)
+    out = {}
+    for name, values in zip(REPLAY_COLUMNS, (torque_cmd, current_cmd, torque_hat, z_hat), strict=True):
+        column = np.full(n, np.nan)
+        column[:last] = values
+        out[name] = column
+    replayed = np.zeros(n)
+    replayed[:last] = 1.0
     out["replayed"] = replayed
     return out
 
