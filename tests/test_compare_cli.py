@@ -118,3 +118,33 @@ def test_arm_acceleration_is_the_plants_on_sim_else_the_encoders():
     assert np.max(np.abs(accel[200:-200] - expected[200:-200])) < 1e-3 * np.max(np.abs(expected))
     accel, source = arm_acceleration({**stream, "arm_accel_true_rad_s2": expected}, 1000.0, 20.0)
     assert source == "plant" and np.allclose(accel[200:-200], expected[200:-200], rtol=0, atol=1e-3)
+
+
+@pytest.mark.e2e
+def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp_path):
+    """The same laws on the same road over the serial stack and the emulated board: θ̈2 comes
+    from the encoders there (the plant's own on the sim), so comfort agrees within the encoder
+    method's error (a few %, 10 % at 1 A on the sim's own encoders), travel closely, and the
+    soft damper is the least comfortable on both."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q"]
+    assert main(["compare", *common, "--controller", "skyhook-add", "--out", str(tmp_path / "sim")]) == 0
+    emu = Emulator(tmp_path, "serial", "python")
+    try:
+        link = [
+            "compare", *common, "--controller", "skyhook-add", "--driver", "serial", "--port", emu.link,
+            "--config", relaxed_config(tmp_path), "--out", str(tmp_path / "link"),
+        ]  # fmt: skip
+        assert main(link) == 0
+    finally:
+        emu.stop()
+    sim, over = rows(tmp_path / "sim"), rows(tmp_path / "link")
+    assert set(sim) == set(over) == {"passive 0 A", "passive 1 A", "skyhook-add"}
+    for law in sim:
+        assert over[law]["status"] == "ok", over[law]["status"]
+        a_sim, a_link = float(sim[law]["rms_accel_rad_s2"]), float(over[law]["rms_accel_rad_s2"])
+        assert a_link == pytest.approx(a_sim, rel=0.25), law
+        assert float(over[law]["rms_theta_deg"]) == pytest.approx(float(sim[law]["rms_theta_deg"]), rel=0.1), law
+    for table in (sim, over):  # the soft damper is the least comfortable on this road, by ~25 %
+        assert max(table, key=lambda law: float(table[law]["rms_accel_rad_s2"])) == "passive 0 A"
