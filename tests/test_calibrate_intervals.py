@@ -112,7 +112,10 @@ def test_jackknife_is_the_delete_one_block_refit():
     assert iv.samples["k"][0] == pytest.approx(refit[0], rel=1e-9)
     pseudo = iv.samples["k"]
     spread = math.sqrt(3 / 4 * np.sum((pseudo - pseudo.mean()) ** 2))
-    assert iv.high["k"] - iv.value["k"] == pytest.approx(1.959964 * spread)
+    bias = 3 * (pseudo.mean() - iv.value["k"])  # the jackknife's bias estimate (B - 1)(mean - value)
+    # Student's t for B - 1 = 3 degrees of freedom: 3.182446 (tables), not the normal's 1.96
+    assert iv.high["k"] - iv.value["k"] == pytest.approx(3.182446 * spread + abs(bias), rel=1e-6)
+    assert iv.value["k"] - iv.low["k"] == pytest.approx(3.182446 * spread + abs(bias), rel=1e-6)
 
 
 def test_bootstrap_is_deterministic_and_brackets_the_estimate():

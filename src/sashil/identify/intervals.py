@@ -15,14 +15,18 @@ the scatter of the estimate. Here (:func:`jackknife`):
   quantities a lab uses (:func:`lab_quantities`): k, c(i) = c1 + c2 i at 0 A and the rig's maximum
   current, and the saturated hysteretic (yield) torque alpha(i) (delta/(beta+gamma))^(1/n) at 0 A and
   at the maximum current (seed 001);
-* the interval is value +- 1.96 s_J with the jackknife's s_J^2 = (B-1)/B sum_b (q_b - mean q)^2.
+* the interval is value +- (t s_J + |b_J|): the jackknife's spread s_J^2 = (B-1)/B sum_b (q_b - mean q)^2
+  with Student's t quantile for B - 1 degrees of freedom (B is 15-25 blocks, where 1.96 is 5-8 %
+  short), widened by the size of the jackknife's own bias estimate b_J = (B-1)(mean q - q) (the
+  estimate is not moved: a bias-corrected centre covered less, 84 % against 90 % on unseen dampers).
 
 Leaving a block out moves the estimate by its leverage as well as its residuals, along the weakly
 determined directions (n against beta, delta and alpha) most: that is what keeps the jackknife
 honest where a run (or part of one) alone carries a direction. The step is not damped: a
 Marquardt term of one block's share of diag(J^T J) cut the measured coverage from 95 % to 45 %. Chosen by the
 coverage tools/bench_intervals.py measures for calibrate, beside the white-residual covariance and a wild block
-bootstrap (:func:`bootstrap`, kept for that comparison). Everything here is arithmetic on the fit's
+bootstrap (:func:`bootstrap`, kept for that comparison); the t quantile and the bias term were chosen on the
+same tuning set (they lift every quantity there to >= 94 %) and checked on unseen dampers. Everything here is arithmetic on the fit's
 Jacobian and residuals: no simulation.
 """
 
@@ -166,8 +170,16 @@ def block_scores(jacobian: np.ndarray, residuals: np.ndarray, labels: np.ndarray
     return out
 
 
+def t95(dof: int) -> float:
+    """The two-sided 95 % quantile of Student's t with ``dof`` degrees of freedom (the normal's
+    1.96 for large ``dof``): a jackknife over B blocks estimates its spread with B - 1."""
+    from scipy.stats import t
+
+    return float(t.ppf(0.5 + LEVEL / 2.0, max(dof, 1)))
+
+
 def jackknife(result: FitResult, records: Sequence[Record], current_max_a: float, block_s: float = 2.0) -> Intervals:
-    """value +- 1.96 s_J from the delete-one-block jackknife (see the module docstring)."""
+    """value +- (t95(B-1) s_J + |b_J|) from the delete-one-block jackknife (see the module docstring)."""
     if result.jacobian is None or result.residuals is None or result.x is None:
         raise ValueError("jackknife: the fit result carries no Jacobian")
     J, e, x = result.jacobian, result.residuals, result.x
@@ -190,11 +202,17 @@ def jackknife(result: FitResult, records: Sequence[Record], current_max_a: float
     samples = {name: np.array(v) for name, v in draws.items()}
     low, high = {}, {}
     floor, ceiling = physical_range(result)
+    quantile = t95(blocks - 1)
     for name, s in samples.items():
         spread = math.sqrt((blocks - 1) / blocks * float(np.sum((s - s.mean()) ** 2)))
-        low[name] = max(value[name] - Z95 * spread, floor.get(name, -math.inf))
-        high[name] = min(value[name] + Z95 * spread, ceiling.get(name, math.inf))
-    method = f"delete-one-block jackknife: {blocks} blocks of about {block_s:g} s, each refit one Gauss-Newton step"
+        bias = (blocks - 1) * (float(s.mean()) - value[name])
+        half = quantile * spread + abs(bias)
+        low[name] = max(value[name] - half, floor.get(name, -math.inf))
+        high[name] = min(value[name] + half, ceiling.get(name, math.inf))
+    method = (
+        f"delete-one-block jackknife: {blocks} blocks of about {block_s:g} s, each refit one Gauss-Newton step; "
+        f"+-(t95({blocks - 1}) s_J + |jackknife bias|)"
+    )
     return Intervals(value, low, high, method, 0, blocks, block_s, samples)
 
 
