@@ -154,6 +154,10 @@ def report_serial(rows: list[dict]) -> None:
             f"{name:>10} | {old} | {100 * np.mean(cov):>8.0f}% {100 * np.median(hw):>6.2f}% {100 * np.max(hw):>7.2f}% "
             f"| {100 * np.median(np.abs(err)):>6.2f}% {100 * np.max(np.abs(err)):>8.2f}%"
         )
+    for d, case in enumerate(rows):
+        cal = case["params_doc"]["calibration"]
+        suspect = " (fit suspect: no interval around a wrong optimum covers)" if cal["intervals"]["fit_suspect"] else ""
+        print(f"  damper {d}: held-out NRMSE {100 * cal['held_out_nrmse_mean']:.2f} %{suspect}")
     fits = [case["params_doc"]["calibration"]["fit_s"] for case in rows]
     print(
         f"{len(rows)} calibrations over serial; fit {np.median(fits):.1f} s median, {max(fits):.1f} s worst; "
