@@ -3,7 +3,7 @@
  * hardware interface. Portable C99: no allocation; integers in the wire's units (coil current in
  * 0.5 mA counts, road speed in 1 urad/s counts), times in microseconds. The same behaviour as the
  * Python board (drivers/emulator/device.py): Hello -> Version; Configure -> Status (fault 1 when it
- * cannot be honoured); Command drives the coil (ENABLE bit, clamped to i_max) and feeds the watchdog,
+ * cannot be honoured, 3 when the CAN link has no send_can); Command drives the coil (ENABLE bit, clamped to i_max) and feeds the watchdog,
  * and in host pacing is answered by a Sample; RoadSpeed sets the road motor; in device pacing one
  * Sample per period. Watchdog: no valid Command for watchdog_ms -> coil and road to 0, the watchdog
  * flag, a Status; the next valid Command clears it.
@@ -20,6 +20,10 @@
 #define SASHIL_FLAG_WATCHDOG 0x01u
 #define SASHIL_FAULT_NONE 0u
 #define SASHIL_FAULT_BAD_CONFIGURE 1u
+#define SASHIL_FAULT_NO_CAN 3u /* a Configure on the CAN link of a board whose HAL has no send_can */
+/* Status flag set by the hardware layer (sashil_board_set_status_flags): the crystal did not start
+ * and the board runs on its internal oscillator */
+#define SASHIL_STATUS_CLOCK_FALLBACK 0x10u
 #define SASHIL_PACING_DEVICE 0u
 #define SASHIL_PACING_HOST 1u
 #define SASHIL_LINK_SERIAL 0u /* sashil serial frames (COBS + CRC-16) through hal.send */
@@ -56,8 +60,11 @@ typedef struct {
     uint16_t rate_hz, watchdog_ms;
     uint8_t pacing, link;
     uint16_t sessions; /* Configures honoured since boot */
+    uint16_t refusals; /* Configures refused since boot */
+    uint8_t status_flags; /* the hardware layer's, in every Status */
     uint32_t can_bad_frames; /* CAN frames with a known id and the wrong length */
     uint64_t boot_us, next_sample_us;
+    uint32_t period_rem; /* the sample period's remainder carried, in 1/rate_hz us */
     int booted, commanded, watchdog_tripped;
     uint64_t last_cmd_us;
     uint16_t drive_counts;
@@ -86,8 +93,12 @@ void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data,
  * a board may sleep until then or until bytes arrive. */
 uint64_t sashil_board_next_event_us(const sashil_board *b);
 
-/* Configures honoured since boot (a new host session each). */
+/* Configures honoured since boot (a new host session each), and refused (with a fault code). */
 uint16_t sashil_board_sessions(const sashil_board *b);
+uint16_t sashil_board_refusals(const sashil_board *b);
+
+/* Flags the hardware layer reports in every Status (SASHIL_STATUS_CLOCK_FALLBACK). */
+void sashil_board_set_status_flags(sashil_board *b, uint8_t flags);
 
 /* Watchdog trips since boot (as Status reports them), and device-paced samples that fell a whole
  * period behind. */

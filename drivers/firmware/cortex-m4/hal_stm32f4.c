@@ -21,15 +21,18 @@
  *                 in the receive interrupt; frames to send go to a ring emptied by the transmit interrupt
  *                 (TXE), so the board's logic never waits for the wire: a 23-byte sample frame takes
  *                 230 us on the wire, which caps device pacing at about 4.3 kHz on this link.
- *   clock         the core's cycle counter (DWT CYCCNT) accumulated into microseconds.
+ *   clock         the core's cycles accumulated into microseconds: DWT CYCCNT where it counts, else
+ *                 SysTick on the core clock (hal_now_us).
  * bxCAN is not wired up in this reference layer: the board logic speaks the DBC's CAN frames
  * (sashil_board_set_link), and a CAN variant adds CAN1 on PB8/PB9 with hal.send_can.
  *
  * SASHIL_QEMU (make cortex-m4-qemu, for QEMU's netduinoplus2, an STM32F405): QEMU 7.2 models no RCC
- * (its ready bits read 0, so the PLL start-up would wait forever) and its USART raises no TXE
- * interrupt. With the macro the clock stays at reset (HSI) and hal_send writes each byte when TXE
- * is set; everything else (vector table, start-up, receive interrupt and ring, board logic) is the
- * hardware build's.
+ * (its ready bits read 0, so the PLL start-up would wait forever), its USART raises no TXE
+ * interrupt, its TIM2..5 count time rather than encoder edges, and it has no TIM6 (no current loop).
+ * With the macro the clock stays at reset, hal_send writes each byte when TXE is set, the encoders
+ * read a rig at rest (0 counts from reset) and the measured current is the setpoint; everything else
+ * (vector table, start-up, SysTick clock, receive interrupt and ring, board logic) is the hardware
+ * build's. QEMU's SysTick runs at its 168 MHz system clock, the same count as the hardware's.
  */
 #include "hal_stm32f4.h"
 
@@ -94,6 +97,11 @@
 #define DEMCR REG(0xE000EDFCu)
 #define DWT_CTRL REG(0xE0001000u)
 #define DWT_CYCCNT REG(0xE0001004u)
+/* SysTick (PM0214 4.5) */
+#define SYST_CSR REG(0xE000E010u)
+#define SYST_RVR REG(0xE000E014u)
+#define SYST_CVR REG(0xE000E018u)
+#define SYST_MASK 0x00FFFFFFu
 
 #define SYSCLK_MHZ 168u
 #define PWM_PERIOD 8400u                 /* 168 MHz / 20 kHz */
@@ -116,6 +124,9 @@ static volatile int32_t road_setpoint;   /* urad/s */
 static float coil_integral, road_integral;
 static uint32_t road_last_counts;
 static uint32_t ticks;
+static int clock_is_dwt; /* the clock counts DWT cycles (1) or SysTick's (0) */
+
+static void clock_source_init(void);
 
 static void pin_af(uint32_t port, unsigned pin, unsigned af)
 {
@@ -205,9 +216,23 @@ void hal_init(void)
     TIM_CR1(TIM6) = 1u;
     NVIC_ISER(54u / 32u) = 1u << (54u % 32u);
 
-    DEMCR |= 1u << 24; /* TRCENA */
+    clock_source_init();
+}
+
+/* DWT CYCCNT if it counts (a part may lack it, and QEMU models none: it reads 0 there), else SysTick
+ * on the core clock, free-running from 2^24 - 1 (PM0214 4.5). */
+static void clock_source_init(void)
+{
+    SYST_RVR = SYST_MASK;
+    SYST_CVR = 0u;
+    SYST_CSR = (1u << 2) | 1u; /* CLKSOURCE = the core clock, ENABLE; no interrupt */
+    DEMCR |= 1u << 24;         /* TRCENA */
     DWT_CYCCNT = 0u;
     DWT_CTRL |= 1u;
+    uint32_t first = DWT_CYCCNT;
+    for (volatile int spin = 0; spin < 16; spin++) {
+    }
+    clock_is_dwt = DWT_CYCCNT != first;
 }
 
 #define USART_TXEIE (1u << 7)
@@ -289,14 +314,28 @@ void TIM6_DAC_IRQHandler(void)
 void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts)
 {
     (void)ctx;
+#ifdef SASHIL_QEMU
+    /* QEMU's TIM2 and TIM5 model no encoder mode: they count time at 1 GHz, which would read as an arm
+     * swung by thousands of degrees. The image reads a rig at rest instead, both encoders at their reset
+     * position 0: the physics is the emulator's, QEMU checks the image's protocol, timing and safety. */
+    *arm_counts = 0;
+    *road_counts = 0;
+#else
     *arm_counts = (int32_t)TIM_CNT(TIM2);
     *road_counts = (int32_t)TIM_CNT(TIM5);
+#endif
 }
 
 int16_t hal_read_current(void *ctx)
 {
     (void)ctx;
+#ifdef SASHIL_QEMU
+    /* QEMU models no TIM6 and so runs no current loop: the image reports an ideal coil, its current the
+     * setpoint, so a sample shows what the board drives (and the watchdog's 0 A) */
+    return (int16_t)coil_setpoint;
+#else
     return coil_measured;
+#endif
 }
 
 void hal_set_coil(void *ctx, uint16_t counts)
@@ -343,13 +382,23 @@ void hal_send(void *ctx, const uint8_t *bytes, size_t n)
     USART_CR1 |= USART_TXEIE;
 }
 
+/* The microsecond clock: the core's cycles, counted by DWT CYCCNT where the part has it running, else
+ * by SysTick (24 bits, counting down at the core clock, which every Cortex-M4 has and QEMU models).
+ * Either count is accumulated into microseconds with the spare cycles carried, so no time is lost
+ * between calls; SysTick wraps every 2^24 cycles (0.1 s at 168 MHz), hence "call often enough". */
 uint64_t hal_now_us(void)
 {
-    static uint32_t last_cycles, spare_cycles;
+    static uint32_t last_count, spare_cycles;
     static uint64_t us;
-    uint32_t cycles = DWT_CYCCNT;
-    uint32_t elapsed = cycles - last_cycles + spare_cycles; /* modulo 2^32: one wrap between calls */
-    last_cycles = cycles;
+    uint32_t count, elapsed;
+    if (clock_is_dwt) {
+        count = DWT_CYCCNT;
+        elapsed = count - last_count + spare_cycles; /* modulo 2^32: one wrap between calls */
+    } else {
+        count = SYST_CVR;
+        elapsed = ((last_count - count) & SYST_MASK) + spare_cycles; /* counts down, modulo 2^24 */
+    }
+    last_count = count;
     us += elapsed / SYSCLK_MHZ;
     spare_cycles = elapsed % SYSCLK_MHZ;
     return us;
