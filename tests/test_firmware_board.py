@@ -265,3 +265,12 @@ def test_the_hardware_layers_status_flags_go_out_in_every_status():
     trip = [m for m in b.ticks(2 * MS, 60 * MS) if isinstance(m, Status)]
     assert trip == [Status(STATUS_CLOCK_FALLBACK | FLAG_WATCHDOG, 0, 0, 1)]
     assert not [m for m in b.sent if isinstance(m[1], Sample) and m[1].flags & STATUS_CLOCK_FALLBACK]
+
+
+def test_configure_takes_its_range_to_the_edges_and_refuses_one_past_them():
+    for rate, watchdog in ((1, 1), (20000, 1), (1000, 65535)):
+        assert Board().send_host(Configure(rate, watchdog, PACING_HOST), 0) == [Status(0, 0, 0, 0)], (rate, watchdog)
+    for rate, watchdog, pacing in ((0, 50, PACING_HOST), (20001, 50, PACING_HOST), (1000, 0, PACING_HOST)):
+        b = Board()
+        assert b.send_host(Configure(rate, watchdog, pacing), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+        assert b.send_host(Command(0.5, CMD_ENABLE), MS) == [] and b.coil == []  # never acted on
