@@ -27,12 +27,13 @@
  * (sashil_board_set_link), and a CAN variant adds CAN1 on PB8/PB9 with hal.send_can.
  *
  * SASHIL_QEMU (make cortex-m4-qemu, for QEMU's netduinoplus2, an STM32F405): QEMU 7.2 models no RCC
- * (its ready bits read 0, so the PLL start-up would wait forever), its USART raises no TXE
- * interrupt, its TIM2..5 count time rather than encoder edges, and it has no TIM6 (no current loop).
- * With the macro the clock stays at reset, hal_send writes each byte when TXE is set, the encoders
- * read a rig at rest (0 counts from reset) and the measured current is the setpoint; everything else
- * (vector table, start-up, SysTick clock, receive interrupt and ring, board logic) is the hardware
- * build's. QEMU's SysTick runs at its 168 MHz system clock, the same count as the hardware's.
+ * (its ready bits read 0), its USART raises no TXE interrupt, its TIM2..5 count time rather than
+ * encoder edges, and it has no TIM6 (no current loop). With the macro the clock start-up runs as on
+ * the hardware and meets what a dead crystal looks like: it times out (10 ms there) and the board
+ * reports the fallback in every Status; hal_send writes each byte when TXE is set, the encoders read a
+ * rig at rest (0 counts from reset) and the measured current is the setpoint. Everything else (vector
+ * table, start-up, SysTick clock, receive interrupt and ring, board logic) is the hardware build's.
+ * QEMU's SysTick runs on its fixed 168 MHz system clock, the hardware's count.
  */
 #include "hal_stm32f4.h"
 
@@ -104,6 +105,9 @@
 #define SYST_MASK 0x00FFFFFFu
 
 #define SYSCLK_MHZ 168u
+#define HSI_MHZ 16u                      /* the internal oscillator, the core clock after reset */
+#define HSE_TIMEOUT_CYCLES 1600000u      /* 100 ms at HSI: a crystal starts within a few ms */
+#define PLL_TIMEOUT_CYCLES 160000u       /* 10 ms: the PLL locks within 0.2 ms */
 #define PWM_PERIOD 8400u                 /* 168 MHz / 20 kHz */
 #define SENSE_MV_PER_A 1200u             /* the current-sense amplifier's gain */
 #define ADC_MV_FULL 3300u                /* 12-bit ADC, 3.3 V reference */
@@ -125,6 +129,8 @@ static float coil_integral, road_integral;
 static uint32_t road_last_counts;
 static uint32_t ticks;
 static int clock_is_dwt; /* the clock counts DWT cycles (1) or SysTick's (0) */
+static uint32_t core_mhz = HSI_MHZ; /* the core clock, and so the cycles per microsecond */
+static int clock_fallback; /* the crystal did not start (or the PLL did not lock) */
 
 static void clock_source_init(void);
 
@@ -135,22 +141,53 @@ static void pin_af(uint32_t port, unsigned pin, unsigned af)
     GPIO_AFR(port, pin / 8u) = (GPIO_AFR(port, pin / 8u) & ~(0xFu << (4u * (pin % 8u)))) | (af << (4u * (pin % 8u)));
 }
 
+/* Wait for (reg & mask) == want for at most timeout_cycles of SysTick (free-running on the core clock
+ * since hal_init started it); 1 when it came. Below 2^24 cycles: the count wraps once every 2^24. */
+static int wait_for(volatile uint32_t *reg, uint32_t mask, uint32_t want, uint32_t timeout_cycles)
+{
+    uint32_t start = SYST_CVR;
+    while ((*reg & mask) != want) {
+        if (((start - SYST_CVR) & SYST_MASK) > timeout_cycles) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* SYSCLK 168 MHz from the PLL, fed by the crystal (HSE) when it starts within HSE_TIMEOUT_CYCLES, else
+ * by the internal 16 MHz oscillator (HSI, +-1 %): the same 168 MHz, so every rate below holds, only
+ * less exactly, and clock_fallback says so (the host hears it in every Status). A PLL that does not
+ * lock leaves the core on HSI at 16 MHz: the clock and the host link follow core_mhz, the PWM and
+ * the current and speed loops run at 16/168 of their rates. */
 static void clock_init(void)
 {
+    uint32_t source;
     RCC_CR |= 1u << 16; /* HSEON */
-    while (!(RCC_CR & (1u << 17))) {
+    if (wait_for(&RCC_CR, 1u << 17, 1u << 17, HSE_TIMEOUT_CYCLES)) {
+        source = 8u | (1u << 22); /* PLLM 8 from the 8 MHz crystal, PLLSRC HSE */
+    } else {
+        RCC_CR &= ~(1u << 16); /* a dead or missing crystal: stop trying */
+        clock_fallback = 1;
+        source = 16u; /* PLLM 16 from the 16 MHz HSI, PLLSRC HSI */
     }
-    /* PLLM 8, PLLN 336, PLLP 2 (bits 00), PLLSRC HSE, PLLQ 7; the reserved bits keep their reset value */
-    RCC_PLLCFGR = (RCC_PLLCFGR & 0xF0BC8000u) | 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    /* PLLN 336, PLLP 2 (bits 00), PLLQ 7; the reserved bits keep their reset value */
+    RCC_PLLCFGR = (RCC_PLLCFGR & 0xF0BC8000u) | source | (336u << 6) | (0u << 16) | (7u << 24);
     RCC_CR |= 1u << 24; /* PLLON */
-    while (!(RCC_CR & (1u << 25))) {
+    if (!wait_for(&RCC_CR, 1u << 25, 1u << 25, PLL_TIMEOUT_CYCLES)) {
+        clock_fallback = 1;
+        return; /* on HSI at 16 MHz */
     }
     FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10); /* 5 wait states, prefetch, I- and D-cache */
     RCC_CFGR = (5u << 10) | (4u << 13);                  /* APB1 /4, APB2 /2 before the switch */
     RCC_CFGR |= 2u;                                      /* SYSCLK = PLL */
-    while ((RCC_CFGR & (3u << 2)) != (2u << 2)) {
+    if (wait_for(&RCC_CFGR, 3u << 2, 2u << 2, PLL_TIMEOUT_CYCLES)) {
+        core_mhz = SYSCLK_MHZ;
+    } else {
+        clock_fallback = 1;
     }
 }
+
+int hal_clock_fallback(void) { return clock_fallback; }
 
 static void encoder_init(uint32_t tim)
 {
@@ -176,10 +213,14 @@ static void pwm_init(uint32_t tim)
 
 void hal_init(void)
 {
-#ifdef SASHIL_QEMU
-    (void)clock_init; /* QEMU has no RCC: the reset clock */
-#else
+    SYST_RVR = SYST_MASK; /* SysTick free-running on the core clock: clock_init's timeouts, then the clock */
+    SYST_CVR = 0u;
+    SYST_CSR = (1u << 2) | 1u; /* CLKSOURCE = the core clock, ENABLE; no interrupt */
     clock_init();
+#ifdef SASHIL_QEMU
+    /* QEMU models no RCC (reads 0: clock_init above times out as on a dead crystal and flags it) and
+     * runs SysTick on its fixed 168 MHz system clock */
+    core_mhz = SYSCLK_MHZ;
 #endif
     RCC_AHB1ENR |= 7u;                                            /* GPIOA, GPIOB, GPIOC */
     RCC_APB1ENR |= (1u << 0) | (1u << 3) | (1u << 4);             /* TIM2, TIM5, TIM6 */
@@ -206,7 +247,8 @@ void hal_init(void)
 
     pin_af(GPIOA, 9u, 7u);
     pin_af(GPIOA, 10u, 7u);
-    USART_BRR = 84u;             /* 84 MHz / 1 Mbit/s, oversampling by 16: 5 + 4/16 */
+    /* 1 Mbit/s, oversampling by 16: BRR = f_APB2 / 1 MHz (84: 5 + 4/16 at 84 MHz; APB2 = HSI without PLL) */
+    USART_BRR = core_mhz == SYSCLK_MHZ ? SYSCLK_MHZ / 2u : HSI_MHZ;
     USART_CR1 = (1u << 13) | (1u << 5) | (1u << 3) | (1u << 2); /* UE, RXNEIE, TE, RE */
     NVIC_ISER(37u / 32u) = 1u << (37u % 32u);
 
@@ -220,13 +262,10 @@ void hal_init(void)
 }
 
 /* DWT CYCCNT if it counts (a part may lack it, and QEMU models none: it reads 0 there), else SysTick
- * on the core clock, free-running from 2^24 - 1 (PM0214 4.5). */
+ * (PM0214 4.5), free-running on the core clock since hal_init. */
 static void clock_source_init(void)
 {
-    SYST_RVR = SYST_MASK;
-    SYST_CVR = 0u;
-    SYST_CSR = (1u << 2) | 1u; /* CLKSOURCE = the core clock, ENABLE; no interrupt */
-    DEMCR |= 1u << 24;         /* TRCENA */
+    DEMCR |= 1u << 24; /* TRCENA */
     DWT_CYCCNT = 0u;
     DWT_CTRL |= 1u;
     uint32_t first = DWT_CYCCNT;
@@ -399,8 +438,8 @@ uint64_t hal_now_us(void)
         elapsed = ((last_count - count) & SYST_MASK) + spare_cycles; /* counts down, modulo 2^24 */
     }
     last_count = count;
-    us += elapsed / SYSCLK_MHZ;
-    spare_cycles = elapsed % SYSCLK_MHZ;
+    us += elapsed / core_mhz;
+    spare_cycles = elapsed % core_mhz;
     return us;
 }
 

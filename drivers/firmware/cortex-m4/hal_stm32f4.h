@@ -7,6 +7,9 @@
 
 void hal_init(void);
 
+/* 1 when the crystal did not start within its timeout and the board runs on the internal oscillator */
+int hal_clock_fallback(void);
+
 /* the sashil_hal callbacks (sashil_board.h), in the wire's units */
 void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts);
 int16_t hal_read_current(void *ctx);

@@ -20,6 +20,7 @@ int main(void)
     uint8_t bytes[64];
     hal_init();
     sashil_board_init(&board, &hal, COUNTS_PER_REV, CURRENT_MAX_COUNTS, 0u);
+    sashil_board_set_status_flags(&board, hal_clock_fallback() ? SASHIL_STATUS_CLOCK_FALLBACK : 0u);
     for (;;) {
         uint64_t now = hal_now_us();
         size_t n = hal_uart_take(bytes, sizeof bytes);
