@@ -23,8 +23,7 @@
  *                 230 us on the wire, which caps device pacing at about 4.3 kHz on this link.
  *   clock         the core's cycles accumulated into microseconds: DWT CYCCNT where it counts, else
  *                 SysTick on the core clock (hal_now_us).
- * bxCAN is not wired up in this reference layer: the board logic speaks the DBC's CAN frames
- * (sashil_board_set_link), and a CAN variant adds CAN1 on PB8/PB9 with hal.send_can.
+ * CAN: hal_can_stm32f4.c (make cortex-m4-can) adds bxCAN CAN1 on PB8/PB9 as the board's send_can.
  *
  * SASHIL_QEMU (make cortex-m4-qemu, for QEMU's netduinoplus2, an STM32F405): QEMU 7.2 models no RCC
  * (its ready bits read 0), its USART raises no TXE interrupt, its TIM2..5 count time rather than
@@ -188,6 +187,8 @@ static void clock_init(void)
 }
 
 int hal_clock_fallback(void) { return clock_fallback; }
+
+uint32_t hal_apb1_mhz(void) { return core_mhz == SYSCLK_MHZ ? SYSCLK_MHZ / 4u : HSI_MHZ; }
 
 static void encoder_init(uint32_t tim)
 {
