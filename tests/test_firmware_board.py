@@ -274,3 +274,15 @@ def test_configure_takes_its_range_to_the_edges_and_refuses_one_past_them():
         b = Board()
         assert b.send_host(Configure(rate, watchdog, pacing), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
         assert b.send_host(Command(0.5, CMD_ENABLE), MS) == [] and b.coil == []  # never acted on
+
+
+def test_a_rate_above_what_the_link_carries_is_refused_and_never_acted_on():
+    b = Board()
+    LIB.sashil_board_set_max_rate(b.board, 4000)
+    assert b.send_host(Configure(4001, 50, PACING_DEVICE), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+    assert b.ticks(0, 10 * MS) == [] and LIB.sashil_board_refusals(b.board) == 1  # no samples streamed
+    assert b.send_host(Configure(4000, 50, PACING_DEVICE), 10 * MS) == [Status(0, 0, 0, 0)]  # the limit itself
+    LIB.sashil_board_set_max_rate(b.board, 1)
+    assert b.send_host(Configure(2, 50, PACING_HOST), 10 * MS)[0].fault_code == FAULT_BAD_CONFIGURE
+    LIB.sashil_board_set_max_rate(b.board, 0)  # out of range: the protocol's 20 kHz
+    assert b.send_host(Configure(20000, 50, PACING_HOST), 11 * MS) == [Status(0, 0, 0, 0)]

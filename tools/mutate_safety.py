@@ -6,8 +6,9 @@ Python targets: every comparison in ``src/sashil/safety.py`` (the host's supervi
 
 C targets, the board that runs on the bench (``drivers/firmware/sashil_board.c``): the current clamp
 (``set_drive``), the watchdog (in ``sashil_board_tick`` and ``sashil_board_next_event_us``), and the
-fault paths: Configure's refusals, a Command before Configure, a CAN frame of the wrong length, a HAL
-without a transmitter (``configure``, ``handle``, ``sashil_board_receive_can``, ``emit``).
+fault paths: Configure's refusals (a rate above the link's), a Command before Configure, a CAN frame
+of the wrong length, a HAL without a transmitter (``configure``, ``sashil_board_set_max_rate``,
+``handle``, ``sashil_board_receive_can``, ``emit``).
 
 Each comparison operator gives two mutants: its negation (``<`` -> ``>=``, ``==`` -> ``!=``,
 ``is`` -> ``is not``, ``in`` -> ``not in``) and, for an ordering, its boundary twin (``<`` -> ``<=``,
@@ -212,15 +213,22 @@ C_TARGETS = (
     ),
     CTarget("drivers/firmware/sashil_board.c", "sashil_board_next_event_us", mentions=("watchdog", "commanded")),
     CTarget("drivers/firmware/sashil_board.c", "configure"),
+    CTarget("drivers/firmware/sashil_board.c", "sashil_board_set_max_rate"),
     CTarget("drivers/firmware/sashil_board.c", "handle", mentions=("configured",)),
     CTarget("drivers/firmware/sashil_board.c", "sashil_board_receive_can", mentions=("len",)),
     CTarget("drivers/firmware/sashil_board.c", "emit", mentions=("NULL",)),
 )
 
 #: mutants that behave exactly as the original (no test can kill them): (function, the line's code
-#: before the mutation, the new operator) and why; listed apart and not counted
+#: before the mutation, the operator, its replacement) and why; listed apart and not counted
 C_EQUIVALENT = {
-    ("set_drive", "if (counts > b->current_max_counts) {", ">="): "a current at the limit is clamped to itself",
+    ("set_drive", "if (counts > b->current_max_counts) {", ">", ">="): "a current at the limit is clamped to itself",
+    (
+        "sashil_board_set_max_rate",
+        "b->max_rate_hz = max_rate_hz >= 1u && max_rate_hz <= SASHIL_MAX_RATE_HZ ? max_rate_hz : SASHIL_MAX_RATE_HZ;",
+        "<=",
+        "<",
+    ): "a limit of 20000 is replaced by 20000",
 }
 
 C_NEGATE = {"<": ">=", ">=": "<", ">": "<=", "<=": ">", "==": "!=", "!=": "=="}
@@ -281,7 +289,7 @@ def c_mutants(target: CTarget) -> list[CMutant]:
 def _equivalent(mutant: CMutant) -> str | None:
     """Why ``mutant`` is an equivalent mutant, or None."""
     before = mutant.text.split("  ->  ")[0]
-    return C_EQUIVALENT.get((mutant.target.function, before, mutant.new))
+    return C_EQUIVALENT.get((mutant.target.function, before, mutant.old, mutant.new))
 
 
 def mutated_c_source(mutant: CMutant) -> str:

@@ -95,7 +95,7 @@ static void configure(sashil_board *b, const uint8_t *p, uint64_t now_us)
 {
     uint16_t rate = get16(p), watchdog = get16(p + 2);
     uint8_t pacing = p[4];
-    int rate_ok = rate >= 1u && rate <= 20000u && (b->fixed_rate_hz == 0u || rate == b->fixed_rate_hz);
+    int rate_ok = rate >= 1u && rate <= b->max_rate_hz && (b->fixed_rate_hz == 0u || rate == b->fixed_rate_hz);
     uint8_t fault = SASHIL_FAULT_NONE;
     if (!rate_ok || watchdog < 1u || pacing > SASHIL_PACING_HOST) {
         fault = SASHIL_FAULT_BAD_CONFIGURE;
@@ -163,6 +163,7 @@ void sashil_board_init(sashil_board *b, const sashil_hal *hal, uint32_t counts_p
     b->counts_per_rev = counts_per_rev;
     b->current_max_counts = current_max_counts;
     b->fixed_rate_hz = fixed_rate_hz;
+    b->max_rate_hz = SASHIL_MAX_RATE_HZ;
     b->rate_hz = 1000;
     b->watchdog_ms = 50;
     sashil_stream_init(&b->rx);
@@ -225,6 +226,11 @@ void sashil_board_tick(sashil_board *b, uint64_t now_us)
 }
 
 void sashil_board_set_link(sashil_board *b, uint8_t link) { b->link = link; }
+
+void sashil_board_set_max_rate(sashil_board *b, uint16_t max_rate_hz)
+{
+    b->max_rate_hz = max_rate_hz >= 1u && max_rate_hz <= SASHIL_MAX_RATE_HZ ? max_rate_hz : SASHIL_MAX_RATE_HZ;
+}
 
 void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data, uint8_t len, uint64_t now_us)
 {

@@ -17,6 +17,7 @@
 #include "sashil_frame.h"
 
 #define SASHIL_PROTOCOL_VERSION 1u
+#define SASHIL_MAX_RATE_HZ 20000u /* the protocol's highest sample rate */
 #define SASHIL_FLAG_WATCHDOG 0x01u
 #define SASHIL_FAULT_NONE 0u
 #define SASHIL_FAULT_BAD_CONFIGURE 1u
@@ -54,7 +55,8 @@ typedef struct {
     sashil_hal hal;
     uint32_t counts_per_rev;
     uint16_t current_max_counts;
-    uint16_t fixed_rate_hz; /* 0: any rate 1..20000 */
+    uint16_t fixed_rate_hz; /* 0: any rate 1..max_rate_hz */
+    uint16_t max_rate_hz;   /* the highest rate its link carries (20000 unless set) */
     /* session */
     int configured;
     uint16_t rate_hz, watchdog_ms;
@@ -82,6 +84,10 @@ void sashil_board_receive(sashil_board *b, const uint8_t *bytes, size_t n, uint6
 
 /* The board's timer: watchdog, and in device pacing the sample that is due. */
 void sashil_board_tick(sashil_board *b, uint64_t now_us);
+
+/* The highest sample rate the board's link carries (1..20000; 20000 after init): a Configure above
+ * it is refused (fault 1), since the samples could not all leave. */
+void sashil_board_set_max_rate(sashil_board *b, uint16_t max_rate_hz);
 
 /* Choose the link (SASHIL_LINK_SERIAL, the default after init, or SASHIL_LINK_CAN). */
 void sashil_board_set_link(sashil_board *b, uint8_t link);

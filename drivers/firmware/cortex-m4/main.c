@@ -20,6 +20,10 @@
 #endif
 
 #define COUNTS_PER_REV 4096u
+/* the sample rates the links carry: a 23-byte sample frame is 230 us at 1 Mbit/s (4.3 kHz), a CAN
+ * sample two frames of up to 135 bits each with stuffing (3.7 kHz); a little margin below each */
+#define SERIAL_MAX_RATE_HZ 4000u
+#define CAN_MAX_RATE_HZ 3500u
 #define CURRENT_MAX_COUNTS 4000u /* 2 A in 0.5 mA counts: the coil driver's limit */
 
 static sashil_board board;
@@ -33,9 +37,11 @@ int main(void)
     hal_init();
     sashil_board_init(&board, &hal, COUNTS_PER_REV, CURRENT_MAX_COUNTS, 0u);
     sashil_board_set_status_flags(&board, hal_clock_fallback() ? SASHIL_STATUS_CLOCK_FALLBACK : 0u);
+    sashil_board_set_max_rate(&board, SERIAL_MAX_RATE_HZ);
 #ifdef SASHIL_CAN
     if (hal_can_init(hal_apb1_mhz())) {
         sashil_board_set_link(&board, SASHIL_LINK_CAN);
+        sashil_board_set_max_rate(&board, CAN_MAX_RATE_HZ);
     }
 #endif
     for (;;) {
