@@ -3,9 +3,9 @@
  * hardware interface. Portable C99: no allocation; integers in the wire's units (coil current in
  * 0.5 mA counts, road speed in 1 urad/s counts), times in microseconds. The same behaviour as the
  * Python board (drivers/emulator/device.py): Hello -> Version; Configure -> Status (fault 1 when it
- * cannot be honoured, 3 when the CAN link has no send_can); Command drives the coil (ENABLE bit, clamped to i_max) and feeds the watchdog,
- * and in host pacing is answered by a Sample; RoadSpeed sets the road motor; in device pacing one
- * Sample per period. Watchdog: no valid Command for watchdog_ms -> coil and road to 0, the watchdog
+ * cannot be honoured, 3 when the CAN link has no send_can); Command drives the coil (ENABLE bit,
+ * clamped to i_max) and feeds the watchdog, and in host pacing is answered by a Sample; RoadSpeed
+ * sets the road motor; in device pacing one Sample per period, on an exact grid of 1e6/rate us. Watchdog: no valid Command for watchdog_ms -> coil and road to 0, the watchdog
  * flag, a Status; the next valid Command clears it.
  */
 #ifndef SASHIL_BOARD_H
