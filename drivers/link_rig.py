@@ -44,10 +44,12 @@ from sashil.drivers.interface import (
 )
 from sashil.drivers.messages import (
     CMD_ENABLE,
+    FAULT_NO_CAN,
     PACING_DEVICE,
     PACING_HOST,
     PACING_NAMES,
     PROTOCOL_VERSION,
+    STATUS_CLOCK_FALLBACK,
     Command,
     Configure,
     Hello,
@@ -120,6 +122,7 @@ class LinkRig(RigInterface):
             "gaps": 0,
             "gap_max_ms": 0.0,
             "zero_current_after_ms": 0.0,
+            "clock_fallback": 0,  # 1: the board said its crystal failed (it runs on its internal oscillator)
         }
         #: the last deactivate after an active session: did a sample show the coil at rest, how soon
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
@@ -225,10 +228,19 @@ class LinkRig(RigInterface):
         self._send_msg(Configure(s.rate_hz, s.watchdog_ms, s.pacing))
         status = self._expect(Status, "Status (answer to Configure)")
         self.last_status = status
+        if status.fault_code == FAULT_NO_CAN:
+            raise DriverError(f"{self.describe()}: the device has no CAN transmitter: it refused a CAN session")
         if status.fault_code:
             raise DriverError(
                 f"{self.describe()}: the device refused rate {s.rate_hz} Hz / watchdog {s.watchdog_ms} ms "
                 f"(fault code {status.fault_code})"
+            )
+        if status.flags & STATUS_CLOCK_FALLBACK:
+            self.stats["clock_fallback"] = 1
+            log.warning(
+                "%s: the board's crystal did not start: it runs on its internal oscillator "
+                "(its sample period and watchdog within about 1 %%, not the crystal's ppm)",
+                self.describe(),
             )
 
     def _expect(self, kind: type, what: str) -> Any:

@@ -66,6 +66,10 @@ class Status:
 FAULT_NONE = 0
 FAULT_BAD_CONFIGURE = 1  # a Configure the device cannot honour (rate or watchdog out of range)
 FAULT_NOT_CONFIGURED = 2  # a Command before Configure
+FAULT_NO_CAN = 3  # a Configure on the CAN link of a board without a CAN transmitter
+
+#: Status.flags bits beyond the sample flags (drivers/interface.py) the board repeats in Status
+STATUS_CLOCK_FALLBACK = 0x10  # the board's crystal did not start: it runs on its internal oscillator
 
 
 @dataclass(frozen=True, slots=True)

@@ -2,7 +2,8 @@
  * tests/test_firmware_fuzz.py): garbage of every length 0..2047 bytes into the COBS decoder, the frame
  * decoder, the byte stream decoder and the board itself (behind a stub hardware interface), and
  * good frames cut and corrupted at every byte, and random CAN frames of every length on every id into a
- * board on the CAN link. Exit 0 and "ok ..." when every bad frame was counted
+ * board on the CAN link, and into a board on the CAN link whose HAL has no send_can (every Configure
+ * refused and counted, the coil never driven). Exit 0 and "ok ..." when every bad frame was counted
  * and nothing good came out of garbage longer than a frame. */
 #include <stdio.h>
 #include <string.h>
@@ -38,6 +39,9 @@ static void send(void *ctx, const uint8_t *bytes, size_t n) {
     (void)ctx;
     for (i = 0; i < n; i++) sent_bytes += bytes[i] != 0xA5u; /* touch every byte (ASan checks the reads) */
 }
+
+static unsigned long driven; /* non-zero coil setpoints of the board without CAN: must stay 0 */
+static void set_coil_counted(void *ctx, uint16_t counts) { (void)ctx; driven += counts != 0u; }
 
 static unsigned long can_sent;
 static void send_can(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
@@ -127,6 +131,27 @@ int main(void) {
         }
         if (sashil_board_bad_frames(&can_board) != wrong) return 6; /* every wrong length counted, no other */
         if (can_sent == 0u || can_sent >= 1000000ul) return 7;
+    }
+    /* CAN on a board whose HAL has no send_can: every Configure refused and counted, nothing driven,
+     * nothing called through the missing pointer (ASan/UBSan would stop on a call through NULL) */
+    {
+        static sashil_board no_can;
+        sashil_hal bare = {NULL, read_encoders, read_current, set_coil_counted, set_road_speed, sensor_flags, send, NULL};
+        unsigned long configures = 0;
+        sashil_board_init(&no_can, &bare, 4096u, 2000u, 0u);
+        sashil_board_set_link(&no_can, SASHIL_LINK_CAN);
+        for (n = 0; n < 20000u; n++) {
+            uint8_t d[8], l = (uint8_t)(next_byte() % 9u);
+            uint16_t id = can_ids[next_byte() % (sizeof can_ids / sizeof can_ids[0])];
+            for (i = 0; i < 8u; i++) d[i] = next_byte();
+            if (n % 16u == 0u) id = 0x1F0u, l = 5u; /* a well-formed Configure, often */
+            configures += id == 0x1F0u && l == 5u;
+            now += 50u;
+            sashil_board_receive_can(&no_can, id, d, l, now);
+            sashil_board_tick(&no_can, now);
+        }
+        if (sashil_board_sessions(&no_can) != 0u || sashil_board_refusals(&no_can) != (uint16_t)configures) return 8;
+        if (driven != 0u) return 9;
     }
     if (stream.frames != good || stream.bad_frames != bad) return 4;
     if (sent_bytes == 0u) return 5; /* the session was answered between the garbage */

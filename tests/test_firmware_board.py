@@ -17,8 +17,10 @@ from sashil.drivers.interface import FLAG_HELD, FLAG_WATCHDOG
 from sashil.drivers.messages import (
     CMD_ENABLE,
     FAULT_BAD_CONFIGURE,
+    FAULT_NO_CAN,
     PACING_DEVICE,
     PACING_HOST,
+    STATUS_CLOCK_FALLBACK,
     Command,
     Configure,
     Hello,
@@ -39,7 +41,9 @@ MS = 1000  # us
 class Board:
     """The C board with a fake rig behind its hardware interface."""
 
-    def __init__(self, counts_per_rev: int = 4096, current_max_counts: int = 2000, fixed_rate_hz: int = 0):
+    def __init__(
+        self, counts_per_rev: int = 4096, current_max_counts: int = 2000, fixed_rate_hz: int = 0, can: bool = True
+    ):
         self.arm, self.road, self.current_counts, self.hw_flags = 100, -7, 321, FLAG_HELD
         self.coil: list[tuple[int, int]] = []  # (time us, setpoint counts)
         self.road_speed: list[tuple[int, int]] = []
@@ -68,7 +72,7 @@ class Board:
             firmware.SetRoadSpeed(lambda _ctx, speed: self.road_speed.append((self.now, speed))),
             firmware.SensorFlags(lambda _ctx: self.hw_flags),
             firmware.Send(send),
-            firmware.SendCan(send_can),
+            firmware.SendCan(send_can) if can else firmware.SendCan(),  # SendCan(): NULL, a HAL without CAN
         )
         self.hal = firmware.Hal(None, *self._callbacks)
         self.board = ctypes.create_string_buffer(LIB.sashil_board_size())
@@ -215,3 +219,70 @@ def test_next_event_is_the_due_sample_or_the_watchdog_deadline_and_sessions_coun
     assert LIB.sashil_board_next_event_us(host.board) == 23 * MS  # only the watchdog, 20 ms on
     host.send_host(Configure(1000, 20, PACING_HOST), 4 * MS)
     assert LIB.sashil_board_sessions(host.board) == 2
+
+
+def test_device_pacing_at_3_khz_holds_the_exact_period_over_10_s_of_device_time():
+    """1e6/3000 is 333 1/3 us: the board carries the third, so sample k is due at floor(k * 1e6/3000) us
+    after Configure, never a whole sample ahead or behind (a 333 us period would gain 30 samples)."""
+    b = Board()
+    sent = []
+    b.out.feed = lambda data: sent.append(len(data)) or []  # count frames only: 30 000 of them
+    b.send_host(Configure(3000, 50, PACING_DEVICE), 7)
+    start, now, due = 7, 7, []
+    while now < start + 10_000_000:
+        due.append(now - start)
+        LIB.sashil_board_tick(b.board, now)
+        now = LIB.sashil_board_next_event_us(b.board)
+    assert len(sent) == 1 + 30_000  # Configure's Status and one sample per period
+    assert due == [k * 1_000_000 // 3000 for k in range(30_000)]
+    assert now == start + 10_000_000 and LIB.sashil_board_overruns(b.board) == 0
+
+
+def test_a_can_session_on_a_board_without_send_can_is_refused_and_never_acted_on():
+    b = Board(can=False).use_can()
+    refused = b.send_can(Configure(1000, 50, PACING_HOST), 0)
+    assert refused == [Status(0, FAULT_NO_CAN, 0, 0)]  # the refusal goes out on the serial transmitter
+    assert b.send_can(Command(0.8, CMD_ENABLE), MS, seq=1) == [] and b.coil == []  # no session: no drive
+    assert b.ticks(MS, 100 * MS) == [] and LIB.sashil_board_refusals(b.board) == 1
+    assert LIB.sashil_board_sessions(b.board) == 0
+    assert b.send_can(Hello(1), 100 * MS) == [Version(1, 4096, 1.0)]  # it still answers, never calls NULL
+
+
+def test_a_refused_configure_leaves_the_running_session_as_it_was_and_is_counted():
+    b = Board()
+    b.send_host(Configure(1000, 50, PACING_HOST), 0)
+    b.send_host(Command(0.5, CMD_ENABLE), MS)
+    assert b.send_host(Configure(30000, 50, PACING_HOST), 2 * MS) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+    assert b.coil[-1] == (MS, 1000) and LIB.sashil_board_refusals(b.board) == 1
+    assert isinstance(b.send_host(Command(0.5, CMD_ENABLE), 3 * MS)[0], Sample)  # still host-paced at 1 kHz
+
+
+def test_the_hardware_layers_status_flags_go_out_in_every_status():
+    b = Board()
+    LIB.sashil_board_set_status_flags(b.board, STATUS_CLOCK_FALLBACK)
+    assert b.send_host(Configure(1000, 50, PACING_HOST), 0) == [Status(STATUS_CLOCK_FALLBACK, 0, 0, 0)]
+    b.send_host(Command(0.5, CMD_ENABLE), MS)
+    trip = [m for m in b.ticks(2 * MS, 60 * MS) if isinstance(m, Status)]
+    assert trip == [Status(STATUS_CLOCK_FALLBACK | FLAG_WATCHDOG, 0, 0, 1)]
+    assert not [m for m in b.sent if isinstance(m[1], Sample) and m[1].flags & STATUS_CLOCK_FALLBACK]
+
+
+def test_configure_takes_its_range_to_the_edges_and_refuses_one_past_them():
+    for rate, watchdog in ((1, 1), (20000, 1), (1000, 65535)):
+        assert Board().send_host(Configure(rate, watchdog, PACING_HOST), 0) == [Status(0, 0, 0, 0)], (rate, watchdog)
+    for rate, watchdog, pacing in ((0, 50, PACING_HOST), (20001, 50, PACING_HOST), (1000, 0, PACING_HOST)):
+        b = Board()
+        assert b.send_host(Configure(rate, watchdog, pacing), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+        assert b.send_host(Command(0.5, CMD_ENABLE), MS) == [] and b.coil == []  # never acted on
+
+
+def test_a_rate_above_what_the_link_carries_is_refused_and_never_acted_on():
+    b = Board()
+    LIB.sashil_board_set_max_rate(b.board, 4000)
+    assert b.send_host(Configure(4001, 50, PACING_DEVICE), 0) == [Status(0, FAULT_BAD_CONFIGURE, 0, 0)]
+    assert b.ticks(0, 10 * MS) == [] and LIB.sashil_board_refusals(b.board) == 1  # no samples streamed
+    assert b.send_host(Configure(4000, 50, PACING_DEVICE), 10 * MS) == [Status(0, 0, 0, 0)]  # the limit itself
+    LIB.sashil_board_set_max_rate(b.board, 1)
+    assert b.send_host(Configure(2, 50, PACING_HOST), 10 * MS)[0].fault_code == FAULT_BAD_CONFIGURE
+    LIB.sashil_board_set_max_rate(b.board, 0)  # out of range: the protocol's 20 kHz
+    assert b.send_host(Configure(20000, 50, PACING_HOST), 11 * MS) == [Status(0, 0, 0, 0)]

@@ -118,3 +118,23 @@ def test_the_firmware_answers_a_session_on_qemus_stm32f405(tmp_path):
     steps = qemu_smoke.smoke(tmp_path / "cortex-m4" / "sashil-board-qemu.elf", timeout_s=5.0)
     assert steps[0].startswith("Hello -> Version(protocol_version=1, counts_per_rev=4096, current_max_a=2.0)")
     assert len(steps) == 3
+
+
+def test_the_can_build_links_the_bxcan_driver_into_its_vector_table(tmp_path):
+    """make cortex-m4-can: CAN1's transmit and receive interrupts in the vector table, within budget."""
+    if importlib.util.find_spec("ziglang") is None or shutil.which("make") is None:
+        pytest.skip("needs make and the ziglang package (pip install ziglang)")
+    done = subprocess.run(
+        ["make", "-C", str(FIRMWARE), "cortex-m4-can", f"PYTHON={sys.executable}", f"BUILD={tmp_path}"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    image = elf.read_elf(tmp_path / "cortex-m4" / "sashil-board-can.elf")
+    flash_start, _ = elf.FLASH
+    for irq, name in ((19, "CAN1_TX_IRQHandler"), (20, "CAN1_RX0_IRQHandler")):  # RM0090 table 61
+        assert image.word_at(flash_start + 4 * (16 + irq)) & ~1 == image.symbols[name] & ~1
+    assert "hal_can_send" in image.symbols and "bxcan_pack" in image.symbols
+    assert image.flash_bytes() < 32 * 1024 and image.ram_bytes() < 8 * 1024
+    assert f"flash {image.flash_bytes()} B" in done.stdout

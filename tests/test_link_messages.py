@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import fcntl
+import logging
 import os
 import pty
+import select
+import threading
+import tty
 
 import pytest
 
@@ -13,6 +17,8 @@ from sashil.config import default_config
 from sashil.drivers import open_rig
 from sashil.drivers.emulator import EmulatorThread
 from sashil.drivers.firmware import compiler
+from sashil.drivers.messages import FAULT_NO_CAN, STATUS_CLOCK_FALLBACK, Configure, Hello, Status, Version
+from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError
 
 pytestmark = pytest.mark.e2e  # real ptys (and the emulator in a thread)
@@ -113,3 +119,45 @@ def test_the_emulators_hold_is_announced_and_a_host_that_runs_no_drop_test_warns
         "whatever the host runs (--hold-deg)"
         for n in (1, 2)
     ]
+
+
+def _fake_board(controller: int, status: Status, stop: threading.Event) -> None:
+    """Answers Hello with the default rig's Version and Configure with ``status`` on a pty's controller."""
+    decoder, seq = StreamDecoder(), 0
+    while not stop.is_set():
+        if not select.select([controller], [], [], 0.02)[0]:
+            continue
+        for _, msg in decoder.feed(os.read(controller, 4096)):
+            answer = {Hello: Version(1, 4096, 1.0), Configure: status}.get(type(msg))
+            if answer is not None:
+                seq += 1
+                os.write(controller, encode_frame(answer, seq))
+
+
+@pytest.mark.parametrize(
+    "status, said",
+    [
+        (Status(STATUS_CLOCK_FALLBACK), "the board's crystal did not start: it runs on its internal oscillator"),
+        (Status(0, FAULT_NO_CAN), "the device has no CAN transmitter: it refused a CAN session"),
+    ],
+)
+def test_a_board_on_its_internal_oscillator_is_reported_and_one_without_can_named(status, said, caplog):
+    controller, device = pty.openpty()
+    tty.setraw(device)
+    stop = threading.Event()
+    board = threading.Thread(target=_fake_board, args=(controller, status, stop), daemon=True)
+    board.start()
+    try:
+        with open_rig(_config("serial", os.ttyname(device))) as rig:
+            if status.fault_code:
+                with pytest.raises(DriverError, match=said):
+                    rig.configure()
+            else:
+                with caplog.at_level(logging.WARNING):
+                    rig.configure()
+                assert said in caplog.text and rig.link_stats()["clock_fallback"] == 1
+    finally:
+        stop.set()
+        board.join()
+        os.close(controller)
+        os.close(device)

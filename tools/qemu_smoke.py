@@ -1,7 +1,8 @@
 """Run the Cortex-M4 firmware on QEMU's ``netduinoplus2`` (an STM32F405) and hold a short session with it.
 
-Build the QEMU variant first (``-DSASHIL_QEMU``: no PLL start-up and polled transmit, since QEMU 7.2
-models no RCC and raises no USART TXE interrupt; see ``drivers/firmware/cortex-m4/hal_stm32f4.c``):
+Build the QEMU variant first (``-DSASHIL_QEMU``: no PLL start-up, polled transmit, encoders at rest,
+since QEMU 7.2 models no RCC, raises no USART TXE interrupt and has no encoder mode; see
+``drivers/firmware/cortex-m4/hal_stm32f4.c``):
 
     make -C drivers/firmware cortex-m4-qemu PYTHON=.venv/bin/python
     .venv/bin/python tools/qemu_smoke.py drivers/firmware/build/cortex-m4/sashil-board-qemu.elf
@@ -10,9 +11,9 @@ USART1 is QEMU's first serial port, here a Unix socket. Over it, with the projec
 Command(0 A) and Hello -> Version (protocol 1, 4096 counts per revolution, 2 A); Configure in host
 pacing -> Status with no fault; Command(0.5 A, enabled) -> Sample. So the vector table, the reset
 handler, the receive interrupt and ring, the frame codec and the board's session logic run on an
-emulated Cortex-M4. QEMU's DWT cycle counter reads 0, so the board's clock stands still there:
-device pacing and the watchdog are not exercised. Needs ``qemu-system-arm`` (Debian:
-``apt-get install qemu-system-arm``). Prints one line per step; exit 0 when all passed.
+emulated Cortex-M4. Whole sessions (``sashil run`` in both pacings, the watchdog) run against the same
+image in ``tests/test_firmware_qemu.py`` (``make -C drivers/firmware qemu``). Needs ``qemu-system-arm``
+(Debian: ``apt-get install qemu-system-arm``). Prints one line per step; exit 0 when all passed.
 
 ``--quick`` without an ELF builds the QEMU variant into a temporary folder first (needs make and the
 ziglang package); without qemu-system-arm, make or ziglang it says what is missing and exits 0:

@@ -110,6 +110,12 @@ def load() -> ctypes.CDLL:
     lib.sashil_board_sessions.restype = ctypes.c_uint16
     lib.sashil_board_watchdog_trips.argtypes = (ctypes.c_void_p,)
     lib.sashil_board_watchdog_trips.restype = ctypes.c_uint16
+    lib.sashil_board_set_max_rate.argtypes = (ctypes.c_void_p, ctypes.c_uint16)
+    lib.sashil_board_set_max_rate.restype = None
+    lib.sashil_board_refusals.argtypes = (ctypes.c_void_p,)
+    lib.sashil_board_refusals.restype = ctypes.c_uint16
+    lib.sashil_board_set_status_flags.argtypes = (ctypes.c_void_p, ctypes.c_uint8)
+    lib.sashil_board_set_status_flags.restype = None
     lib.sashil_board_overruns.argtypes = (ctypes.c_void_p,)
     lib.sashil_board_overruns.restype = ctypes.c_uint32
     lib.sashil_board_bad_frames.argtypes = (ctypes.c_void_p,)

@@ -39,12 +39,14 @@ static void emit_can(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t 
 static void emit(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t *payload, uint8_t len)
 {
     uint8_t frame[SASHIL_MAX_FRAME];
-    if (b->link == SASHIL_LINK_CAN) {
+    if (b->link == SASHIL_LINK_CAN && b->hal.send_can != NULL) {
         emit_can(b, type, seq, payload, len);
         return;
     }
+    /* the serial link, or a CAN link on a HAL without send_can: then the board's only way to answer
+     * (the Status refusing the CAN session) is its serial transmitter, if it has one */
     size_t n = sashil_frame_encode(type, seq, payload, len, frame, sizeof frame);
-    if (n > 0) {
+    if (n > 0 && b->hal.send != NULL) {
         b->hal.send(b->hal.ctx, frame, n);
     }
 }
@@ -54,7 +56,7 @@ static uint8_t board_flags(const sashil_board *b) { return b->watchdog_tripped ?
 static void reply_status(sashil_board *b, uint8_t fault)
 {
     uint8_t p[6];
-    p[0] = board_flags(b);
+    p[0] = (uint8_t)(board_flags(b) | b->status_flags);
     p[1] = fault;
     put16(p + 2, (uint16_t)sashil_board_bad_frames(b));
     put16(p + 4, b->watchdog_trips);
@@ -93,9 +95,16 @@ static void configure(sashil_board *b, const uint8_t *p, uint64_t now_us)
 {
     uint16_t rate = get16(p), watchdog = get16(p + 2);
     uint8_t pacing = p[4];
-    int rate_ok = rate >= 1u && rate <= 20000u && (b->fixed_rate_hz == 0u || rate == b->fixed_rate_hz);
+    int rate_ok = rate >= 1u && rate <= b->max_rate_hz && (b->fixed_rate_hz == 0u || rate == b->fixed_rate_hz);
+    uint8_t fault = SASHIL_FAULT_NONE;
     if (!rate_ok || watchdog < 1u || pacing > SASHIL_PACING_HOST) {
-        reply_status(b, SASHIL_FAULT_BAD_CONFIGURE);
+        fault = SASHIL_FAULT_BAD_CONFIGURE;
+    } else if (b->link == SASHIL_LINK_CAN && b->hal.send_can == NULL) {
+        fault = SASHIL_FAULT_NO_CAN; /* the session could never send a sample */
+    }
+    if (fault != SASHIL_FAULT_NONE) { /* refused: the session, if any, goes on as it was */
+        b->refusals++;
+        reply_status(b, fault);
         return;
     }
     b->rate_hz = rate;
@@ -104,6 +113,7 @@ static void configure(sashil_board *b, const uint8_t *p, uint64_t now_us)
     b->configured = 1;
     b->sessions++;
     b->next_sample_us = now_us;
+    b->period_rem = 0u;
     set_drive(b, 0);
     b->commanded = 0;
     b->watchdog_tripped = 0;
@@ -153,6 +163,7 @@ void sashil_board_init(sashil_board *b, const sashil_hal *hal, uint32_t counts_p
     b->counts_per_rev = counts_per_rev;
     b->current_max_counts = current_max_counts;
     b->fixed_rate_hz = fixed_rate_hz;
+    b->max_rate_hz = SASHIL_MAX_RATE_HZ;
     b->rate_hz = 1000;
     b->watchdog_ms = 50;
     sashil_stream_init(&b->rx);
@@ -178,6 +189,19 @@ void sashil_board_receive(sashil_board *b, const uint8_t *bytes, size_t n, uint6
     }
 }
 
+/* The next sample 1e6/rate_hz us on: the whole microseconds, plus the remainder carried in units of
+ * 1/rate_hz us, so the period is exact on average and a sample is never more than 1 us off the
+ * ideal grid (1e6/3000 = 333 us + 1/3 us: 3000 Hz and not 3003 Hz). */
+static void next_sample_time(sashil_board *b)
+{
+    b->next_sample_us += 1000000u / b->rate_hz;
+    b->period_rem += 1000000u % b->rate_hz;
+    if (b->period_rem >= b->rate_hz) {
+        b->period_rem -= b->rate_hz;
+        b->next_sample_us++;
+    }
+}
+
 void sashil_board_tick(sashil_board *b, uint64_t now_us)
 {
     boot(b, now_us);
@@ -192,16 +216,21 @@ void sashil_board_tick(sashil_board *b, uint64_t now_us)
     }
     if (b->configured && b->pacing == SASHIL_PACING_DEVICE && now_us >= b->next_sample_us) {
         send_sample(b, now_us);
-        uint64_t period = 1000000u / b->rate_hz;
-        b->next_sample_us += period;
+        next_sample_time(b);
         if (b->next_sample_us <= now_us) { /* fell behind by a whole period: do not burst */
             b->overruns++;
-            b->next_sample_us = now_us + period;
+            b->next_sample_us = now_us;
+            next_sample_time(b);
         }
     }
 }
 
 void sashil_board_set_link(sashil_board *b, uint8_t link) { b->link = link; }
+
+void sashil_board_set_max_rate(sashil_board *b, uint16_t max_rate_hz)
+{
+    b->max_rate_hz = max_rate_hz >= 1u && max_rate_hz <= SASHIL_MAX_RATE_HZ ? max_rate_hz : SASHIL_MAX_RATE_HZ;
+}
 
 void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data, uint8_t len, uint64_t now_us)
 {
@@ -245,6 +274,10 @@ uint64_t sashil_board_next_event_us(const sashil_board *b)
 }
 
 uint16_t sashil_board_sessions(const sashil_board *b) { return b->sessions; }
+
+uint16_t sashil_board_refusals(const sashil_board *b) { return b->refusals; }
+
+void sashil_board_set_status_flags(sashil_board *b, uint8_t flags) { b->status_flags = flags; }
 
 uint16_t sashil_board_watchdog_trips(const sashil_board *b) { return b->watchdog_trips; }
 

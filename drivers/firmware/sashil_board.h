@@ -3,9 +3,9 @@
  * hardware interface. Portable C99: no allocation; integers in the wire's units (coil current in
  * 0.5 mA counts, road speed in 1 urad/s counts), times in microseconds. The same behaviour as the
  * Python board (drivers/emulator/device.py): Hello -> Version; Configure -> Status (fault 1 when it
- * cannot be honoured); Command drives the coil (ENABLE bit, clamped to i_max) and feeds the watchdog,
- * and in host pacing is answered by a Sample; RoadSpeed sets the road motor; in device pacing one
- * Sample per period. Watchdog: no valid Command for watchdog_ms -> coil and road to 0, the watchdog
+ * cannot be honoured, 3 when the CAN link has no send_can); Command drives the coil (ENABLE bit,
+ * clamped to i_max) and feeds the watchdog, and in host pacing is answered by a Sample; RoadSpeed
+ * sets the road motor; in device pacing one Sample per period, on an exact grid of 1e6/rate us. Watchdog: no valid Command for watchdog_ms -> coil and road to 0, the watchdog
  * flag, a Status; the next valid Command clears it.
  */
 #ifndef SASHIL_BOARD_H
@@ -17,9 +17,14 @@
 #include "sashil_frame.h"
 
 #define SASHIL_PROTOCOL_VERSION 1u
+#define SASHIL_MAX_RATE_HZ 20000u /* the protocol's highest sample rate */
 #define SASHIL_FLAG_WATCHDOG 0x01u
 #define SASHIL_FAULT_NONE 0u
 #define SASHIL_FAULT_BAD_CONFIGURE 1u
+#define SASHIL_FAULT_NO_CAN 3u /* a Configure on the CAN link of a board whose HAL has no send_can */
+/* Status flag set by the hardware layer (sashil_board_set_status_flags): the crystal did not start
+ * and the board runs on its internal oscillator */
+#define SASHIL_STATUS_CLOCK_FALLBACK 0x10u
 #define SASHIL_PACING_DEVICE 0u
 #define SASHIL_PACING_HOST 1u
 #define SASHIL_LINK_SERIAL 0u /* sashil serial frames (COBS + CRC-16) through hal.send */
@@ -50,14 +55,18 @@ typedef struct {
     sashil_hal hal;
     uint32_t counts_per_rev;
     uint16_t current_max_counts;
-    uint16_t fixed_rate_hz; /* 0: any rate 1..20000 */
+    uint16_t fixed_rate_hz; /* 0: any rate 1..max_rate_hz */
+    uint16_t max_rate_hz;   /* the highest rate its link carries (20000 unless set) */
     /* session */
     int configured;
     uint16_t rate_hz, watchdog_ms;
     uint8_t pacing, link;
     uint16_t sessions; /* Configures honoured since boot */
+    uint16_t refusals; /* Configures refused since boot */
+    uint8_t status_flags; /* the hardware layer's, in every Status */
     uint32_t can_bad_frames; /* CAN frames with a known id and the wrong length */
     uint64_t boot_us, next_sample_us;
+    uint32_t period_rem; /* the sample period's remainder carried, in 1/rate_hz us */
     int booted, commanded, watchdog_tripped;
     uint64_t last_cmd_us;
     uint16_t drive_counts;
@@ -76,6 +85,10 @@ void sashil_board_receive(sashil_board *b, const uint8_t *bytes, size_t n, uint6
 /* The board's timer: watchdog, and in device pacing the sample that is due. */
 void sashil_board_tick(sashil_board *b, uint64_t now_us);
 
+/* The highest sample rate the board's link carries (1..20000; 20000 after init): a Configure above
+ * it is refused (fault 1), since the samples could not all leave. */
+void sashil_board_set_max_rate(sashil_board *b, uint16_t max_rate_hz);
+
 /* Choose the link (SASHIL_LINK_SERIAL, the default after init, or SASHIL_LINK_CAN). */
 void sashil_board_set_link(sashil_board *b, uint8_t link);
 
@@ -86,8 +99,12 @@ void sashil_board_receive_can(sashil_board *b, uint16_t id, const uint8_t *data,
  * a board may sleep until then or until bytes arrive. */
 uint64_t sashil_board_next_event_us(const sashil_board *b);
 
-/* Configures honoured since boot (a new host session each). */
+/* Configures honoured since boot (a new host session each), and refused (with a fault code). */
 uint16_t sashil_board_sessions(const sashil_board *b);
+uint16_t sashil_board_refusals(const sashil_board *b);
+
+/* Flags the hardware layer reports in every Status (SASHIL_STATUS_CLOCK_FALLBACK). */
+void sashil_board_set_status_flags(sashil_board *b, uint8_t flags);
 
 /* Watchdog trips since boot (as Status reports them), and device-paced samples that fell a whole
  * period behind. */

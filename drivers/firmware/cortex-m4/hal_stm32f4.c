@@ -21,15 +21,18 @@
  *                 in the receive interrupt; frames to send go to a ring emptied by the transmit interrupt
  *                 (TXE), so the board's logic never waits for the wire: a 23-byte sample frame takes
  *                 230 us on the wire, which caps device pacing at about 4.3 kHz on this link.
- *   clock         the core's cycle counter (DWT CYCCNT) accumulated into microseconds.
- * bxCAN is not wired up in this reference layer: the board logic speaks the DBC's CAN frames
- * (sashil_board_set_link), and a CAN variant adds CAN1 on PB8/PB9 with hal.send_can.
+ *   clock         the core's cycles accumulated into microseconds: DWT CYCCNT where it counts, else
+ *                 SysTick on the core clock (hal_now_us).
+ * CAN: hal_can_stm32f4.c (make cortex-m4-can) adds bxCAN CAN1 on PB8/PB9 as the board's send_can.
  *
  * SASHIL_QEMU (make cortex-m4-qemu, for QEMU's netduinoplus2, an STM32F405): QEMU 7.2 models no RCC
- * (its ready bits read 0, so the PLL start-up would wait forever) and its USART raises no TXE
- * interrupt. With the macro the clock stays at reset (HSI) and hal_send writes each byte when TXE
- * is set; everything else (vector table, start-up, receive interrupt and ring, board logic) is the
- * hardware build's.
+ * (its ready bits read 0), its USART raises no TXE interrupt, its TIM2..5 count time rather than
+ * encoder edges, and it has no TIM6 (no current loop). With the macro the clock start-up runs as on
+ * the hardware and meets what a dead crystal looks like: it times out (10 ms there) and the board
+ * reports the fallback in every Status; hal_send writes each byte when TXE is set, the encoders read a
+ * rig at rest (0 counts from reset) and the measured current is the setpoint. Everything else (vector
+ * table, start-up, SysTick clock, receive interrupt and ring, board logic) is the hardware build's.
+ * QEMU's SysTick runs on its fixed 168 MHz system clock, the hardware's count.
  */
 #include "hal_stm32f4.h"
 
@@ -94,8 +97,16 @@
 #define DEMCR REG(0xE000EDFCu)
 #define DWT_CTRL REG(0xE0001000u)
 #define DWT_CYCCNT REG(0xE0001004u)
+/* SysTick (PM0214 4.5) */
+#define SYST_CSR REG(0xE000E010u)
+#define SYST_RVR REG(0xE000E014u)
+#define SYST_CVR REG(0xE000E018u)
+#define SYST_MASK 0x00FFFFFFu
 
 #define SYSCLK_MHZ 168u
+#define HSI_MHZ 16u                      /* the internal oscillator, the core clock after reset */
+#define HSE_TIMEOUT_CYCLES 1600000u      /* 100 ms at HSI: a crystal starts within a few ms */
+#define PLL_TIMEOUT_CYCLES 160000u       /* 10 ms: the PLL locks within 0.2 ms */
 #define PWM_PERIOD 8400u                 /* 168 MHz / 20 kHz */
 #define SENSE_MV_PER_A 1200u             /* the current-sense amplifier's gain */
 #define ADC_MV_FULL 3300u                /* 12-bit ADC, 3.3 V reference */
@@ -116,6 +127,11 @@ static volatile int32_t road_setpoint;   /* urad/s */
 static float coil_integral, road_integral;
 static uint32_t road_last_counts;
 static uint32_t ticks;
+static int clock_is_dwt; /* the clock counts DWT cycles (1) or SysTick's (0) */
+static uint32_t core_mhz = HSI_MHZ; /* the core clock, and so the cycles per microsecond */
+static int clock_fallback; /* the crystal did not start (or the PLL did not lock) */
+
+static void clock_source_init(void);
 
 static void pin_af(uint32_t port, unsigned pin, unsigned af)
 {
@@ -124,22 +140,55 @@ static void pin_af(uint32_t port, unsigned pin, unsigned af)
     GPIO_AFR(port, pin / 8u) = (GPIO_AFR(port, pin / 8u) & ~(0xFu << (4u * (pin % 8u)))) | (af << (4u * (pin % 8u)));
 }
 
+/* Wait for (reg & mask) == want for at most timeout_cycles of SysTick (free-running on the core clock
+ * since hal_init started it); 1 when it came. Below 2^24 cycles: the count wraps once every 2^24. */
+static int wait_for(volatile uint32_t *reg, uint32_t mask, uint32_t want, uint32_t timeout_cycles)
+{
+    uint32_t start = SYST_CVR;
+    while ((*reg & mask) != want) {
+        if (((start - SYST_CVR) & SYST_MASK) > timeout_cycles) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* SYSCLK 168 MHz from the PLL, fed by the crystal (HSE) when it starts within HSE_TIMEOUT_CYCLES, else
+ * by the internal 16 MHz oscillator (HSI, +-1 %): the same 168 MHz, so every rate below holds, only
+ * less exactly, and clock_fallback says so (the host hears it in every Status). A PLL that does not
+ * lock leaves the core on HSI at 16 MHz: the clock and the host link follow core_mhz, the PWM and
+ * the current and speed loops run at 16/168 of their rates. */
 static void clock_init(void)
 {
+    uint32_t source;
     RCC_CR |= 1u << 16; /* HSEON */
-    while (!(RCC_CR & (1u << 17))) {
+    if (wait_for(&RCC_CR, 1u << 17, 1u << 17, HSE_TIMEOUT_CYCLES)) {
+        source = 8u | (1u << 22); /* PLLM 8 from the 8 MHz crystal, PLLSRC HSE */
+    } else {
+        RCC_CR &= ~(1u << 16); /* a dead or missing crystal: stop trying */
+        clock_fallback = 1;
+        source = 16u; /* PLLM 16 from the 16 MHz HSI, PLLSRC HSI */
     }
-    /* PLLM 8, PLLN 336, PLLP 2 (bits 00), PLLSRC HSE, PLLQ 7; the reserved bits keep their reset value */
-    RCC_PLLCFGR = (RCC_PLLCFGR & 0xF0BC8000u) | 8u | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    /* PLLN 336, PLLP 2 (bits 00), PLLQ 7; the reserved bits keep their reset value */
+    RCC_PLLCFGR = (RCC_PLLCFGR & 0xF0BC8000u) | source | (336u << 6) | (0u << 16) | (7u << 24);
     RCC_CR |= 1u << 24; /* PLLON */
-    while (!(RCC_CR & (1u << 25))) {
+    if (!wait_for(&RCC_CR, 1u << 25, 1u << 25, PLL_TIMEOUT_CYCLES)) {
+        clock_fallback = 1;
+        return; /* on HSI at 16 MHz */
     }
     FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10); /* 5 wait states, prefetch, I- and D-cache */
     RCC_CFGR = (5u << 10) | (4u << 13);                  /* APB1 /4, APB2 /2 before the switch */
     RCC_CFGR |= 2u;                                      /* SYSCLK = PLL */
-    while ((RCC_CFGR & (3u << 2)) != (2u << 2)) {
+    if (wait_for(&RCC_CFGR, 3u << 2, 2u << 2, PLL_TIMEOUT_CYCLES)) {
+        core_mhz = SYSCLK_MHZ;
+    } else {
+        clock_fallback = 1;
     }
 }
+
+int hal_clock_fallback(void) { return clock_fallback; }
+
+uint32_t hal_apb1_mhz(void) { return core_mhz == SYSCLK_MHZ ? SYSCLK_MHZ / 4u : HSI_MHZ; }
 
 static void encoder_init(uint32_t tim)
 {
@@ -165,10 +214,14 @@ static void pwm_init(uint32_t tim)
 
 void hal_init(void)
 {
-#ifdef SASHIL_QEMU
-    (void)clock_init; /* QEMU has no RCC: the reset clock */
-#else
+    SYST_RVR = SYST_MASK; /* SysTick free-running on the core clock: clock_init's timeouts, then the clock */
+    SYST_CVR = 0u;
+    SYST_CSR = (1u << 2) | 1u; /* CLKSOURCE = the core clock, ENABLE; no interrupt */
     clock_init();
+#ifdef SASHIL_QEMU
+    /* QEMU models no RCC (reads 0: clock_init above times out as on a dead crystal and flags it) and
+     * runs SysTick on its fixed 168 MHz system clock */
+    core_mhz = SYSCLK_MHZ;
 #endif
     RCC_AHB1ENR |= 7u;                                            /* GPIOA, GPIOB, GPIOC */
     RCC_APB1ENR |= (1u << 0) | (1u << 3) | (1u << 4);             /* TIM2, TIM5, TIM6 */
@@ -195,7 +248,8 @@ void hal_init(void)
 
     pin_af(GPIOA, 9u, 7u);
     pin_af(GPIOA, 10u, 7u);
-    USART_BRR = 84u;             /* 84 MHz / 1 Mbit/s, oversampling by 16: 5 + 4/16 */
+    /* 1 Mbit/s, oversampling by 16: BRR = f_APB2 / 1 MHz (84: 5 + 4/16 at 84 MHz; APB2 = HSI without PLL) */
+    USART_BRR = core_mhz == SYSCLK_MHZ ? SYSCLK_MHZ / 2u : HSI_MHZ;
     USART_CR1 = (1u << 13) | (1u << 5) | (1u << 3) | (1u << 2); /* UE, RXNEIE, TE, RE */
     NVIC_ISER(37u / 32u) = 1u << (37u % 32u);
 
@@ -205,9 +259,20 @@ void hal_init(void)
     TIM_CR1(TIM6) = 1u;
     NVIC_ISER(54u / 32u) = 1u << (54u % 32u);
 
+    clock_source_init();
+}
+
+/* DWT CYCCNT if it counts (a part may lack it, and QEMU models none: it reads 0 there), else SysTick
+ * (PM0214 4.5), free-running on the core clock since hal_init. */
+static void clock_source_init(void)
+{
     DEMCR |= 1u << 24; /* TRCENA */
     DWT_CYCCNT = 0u;
     DWT_CTRL |= 1u;
+    uint32_t first = DWT_CYCCNT;
+    for (volatile int spin = 0; spin < 16; spin++) {
+    }
+    clock_is_dwt = DWT_CYCCNT != first;
 }
 
 #define USART_TXEIE (1u << 7)
@@ -289,14 +354,28 @@ void TIM6_DAC_IRQHandler(void)
 void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts)
 {
     (void)ctx;
+#ifdef SASHIL_QEMU
+    /* QEMU's TIM2 and TIM5 model no encoder mode: they count time at 1 GHz, which would read as an arm
+     * swung by thousands of degrees. The image reads a rig at rest instead, both encoders at their reset
+     * position 0: the physics is the emulator's, QEMU checks the image's protocol, timing and safety. */
+    *arm_counts = 0;
+    *road_counts = 0;
+#else
     *arm_counts = (int32_t)TIM_CNT(TIM2);
     *road_counts = (int32_t)TIM_CNT(TIM5);
+#endif
 }
 
 int16_t hal_read_current(void *ctx)
 {
     (void)ctx;
+#ifdef SASHIL_QEMU
+    /* QEMU models no TIM6 and so runs no current loop: the image reports an ideal coil, its current the
+     * setpoint, so a sample shows what the board drives (and the watchdog's 0 A) */
+    return (int16_t)coil_setpoint;
+#else
     return coil_measured;
+#endif
 }
 
 void hal_set_coil(void *ctx, uint16_t counts)
@@ -343,15 +422,25 @@ void hal_send(void *ctx, const uint8_t *bytes, size_t n)
     USART_CR1 |= USART_TXEIE;
 }
 
+/* The microsecond clock: the core's cycles, counted by DWT CYCCNT where the part has it running, else
+ * by SysTick (24 bits, counting down at the core clock, which every Cortex-M4 has and QEMU models).
+ * Either count is accumulated into microseconds with the spare cycles carried, so no time is lost
+ * between calls; SysTick wraps every 2^24 cycles (0.1 s at 168 MHz), hence "call often enough". */
 uint64_t hal_now_us(void)
 {
-    static uint32_t last_cycles, spare_cycles;
+    static uint32_t last_count, spare_cycles;
     static uint64_t us;
-    uint32_t cycles = DWT_CYCCNT;
-    uint32_t elapsed = cycles - last_cycles + spare_cycles; /* modulo 2^32: one wrap between calls */
-    last_cycles = cycles;
-    us += elapsed / SYSCLK_MHZ;
-    spare_cycles = elapsed % SYSCLK_MHZ;
+    uint32_t count, elapsed;
+    if (clock_is_dwt) {
+        count = DWT_CYCCNT;
+        elapsed = count - last_count + spare_cycles; /* modulo 2^32: one wrap between calls */
+    } else {
+        count = SYST_CVR;
+        elapsed = ((last_count - count) & SYST_MASK) + spare_cycles; /* counts down, modulo 2^24 */
+    }
+    last_count = count;
+    us += elapsed / core_mhz;
+    spare_cycles = elapsed % core_mhz;
     return us;
 }
 

@@ -7,6 +7,12 @@
 
 void hal_init(void);
 
+/* 1 when the crystal did not start within its timeout and the board runs on the internal oscillator */
+int hal_clock_fallback(void);
+
+/* the APB1 bus clock in MHz: 42 from the PLL, 16 when the PLL did not lock (bxCAN's bit timing) */
+uint32_t hal_apb1_mhz(void);
+
 /* the sashil_hal callbacks (sashil_board.h), in the wire's units */
 void hal_read_encoders(void *ctx, int32_t *arm_counts, int32_t *road_counts);
 int16_t hal_read_current(void *ctx);

@@ -14,6 +14,10 @@ void Reset_Handler(void);
 void Default_Handler(void);
 void USART1_IRQHandler(void);
 void TIM6_DAC_IRQHandler(void);
+#ifdef SASHIL_CAN
+void CAN1_TX_IRQHandler(void);
+void CAN1_RX0_IRQHandler(void);
+#endif
 
 void Default_Handler(void)
 {
@@ -25,6 +29,8 @@ void Default_Handler(void)
 #define IRQ_COUNT 82u
 #define USART1_IRQ 37u
 #define TIM6_DAC_IRQ 54u
+#define CAN1_TX_IRQ 19u
+#define CAN1_RX0_IRQ 20u
 
 typedef void (*vector)(void);
 
@@ -43,6 +49,10 @@ __attribute__((section(".isr_vector"), used)) const vector vectors[16u + IRQ_COU
     [15] = Default_Handler, /* SysTick */
     [16u + USART1_IRQ] = USART1_IRQHandler,
     [16u + TIM6_DAC_IRQ] = TIM6_DAC_IRQHandler,
+#ifdef SASHIL_CAN
+    [16u + CAN1_TX_IRQ] = CAN1_TX_IRQHandler,
+    [16u + CAN1_RX0_IRQ] = CAN1_RX0_IRQHandler,
+#endif
 };
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
