@@ -123,9 +123,10 @@ def test_arm_acceleration_is_the_plants_on_sim_else_the_encoders():
 @pytest.mark.e2e
 def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp_path):
     """The same laws on the same road over the serial stack and the emulated board: θ̈2 comes
-    from the encoders there (the plant's own on the sim), so comfort agrees within the encoder
-    method's error (a few %, 10 % at 1 A on the sim's own encoders), travel closely, and the
-    soft damper is the least comfortable on both."""
+    from the encoders there (the plant's own on the sim), differentiated on the device's clock, so
+    comfort agrees within the encoder method's error (a few %, 10 % at 1 A on the sim's own
+    encoders) and the link's timing, travel closely, and the soft damper is the least comfortable
+    on both."""
     from test_link_e2e import Emulator, relaxed_config
 
     common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q"]
@@ -144,7 +145,33 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
     for law in sim:
         assert over[law]["status"] == "ok", over[law]["status"]
         a_sim, a_link = float(sim[law]["rms_accel_rad_s2"]), float(over[law]["rms_accel_rad_s2"])
-        assert a_link == pytest.approx(a_sim, rel=0.25), law
+        # the encoders' θ̈2 reads up to 10 % high; a loaded host sends the road's speed commands
+        # late, which roughens the road itself (+15 % measured with two busy cores beside)
+        assert a_link == pytest.approx(a_sim, rel=0.35), law
         assert float(over[law]["rms_theta_deg"]) == pytest.approx(float(sim[law]["rms_theta_deg"]), rel=0.1), law
     for table in (sim, over):  # the soft damper is the least comfortable on this road, by ~25 %
         assert max(table, key=lambda law: float(table[law]["rms_accel_rad_s2"])) == "passive 0 A"
+
+
+def test_the_encoders_arm_acceleration_is_taken_on_the_devices_clock():
+    """A link's stream: samples every 1 ms of device time, but one lost (a 2 ms gap) and one row
+    repeating the sample before it. θ2 = a·t²/2 (hand-derived θ̈2 = a): the device-clock grid reads
+    a everywhere away from the ends, where a grid of the rows would read the gap as a jump."""
+    a = 3.0
+    device_us = [1000 * k for k in range(400)]
+    del device_us[200]  # a lost sample
+    rows_us = [*device_us[:100], device_us[99], *device_us[100:]]  # a cycle that read nothing new
+    seq = [*range(100), 99, *range(100, len(device_us))]
+    t = np.array(rows_us) * 1e-6
+    stream = {
+        "theta_rad": 0.5 * a * t**2,
+        "theta_road_rad": np.zeros(t.size),
+        "device_time_us": np.array(rows_us, dtype=float),
+        "seq": np.array(seq, dtype=float),
+    }
+    accel, source = arm_acceleration(stream, 1000.0, 40.0)
+    assert source == "encoders"
+    assert np.allclose(accel[120:-120], a, rtol=5e-3)  # away from the filter's end transients
+    rows_only = {key: value for key, value in stream.items() if key != "device_time_us"}
+    naive, _ = arm_acceleration(rows_only, 1000.0, 40.0)
+    assert np.max(np.abs(naive[120:-120] - a)) > 0.5 * a  # what the row grid made of the gap

@@ -13,8 +13,10 @@ Metrics, after ``compare.settle_s``:
   (4th-order Butterworth, forward and back). On a simulated rig θ̈2 is the plant's own,
   (−k·θ − T)/J of its true state (seed 001 eq. 13), recorded every cycle as
   ``arm_accel_true_rad_s2``; on any other rig it is the arm angle θ2 = θ + θ1 of the encoders,
-  differentiated twice after the low-pass (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS
-  in quadrature at 20 Hz, the same for every law);
+  differentiated twice after the low-pass, on a uniform grid of the samples' own device time (a
+  link loses samples and repeats one when a cycle reads nothing new; a grid of the rows would read
+  those as jumps) (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS in quadrature at
+  20 Hz, the same for every law);
 * travel: RMS of the relative angle θ;
 * handling proxy: RMS of the road-side torque k·θ + T. With the road side driven (seed 001 eq. 13,
   T_in = 0) it equals −J·θ̈2, so on this rig it ranks laws exactly as comfort does;
@@ -116,7 +118,38 @@ def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float
         return smooth(true), "plant"
     theta2 = np.asarray(stream["theta_rad"], dtype=float) + np.asarray(stream["theta_road_rad"], dtype=float)
     dt = 1.0 / rate_hz
-    return np.asarray(np.gradient(np.gradient(smooth(theta2), dt), dt)), "encoders"
+    sampled = sample_times(stream)
+    if sampled is None:
+        return np.asarray(np.gradient(np.gradient(smooth(theta2), dt), dt)), "encoders"
+    # a link's samples are taken on the device's clock, with gaps where samples were lost and a
+    # cycle that read no new sample repeating the last: differentiate on a uniform grid of the
+    # device's time, then read the result back at every row
+    from scipy.interpolate import CubicSpline
+
+    times, first = sampled
+    grid = np.arange(times[0], times[-1] + 0.5 * dt, dt)
+    grid = grid[grid <= times[-1]]
+    on_grid = CubicSpline(times, theta2[first])(grid)  # a lost sample's gap bridged smoothly
+    accel = np.gradient(np.gradient(smooth(on_grid), dt), dt)
+    row_times = np.interp(np.arange(theta2.size), first, times)
+    return np.asarray(np.interp(row_times, grid, accel)), "encoders"
+
+
+def sample_times(stream: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
+    """Each distinct sample's device time [s] (rising) and the row that first carried it, from the
+    stream's ``seq`` and ``device_time_us``; None when the stream has no device clock (a simulated
+    rig's rows are its samples, evenly spaced)."""
+    device = np.asarray(stream.get("device_time_us", ()), dtype=float)
+    seq = np.asarray(stream.get("seq", ()), dtype=float)
+    if device.size < 3 or seq.size != device.size or not np.all(np.isfinite(device)) or not np.any(device):
+        return None
+    first = np.flatnonzero(np.r_[True, np.diff(seq) != 0])
+    times = device[first] * 1e-6
+    keep = np.r_[True, np.diff(times) > 0]  # a clock that did not advance adds nothing
+    first, times = first[keep], times[keep]
+    if times.size < 3:
+        return None
+    return times, first
 
 
 def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
