@@ -1,6 +1,6 @@
 /*
  * The interface board's firmware on an STM32F405/F407: the portable board logic (sashil_board.c,
- * protocol v1 of drivers/protocol.md) behind the reference hardware layer (hal_stm32f4.c). The main
+ * protocol v2 of drivers/protocol.md) behind the reference hardware layer (hal_stm32f4.c). The main
  * loop hands the bytes the UART received to the board and lets the board's timer run: samples in
  * device pacing, the watchdog that rests coil and road when the host falls silent.
  */
@@ -15,10 +15,12 @@ static sashil_board board;
 int main(void)
 {
     static const sashil_hal hal = {
-        0, hal_read_encoders, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, hal_send, 0,
+        0, hal_read_encoders_timed, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, hal_send, 0,
+        hal_read_edges,
     };
     uint8_t bytes[64];
     hal_init();
+    hal_edges_init();
     sashil_board_init(&board, &hal, COUNTS_PER_REV, CURRENT_MAX_COUNTS, 0u);
     for (;;) {
         uint64_t now = hal_now_us();

@@ -14,6 +14,7 @@ void Reset_Handler(void);
 void Default_Handler(void);
 void USART1_IRQHandler(void);
 void TIM6_DAC_IRQHandler(void);
+void TIM7_IRQHandler(void);
 
 void Default_Handler(void)
 {
@@ -25,6 +26,7 @@ void Default_Handler(void)
 #define IRQ_COUNT 82u
 #define USART1_IRQ 37u
 #define TIM6_DAC_IRQ 54u
+#define TIM7_IRQ 55u
 
 typedef void (*vector)(void);
 
@@ -43,6 +45,7 @@ __attribute__((section(".isr_vector"), used)) const vector vectors[16u + IRQ_COU
     [15] = Default_Handler, /* SysTick */
     [16u + USART1_IRQ] = USART1_IRQHandler,
     [16u + TIM6_DAC_IRQ] = TIM6_DAC_IRQHandler,
+    [16u + TIM7_IRQ] = TIM7_IRQHandler,
 };
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
