@@ -1,7 +1,8 @@
 """Replay: a recorded run's sensor stream through a controller, offline.
 
 Each recorded row becomes the :class:`~sashil.drivers.interface.RigSample` the loop read (encoder
-counts back from ``theta_rad``/``theta_road_rad``, the measured ``current_a``, ``seq``), with the
+counts back from ``theta_rad``/``theta_road_rad``, the measured ``current_a``, ``seq``, the device
+time and each encoder's last edge when the run recorded them), with the
 period the loop measured (``time_s`` differences) and the road speed the run commanded on the row
 before (the controller's road feed-forward). The controller's estimator, observer, law and inverse
 run as in the loop, on these samples; what it would have commanded (T*, i*, T̂) goes beside what
@@ -22,13 +23,16 @@ from typing import Any
 import numpy as np
 
 from sashil.control.controller import Controller
-from sashil.drivers.interface import RigSample
+from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.errors import DataFileError
 
 #: what a replay needs of a recorded data.csv
 REQUIRED = ("time_s", "theta_rad", "current_a", "seq")
 #: what it writes beside the recorded columns
 REPLAY_COLUMNS = ("replay_torque_cmd_nm", "replay_current_cmd_a", "replay_torque_hat_nm", "replay_z_hat")
+#: the sample's integer fields a run records beside the angles (absent in older runs: no edges)
+EDGE_FIELDS = ("device_time_us", "arm_edge_us", "arm_edge_dir", "road_edge_us", "road_edge_dir")
+_ABSENT = {"device_time_us": 0, "arm_edge_us": NO_EDGE, "arm_edge_dir": 0, "road_edge_us": NO_EDGE, "road_edge_dir": 0}
 TWO_PI = 2.0 * math.pi
 
 
@@ -52,6 +56,12 @@ def replay(controller: Controller, data: dict[str, np.ndarray], counts_per_rev: 
     current = data["current_a"]
     seq = data["seq"]
     road_cmd = data.get("road_speed_cmd_rad_s")
+    fields = {
+        name: np.asarray(data[name], dtype=np.int64) if name in data else np.full(n, _ABSENT[name], dtype=np.int64)
+        for name in EDGE_FIELDS
+    }
+    device_us, arm_edge, arm_dir = fields["device_time_us"], fields["arm_edge_us"], fields["arm_edge_dir"]
+    road_edge, road_dir = fields["road_edge_us"], fields["road_edge_dir"]
     scale = counts_per_rev / TWO_PI
     out = {name: np.full(n, np.nan) for name in REPLAY_COLUMNS}
     replayed = np.zeros(n)
@@ -64,12 +74,16 @@ def replay(controller: Controller, data: dict[str, np.ndarray], counts_per_rev: 
         sample = RigSample(
             seq=int(seq[k]),
             time_ns=int(t_ns[k]),
-            device_time_us=0,
+            device_time_us=int(device_us[k]),
             arm_counts=int(round(theta[k] * scale)) + road_counts,
             road_counts=road_counts,
             current_a=float(current[k]),
             flags=0,
             counts_per_rev=counts_per_rev,
+            arm_edge_us=int(arm_edge[k]),
+            arm_edge_dir=int(arm_dir[k]),
+            road_edge_us=int(road_edge[k]),
+            road_edge_dir=int(road_dir[k]),
         )
         if road_cmd is not None and k:
             speed = float(road_cmd[k - 1])
