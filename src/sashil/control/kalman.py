@@ -81,17 +81,17 @@ THETA, THETA_DOT, ROAD, ROAD_DOT, ROAD_DDOT, BIAS = range(6)
 
 #: edge events (``edge_timing``): the standard deviation of an event's time [s] (the reference board
 #: stamps within +-5 us; the emulator to the microsecond); an event older than EDGE_MAX_AGE_S is not
-#: fused (the model's transition over that long says less than the count); an encoder whose last
-#: event is older than EDGE_RECENT_S has its count read as noise again, not as its cell
+#: fused (the model's transition over that long says less than the count)
 EDGE_TIME_SIGMA_S = 3e-6
 EDGE_MAX_AGE_S = 0.02
-EDGE_RECENT_S = 0.065
+#: the standard deviation [counts] a count is read with once its encoder had events (not q/sqrt(12):
+#: :mod:`sashil.control.edge_kalman` says why and what was measured)
+EDGE_COUNT_SIGMA_COUNTS = math.sqrt(64.0 / 12.0)
 #: with edge events the prediction's miss is measured to a fraction of a count: the innovation check
 #: then uses this share of ``innovation_limit``. Measured on drops, 3 Hz sines and chirps (4 s, seed
-#: damper): the right J misses by at most 0.5 count, never 1 for two cycles running; J 3 times too
-#: large 2 counts for at most one cycle (let run); J 20 times too large 2 counts for 12-14 cycles
-#: running on drops and chirps (falls back); J 3 times too small 22-29 cycles (falls back: that model
-#: misses more than the old reading of counts could tell)
+#: damper): the right J misses by at most 0.5 count; J 3 times too large by 2 counts for at most one
+#: cycle running (let run); J 20 times too large for 18-49 cycles running (falls back); J 3 times too
+#: small for 33-39 (falls back: that model misses more than the old reading of counts could tell)
 EDGE_LIMIT_SHARE = 1.0 / 3.0
 #: bad events: once this many events were seen, a share of bad ones above EDGE_BAD_SHARE is a fault
 EDGE_BAD_MIN_EVENTS = 100
@@ -332,10 +332,11 @@ class KalmanRigEstimator(EstimatorOutputs):
             return -1.0, 0.0  # the filter starts from this sample's counts; a stale event says no more
         return tau, (counts - 0.5 * direction) * scale
 
-    def _zone(self, k: int, now_us: int, half_count: float) -> float:
-        """Half a count for an encoder with a recent event (its count read as its cell), else 0."""
-        last = self._last_edge_us[k]
-        return half_count if last != NO_EDGE and now_us - last <= EDGE_RECENT_S * 1e6 else 0.0
+    def _count_var(self, k: int, scale: float) -> float:
+        """The variance encoder ``k``'s count is read with: weak once it had events, q^2/12 before
+        (plus the configured angle noise)."""
+        sigma = EDGE_COUNT_SIGMA_COUNTS if self._last_edge_us[k] != NO_EDGE else math.sqrt(1.0 / 12.0)
+        return (sigma * scale) ** 2 + self.angle_noise_rad**2
 
     def _update_with_edges(self, sample: RigSample, dt: float, body_accel: float, road_accel: float | None) -> None:
         """:meth:`update` with the samples' edge events (:mod:`sashil.control.edge_kalman`)."""
@@ -358,7 +359,6 @@ class KalmanRigEstimator(EstimatorOutputs):
             self.started = True
         elif dt > 0.0:
             commanded = road_accel is not None
-            half_count = 0.5 * scale
             worst = (
                 edge_cycle(
                     xa,
@@ -374,9 +374,9 @@ class KalmanRigEstimator(EstimatorOutputs):
                     arm_boundary,
                     road_tau,
                     road_boundary,
-                    scale * scale / 12.0 + self.angle_noise_rad**2,
-                    self._zone(0, now_us, half_count),
-                    self._zone(1, now_us, half_count),
+                    self._count_var(0, scale),
+                    self._count_var(1, scale),
+                    0.5 * scale,
                     EDGE_TIME_SIGMA_S * EDGE_TIME_SIGMA_S,
                     self.accel_psd,
                 )
