@@ -19,15 +19,16 @@ steady-state gain fits them.
 The counts are read as the angle plus white noise, as without events, but for an encoder that had
 events with a variance far above the quantisation's q^2/12 (``kalman.EDGE_COUNT_SIGMA_COUNTS``): the
 events say where in its cell the angle is, and a count read at q^2/12 every cycle would pull the
-estimate towards the middle of the cell, by up to half a count, against them. Read weakly, the count
-still holds the estimate when no event comes and the model drifts (an arm stuck by the damper's
-yield, moving by less than a count: there the model's acceleration is off and nothing else pins the
-angle). Measured over the benchmark's eleven dampers (exact model, six conditions): reading the
-count as its cell (no correction inside it) let the estimate drift across the cell there (a drop on
-one damper: 34 % tracking error against 25 % without events); at q^2/12 the pull costs the sines (1 Hz
-up to 12.6 %); at 64 q^2/12 (2.3 counts) every condition is below 8 %. An encoder that does not move
-has no new event: its count (the old information) is all the filter gets from it; one that never
-moved is read at q^2/12, as without events.
+estimate towards the middle of the cell, by up to half a count, against them. An estimate that
+leaves the count's cell all the same (the model drifting while no event comes: an arm stuck by the
+damper's yield, where the model's acceleration is off and the arm moves by less than a count) is put
+back to the cell's edge at q^2/12. Measured over the benchmark's eleven dampers (exact model, six
+conditions): the cell alone (no correction inside it) let the estimate drift across it (a drop on
+one damper: 34 % tracking error against 25 % without events); the count at q^2/12 cost the sines (1 Hz
+up to 12.6 %); the weak count alone, with an identified model, let a stuck arm's estimate drift by 13
+counts (a false fallback to 0 A); weak count and cell together: every condition below 8 % with the
+exact model. An encoder that does not move has no new event: its count (the old information) is all
+the filter gets from it; one that never moved is read at q^2/12, as without events.
 
 :func:`edge_cycle` is one cycle (predict, the events, the counts) compiled with numba.
 """
@@ -142,10 +143,17 @@ def edge_cycle(
         variance = time_var * rate * rate + floor
         worst = max(worst, abs(road_boundary - predicted))
         _scalar_update(x, p, h, road_boundary - predicted, variance)
+    cell_var = 4.0 * half_count * half_count / 12.0
     h[0], h[1], h[2], h[3], h[4], h[5] = 1.0, 0.0, 1.0, 0.0, 0.0, 0.0
     _scalar_update(x, p, h, arm - (x[0] + x[2]), arm_var)
+    e_cell = _cell(arm - (x[0] + x[2]), half_count)
+    if e_cell != 0.0:  # outside the count's cell: back to its edge, at the quantisation's variance
+        _scalar_update(x, p, h, e_cell, cell_var)
     h[0], h[1], h[2], h[3], h[4], h[5] = 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
     _scalar_update(x, p, h, road - x[2], road_var)
+    e_cell = _cell(road - x[2], half_count)
+    if e_cell != 0.0:
+        _scalar_update(x, p, h, e_cell, cell_var)
     for i in range(6):  # keep P symmetric against rounding
         for j in range(i + 1, 6):
             mean = 0.5 * (p[i, j] + p[j, i])
