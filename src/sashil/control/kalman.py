@@ -47,6 +47,13 @@ The noise densities were chosen over the whole condition set (drop, chirp, stepp
 dampers with identified and with 10 %-off models, with and without host stalls), not on one case;
 see the README's control figures.
 
+With ``edge_timing`` (``controller.edge_timing``, the default) the samples' encoder edge events are
+fused too, as exact angles at their own times: the cycle is then :func:`~sashil.control.edge_kalman.edge_cycle`
+with the covariance propagated (the steady-state gains above do not fit events that come at any time),
+counts read weakly within their cell, and the innovation check at ``EDGE_LIMIT_SHARE`` of the limit.
+Bad events (from the future, or older than the encoder's last one) are counted (``edge_rejects``) and
+left out; :attr:`KalmanRigEstimator.edge_fault` says when they pass 1 %.
+
 Innovation check: ``innovation_limit`` counts; a residual larger than that on either encoder for
 :data:`PERSIST_CYCLES` cycles in a row after the first :data:`WARMUP_S` (the model cannot explain the
 motion, e.g. a J 20 times too small) sets :attr:`diverged`; the controller then falls back to 0 A.
