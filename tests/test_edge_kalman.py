@@ -133,3 +133,36 @@ def test_the_config_switch_turns_the_events_off():
     for k in range(50):
         ctl.step(moving_sample(k, 0.5), k * 10**6, 10**6)
     assert ctl.stats()["edge_events"] == 0
+
+
+def test_a_run_with_bad_edge_times_ends_at_zero_current_with_exit_3_and_the_counts():
+    from sashil.drivers.interface import RigCommand
+    from sashil.drivers.sim import SimulatedRig
+    from sashil.errors import exit_code_of
+    from sashil.runtime.clock import VirtualClock
+    from sashil.runtime.loop import ControlLoop
+
+    class BadEdges(SimulatedRig):
+        """The simulated rig with a road turning at 0.5 rad/s, whose board stamps one edge in 30 in the future."""
+
+        def read(self, t_ns, dt_ns):
+            sample = super().read(t_ns, dt_ns)
+            if sample.seq % 30 == 0 and sample.road_edge_dir:
+                sample.road_edge_us = sample.device_time_us + 20
+            return sample
+
+        def write(self, cmd, t_ns, dt_ns):
+            self.currents.append(cmd.current_a)
+            super().write(RigCommand(cmd.current_a, 0.5), t_ns, dt_ns)
+
+    config = default_config()
+    rig = BadEdges.from_config(config)
+    rig.currents = []
+    ctl = make_controller("passive", {**config, "controller": {**config["controller"], "current_a": 0.5}})
+    loop = ControlLoop(rig, ctl, VirtualClock(), 1000.0, 5.0)
+    with pytest.raises(SafetyTrip):
+        loop.run()
+    assert loop.result.exit_status == "safety_trip" and exit_code_of(loop.result.exit_status) == 3
+    assert rig.currents[-1] == 0.0  # the shutdown's safe command
+    stats = ctl.stats()
+    assert stats["edge_rejects"] > 0.01 * (stats["edge_rejects"] + stats["edge_events"])
