@@ -5,9 +5,10 @@ machine, see ``tools/bench_link.py``; fast enough for a 1 kHz cycle, so there is
 path). Values are quantised by the same functions as the serial codec (``messages.py``) and passed
 to cantools as raw integers, so both links clamp and round identically.
 
-A sample does not fit one classic 8-byte frame: it travels as SampleA (encoders) followed by
-SampleB (sequence, device time, current, flags). One node sends both back to back, so they arrive
-in order; :class:`CanDecoder` pairs each SampleB with the SampleA right before it.
+A sample does not fit one classic 8-byte frame: it travels as SampleA (encoders), SampleEdges (the
+encoders' last count changes) and SampleB (sequence, device time, current, flags). One node sends
+the three back to back, so they arrive in order; :class:`CanDecoder` completes each SampleB with the
+SampleA and SampleEdges right before it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from typing import cast
 import cantools
 
 from sashil.drivers.messages import (
+    EDGE_ARM_UP,
+    EDGE_ROAD_UP,
     Command,
     Configure,
     Hello,
@@ -29,6 +32,9 @@ from sashil.drivers.messages import (
     Status,
     Version,
     current_to_wire,
+    edge_age_to_wire,
+    edge_dirs_to_wire,
+    edge_from_wire,
     road_speed_to_wire,
 )
 
@@ -37,6 +43,7 @@ DBC_PATH = Path(__file__).with_name("sashil.dbc")
 ID_COMMAND = 0x100
 ID_SAMPLE_A = 0x110
 ID_SAMPLE_B = 0x111
+ID_SAMPLE_EDGES = 0x112
 ID_ROAD_SPEED = 0x120
 ID_STATUS = 0x180
 ID_CONFIGURE = 0x1F0
@@ -45,7 +52,7 @@ ID_VERSION = 0x1F2
 
 #: frames the host sends / the rig sends (for receive filters)
 HOST_IDS = (ID_COMMAND, ID_ROAD_SPEED, ID_CONFIGURE, ID_HELLO)
-RIG_IDS = (ID_SAMPLE_A, ID_SAMPLE_B, ID_STATUS, ID_VERSION)
+RIG_IDS = (ID_SAMPLE_A, ID_SAMPLE_EDGES, ID_SAMPLE_B, ID_STATUS, ID_VERSION)
 
 
 @lru_cache(maxsize=1)
@@ -66,10 +73,18 @@ def _pack(frame_id: int, raw: dict[str, int]) -> tuple[int, bytes]:
 
 
 def encode(msg: Message, seq: int = 0) -> list[tuple[int, bytes]]:
-    """The CAN frames ``[(arbitration id, data), ...]`` carrying ``msg`` (two for a Sample)."""
+    """The CAN frames ``[(arbitration id, data), ...]`` carrying ``msg`` (three for a Sample)."""
     if isinstance(msg, Sample):
         return [
             _pack(ID_SAMPLE_A, {"ArmCounts": msg.arm_counts, "RoadCounts": msg.road_counts}),
+            _pack(
+                ID_SAMPLE_EDGES,
+                {
+                    "ArmEdgeAge": edge_age_to_wire(msg.arm_edge_age_us),
+                    "RoadEdgeAge": edge_age_to_wire(msg.road_edge_age_us),
+                    "EdgeDirs": edge_dirs_to_wire(msg.arm_edge_dir, msg.road_edge_dir),
+                },
+            ),
             _pack(
                 ID_SAMPLE_B,
                 {
@@ -116,7 +131,7 @@ class CanCounters:
     frames: int = 0  # frames decoded
     unknown_id: int = 0  # frames with an id that is not in the DBC (ignored)
     bad_length: int = 0  # a known id with the wrong data length
-    unpaired: int = 0  # a SampleB without its SampleA, or a SampleA overwritten before its SampleB
+    unpaired: int = 0  # a sample's frame without the others of its sample (A, edges, B), or out of order
     bad_lines: int = 0  # adapter lines the CAN library could not parse (an SLCAN line garbled on the wire)
 
     @property
@@ -136,10 +151,11 @@ class CanCounters:
 
 @dataclass
 class CanDecoder:
-    """Turns received CAN frames back into ``(seq, message)``; pairs SampleA/SampleB."""
+    """Turns received CAN frames back into ``(seq, message)``; joins SampleA, SampleEdges, SampleB."""
 
     counters: CanCounters = field(default_factory=CanCounters)
     _sample_a: dict[str, float] | None = None
+    _sample_edges: dict[str, float] | None = None
 
     def feed(self, frame_id: int, data: bytes) -> tuple[int, Message] | None:
         """The message completed by this frame, or None (first half of a sample, unknown id)."""
@@ -155,21 +171,32 @@ class CanDecoder:
         counters.frames += 1
         sig = cast("dict[str, float]", spec.decode(data, decode_choices=False))  # numbers: no choices decoded
         if frame_id == ID_SAMPLE_A:
-            if self._sample_a is not None:
+            if self._sample_a is not None or self._sample_edges is not None:
+                counters.unpaired += 1  # the sample before never completed
+            self._sample_a, self._sample_edges = sig, None
+            return None
+        if frame_id == ID_SAMPLE_EDGES:
+            if self._sample_a is None or self._sample_edges is not None:
                 counters.unpaired += 1
-            self._sample_a = sig
+                self._sample_a = None
+                return None
+            self._sample_edges = sig
             return None
         if frame_id == ID_SAMPLE_B:
-            part_a, self._sample_a = self._sample_a, None
-            if part_a is None:
+            part_a, edges = self._sample_a, self._sample_edges
+            self._sample_a = self._sample_edges = None
+            if part_a is None or edges is None:
                 counters.unpaired += 1
                 return None
+            dirs = int(edges["EdgeDirs"])
             sample = Sample(
                 int(sig["DeviceTimeUs"]),
                 int(part_a["ArmCounts"]),
                 int(part_a["RoadCounts"]),
                 float(sig["CurrentMeas"]),
                 int(sig["SampleFlags"]),
+                *edge_from_wire(int(edges["ArmEdgeAge"]), dirs, EDGE_ARM_UP),
+                *edge_from_wire(int(edges["RoadEdgeAge"]), dirs, EDGE_ROAD_UP),
             )
             return int(sig["SampleSeq"]), sample
         if frame_id == ID_COMMAND:

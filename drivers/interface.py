@@ -24,6 +24,9 @@ FLAG_STUCK_SENSOR = 0x04  # (emulator fault injection) the encoder value is froz
 FLAG_OVERCURRENT = 0x08
 FLAG_FAULT = 0x80
 
+#: RigSample edge time when the sample carries no edge for that encoder
+NO_EDGE = -1
+
 
 @dataclass(slots=True)
 class RigSample:
@@ -37,6 +40,13 @@ class RigSample:
     current_a: float  # measured coil current
     flags: int
     counts_per_rev: int
+    #: device time [us] of the arm encoder's last count change (NO_EDGE: none reported), and its
+    #: direction (+1 the count went up, -1 down, 0 none); the count boundary it crossed is
+    #: arm_counts - arm_edge_dir / 2 (protocol.md "Encoder edges")
+    arm_edge_us: int = NO_EDGE
+    arm_edge_dir: int = 0
+    road_edge_us: int = NO_EDGE  # the same for the road encoder
+    road_edge_dir: int = 0
 
     @property
     def theta_rad(self) -> float:

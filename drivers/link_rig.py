@@ -35,6 +35,7 @@ from typing import Any
 
 from sashil.drivers.interface import (
     FLAG_HELD,
+    NO_EDGE,
     RigCapabilities,
     RigCommand,
     RigInterface,
@@ -368,15 +369,21 @@ class LinkRig(RigInterface):
         seq, sample = newest
         if sample.flags & FLAG_HELD and not self._held_noted:
             self._note_held()
+        device_time_us = self._unwrap_device_time(sample.device_time_us)
         return RigSample(
             seq=seq,
             time_ns=t_ns,
-            device_time_us=self._unwrap_device_time(sample.device_time_us),
+            device_time_us=device_time_us,
             arm_counts=sample.arm_counts,
             road_counts=sample.road_counts,
             current_a=sample.current_a,
             flags=sample.flags,
             counts_per_rev=self.counts_per_rev,
+            # an edge's age back to the device's clock (the sample's own time minus the age)
+            arm_edge_us=device_time_us - sample.arm_edge_age_us if sample.arm_edge_dir else NO_EDGE,
+            arm_edge_dir=sample.arm_edge_dir,
+            road_edge_us=device_time_us - sample.road_edge_age_us if sample.road_edge_dir else NO_EDGE,
+            road_edge_dir=sample.road_edge_dir,
         )
 
     def _wait_for_sample(self, newest: tuple[int, Sample] | None, deadline: float) -> tuple[int, Sample] | None:

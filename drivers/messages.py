@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: protocol version exchanged in Hello/Version; a device that answers another version is refused
-PROTOCOL_VERSION = 1
+#: (version 2 added the encoder edge times to the Sample; protocol.md "Session")
+PROTOCOL_VERSION = 2
 
 #: wire units
 CURRENT_LSB_A = 0.0005  # coil current (command and measurement): 0.5 mA per count
@@ -21,6 +22,12 @@ ROAD_SPEED_LSB_RAD_S = 1e-6  # road-wheel motor speed: 1 µrad/s per count
 PACING_DEVICE = 0  # the device streams a sample every 1/rate s; the host cycle runs on each sample
 PACING_HOST = 1  # the device answers each Command with one Sample
 PACING_NAMES = {"device": PACING_DEVICE, "host": PACING_HOST}
+
+#: Sample edge age that means "no count change in the last 65.534 ms" (or none since boot)
+EDGE_AGE_NONE = 0xFFFF
+#: Sample edge direction bits on the wire (set: the count went up at that edge)
+EDGE_ARM_UP = 0x01
+EDGE_ROAD_UP = 0x02
 
 #: Command.flags bits
 CMD_ENABLE = 0x01  # without it the device drives 0 A whatever the setpoint says
@@ -35,6 +42,12 @@ class Sample:
     road_counts: int  # road/wheel-side encoder (theta1), signed 32 bit
     current_a: float  # measured coil current
     flags: int  # FLAG_* bits of sashil.drivers.interface
+    #: microseconds from the arm encoder's last count change to this sample (EDGE_AGE_NONE: none recent)
+    arm_edge_age_us: int = EDGE_AGE_NONE
+    #: +1 / -1: the arm count went up / down at that change; 0 with no recent change
+    arm_edge_dir: int = 0
+    road_edge_age_us: int = EDGE_AGE_NONE  # the same for the road encoder
+    road_edge_dir: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +111,24 @@ class Configure:
 
 
 Message = Sample | Command | RoadSpeed | Status | Hello | Version | Configure
+
+
+def edge_dirs_to_wire(arm_dir: int, road_dir: int) -> int:
+    """The Sample's direction byte: EDGE_ARM_UP / EDGE_ROAD_UP set for a count that went up."""
+    return (EDGE_ARM_UP if arm_dir > 0 else 0) | (EDGE_ROAD_UP if road_dir > 0 else 0)
+
+
+def edge_from_wire(age_us: int, dirs: int, up_bit: int) -> tuple[int, int]:
+    """(age, direction) of one encoder from the wire: direction 0 when the age says no recent edge."""
+    if age_us >= EDGE_AGE_NONE:
+        return EDGE_AGE_NONE, 0
+    return age_us, 1 if dirs & up_bit else -1
+
+
+def edge_age_to_wire(age_us: int) -> int:
+    """An edge age [µs] as the wire's u16: ages of EDGE_AGE_NONE or more (and negative ones, which
+    no board sends) saturate to EDGE_AGE_NONE."""
+    return age_us if 0 <= age_us < EDGE_AGE_NONE else EDGE_AGE_NONE
 
 
 def current_to_wire(current_a: float, signed: bool) -> int:

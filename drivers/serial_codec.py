@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 from sashil.drivers.messages import (
     CURRENT_LSB_A,
+    EDGE_ARM_UP,
+    EDGE_ROAD_UP,
     ROAD_SPEED_LSB_RAD_S,
     Command,
     Configure,
@@ -29,6 +31,9 @@ from sashil.drivers.messages import (
     Status,
     Version,
     current_to_wire,
+    edge_age_to_wire,
+    edge_dirs_to_wire,
+    edge_from_wire,
     road_speed_to_wire,
 )
 
@@ -47,7 +52,7 @@ MAX_PAYLOAD = 32
 #: longest encoded frame (header + payload + crc, COBS overhead, delimiter)
 MAX_FRAME = HEADER.size + MAX_PAYLOAD + CRC.size + 2
 
-_SAMPLE = struct.Struct("<IiihB")
+_SAMPLE = struct.Struct("<IiihBHHB")  # ..., flags, arm edge age, road edge age, edge directions
 _COMMAND = struct.Struct("<HB")
 _ROAD_SPEED = struct.Struct("<i")
 _STATUS = struct.Struct("<BBHH")
@@ -143,6 +148,9 @@ def encode_payload(msg: Message) -> tuple[int, bytes]:
             msg.road_counts,
             current_to_wire(msg.current_a, signed=True),
             msg.flags & 0xFF,
+            edge_age_to_wire(msg.arm_edge_age_us),
+            edge_age_to_wire(msg.road_edge_age_us),
+            edge_dirs_to_wire(msg.arm_edge_dir, msg.road_edge_dir),
         )
     if isinstance(msg, Command):
         return TYPE_COMMAND, _COMMAND.pack(current_to_wire(msg.current_a, signed=False), msg.flags & 0xFF)
@@ -167,8 +175,16 @@ def decode_payload(msg_type: int, payload: bytes) -> Message:
     """The message of type ``msg_type`` in ``payload``; FrameError for a wrong type or length."""
     try:
         if msg_type == TYPE_SAMPLE:
-            t_us, arm, road, cur, flags = _SAMPLE.unpack(payload)
-            return Sample(t_us, arm, road, cur * CURRENT_LSB_A, flags)
+            t_us, arm, road, cur, flags, arm_age, road_age, dirs = _SAMPLE.unpack(payload)
+            return Sample(
+                t_us,
+                arm,
+                road,
+                cur * CURRENT_LSB_A,
+                flags,
+                *edge_from_wire(arm_age, dirs, EDGE_ARM_UP),
+                *edge_from_wire(road_age, dirs, EDGE_ROAD_UP),
+            )
         if msg_type == TYPE_COMMAND:
             cur, flags = _COMMAND.unpack(payload)
             return Command(cur * CURRENT_LSB_A, flags)

@@ -4,18 +4,23 @@ The plant advances to the host time each ``read`` is given, so the same backend 
 virtual clock (deterministic, as fast as the CPU allows) or on the real clock; the loop chooses.
 The sensor model quantises both encoders (counts per revolution from the config) and adds
 seeded Gaussian noise to the angles and the measured current when the config asks for it.
-The backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
+Each encoder's last count change is timed on the plant's continuous trajectory
+(:mod:`sashil.drivers.encoder_edges`): the samples carry it as a board's timer capture does. The
+backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
 ``RigCommand.road_speed_rad_s`` as a real board's road motor does (:class:`RoadWheel`), so a plan
 drives the road the same way on every backend.
 """
 
 from __future__ import annotations
 
+import math
 import random
 from typing import Any
 
+from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing
 from sashil.drivers.interface import (
     FLAG_HELD,
+    NO_EDGE,
     TWO_PI,
     RigCapabilities,
     RigCommand,
@@ -89,6 +94,12 @@ class SimulatedRig(RigInterface):
         #: the road motor: the plant's road angle under the speed commands
         self.wheel = RoadWheel()
         plant.road = self.wheel
+        #: each encoder's last count change: (host time [ns], direction +1/-1), or None (none yet)
+        self.arm_edge: tuple[int, int] | None = None
+        self.road_edge: tuple[int, int] | None = None
+        self._arm_end: float | None = None  # the angles at the end of the last step (a jump since: an edge)
+        self._road_end: float | None = None
+        self._found: tuple[tuple[float, int] | None, tuple[float, int] | None] = (None, None)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SimulatedRig:
@@ -141,17 +152,22 @@ class SimulatedRig(RigInterface):
             self._t0_ns = self._last_ns = t_ns
         plant = self.plant
         elapsed = (t_ns - self._last_ns) * 1e-9
+        start_ns = self._last_ns
         if self._release_at_s is not None:
             release_in = self._release_at_s - plant.state.time_s
             if release_in <= elapsed:
                 # step to the release instant, let go, then step the rest of the period
                 if release_in > 0.0:
-                    plant.step(release_in, self._command)
+                    release_ns = start_ns + release_in * 1e9
+                    self._advance(release_in, start_ns, release_ns)
+                    start_ns = release_ns  # type: ignore[assignment]  # a float ns from here
                     elapsed -= release_in
                 plant.release()
                 self._release_at_s = None
         if elapsed > 0.0:
-            plant.step(elapsed, self._command)
+            self._advance(elapsed, start_ns, t_ns)
+        else:
+            self._jumps(start_ns)
         self._last_ns = t_ns
         st = plant.state
         theta_road = st.theta_road_rad
@@ -164,17 +180,93 @@ class SimulatedRig(RigInterface):
             current += self._rng.gauss(0.0, self.current_noise_a)
         scale = self._counts_per_rad
         self._seq += 1
-        # positional: seq, time_ns, device_time_us, arm_counts, road_counts, current_a, flags, counts_per_rev
+        t0 = self._t0_ns
+        arm_edge, road_edge = self.arm_edge, self.road_edge
+        # positional: seq, time_ns, device_time_us, arm_counts, road_counts, current_a, flags, counts_per_rev,
+        # then each encoder's last edge (device time [us], direction)
         return RigSample(
             self._seq,
             t_ns,
-            (t_ns - self._t0_ns) // 1000,
+            (t_ns - t0) // 1000,
             round(theta_arm * scale),
             round(theta_road * scale),
             current,
             0 if plant._held_at is None else FLAG_HELD,
             self.counts_per_rev,
+            NO_EDGE if arm_edge is None else (arm_edge[0] - t0) // 1000,
+            0 if arm_edge is None else arm_edge[1],
+            NO_EDGE if road_edge is None else (road_edge[0] - t0) // 1000,
+            0 if road_edge is None else road_edge[1],
         )
+
+    # encoder edges ---------------------------------------------------------------------------
+    def _substep_edges(
+        self,
+        t0: float,
+        h: float,
+        theta: tuple[float, float, float, float],
+        road_ends: tuple[float, float, float, float],
+        q: float,
+    ) -> None:
+        """The last count change of each encoder over one sub-step from plant time ``t0`` of ``h`` s,
+        as (fraction of the sub-step, direction) or None, into ``self._found``. ``theta``: the relative
+        angle's Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the
+        road angle at both ends and its rate at both ends."""
+        y0, m0, y1, m1 = theta
+        r0, r1, rv0, rv1 = road_ends
+        road = self.plant.road
+        # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
+        road_bulge = 0.0 if road is None else 0.125 * h * abs(rv1 - rv0)
+
+        def road_angle(s: float) -> float:
+            return r0 if road is None else road(t0 + s * h)[0]
+
+        def arm(s: float) -> float:
+            return hermite(y0, m0, y1, m1, s) + road_angle(s)
+
+        self._found = (
+            last_crossing(arm, y0 + r0, y1 + r1, hermite_bulge(y0, m0, y1, m1) + road_bulge, q),
+            last_crossing(road_angle, r0, r1, road_bulge, q),
+        )
+
+    def _angles(self) -> tuple[float, float]:
+        """(arm, road) angle of the plant now, noise-free."""
+        st = self.plant.state
+        return st.theta_rad + st.theta_road_rad, st.theta_road_rad
+
+    def _jumps(self, at_ns: float) -> None:
+        """A count changed without motion since the last step (the operator pressed the arm to its hold
+        angle): an edge at ``at_ns``."""
+        arm, road = self._angles()
+        q = TWO_PI / self.counts_per_rev
+        for which, now, before in (("arm", arm, self._arm_end), ("road", road, self._road_end)):
+            if before is not None and round(now / q) != round(before / q):
+                setattr(self, f"{which}_edge", (int(at_ns), 1 if now > before else -1))
+        self._arm_end, self._road_end = arm, road
+
+    def _advance(self, seconds: float, from_ns: float, to_ns: float) -> None:
+        """Step the plant ``seconds`` (host time ``from_ns`` to ``to_ns``) in the sub-steps it would take
+        in one call, timing each encoder's last count change on the way (module docstring)."""
+        plant = self.plant
+        st = plant.state
+        count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
+        h = seconds / count
+        h_ns = (to_ns - from_ns) / count
+        q = TWO_PI / self.counts_per_rev
+        self._jumps(from_ns)
+        for j in range(count):
+            t0, y0, v0 = st.time_s, st.theta_rad, st.theta_dot_rad_s
+            r0, rv0 = st.theta_road_rad, st.theta_road_dot_rad_s
+            plant.step(h, self._command)
+            ends = (y0, h * v0, st.theta_rad, h * st.theta_dot_rad_s)
+            self._substep_edges(t0, h, ends, (r0, st.theta_road_rad, rv0, st.theta_road_dot_rad_s), q)
+            found_arm, found_road = self._found
+            start_ns = from_ns + j * h_ns
+            if found_arm is not None:
+                self.arm_edge = (math.ceil(start_ns + found_arm[0] * h_ns), found_arm[1])
+            if found_road is not None:
+                self.road_edge = (math.ceil(start_ns + found_road[0] * h_ns), found_road[1])
+        self._arm_end, self._road_end = self._angles()
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         if self.state is not RigState.ACTIVE:

@@ -3,8 +3,11 @@
  * decoder, the byte stream decoder and the board itself (behind a stub hardware interface), and
  * good frames cut and corrupted at every byte, and random CAN frames of every length on every id into a
  * board on the CAN link, and into a board on the CAN link whose HAL has no send_can (every Configure
- * refused and counted, the coil never driven). Exit 0 and "ok ..." when every bad frame was counted
- * and nothing good came out of garbage longer than a frame. */
+ * refused and counted, the coil never driven). The hardware's encoder edges are random too (any
+ * time, any direction byte): every Sample the board sends is decoded again and its edge fields
+ * checked (an edge without a direction is sent as "none", only the two direction bits are used).
+ * Exit 0 and "ok ..." when every bad frame was counted and nothing good came out of garbage longer
+ * than a frame. */
 #include <stdio.h>
 #include <string.h>
 
@@ -34,10 +37,37 @@ static uint8_t sensor_flags(void *ctx) {
     (void)ctx;
     return 0;
 }
+static sashil_edge last_arm, last_road; /* what read_edges gave for the sample being sent */
+static unsigned long bad_samples, samples_checked;
+
+static void read_edges(void *ctx, sashil_edge *arm, sashil_edge *road) {
+    (void)ctx;
+    arm->time_us = (uint32_t)next_byte() << 24 | (uint32_t)next_byte() << 8 | next_byte();
+    arm->dir = (int8_t)(next_byte() % 3u) - 1;
+    road->time_us = (uint32_t)next_byte() << 16 | next_byte();
+    road->dir = (int8_t)next_byte(); /* any byte: a HAL that reports a direction of 77 */
+    last_arm = *arm;
+    last_road = *road;
+}
+
+static void check_sample(const uint8_t *p, uint8_t len) {
+    uint16_t arm_age = (uint16_t)(p[15] | p[16] << 8), road_age = (uint16_t)(p[17] | p[18] << 8);
+    samples_checked++;
+    if (len != 20u || (p[19] & ~0x03u) != 0u) bad_samples++;
+    if ((last_arm.dir == 0 && arm_age != SASHIL_EDGE_AGE_NONE) || (last_road.dir == 0 && road_age != SASHIL_EDGE_AGE_NONE))
+        bad_samples++;
+    if (((p[19] & SASHIL_EDGE_ARM_UP) != 0u) != (last_arm.dir > 0) || ((p[19] & SASHIL_EDGE_ROAD_UP) != 0u) != (last_road.dir > 0))
+        bad_samples++;
+}
+
 static void send(void *ctx, const uint8_t *bytes, size_t n) {
     size_t i;
+    uint8_t type, len, payload[SASHIL_MAX_PAYLOAD];
+    uint16_t seq;
     (void)ctx;
     for (i = 0; i < n; i++) sent_bytes += bytes[i] != 0xA5u; /* touch every byte (ASan checks the reads) */
+    if (n > 1u && sashil_frame_decode(bytes, n - 1u, &type, &seq, payload, &len) == SASHIL_FRAME_OK && type == 1u)
+        check_sample(payload, len);
 }
 
 static unsigned long driven; /* non-zero coil setpoints of the board without CAN: must stay 0 */
@@ -49,22 +79,24 @@ static void send_can(void *ctx, uint16_t id, const uint8_t *data, uint8_t len) {
     (void)ctx;
     if (len > 8u || id > 0x7FFu) can_sent += 1000000ul; /* a frame no CAN controller could send */
     for (i = 0; i < len; i++) can_sent += data[i] != 0xA5u;
+    if (id == SASHIL_CAN_SAMPLE_EDGES && (len != 5u || (data[4] & ~0x03u) != 0u)) bad_samples++;
 }
 
 int main(void) {
     static uint8_t data[2048], out[64];
     sashil_stream stream;
     static sashil_board board;
-    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send, send_can};
+    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send, send_can,
+                      read_edges};
     static sashil_board can_board;
-    static const uint16_t can_ids[] = {0x100u, 0x110u, 0x111u, 0x120u, 0x180u, 0x1F0u, 0x1F1u, 0x1F2u, 0x7FFu};
+    static const uint16_t can_ids[] = {0x100u, 0x110u, 0x111u, 0x112u, 0x120u, 0x180u, 0x1F0u, 0x1F1u, 0x1F2u, 0x7FFu};
     uint8_t type, payload[SASHIL_MAX_PAYLOAD], len, frame[SASHIL_MAX_FRAME];
     uint16_t seq;
     size_t n, i, cap, out_len, flen;
     unsigned long good = 0, bad = 0, ends = 0;
     uint64_t now = 0;
 
-    static const uint8_t hello[1] = {1u}, configure[5] = {0xE8u, 0x03u, 50u, 0u, 0u}, command[3] = {100u, 0u, 1u};
+    static const uint8_t hello[1] = {2u}, configure[5] = {0xE8u, 0x03u, 50u, 0u, 0u}, command[3] = {100u, 0u, 1u};
     uint8_t session[3 * SASHIL_MAX_FRAME];
     size_t session_len = 0;
 
@@ -155,6 +187,7 @@ int main(void) {
     }
     if (stream.frames != good || stream.bad_frames != bad) return 4;
     if (sent_bytes == 0u) return 5; /* the session was answered between the garbage */
+    if (samples_checked == 0u || bad_samples != 0u) return 8; /* samples went out, their edge fields sound */
     printf("ok frames=%lu bad=%lu sent=%lu ends=%lu\n", good, bad, sent_bytes, ends);
     return 0;
 }

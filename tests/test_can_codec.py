@@ -18,6 +18,7 @@ def test_dbc_loads_with_the_protocol_messages():
         0x100: ("Command", 5),
         0x110: ("SampleA", 8),
         0x111: ("SampleB", 8),
+        0x112: ("SampleEdges", 5),
         0x120: ("RoadSpeed", 4),
         0x180: ("Status", 6),
         0x1F0: ("Configure", 5),
@@ -29,9 +30,10 @@ def test_dbc_loads_with_the_protocol_messages():
 
 
 def test_sample_frames_bytes():
-    frames = encode(Sample(123456, -57, 4097, 0.5, 2), seq=5)
+    frames = encode(Sample(123456, -57, 4097, 0.5, 2, 999, -1, 12, 1), seq=5)
     assert frames == [
         (0x110, bytes.fromhex("c7ffffff01100000")),  # arm -57, road 4097 (int32 LE)
+        (0x112, bytes.fromhex("e7030c0002")),  # arm edge 999 us ago, road 12 us ago; bit 1: road went up
         (0x111, bytes.fromhex("050040e201e80302")),  # seq 5, time 0x01E240, current 1000 counts, flags 2
     ]
 
@@ -44,7 +46,10 @@ def test_command_frame_bytes_and_clamping():
 
 def test_dbc_decodes_what_the_codec_encodes_in_physical_units():
     db = database()
-    frame_id, data = encode(Sample(10, 1, 2, -0.25, 0x82), seq=9)[1]
+    frames = encode(Sample(10, 1, 2, -0.25, 0x82, 40, 1, 65535, 0), seq=9)
+    frame_id, data = frames[1]
+    assert db.decode_message(frame_id, data) == {"ArmEdgeAge": 40, "RoadEdgeAge": 65535, "EdgeDirs": 1}
+    frame_id, data = frames[2]
     assert db.decode_message(frame_id, data) == {
         "SampleSeq": 9,
         "DeviceTimeUs": 10,
@@ -73,12 +78,18 @@ def test_round_trip_through_the_dbc(msg, seq):
 
 def test_sample_b_without_a_is_counted_not_invented():
     decoder = CanDecoder()
-    (a_id, a_data), (b_id, b_data) = encode(Sample(1, 2, 3, 0.0, 0), seq=1)
+    (a_id, a_data), (e_id, e_data), (b_id, b_data) = encode(Sample(1, 2, 3, 0.0, 0), seq=1)
     assert decoder.feed(b_id, b_data) is None
     assert decoder.feed(a_id, a_data) is None
     assert decoder.feed(a_id, a_data) is None  # a second A overwrites the first: one unpaired
+    assert decoder.feed(e_id, e_data) is None
     assert decoder.feed(b_id, b_data) == (1, Sample(1, 2, 3, 0.0, 0))
     assert decoder.counters.unpaired == 2
+    # the edges frame lost: the B that follows completes nothing
+    assert decoder.feed(a_id, a_data) is None
+    assert decoder.feed(b_id, b_data) is None
+    assert decoder.feed(e_id, e_data) is None  # edges without their A
+    assert decoder.counters.unpaired == 4
     assert decoder.feed(0x7FF, b"") is None and decoder.counters.unknown_id == 1
     assert decoder.feed(can_codec.ID_COMMAND, b"\x00") is None and decoder.counters.bad_length == 1
 

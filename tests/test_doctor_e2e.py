@@ -33,7 +33,7 @@ def test_doctor_against_the_emulated_board(transport, driver, tmp_path):
     assert json.loads(done.stdout)["exit_code"] == done.returncode
     assert rows["port/exists"]["status"] == "ok" and "/dev/pts/" in rows["port/exists"]["found"]
     assert rows["port/latency_timer"]["status"] == "ok"
-    assert rows["board/hello"]["status"] == "ok" and "protocol 1" in rows["board/hello"]["found"]
+    assert rows["board/hello"]["status"] == "ok" and "protocol 2" in rows["board/hello"]["found"]
     trips = rows["board/round_trips"]["data"]
     assert trips["rounds"] == 200 and trips["answered"] > 0 and trips["p50_us"] <= trips["p99_us"] <= trips["max_us"]
     assert rows["board/watchdog"]["status"] == "ok" and "watchdog flag set" in rows["board/watchdog"]["found"]

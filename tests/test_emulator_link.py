@@ -89,22 +89,22 @@ def test_the_dbc_decodes_the_frames_the_can_backend_sends():
                     database().decode_message(frame.arbitration_id, frame.data)
                 )
                 frame = listener.recv(0.0)
-    assert seen[0x1F1] == [{"HelloVersion": 1}]
+    assert seen[0x1F1] == [{"HelloVersion": 2}]
     assert seen[0x1F0] == [{"SampleRateHz": 1000, "WatchdogMs": 50, "Pacing": "device"}]
     assert {"CmdSeq", "CurrentCmd", "CmdFlags"} <= set(seen[0x100][0])
     assert any(d["CurrentCmd"] == 0.25 and d["CmdFlags"] == 1 for d in seen[0x100])
     assert seen[0x100][-1]["CurrentCmd"] == 0.0  # the context manager's exit commands 0 A
-    assert 0x110 in seen and 0x111 in seen
+    assert 0x110 in seen and 0x112 in seen and 0x111 in seen
 
 
 def test_wrong_protocol_version_is_refused_and_nothing_energised(monkeypatch):
-    monkeypatch.setattr(device_module, "PROTOCOL_VERSION", 2)
+    monkeypatch.setattr(device_module, "PROTOCOL_VERSION", 1)  # a board of protocol 1 (no edge times)
     with EmulatorThread(default_config(), "serial") as emu:
         with open_rig(host_config("serial", emu.port)) as rig:
             with pytest.raises(DriverError) as err:
                 rig.configure()
             assert type(err.value) is DriverError and err.value.exit_code == 2
-            assert "protocol version 2" in str(err.value) and "\n" not in str(err.value)
+            assert "protocol version 1, this host speaks 2" in str(err.value) and "\n" not in str(err.value)
             assert emu.device.drive_a == 0.0 and not emu.device.configured
             rig.deactivate()
 

@@ -39,11 +39,18 @@ MS = 1000  # us
 
 
 class Board:
-    """The C board with a fake rig behind its hardware interface."""
+    """The C board with a fake rig behind its hardware interface (``edges``: the encoders' last count
+    changes the hardware reports, as ((time us, dir), (time us, dir)); None: no edge timing)."""
 
     def __init__(
-        self, counts_per_rev: int = 4096, current_max_counts: int = 2000, fixed_rate_hz: int = 0, can: bool = True
+        self,
+        counts_per_rev: int = 4096,
+        current_max_counts: int = 2000,
+        fixed_rate_hz: int = 0,
+        can: bool = True,
+        edges=None,
     ):
+        self.edges = edges
         self.arm, self.road, self.current_counts, self.hw_flags = 100, -7, 321, FLAG_HELD
         self.coil: list[tuple[int, int]] = []  # (time us, setpoint counts)
         self.road_speed: list[tuple[int, int]] = []
@@ -74,6 +81,13 @@ class Board:
             firmware.Send(send),
             firmware.SendCan(send_can) if can else firmware.SendCan(),  # SendCan(): NULL, a HAL without CAN
         )
+        if edges is not None:
+
+            def read_edges(_ctx, arm, road):
+                for (time_us, direction), out in zip(self.edges, (arm, road), strict=True):
+                    out[0].time_us, out[0].dir = time_us, direction
+
+            self._callbacks += (firmware.ReadEdges(read_edges),)
         self.hal = firmware.Hal(None, *self._callbacks)
         self.board = ctypes.create_string_buffer(LIB.sashil_board_size())
         LIB.sashil_board_init(self.board, ctypes.byref(self.hal), counts_per_rev, current_max_counts, fixed_rate_hz)
@@ -113,7 +127,7 @@ class Board:
 
 def test_hello_and_configure_answer_as_the_protocol_says():
     b = Board()
-    assert b.send_host(Hello(1), 0) == [Version(1, 4096, 1.0)]  # 2000 counts of 0.5 mA
+    assert b.send_host(Hello(2), 0) == [Version(2, 4096, 1.0)]  # 2000 counts of 0.5 mA
     assert b.send_host(Configure(1000, 50, PACING_DEVICE), 0) == [Status(0, 0, 0, 0)]
     assert [s for s, _ in b.sent] == [1, 2]  # replies numbered in order
     fixed = Board(fixed_rate_hz=500)
@@ -170,20 +184,43 @@ def test_garbage_from_the_host_is_counted_and_reported_never_drives_the_coil():
 
 def test_over_can_the_board_sends_exactly_the_frames_of_the_python_codec():
     b = Board().use_can()
-    assert b.send_can(Hello(1), 0) == [Version(1, 4096, 1.0)]
+    assert b.send_can(Hello(2), 0) == [Version(2, 4096, 1.0)]
     assert b.send_can(Configure(1000, 50, PACING_HOST), 0) == [Status(0, 0, 0, 0)]
     sample = b.send_can(Command(0.8, CMD_ENABLE), MS, seq=7)
     assert sample == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD)] and b.coil[-1] == (MS, 1600)
     expected = [
-        *can_codec.encode(Version(1, 4096, 1.0)),
+        *can_codec.encode(Version(2, 4096, 1.0)),
         *can_codec.encode(Status(0, 0, 0, 0)),
         *can_codec.encode(Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD), seq=1),
     ]
-    assert b.can_frames == expected  # ids, lengths and bytes (the sample split in SampleA + SampleB)
-    assert b.can_frames[-2:] == [
+    assert b.can_frames == expected  # ids, lengths and bytes (the sample split in A, edges, B)
+    assert b.can_frames[-3:] == [
         (0x110, bytes.fromhex("64000000f9ffffff")),  # arm 100, road -7
+        (0x112, bytes.fromhex("ffffffff00")),  # no edge timing in this hardware: both ages say none
         (0x111, bytes.fromhex("0100e80300410102")),  # seq 1, 1000 us, 321 counts, flags 0x02 (held)
     ]
+
+
+def test_edge_ages_are_the_sample_time_minus_the_capture_time_saturated_and_wrapping():
+    b = Board(edges=((700, 1), (0, 0)))  # arm: an edge at 700 us, count up; road: none since boot
+    b.send_host(Hello(2), 0)
+    b.send_host(Configure(1000, 50, PACING_HOST), 0)
+    assert b.send_host(Command(0.0, 0), MS) == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD, 300, 1)]
+    b.edges = ((999, -1), (1000, 1))  # arm down 1 us before the sample, road up at the sample
+    assert b.send_host(Command(0.0, 0), MS) == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD, 1, -1, 0, 1)]
+    b.edges = ((1001, 1), (1000 - 65534, -1))  # arm stamped while the sample was taken: age 0
+    assert b.send_host(Command(0.0, 0), MS) == [Sample(1000, 100, -7, 321 * 0.0005, FLAG_HELD, 0, 1, 65534, -1)]
+    b.edges = ((1000 - 65535, 1), (0, 1))  # 65.535 ms old: as none
+    got = b.send_host(Command(0.0, 0), 70 * MS)
+    assert got == [Sample(70_000, 100, -7, 321 * 0.0005, FLAG_HELD, 65535, 0, 65535, 0)]
+    # the capture clock is 32 bits: an edge just before its wrap, the sample just after
+    b.edges = ((2**32 - 10, 1), (0, 0))
+    now = 2**32 + 5
+    frame = encode_frame(Command(0.0, 0), 99)
+    before = len(b.sent)
+    LIB.sashil_board_receive(b.board, (ctypes.c_uint8 * len(frame)).from_buffer_copy(frame), len(frame), now)
+    sample = b.sent[before:][0][1]
+    assert (sample.arm_edge_age_us, sample.arm_edge_dir, sample.road_edge_age_us) == (15, 1, 65535)
 
 
 def test_over_can_the_device_clock_wraps_at_24_bits_and_road_speed_and_watchdog_act():

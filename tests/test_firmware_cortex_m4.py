@@ -116,7 +116,7 @@ def test_the_firmware_answers_a_session_on_qemus_stm32f405(tmp_path):
     qemu_smoke = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(qemu_smoke)
     steps = qemu_smoke.smoke(tmp_path / "cortex-m4" / "sashil-board-qemu.elf", timeout_s=5.0)
-    assert steps[0].startswith("Hello -> Version(protocol_version=1, counts_per_rev=4096, current_max_a=2.0)")
+    assert steps[0].startswith("Hello -> Version(protocol_version=2, counts_per_rev=4096, current_max_a=2.0)")
     assert len(steps) == 3
 
 

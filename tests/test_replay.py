@@ -37,6 +37,10 @@ def recorded(tmp_path_factory):
 
 
 def test_replay_with_the_runs_own_law_reproduces_its_commands(recorded, tmp_path):
+    # the run's estimator fused encoder edge events, and data.csv kept them for the replay
+    run = load_run(recorded)
+    assert np.any(run.data["road_edge_dir"] != 0) and np.any(run.data["arm_edge_dir"] != 0)
+    assert json.loads((recorded / "summary.json").read_text())["controller_stats"]["edge_events"] > 0
     out = tmp_path / "same"
     assert main(["replay", str(recorded), "-q", "--out", str(out)]) == 0
     data = load_run(out).data

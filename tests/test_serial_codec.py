@@ -96,10 +96,24 @@ def test_command_frame_bytes():
 
 
 def test_sample_frame_bytes():
-    frame = encode_frame(Sample(1000, -57, 0, 0.25, 2), 7)
-    # type 01 seq 0007 len 0f | time e8030000 | arm c7ffffff | road 00000000 | current f401 | flags 02 | crc
-    assert frame.hex(" ") == "03 01 07 04 0f e8 03 01 05 c7 ff ff ff 01 01 01 06 f4 01 02 0d 10 00"
-    assert decode_frame(frame[:-1]) == (7, Sample(1000, -57, 0, 0.25, 2))
+    sample = Sample(1000, -57, 0, 0.25, 2, arm_edge_age_us=300, arm_edge_dir=1)
+    # type 01 seq 0007 len 14 | time e8030000 | arm c7ffffff | road 00000000 | current f401 | flags 02
+    # | arm edge age 2c01 (300 us) | road edge age ffff (none) | directions 01 (arm up) | crc
+    body = bytes.fromhex("01070014e8030000c7ffffff00000000f401022c01ffff01")
+    assert binascii.crc_hqx(body, 0xFFFF) == 0x3BCA
+    frame = encode_frame(sample, 7)
+    assert frame.hex(" ") == "03 01 07 04 14 e8 03 01 05 c7 ff ff ff 01 01 01 0b f4 01 02 2c 01 ff ff 01 ca 3b 00"
+    assert decode_frame(frame[:-1]) == (7, sample)
+    assert len(frame) == 28  # the link budget's serial Sample (protocol.md)
+
+
+def test_sample_edges_decode_direction_only_with_an_edge():
+    # arm: an edge 0 us old, count went down (bit 0 clear); road: 65534 us old, up (bit 1 set)
+    sample = Sample(1000, -57, 0, 0.25, 2, 0, -1, 65534, 1)
+    assert decode_frame(encode_frame(sample, 7)[:-1]) == (7, sample)
+    # no edge recently: the direction bits mean nothing and decode as 0; ages past the field saturate
+    odd = Sample(5, 1, 2, 0.0, 0, 70000, 1, -3, -1)
+    assert decode_frame(encode_frame(odd, 1)[:-1]) == (1, Sample(5, 1, 2, 0.0, 0))
 
 
 def test_bad_crc_and_length_are_told_apart():

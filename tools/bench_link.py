@@ -57,7 +57,7 @@ def percentiles(values_ns: list[int]) -> str:
 
 
 def codec_cost(n: int = 20000) -> None:
-    sample, command = Sample(123456, -57, 4097, 0.25, 2), Command(0.5)
+    sample, command = Sample(123456, -57, 4097, 0.25, 2, 300, 1, 12, -1), Command(0.5)
     frame = encode_frame(sample, 1)
     decoder = StreamDecoder()
     t0 = time.perf_counter_ns()
@@ -82,12 +82,12 @@ def codec_cost(n: int = 20000) -> None:
         f"  serial encode Sample {(t1 - t0) / n / 1e3:6.2f} us   decode Sample {(t2 - t1) / n / 1e3:6.2f} us   ({len(frame)} bytes on the wire)"
     )
     print(
-        f"  CAN    encode Command {(t4 - t3) / n / 1e3:5.2f} us   decode Sample (2 frames) {(t5 - t4) / n / 1e3:6.2f} us  (cantools via sashil.dbc)"
+        f"  CAN    encode Command {(t4 - t3) / n / 1e3:5.2f} us   decode Sample (3 frames) {(t5 - t4) / n / 1e3:6.2f} us  (cantools via sashil.dbc)"
     )
 
 
 def bus_load(rate_hz: float = 1000.0, bitrate: int = 1_000_000) -> None:
-    per_cycle = {"SampleA": 8, "SampleB": 8, "Command": 5}
+    per_cycle = {"SampleA": 8, "SampleEdges": 5, "SampleB": 8, "Command": 5}
     nominal = sum(can_codec.frame_bits(n, worst_case_stuffing=False) for n in per_cycle.values())
     worst = sum(can_codec.frame_bits(n) for n in per_cycle.values())
     print(
@@ -97,6 +97,13 @@ def bus_load(rate_hz: float = 1000.0, bitrate: int = 1_000_000) -> None:
         f"  {nominal} bits/cycle without stuffing -> {100 * nominal * rate_hz / bitrate:.1f} %;"
         f" worst-case stuffing {worst} bits/cycle -> {100 * worst * rate_hz / bitrate:.1f} %"
         f"; time on the bus per cycle {worst / bitrate * 1e6:.0f} us worst case"
+    )
+    sample_bits = worst - can_codec.frame_bits(per_cycle["Command"])
+    serial_bits = 10 * len(encode_frame(Sample(123456, -57, 4097, 0.25, 2, 300, 1, 12, -1), 1))  # 8N1
+    print(
+        f"  highest device-paced rate: CAN {bitrate / sample_bits:.0f} Hz (samples alone, worst-case stuffing), "
+        f"{bitrate / worst:.0f} Hz with a Command each cycle; serial at {bitrate / 1e6:g} Mbit/s "
+        f"{bitrate / serial_bits:.0f} Hz ({serial_bits // 10} bytes per Sample)"
     )
 
 

@@ -18,14 +18,18 @@ torque at 1 A 0.2-2.5 N m, J 0.8-1.2):
 
 Rows per damper: the controller on the exact model; on the identified model (4096 counts/rev, also
 with two 34 ms host stalls as this shared machine makes over the link, and 65536 counts/rev); on a
-model 10 % off in every parameter (a stress case); with the Kalman filter's cell reading of a count
-(an option, also with the stalls); and the previous controller as the baseline.
+model 10 % off in every parameter (a stress case); each with the encoders' edge times fused
+(``controller.edge_timing``, the default) and, beside it, without them (the counts alone); the Kalman
+filter's cell reading of a count (an option of the counts-alone filter); and the previous controller
+as the baseline.
 
 Printed per damper and condition: tracking NRMSE = RMS(T_true,k+1 - T*_k)/RMS(T*_k) [%], the same
 RMS as a fraction of the torque authority T(i_max) - T(0) [%], observer NRMSE = RMS(T_hat - T_true) /
 RMS(T_true) [%]; the worst and the median over the spread; the previous controller (fixed-bandwidth
-tracking filters, the "0 A when T*·v <= 0" inverse) from the same run as the baseline; the median
-compute time of one controller cycle (Kalman vs tracking filters).
+tracking filters, the "0 A when T*·v <= 0" inverse) from the same run as the baseline; the static
+resolution k*q/sqrt(12) / RMS(T*) of each run (one count of the relative angle as spring torque,
+quantisation taken as noise, over the torque asked for); the median compute time of one controller
+cycle (Kalman with and without edge events, tracking filters).
 
     .venv/bin/python tools/bench_truth_chain.py [--link] [--calibrate] [--dampers seed,A,...] [--quick]
 
@@ -68,7 +72,8 @@ from sashil.identify.fit import FitOptions, fit_model
 from sashil.identify.synthetic import drop_test_columns
 from sashil.models.hysteresis import BoucWenParams
 
-BASELINE = {"estimator": "tracking", "inverse": "rule"}
+BASELINE = {"estimator": "tracking", "inverse": "rule", "edge_timing": False}
+EDGES_OFF = {"edge_timing": False}
 STALLS = (4.0, 6.6)  # two host stalls of truth_chain_sim.STALL_S (34 ms), as seen over the link here
 QUICK_STALLS = (0.6,)  # one stall inside the cut conditions of --quick
 
@@ -288,26 +293,31 @@ def main() -> None:
                 f"k {100 * (p_fit.k / p_true.k - 1):+.2f} %"
             )
             print(f"  {'':34s} " + " ".join(f"{n[:6]:>6s}" for n in names))
+            cell = {"kalman_quantisation": "cell", **EDGES_OFF}
             for label, model, counts, stalls, controller in (
                 ("exact model, 4096 counts", true, 4096, (), {}),
+                ("exact model, 4096, edges off", true, 4096, (), EDGES_OFF),
                 ("identified, 4096 counts", fitted, 4096, (), {}),
+                ("identified, 4096, edges off", fitted, 4096, (), EDGES_OFF),
                 ("identified, 4096, two host stalls", fitted, 4096, stall_times, {}),
+                ("identified, 4096, stalls, edges off", fitted, 4096, stall_times, EDGES_OFF),
                 ("identified, 65536 counts", fitted, 65536, (), {}),
                 ("model 10 % off, 4096 counts", mismatched(true), 4096, (), {}),
-                ("cell reading, identified, 4096", fitted, 4096, (), {"kalman_quantisation": "cell"}),
-                ("cell reading, 4096, two host stalls", fitted, 4096, stall_times, {"kalman_quantisation": "cell"}),
+                ("model 10 % off, 4096, edges off", mismatched(true), 4096, (), EDGES_OFF),
+                ("cell reading, edges off, 4096", fitted, 4096, (), cell),
                 ("baseline (tracking+rule), 4096", fitted, 4096, (), BASELINE),
                 ("baseline (tracking+rule), 65536", fitted, 65536, (), BASELINE),
             ):
                 rows = condition_table(model, true, counts, stalls, conditions, **controller)
                 print(f"  {label:34s} {fmt(rows, 'tracking')}   tracking")
-                if label in ("identified, 4096 counts", "identified, 65536 counts"):
+                if label in ("exact model, 4096 counts", "identified, 4096 counts", "identified, 4096, edges off"):
                     print(f"  {'':34s} {fmt(rows, 'authority')}   of authority")
                     print(f"  {'':34s} {fmt(rows, 'observer')}   observer")
                     print(f"  {'':34s} {fmt(rows, 'floor')}   static resolution k*q/sqrt(12)/RMS(T*)")
                 for row, cond in zip(rows, names, strict=True):
                     worst.setdefault(label, []).append((row["tracking"], f"{name}, {cond}"))
                     worst.setdefault(label + " observer", []).append((row["observer"], f"{name}, {cond}"))
+                    worst.setdefault(label + " floor", []).append((row["floor"], f"{name}, {cond}"))
                 sine.setdefault(label, []).append(rows[1]["tracking"])
             obs = passive_observer(fitted, true, 4096, conditions)
             print(
@@ -318,7 +328,11 @@ def main() -> None:
                     (value, f"{name}, chirp at {current} A")
                 )
             timing.append(
-                (compute_time_us(fitted, 4096, conditions), compute_time_us(fitted, 4096, conditions, **BASELINE))
+                (
+                    compute_time_us(fitted, 4096, conditions),
+                    compute_time_us(fitted, 4096, conditions, **EDGES_OFF),
+                    compute_time_us(fitted, 4096, conditions, **BASELINE),
+                )
             )
             if args.link:
                 r = link_sine(name, true, fitted, Path(tmp_dir))
@@ -334,6 +348,8 @@ def main() -> None:
                     )
     print("\nover the spread (worst / median) [%]:")
     for label, pairs in worst.items():
+        if label.endswith(" floor") and not label.startswith(("exact model, 4096 counts", "identified, 4096 counts")):
+            continue
         v = 100 * np.asarray([value for value, _ in pairs])
         where = max(pairs)[1]
         extra = ""
@@ -351,10 +367,24 @@ def main() -> None:
                 f"without the host stalls: worst {100 * max(calm):.1f}, median {100 * statistics.median(calm):.1f} "
                 f"({sum(r['stalls'] for r in ok)} stalls in {len(ok)} runs; {len(links) - len(ok)} runs failed)"
             )
+    print("\ntargets (identified model, 4096 counts, edge events on; the same with them off):")
+    for on, off in (("identified, 4096 counts", "identified, 4096, edges off"),):
+        if on not in sine:
+            continue
+        for tag, label in (("on ", on), ("off", off)):
+            s_worst = 100 * max(sine[label])
+            whole = 100 * max(v for v, _ in worst[label])
+            obs = 100 * max(v for v, _ in worst[label + " observer"])
+            print(
+                f"  edges {tag}: 1.2 Hz sine worst {s_worst:.1f} % (target <= 10), whole set worst {whole:.1f} % "
+                f"(<= 15), observer worst {obs:.1f} % (<= 8)"
+            )
     kal = statistics.median(t[0] for t in timing)
-    base = statistics.median(t[1] for t in timing)
+    counts_only = statistics.median(t[1] for t in timing)
+    base = statistics.median(t[2] for t in timing)
     print(
-        f"controller cycle compute, median: Kalman + band inverse {kal:.1f} us; baseline tracking filters {base:.1f} us"
+        f"controller cycle compute, median: Kalman with edge events + band inverse {kal:.1f} us; the counts alone "
+        f"{counts_only:.1f} us; baseline tracking filters {base:.1f} us"
     )
     print(f"(measured {time.strftime('%Y-%m-%d %H:%M')} on a shared 2-core machine)")
 

@@ -100,7 +100,7 @@ def smoke(elf: Path, timeout_s: float = 1.0) -> list[str]:
                 hello = encode_frame(Command(0.0, flags=0), 1) + encode_frame(Hello(), 2)
                 sock.sendall(hello)
                 version = _answer(sock, decoder, Version, timeout_s, resend=hello)
-                if version != Version(protocol_version=1, counts_per_rev=4096, current_max_a=2.0):
+                if version != Version(protocol_version=2, counts_per_rev=4096, current_max_a=2.0):
                     raise SmokeError(f"unexpected {version}")
                 steps.append(f"Hello -> {version} in {1e3 * (time.monotonic() - t0):.0f} ms")
                 sock.sendall(encode_frame(Configure(rate_hz=1000, watchdog_ms=50, pacing=PACING_HOST), 3))

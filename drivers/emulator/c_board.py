@@ -23,7 +23,7 @@ import math
 from collections.abc import Callable
 
 from sashil.drivers import firmware
-from sashil.drivers.emulator.device import Faults, Operator
+from sashil.drivers.emulator.device import Edge, Faults, Operator
 from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.emulator.wire import WireBytes, WireCan
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, RigCommand, RigSample
@@ -64,7 +64,8 @@ class CBoardDevice:
         self.on_drive: Callable[[int, float], None] | None = None
         self._now_ns = 0
         self._reading: RigSample | None = None
-        self._stuck: tuple[int, int] | None = None
+        self._sample_edges: tuple[Edge, Edge] = (None, None)  # the edges of the sample being taken
+        self._stuck: tuple[int, int, Edge, Edge] | None = None
         self._out: list[tuple[int, WireBytes | WireCan]] = []
 
         def read_encoders(_ctx: object, arm: ctypes._Pointer, road: ctypes._Pointer) -> None:
@@ -88,6 +89,14 @@ class CBoardDevice:
         def send_can(_ctx: object, can_id: int, data: ctypes._Pointer, n: int) -> None:
             self._out.append((0, WireCan(can_id, bytes(data[:n]))))
 
+        def read_edges(_ctx: object, arm: ctypes._Pointer, road: ctypes._Pointer) -> None:
+            for edge, out in zip(self._sample_edges, (arm, road), strict=True):
+                if edge is None:
+                    out[0].time_us, out[0].dir = 0, 0
+                else:  # the board's microsecond clock, as a timer capture stamps it (32 bit, wraps)
+                    out[0].time_us = ((edge[0] - (self.boot_ns or 0)) // 1000) & 0xFFFFFFFF
+                    out[0].dir = edge[1]
+
         self._callbacks = (  # ctypes callbacks live as long as the board
             firmware.ReadEncoders(read_encoders),
             firmware.ReadCurrent(read_current),
@@ -96,6 +105,7 @@ class CBoardDevice:
             firmware.SensorFlags(sensor_flags),
             firmware.Send(send),
             firmware.SendCan(send_can),
+            firmware.ReadEdges(read_edges),
         )
         self._hal = firmware.Hal(None, *self._callbacks)
         self._board = ctypes.create_string_buffer(self.lib.sashil_board_size())
@@ -172,15 +182,17 @@ class CBoardDevice:
 
     def _sample_encoders(self) -> tuple[int, int]:
         """The encoders at a sample (the board reads them once per sample): frozen after the stuck
-        sensor fault, and the plant's true state logged for ``--truth``."""
+        sensor fault with their last edges, and the plant's true state logged for ``--truth``."""
         reading = self._read()
         arm, road = reading.arm_counts, reading.road_counts
+        arm_edge, road_edge = self.rig.arm_edge, self.rig.road_edge
         elapsed = self.session_time_s(self._now_ns)
         stuck_after = self.faults.stuck_sensor_after_s
         if stuck_after is not None and elapsed is not None and elapsed >= stuck_after:
             if self._stuck is None:
-                self._stuck = (arm, road)
-            arm, road = self._stuck
+                self._stuck = (arm, road, arm_edge, road_edge)
+            arm, road, arm_edge, road_edge = self._stuck
+        self._sample_edges = (arm_edge, road_edge)
         self.samples_sent += 1
         if self.truth is not None:
             self.truth.record(self.samples_sent & 0xFFFF, self._now_us(), self.rig.plant)

@@ -26,6 +26,7 @@ from sashil.drivers.emulator.wire import Payload
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample, clamp_current
 from sashil.drivers.messages import (
     CMD_ENABLE,
+    EDGE_AGE_NONE,
     FAULT_BAD_CONFIGURE,
     FAULT_NONE,
     PACING_DEVICE,
@@ -41,6 +42,21 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.drivers.sim import SimulatedRig
+
+#: one encoder's last count change on the emulator's clock: (host time [ns], direction), or None
+Edge = tuple[int, int] | None
+
+
+def edge_age(edge: Edge, boot_ns: int, device_time_us: int) -> tuple[int, int]:
+    """(age [us], direction) of an encoder's last count change in a sample taken at ``device_time_us``
+    (microseconds since ``boot_ns``), as a board's timer capture gives it (sashil_board.c edge_age):
+    EDGE_AGE_NONE and 0 for none or one 65.535 ms old or more."""
+    if edge is None:
+        return EDGE_AGE_NONE, 0
+    age = device_time_us - (edge[0] - boot_ns) // 1000
+    if age >= EDGE_AGE_NONE:
+        return EDGE_AGE_NONE, 0
+    return max(age, 0), edge[1]
 
 
 @dataclass
@@ -123,7 +139,7 @@ class RigDevice:
         self._next_sample_ns = 0
         self._sample_seq = 0
         self._tx_seq = 0
-        self._stuck: tuple[int, int] | None = None
+        self._stuck: tuple[int, int, Edge, Edge] | None = None
         self.samples_sent = 0
         self.overruns = 0
         #: called with (now_ns, drive_a) whenever the drive current changes (tests, logging)
@@ -238,19 +254,28 @@ class RigDevice:
     def _sample(self, now_ns: int) -> tuple[int, Message]:
         reading = self._advance(now_ns)
         arm, road = reading.arm_counts, reading.road_counts
+        arm_edge, road_edge = self.rig.arm_edge, self.rig.road_edge
         stuck_after = self.faults.stuck_sensor_after_s
         elapsed = self.session_time_s(now_ns)
         if stuck_after is not None and elapsed is not None and elapsed >= stuck_after:
             if self._stuck is None:
-                self._stuck = (arm, road)
-            arm, road = self._stuck
+                self._stuck = (arm, road, arm_edge, road_edge)
+            arm, road, arm_edge, road_edge = self._stuck
         self._sample_seq = (self._sample_seq + 1) & 0xFFFF
         self.samples_sent += 1
         boot = self.boot_ns if self.boot_ns is not None else now_ns
         device_time_us = (now_ns - boot) // 1000
         if self.truth is not None:
             self.truth.record(self._sample_seq, device_time_us, self.rig.plant)
-        return self._sample_seq, Sample(device_time_us, arm, road, reading.current_a, reading.flags | self.flags())
+        return self._sample_seq, Sample(
+            device_time_us,
+            arm,
+            road,
+            reading.current_a,
+            reading.flags | self.flags(),
+            *edge_age(arm_edge, boot, device_time_us),
+            *edge_age(road_edge, boot, device_time_us),
+        )
 
     def _reply(self, msg: Message) -> tuple[int, Message]:
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF

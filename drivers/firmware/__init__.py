@@ -1,6 +1,6 @@
 """The interface board's logic in portable C, built for the host and loaded with ctypes.
 
-So far: the serial framing of protocol v1 (``sashil_frame.c``: CRC-16, COBS, frame encode/decode, a
+So far: the serial framing of protocol v2 (``sashil_frame.c``: CRC-16, COBS, frame encode/decode, a
 stream decoder), tested byte for byte against :mod:`sashil.drivers.serial_codec`, and the board's
 session logic (``sashil_board.c``: Hello/Version, Configure/Status, Command and RoadSpeed, samples
 in both pacings, the watchdog for coil and road) behind a hardware-interface struct, tested through
@@ -132,6 +132,15 @@ Send = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8), c
 SendCan = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_uint16, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint8)
 
 
+class Edge(ctypes.Structure):
+    """``sashil_edge`` of sashil_board.h: one encoder's last count change (time in µs, direction)."""
+
+    _fields_ = [("time_us", ctypes.c_uint32), ("dir", ctypes.c_int8)]
+
+
+ReadEdges = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(Edge), ctypes.POINTER(Edge))
+
+
 class Hal(ctypes.Structure):
     """``sashil_hal`` of sashil_board.h: the board's hardware interface as callbacks."""
 
@@ -144,6 +153,7 @@ class Hal(ctypes.Structure):
         ("sensor_flags", SensorFlags),
         ("send", Send),
         ("send_can", SendCan),
+        ("read_edges", ReadEdges),
     ]
 
 

@@ -1,4 +1,4 @@
-/* The interface board's logic, protocol v1: see sashil_board.h. */
+/* The interface board's logic, protocol v2: see sashil_board.h. */
 #include "sashil_board.h"
 
 enum { T_SAMPLE = 1, T_COMMAND = 2, T_ROAD_SPEED = 3, T_STATUS = 4, T_HELLO = 5, T_VERSION = 6, T_CONFIGURE = 7 };
@@ -9,13 +9,15 @@ static uint16_t get16(const uint8_t *p) { return (uint16_t)(p[0] | ((uint16_t)p[
 static uint32_t get32(const uint8_t *p) { return (uint32_t)get16(p) | ((uint32_t)get16(p + 2) << 16); }
 
 /* A message as the DBC's CAN frames: the payloads are the serial ones, but for the Sample (split in
- * SampleA: arm, road; SampleB: seq, 24-bit device time, current, flags) and the Command (seq first). */
+ * SampleA: arm, road; SampleEdges: the two edge ages and directions; SampleB: seq, 24-bit device
+ * time, current, flags) and the Command (seq first). */
 static void emit_can(sashil_board *b, uint8_t type, uint16_t seq, const uint8_t *p, uint8_t len)
 {
     uint8_t d[8];
     switch (type) {
     case T_SAMPLE:
         b->hal.send_can(b->hal.ctx, SASHIL_CAN_SAMPLE_A, p + 4, 8);
+        b->hal.send_can(b->hal.ctx, SASHIL_CAN_SAMPLE_EDGES, p + 15, 5);
         put16(d, seq);
         d[2] = p[0];
         d[3] = p[1];
@@ -78,16 +80,38 @@ static void set_road(sashil_board *b, int32_t urad_s)
     b->hal.set_road_speed(b->hal.ctx, urad_s);
 }
 
+/* Microseconds from an edge to the sample, as the wire's u16: SASHIL_EDGE_AGE_NONE for no edge or
+ * one 65.535 ms old or more; an edge the capture stamped after the sample's clock reading (it
+ * happened while the sample was taken) counts as age 0. Modular 32-bit arithmetic: the clock wraps. */
+static uint16_t edge_age(const sashil_edge *edge, uint64_t now_us)
+{
+    if (edge->dir == 0) {
+        return SASHIL_EDGE_AGE_NONE;
+    }
+    uint32_t age = (uint32_t)now_us - edge->time_us;
+    if (age >= 0x80000000u) {
+        return 0u;
+    }
+    return age < SASHIL_EDGE_AGE_NONE ? (uint16_t)age : (uint16_t)SASHIL_EDGE_AGE_NONE;
+}
+
 static void send_sample(sashil_board *b, uint64_t now_us)
 {
-    uint8_t p[15];
+    uint8_t p[20];
     int32_t arm = 0, road = 0;
+    sashil_edge arm_edge = {0u, 0}, road_edge = {0u, 0};
     b->hal.read_encoders(b->hal.ctx, &arm, &road);
+    if (b->hal.read_edges != NULL) {
+        b->hal.read_edges(b->hal.ctx, &arm_edge, &road_edge);
+    }
     put32(p, (uint32_t)(now_us - b->boot_us)); /* the device clock, wraps at 2^32 us */
     put32(p + 4, (uint32_t)arm);
     put32(p + 8, (uint32_t)road);
     put16(p + 12, (uint16_t)b->hal.read_current(b->hal.ctx));
     p[14] = (uint8_t)(b->hal.sensor_flags(b->hal.ctx) | board_flags(b));
+    put16(p + 15, edge_age(&arm_edge, now_us));
+    put16(p + 17, edge_age(&road_edge, now_us));
+    p[19] = (uint8_t)((arm_edge.dir > 0 ? SASHIL_EDGE_ARM_UP : 0u) | (road_edge.dir > 0 ? SASHIL_EDGE_ROAD_UP : 0u));
     emit(b, T_SAMPLE, ++b->sample_seq, p, sizeof p);
 }
 

@@ -1,5 +1,5 @@
 /*
- * The interface board's logic, protocol v1 (drivers/protocol.md "Session", "Pacing"), behind a small
+ * The interface board's logic, protocol v2 (drivers/protocol.md "Session", "Pacing"), behind a small
  * hardware interface. Portable C99: no allocation; integers in the wire's units (coil current in
  * 0.5 mA counts, road speed in 1 urad/s counts), times in microseconds. The same behaviour as the
  * Python board (drivers/emulator/device.py): Hello -> Version; Configure -> Status (fault 1 when it
@@ -16,7 +16,7 @@
 
 #include "sashil_frame.h"
 
-#define SASHIL_PROTOCOL_VERSION 1u
+#define SASHIL_PROTOCOL_VERSION 2u
 #define SASHIL_MAX_RATE_HZ 20000u /* the protocol's highest sample rate */
 #define SASHIL_FLAG_WATCHDOG 0x01u
 #define SASHIL_FAULT_NONE 0u
@@ -34,6 +34,20 @@
 #define SASHIL_CAN_COMMAND 0x100u
 #define SASHIL_CAN_SAMPLE_A 0x110u
 #define SASHIL_CAN_SAMPLE_B 0x111u
+#define SASHIL_CAN_SAMPLE_EDGES 0x112u
+
+/* A Sample's edge age that means "no count change in the last 65.534 ms" (or none since boot), and
+ * its direction bits (set: the count went up at that change). */
+#define SASHIL_EDGE_AGE_NONE 0xFFFFu
+#define SASHIL_EDGE_ARM_UP 0x01u
+#define SASHIL_EDGE_ROAD_UP 0x02u
+
+/* One encoder's last count change as the hardware timestamped it: the time (low 32 bits of the
+ * clock the board is given as now_us) and the direction, +1 up, -1 down, 0 no change since boot. */
+typedef struct {
+    uint32_t time_us;
+    int8_t dir;
+} sashil_edge;
 #define SASHIL_CAN_ROAD_SPEED 0x120u
 #define SASHIL_CAN_STATUS 0x180u
 #define SASHIL_CAN_CONFIGURE 0x1F0u
@@ -49,6 +63,9 @@ typedef struct {
     uint8_t (*sensor_flags)(void *ctx);           /* flags the hardware adds (held, overcurrent, ...) */
     void (*send)(void *ctx, const uint8_t *bytes, size_t n);               /* one whole serial frame */
     void (*send_can)(void *ctx, uint16_t id, const uint8_t *data, uint8_t len); /* one CAN frame */
+    /* The encoders' last count changes (timer input capture or a fast counter poll); read right
+     * after read_encoders for the same sample. NULL: a board without edge timing (ages say none). */
+    void (*read_edges)(void *ctx, sashil_edge *arm, sashil_edge *road);
 } sashil_hal;
 
 typedef struct {

@@ -1,4 +1,4 @@
-/* sashil rig protocol v1, serial framing: see sashil_frame.h. */
+/* sashil rig protocol v2, serial framing: see sashil_frame.h. */
 #include "sashil_frame.h"
 
 uint16_t sashil_crc16(const uint8_t *data, size_t n)
@@ -90,7 +90,7 @@ int sashil_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap, si
 int sashil_payload_size(uint8_t type)
 {
     switch (type) {
-    case 0x01: return 15; /* Sample */
+    case 0x01: return 20; /* Sample */
     case 0x02: return 3;  /* Command */
     case 0x03: return 4;  /* RoadSpeed */
     case 0x04: return 6;  /* Status */

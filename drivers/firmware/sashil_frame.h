@@ -1,5 +1,5 @@
 /*
- * sashil rig protocol v1, serial framing (drivers/protocol.md "Serial framing"), for the interface board.
+ * sashil rig protocol v2, serial framing (drivers/protocol.md "Serial framing"), for the interface board.
  *
  *   COBS( type:u8 | seq:u16 | len:u8 | payload[len] | crc:u16 ) 0x00      (integers little-endian)
  *
@@ -25,7 +25,7 @@ enum {
     SASHIL_FRAME_COBS = -1,         /* impossible COBS code sequence */
     SASHIL_FRAME_LENGTH = -2,       /* shorter than header + CRC, or the length field disagrees */
     SASHIL_FRAME_CRC = -3,          /* bad CRC */
-    SASHIL_FRAME_UNKNOWN_TYPE = -4, /* a type code protocol v1 does not have */
+    SASHIL_FRAME_UNKNOWN_TYPE = -4, /* a type code protocol v2 does not have */
     SASHIL_FRAME_OVERFLOW = -5      /* more than SASHIL_MAX_FRAME bytes without a delimiter */
 };
 
@@ -45,7 +45,7 @@ size_t sashil_frame_encode(uint8_t type, uint16_t seq, const uint8_t *payload, u
 int sashil_frame_decode(const uint8_t *cobs, size_t n, uint8_t *type, uint16_t *seq, uint8_t *payload,
                         uint8_t *len);
 
-/* The payload length of a protocol v1 message type, or -1 for an unknown type. */
+/* The payload length of a protocol v2 message type, or -1 for an unknown type. */
 int sashil_payload_size(uint8_t type);
 
 /* A stream decoder: bytes in, one frame out at each delimiter (no allocation, fixed buffer). */

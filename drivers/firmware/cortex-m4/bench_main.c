@@ -31,7 +31,8 @@ static uint64_t session(uint32_t samples)
 {
     static sashil_board board;
     static const sashil_hal hal = {
-        0, hal_read_encoders, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, send_copy, 0,
+        0, hal_read_encoders_timed, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, send_copy, 0,
+        hal_read_edges,
     };
     static const uint8_t configure[5] = {0xE8u, 0x03u, 50u, 0u, 0u}; /* 1 kHz, 50 ms, device pacing */
     static const uint8_t command[3] = {0xD0u, 0x07u, 1u};          /* 1.0 A, ENABLE */

@@ -19,8 +19,8 @@
  *                 loop at 1 kHz on the road encoder's counts.
  *   host link     USART1 at 1 Mbit/s, 8N1: PA9 = TX, PA10 = RX (AF7); received bytes go to a ring buffer
  *                 in the receive interrupt; frames to send go to a ring emptied by the transmit interrupt
- *                 (TXE), so the board's logic never waits for the wire: a 23-byte sample frame takes
- *                 230 us on the wire, which caps device pacing at about 4.3 kHz on this link.
+ *                 (TXE), so the board's logic never waits for the wire: a 28-byte sample frame takes
+ *                 280 us on the wire, which caps device pacing at about 3.6 kHz on this link.
  *   clock         the core's cycles accumulated into microseconds: DWT CYCCNT where it counts, else
  *                 SysTick on the core clock (hal_now_us).
  * CAN: hal_can_stm32f4.c (make cortex-m4-can) adds bxCAN CAN1 on PB8/PB9 as the board's send_can.
@@ -452,4 +452,103 @@ size_t hal_uart_take(uint8_t *out, size_t cap)
         rx_tail = (rx_tail + 1u) & (RX_RING - 1u);
     }
     return n;
+}
+
+/* --- encoder edge times ------------------------------------------------------------------------
+ * TIM7 interrupts at EDGE_POLL_HZ (100 kHz) and reads both encoder counters; a count that differs from
+ * the last poll is an edge at that poll, with the direction of the difference. Why a poll and not input
+ * capture: the encoder pins already feed TIM2/TIM5 in encoder mode, whose captures latch counts, not
+ * times (a capture timer would need the A/B lines wired to a second timer's pins), and a capture
+ * interrupt per edge costs 2 x 4096 x 10 = 82 k interrupts/s at the top speed against a poll's fixed
+ * 100 k/s that also sees each edge on its own: at 4096 counts x 10 rev/s an edge comes every 24.4 us,
+ * more than two poll periods.
+ * ISR budget: entry and exit about 24 cycles, the body (two counter reads on APB1, two compares, the
+ * stores) about 40: ~64 cycles x 100 kHz = 6.4 M cycles/s, 3.8 % of the 168 MHz core, whatever the
+ * encoder speed. It preempts the 10 kHz current loop (whose ADC wait is ~3 us) and the UART, so an edge
+ * is stamped within one poll: the time is the middle of the poll period it fell in, off by at most
+ * +-5 us (drivers/protocol.md "Encoder edges").
+ * The counts of a sample and its edges are taken together with the poll masked
+ * (hal_read_encoders_timed), so the edge of a count the poll has not seen yet is the one since the last
+ * poll, never the edge before it. */
+#define TIM7 0x40001400u
+#define TIM7_IRQ 55u
+#define EDGE_POLL_HZ 100000u
+#define EDGE_POLL_US (1000000u / EDGE_POLL_HZ)
+#define TIMER_MHZ 84u /* APB1 timer clock */
+#define NVIC_ICER(n) REG(0xE000E180u + 4u * (n))
+#define NVIC_IPR(irq) (*(volatile uint8_t *)(0xE000E400u + (irq)))
+
+static volatile uint32_t poll_ticks;                /* polls since hal_edges_init */
+static volatile uint32_t arm_seen, road_seen;       /* the counts at the last poll */
+static volatile uint32_t arm_edge_tick, road_edge_tick; /* the poll that saw each encoder's last change */
+static volatile int8_t arm_edge_dir, road_edge_dir; /* +1 / -1; 0: no change since boot */
+static sashil_edge sample_arm, sample_road;         /* the edges of the counts hal_read_encoders_timed read */
+
+void hal_edges_init(void)
+{
+    RCC_APB1ENR |= 1u << 5; /* TIM7 */
+    arm_seen = TIM_CNT(TIM2);
+    road_seen = TIM_CNT(TIM5);
+    TIM_PSC(TIM7) = 0u;
+    TIM_ARR(TIM7) = TIMER_MHZ * EDGE_POLL_US - 1u; /* 84 MHz / 840 = 100 kHz */
+    TIM_DIER(TIM7) = 1u;
+    TIM_CR1(TIM7) = 1u;
+    NVIC_IPR(TIM7_IRQ) = 0x00u; /* the poll preempts the others: its stamp does not wait for them */
+    NVIC_IPR(37u) = 0x40u;      /* USART1 */
+    NVIC_IPR(54u) = 0x40u;      /* TIM6: the current loop */
+    NVIC_ISER(TIM7_IRQ / 32u) = 1u << (TIM7_IRQ % 32u);
+}
+
+void TIM7_IRQHandler(void)
+{
+    TIM_SR(TIM7) = 0u;
+    uint32_t tick = poll_ticks + 1u;
+    uint32_t arm = TIM_CNT(TIM2), road = TIM_CNT(TIM5);
+    poll_ticks = tick;
+    if (arm != arm_seen) {
+        arm_edge_dir = (int32_t)(arm - arm_seen) > 0 ? 1 : -1; /* modulo 2^32: right across the wrap */
+        arm_edge_tick = tick;
+        arm_seen = arm;
+    }
+    if (road != road_seen) {
+        road_edge_dir = (int32_t)(road - road_seen) > 0 ? 1 : -1;
+        road_edge_tick = tick;
+        road_seen = road;
+    }
+}
+
+/* One encoder's last edge for a sample whose count is `count`, `since_us` after the last poll. */
+static sashil_edge edge_of(uint32_t count, uint32_t seen, uint32_t edge_tick, int8_t dir, uint32_t ticks,
+                           uint32_t since_us, uint32_t now_us)
+{
+    sashil_edge edge;
+    if (count != seen) { /* a change the poll has not seen: between the last poll and now */
+        edge.time_us = now_us - since_us / 2u;
+        edge.dir = (int32_t)(count - seen) > 0 ? 1 : -1;
+    } else {
+        edge.time_us = now_us - since_us - (ticks - edge_tick) * EDGE_POLL_US - EDGE_POLL_US / 2u;
+        edge.dir = dir;
+    }
+    return edge;
+}
+
+void hal_read_encoders_timed(void *ctx, int32_t *arm_counts, int32_t *road_counts)
+{
+    uint32_t now_us = (uint32_t)hal_now_us();
+    NVIC_ICER(TIM7_IRQ / 32u) = 1u << (TIM7_IRQ % 32u); /* the poll waits: counts and edges are one snapshot */
+    __asm__ volatile("dsb\n\tisb" ::: "memory");
+    hal_read_encoders(ctx, arm_counts, road_counts);
+    uint32_t ticks = poll_ticks, since_us = TIM_CNT(TIM7) / TIMER_MHZ;
+    uint32_t arm = arm_seen, road = road_seen, arm_tick = arm_edge_tick, road_tick = road_edge_tick;
+    int8_t arm_dir = arm_edge_dir, road_dir = road_edge_dir;
+    NVIC_ISER(TIM7_IRQ / 32u) = 1u << (TIM7_IRQ % 32u);
+    sample_arm = edge_of((uint32_t)*arm_counts, arm, arm_tick, arm_dir, ticks, since_us, now_us);
+    sample_road = edge_of((uint32_t)*road_counts, road, road_tick, road_dir, ticks, since_us, now_us);
+}
+
+void hal_read_edges(void *ctx, sashil_edge *arm, sashil_edge *road)
+{
+    (void)ctx;
+    *arm = sample_arm;
+    *road = sample_road;
 }

@@ -5,6 +5,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "sashil_board.h"
+
 void hal_init(void);
 
 /* 1 when the crystal did not start within its timeout and the board runs on the internal oscillator */
@@ -26,5 +28,12 @@ uint64_t hal_now_us(void);
 
 /* bytes received by the UART since the last call (at most cap); from the receive interrupt's ring */
 size_t hal_uart_take(uint8_t *out, size_t cap);
+
+/* encoder edge times (a 100 kHz poll of the counters, TIM7; see hal_stm32f4.c): start the poll after
+ * hal_init; hal_read_encoders_timed reads the counts with their edges (the board's read_encoders),
+ * hal_read_edges hands those edges to the board (its read_edges) */
+void hal_edges_init(void);
+void hal_read_encoders_timed(void *ctx, int32_t *arm_counts, int32_t *road_counts);
+void hal_read_edges(void *ctx, sashil_edge *arm, sashil_edge *road);
 
 #endif

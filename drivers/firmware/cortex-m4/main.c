@@ -1,6 +1,6 @@
 /*
  * The interface board's firmware on an STM32F405/F407: the portable board logic (sashil_board.c,
- * protocol v1 of drivers/protocol.md) behind the reference hardware layer (hal_stm32f4.c). The main
+ * protocol v2 of drivers/protocol.md) behind the reference hardware layer (hal_stm32f4.c). The main
  * loop hands the bytes the UART received (and, in the CAN build, the frames CAN1 received) to the
  * board and lets the board's timer run: samples in device pacing, the watchdog that rests coil and
  * road when the host falls silent.
@@ -20,10 +20,11 @@
 #endif
 
 #define COUNTS_PER_REV 4096u
-/* the sample rates the links carry: a 23-byte sample frame is 230 us at 1 Mbit/s (4.3 kHz), a CAN
- * sample two frames of up to 135 bits each with stuffing (3.7 kHz); a little margin below each */
-#define SERIAL_MAX_RATE_HZ 4000u
-#define CAN_MAX_RATE_HZ 3500u
+/* the sample rates the links carry: a 28-byte sample frame is 280 us at 1 Mbit/s (3.57 kHz), a CAN
+ * sample three frames (SampleA, SampleEdges, SampleB: up to 375 bits with stuffing, 2.67 kHz) and
+ * the host's Command each cycle (2.08 kHz in all, drivers/protocol.md); a little margin below each */
+#define SERIAL_MAX_RATE_HZ 3400u
+#define CAN_MAX_RATE_HZ 2000u
 #define CURRENT_MAX_COUNTS 4000u /* 2 A in 0.5 mA counts: the coil driver's limit */
 
 static sashil_board board;
@@ -31,10 +32,12 @@ static sashil_board board;
 int main(void)
 {
     static const sashil_hal hal = {
-        0, hal_read_encoders, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, hal_send, SEND_CAN,
+        0, hal_read_encoders_timed, hal_read_current, hal_set_coil, hal_set_road_speed, hal_sensor_flags, hal_send, SEND_CAN,
+        hal_read_edges,
     };
     uint8_t bytes[64];
     hal_init();
+    hal_edges_init();
     sashil_board_init(&board, &hal, COUNTS_PER_REV, CURRENT_MAX_COUNTS, 0u);
     sashil_board_set_status_flags(&board, hal_clock_fallback() ? SASHIL_STATUS_CLOCK_FALLBACK : 0u);
     sashil_board_set_max_rate(&board, SERIAL_MAX_RATE_HZ);

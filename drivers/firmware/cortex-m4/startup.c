@@ -18,6 +18,7 @@ void TIM6_DAC_IRQHandler(void);
 void CAN1_TX_IRQHandler(void);
 void CAN1_RX0_IRQHandler(void);
 #endif
+void TIM7_IRQHandler(void);
 
 void Default_Handler(void)
 {
@@ -31,6 +32,7 @@ void Default_Handler(void)
 #define TIM6_DAC_IRQ 54u
 #define CAN1_TX_IRQ 19u
 #define CAN1_RX0_IRQ 20u
+#define TIM7_IRQ 55u
 
 typedef void (*vector)(void);
 
@@ -53,6 +55,7 @@ __attribute__((section(".isr_vector"), used)) const vector vectors[16u + IRQ_COU
     [16u + CAN1_TX_IRQ] = CAN1_TX_IRQHandler,
     [16u + CAN1_RX0_IRQ] = CAN1_RX0_IRQHandler,
 #endif
+    [16u + TIM7_IRQ] = TIM7_IRQHandler,
 };
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)

@@ -174,6 +174,12 @@ CONTROLLER = Section(
             choices=("noise", "cell", "auto"),
             doc="kalman: a count as the angle plus white noise q^2/12, or as the zone of one count about it",
         ),
+        "edge_timing": Field(
+            "bool",
+            True,
+            doc="kalman: fuse the encoders' edge times (protocol 2) as exact angles at their instants; "
+            "false: the counts alone",
+        ),
         "kalman_bias_psd": Field(
             "float", 1.0e-4, low=0.0, low_open=True, high=1e15, doc="kalman: model-error drift [rad^2/s^5]"
         ),

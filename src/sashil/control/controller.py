@@ -17,6 +17,11 @@ fills each cycle. Its output is checked: an exception, NaN, an infinity or a non
 with :class:`~sashil.errors.LawError`, naming the law and the first line of what went wrong; the
 loop then commands 0 A and deactivates the rig like any other error.
 
+Bad edge events: the Kalman estimator leaves out an edge time from the future or older than the
+encoder's last one and counts it (``edge_rejects``); when more than 1 % of the events were bad (after
+the first 100) the stage raises :class:`~sashil.errors.SafetyTrip`: the loop commands 0 A and the
+run ends with exit 3, the counts in summary.json's ``controller_stats``.
+
 Fallback: when the estimator reports divergence (its innovation out of bounds, e.g. a wildly wrong
 J) or a non-finite estimate, the stage commands 0 A (the MR damper's passive, safe state) for the
 rest of the run; :meth:`Controller.stats` reports it for summary.json.
@@ -34,7 +39,7 @@ from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.law_api import Law, LawState
 from sashil.control.observer import BoucWenObserver
 from sashil.drivers.interface import RigCommand, RigSample, clamp_current
-from sashil.errors import LawError
+from sashil.errors import LawError, SafetyTrip
 
 NAN = float("nan")
 INF = float("inf")
@@ -111,6 +116,15 @@ class Controller:
         self.command.current_a = 0.0
         return self.command
 
+    def _edge_fault(self) -> None:
+        """Too many bad edge events: stop the run (the loop then commands 0 A)."""
+        est = self.estimator
+        rejects, events = getattr(est, "edge_rejects", 0), getattr(est, "edge_events", 0)
+        raise SafetyTrip(
+            f"encoder edge times: {rejects} of {rejects + events} events were from the future or older than the "
+            f"encoder's last (more than 1 %) at t = {self.time_s:.4f} s: the board's edge timing is not to be trusted"
+        )
+
     def stats(self) -> dict[str, object]:
         """For summary.json: the law (name, origin, parameters), clipped/passive cycles, unsafe commands,
         the estimator fallback."""
@@ -123,6 +137,8 @@ class Controller:
             "fallback_at_s": self.fallback_at_s,
             "fallback_cycles": self.fallback_cycles,
             "innovations_out": int(getattr(self.estimator, "innovations_out", 0)),
+            "edge_events": int(getattr(self.estimator, "edge_events", 0)),
+            "edge_rejects": int(getattr(self.estimator, "edge_rejects", 0)),
         }
 
     @property
@@ -183,6 +199,8 @@ class Controller:
             road_accel = 0.0 if self._road_speed is None else (speed - self._road_speed) / dt
             self._road_speed = speed
         est.update(sample, dt, self._accel, road_accel)  # model body acceleration of the last cycle
+        if getattr(est, "edge_fault", False):
+            self._edge_fault()
         theta, v = est.theta_rad, est.theta_dot_rad_s
         if not self.fallback and (getattr(est, "diverged", False) or not math.isfinite(v) or not math.isfinite(theta)):
             # the model cannot explain the motion (innovation out of bounds) or the estimate is not a number:

@@ -47,6 +47,7 @@ def make_estimator(
             innovation_limit=float(section["innovation_limit_counts"]),
             commanded_road_jerk_psd=float(section["kalman_road_jerk_psd_commanded"]),
             quantisation=str(section["kalman_quantisation"]),
+            edge_timing=bool(section["edge_timing"]),
         )
         # the gains now, not in the first real-time cycle (the device confirms the resolution)
         estimator.prepare(int(config["rig"]["encoder_counts_per_rev"]))

@@ -1,7 +1,8 @@
 """Replay: a recorded run's sensor stream through a controller, offline.
 
 Each recorded row becomes the :class:`~sashil.drivers.interface.RigSample` the loop read (encoder
-counts back from ``theta_rad``/``theta_road_rad``, the measured ``current_a``, ``seq``), with the
+counts back from ``theta_rad``/``theta_road_rad``, the measured ``current_a``, ``seq``, the device
+time and each encoder's last edge when the run recorded them), with the
 period the loop measured (``time_s`` differences) and the road speed the run commanded on the row
 before (the controller's road feed-forward). The controller's estimator, observer, law and inverse
 run as in the loop, on these samples; what it would have commanded (T*, i*, T̂) goes beside what
@@ -27,7 +28,7 @@ import numpy as np
 import yaml
 
 from sashil.control.controller import Controller
-from sashil.drivers.interface import RigSample
+from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.errors import DataFileError
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
 
@@ -35,6 +36,9 @@ from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
 REQUIRED = ("time_s", "theta_rad", "current_a", "seq")
 #: what it writes beside the recorded columns
 REPLAY_COLUMNS = ("replay_torque_cmd_nm", "replay_current_cmd_a", "replay_torque_hat_nm", "replay_z_hat")
+#: the sample's integer fields a run records beside the angles (absent in older runs: no edges)
+EDGE_FIELDS = ("device_time_us", "arm_edge_us", "arm_edge_dir", "road_edge_us", "road_edge_dir")
+_ABSENT = {"device_time_us": 0, "arm_edge_us": NO_EDGE, "arm_edge_dir": 0, "road_edge_us": NO_EDGE, "road_edge_dir": 0}
 TWO_PI = 2.0 * math.pi
 
 
@@ -88,6 +92,11 @@ def replay(
     time_s = data["time_s"]
     n = time_s.size
     seq = data["seq"]
+    fields = {
+        name: np.asarray(data[name], dtype=np.int64) if name in data else np.full(n, _ABSENT[name], dtype=np.int64)
+        for name in EDGE_FIELDS
+    }
+    device_us, arm_edge, arm_dir, road_edge, road_dir = (fields[name].tolist() for name in EDGE_FIELDS)
     scale = counts_per_rev / TWO_PI
     # the encoder counts back from the recorded angles, whole columns at once (rint: the same
     # half-to-even rounding as the counts were divided from); Python lists index fastest per row
@@ -108,7 +117,10 @@ def replay(
     prev_ns = 0
     for k in range(last):
         now_ns = t_ns[k]
-        sample = RigSample(seq_list[k], now_ns, 0, arm_counts[k], road_list[k], current[k], 0, counts_per_rev)
+        sample = RigSample(
+            seq_list[k], now_ns, device_us[k], arm_counts[k], road_list[k], current[k], 0, counts_per_rev,
+            arm_edge[k], arm_dir[k], road_edge[k], road_dir[k],
+        )  # fmt: skip
         if speeds is not None and k:
             command.road_speed_rad_s = speeds[k - 1]
         if tuning is not None:

@@ -43,11 +43,23 @@ log = logging.getLogger("sashil.loop")
 
 #: the columns the loop records for every cycle (docs/architecture.md names first), then the stage's
 #: signals (see ``stage_signals``), then what plans derive their records from: the sample's ``seq``
-#: and device time, the road speed the cycle commanded (NaN: none), the plan's ``phase`` (its
+#: and device time, each encoder's last edge as the sample carried it (device time [us], -1: none;
+#: direction +1/-1, 0: none; a replay needs them), the road speed the cycle commanded (NaN: none),
+#: the plan's ``phase`` (its
 #: ``phase_code``: a drop test's hold, release, ...; 0 for a stage without phases) and the safety
 #: supervisor's ``trip_code`` (sashil.safety.TRIP_CODES)
 BASE_COLUMNS = ("time_s", "theta_rad", "current_a", "current_cmd_a", "theta_road_rad")
-TAIL_COLUMNS = ("seq", "device_time_us", "road_speed_cmd_rad_s", "phase", "trip_code")
+TAIL_COLUMNS = (
+    "seq",
+    "device_time_us",
+    "arm_edge_us",
+    "arm_edge_dir",
+    "road_edge_us",
+    "road_edge_dir",
+    "road_speed_cmd_rad_s",
+    "phase",
+    "trip_code",
+)
 NAN = float("nan")
 #: docs/architecture.md data.csv columns a stage may provide as per-cycle attributes
 STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
@@ -252,13 +264,18 @@ class ControlLoop:
         row[0] = (t_ns - self.start_ns) * 1e-9
         if sample is None:
             row[1] = row[2] = row[4] = NAN
-            row[-5] = row[-4] = -1
+            row[-9] = row[-8] = row[-7] = row[-5] = -1
+            row[-6] = row[-4] = 0
         else:
             row[1] = sample.theta_rad
             row[2] = sample.current_a
             row[4] = sample.theta_road_rad
-            row[-5] = sample.seq
-            row[-4] = sample.device_time_us
+            row[-9] = sample.seq
+            row[-8] = sample.device_time_us
+            row[-7] = sample.arm_edge_us
+            row[-6] = sample.arm_edge_dir
+            row[-5] = sample.road_edge_us
+            row[-4] = sample.road_edge_dir
         row[3] = current_cmd
         signals = self._signals
         if signals is not None:

@@ -1,0 +1,193 @@
+"""Encoder edge times: the simulated rig times each count change on the plant's trajectory, and both
+emulated boards (Python and C, serial and CAN, device and host pacing) send them, identical and
+equal to the hand-derived times of a motion whose edges are analytic.
+
+The motion: the operator holds the arm (theta fixed at the hold angle) while the road wheel turns at
+a constant speed w from t = 0. Then theta1(t) = w t and theta2(t) = theta_hold + w t, and with q
+radians per count the count n is reached (direction d = sign(w)) when the angle crosses the
+boundary (n - d/2) q: the road at t = (n - d/2) q / w, the arm at t = ((n - d/2) q - theta_hold) / w.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sashil.config import default_config
+from sashil.drivers import can_codec, firmware
+from sashil.drivers.emulator import Operator, build_device
+from sashil.drivers.emulator.wire import WireBytes, WireCan
+from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing
+from sashil.drivers.interface import NO_EDGE, RigCommand
+from sashil.drivers.messages import (
+    CMD_ENABLE,
+    EDGE_AGE_NONE,
+    PACING_DEVICE,
+    PACING_HOST,
+    Command,
+    Configure,
+    Hello,
+    RoadSpeed,
+    Sample,
+)
+from sashil.drivers.serial_codec import StreamDecoder, encode_frame
+from sashil.drivers.sim import SimulatedRig
+from sashil.models.plant import RigPlant
+from sashil.models.registry import rig_params
+
+MS = 1_000_000
+COUNTS = 4096
+Q = 2 * math.pi / COUNTS
+HOLD_DEG = 0.3
+
+
+def edge_us(boundary_rad: float, offset_rad: float, speed: float) -> int:
+    """The device microsecond of the instant ``offset + speed * t`` reaches ``boundary`` (t from 0)."""
+    return math.floor((boundary_rad - offset_rad) / speed * 1e6)
+
+
+def expected_edge(count: int, offset_rad: float, speed: float) -> tuple[int, int]:
+    """(time [us], direction) of the edge into ``count`` of the motion ``offset + speed * t``."""
+    direction = 1 if speed > 0 else -1
+    return edge_us((count - 0.5 * direction) * Q, offset_rad, speed), direction
+
+
+# --- the pure edge finder -----------------------------------------------------------------------
+def test_the_hermite_curve_has_its_ends_and_slopes_and_the_bulge_bounds_it():
+    y0, m0, y1, m1 = 0.2, 1.5, -0.1, -0.7
+    assert hermite(y0, m0, y1, m1, 0.0) == y0 and hermite(y0, m0, y1, m1, 1.0) == pytest.approx(y1)
+    eps = 1e-7
+    assert (hermite(y0, m0, y1, m1, eps) - y0) / eps == pytest.approx(m0, rel=1e-5)
+    bulge = hermite_bulge(y0, m0, y1, m1)
+    worst = max(abs(hermite(y0, m0, y1, m1, k / 1000) - (y0 + (y1 - y0) * k / 1000)) for k in range(1001))
+    assert worst <= bulge
+
+
+def test_last_crossing_of_a_straight_line_is_its_last_boundary():
+    # 0.3 q to 3.2 q: counts 0 -> 3, the last boundary 2.5 q at s = (2.5 - 0.3) / 2.9
+    s, direction = last_crossing(lambda s: (0.3 + 2.9 * s) * Q, 0.3 * Q, 3.2 * Q, 0.0, Q)
+    assert direction == 1 and s == pytest.approx(2.2 / 2.9, abs=1e-7)
+    s, direction = last_crossing(lambda s: (0.3 - 1.0 * s) * Q, 0.3 * Q, -0.7 * Q, 0.0, Q)
+    assert direction == -1 and s == pytest.approx(0.8, abs=1e-7)
+    assert last_crossing(lambda s: (0.1 + 0.2 * s) * Q, 0.1 * Q, 0.3 * Q, 0.0, Q) is None
+
+
+def test_a_motion_that_leaves_its_count_and_comes_back_has_its_return_edge():
+    # up through 0.5 q and back below it within the step: the last edge is the way down, at s = 0.75
+    def angle(s: float) -> float:
+        return (0.2 + 1.6 * s * (1 - s) * 1.0) * Q - 0.2 * Q * s
+
+    found = last_crossing(angle, angle(0.0), angle(1.0), 1.0 * Q, Q)
+    assert found is not None and found[1] == -1
+    assert angle(found[0]) == pytest.approx(0.5 * Q, abs=1e-9) and found[0] > 0.5
+
+
+# --- the simulated rig ----------------------------------------------------------------------------
+def _held_rig(speed: float, max_step_s: float = 0.001) -> SimulatedRig:
+    config = default_config()
+    plant = RigPlant(rig_params(config["model"]), max_step_s=max_step_s)
+    rig = SimulatedRig(plant, COUNTS)
+    rig.configure()
+    rig.activate()
+    rig.read(0, 0)
+    rig.operator_hold(math.radians(HOLD_DEG), 100.0)
+    rig.write(RigCommand(0.0, speed), 0, 0)
+    return rig
+
+
+@pytest.mark.parametrize("speed, max_step_s", [(2.0, 0.001), (-0.37, 0.001), (5.3, 0.0004)])
+def test_the_simulated_rig_times_each_edge_on_the_trajectory(speed, max_step_s):
+    rig = _held_rig(speed, max_step_s)
+    hold = math.radians(HOLD_DEG)
+    for k in range(1, 40):
+        sample = rig.read(k * MS, MS)
+        road = expected_edge(sample.road_counts, 0.0, speed) if sample.road_counts else (NO_EDGE, 0)
+        assert (sample.road_edge_us, sample.road_edge_dir) == road
+        arm_count_at_hold = round(hold / Q)
+        if sample.arm_counts == arm_count_at_hold:  # the hold's jump at t = 0 is the arm's last edge
+            assert (sample.arm_edge_us, sample.arm_edge_dir) == (0, 1)
+        else:
+            assert (sample.arm_edge_us, sample.arm_edge_dir) == expected_edge(sample.arm_counts, hold, speed)
+
+
+def test_a_rig_at_rest_has_no_edge():
+    config = default_config()
+    rig = SimulatedRig(RigPlant(rig_params(config["model"])), COUNTS)
+    rig.configure()
+    rig.activate()
+    for k in range(5):
+        sample = rig.read(k * MS, MS)
+        assert (sample.arm_edge_us, sample.arm_edge_dir, sample.road_edge_us, sample.road_edge_dir) == (
+            NO_EDGE,
+            0,
+            NO_EDGE,
+            0,
+        )
+
+
+# --- both boards, both links, both pacings ------------------------------------------------------
+def _decode(out: list, decoder: object) -> list[Sample]:
+    got = []
+    for _, item in out:
+        if isinstance(item, Sample):
+            got.append(item)
+        elif isinstance(item, WireBytes):
+            got += [m for _, m in decoder.feed(item.data) if isinstance(m, Sample)]  # type: ignore[attr-defined]
+        elif isinstance(item, WireCan):
+            done = decoder.feed(item.can_id, item.data)  # type: ignore[attr-defined]
+            if done is not None and isinstance(done[1], Sample):
+                got.append(done[1])
+    return got
+
+
+def _board_samples(board: str, link: str, pacing: int, speed: float) -> list[Sample]:
+    """The samples of one board over 60 ms of the held-arm, turning-road motion."""
+    device = build_device(default_config(), operator=Operator(HOLD_DEG, 100.0), board=board, link=link)
+    decoder = can_codec.CanDecoder() if link == "can" else StreamDecoder()
+
+    def deliver(msg: object, at_ns: int) -> list:
+        if board == "python":
+            return device.handle(msg, at_ns)  # type: ignore[arg-type]
+        if link == "can":
+            out = []
+            for can_id, data in can_codec.encode(msg):  # type: ignore[arg-type]
+                out += device.handle(WireCan(can_id, data), at_ns)
+            return out
+        return device.handle(WireBytes(encode_frame(msg, 1)), at_ns)  # type: ignore[arg-type]
+
+    out = deliver(Hello(), 0) + deliver(Configure(1000, 1000, pacing), 0) + deliver(RoadSpeed(speed), 0)
+    for k in range(1, 61):
+        t = k * MS + (137_000 if pacing == PACING_HOST else 0)  # host pacing: off the device's grid
+        out += deliver(Command(0.0, CMD_ENABLE), t)
+        out += device.tick(t)
+    return _decode(out, decoder)
+
+
+BOARDS = [("python", "serial")] + ([("c", "serial"), ("c", "can")] if firmware.compiler() is not None else [])
+
+
+@pytest.mark.parametrize("pacing", [PACING_DEVICE, PACING_HOST])
+def test_both_boards_send_the_hand_derived_edge_ages(pacing):
+    speed = 1.7  # rad/s: each count changes every q / w = 0.90 ms
+    hold = math.radians(HOLD_DEG)
+    runs = {f"{board}/{link}": _board_samples(board, link, pacing, speed) for board, link in BOARDS}
+    reference = runs["python/serial"]
+    assert len(reference) >= 59
+    for name, got in runs.items():
+        assert got == reference, name  # identical to the microsecond on every board and link
+    for sample in reference[1:]:
+        t_us = sample.device_time_us
+        road_us, road_dir = expected_edge(sample.road_counts, 0.0, speed)
+        assert (sample.road_edge_age_us, sample.road_edge_dir) == (t_us - road_us, road_dir)
+        arm_us, arm_dir = expected_edge(sample.arm_counts, hold, speed)
+        assert (sample.arm_edge_age_us, sample.arm_edge_dir) == (t_us - arm_us, arm_dir)
+        assert 0 <= sample.road_edge_age_us <= 903  # at most one count period old
+
+
+def test_an_encoder_that_does_not_move_reports_no_recent_edge():
+    got = _board_samples("python", "serial", PACING_DEVICE, 0.0)
+    late = [s for s in got if s.device_time_us > 0]
+    assert late and all(s.road_edge_age_us == EDGE_AGE_NONE and s.road_edge_dir == 0 for s in late)
+    # the arm's hold jump at boot is an edge, reported until it is 65.535 ms old
+    assert all(s.arm_edge_age_us == s.device_time_us and s.arm_edge_dir == 1 for s in late)
