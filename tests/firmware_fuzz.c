@@ -168,7 +168,7 @@ int main(void) {
      * nothing called through the missing pointer (ASan/UBSan would stop on a call through NULL) */
     {
         static sashil_board no_can;
-        sashil_hal bare = {NULL, read_encoders, read_current, set_coil_counted, set_road_speed, sensor_flags, send, NULL};
+        sashil_hal bare = {NULL, read_encoders, read_current, set_coil_counted, set_road_speed, sensor_flags, send, NULL, read_edges};
         unsigned long configures = 0;
         sashil_board_init(&no_can, &bare, 4096u, 2000u, 0u);
         sashil_board_set_link(&no_can, SASHIL_LINK_CAN);

@@ -20,6 +20,7 @@ from sashil.drivers.messages import (
     FAULT_NO_CAN,
     PACING_DEVICE,
     PACING_HOST,
+    PROTOCOL_VERSION,
     STATUS_CLOCK_FALLBACK,
     Command,
     Configure,
@@ -282,7 +283,7 @@ def test_a_can_session_on_a_board_without_send_can_is_refused_and_never_acted_on
     assert b.send_can(Command(0.8, CMD_ENABLE), MS, seq=1) == [] and b.coil == []  # no session: no drive
     assert b.ticks(MS, 100 * MS) == [] and LIB.sashil_board_refusals(b.board) == 1
     assert LIB.sashil_board_sessions(b.board) == 0
-    assert b.send_can(Hello(1), 100 * MS) == [Version(1, 4096, 1.0)]  # it still answers, never calls NULL
+    assert b.send_can(Hello(PROTOCOL_VERSION), 100 * MS) == [Version(PROTOCOL_VERSION, 4096, 1.0)]  # never calls NULL
 
 
 def test_a_refused_configure_leaves_the_running_session_as_it_was_and_is_counted():

@@ -10,7 +10,7 @@ import subprocess
 import pytest
 
 from sashil.drivers import can_codec, firmware
-from sashil.drivers.messages import Sample, Status, Version
+from sashil.drivers.messages import PROTOCOL_VERSION, Sample, Status, Version
 
 CORTEX_M4 = firmware.HERE / "cortex-m4"
 
@@ -72,11 +72,11 @@ def test_a_mailbox_holds_the_id_the_length_and_the_bytes_as_rm0090_lays_them_out
 
 def test_every_frame_the_board_sends_goes_out_and_comes_back_unchanged(lib):
     frames = [
-        *can_codec.encode(Sample(123456, -100, 7, 0.25, 0x03), seq=9),  # SampleA + SampleB
+        *can_codec.encode(Sample(123456, -100, 7, 0.25, 0x03), seq=9),  # SampleA, SampleEdges, SampleB
         *can_codec.encode(Status(0x11, 3, 2, 1)),
-        *can_codec.encode(Version(1, 4096, 2.0)),
+        *can_codec.encode(Version(PROTOCOL_VERSION, 4096, 2.0)),
     ]
-    assert [f[0] for f in frames] == [0x110, 0x111, 0x180, 0x1F2]
+    assert [f[0] for f in frames] == [0x110, 0x112, 0x111, 0x180, 0x1F2]
     for can_id, data in frames:
         box = pack(lib, can_id, data)
         assert box is not None and box.tdtr == len(data)

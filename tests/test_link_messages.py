@@ -17,7 +17,15 @@ from sashil.config import default_config
 from sashil.drivers import open_rig
 from sashil.drivers.emulator import EmulatorThread
 from sashil.drivers.firmware import compiler
-from sashil.drivers.messages import FAULT_NO_CAN, STATUS_CLOCK_FALLBACK, Configure, Hello, Status, Version
+from sashil.drivers.messages import (
+    FAULT_NO_CAN,
+    PROTOCOL_VERSION,
+    STATUS_CLOCK_FALLBACK,
+    Configure,
+    Hello,
+    Status,
+    Version,
+)
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError
 
@@ -128,7 +136,7 @@ def _fake_board(controller: int, status: Status, stop: threading.Event) -> None:
         if not select.select([controller], [], [], 0.02)[0]:
             continue
         for _, msg in decoder.feed(os.read(controller, 4096)):
-            answer = {Hello: Version(1, 4096, 1.0), Configure: status}.get(type(msg))
+            answer = {Hello: Version(PROTOCOL_VERSION, 4096, 1.0), Configure: status}.get(type(msg))
             if answer is not None:
                 seq += 1
                 os.write(controller, encode_frame(answer, seq))

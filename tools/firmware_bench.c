@@ -18,11 +18,12 @@ static void set_coil(void *ctx, uint16_t c) { (void)ctx; sink += c; }
 static void set_road_speed(void *ctx, int32_t s) { (void)ctx; sink += (unsigned long)s; }
 static uint8_t sensor_flags(void *ctx) { (void)ctx; return 0; }
 static void send(void *ctx, const uint8_t *b, size_t n) { size_t i; (void)ctx; for (i = 0; i < n; i++) sink += b[i]; }
+static void read_edges(void *ctx, sashil_edge *a, sashil_edge *r) { (void)ctx; a->time_us = (uint32_t)arm; a->dir = 1; r->time_us = 0; r->dir = 0; }
 
 int main(int argc, char **argv)
 {
     static sashil_board board;
-    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send, NULL};
+    sashil_hal hal = {NULL, read_encoders, read_current, set_coil, set_road_speed, sensor_flags, send, NULL, read_edges};
     static const uint8_t configure[5] = {0xE8u, 0x03u, 50u, 0u, 0u};
     uint8_t frame[SASHIL_MAX_FRAME], payload[3] = {0xD0u, 0x07u, 1u}; /* 1.0 A, ENABLE */
     long samples = argc > 1 ? atol(argv[1]) : 1000000L, k;
