@@ -288,17 +288,7 @@ class KalmanRigEstimator(EstimatorOutputs):
                 e_arm = e_arm - dz if e_arm > dz else (e_arm + dz if e_arm < -dz else 0.0)
                 if road_accel is not None:  # the road's cell only where its motion is commanded
                     e_road = e_road - dz if e_road > dz else (e_road + dz if e_road < -dz else 0.0)
-            worst = max(abs(e_arm), abs(e_road)) / scale
-            if worst > self.innovation_max_counts:
-                self.innovation_max_counts = worst
-            if worst > self.innovation_limit:
-                self.innovations_out += 1
-                self._outside += 1
-                if self._outside >= PERSIST_CYCLES and self._cycles >= self._warmup_cycles:
-                    self.diverged = True
-            else:
-                self._outside = 0
-            self._cycles += 1
+            self._innovation(max(abs(e_arm), abs(e_road)) / scale, self.innovation_limit)
             x[0] = theta_pred + g[0][0] * e_arm + g[0][1] * e_road
             x[1] = v + dt * accel + g[1][0] * e_arm + g[1][1] * e_road
             x[2] = r_pred + g[2][0] * e_arm + g[2][1] * e_road
@@ -311,6 +301,20 @@ class KalmanRigEstimator(EstimatorOutputs):
         self.road_dot_rad_s = x[3]
         self.road_ddot_rad_s2 = x[4]
         self.body_dot_rad_s = x[1] + x[3]
+
+    def _innovation(self, worst: float, limit: float) -> None:
+        """Count a cycle's largest residual ``worst`` [counts] against ``limit``: PERSIST_CYCLES in a
+        row beyond it (after the warm-up) mean the model cannot explain the motion (``diverged``)."""
+        if worst > self.innovation_max_counts:
+            self.innovation_max_counts = worst
+        if worst > limit:
+            self.innovations_out += 1
+            self._outside += 1
+            if self._outside >= PERSIST_CYCLES and self._cycles >= self._warmup_cycles:
+                self.diverged = True
+        else:
+            self._outside = 0
+        self._cycles += 1
 
     # edge events -------------------------------------------------------------------------------
     @property
@@ -389,16 +393,7 @@ class KalmanRigEstimator(EstimatorOutputs):
                 )
                 / scale
             )
-            if worst > self.innovation_max_counts:
-                self.innovation_max_counts = worst
-            if worst > self.innovation_limit * EDGE_LIMIT_SHARE:
-                self.innovations_out += 1
-                self._outside += 1
-                if self._outside >= PERSIST_CYCLES and self._cycles >= self._warmup_cycles:
-                    self.diverged = True
-            else:
-                self._outside = 0
-            self._cycles += 1
+            self._innovation(worst, self.innovation_limit * EDGE_LIMIT_SHARE)
         x = self.x
         x[:] = xa.tolist()
         self.theta_rad = x[0]
