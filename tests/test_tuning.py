@@ -235,3 +235,11 @@ def test_run_png_marks_each_applied_change_on_every_panel():
     assert [[line.get_xdata()[0] for line in ax.lines] for ax in axes] == [[0.25]] * 3  # the refusal is not drawn
     assert [text.get_text() for text in axes[0].texts] == ["gain = 2.0"]
     pyplot().close(fig)
+
+
+def test_a_change_that_arrives_before_the_loop_started_is_dated_at_cycle_zero():
+    _law, tuning = make()  # no loop has attached its timing yet: the socket opens before the first cycle
+    tuning.post({"gain": 2.0}, 0.0)
+    tuning.service(0.0, 0)
+    (event,) = tuning.events
+    assert (event.cycle, event.arrived_cycle, event.status) == (0, 0, "applied")

@@ -42,8 +42,9 @@ SOCKET_NAME = "tune.sock"
 MAX_SOCKET_PATH = 100
 #: a request larger than this is refused (parameter changes are a few hundred bytes)
 MAX_REQUEST_BYTES = 65536
-#: seconds a client may take to send its request, and the client waits for an answer
-IO_TIMEOUT_S = 10.0
+#: seconds a client may take to send its request, and the client waits for an answer (longer than
+#: the run waits for its loop to take a change: sashil.runtime.tuning.DEFAULT_WAIT_S)
+IO_TIMEOUT_S = 40.0
 
 
 class TuningError(SashilError):

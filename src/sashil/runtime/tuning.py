@@ -28,8 +28,9 @@ from typing import Any
 
 from sashil.errors import ConfigError
 
-#: a caller waits this long for the loop to take its change (a loop at 1 Hz takes up to 1 s)
-DEFAULT_WAIT_S = 5.0
+#: a caller waits this long for the loop to take its change: the socket opens before the loop's
+#: first cycle (the run compiles its kernels and greets the board first), and a loop at 1 Hz takes 1 s
+DEFAULT_WAIT_S = 30.0
 #: the columns of the run folder's events.csv, one row per event
 EVENT_COLUMNS = ("time_s", "cycle", "key", "old", "new", "ramp_s", "status", "arrived_cycle")
 
@@ -144,8 +145,9 @@ class LiveTuning:
             self.busy = True
         return request
 
-    def _cycles(self) -> int | None:
-        return None if self.timing is None else int(self.timing.cycles)
+    def _cycles(self) -> int:
+        """The cycles the loop has run (0 before it started)."""
+        return 0 if self.timing is None else int(self.timing.cycles)
 
     def _take_pending(self, request: _Request) -> bool:
         """Withdraw ``request`` if the loop has not taken it yet (True), else False."""
