@@ -257,14 +257,14 @@ class KalmanRigEstimator(EstimatorOutputs):
     def update(self, sample: RigSample, dt: float, body_accel: float = 0.0, road_accel: float | None = None) -> None:
         """Take one sample ``dt`` [s] after the previous one; ``body_accel``: the model's arm acceleration;
         ``road_accel``: the road acceleration the plan commanded over the period (None: not commanded)."""
-        if self.edge_timing:
-            self._update_with_edges(sample, dt, body_accel, road_accel)
-            return
         if sample.counts_per_rev != self._counts_per_rev:
             self._set_resolution(sample.counts_per_rev)
         scale = TWO_PI / sample.counts_per_rev
         arm = sample.arm_counts * scale
         road = sample.road_counts * scale
+        if self.edge_timing:
+            self._update_with_edges(sample, dt, body_accel, road_accel, scale, arm, road)
+            return
         x = self.x
         if not self.started:
             x[:] = [arm - road, 0.0, road, 0.0, 0.0, 0.0]
@@ -349,13 +349,18 @@ class KalmanRigEstimator(EstimatorOutputs):
         sigma = EDGE_COUNT_SIGMA_COUNTS if self._last_edge_us[k] != NO_EDGE else math.sqrt(1.0 / 12.0)
         return (sigma * scale) ** 2 + self.angle_noise_rad**2
 
-    def _update_with_edges(self, sample: RigSample, dt: float, body_accel: float, road_accel: float | None) -> None:
-        """:meth:`update` with the samples' edge events (:mod:`sashil.control.edge_kalman`)."""
-        if sample.counts_per_rev != self._counts_per_rev:
-            self._set_resolution(sample.counts_per_rev)
-        scale = TWO_PI / sample.counts_per_rev
-        arm = sample.arm_counts * scale
-        road = sample.road_counts * scale
+    def _update_with_edges(
+        self,
+        sample: RigSample,
+        dt: float,
+        body_accel: float,
+        road_accel: float | None,
+        scale: float,
+        arm: float,
+        road: float,
+    ) -> None:
+        """:meth:`update` with the samples' edge events (:mod:`sashil.control.edge_kalman`); ``scale``
+        is one count [rad], ``arm`` and ``road`` the encoders' angles as counted."""
         now_us = sample.device_time_us
         arm_tau, arm_boundary = self._event(
             0, sample.arm_edge_us, sample.arm_edge_dir, sample.arm_counts, now_us, scale
