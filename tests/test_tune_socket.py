@@ -147,7 +147,9 @@ def test_a_stale_socket_of_a_killed_run_is_no_live_run(tmp_path):
     [
         (["loop.rate_hz=10"], "only a running law's parameters can change"),
         (["controller.tune_ramp_s=1"], "controller.tune_ramp_s alone changes nothing"),
-        (["controller.tune_ramp_s=fast", "controller.c=1"], "controller.tune_ramp_s: expected seconds >= 0"),
+        (["controller.tune_ramp_s=fast", "controller.c=1"], "controller.tune_ramp_s: expected a number >= 0"),
+        (["controller.tune_ramp_s=-1", "controller.c=1"], "controller.tune_ramp_s: expected a number >= 0"),
+        (["controller.tune_ramp_s=4000", "controller.c=1"], "controller.tune_ramp_s: expected a number >= 0"),
         (["controller"], "expected section.key=value"),
     ],
 )

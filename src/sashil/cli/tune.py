@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from typing import Any
 
 from sashil.cli.common import add_verbosity_options, setup_logging
 from sashil.config.overrides import parse_override
 from sashil.errors import ConfigError
 from sashil.runtime.tune_socket import request
+from sashil.runtime.tuning import RAMP_KEY, check_ramp
 
 HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
 EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.tune_ramp_s=1"
-RAMP_KEY = "tune_ramp_s"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,9 +41,7 @@ def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
                 f"sashil tune {text!r}: only a running law's parameters can change: controller.<param>=VALUE"
             )
         if path[1] == RAMP_KEY:
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-                raise ConfigError(f"controller.tune_ramp_s: expected seconds >= 0, got {value!r}")
-            ramp = float(value)
+            ramp = check_ramp(value)
         else:
             values[path[1]] = value
     if texts and not values:

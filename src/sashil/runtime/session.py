@@ -24,7 +24,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
 from sashil.runtime.tune_socket import TuneServer
-from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
 
 #: the run folder's record of live parameter changes (sashil tune)
 EVENTS_FILE = "events.csv"
@@ -42,7 +42,7 @@ def open_tuning(
     law = getattr(stage, "law", None)
     if law is None or not hasattr(law, "check_parameters"):
         return None, None
-    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get("tune_ramp_s", 0.0)))
+    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get(RAMP_KEY, 0.0)))
     try:
         server = TuneServer(folder.path, tuning).start()
     except OSError as err:

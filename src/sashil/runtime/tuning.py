@@ -31,8 +31,18 @@ from sashil.errors import ConfigError
 #: a caller waits this long for the loop to take its change: the socket opens before the loop's
 #: first cycle (the run compiles its kernels and greets the board first), and a loop at 1 Hz takes 1 s
 DEFAULT_WAIT_S = 30.0
+#: the controller key of a live change's ramp (seconds; 0: a step)
+RAMP_KEY = "tune_ramp_s"
 #: the columns of the run folder's events.csv, one row per event
 EVENT_COLUMNS = ("time_s", "cycle", "key", "old", "new", "ramp_s", "status", "arrived_cycle")
+
+
+def check_ramp(value: Any) -> float:
+    """``controller.tune_ramp_s`` given with a change, checked by its config field (the code a config
+    file's value goes through); ConfigError in one line."""
+    from sashil.config.sections import CONTROLLER
+
+    return float(CONTROLLER.fields[RAMP_KEY].check(value, f"controller.{RAMP_KEY}"))
 
 
 @dataclass
@@ -105,10 +115,8 @@ class LiveTuning:
         """The values as the law would store them and the ramp, or ConfigError in one line."""
         if not values:
             raise ConfigError("nothing to change: give controller.<param>=VALUE")
-        ramp = self.ramp_s if ramp_s is None else ramp_s
-        if not (isinstance(ramp, (int, float)) and not isinstance(ramp, bool) and 0.0 <= ramp <= 3600.0):
-            raise ConfigError(f"controller.tune_ramp_s: expected seconds in [0, 3600], got {ramp!r}")
-        return self.law.check_parameters(values), float(ramp)
+        ramp = self.ramp_s if ramp_s is None else check_ramp(ramp_s)
+        return self.law.check_parameters(values), ramp
 
     def submit(
         self, values: Mapping[str, Any], ramp_s: float | None = None, wait_s: float = DEFAULT_WAIT_S
