@@ -195,7 +195,7 @@ def evaluate(case: dict, block_s: float) -> tuple[dict[str, Intervals], dict, fl
     chosen method took."""
     cal = case["calibration"]
     best, imax = cal.best, case["current_max_a"]
-    block = interval_blocks(cal.fit_records, block_s, len(best.free))  # as calibrate does
+    block = interval_blocks(cal.fit_records, block_s, best.model_free)  # as calibrate does
     started = time.perf_counter()
     chosen = jackknife(best, cal.fit_records, imax, block)
     cost = time.perf_counter() - started

@@ -68,7 +68,7 @@ from truth_chain_sim import (
 )
 
 from sashil.identify.data import record_from_columns
-from sashil.identify.fit import FitOptions, fit_model
+from sashil.identify.fit import FitOptions, fit_model, initial_angle_tolerance
 from sashil.identify.synthetic import drop_test_columns
 from sashil.models.hysteresis import BoucWenParams
 
@@ -84,9 +84,12 @@ def identify(true: dict[str, float], quick: bool = False) -> tuple[dict[str, flo
     params = BoucWenParams.from_mapping(true)
     seconds = 2.0 if quick else 10.0
     records = [record_from_columns(f"drop {i:g} A", drop_test_columns(params, -5.0, i, seconds)) for i in (0.0, 1.0)]
-    options = FitOptions(J=true["J"])
+    tolerance = initial_angle_tolerance(records)  # as sashil identify does
+    options = FitOptions(J=true["J"], initial_angle_tolerance_rad=tolerance)
     if quick:
-        options = FitOptions(J=true["J"], design=16, starts=2, refine=1, probe_nfev=3, max_nfev=5)
+        options = FitOptions(
+            J=true["J"], design=16, starts=2, refine=1, probe_nfev=3, max_nfev=5, initial_angle_tolerance_rad=tolerance
+        )
     started = time.perf_counter()
     result = fit_model("bouc-wen", records, options)
     return dict(result.params), time.perf_counter() - started

@@ -32,7 +32,15 @@ from scipy.signal import savgol_filter
 from sashil.calibrate.rig import StepResult
 from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
-from sashil.identify.fit import FitOptions, FitResult, Problem, _inside, fit_model
+from sashil.identify.fit import (
+    FitOptions,
+    FitResult,
+    Problem,
+    _inside,
+    fit_model,
+    initial_angle_tolerance,
+    simulate_fitted,
+)
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
 from sashil.identify.rig_models import MODELS
 from sashil.stats import nrmse
@@ -220,10 +228,9 @@ def validate(result: FitResult, records: Sequence[Record]) -> list[Validation]:
 def residual_inflation(result: FitResult, records: Sequence[Record], max_lag: int = 2000) -> float:
     """sqrt of the integrated autocorrelation time of the fit residuals (Sokal's window, c = 5):
     the factor by which white-noise standard errors understate the real ones."""
-    model = MODELS[result.model]
     taus = []
-    for record in records:
-        e = model.simulate(result.params, record) - record.theta
+    for record, sim in zip(records, simulate_fitted(result, records), strict=True):
+        e = sim - record.theta
         e = e - e.mean()
         var = float(np.dot(e, e))
         if var <= 0.0 or e.size < 8:
@@ -256,10 +263,12 @@ def n_profile(
     lo, hi = problem.bounds()
     names = problem.free
     index = names.index("n")
-    keep = [j for j in range(len(names)) if j != index]
+    # the initial-angle offsets stay at the fit's: the profile is about the shape
+    keep = [j for j in range(problem.model_size) if j != index]
     p = result.params
     coordinate = {"log10_S": math.log10(p["delta"]), "b": p["beta"] / p["delta"]}
-    best = np.array([coordinate.get(name, p.get(name, 0.0)) for name in names])
+    offsets = dict(zip(problem.offsets, result.initial_offsets_rad, strict=False))
+    best = np.array([coordinate.get(name, offsets.get(name, p.get(name, 0.0))) for name in names])
     points = [ProfilePoint(float(best[index]), float(np.sqrt(np.mean(problem.residuals(best) ** 2))), math.nan, True)]
     if held_out:
         points[0].validation_nrmse = float(np.mean([v.nrmse for v in validate(result, held_out)]))
@@ -309,7 +318,7 @@ def analyse(
             f"calibrate: only {len(fit_records)} of the {len(fit_results)} runs to fit are usable (link gaps cut "
             "the others short); repeat the calibration on a quieter link"
         )
-    options = FitOptions(J=inertia)
+    options = FitOptions(J=inertia, initial_angle_tolerance_rad=initial_angle_tolerance(fit_records))
     names = ["bouc-wen", "dahl", "lugre", "bingham"] if model == "all" else [model]
     started = time.perf_counter()
     results = []
@@ -328,7 +337,7 @@ def analyse(
     cal = Calibration(results, fit_records, validate_records, validations, residual_inflation(best, fit_records))
     cal.fit_s = fit_s
     started_intervals = time.perf_counter()
-    block = interval_blocks(fit_records, block_s, len(best.free))
+    block = interval_blocks(fit_records, block_s, best.model_free)
     if block != block_s:
         say(f"interval blocks shortened to {block:.3g} s: the records are too short for {block_s:g} s blocks")
     cal.intervals = jackknife(best, fit_records, current_max_a, block)

@@ -19,10 +19,9 @@ import numpy as np
 from sashil.calibrate.analysis import PROFILE_NFEV, Calibration
 from sashil.calibrate.rig import StepResult
 from sashil.identify.data import Record
-from sashil.identify.fit import FitResult
+from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
-from sashil.identify.rig_models import MODELS
 
 #: a parameter whose 95 % interval is wider than +- this fraction of its value is "not pinned down"
 LOOSE = 0.25
@@ -252,8 +251,7 @@ def write_report(
 ) -> Path:
     """``report.md`` and its plots in ``folder``; returns the report's path."""
     best = cal.best
-    model = MODELS[best.model]
-    fit_sims = [model.simulate(best.params, r) for r in cal.fit_records]
+    fit_sims = simulate_fitted(best, cal.fit_records)
     roads = road_angles(results)
     _overlay(cal.fit_records, fit_sims, folder / "fit.png", f"{best.model} fit (the runs the fit saw)", roads)
     if cal.validations:

@@ -21,7 +21,7 @@ from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
-from sashil.identify.fit import FitResult
+from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
@@ -113,8 +113,7 @@ EXTRA_WORSE = 1.5
 
 def plan_rms(result: FitResult, records: Sequence[Record]) -> float:
     """RMS output error [rad] of ``result`` over ``records`` (all samples)."""
-    model = MODELS[result.model]
-    errors = [model.simulate(result.params, r) - r.theta for r in records]
+    errors = [sim - r.theta for sim, r in zip(simulate_fitted(result, records), records, strict=True)]
     return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
 
 

@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from sashil.identify.data import load_records
-    from sashil.identify.fit import FitOptions, fit_model
+    from sashil.identify.fit import FitOptions, fit_model, initial_angle_tolerance
     from sashil.identify.intervals import interval_blocks, jackknife
     from sashil.identify.report import (
         comparison_table,
@@ -140,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
         J=args.inertia,
         seed=args.seed,
         progress=not args.quiet and sys.stderr.isatty(),
+        initial_angle_tolerance_rad=initial_angle_tolerance(records),
     )
     results = []
     intervals = {}
@@ -148,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         result = fit_model(name, records, options)
         results.append(result)
         print(format_result(result))
-        block = interval_blocks(records, BLOCK_S, len(result.free))
+        block = interval_blocks(records, BLOCK_S, result.model_free)
         intervals[name] = jackknife(result, records, current_max, block)
         print(format_intervals(intervals[name]))
     best = ranked(results)[0]

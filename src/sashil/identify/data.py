@@ -156,6 +156,19 @@ def load_records(
     return records
 
 
+def angle_quantum(records: Sequence[Record]) -> float:
+    """The encoder count of the records' angles [rad]: the smallest step between consecutive samples
+    when every step is a whole number of it (encoder records), else 0 (angles that are not counts)."""
+    steps = np.concatenate([np.abs(np.diff(r.theta)) for r in records])
+    moved = steps[steps > 0.0]
+    if moved.size == 0:
+        return 0.0
+    quantum = float(moved.min())
+    ratio = moved / quantum
+    whole = np.abs(ratio - np.round(ratio)) <= 1e-3 * np.maximum(ratio, 1.0)
+    return quantum if float(np.mean(whole)) >= 0.99 else 0.0
+
+
 def check_current_spread(records: Sequence[Record]) -> None:
     """alpha2 and c2 need runs at different currents."""
     values = np.concatenate([r.current for r in records])

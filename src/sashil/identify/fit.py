@@ -14,6 +14,13 @@ Stages (default, ``fit_model``):
 2. local: trust-region least squares (scipy ``least_squares``) on the output error over all free
    parameters, from the best few global candidates screened by their output error; the best
    refinement wins, and whether the others reached the same cost is reported (convergence).
+Initial angles (``initial_angle_tolerance_rad`` > 0): an encoder gives each run's release angle only
+to within its count cell (and its noise), and a run simulated from the wrong start carries that
+offset through every sample; the fit would bend the damper's parameters to absorb it (the yield
+torque most, by several per cent on a damper whose yield spans few counts). So each record's
+initial angle is a nuisance parameter of the local stage, searched within +- the tolerance of its
+first sample (the classic output-error treatment of an unknown initial state), with its Jacobian
+column from a simulation of that record alone.
 ``two_stage=True`` is the seed 000 procedure instead: the linear part (k, c1, c2) with Coulomb
 friction first (output error), then the hysteresis parameters by differential evolution on the
 output error with the linear part fixed, then the same local refinement of everything.
@@ -24,19 +31,24 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares, lsq_linear
 
-from sashil.identify.data import Record
+from sashil.identify.data import Record, angle_quantum
 from sashil.identify.progress import Progress
 from sashil.identify.rig_models import MODELS, RigModel
 from sashil.stats import nrmse
 
 #: parameters a linear solve keeps >= 0 (physical torques and damping); Bingham's offset f0 is free
 FREE_SIGN = {"f0"}
+#: each record's initial angle is searched within this many encoder counts of its first sample: the
+#: count cell (half a count each way) and the angle noise of two encoders (a few tenths of a count)
+INITIAL_ANGLE_COUNTS = 2.0
+#: relative forward-difference step of the Jacobian (scipy's 2-point: the square root of the float epsilon)
+FD_STEP = float(np.finfo(float).eps) ** 0.5
 
 
 @dataclass
@@ -55,6 +67,8 @@ class FitOptions:
     max_step: float = 1e-3
     progress: bool = False
     local: bool = True
+    # each record's initial angle searched within +- this of its first sample [rad]; 0: taken as exact
+    initial_angle_tolerance_rad: float = 0.0
 
 
 @dataclass
@@ -79,6 +93,10 @@ class FitResult:
     x: np.ndarray | None = None
     residuals: np.ndarray | None = None
     jacobian: np.ndarray | None = None
+    # the search vector's bounds, and each record's fitted initial-angle offset [rad] (fit order)
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+    initial_offsets_rad: list[float] = field(default_factory=list)
 
     @property
     def rms_total(self) -> float:
@@ -87,6 +105,11 @@ class FitResult:
     @property
     def nrmse_mean(self) -> float:
         return float(np.mean(self.nrmse))
+
+    @property
+    def model_free(self) -> int:
+        """How many of the free parameters are the model's (the initial-angle offsets left out)."""
+        return len(self.free) - len(self.initial_offsets_rad) if self.free else 0
 
 
 #: rows of the equation-error (variable projection) stage, about: longer records are sampled sparser
@@ -121,6 +144,10 @@ class Problem:
         self._vp_records = [_every(r, self.stride) for r in self.records]
         edge = math.ceil(15 / self.stride)  # the smoothed derivatives' edges (15 ms) are left out
         trim = [slice(edge, r.theta.size - edge) for r in self._vp_records]
+        tolerance = float(options.initial_angle_tolerance_rad)
+        self.tolerance = tolerance if tolerance > 0.0 else 0.0
+        self.offsets = tuple(f"initial_angle_{k}" for k in range(len(self.records))) if self.tolerance else ()
+        self._last: tuple[bytes, np.ndarray] | None = None
         self._target = np.concatenate(
             [
                 (r.torque_in - options.J * (r.theta_ddot + r.acc_road))[s]
@@ -165,33 +192,98 @@ class Problem:
     # --- output error ------------------------------------------------------------------------------
     @property
     def free(self) -> tuple[str, ...]:
-        return self.linear + self.model.nonlinear
+        """The search vector: torque coefficients, state shape, then each record's initial-angle offset."""
+        return self.linear + self.model.nonlinear + self.offsets
+
+    @property
+    def model_size(self) -> int:
+        """Entries of the search vector that are the model's (the initial-angle offsets follow)."""
+        return len(self.linear) + len(self.model.nonlinear)
 
     def params_of(self, x: np.ndarray) -> dict[str, float]:
         nl_names = self.model.nonlinear
         lin = dict(zip(self.linear, x[: len(self.linear)], strict=True))
-        nl = dict(zip(nl_names, x[len(self.linear) :], strict=True))
+        nl = dict(zip(nl_names, x[len(self.linear) : self.model_size], strict=True))
         return self.model.full_params(nl, {**lin, **self.fixed_linear}, self.options.J)
+
+    def offsets_of(self, x: np.ndarray) -> list[float]:
+        """Each record's initial-angle offset [rad] (0 where the search vector has none)."""
+        tail = x[self.model_size :]
+        return [float(v) for v in tail] if tail.size == len(self.records) else [0.0] * len(self.records)
+
+    def padded(self, x: np.ndarray) -> np.ndarray:
+        """A model-only search vector (a global stage's candidate) with zero initial-angle offsets."""
+        return np.concatenate([x, np.zeros(len(self.offsets))]) if x.size == self.model_size else x
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = [-np.inf if n in FREE_SIGN else 0.0 for n in self.linear] + [b[0] for b in self.model.nl_bounds]
         hi = [np.inf for _ in self.linear] + [b[1] for b in self.model.nl_bounds]
+        lo += [-self.tolerance] * len(self.offsets)
+        hi += [self.tolerance] * len(self.offsets)
         return np.array(lo, float), np.array(hi, float)
 
-    def simulate(self, params: dict[str, float]) -> list[np.ndarray]:
+    def simulate(self, params: dict[str, float], offsets: Sequence[float] | None = None) -> list[np.ndarray]:
         self.evaluations += 1
-        return [self.model.simulate(params, r, self.options.max_step) for r in self.records]
+        shifts = offsets if offsets is not None else [0.0] * len(self.records)
+        return [
+            self.model.simulate(params, r, self.options.max_step, d) for r, d in zip(self.records, shifts, strict=True)
+        ]
+
+    def _record_residual(self, k: int, params: dict[str, float] | None, offset: float) -> np.ndarray:
+        """theta_sim - theta_rec of record k (1.0 where the simulation failed or is not finite)."""
+        record = self.records[k]
+        if params is None:
+            return np.full(record.theta.size, 1.0)
+        try:
+            e = self.model.simulate(params, record, self.options.max_step, offset) - record.theta
+        except (ValueError, ZeroDivisionError, FloatingPointError):
+            return np.full(record.theta.size, 1.0)
+        return np.where(np.isfinite(e), e, 1.0)
+
+    def _params_or_none(self, x: np.ndarray) -> dict[str, float] | None:
+        try:
+            return self.params_of(x)
+        except (ValueError, ZeroDivisionError, FloatingPointError):
+            return None
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        try:
-            sims = self.simulate(self.params_of(x))
-        except (ValueError, ZeroDivisionError, FloatingPointError):
-            sims = None
-        out = []
-        for k, r in enumerate(self.records):
-            e = sims[k] - r.theta if sims is not None else np.full(r.theta.size, 1.0)
-            out.append(np.where(np.isfinite(e), e, 1.0))
-        return np.concatenate(out)
+        """Output error of every record, concatenated in fit order."""
+        self.evaluations += 1
+        params = self._params_or_none(x)
+        offsets = self.offsets_of(x)
+        out = np.concatenate([self._record_residual(k, params, offsets[k]) for k in range(len(self.records))])
+        self._last = (x.tobytes(), out)  # least_squares asks for the Jacobian where it last evaluated
+        return out
+
+    @property
+    def jac_option(self) -> Callable[[np.ndarray], np.ndarray] | str:
+        """What ``least_squares`` differentiates with: :meth:`jacobian` with initial-angle offsets, else
+        its own 2-point differences (the same step)."""
+        return self.jacobian if self.offsets else "2-point"
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """Forward-difference Jacobian of :meth:`residuals` (scipy's 2-point step, turned inwards at a
+        bound); an initial-angle offset moves only its own record, which alone is re-simulated."""
+        lo, hi = self.bounds()
+        last = self._last
+        base = last[1] if last is not None and last[0] == x.tobytes() else self.residuals(x)
+        ends = np.cumsum([0] + [r.theta.size for r in self.records])
+        params = self._params_or_none(x)
+        offsets = self.offsets_of(x)
+        out = np.zeros((base.size, x.size))
+        for j in range(x.size):
+            h = FD_STEP * (1.0 if x[j] >= 0.0 else -1.0) * max(1.0, abs(float(x[j])))
+            if not lo[j] <= x[j] + h <= hi[j]:
+                h = -h
+            if j < self.model_size:
+                moved = x.copy()
+                moved[j] += h
+                out[:, j] = (self.residuals(moved) - base) / h
+            else:
+                k = j - self.model_size
+                rows = slice(int(ends[k]), int(ends[k + 1]))
+                out[rows, j] = (self._record_residual(k, params, offsets[k] + h) - base[rows]) / h
+        return out
 
 
 def _inside(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -288,9 +380,11 @@ def _simplex(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions, bar: Progress) -> np.ndarray:
     """Seed 000 section 4.2: linear part with Coulomb friction first, then the hysteresis."""
     coulomb = Problem(MODELS["bingham"], records, FitOptions(**{**options.__dict__, "passive": options.passive}))
-    x0 = _global_vp(coulomb, options, bar)[0]
+    x0 = coulomb.padded(_global_vp(coulomb, options, bar)[0])
     lo, hi = coulomb.bounds()
-    fit1 = least_squares(coulomb.residuals, _inside(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=60)
+    fit1 = least_squares(
+        coulomb.residuals, _inside(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=60, jac=coulomb.jac_option
+    )
     stage1 = coulomb.params_of(fit1.x)
     linear_part = {"k": stage1["k"], "c1": stage1["c0"], "c2": stage1["c0_i"]}
     model = problem.model
@@ -306,7 +400,7 @@ def _two_stage(problem: Problem, records: Sequence[Record], options: FitOptions,
     bounds = [(0.0, 4.0 * fc + 1e-3) for _ in hyst] + list(model.nl_bounds)
 
     def cost(v: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(problem.residuals(compose(v)) ** 2)))
+        return float(np.sqrt(np.mean(problem.residuals(problem.padded(compose(v))) ** 2)))
 
     result = differential_evolution(
         cost,
@@ -373,6 +467,7 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
             f"global: deterministic multi-start (Sobol design of {_design(model, options.design).shape[0]} points, "
             f"Nelder-Mead from {len(starts)} distinct), variable projection on the torque balance"
         )
+    starts = [problem.padded(x) for x in starts]
     lo, hi = problem.bounds()
     screened = len(starts)
     global_s = time.perf_counter() - started
@@ -390,6 +485,7 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
             bounds=(lo, hi),
             x_scale="jac",
             max_nfev=budget if options.local else 1,
+            jac=problem.jac_option,
         )
         trials.append(trial)
         bar.advance(1)
@@ -397,7 +493,12 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
     fit = trials[best]
     if options.local and len(starts) > 1 and fit.status == 0:
         more = least_squares(
-            problem.residuals, _inside(fit.x, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=options.max_nfev
+            problem.residuals,
+            _inside(fit.x, lo, hi),
+            bounds=(lo, hi),
+            x_scale="jac",
+            max_nfev=options.max_nfev,
+            jac=problem.jac_option,
         )
         more.nfev += fit.nfev
         trials[best] = fit = more
@@ -411,7 +512,8 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
     bar.close()
     params = problem.params_of(fit.x)
     stderr, corr, flagged = _uncertainty(problem, fit)
-    sims = problem.simulate(params)
+    offsets = problem.offsets_of(fit.x)
+    sims = problem.simulate(params, offsets)
     rms = [float(np.sqrt(np.mean((s - r.theta) ** 2))) for s, r in zip(sims, records, strict=True)]
     nr = [nrmse(s, r.theta) for s, r in zip(sims, records, strict=True)]
     return FitResult(
@@ -433,7 +535,24 @@ def fit_model(name: str, records: Sequence[Record], options: FitOptions | None =
         x=np.array(fit.x, dtype=float),
         residuals=np.array(fit.fun, dtype=float),
         jacobian=np.array(fit.jac, dtype=float),
+        lower=lo,
+        upper=hi,
+        initial_offsets_rad=offsets,
     )
+
+
+def initial_angle_tolerance(records: Sequence[Record]) -> float:
+    """How far from its first sample each record's initial angle is searched [rad]:
+    INITIAL_ANGLE_COUNTS encoder counts of the records (0 for angles that are not counts)."""
+    return INITIAL_ANGLE_COUNTS * angle_quantum(records)
+
+
+def simulate_fitted(result: FitResult, records: Sequence[Record]) -> list[np.ndarray]:
+    """theta_sim [rad] of each record under the fitted model, from the initial angle the fit
+    estimated for it (its first sample, for a record the fit did not see)."""
+    model = MODELS[result.model]
+    offsets = dict(zip(result.record_names, result.initial_offsets_rad, strict=False))
+    return [model.simulate(result.params, r, initial_offset_rad=offsets.get(r.name, 0.0)) for r in records]
 
 
 def _convergence(problem: Problem, fit, trials: Sequence) -> dict:

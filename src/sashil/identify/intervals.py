@@ -103,7 +103,10 @@ def quantities(result: FitResult, params: dict[str, float], current_max_a: float
 
 
 def search_bounds(result: FitResult) -> tuple[np.ndarray, np.ndarray]:
-    """The fit's bounds on its search vector (linear torque terms >= 0, the model's box for the rest)."""
+    """The fit's bounds on its search vector (linear torque terms >= 0, the model's box for the
+    shape, the tolerance for the initial-angle offsets): as the fit kept them, where it did."""
+    if result.lower is not None and result.upper is not None:
+        return result.lower, result.upper
     model = MODELS[result.model]
     nl = dict(zip(model.nonlinear, model.nl_bounds, strict=True))
     lo = [nl[n][0] if n in nl else (-np.inf if n in FREE_SIGN else 0.0) for n in result.free]

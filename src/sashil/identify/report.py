@@ -9,9 +9,9 @@ import numpy as np
 import yaml
 
 from sashil.identify.data import Record
-from sashil.identify.fit import FitResult
+from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import Intervals
-from sashil.identify.rig_models import MODELS, bouc_wen_rescale
+from sashil.identify.rig_models import bouc_wen_rescale
 
 OBJECTIVE = "output error: RMS of simulated minus recorded theta over all samples (seed 000 eq. 10)"
 
@@ -141,7 +141,7 @@ def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: 
         ax, res = axes[2 * k, 0], axes[2 * k + 1, 0]
         ax.plot(record.time_s, np.degrees(record.theta), color="k", lw=1.2, label="recorded")
         for r in ranked(results):
-            sim = MODELS[r.model].simulate(r.params, record)
+            sim = simulate_fitted(r, [record])[0]
             (line,) = ax.plot(
                 record.time_s, np.degrees(sim), lw=0.9, label=f"{r.model} (RMS {np.degrees(r.rms_total):.3g} deg)"
             )

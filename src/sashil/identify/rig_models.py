@@ -84,8 +84,11 @@ class RigModel:
         bound = kernels.state_bound(self.code, p)
         return kernels.state_path(self.code, p, record.theta_smooth, record.initial_state_sign() * bound)
 
-    def simulate(self, params: dict[str, float], record: Record, max_step: float = 1e-3) -> np.ndarray:
-        """Output-error simulation of a record: theta [rad] from theta0 at rest-or-moving start."""
+    def simulate(
+        self, params: dict[str, float], record: Record, max_step: float = 1e-3, initial_offset_rad: float = 0.0
+    ) -> np.ndarray:
+        """Output-error simulation of a record: theta [rad] from theta0 at rest-or-moving start
+        (theta0 the record's first sample plus ``initial_offset_rad``, where the fit estimated it)."""
         p = self.array(params)
         bound = kernels.state_bound(self.code, p) if self.code != kernels.BINGHAM else 0.0
         return kernels.simulate_rig(
@@ -95,7 +98,7 @@ class RigModel:
             record.current,
             record.acc_road,
             record.torque_in,
-            float(record.theta[0]),
+            float(record.theta[0]) + initial_offset_rad,
             record.v0,
             record.initial_state_sign() * bound,
             max_step,
