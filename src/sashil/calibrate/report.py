@@ -299,10 +299,13 @@ def write_report(
                 "road",
                 "fit/held-out NRMSE",
                 "quantisation floor",
+                "start searched [counts]",
             ]
         ),
     ]
-    lines.append(_row(["---"] * 8))
+    lines.append(_row(["---"] * 9))
+    q = 2.0 * math.pi / counts_per_rev
+    start = dict(zip(best.record_names, best.initial_offsets_rad, strict=False))
     nr = dict(zip(best.record_names, best.nrmse, strict=True))
     nr.update({v.name: v.nrmse for v in cal.validations})
     records = {r.name: r for r in [*cal.fit_records, *cal.validate_records]}
@@ -326,6 +329,7 @@ def write_report(
                     road,
                     f"{100 * nr[s.name]:.2f} %" if s.name in nr else "-",
                     f"{100 * floor:.2f} %",
+                    f"{start[s.name] / q:+.2f}" if s.name in start else "-",
                 ]
             )
         )
@@ -333,7 +337,9 @@ def write_report(
         "",
         "The quantisation floor is the NRMSE a perfect model would show against the record: the encoder's "
         f"{counts_per_rev} counts per revolution alone (q/√12 over the record's standard deviation). Drop records "
-        "are cut 0.5 s after the arm came to rest.",
+        "are cut 0.5 s after the arm came to rest. The fit searched each run's initial angle within two counts of "
+        "its first sample (the encoder gives the held arm's angle only to within its count and noise); "
+        "'start searched' is where it put it, in counts from that sample.",
         "",
         "![fit](fit.png)",
         "",

@@ -51,8 +51,14 @@ def param_document(result: FitResult, delta: float | None = None, intervals: Int
             "objective": OBJECTIVE,
             "rms_rad_total": result.rms_total,
             "runs": [
-                {"file": name, "rms_rad": rms, "nrmse": nr}
-                for name, rms, nr in zip(result.record_names, result.rms_rad, result.nrmse, strict=True)
+                {"file": name, "rms_rad": rms, "nrmse": nr, "initial_angle_offset_rad": offset}
+                for name, rms, nr, offset in zip(
+                    result.record_names,
+                    result.rms_rad,
+                    result.nrmse,
+                    result.initial_offsets_rad or [0.0] * len(result.record_names),
+                    strict=True,
+                )
             ],
             "wall_s": round(result.wall_s, 3),
             "evaluations": result.evaluations,
