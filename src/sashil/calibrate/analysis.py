@@ -39,6 +39,7 @@ from sashil.identify.fit import (
     _inside,
     fit_model,
     initial_angle_tolerance,
+    one_blas_thread,
     simulate_fitted,
 )
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
@@ -344,6 +345,7 @@ def analyse(
     cal.intervals_s = time.perf_counter() - started_intervals
     if profile and best.model == "bouc-wen":
         say(f"profiling n at {', '.join(f'{v:g}' for v in N_PROFILE)} ...")
-        cal.profile = n_profile(best, fit_records, validate_records, options)
+        with one_blas_thread():
+            cal.profile = n_profile(best, fit_records, validate_records, options)
     cal.analysis_s = time.perf_counter() - started - fit_s
     return cal

@@ -28,6 +28,7 @@ output error with the linear part fixed, then the same local refinement of every
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -449,9 +450,21 @@ def _uncertainty(problem: Problem, fit) -> tuple[dict, dict, list]:
     return stderr, corr, flagged
 
 
+def one_blas_thread() -> contextlib.AbstractContextManager:
+    """BLAS on one thread within the block: the fit's matrices are tall and thin (tens of thousands
+    of samples by a dozen parameters), where BLAS's worker threads only contend for the cores."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def fit_model(name: str, records: Sequence[Record], options: FitOptions | None = None) -> FitResult:
-    """Identify model ``name`` jointly on ``records`` (see the module docstring)."""
-    options = options or FitOptions()
+    """Identify model ``name`` jointly on ``records`` (see the module docstring), BLAS on one thread."""
+    with one_blas_thread():
+        return _fit_model(name, records, options or FitOptions())
+
+
+def _fit_model(name: str, records: Sequence[Record], options: FitOptions) -> FitResult:
     started = time.perf_counter()
     model = MODELS[name]
     problem = Problem(model, records, options)
