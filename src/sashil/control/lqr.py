@@ -23,8 +23,10 @@ The laws give the weights relative to the rig's own scales (:func:`scaled_weight
 acceleration squared and q_a, q̂_θ, q̂_v, r̂ plain numbers. In the time τ = ω_n t, with the angle as
 it is, the rate θ̇2/ω_n, the acceleration θ̈2/ω_n² and the input u/k, the model and this cost depend
 on the weights and the nominal damping ratio ζ_n = c_n/(2√(kJ)) alone: one set of weights gives
-the same design, the same gains in those units and the same closed-loop poles over ω_n, on any J
-and k (the Riccati solution of the scaled problem is the unscaled one's up to a constant factor).
+the same design, the same gains in units of k and √(kJ) and the same closed-loop poles over ω_n, on
+any J and k. With r̂ = q̂_v = 0 the input sets θ̈2 freely and the design is the double integrator's:
+the closed loop asked for is θ̈2 = −√q̂_θ·ω_n²·θ − √2·q̂_θ^¼·ω_n·θ̇2 (road at rest), the spring
+softened to √q̂_θ·k and a skyhook of damping ratio q̂_θ^¼/√2.
 """
 
 from __future__ import annotations
@@ -93,7 +95,7 @@ def scaled_weights(
 ) -> tuple[float, float, float, float]:
     """The absolute weights of :func:`lqr_gains` from the relative ones of the module docstring:
     (q_a, q̂_θ·(k/J)², q̂_v·k/J, r̂/J²). A rig without a spring (k = 0) has no ω_n: its travel and
-    rate terms vanish, and a cost that needs them has no stabilising solution."""
+    rate terms vanish."""
     w2 = max(k, 0.0) / J
     return q_accel, q_theta * w2 * w2, q_body_dot * w2, r_torque / (J * J)
 
@@ -110,6 +112,6 @@ def scaled_lqr_gains(
     if q_accel == 0.0 and not k > 0.0:
         raise ConfigError(
             "controller.q_theta: the LQR has no stabilising solution for these weights (without a spring, "
-            "k = 0, the travel and rate weights, relative to k/J, vanish: only q_accel is left)"
+            "k = 0, the travel and rate weights, relative to k/J, vanish, and q_accel is 0)"
         )
     return lqr_gains(J, k, c_n, *scaled_weights(J, k, q_accel, q_theta, q_body_dot, r_torque))
