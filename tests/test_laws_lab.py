@@ -11,7 +11,7 @@ from sashil.cli import main
 from sashil.control import LawContext, LawState
 from sashil.control.law_registry import find_law
 from sashil.control.laws_lab import ClippedOptimal, GroundhookHybrid, LqrClipped, PowerDrivenDamper
-from sashil.control.lqr import lqr_gains
+from sashil.control.lqr import lqr_gains, scaled_weights
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
@@ -47,6 +47,39 @@ def test_comfort_and_travel_weights_leave_a_double_integrator():
     design = lqr_gains(1.0, k, c_n, q_accel=1.0, q_theta=rho, q_body_dot=0.0, r_torque=0.0)
     assert design.k_theta == pytest.approx(k - math.sqrt(rho))
     assert design.k_body == pytest.approx(c_n - math.sqrt(2.0) * rho**0.25)
+
+
+def test_relative_weights_are_the_rigs_own_scales():
+    # ω_n² = k/J = 4: the travel weight in units of ω_n⁴, the rate's in ω_n², the torque's in 1/J²
+    assert scaled_weights(2.0, 8.0, 1.0, 0.5, 0.25, 3.0) == pytest.approx((1.0, 8.0, 1.0, 0.75))
+    # no spring, no ω_n: the travel and rate terms vanish
+    assert scaled_weights(1.0, 0.0, 1.0, 0.5, 0.25, 0.0) == (1.0, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("J, k", [(0.5, 109.0), (2.0, 70.0), (1.0, 160.0)])
+def test_one_set_of_weights_is_the_same_design_on_any_rig(J, k):
+    # the seed rig (J 1, k 109) and another J, k at the same nominal damping ratio ζ_n: the gains in
+    # the rig's units (k_θ/k, k_v/√(kJ)) and the poles over ω_n are the same
+    def normalised(J: float, k: float) -> tuple[float, ...]:
+        c_n = 2.0 * 0.05 * math.sqrt(k * J)
+        design = lqr_gains(J, k, c_n, *scaled_weights(J, k, 1.0, 0.25, 0.1, 0.01))
+        w = math.sqrt(k / J)
+        poles = sorted(design.poles, key=lambda p: p.imag)
+        return (
+            design.k_theta / k,
+            design.k_body / math.sqrt(k * J),
+            *(x for p in poles for x in (p.real / w, p.imag / w)),
+        )
+
+    assert normalised(J, k) == pytest.approx(normalised(1.0, 109.0))
+
+
+def test_the_laws_weights_are_relative_to_the_rig():
+    # the law's gains are lqr_gains' on the scaled weights; on the seed rig (k/J = 109) q_theta 0.25
+    # is an absolute travel weight of 0.25·109² 1/(rad s²)²
+    law = LqrClipped(CONTEXT, q_theta=0.25, lqr_current_a=0.0)
+    design = lqr_gains(1.0, 109.0, 0.7, q_accel=1.0, q_theta=0.25 * 109.0**2, q_body_dot=0.0, r_torque=0.0)
+    assert (law.k_theta, law.k_body) == pytest.approx((design.k_theta, design.k_body))
 
 
 @pytest.mark.parametrize(

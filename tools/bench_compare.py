@@ -15,11 +15,13 @@ alternating signs, the coil lag 10 % slower), on ISO 8608 class C at the rig's s
 - the optimal bound (:mod:`sashil.experiments.optimal_bound`, the simulated plant's viscous envelope,
   the road known in advance): how far it lies below the best constant damping, and each law's gain
   as a share of it.
+- the same figures on the training dampers (every other one of the list, from the first: the set the
+  LQR laws' default weights were chosen on) and on the others (unseen by that choice).
 - each law's own compute per cycle (its torque/current call on recorded states), median and p99.
   Goal: <= 10 us median.
 - ``sashil compare`` with 8 laws x 30 s on the simulated rig, in 1 and 2 processes. Goal: <= 30 s.
 
-    .venv/bin/python tools/bench_compare.py [--quick] [--jobs N]
+    .venv/bin/python tools/bench_compare.py [--quick] [--jobs N] [--dampers all|train|unseen] [--json PATH]
 """
 
 from __future__ import annotations
@@ -27,11 +29,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import os
 import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
 from multiprocessing import get_context
 from pathlib import Path
 from tempfile import TemporaryDirectory
@@ -68,6 +72,25 @@ GOAL_GAIN_PCT = 10.0
 GOAL_CYCLE_US = 10.0
 GOAL_COMPARE_S = 30.0
 QUICK_DAMPERS = ("seed", "J 2")
+#: the dampers the LQR laws' default weights were chosen on: every other one of the list, from the
+#: first (each kind of variation lands on both sides); the rest are unseen by that choice
+TRAIN_DAMPERS = tuple(name for name, _ in DAMPERS[::2])
+
+
+@dataclass
+class Case:
+    """One damper and model: the best constant current, the bound, each law's gain over it [%]."""
+
+    damper: str
+    mismatch: float
+    best_current_a: float
+    rms_accel_best: float
+    bound_gain_pct: float
+    gains_pct: dict[str, float | None]
+
+    @property
+    def label(self) -> str:
+        return f"{self.damper}, {'exact' if not self.mismatch else '10 % off'}"
 
 
 def config_of(params: dict[str, float], mismatch: float) -> dict[str, Any]:
@@ -139,14 +162,53 @@ def compare_wall_s(duration: float, jobs: int) -> float:
     return wall
 
 
+def summarise(title: str, rows: list[Case]) -> None:
+    """Per law: the worst and median gain over the best constant current, and as a share of the bound."""
+    bounds = [r.bound_gain_pct for r in rows]
+    print()
+    print(f"{title}: {len(rows)} runs per law")
+    print(
+        f"  optimal bound below the best constant damping (plant's viscous envelope): worst {min(bounds):.1f} %, "
+        f"median {statistics.median(bounds):.1f} %, best {max(bounds):.1f} %"
+    )
+    print("  gain in RMS arm acceleration over the best constant current (positive: better); that gain as a share")
+    print("  of the bound's (100 %: all the bound allows)")
+    for law in LAWS:
+        done = [(r, gain) for r in rows if (gain := r.gains_pct.get(law)) is not None]
+        failed = len(rows) - len(done)
+        if not done:
+            print(f"    {law:18s} no finished run")
+            continue
+        gains = [gain for _, gain in done]
+        worst = min(done, key=lambda pair: pair[1])[0]
+        shares = [100.0 * gain / r.bound_gain_pct for r, gain in done if r.bound_gain_pct > 0]
+        share = f"; share worst {min(shares):+6.1f} %, median {statistics.median(shares):+6.1f} %" if shares else ""
+        goal = ""
+        if law in GOAL_LAWS:
+            met = not failed and min(gains) >= GOAL_GAIN_PCT
+            goal = f"   [goal >= {GOAL_GAIN_PCT:g} % on every damper: {'met' if met else 'NOT met'}]"
+        print(
+            f"    {law:18s} worst {min(gains):+6.1f} % ({worst.label}), median {statistics.median(gains):+6.1f} %"
+            + share
+            + (f"; {failed} failed" if failed else "")
+            + goal
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="two dampers, exact model, 4 s runs (CI)")
     parser.add_argument("--jobs", type=int, default=2, help="processes for the damper runs (default 2)")
+    parser.add_argument(
+        "--dampers", choices=("all", "train", "unseen"), default="all", help="which part of the spread (default all)"
+    )
+    parser.add_argument("--json", metavar="PATH", help="also write each damper's figures to PATH")
     args = parser.parse_args()
     duration = 4.0 if args.quick else 30.0
     currents = [0.0, 0.5, 1.0] if args.quick else [round(0.1 * i, 2) for i in range(11)]
     dampers = [(n, p) for n, p in DAMPERS if not args.quick or n in QUICK_DAMPERS]
+    if args.dampers != "all":
+        dampers = [(n, p) for n, p in dampers if (n in TRAIN_DAMPERS) == (args.dampers == "train")]
     mismatches = (0.0,) if args.quick else (0.0, 0.1)
     load = os.getloadavg()[0]
     print(
@@ -156,10 +218,6 @@ def main() -> None:
         f"{law[:13]:>13s}" for law in LAWS
     )
     print(header)
-    gains: dict[str, list[float]] = {law: [] for law in LAWS}
-    shares: dict[str, list[float]] = {law: [] for law in LAWS}
-    bound_gains: list[float] = []
-    worst_case: dict[str, str] = {}
     start = time.perf_counter()
     cases = [(name, params, m) for name, params in dampers for m in mismatches]
     all_jobs = [jobs_for(config_of(params, m), currents, duration) for _, params, m in cases]
@@ -174,51 +232,38 @@ def main() -> None:
         results = [run_job(job) for job in flat]
         bounds = [bound_of(config, duration) for config in configs]
     per_case = len(all_jobs[0])
+    rows: list[Case] = []
     for index, (name, _, mismatch) in enumerate(cases):
         chunk = results[index * per_case : (index + 1) * per_case]
         passive = [r for r in chunk[: len(currents)] if r.ok]
         best = min(passive, key=lambda r: r.metrics["rms_accel_rad_s2"])
         a_best = best.metrics["rms_accel_rad_s2"]
-        bound_gain = bounds[index].gain_pct
-        bound_gains.append(bound_gain)
+        case = Case(name, mismatch, float(best.label.split()[1]), a_best, bounds[index].gain_pct, {})
         cells = []
         for r in chunk[len(currents) :]:
             if not r.ok:
+                case.gains_pct[r.label] = None
                 cells.append(f"{'failed':>13s}")
                 print(f"  {name} {r.label}: {r.status}")
                 continue
             gain = 100.0 * (1.0 - r.metrics["rms_accel_rad_s2"] / a_best)
-            if not gains[r.label] or gain < min(gains[r.label]):
-                worst_case[r.label] = f"{name}, {'exact' if not mismatch else '10 % off'}"
-            gains[r.label].append(gain)
-            if bound_gain > 0:
-                shares[r.label].append(100.0 * gain / bound_gain)
+            case.gains_pct[r.label] = gain
             cells.append(f"{gain:+12.1f}%")
+        rows.append(case)
         model = "exact" if not mismatch else "10%off"
-        print(f"{name:26s} {model:6s} {best.label.split()[1]:>6s} {a_best:8.3f} {bound_gain:5.1f}% " + " ".join(cells))
-    print(f"({len(flat)} runs of {duration:g} s in {time.perf_counter() - start:.1f} s wall, {args.jobs} processes)")
-    print()
-    print("gain in RMS arm acceleration over the best constant current (positive: better)")
-    for law, values in gains.items():
-        if not values:
-            print(f"  {law:18s} no finished run")
-            continue
-        goal = (
-            f"   [goal >= {GOAL_GAIN_PCT:g} % on every damper: {'met' if min(values) >= GOAL_GAIN_PCT else 'NOT met'}]"
-        )
         print(
-            f"  {law:18s} worst {min(values):+6.1f} % ({worst_case[law]}), median {statistics.median(values):+6.1f} %"
-            + (goal if law in GOAL_LAWS else "")
+            f"{name:26s} {model:6s} {case.best_current_a:6g} {a_best:8.3f} {case.bound_gain_pct:5.1f}% "
+            + " ".join(cells)
         )
-    print()
-    print(
-        f"optimal bound below the best constant damping (plant's viscous envelope): worst {min(bound_gains):.1f} %, "
-        f"median {statistics.median(bound_gains):.1f} %, best {max(bound_gains):.1f} %"
-    )
-    print("each law's gain as a share of the bound's gain (100 %: all the bound allows)")
-    for law, values in shares.items():
-        if values:
-            print(f"  {law:18s} worst {min(values):+6.1f} %, median {statistics.median(values):+6.1f} %")
+    print(f"({len(flat)} runs of {duration:g} s in {time.perf_counter() - start:.1f} s wall, {args.jobs} processes)")
+    summarise("all dampers", rows)
+    train = [r for r in rows if r.damper in TRAIN_DAMPERS]
+    unseen = [r for r in rows if r.damper not in TRAIN_DAMPERS]
+    if train and unseen:
+        summarise("training dampers (the LQR laws' default weights were chosen on these)", train)
+        summarise("unseen dampers", unseen)
+    if args.json:
+        Path(args.json).write_text(json.dumps([asdict(r) for r in rows], indent=1))
     print()
     samples = 2_000 if args.quick else 200_000
     print(

@@ -17,7 +17,7 @@ side as +T, and is realisable only when T·θ̇ > 0 and inside the feasible band
 from __future__ import annotations
 
 from sashil.control.law_api import Law, LawState, Param
-from sashil.control.lqr import lqr_gains
+from sashil.control.lqr import scaled_lqr_gains
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
@@ -33,13 +33,15 @@ def _model(law: Law, key: str) -> tuple[BoucWenParams, float]:
 
 class _Lqr(Law):
     """T* = c_n·θ̇ − (k_θ·θ + k_v·θ̇2), the LQR torque on the rig's linear model (:mod:`sashil.control.lqr`,
-    Dyke et al. 1996 eqs. 5-8); the weights and the nominal current are parameters, the gains are
-    solved once, when the parameters are set."""
+    Dyke et al. 1996 eqs. 5-8), solved once, when the parameters are set. The weights are relative to
+    the rig's own scales (:func:`sashil.control.lqr.scaled_weights`, ω_n² = k/J): the cost is
+    q_accel·θ̈2² + q_theta·ω_n⁴·θ² + q_body_dot·ω_n²·θ̇2² + r_torque·(u/J)², so one set of weights is
+    the same design on any J and k."""
 
-    q_accel = Param(1.0, unit="1/(rad/s^2)^2", low=0.0, doc="weight of the arm acceleration θ̈2²")
-    q_theta = Param(3000.0, unit="1/rad^2", low=0.0, doc="weight of the relative angle θ² (suspension travel)")
-    q_body_dot = Param(0.0, unit="1/(rad/s)^2", low=0.0, doc="weight of the arm rate θ̇2²")
-    r_torque = Param(0.0, unit="1/(N m)^2", low=0.0, doc="weight of the torque beyond c_n·θ̇")
+    q_accel = Param(1.0, low=0.0, doc="weight of the arm acceleration θ̈2²")
+    q_theta = Param(0.5, low=0.0, doc="weight of the relative angle θ² (suspension travel), in units of ω_n⁴ = (k/J)²")
+    q_body_dot = Param(0.0, low=0.0, doc="weight of the arm rate θ̇2², in units of ω_n² = k/J")
+    r_torque = Param(0.0, low=0.0, doc="weight of the torque u beyond c_n·θ̇, in units of 1/J²")
     lqr_current_a = Param(0.0, unit="A", low=0.0, high=10.0, doc="nominal current of the model's viscous part c_n")
 
     def parameters_changed(self) -> None:
@@ -49,7 +51,7 @@ class _Lqr(Law):
                 f"controller.lqr_current_a: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {self.lqr_current_a:g}"
             )
         self.c_n = p.damping(self.lqr_current_a)
-        self.design = lqr_gains(p.J, p.k, self.c_n, self.q_accel, self.q_theta, self.q_body_dot, self.r_torque)
+        self.design = scaled_lqr_gains(p.J, p.k, self.c_n, self.q_accel, self.q_theta, self.q_body_dot, self.r_torque)
         self.k_theta, self.k_body = self.design.k_theta, self.design.k_body
 
     def desired(self, state: LawState) -> float:
