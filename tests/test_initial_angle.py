@@ -49,6 +49,12 @@ def test_angle_quantum_is_the_encoder_count():
     assert initial_angle_tolerance(records) == pytest.approx(INITIAL_ANGLE_COUNTS * COUNT, rel=1e-9)
 
 
+def test_a_first_sample_between_counts_still_finds_the_count():
+    """A record that starts at a turning point's vertex (an angle between counts) is still counts."""
+    records = _drops(1.0, first_shift_counts=0.37)
+    assert angle_quantum(records) == pytest.approx(COUNT, rel=1e-9)
+
+
 def test_angles_that_are_not_counts_get_no_tolerance():
     t = np.arange(0.0, 1.0, 1e-3)
     smooth = record_from_columns(
