@@ -93,7 +93,12 @@ def board(tmp_path_factory) -> Iterator[Path]:
     )
     assert done.returncode == 0, done.stderr
     link = build / "board"
-    with qemu.QemuBoard(build / "cortex-m4" / "sashil-board-qemu.elf", link=link):
+    # -icount: QEMU's virtual clock counts the image's instructions (8 ns each) and, while the image
+    # waits for its next tick, the host's time (sleep=on): the board's SysTick then runs on a clock of
+    # its own, not on the moments a busy host happens to schedule QEMU's vCPU
+    with qemu.QemuBoard(
+        build / "cortex-m4" / "sashil-board-qemu.elf", link=link, extra=["-icount", "shift=3,sleep=on"]
+    ):
         port = Port(link)  # the image enables its USART within microseconds; wait until it answers
         try:
             port.wait(Version, 10.0, resend=(Hello(),))
