@@ -295,6 +295,11 @@ class KalmanRigEstimator(EstimatorOutputs):
             x[3] = rv + dt * ra + g[3][0] * e_arm + g[3][1] * e_road
             x[4] = ra - (road_accel or 0.0) + g[4][0] * e_arm + g[4][1] * e_road
             x[5] = b + g[5][0] * e_arm + g[5][1] * e_road
+        self._publish()
+
+    def _publish(self) -> None:
+        """The state vector's estimates under the names the laws read; the arm's rate θ̇2 = θ̇ + θ̇1."""
+        x = self.x
         self.theta_rad = x[0]
         self.theta_dot_rad_s = x[1]
         self.theta_road_rad = x[2]
@@ -399,11 +404,5 @@ class KalmanRigEstimator(EstimatorOutputs):
                 / scale
             )
             self._innovation(worst, self.innovation_limit * EDGE_LIMIT_SHARE)
-        x = self.x
-        x[:] = xa.tolist()
-        self.theta_rad = x[0]
-        self.theta_dot_rad_s = x[1]
-        self.theta_road_rad = x[2]
-        self.road_dot_rad_s = x[3]
-        self.road_ddot_rad_s2 = x[4]
-        self.body_dot_rad_s = x[1] + x[3]
+        self.x[:] = xa.tolist()
+        self._publish()
