@@ -16,7 +16,6 @@ from sashil.cli.common import (
     setup_logging,
 )
 
-HELP = "calibrate: run the drop-test/road plan on the rig, fit the damper model, validate it on held-out runs"
 EXAMPLE = "sashil calibrate --driver serial --port /dev/ttyACM0 --inertia 0.95 --out runs/cal"
 
 MODEL_CHOICES = ("bouc-wen", "dahl", "lugre", "bingham", "all")

@@ -40,7 +40,6 @@ from sashil.experiments.road_option import parse_road
 from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.recording.run_folder import RunFolder
 
-HELP = "run several laws on the same road and compare them (compare.md, metrics.csv, compare.png)"
 EXAMPLE = "sashil compare --road iso8608:C --duration 30 --controller skyhook-add --controller clipped-optimal"
 DEFAULT_ROAD = "iso8608:C"
 

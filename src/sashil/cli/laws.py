@@ -8,7 +8,6 @@ from typing import Any
 
 from sashil.control.law_registry import LawEntry, find_law, known_laws
 
-HELP = "list the control laws found (built-in, installed packages, or a given class) and their parameters"
 EXAMPLE = "sashil laws --law examples/soft_skyhook/soft_skyhook.py:SoftSkyhook"
 
 

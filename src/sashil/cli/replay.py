@@ -12,7 +12,6 @@ import numpy as np
 from sashil.cli.common import add_config_options, add_output_options, law_help, resolve_config, say
 from sashil.errors import DataFileError
 
-HELP = "run a law offline on a recorded run's samples: what it would have commanded, beside what was"
 EXAMPLE = "sashil replay runs/bench-skyhook --controller groundhook --set controller.c_ground=2"
 
 

@@ -13,7 +13,6 @@ from sashil.recording.matlab import export_mat
 from sashil.recording.report import write_report
 from sashil.recording.run_folder import RunFolder
 
-HELP = "report on run folders: θ(t) overlays, hysteresis loops, transmissibility, timing, report.md"
 EXAMPLE = "sashil report runs/drop-0A runs/drop-1A --out runs/compare"
 
 

@@ -13,7 +13,6 @@ from sashil.config.sections import SIMULATE
 from sashil.errors import ConfigError
 from sashil.models.registry import MODEL_PARAMS
 
-HELP = "simulate a model (from --params) on recorded inputs or a drop test, for validation"
 EXAMPLE = "sashil simulate --params params.yaml --input runs/a/data.csv --out runs/sim-a"
 
 

@@ -23,8 +23,9 @@ from sashil.cli.common import (
     resolve_config,
     select_law,
     setup_logging,
+    start_can_trace,
+    write_formats,
 )
-from sashil.cli.outputs import start_can_trace, write_formats
 from sashil.control.registry import make_controller
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import (
@@ -43,7 +44,6 @@ from sashil.recording.run_set import RunSet
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.stats import nrmse
 
-HELP = "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)"
 EXAMPLE = "sashil sweep --f-start 0.5 --f-stop 5 --duration 30 --controller skyhook-onoff"
 
 

@@ -12,7 +12,6 @@ from sashil.errors import ConfigError
 from sashil.runtime.tune_socket import request
 from sashil.runtime.tuning import RAMP_KEY, check_ramp
 
-HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
 EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.tune_ramp_s=1"
 
 

@@ -11,7 +11,7 @@ e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'``.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import yaml
@@ -55,17 +55,22 @@ def _set(doc: dict[str, Any], path: list[str], value: Any) -> None:
 def apply_overrides(config: dict[str, Any], overrides: Iterable[str], source: str = SOURCE) -> dict[str, Any]:
     """A validated copy of ``config`` with each ``section.key=value`` override applied in order
     (``source``: the option named in error messages)."""
-    overrides = list(overrides)
-    if not overrides:
-        return config
-    doc = copy.deepcopy(config)
-    parsed = [parse_override(text) for text in overrides]
-    for path, value in parsed:
+    return apply_values(config, [parse_override(text) for text in overrides], source)
+
+
+def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], Any]], source: str) -> dict[str, Any]:
+    """A validated copy of ``config`` with each ``(dotted path, value)`` set in order, checked as a
+    config file is (``source``: the option named in error messages); ``config`` itself when there is
+    nothing to set."""
+    if not values:
+        return config  # type: ignore[return-value]
+    doc: dict[str, Any] = copy.deepcopy(dict(config))
+    for path, value in values:
         if path == ["controller", "law"] and isinstance(doc.get("controller"), dict):
             # the previous law's parameters go with it, unless set alongside the new law
             from sashil.control.law_config import switch_law
 
-            keep = {p[1] for p, _ in parsed if len(p) == 2 and p[0] == "controller"}
+            keep = {p[1] for p, _ in values if len(p) == 2 and p[0] == "controller"}
             switch_law(doc["controller"], value, keep)
         else:
             _set(doc, path, value)

@@ -41,7 +41,12 @@ DRIVER = Section(
     {
         "name": Field("choice", "sim", choices=tuple(BACKENDS)),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
-        "clock": Field("choice", "virtual", choices=("virtual", "real"), doc="sim backend only"),
+        "clock": Field(
+            "choice?",
+            None,
+            choices=("virtual", "real"),
+            doc="sim backend only; null: the verb's own (virtual for drop-test, sweep, calibrate; real for run)",
+        ),
         # serial and can backends (drivers/protocol.md)
         "baud": Field("int", 1_000_000, low=1200, high=100_000_000, doc="serial line rate (ignored by ptys)"),
         "can_interface": Field(
@@ -56,6 +61,13 @@ DRIVER = Section(
             "float", 25.0, low=0.0, high=60_000.0, doc="the run ends after this long without a sample"
         ),
         "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
+        "max_lost_fraction": Field(
+            "float",
+            0.05,
+            low=0.0,
+            high=1.0,
+            doc="a run over a link that lost more than this share of its samples ends 'lossy' (exit 5), data kept",
+        ),
     },
     doc="which backend talks to the rig",
 )
@@ -70,6 +82,13 @@ LOOP = Section(
             "choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"
         ),
         "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
+        "max_missed_fraction": Field(
+            "float",
+            0.05,
+            low=0.0,
+            high=1.0,
+            doc="a run that missed more than this share of its scheduled deadlines ends 'lossy' (exit 5), data kept",
+        ),
         "rt": Section(
             {
                 "priority": Field("int", 50, low=0, high=99, doc="SCHED_FIFO priority (0: leave the scheduler alone)"),

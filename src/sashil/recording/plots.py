@@ -126,6 +126,8 @@ def run_title(summary: dict | None, config: dict[str, Any] | None = None) -> str
         parts.append(f"lateness p99 {late['p99']:.0f} µs")
     if summary.get("trips"):
         parts.append(f"{len(summary['trips'])} trip(s)")
+    if summary.get("exit_status") == "lossy":
+        parts.append(f"LOSSY: {summary.get('error')}")
     return f"{title}: " + ", ".join(parts)
 
 

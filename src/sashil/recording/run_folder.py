@@ -129,6 +129,16 @@ class RunFolder:
     def file(self, name: str) -> Path:
         return self.path / name
 
+    def discard(self) -> None:
+        """Remove what this folder holds (and the folder, when this process made it): a run that
+        never started leaves nothing behind."""
+        made = next((was_made for path, was_made in CREATED if path == self.path), True)
+        if made:
+            shutil.rmtree(self.path, ignore_errors=True)
+        else:
+            for child in self.path.iterdir():
+                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+
     def recorded(self) -> bool:
         """Whether any recorded row (``data.csv`` or ``cycles.csv``, here or in a sub-folder) is on disk."""
         return any(_has_rows(f) for name in DATA_FILES for f in self.path.rglob(name))

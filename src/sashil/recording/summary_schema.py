@@ -8,8 +8,8 @@ Every summary has the common keys below, whatever the verb; a verb adds its own 
 =================  ====================================================================
 ``schema_version`` 1 (raised when a common key changes meaning or is removed)
 ``verb``           the verb that wrote the folder: run, drop-test, sweep, simulate, ...
-``exit_status``    ok | stopped | safety_trip | deadline_missed | error
-``exit_code``      the process exit code of that status (0, 130, 3, 4, 1 or the error's)
+``exit_status``    ok | stopped | safety_trip | deadline_missed | lossy | error
+``exit_code``      the process exit code of that status (0, 130, 3, 4, 5, 1 or the error's)
 ``error``          one line, or null
 ``driver``         sim | serial | can, or null when no rig was driven (simulate)
 ``controller``     what commanded the damper (``passive 0.5 A``, ``skyhook``, ...), or null

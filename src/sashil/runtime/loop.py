@@ -291,6 +291,7 @@ class ControlLoop:
     def _overrun(self, t_ns: int, late_ns: int) -> None:
         missed = late_ns // self.period_ns
         timing = self.timing
+        timing.skip(late_ns, self.period_ns, missed)
         if self.overrun_policy == "fail":
             timing.missed_deadlines += missed
             timing.overruns += 1

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DataFileError, DiskSpaceError, Stopped, exit_code_of
+from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
 from sashil.models.hysteresis import compile_kernels
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
@@ -76,6 +76,29 @@ def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | N
             "free some space or choose --out on another disk"
         )
     return need
+
+
+def losses(config: dict[str, Any], timing: Any, link: dict[str, Any] | None) -> LossError | None:
+    """The :class:`~sashil.errors.LossError` of a run that missed more of its scheduled deadlines than
+    ``loop.max_missed_fraction`` or lost more of its samples than ``driver.max_lost_fraction``
+    allows, naming what was lost and the key; None when it stayed within both."""
+    problems = []
+    scheduled = timing.cycles + timing.missed_deadlines
+    allowed = float(config["loop"]["max_missed_fraction"])
+    if scheduled and timing.missed_deadlines > allowed * scheduled:
+        problems.append(
+            f"missed {timing.missed_deadlines} of {scheduled} deadlines ({100 * timing.missed_deadlines / scheduled:.2g} %; "
+            f"loop.max_missed_fraction allows {100 * allowed:g} %)"
+        )
+    if link:
+        lost = int(link.get("samples_missed", 0))
+        expected = int(link.get("samples", 0)) + lost
+        allowed = float(config["driver"]["max_lost_fraction"])
+        if expected and lost > allowed * expected:
+            problems.append(
+                f"lost {lost} of {expected} samples ({100 * lost / expected:.2g} %; driver.max_lost_fraction allows {100 * allowed:g} %)"
+            )
+    return LossError("the run " + " and ".join(problems) + "; its data are kept") if problems else None
 
 
 @dataclass
@@ -232,12 +255,19 @@ def run_plan(
             stream = {}
     if scratch is not None:
         scratch.cleanup()
+    link = rig.link_stats() if capabilities_of(rig).link else None
+    lost = losses(config, loop.timing, link) if error is None and loop.result.exit_status == "ok" else None
+    if lost is not None:  # a run that lost what the config does not allow does not end ok
+        error = lost
+        loop.result.exit_status = "lossy"
+        loop.result.error = str(lost)
+        say(str(lost))
     return RunOutcome(
         loop,
         error,
         flag,
         realtime=rt.report() if rt is not None else {},
         recording=recorder.summary() if recorder is not None else None,
-        link=rig.link_stats() if capabilities_of(rig).link else None,
+        link=link,
         stream=stream,
     )

@@ -15,7 +15,7 @@ outcome), ``recording`` (rows written/dropped) and ``controller``.
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -74,12 +74,15 @@ def run_session(
     realtime: bool = True,
     live: Any = None,
     tune: bool = False,
+    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
 ) -> SessionOutcome:
     """Run ``stage`` on ``rig`` in closed loop through the one runner
     (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
     timing file and ``summary.json`` (see module doc). ``tune``: serve live changes of the stage's
     law on the folder's tuning socket while the loop runs (:mod:`sashil.runtime.tune_socket`),
-    recorded in ``events.csv`` and ``summary.json``'s ``tuning``."""
+    recorded in ``events.csv`` and ``summary.json``'s ``tuning``. ``finish``: the verb's one hook,
+    called with the session's summary once the data and timing are on disk; the keys it returns are
+    added before ``summary.json`` is written, once."""
     folder.write_config(config)
     tuning, server = open_tuning(config, stage, folder, say) if tune else (None, None)
     try:
@@ -114,5 +117,7 @@ def run_session(
         "live_view": live_stats,
         "tuning": tuning.summary() if tuning is not None else None,
     }
+    if finish is not None:
+        summary.update(finish(summary))
     folder.write_summary(summary)
     return SessionOutcome(result, summary, outcome.error, outcome.exit_code)

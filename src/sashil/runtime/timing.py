@@ -13,7 +13,9 @@ Nothing is allocated per cycle.
 (``rate_hz``, ``cycles``, ``missed_deadlines``, ``lateness_us``, ``compute_us``) and, beside them,
 ``read_us``, ``write_us`` and ``cycle_us`` (read+compute+write): p50/p99/p99.9 exact while the run
 fits in the ring, from the histograms beyond it (``quantiles_from``: ``exact`` or ``histogram``);
-``max`` always exact. ``recent(name)`` is the ring's content in cycle order (what ``timing.npz``
+``max`` always exact. Lateness counts every *scheduled* cycle: the deadlines an overrun skipped
+(:meth:`TimingStats.skip`) enter its quantiles with the lateness each had when the late cycle
+finally ran, so a run that lost half its deadlines cannot report a small p99. ``recent(name)`` is the ring's content in cycle order (what ``timing.npz``
 holds: the last ``window`` cycles).
 """
 
@@ -99,6 +101,21 @@ class TimingStats:
         self.cycles = 0
         self.missed_deadlines = 0  # whole periods skipped because a cycle started too late
         self.overruns = 0  # occasions on which periods were skipped
+        #: lateness of the skipped deadlines (ns), kept for exact quantiles up to ``window`` of them
+        self.skipped_lateness: list[np.ndarray] = []
+        self.skipped_kept = 0
+
+    def skip(self, late_ns: int, period_ns: int, missed: int) -> None:
+        """Count the ``missed`` deadlines an overrun skipped: the cycle that ran ``late_ns`` after its
+        deadline passed the next ``missed`` ones, each then ``late_ns - j * period_ns`` late (j = 1..)."""
+        if missed <= 0:
+            return
+        values = late_ns - period_ns * np.arange(1, missed + 1, dtype=np.int64)
+        self.histograms["lateness"] += np.bincount(bucket_of(values), minlength=N_BUCKETS)
+        room = self.window - self.skipped_kept
+        if room > 0:
+            self.skipped_lateness.append(values[:room])
+            self.skipped_kept += min(room, missed)
 
     # the loop's side -------------------------------------------------------------------------
     def fold(self) -> None:
@@ -139,11 +156,17 @@ class TimingStats:
         return self.recent(name).astype(float) * 1e-3
 
     def stats_us(self, name: str) -> dict[str, float | None]:
-        """``{p50, p99, p99_9, max}`` of a column (or ``cycle``) in µs (None for an empty run)."""
-        if self.cycles <= self.window:  # all of it is in the ring: exact
+        """``{p50, p99, p99_9, max}`` of a column (or ``cycle``) in µs (None for an empty run); lateness
+        with the skipped deadlines (see module doc)."""
+        skipped = self.missed_deadlines if name == "lateness" else 0
+        exact = self.cycles <= self.window and skipped <= self.skipped_kept
+        if exact:  # all of it is in the ring (and the skipped deadlines kept): exact
             if name == "cycle":
                 return quantiles_us(self.column_us("read") + self.column_us("compute") + self.column_us("write"))
-            return quantiles_us(self.column_us(name))
+            values = self.column_us(name)
+            if skipped:
+                values = np.concatenate([values, *(part.astype(float) * 1e-3 for part in self.skipped_lateness)])
+            return quantiles_us(values)
         self.fold()
         counts = self.histograms[name]
         out: dict[str, float | None] = {key: round(histogram_quantile_ns(counts, q) * 1e-3, 3) for key, q in QUANTILES}

@@ -1,0 +1,43 @@
+"""sashil's experiments as library functions: each takes a resolved config and its options and
+returns the :class:`~sashil.api.Run` of the folder it wrote.
+
+* :func:`drop_test` (``sashil drop-test``), :func:`closed_loop` (``sashil run``);
+* :func:`resolve` turns a :class:`ConfigSource` (file, parameters, ``--set``, law, driver, port,
+  the verb's options) into the read-only config they take;
+* progress, operator prompts, results and warnings reach the caller as :class:`Event` objects
+  (``on_event``); the command line prints them, a script or a page receives them.
+
+The command line (:mod:`sashil.cli`) and ``sashil.run``/``sashil.drop_test`` are thin callers of
+these functions. Names load on first use, so importing this package costs nothing.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sashil.config.resolve import ConfigSource, Option, resolve
+    from sashil.lab.closed_loop import closed_loop
+    from sashil.lab.drop_test import drop_test
+    from sashil.lab.events import Event
+    from sashil.lab.outputs import Outputs
+
+_LAZY = {
+    "ConfigSource": "sashil.config.resolve",
+    "Option": "sashil.config.resolve",
+    "resolve": "sashil.config.resolve",
+    "closed_loop": "sashil.lab.closed_loop",
+    "drop_test": "sashil.lab.drop_test",
+    "Event": "sashil.lab.events",
+    "Outputs": "sashil.lab.outputs",
+}
+
+__all__ = ["ConfigSource", "Event", "Option", "Outputs", "closed_loop", "drop_test", "resolve"]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sashil.lab' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

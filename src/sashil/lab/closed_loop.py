@@ -1,0 +1,148 @@
+"""``sashil run`` as a library function: the rig in closed loop on the real clock, at a fixed
+rate, under a law and a road, into a run folder (data.csv, timing, run.png, summary.json)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from sashil.api import Run, load_run
+from sashil.errors import ConfigError, SashilError
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+
+__all__ = ["build_stage", "check_run", "closed_loop"]
+
+
+def check_run(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+    """The ``run`` keys a run can honour: the road parses (named as the option or key that gave it)."""
+    from sashil.experiments.road_option import parse_road
+
+    spec = config["run"]["road"]
+    try:
+        parse_road(spec, config)  # type: ignore[arg-type]
+    except ConfigError as err:
+        where = named("run.road")
+        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
+
+
+def build_stage(config: dict[str, Any]) -> tuple[str, Any]:
+    """The loop stage of the config's law and its label (the built-in passive law runs as a constant
+    current: no estimator or observer needed)."""
+    name = config["controller"]["law"]
+    if name == "passive":
+        from sashil.control.law_config import law_context
+        from sashil.control.laws import Passive
+        from sashil.runtime.stages import ConstantCurrent
+
+        law = Passive(law_context(config), current_a=float(config["controller"]["current_a"]))
+        return f"passive {law.current_a:g} A", ConstantCurrent(law=law)
+    from sashil.control.registry import make_controller
+
+    return name, make_controller(name, config)
+
+
+def closed_loop(
+    config: Any,
+    outputs: Outputs | None = None,
+    on_event: Listener = ignore,
+    *,
+    progress: bool = False,
+    tune: bool = True,
+) -> Run:
+    """Run the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    ``run``) in closed loop for ``run.duration_s`` (None: until stopped by a signal) and return its
+    folder as a :class:`~sashil.api.Run`.
+
+    ``progress``: a progress bar on the terminal. ``tune``: serve live changes of the law on the
+    folder's socket (``sashil tune``). Bad input (a port that cannot be opened) raises ConfigError
+    with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
+    from sashil.drivers import open_rig
+    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.recording.plots import plot_run, plot_timing
+    from sashil.recording.run_folder import RunFolder
+    from sashil.recording.run_progress import RunProgress, SessionHooks
+    from sashil.runtime.clock import RealClock
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.session import run_session
+    from sashil.runtime.timing import format_timing
+
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.check(config["driver"]["name"])
+    duration = config["run"]["duration_s"]
+    rate = float(config["loop"]["rate_hz"])
+    backend = config["driver"]["name"]
+    rig = open_rig(config)  # built, not opened
+    try:
+        label, stage = build_stage(config)
+        road, road_text = parse_road(config["run"]["road"], config)
+        if road is not None:
+            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+        # open the port and greet the board now (configure is idempotent; the loop's own call finds
+        # it done): a port that cannot be opened is one line, before any set-up, output or folder
+        rig.configure()
+    except BaseException:
+        rig.close()
+        raise
+    folder = RunFolder.create(outputs.out, "run")
+    live = outputs.open_live_tap(config, record_columns(stage), "sashil run", folder.path)
+    if progress:  # a bar on a terminal, a line every 10 s otherwise
+        live = SessionHooks(live, RunProgress(duration, rate))
+    clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
+    on_event(
+        Event(
+            "progress",
+            f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
+            f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+        )
+    )
+    trace = outputs.start_can_trace(rig, folder.path)
+    trace_stats: dict[str, Any] | None = None
+
+    def finish(summary: dict[str, Any]) -> dict[str, Any]:
+        """The run's own keys, its --format files and plots, before the one summary.json is written."""
+        nonlocal trace_stats
+        trace_stats = trace.close() if trace is not None else None
+        extra: dict[str, Any] = {"road": road_text}
+        if trace_stats is not None:
+            extra["can_trace"] = trace_stats
+        if (folder.path / "data.csv").exists():
+            outputs.write_formats(
+                folder.path,
+                config,
+                "run",
+                exit_status=summary.get("exit_status", "ok"),
+                controller=summary.get("controller"),
+            )
+            plot_run(folder.path / "run.png", folder.path, {**summary, **extra})
+        timing = load_run(folder.path).timing
+        if timing is not None and len(timing.get("lateness_ns", ())):
+            plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
+        return extra
+
+    def say(line: str) -> None:
+        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
+
+    try:
+        outcome = run_session(
+            config, rig, stage, folder, clock, duration, controller=label, live=live, say=say, tune=tune, finish=finish
+        )
+    finally:
+        if trace is not None and trace_stats is None:
+            trace.close()
+    if isinstance(outcome.error, SashilError) and outcome.error.exit_code == ConfigError.exit_code:
+        folder.discard()
+        raise outcome.error  # bad input (a port that cannot be opened): nothing ran, no folder
+    summary = outcome.summary
+    on_event(Event("result", format_timing(summary["timing"]), {"timing": summary["timing"]}))
+    for trip in summary["trips"]:
+        on_event(Event("warning", f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", trip))
+    on_event(Event("folder", f"run folder: {folder.path}", {"folder": str(folder.path)}))
+    if outcome.result.exit_status == "stopped":
+        on_event(Event("warning", f"sashil run: stopped by {outcome.result.stop_reason}; damper at 0 A"))
+    error = outcome.error
+    if error is not None and not isinstance(error, KeyboardInterrupt):
+        if isinstance(error, SashilError):
+            raise error
+        raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
+    return load_run(folder.path)
