@@ -8,13 +8,9 @@ bring in what they need when they are first touched.
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
-try:  # the one version is pyproject.toml's [project] version, read from the installed metadata
-    __version__ = version("sashil")
-except PackageNotFoundError:  # pragma: no cover - running from a tree that was never installed
-    __version__ = "0+unknown"
+from sashil._version import __version__
 
 if TYPE_CHECKING:
     from sashil.api import Run, load_run

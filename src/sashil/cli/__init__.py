@@ -20,6 +20,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import NamedTuple, NoReturn
 
+from sashil._version import __version__
 from sashil.errors import (
     EXIT_STATUS_CODES,
     EXIT_STOPPED,
@@ -113,15 +114,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("sashil")
-    except PackageNotFoundError:  # pragma: no cover - a tree that was never installed
-        return "0+unknown"
-
-
 def add_verb(sub: argparse._SubParsersAction, verb: str) -> argparse.ArgumentParser:
     """The parser of ``verb``, its module imported and its arguments added."""
     entry = VERBS[verb]
@@ -149,7 +141,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
     wanted = set(VERBS) if argv is None else {next((a for a in argv if not a.startswith("-")), "")}
     for verb, entry in VERBS.items():
