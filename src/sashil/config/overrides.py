@@ -24,20 +24,21 @@ from sashil.errors import ConfigError
 SOURCE = "--set"
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """``"loop.rt.priority=0"`` -> ``(["loop", "rt", "priority"], 0)``; the value is read as YAML."""
+def parse_override(text: str, source: str = SOURCE) -> tuple[list[str], Any]:
+    """``"loop.rt.priority=0"`` -> ``(["loop", "rt", "priority"], 0)``; the value is read as YAML
+    (``source``: the option or command named in an error)."""
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value (e.g. loop.rate_hz=500)")
+        raise ConfigError(f"{source} {text!r}: expected section.key=value (e.g. loop.rate_hz=500)")
     path = key.split(".")
     if len(path) < 2 or any(not part for part in path):
-        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value, with a dotted key (e.g. loop.rate_hz=500)")
+        raise ConfigError(f"{source} {text!r}: expected section.key=value, with a dotted key (e.g. loop.rate_hz=500)")
     try:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError as err:
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise ConfigError(f"{SOURCE}: {key}: not a valid YAML value ({problem}): {raw!r}") from None
+        raise ConfigError(f"{source}: {key}: not a valid YAML value ({problem}): {raw!r}") from None
     return path, value
 
 

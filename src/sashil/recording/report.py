@@ -19,7 +19,6 @@ law's parameters and current (not by its folder), and writes:
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -28,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from sashil.api import load_run
 from sashil.errors import DataFileError
-from sashil.recording.data_file import read_data_csv
 from sashil.recording.labels import (
     changed_parameters,
     controller_label,
@@ -40,7 +39,7 @@ from sashil.recording.labels import (
     law_parameters,
     unique_labels,
 )
-from sashil.recording.plots import BESIDE, pyplot, read_run_config, save_figure
+from sashil.recording.plots import BESIDE, pyplot, save_figure
 
 #: the drop-test torque's low-pass cut-off as a multiple of the natural frequency sqrt(k/J)/2pi
 DROP_CUTOFF_RATIO = 3.0
@@ -75,29 +74,12 @@ class RunRecord:
     config: dict[str, Any] = field(default_factory=dict)
 
 
-def _read_json(path: Path) -> dict[str, Any]:
+def _model_params(config: dict[str, Any]) -> dict[str, float] | None:
+    """k, J of a run's config (None when it has no model)."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataFileError(f"{path}: no such file (is {path.parent} a sashil run folder?)") from None
-    except (OSError, ValueError) as err:
-        raise DataFileError(f"{path}: not readable JSON ({err})") from None
-    if not isinstance(doc, dict):
-        raise DataFileError(f"{path}: expected a JSON object")
-    return doc
-
-
-def _model_params(folder: Path) -> dict[str, float] | None:
-    """k, J of the run's config.yaml (None when absent)."""
-    try:
-        import yaml
-
-        config = yaml.safe_load((folder / "config.yaml").read_text(encoding="utf-8"))
         params = config["model"]["params"]
         return {"k": float(params["k"]), "J": float(params.get("J", 1.0))}
-    except (OSError, KeyError, TypeError, ValueError, ImportError):
-        return None
-    except Exception:
+    except (KeyError, TypeError, ValueError):
         return None
 
 
@@ -111,38 +93,37 @@ def _trace_label(entry: dict[str, Any] | None, summary: dict[str, Any], config: 
     return controller_label(summary, config)
 
 
-def load_run(path: str | Path) -> RunRecord:
-    """One run folder: its summary, its traces (one per drop-test current), sweep table, timing."""
-    path = Path(path)
-    if not path.is_dir():
-        raise DataFileError(f"{path}: not a folder (expected a sashil run folder)")
-    summary = _read_json(path / "summary.json")
-    config = read_run_config(path)
-    record = RunRecord(path, controller_label(summary, config), summary, config=config)
-    runs = summary.get("runs") if isinstance(summary.get("runs"), list) else None
+def read_record(path: str | Path) -> RunRecord:
+    """One run folder as the report needs it: its summary, its traces (one per drop-test current),
+    sweep table and timing, read through :func:`sashil.api.load_run`, the one run-folder reader."""
+    run = load_run(path)
+    if not (run.path / "summary.json").is_file():
+        raise DataFileError(f"{run.path / 'summary.json'}: no such file (is {run.path} a sashil run folder?)")
+    summary, config = run.summary, run.config
+    record = RunRecord(run.path, controller_label(summary, config), summary, config=config)
+    entries = summary.get("runs") if isinstance(summary.get("runs"), list) else None
     if summary.get("mode") == "stepped":
-        runs = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
-    if runs:
-        for entry in runs:
-            sub = path / str(entry.get("folder", "."))
-            columns = read_data_csv(sub / "data.csv")
-            params = _model_params(sub) or _model_params(path)
-            record.traces.append(Trace(_trace_label(entry, summary, config), columns, entry, params, path.name))
-    elif (path / "data.csv").exists():
-        columns = read_data_csv(path / "data.csv")
-        record.traces.append(Trace(record.label, columns, None, _model_params(path), path.name))
-    table = path / "transmissibility.csv"
-    if table.exists():
-        record.sweep = read_data_csv(table, required=("frequency_hz", "transmissibility"), min_rows=1)
-    timing = path / "timing.npz"
-    if timing.exists():
-        try:
-            with np.load(timing) as data:
-                record.timing = {name: np.asarray(data[name]) for name in data.files}
-        except (OSError, ValueError) as err:
-            raise DataFileError(f"{timing}: not a readable timing file ({err})") from None
+        entries = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
+    for sub in run.runs if entries or run.data_file is not None else ():
+        if sub.data_file is None:
+            continue
+        columns = sub.data
+        missing = [name for name in ("time_s", "theta_rad", "current_a") if name not in columns]
+        if missing:
+            raise DataFileError(f"{sub.data_file}: missing column(s) {', '.join(missing)}")
+        entry = sub.metrics if entries else None
+        label = _trace_label(entry, summary, config) if entries else record.label
+        params = _model_params(sub.config) or _model_params(config)
+        record.traces.append(Trace(label, columns, entry, params, run.path.name))
+    table = run.tables.get("transmissibility")
+    if table is not None:
+        for name in ("frequency_hz", "transmissibility"):
+            if name not in table:
+                raise DataFileError(f"{run.path / 'transmissibility.csv'}: missing column {name}")
+        record.sweep = table
+    record.timing = run.timing
     if not record.traces and record.sweep is None:
-        raise DataFileError(f"{path}: no data.csv or transmissibility.csv in this run folder")
+        raise DataFileError(f"{run.path}: no data.csv or transmissibility.csv in this run folder")
     return record
 
 
@@ -518,7 +499,7 @@ def write_report(
     runs = []
     for run_dir in run_dirs:
         progress(f"reading {run_dir}")
-        runs.append(load_run(run_dir))
+        runs.append(read_record(run_dir))
     name_uniquely(runs)
     traces = [trace for run in runs for trace in run.traces]
     plots: list[Path] = []

@@ -104,6 +104,7 @@ class RunFolder:
         self.path = path
         self.verb = verb
         self.started_utc = utc_now()
+        self.summary_written = False
 
     @classmethod
     def create(cls, out: str | Path | None, verb: str, root: str | Path = "runs") -> RunFolder:
@@ -181,7 +182,12 @@ class RunFolder:
         return target
 
     def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
-        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`."""
+        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`, written once,
+        at the end of the run (a second write is a bug: RuntimeError)."""
+        if name == "summary.json":
+            if self.summary_written:
+                raise RuntimeError(f"{self.path}: summary.json is written once, at the end of the run")
+            self.summary_written = True
         doc = {
             **normalise(summary, self.verb),
             "started_utc": self.started_utc.isoformat(),
