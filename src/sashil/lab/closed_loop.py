@@ -11,7 +11,7 @@ from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 
-__all__ = ["build_stage", "check_run", "closed_loop"]
+__all__ = ["check_run", "closed_loop"]
 
 
 def check_run(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
@@ -24,22 +24,6 @@ def check_run(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
     except ConfigError as err:
         where = named("run.road")
         raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
-
-
-def build_stage(config: dict[str, Any]) -> tuple[str, Any]:
-    """The loop stage of the config's law and its label (the built-in passive law runs as a constant
-    current: no estimator or observer needed)."""
-    name = config["controller"]["law"]
-    if name == "passive":
-        from sashil.control.law_config import law_context
-        from sashil.control.laws import Passive
-        from sashil.runtime.stages import ConstantCurrent
-
-        law = Passive(law_context(config), current_a=float(config["controller"]["current_a"]))
-        return f"passive {law.current_a:g} A", ConstantCurrent(law=law)
-    from sashil.control.registry import make_controller
-
-    return name, make_controller(name, config)
 
 
 def closed_loop(
@@ -57,6 +41,7 @@ def closed_loop(
     ``progress``: a progress bar on the terminal. ``tune``: serve live changes of the law on the
     folder's socket (``sashil tune``). Bad input (a port that cannot be opened) raises ConfigError
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
+    from sashil.control.registry import make_stage
     from sashil.drivers import open_rig
     from sashil.experiments.road_option import RoadStage, parse_road
     from sashil.recording.plots import plot_run, plot_timing
@@ -74,7 +59,7 @@ def closed_loop(
     backend = config["driver"]["name"]
     rig = open_rig(config)  # built, not opened
     try:
-        label, stage = build_stage(config)
+        label, stage = make_stage(config)
         road, road_text = parse_road(config["run"]["road"], config)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed

@@ -23,13 +23,11 @@ __all__ = ["drop_test", "result_line"]
 
 
 def _controller(config: Any) -> Any:
-    """The config's controller, which takes over at the release (None: the constant current)."""
-    law = config["controller"]["law"]
-    if law == "passive":
-        return None
-    from sashil.control.registry import make_controller
+    """The config's controller, which takes over at the release (None: a law that reads no state,
+    such as the passive law: the drop's constant current throughout)."""
+    from sashil.control.registry import law_reads_state, make_controller
 
-    return make_controller(law, config)
+    return make_controller(None, config) if law_reads_state(config) else None
 
 
 def _label(current: float) -> str:
@@ -66,10 +64,10 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
     theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
     currents = [float(value) for value in section["currents_a"]]
     outputs.check(config["driver"]["name"])
-    _controller(config)  # bad controller parameters fail here, before a folder exists
+    closed = _controller(config) is not None  # bad controller parameters fail here, before a folder exists
     folder = RunFolder.create(outputs.out, "drop-test")
     law = config["controller"]["law"]
-    columns = DROP_COLUMNS + (CONTROLLER_COLUMNS if law != "passive" else ())
+    columns = DROP_COLUMNS + (CONTROLLER_COLUMNS if closed else ())
     live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     folder.write_config(config)
@@ -78,7 +76,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
         "drop-test",
         {
             "driver": config["driver"]["name"],
-            "controller": law if law != "passive" else "passive (constant current per run)",
+            "controller": law if closed else f"{law} (constant current per run)",
             "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
         },
         several=len(currents) > 1,
@@ -86,7 +84,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
     overlay = []
     prompt = lambda line: on_event(Event("prompt", line))  # noqa: E731
     for current in currents:
-        label = f"{law} (from {current:g} A until the release)" if law != "passive" else f"passive {current:g} A"
+        label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = runs.folder_for(_label(current))
         rig = open_rig(config)
@@ -98,7 +96,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
                 current,
                 duration,
                 rig=rig,
-                controller=_controller(config),
+                controller=_controller(config) if closed else None,
                 notify=prompt,
                 data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             )
@@ -150,7 +148,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
         on_event(Event("result", result_line(record.metrics, duration), {"current_a": current}))
         for note in result_warnings(record.metrics):
             on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
-    under = f", under {law}" if law != "passive" else ""
+    under = f", under {law}" if closed else ""
     plot = plot_drop_test(
         folder.file("drop_test.png"),
         overlay,
