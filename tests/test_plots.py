@@ -22,14 +22,17 @@ from sashil.recording.run_folder import RunFolder
 
 @pytest.fixture
 def figures(monkeypatch) -> list[Any]:
-    """The figures the code under test saved, kept open (``plt.close`` records them instead)."""
+    """The figures the code under test made, in order (each kept for the test to read)."""
     kept: list[Any] = []
-    plt = plots.pyplot()  # matplotlib.pyplot on the Agg backend
-    close = plt.close
-    monkeypatch.setattr(plt, "close", lambda fig=None: kept.append(fig))
-    yield kept
-    for fig in kept:
-        close(fig)
+    make = plots._Figures.subplots
+
+    def subplots(*args: Any, **kwargs: Any) -> tuple[Any, Any]:
+        fig, axes = make(*args, **kwargs)
+        kept.append(fig)
+        return fig, axes
+
+    monkeypatch.setattr(plots._Figures, "subplots", staticmethod(subplots))
+    return kept
 
 
 def legend_texts(ax: Any) -> list[str]:
