@@ -68,7 +68,7 @@ class Field:
                 raise fail()
             return value
         if kind == "float_list":
-            if not isinstance(value, list):
+            if not isinstance(value, (list, tuple)):  # a resolved (read-only) config holds tuples
                 raise fail()
             out = []
             for item in value:
