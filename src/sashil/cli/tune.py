@@ -13,7 +13,7 @@ from sashil.runtime.tune_socket import request
 from sashil.runtime.tuning import RAMP_KEY, check_ramp
 
 HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
-EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.tune_ramp_s=1"
+EXAMPLE = "sashil tune runs/20261125T101500Z-run controller.c_sky=2.5 controller.tune_ramp_s=1"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
