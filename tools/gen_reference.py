@@ -187,7 +187,7 @@ def config_page() -> str:
         out.append(f"## {name}\n\n")
         if section.doc:
             out.append(f"{_rst_to_md(section.doc)}.\n\n")
-        out.append(_table(["key", "kind", "default", "bounds", "meaning"], list(_config_rows(section.fields, name + "."))))
+        out.append(_table(["key", "kind", "default", "bounds", "meaning"], list(_config_rows({name: section}, ""))))
         out.append("\n")
     return "".join(out)
 
