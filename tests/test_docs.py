@@ -101,9 +101,7 @@ def test_examples_run(page: Path, tmp_path: Path):
     for name in ("configs", "examples", "drivers"):
         (tmp_path / name).symlink_to(ROOT / name)
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    done = subprocess.run(
-        ["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
-    )
+    done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, f"{page.name}: exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
 
 
@@ -121,6 +119,8 @@ def test_site_builds_strictly(tmp_path: Path):
     )
     assert done.returncode == 0, done.stderr[-3000:]
     pages = list((tmp_path / "site").rglob("*.html"))
-    loads = re.compile(r"""<(?:script|img|iframe)[^>]+src=["']https?://|<link[^>]+href=["']https?://|url\(["']?https?://""")
+    loads = re.compile(
+        r"""<(?:script|img|iframe)[^>]+src=["']https?://|<link[^>]+href=["']https?://|url\(["']?https?://"""
+    )
     fetched = [p for p in pages if loads.search(p.read_text(encoding="utf-8"))]
     assert not fetched, f"pages that load from the network: {fetched[:3]}"

@@ -258,7 +258,9 @@ def exit_codes_page() -> str:
     status = {code: name for name, code in EXIT_STATUS_CODES.items()}
     out = [HEADER, "# Exit codes\n\n", "Every verb exits with one of these codes; `summary.json` → `exit_status` "]
     out.append("names the same outcome (bad input writes no run folder, so it has none).\n\n")
-    rows = [[code, f"`{status[code]}`" if code in status else "—", _rst_to_md(text)] for code, text in EXIT_CODES.items()]
+    rows = [
+        [code, f"`{status[code]}`" if code in status else "—", _rst_to_md(text)] for code, text in EXIT_CODES.items()
+    ]
     out.append(_table(["code", "`exit_status`", "when"], rows))
     out.append("\nWhat each fault does to each verb: [fault matrix](faults.md).\n")
     return "".join(out)
