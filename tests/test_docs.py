@@ -80,7 +80,7 @@ def test_every_block_runs_or_says_what_it_needs(page: Path):
 def _script(page: Path, folder: Path) -> str:
     """The page's runnable blocks as one bash script (python blocks written beside it and run)."""
     # a block that fails leaves nothing behind: what the page started in the background is stopped
-    lines = ["set -euo pipefail", "trap 'kill -INT $(jobs -p) 2>/dev/null; wait' EXIT"]
+    lines = ["set -euo pipefail", "trap 'jobs -p | xargs -r kill -INT 2>/dev/null || true; wait' EXIT"]
     for n, block in enumerate(fenced_blocks(page.read_text(encoding="utf-8"))):
         if block.needs or block.info not in RUN:
             continue

@@ -71,10 +71,23 @@ EVENT_DOCS = {
 }
 
 
+def _literal_block(match: re.Match[str]) -> str:
+    code = "\n".join(line[4:] for line in match.group(2).rstrip("\n").splitlines())
+    return f"{match.group(1)}\n\n```python\n{code}\n```\n\n"
+
+
+def _doctest_block(match: re.Match[str]) -> str:
+    lines = [re.sub(r"\s*# doctest:.*$", "", line[4:]) for line in match.group(1).splitlines()]
+    return "```python\n" + "\n".join(lines) + "\n```\n"
+
+
 def _rst_to_md(text: str) -> str:
-    """A docstring's reST roles and literals as Markdown code."""
+    """A docstring's reST roles, literals and ``::`` literal blocks as Markdown code."""
     text = re.sub(r":(?:class|func|meth|attr|data|mod|exc):`~?([^`]+)`", lambda m: f"`{m.group(1)}`", text)
-    return text.replace("``", "`")
+    text = text.replace("``", "`") + "\n"
+    text = re.sub(r"(^|\n)::\n\n((?:(?:    .*)?\n)+)", _literal_block, text)
+    text = re.sub(r"((?:^>>> .*\n)+)", _doctest_block, text, flags=re.M)
+    return text.rstrip("\n")
 
 
 def _cell(text: Any) -> str:
@@ -316,6 +329,7 @@ def _signature(name: str, obj: Any) -> str:
         sig = str(inspect.signature(obj))
     except (TypeError, ValueError):
         sig = "(...)"
+    sig = re.sub(r"(: |-> )'([^']*)'", r"\1\2", sig)  # postponed annotations read as written
     return f"```python\n{name}{sig}\n```\n\n"
 
 
