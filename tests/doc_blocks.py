@@ -2,10 +2,10 @@
 
 A block is a fence (three backticks and an info string such as ``sh``, ``python``, ``text``,
 ``yaml``), possibly indented inside a list item. A block that cannot run here (it needs a board, a
-CAN interface, a PREEMPT_RT kernel) is preceded by an HTML comment that says what it needs, which
-the rendered page does not show but a reader of the source and the tests do::
+CAN interface, a PREEMPT_RT kernel) is preceded by a line in italics that says what it needs, for
+the reader and for the tests::
 
-    <!-- needs: a board on /dev/ttyACM0 -->
+    *Needs a board on /dev/ttyACM0.*
 """
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ from __future__ import annotations
 import re
 import textwrap
 from dataclasses import dataclass
+from pathlib import Path
 
 _FENCE = re.compile(r"^(?P<indent>[ ]*)```(?P<info>[^\n`]*)\n(?P<body>.*?)^(?P=indent)```[ ]*$", re.M | re.S)
-_NEEDS = re.compile(r"<!--\s*needs:\s*(?P<what>.+?)\s*-->\s*$")
+_NEEDS = re.compile(r"^\s*\*Needs (?P<what>[^*]+?)\.?\*\s*$")
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,15 @@ def fenced_blocks(text: str) -> list[Block]:
             )
         )
     return blocks
+
+
+def example(page: str, info: str, containing: str) -> str:
+    """The one block of ``info`` in ``docs/<page>`` (or ``README.md``) whose code contains ``containing``."""
+    root = Path(__file__).resolve().parents[1]
+    path = root / page if page == "README.md" else root / "docs" / page
+    found = [b.body for b in fenced_blocks(path.read_text(encoding="utf-8")) if b.info == info and containing in b.body]
+    assert len(found) == 1, f"{page}: expected one {info} block with {containing!r}, found {len(found)}"
+    return found[0]
 
 
 def section(text: str, heading: str) -> str:

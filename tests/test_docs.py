@@ -5,7 +5,7 @@
   nothing the code does not have.
 - Every code block of the tutorials and how-to guides is ``sh`` or ``python`` (run here, page by page,
   in order, in a fresh folder), ``text`` or ``yaml`` (shown, not run), or says what it needs
-  (``<!-- needs: ... -->``, see tests/doc_blocks.py).
+  (``*Needs a board on /dev/ttyACM0.*`` on the line before it, see tests/doc_blocks.py).
 - The site builds in mkdocs' strict mode when the docs extra is installed (``pip install -e '.[docs]'``).
 """
 
