@@ -252,8 +252,9 @@ def columns_page() -> str:
     out.append(
         "## data.csv\n\nA loop run's `data.csv` (and every `cycles.csv`) has these columns in this order: "
         f"first the base columns, then the controller's signals when a controller ran, then the stream's tail. "
-        f"A file that `sashil identify` or `sashil.load_run` reads needs only "
-        f"{', '.join(f'`{c}`' for c in REQUIRED_COLUMNS)}. The unit follows from the name's suffix.\n\n"
+        f"Every `data.csv` has at least {', '.join(f'`{c}`' for c in REQUIRED_COLUMNS)}; `sashil identify` "
+        "reads `time_s`, `theta_rad` and `current_a` (and `theta_road_rad`, `torque_in_nm` when present). "
+        "The unit follows from the name's suffix.\n\n"
     )
     out.append(_table(["column", "unit", "meaning"], rows(BASE_COLUMNS + STAGE_SIGNALS + TAIL_COLUMNS, COLUMN_DOCS)))
     out.append("\nThe stream ends on one row of the safe state the shutdown sent (0 A, the road at rest).\n\n")
