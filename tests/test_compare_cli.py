@@ -4,13 +4,12 @@ a failing law's row saying why, parallel runs equal to sequential ones, and bad 
 from __future__ import annotations
 
 import csv
-import re
 import shlex
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_blocks import example
 
 from sashil.cli import main
 from sashil.experiments.compare import arm_acceleration
@@ -97,11 +96,8 @@ def test_bad_input_is_one_line_exit_2_nothing_run(tmp_path, capsys, extra, key):
     assert len(err) == 1 and key in err[0]
 
 
-def test_the_readme_compare_example_runs(tmp_path):
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = readme.split("#### The laws a lab compares", 1)[1].split("\n#### ", 1)[0]
-    (command,) = re.findall(r"```sh\n(sashil compare .*?)\n```", section, flags=re.S)
-    argv = shlex.split(command)
+def test_the_manuals_compare_example_runs(tmp_path):
+    argv = shlex.split(example("how-to/compare-laws.md", "sh", "sashil compare"))
     assert argv[0] == "sashil"
     assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
     assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}

@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
+
+from doc_blocks import fenced_blocks, section
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _quick_start_commands() -> list[str]:
-    text = (ROOT / "README.md").read_text()
-    section = text.split("## Quick start", 1)[1].split("\n## ", 1)[0]
-    blocks = re.findall(r"```[a-z]*\n(.*?)```", section, flags=re.S)
+    blocks = fenced_blocks(section((ROOT / "README.md").read_text(), "## Quick start"))
     assert len(blocks) == 1, "one fenced block under ## Quick start"
-    return [line for line in blocks[0].splitlines() if line.strip()]
+    return [line for line in blocks[0].body.splitlines() if line.strip()]
 
 
 def test_quick_start_has_two_commands_setup_and_drop_test_then_tests():
