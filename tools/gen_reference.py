@@ -403,6 +403,11 @@ def python_api_page() -> str:
     out.append(_entry("sashil.load_run", sashil.load_run))
     out.append(_doc(api) + "\n\n")
     out.append(_entry("Run", sashil.Run))
+    import sashil.lab as lab
+
+    out.append("# The experiments: `sashil.lab`\n\n" + _doc(lab) + "\n\n")
+    for name in lab.__all__:
+        out.append(_entry(f"sashil.lab.{name}", getattr(lab, name), members=False))
     return "".join(out)
 
 
