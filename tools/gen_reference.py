@@ -331,6 +331,7 @@ def _signature(name: str, obj: Any) -> str:
     except (TypeError, ValueError):
         sig = "(...)"
     sig = re.sub(r"(: |-> )'([^']*)'", r"\1\2", sig)  # postponed annotations read as written
+    sig = re.sub(r"<function (\w+) at 0x[0-9a-f]+>", r"\1", sig)  # a function default by its name
     return f"```python\n{name}{sig}\n```\n\n"
 
 
