@@ -5,6 +5,8 @@ arrive as events; bad input raises before any folder exists."""
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -248,3 +250,17 @@ def test_calibrate_bad_input_raises_and_leaves_no_folder(tmp_path):
         calibrate(config, Outputs(out=out))
     assert err.value.exit_code == ConfigError.exit_code
     assert not out.exists()
+
+
+# the command line -----------------------------------------------------------------------------
+@pytest.mark.parametrize("verb", ["calibrate", "replay", "simulate"])
+def test_verb_help_loads_no_numerics(verb):
+    code = (
+        "import contextlib, io, sys\n"
+        "from sashil.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        f"    main([{verb!r}, '--help'])\n"
+        "print(sorted(m for m in ('numpy', 'scipy', 'numba', 'matplotlib') if m in sys.modules))"
+    )
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert loaded.strip() == "[]"
