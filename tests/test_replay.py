@@ -11,27 +11,37 @@ import pytest
 
 from sashil.api import load_run
 from sashil.cli import main
+from sashil.runtime import clock as clock_module
+from sashil.runtime.clock import VirtualClock
+
+
+class _VirtualClock:
+    """``sashil run``'s clock made virtual (the verb always takes the real one), so no deadline is missed."""
+
+    @staticmethod
+    def for_rate(spin_margin_us: float, rate_hz: float) -> VirtualClock:
+        return VirtualClock()
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("replay") / "run"
-    code = main(
-        [
-            "run",
-            "-q",
-            "--duration",
-            "1",
-            "--controller",
-            "skyhook",
-            "--set",
-            "controller.c_sky=2",
-            "--set",
-            "driver.clock=virtual",
-            "--out",
-            str(out),
-        ]
-    )
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(clock_module, "RealClock", _VirtualClock)
+        code = main(
+            [
+                "run",
+                "-q",
+                "--duration",
+                "1",
+                "--controller",
+                "skyhook",
+                "--set",
+                "controller.c_sky=2",
+                "--out",
+                str(out),
+            ]
+        )
     assert code == 0
     return out
 

@@ -76,6 +76,9 @@ def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], An
         else:
             _set(doc, path, value)
     out = validate(doc, SCHEMA, source)
+    if out["model"]["name"] != "bouc-wen" and isinstance(doc.get("model"), dict):
+        # the schema's default parameters are the Bouc-Wen seed's: another model keeps its own only
+        out["model"]["params"] = dict(doc["model"].get("params") or {})
     from sashil.config import check_controller
     from sashil.models.registry import check_model
 

@@ -30,9 +30,16 @@ __all__ = ["ConfigSource", "Option", "resolve"]
 
 #: verbs that run on the real clock whatever the backend
 REAL_CLOCK_VERBS = ("run",)
+#: verbs that drive no rig (a model on recorded inputs): no key of theirs depends on a backend, and
+#: their model need not be one the rig can run
+RIGLESS_VERBS = ("simulate",)
 #: verb -> ``module:function(config, named)`` that checks the verb's own keys beyond the schema
 #: (``named(key)`` is the option that set a key, or the key), imported when that verb resolves
-VERB_CHECKS = {"drop-test": "sashil.experiments.drop_test:check_drops", "run": "sashil.lab.closed_loop:check_run"}
+VERB_CHECKS = {
+    "drop-test": "sashil.experiments.drop_test:check_drops",
+    "run": "sashil.lab.closed_loop:check_run",
+    "simulate": "sashil.lab.simulate:check_simulate",
+}
 
 
 @dataclass(frozen=True)
@@ -107,7 +114,8 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
         config = apply_values(config, [(["driver", "name"], source.driver)], "--driver")
     if source.port is not None:
         config = apply_values(config, [(["driver", "port"], source.port)], "--port")
-    _resolve_backend(config, source, verb)
+    if verb not in RIGLESS_VERBS:
+        _resolve_backend(config, source, verb)
     check = VERB_CHECKS.get(verb or "")
     if check is not None:  # the verb's own checks of its keys, naming the option that set each
         module, _, name = check.partition(":")

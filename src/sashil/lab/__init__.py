@@ -1,7 +1,9 @@
 """sashil's experiments as library functions: each takes a resolved config and its options and
 returns the :class:`~sashil.api.Run` of the folder it wrote.
 
-* :func:`drop_test` (``sashil drop-test``), :func:`closed_loop` (``sashil run``);
+* :func:`drop_test` (``sashil drop-test``), :func:`closed_loop` (``sashil run``),
+  :func:`calibrate` (``sashil calibrate``), :func:`replay` (``sashil replay``),
+  :func:`simulate` (``sashil simulate``);
 * :func:`resolve` turns a :class:`ConfigSource` (file, parameters, ``--set``, law, driver, port,
   the verb's options) into the read-only config they take;
 * progress, operator prompts, results and warnings reach the caller as :class:`Event` objects
@@ -18,22 +20,39 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from sashil.config.resolve import ConfigSource, Option, resolve
+    from sashil.lab.calibrate import calibrate
     from sashil.lab.closed_loop import closed_loop
     from sashil.lab.drop_test import drop_test
     from sashil.lab.events import Event
     from sashil.lab.outputs import Outputs
+    from sashil.lab.replay import replay
+    from sashil.lab.simulate import simulate
 
 _LAZY = {
     "ConfigSource": "sashil.config.resolve",
     "Option": "sashil.config.resolve",
     "resolve": "sashil.config.resolve",
+    "calibrate": "sashil.lab.calibrate",
     "closed_loop": "sashil.lab.closed_loop",
     "drop_test": "sashil.lab.drop_test",
     "Event": "sashil.lab.events",
     "Outputs": "sashil.lab.outputs",
+    "replay": "sashil.lab.replay",
+    "simulate": "sashil.lab.simulate",
 }
 
-__all__ = ["ConfigSource", "Event", "Option", "Outputs", "closed_loop", "drop_test", "resolve"]
+__all__ = [
+    "ConfigSource",
+    "Event",
+    "Option",
+    "Outputs",
+    "calibrate",
+    "closed_loop",
+    "drop_test",
+    "replay",
+    "resolve",
+    "simulate",
+]
 
 
 def __getattr__(name: str) -> Any:

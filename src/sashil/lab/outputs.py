@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil import __version__
+from sashil.errors import ConfigError
 
 __all__ = ["IN_RUN_FOLDER", "Outputs"]
 
@@ -47,6 +48,13 @@ class Outputs:
         from sashil.recording.formats import check_formats
 
         check_formats(list(self.formats) or None, driver)
+
+    def check_folder_only(self, verb: str) -> None:
+        """ConfigError when formats or a live view are asked of a verb that writes its folder only
+        (it has no loop to stream and no ``--format``)."""
+        asked = [*(f"--format {name}" for name in self.formats), *(["a live view (rerun)"] if self.live_view else [])]
+        if asked:
+            raise ConfigError(f"sashil {verb} writes its run folder only: {', '.join(asked)} is not available")
 
     def open_rerun(self, columns: Sequence[str], name: str, folder: Path) -> Any:
         """The :class:`~sashil.recording.rerun_log.RerunLog` asked for, or None."""
