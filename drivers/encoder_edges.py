@@ -41,6 +41,19 @@ def hermite_bulge(y0: float, m0: float, y1: float, m1: float) -> float:
     return 0.25 * max(abs(m0 - d), abs(m1 - d))
 
 
+def stays_in_cell(y0: float, y1: float, bulge: float, q: float) -> bool:
+    """Whether a curve from ``y0`` to ``y1`` that strays at most ``bulge`` from its chord provably keeps
+    one count (no edge): both ends' counts equal and the curve inside that count's cell."""
+    c1 = round(y1 / q)
+    if round(y0 / q) != c1:
+        return False
+    if y0 < y1:
+        lo, hi = y0 - bulge, y1 + bulge
+    else:
+        lo, hi = y1 - bulge, y0 + bulge
+    return (c1 - 0.5) * q < lo and hi < (c1 + 0.5) * q
+
+
 def last_crossing(
     angle: Callable[[float], float], y0: float, y1: float, bulge: float, q: float
 ) -> tuple[float, int] | None:
@@ -49,11 +62,9 @@ def last_crossing(
     ``y0``/``y1``: the angle at the ends; ``bulge``: a bound on how far it strays from the chord
     between them (0 for a straight line); ``q``: radians per count.
     """
+    if stays_in_cell(y0, y1, bulge, q):
+        return None
     c0, c1 = round(y0 / q), round(y1 / q)
-    if c0 == c1:
-        lo, hi = min(y0, y1) - bulge, max(y0, y1) + bulge
-        if (c1 - 0.5) * q < lo and hi < (c1 + 0.5) * q:
-            return None  # the whole curve stays in the count's cell
     points = min(MAX_POINTS, MIN_POINTS + 2 * abs(c1 - c0))
     prev_s, prev_c = 1.0, c1
     for k in range(points - 1, -1, -1):

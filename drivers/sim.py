@@ -17,7 +17,7 @@ import math
 import random
 from typing import Any
 
-from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing
+from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing, stays_in_cell
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
@@ -43,6 +43,9 @@ class RoadWheel:
     rate theta2_dot, so the relative rate theta_dot = theta2_dot - theta1_dot drops by the speed
     change (unless the operator holds the arm).
     """
+
+    #: theta1_ddot is 0 between speed commands (the plant skips the road's force)
+    accelerates = False
 
     def __init__(self) -> None:
         self._t0 = 0.0
@@ -83,6 +86,7 @@ class SimulatedRig(RigInterface):
         self.plant = plant
         self.counts_per_rev = int(counts_per_rev)
         self._counts_per_rad = self.counts_per_rev / TWO_PI
+        self._count_rad = TWO_PI / self.counts_per_rev  # one count [rad]
         self.angle_noise_rad = float(angle_noise_rad)
         self.current_noise_a = float(current_noise_a)
         self._rng = random.Random(noise_seed)
@@ -99,7 +103,6 @@ class SimulatedRig(RigInterface):
         self.road_edge: tuple[int, int] | None = None
         self._arm_end: float | None = None  # the angles at the end of the last step (a jump since: an edge)
         self._road_end: float | None = None
-        self._found: tuple[tuple[float, int] | None, tuple[float, int] | None] = (None, None)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SimulatedRig:
@@ -207,16 +210,22 @@ class SimulatedRig(RigInterface):
         theta: tuple[float, float, float, float],
         road_ends: tuple[float, float, float, float],
         q: float,
-    ) -> None:
-        """The last count change of each encoder over one sub-step from plant time ``t0`` of ``h`` s,
-        as (fraction of the sub-step, direction) or None, into ``self._found``. ``theta``: the relative
+    ) -> tuple[tuple[float, int] | None, tuple[float, int] | None]:
+        """The last count change of each encoder (arm, road) over one sub-step from plant time ``t0`` of
+        ``h`` s, each as (fraction of the sub-step, direction) or None. ``theta``: the relative
         angle's Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the
-        road angle at both ends and its rate at both ends."""
+        road angle at both ends and its rate at both ends. The curves are only built when the quick
+        test (:func:`~sashil.drivers.encoder_edges.stays_in_cell`) cannot rule an edge out."""
         y0, m0, y1, m1 = theta
         r0, r1, rv0, rv1 = road_ends
         road = self.plant.road
         # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
         road_bulge = 0.0 if road is None else 0.125 * h * abs(rv1 - rv0)
+        arm_bulge = hermite_bulge(y0, m0, y1, m1) + road_bulge
+        arm_still = stays_in_cell(y0 + r0, y1 + r1, arm_bulge, q)
+        road_still = stays_in_cell(r0, r1, road_bulge, q)
+        if arm_still and road_still:
+            return None, None
 
         def road_angle(s: float) -> float:
             return r0 if road is None else road(t0 + s * h)[0]
@@ -224,9 +233,9 @@ class SimulatedRig(RigInterface):
         def arm(s: float) -> float:
             return hermite(y0, m0, y1, m1, s) + road_angle(s)
 
-        self._found = (
-            last_crossing(arm, y0 + r0, y1 + r1, hermite_bulge(y0, m0, y1, m1) + road_bulge, q),
-            last_crossing(road_angle, r0, r1, road_bulge, q),
+        return (
+            None if arm_still else last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, q),
+            None if road_still else last_crossing(road_angle, r0, r1, road_bulge, q),
         )
 
     def _angles(self) -> tuple[float, float]:
@@ -238,6 +247,8 @@ class SimulatedRig(RigInterface):
         """A count changed without motion since the last step (the operator pressed the arm to its hold
         angle): an edge at ``at_ns``."""
         arm, road = self._angles()
+        if arm == self._arm_end and road == self._road_end:
+            return  # nothing moved since the last step's end
         q = TWO_PI / self.counts_per_rev
         for which, now, before in (("arm", arm, self._arm_end), ("road", road, self._road_end)):
             if before is not None and round(now / q) != round(before / q):
@@ -252,21 +263,25 @@ class SimulatedRig(RigInterface):
         count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
         h = seconds / count
         h_ns = (to_ns - from_ns) / count
-        q = TWO_PI / self.counts_per_rev
+        q = self._count_rad
         self._jumps(from_ns)
+        step, command, edges = plant.step, self._command, self._substep_edges
         for j in range(count):
             t0, y0, v0 = st.time_s, st.theta_rad, st.theta_dot_rad_s
             r0, rv0 = st.theta_road_rad, st.theta_road_dot_rad_s
-            plant.step(h, self._command)
-            ends = (y0, h * v0, st.theta_rad, h * st.theta_dot_rad_s)
-            self._substep_edges(t0, h, ends, (r0, st.theta_road_rad, rv0, st.theta_road_dot_rad_s), q)
-            found_arm, found_road = self._found
-            start_ns = from_ns + j * h_ns
+            step(h, command)
+            found_arm, found_road = edges(
+                t0,
+                h,
+                (y0, h * v0, st.theta_rad, h * st.theta_dot_rad_s),
+                (r0, st.theta_road_rad, rv0, st.theta_road_dot_rad_s),
+                q,
+            )
             if found_arm is not None:
-                self.arm_edge = (math.ceil(start_ns + found_arm[0] * h_ns), found_arm[1])
+                self.arm_edge = (math.ceil(from_ns + j * h_ns + found_arm[0] * h_ns), found_arm[1])
             if found_road is not None:
-                self.road_edge = (math.ceil(start_ns + found_road[0] * h_ns), found_road[1])
-        self._arm_end, self._road_end = self._angles()
+                self.road_edge = (math.ceil(from_ns + j * h_ns + found_road[0] * h_ns), found_road[1])
+        self._arm_end, self._road_end = st.theta_rad + st.theta_road_rad, st.theta_road_rad
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         if self.state is not RigState.ACTIVE:

@@ -21,8 +21,10 @@ Plans command; one stream records. A plan keeps no copy of the data: what a verb
 the stream (a drop test's record from the release, a sweep's transmissibility, a calibration
 step on the device's clock) it derives after the run from the stream's columns
 (``read_stream=True``: :attr:`RunOutcome.stream`), whose rows carry the sample's ``seq`` and device
-time, the road speed commanded and the plan's ``phase``. Without a ``data_path`` the stream goes
-to a temporary file that is read back and removed.
+time, the road speed commanded and the plan's ``phase``. On simulated time the recorder keeps those
+rows in memory as well (the values the file parses back to), so nothing is parsed again, and without
+a ``data_path`` no file is written. On the real clock the loop's hot path allocates nothing: the
+stream goes to the file (a temporary one without a ``data_path``) and is read back after the run.
 """
 
 from __future__ import annotations
@@ -166,14 +168,16 @@ def run_plan(
     columns = record_columns(plan)
     recorder = None
     scratch = None
-    if data_path is None and read_stream:
+    real_clock = not getattr(clock, "virtual", False)
+    keep = read_stream and not real_clock  # the stream in memory (module docstring)
+    if data_path is None and read_stream and not keep:
         scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-")
         data_path = Path(scratch.name) / CYCLES_FILE
-    real_clock = not getattr(clock, "virtual", False)
     if data_path is not None:
         data_path = Path(data_path)
         check_disk(data_path.parent, len(columns), rate, duration_s)
-        recorder = Recorder(data_path, columns, lossless=not real_clock)
+    if data_path is not None or keep:
+        recorder = Recorder(data_path, columns, lossless=not real_clock, keep=keep)
     rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
@@ -225,7 +229,9 @@ def run_plan(
     if clip_line is not None:
         say(clip_line)
     stream: dict[str, Any] = {}
-    if read_stream and data_path is not None:
+    if keep and recorder is not None:
+        stream = recorder.stream()
+    elif read_stream and data_path is not None:
         try:
             stream = read_data_csv(data_path, required=(), min_rows=0)
         except DataFileError:  # a stream the disk lost: what ended the run says why
@@ -237,7 +243,7 @@ def run_plan(
         error,
         flag,
         realtime=rt.report() if rt is not None else {},
-        recording=recorder.summary() if recorder is not None else None,
+        recording=recorder.summary() if recorder is not None and data_path is not None else None,
         link=rig.link_stats() if capabilities_of(rig).link else None,
         stream=stream,
     )
