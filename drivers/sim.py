@@ -203,29 +203,24 @@ class SimulatedRig(RigInterface):
         )
 
     # encoder edges ---------------------------------------------------------------------------
-    def _substep_edges(
+    def _crossings(
         self,
         t0: float,
         h: float,
         theta: tuple[float, float, float, float],
-        road_ends: tuple[float, float, float, float],
+        road_ends: tuple[float, float],
+        bulges: tuple[float, float],
         q: float,
     ) -> tuple[tuple[float, int] | None, tuple[float, int] | None]:
         """The last count change of each encoder (arm, road) over one sub-step from plant time ``t0`` of
-        ``h`` s, each as (fraction of the sub-step, direction) or None. ``theta``: the relative
-        angle's Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the
-        road angle at both ends and its rate at both ends. The curves are only built when the quick
-        test (:func:`~sashil.drivers.encoder_edges.stays_in_cell`) cannot rule an edge out."""
+        ``h`` s, each as (fraction of the sub-step, direction) or None. ``theta``: the relative angle's
+        Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the road
+        angle at both ends; ``bulges``: how far the arm's and the road's curves may stray from their
+        chords (:meth:`_advance` computes them for its quick test)."""
         y0, m0, y1, m1 = theta
-        r0, r1, rv0, rv1 = road_ends
+        r0, r1 = road_ends
+        arm_bulge, road_bulge = bulges
         road = self.plant.road
-        # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
-        road_bulge = 0.0 if road is None else 0.125 * h * abs(rv1 - rv0)
-        arm_bulge = hermite_bulge(y0, m0, y1, m1) + road_bulge
-        arm_still = stays_in_cell(y0 + r0, y1 + r1, arm_bulge, q)
-        road_still = stays_in_cell(r0, r1, road_bulge, q)
-        if arm_still and road_still:
-            return None, None
 
         def road_angle(s: float) -> float:
             return r0 if road is None else road(t0 + s * h)[0]
@@ -234,8 +229,8 @@ class SimulatedRig(RigInterface):
             return hermite(y0, m0, y1, m1, s) + road_angle(s)
 
         return (
-            None if arm_still else last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, q),
-            None if road_still else last_crossing(road_angle, r0, r1, road_bulge, q),
+            last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, q),
+            last_crossing(road_angle, r0, r1, road_bulge, q),
         )
 
     def _angles(self) -> tuple[float, float]:
@@ -257,7 +252,9 @@ class SimulatedRig(RigInterface):
 
     def _advance(self, seconds: float, from_ns: float, to_ns: float) -> None:
         """Step the plant ``seconds`` (host time ``from_ns`` to ``to_ns``) in the sub-steps it would take
-        in one call, timing each encoder's last count change on the way (module docstring)."""
+        in one call, timing each encoder's last count change on the way (module docstring): the
+        curves between the sub-step's ends are searched only when the quick test
+        (:func:`~sashil.drivers.encoder_edges.stays_in_cell`) cannot rule a count change out."""
         plant = self.plant
         st = plant.state
         count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
@@ -265,18 +262,19 @@ class SimulatedRig(RigInterface):
         h_ns = (to_ns - from_ns) / count
         q = self._count_rad
         self._jumps(from_ns)
-        step, command, edges = plant.step, self._command, self._substep_edges
+        step, command, smooth_road = plant.step, self._command, plant.road is not None
         for j in range(count):
             t0, y0, v0 = st.time_s, st.theta_rad, st.theta_dot_rad_s
             r0, rv0 = st.theta_road_rad, st.theta_road_dot_rad_s
             step(h, command)
-            found_arm, found_road = edges(
-                t0,
-                h,
-                (y0, h * v0, st.theta_rad, h * st.theta_dot_rad_s),
-                (r0, st.theta_road_rad, rv0, st.theta_road_dot_rad_s),
-                q,
-            )
+            y1, r1 = st.theta_rad, st.theta_road_rad
+            m0, m1 = h * v0, h * st.theta_dot_rad_s
+            # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
+            road_bulge = 0.125 * h * abs(st.theta_road_dot_rad_s - rv0) if smooth_road else 0.0
+            arm_bulge = hermite_bulge(y0, m0, y1, m1) + road_bulge
+            if stays_in_cell(y0 + r0, y1 + r1, arm_bulge, q) and stays_in_cell(r0, r1, road_bulge, q):
+                continue  # no count changed (the common case at 1 kHz)
+            found_arm, found_road = self._crossings(t0, h, (y0, m0, y1, m1), (r0, r1), (arm_bulge, road_bulge), q)
             if found_arm is not None:
                 self.arm_edge = (math.ceil(from_ns + j * h_ns + found_arm[0] * h_ns), found_arm[1])
             if found_road is not None:

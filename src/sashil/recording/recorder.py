@@ -26,6 +26,7 @@ window stays closed too long the writer writes anyway, keeping the flush promise
 
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 import threading
@@ -212,11 +213,13 @@ class Recorder:
         """The kept rows (``keep=True``) as one float array per column, in commit order."""
         if not self.keep:
             raise ValueError("the recorder keeps no rows (keep=False)")
-        rows = self._ring[: self._head]
-        if not rows:
-            return {name: np.zeros(0) for name in self.columns}
-        table = np.array(rows, dtype=float)
-        return {name: table[:, index].copy() for index, name in enumerate(self.columns)}
+        count, width = self._head, self._width
+        values = itertools.chain.from_iterable(itertools.islice(self._ring, count))
+        try:
+            table = np.fromiter(values, dtype=float, count=count * width).reshape(count, width).T.copy()
+        except (TypeError, ValueError):  # a stage signal that is not a number (None: NaN, as numpy reads it)
+            table = np.array(self._ring[:count], dtype=float).reshape(count, width).T.copy()
+        return dict(zip(self.columns, table, strict=True))
 
     def summary(self) -> dict[str, Any]:
         return {
