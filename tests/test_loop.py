@@ -457,7 +457,7 @@ def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monke
     from sashil.runtime import runner
 
     order: list[str] = []
-    monkeypatch.setattr(runner, "compile_kernels", lambda: order.append("compile"))
+    monkeypatch.setattr(runner, "warm_up", lambda plan, say: order.append("compile"))
 
     class Watched(FaultyRig):
         def configure(self):

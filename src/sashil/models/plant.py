@@ -26,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sashil.drivers.interface import clamp_current
-from sashil.models._jit import jit
+from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
 
 #: road-side motion: t [s] -> (theta1 [rad], theta1_dot [rad/s], theta1_ddot [rad/s^2]); a profile
@@ -49,6 +49,9 @@ class PlantState:
     torque_in_nm: float = 0.0
 
 
+@loop_kernel(
+    lambda: (0.0, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, 1.0, 109.0, 0.7, 1.5, 1.0, 1.0, 873.0, 1.0, 700.0, 0.099, 0.9, 0.0)
+)
 @jit
 def rig_substep(
     theta: float,

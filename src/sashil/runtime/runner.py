@@ -4,7 +4,8 @@ A *plan* is a loop stage (``step(sample, t_ns, dt_ns) -> RigCommand | None``): w
 when, what to measure. The runner owns everything around it, the same for ``run``, ``drop-test``,
 ``sweep`` and the calibration plan:
 
-* the per-cycle kernels compiled (numba) before the rig is touched, so the first cycle is on time;
+* the warm-up before the rig is touched (:mod:`sashil.runtime.warmup`: every numba kernel a cycle
+  can call compiled or loaded, the law called once and reset), so the first cycle is on time;
 * the disk checked before anything is energised (:func:`check_disk`, a :class:`DiskSpaceError`,
   exit 2, when the run folder's disk cannot hold the run);
 * the best-effort real-time set-up on the real clock (``loop.rt``), undone afterwards;
@@ -39,7 +40,6 @@ from typing import Any
 
 from sashil.drivers.interface import capabilities_of
 from sashil.errors import DataFileError, DiskSpaceError, Stopped, exit_code_of
-from sashil.models.hysteresis import compile_kernels
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -47,6 +47,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
+from sashil.runtime.warmup import warm_up
 from sashil.safety import SafetySupervisor
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
@@ -194,7 +195,7 @@ def run_plan(
         warn=say,
         tuning=tuning,
     )
-    compile_kernels()  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
+    warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None
     with catch_stop_signals(stop) as flag:
         loop.stop = flag
