@@ -111,15 +111,9 @@ class SafetySupervisor:
     # after read -------------------------------------------------------------------------------
     def check(self, sample: RigSample | None, t_ns: int) -> None:
         """Raise SafetyTrip (after recording it) if the sample breaks an interlock."""
-        if sample is None:
-            self._stale(sample, t_ns)
-            return
-        # fresh: the first sample, or ahead of the last by less than half the counter (inline: per cycle)
-        seq, last = sample.seq, self._last_seq
-        if last is not None and not 0 < (seq - last) % SEQ_MODULUS < SEQ_HALF:
+        if sample is None or not self._advances(sample.seq):
             self._stale(sample, t_ns)
             return  # a stale sample is not judged again
-        self._last_seq = seq
         self._not_fresh = 0
         if sample.flags & self.fault_mask:
             kinds = [name for bit, name in DEVICE_FAULTS if sample.flags & bit]
@@ -134,6 +128,14 @@ class SafetySupervisor:
                     f"angle interlock: |theta| = {abs(math.degrees(theta)):.2f} deg beyond the limit "
                     f"{math.degrees(limit):g} deg (rig.angle_limit_deg)",
                 )
+
+    def _advances(self, seq: int) -> bool:
+        """Whether ``seq`` is fresh: the first one, or ahead of the last by less than half the counter."""
+        last = self._last_seq
+        fresh = last is None or 0 < (seq - last) % SEQ_MODULUS < SEQ_HALF
+        if fresh:
+            self._last_seq = seq
+        return fresh
 
     def _stale(self, sample: RigSample | None, t_ns: int) -> None:
         """Count a cycle without a fresh sample; trip after ``sensor_timeout_cycles`` of them."""

@@ -42,7 +42,7 @@ def warm_kernels(say: Callable[[str], None] = _quiet) -> list[str]:
         importlib.import_module(module)
     kernels = sorted(LOOP_KERNELS.items())
     if JIT:
-        cold = [name for name, (kernel, _) in kernels if not kernel.signatures and not _cached(kernel)]
+        cold = [name for name, (kernel, _) in kernels if not getattr(kernel, "signatures", ()) and not _cached(kernel)]
         if cold:
             say(
                 f"compiling {len(cold)} numba kernel(s) for the loop (first run on this machine or after an "
