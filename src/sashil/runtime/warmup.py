@@ -1,7 +1,8 @@
 """Warm-up before the loop's first deadline: what a first cycle would otherwise do late.
 
 * Every compiled kernel a cycle can call (:data:`sashil.models._jit.LOOP_KERNELS`: the Bouc-Wen
-  z-update, the plant's sub-step, the Kalman filter's edge cycle and its helpers) is called once
+  z-update, the plant's sub-step, the simulated encoders' quick test, the Kalman filter's edge
+  cycle and their helpers) is called once
   with the cycle's signature, so numba compiles it, or loads it from its cache, now. A cached
   kernel still loads lazily on its first call in each process (15-23 ms), and on an empty cache
   (a fresh install) it compiles (seconds): then a progress line says so before it starts.
@@ -21,7 +22,12 @@ from typing import Any
 from sashil.models._jit import JIT, LOOP_KERNELS
 
 #: the modules whose kernels a cycle can call (imported here so that each registers its kernels)
-KERNEL_MODULES = ("sashil.models.hysteresis", "sashil.models.plant", "sashil.control.edge_kalman")
+KERNEL_MODULES = (
+    "sashil.models.hysteresis",
+    "sashil.models.plant",
+    "sashil.control.edge_kalman",
+    "sashil.drivers.encoder_edges",
+)
 
 
 def _quiet(line: str) -> None:
