@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import re
 import subprocess
 import sys
@@ -121,7 +122,8 @@ def main() -> None:
         worst, cycles = first_second_lateness_us(Path(tmp) / "skyhook" / "data.csv", rate)
         print(
             f"sashil run --controller skyhook --duration {duration:g} (sim rig, real clock, {rate:g} Hz; "
-            f"{wall:.1f} s wall with start-up and warm-up):"
+            f"{wall:.1f} s wall with start-up and warm-up; load average {os.getloadavg()[0]:.1f} on "
+            f"{os.cpu_count()} CPUs):"
         )
         print(f"  first second ({cycles} cycles): worst lateness {worst:9.1f} us")
         print(
