@@ -154,9 +154,11 @@ class ControlLoop:
         names = stage_signals(stage)
         self._n_signals = len(names)
         self._signals = attrgetter(*names) if names else None
-        #: the object the signals are read from: the stage, or the one it names as their
-        #: ``signal_source`` (a plan that runs a controller: its plain attributes, read directly)
-        self._signal_source = getattr(stage, "signal_source", stage)
+        #: the object the signals are read from: the one the stage names as their ``signal_source``
+        #: (a plan that runs a controller: its plain attributes, read directly) when it has them all
+        #: (a wrapper that forwards the name may add signals of its own), else the stage
+        source = getattr(stage, "signal_source", stage)
+        self._signal_source = source if all(hasattr(source, name) for name in names) else stage
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
