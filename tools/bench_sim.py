@@ -149,10 +149,15 @@ def bench_breakdown(law: str, record_s: float) -> None:
     rig.read, rig.write = capture_read, capture_write  # type: ignore[method-assign]
     controller = None if law == "passive" else make_controller(law, config)
     record = run_drop_test(config, -5.0, current, record_s, rig=rig, controller=controller)
+    # a fresh controller for each timed block, built beforehand: its construction (the filter's
+    # gains, the law's set-up) is not a per-cycle cost
+    built = [None if law == "passive" else make_controller(law, config) for _ in range(16)]
+
+    def fresh() -> Any:
+        return built.pop()
+
     cycles = record.loop.cycles
-    whole = _cpu(
-        lambda: run_drop_test(config, -5.0, current, record_s, controller=controller and make_controller(law, config))
-    )
+    whole = _cpu(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
     commands = commands[:cycles]
     steps = samples[:cycles]
     release_after = max(config["drop_test"]["hold_time_s"] + 0.1, 0.3)
@@ -188,7 +193,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
 
     def stage(with_plan: bool) -> Callable[[], None]:
         def run() -> None:
-            ctl = None if law == "passive" else make_controller(law, config)
+            ctl = fresh()
             if with_plan:
                 settings = DropTestSettings.from_config(config, -5.0, current, record_s)
                 settings.known_release_after_s = release_after
@@ -214,9 +219,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
 
     def recording_alone() -> None:
         settings = DropTestSettings.from_config(config, -5.0, current, record_s)
-        plan = DropTestPlan(
-            settings, config["rig"]["encoder_counts_per_rev"], make_controller(law, config) if controller else None
-        )
+        plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], fresh())
         recorder = Recorder(None, record_columns(plan), keep=True)
         loop = ControlLoop(rig, plan, VirtualClock(), rate, recorder=recorder)
         loop.start_ns = steps[0][1]
