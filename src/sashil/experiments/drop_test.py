@@ -168,8 +168,10 @@ class DropTestPlan:
         self.notify = notify
         # optional loop stage (sashil.control) that commands the damper after the release
         self.controller = controller
-        #: the controller's per-cycle values go into the stream (the loop reads them after each step)
+        #: the controller's per-cycle values go into the stream (the loop reads them after each step,
+        #: from the controller itself: the attributes below forward them too, but slower)
         self.signal_names = CONTROLLER_COLUMNS if controller is not None else ()
+        self.signal_source = controller if controller is not None else self
         self.command = RigCommand(settings.current_a)
         self.resolution = TWO_PI / counts_per_rev
         self.phase = "wait-hold"

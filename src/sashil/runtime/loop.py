@@ -98,7 +98,8 @@ class LoopResult:
 def stage_signals(stage: object) -> tuple[str, ...]:
     """The per-cycle values a stage exposes for recording: ``stage.signal_names`` when it says,
     else those of its attributes named like the docs/architecture.md columns (``theta_dot_rad_s``, ``z_hat``,
-    ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step``."""
+    ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step`` (from the
+    stage's ``signal_source`` when it names one)."""
     names = getattr(stage, "signal_names", None)
     if names is None:
         names = tuple(name for name in STAGE_SIGNALS if hasattr(stage, name))
@@ -153,6 +154,11 @@ class ControlLoop:
         names = stage_signals(stage)
         self._n_signals = len(names)
         self._signals = attrgetter(*names) if names else None
+        #: the object the signals are read from: the one the stage names as their ``signal_source``
+        #: (a plan that runs a controller: its plain attributes, read directly) when it has them all
+        #: (a wrapper that forwards the name may add signals of its own), else the stage
+        source = getattr(stage, "signal_source", stage)
+        self._signal_source = source if all(hasattr(source, name) for name in names) else stage
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
@@ -280,9 +286,9 @@ class ControlLoop:
         signals = self._signals
         if signals is not None:
             if self._n_signals == 1:
-                row[5] = signals(self.stage)
+                row[5] = signals(self._signal_source)
             else:
-                row[5 : 5 + self._n_signals] = signals(self.stage)
+                row[5 : 5 + self._n_signals] = signals(self._signal_source)
         row[-3] = NAN if road_speed is None else road_speed
         row[-2] = getattr(self.stage, "phase_code", 0)
         row[-1] = trip_code

@@ -4,7 +4,8 @@ A *plan* is a loop stage (``step(sample, t_ns, dt_ns) -> RigCommand | None``): w
 when, what to measure. The runner owns everything around it, the same for ``run``, ``drop-test``,
 ``sweep`` and the calibration plan:
 
-* the per-cycle kernels compiled (numba) before the rig is touched, so the first cycle is on time;
+* the warm-up before the rig is touched (:mod:`sashil.runtime.warmup`: every numba kernel a cycle
+  can call compiled or loaded, the law called once and reset), so the first cycle is on time;
 * the disk checked before anything is energised (:func:`check_disk`, a :class:`DiskSpaceError`,
   exit 2, when the run folder's disk cannot hold the run);
 * the best-effort real-time set-up on the real clock (``loop.rt``), undone afterwards;
@@ -21,8 +22,10 @@ Plans command; one stream records. A plan keeps no copy of the data: what a verb
 the stream (a drop test's record from the release, a sweep's transmissibility, a calibration
 step on the device's clock) it derives after the run from the stream's columns
 (``read_stream=True``: :attr:`RunOutcome.stream`), whose rows carry the sample's ``seq`` and device
-time, the road speed commanded and the plan's ``phase``. Without a ``data_path`` the stream goes
-to a temporary file that is read back and removed.
+time, the road speed commanded and the plan's ``phase``. On simulated time the recorder keeps those
+rows in memory as well (the values the file parses back to), so nothing is parsed again, and without
+a ``data_path`` no file is written. On the real clock the loop's hot path allocates nothing: the
+stream goes to the file (a temporary one without a ``data_path``) and is read back after the run.
 """
 
 from __future__ import annotations
@@ -37,7 +40,6 @@ from typing import Any
 
 from sashil.drivers.interface import capabilities_of
 from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
-from sashil.models.hysteresis import compile_kernels
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -45,6 +47,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
+from sashil.runtime.warmup import warm_up
 from sashil.safety import SafetySupervisor
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
@@ -189,14 +192,16 @@ def run_plan(
     columns = record_columns(plan)
     recorder = None
     scratch = None
-    if data_path is None and read_stream:
+    real_clock = not getattr(clock, "virtual", False)
+    keep = read_stream and not real_clock  # the stream in memory (module docstring)
+    if data_path is None and read_stream and not keep:
         scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-")
         data_path = Path(scratch.name) / CYCLES_FILE
-    real_clock = not getattr(clock, "virtual", False)
     if data_path is not None:
         data_path = Path(data_path)
         check_disk(data_path.parent, len(columns), rate, duration_s)
-        recorder = Recorder(data_path, columns, lossless=not real_clock)
+    if data_path is not None or keep:
+        recorder = Recorder(data_path, columns, lossless=not real_clock, keep=keep)
     rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
@@ -213,7 +218,7 @@ def run_plan(
         warn=say,
         tuning=tuning,
     )
-    compile_kernels()  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
+    warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None
     with catch_stop_signals(stop) as flag:
         loop.stop = flag
@@ -248,7 +253,9 @@ def run_plan(
     if clip_line is not None:
         say(clip_line)
     stream: dict[str, Any] = {}
-    if read_stream and data_path is not None:
+    if keep and recorder is not None:
+        stream = recorder.stream()
+    elif read_stream and data_path is not None:
         try:
             stream = read_data_csv(data_path, required=(), min_rows=0)
         except DataFileError:  # a stream the disk lost: what ended the run says why
@@ -267,7 +274,7 @@ def run_plan(
         error,
         flag,
         realtime=rt.report() if rt is not None else {},
-        recording=recorder.summary() if recorder is not None else None,
+        recording=recorder.summary() if recorder is not None and data_path is not None else None,
         link=link,
         stream=stream,
     )
