@@ -22,6 +22,7 @@ from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
     TWO_PI,
+    PlantTruth,
     RigCapabilities,
     RigCommand,
     RigInterface,
@@ -68,7 +69,12 @@ class SimulatedRig(RigInterface):
 
     name = "sim"
     capabilities = RigCapabilities(
-        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+        operator_hold=True,
+        initial_current=True,
+        road_actuator=True,
+        max_rate_hz=10_000.0,
+        simulated=True,
+        true_torque=True,
     )
 
     def __init__(
@@ -276,6 +282,14 @@ class SimulatedRig(RigInterface):
         speed = cmd.road_speed_rad_s
         if speed is not None and speed == speed and speed != self.wheel.speed_rad_s:  # None/NaN: unchanged
             self.wheel.set_speed(self.plant, speed)
+
+    def plant_truth(self) -> PlantTruth:
+        """The plant's damper torque T and arm acceleration theta2_ddot = (-k*theta - T)/J now (the
+        state of the last ``read``; seed 001 eqs. 9 and 13)."""
+        plant = self.plant
+        torque = plant.damper_torque()
+        p = plant.params
+        return PlantTruth(torque, (-p.k * plant.state.theta_rad - torque) / p.J)
 
     # operator ------------------------------------------------------------------------------
     def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:
