@@ -184,7 +184,7 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
         (["--controller", "skyhook"], "controller.c_sky"),
         (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency at or above --f-start (3 Hz)"),
         (["--stepped", "--f-start", "2", "--f-stop", "2"], "--f-stop: a stepped sine needs a frequency above"),
-        (["--current", "5"], "--current: expected a current in [0, 1]"),
+        (["--current", "5"], "--current: controller.current_a: expected a current in [0, 1]"),
     ],
 )
 def test_sweep_cli_bad_input_is_one_line(tmp_path, capsys, argv, message):

@@ -32,7 +32,12 @@ __all__ = ["ConfigSource", "Option", "resolve"]
 REAL_CLOCK_VERBS = ("run",)
 #: verb -> ``module:function(config, named)`` that checks the verb's own keys beyond the schema
 #: (``named(key)`` is the option that set a key, or the key), imported when that verb resolves
-VERB_CHECKS = {"drop-test": "sashil.experiments.drop_test:check_drops", "run": "sashil.lab.closed_loop:check_run"}
+VERB_CHECKS = {
+    "drop-test": "sashil.experiments.drop_test:check_drops",
+    "run": "sashil.lab.closed_loop:check_run",
+    "sweep": "sashil.lab.sweep:check_sweep",
+    "compare": "sashil.lab.compare:check_compare",
+}
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ __all__ = ["Event", "Listener", "ignore", "printer"]
 #: ``progress``: what is starting or running; ``prompt``: an operator instruction at the bench (shown
 #: even when quiet); ``result``: a figure of a finished run; ``warning``: what the operator should
 #: know; ``folder``: the run folder, once it holds the run
-Kind = Literal["progress", "prompt", "result", "warning", "folder"]
+Kind = Literal["progress", "prompt", "result", "warning", "folder", "output"]
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ def printer(quiet: bool = False, stream: Any = None) -> Listener:
     def show(event: Event) -> None:
         if quiet and event.kind in ("progress", "result"):
             return
-        out = stream if stream is not None else sys.stderr
+        out = sys.stdout if event.kind == "output" else (stream or sys.stderr)
         prefix = "  " if event.kind in ("prompt", "result") else ""
         print(prefix + event.text, file=out, flush=True)
 
