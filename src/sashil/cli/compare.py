@@ -39,9 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--road", metavar="SPEC", help=f"the road every law runs on: {ROAD_SYNTAX} (default compare.road, iso8608:C)"
     )
-    parser.add_argument(
-        "--duration", type=float, metavar="S", help="seconds per law (default compare.duration_s, 30)"
-    )
+    parser.add_argument("--duration", type=float, metavar="S", help="seconds per law (default compare.duration_s, 30)")
     parser.add_argument(
         "--jobs", type=int, metavar="N", help="simulated rig: laws in N processes (default compare.jobs)"
     )

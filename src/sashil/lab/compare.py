@@ -98,8 +98,10 @@ def _law_config(base: Mapping[str, Any], law: CompareLaw, extra: Sequence[str] =
     the key) and read-only."""
     from sashil.config.frozen import freeze, thaw
     from sashil.config.overrides import apply_overrides
+    from sashil.control.law_registry import find_law
 
     try:
+        find_law(law.law)  # an unknown law named as such, before its parameters
         return freeze(apply_overrides(thaw(base), [f"controller.law={law.law}", *law.sets, *extra], "--set"))
     except ConfigError as err:
         raise ConfigError(f"--controller {law.law}: {err}") from None
@@ -233,7 +235,7 @@ def compare(
     start = time.perf_counter()
     results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event)
     wall = time.perf_counter() - start
-    road_profile, road_text = parse_road(road, config)  # type: ignore[arg-type]
+    road_profile, road_text = parse_road(road, config)
     bound = _bound(config, road_profile, duration, on_event)
     header = {
         "road": f"`{road}`: {road_text}",

@@ -89,7 +89,11 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
     stepped = bool(config["sweep"]["stepped"])
     folder = RunFolder.create(outputs.out, "sweep")
-    live = None if stepped else outputs.open_rerun((*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+    live = (
+        None
+        if stepped
+        else outputs.open_rerun((*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+    )
     folder.write_config(config)
     label = _label(config)
     traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
@@ -132,9 +136,7 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     if failure is not None:
         kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
         on_event(
-            Event(
-                "folder", f"run folder: {folder.path} (the sweep ended early; {kept})", {"folder": str(folder.path)}
-            )
+            Event("folder", f"run folder: {folder.path} (the sweep ended early; {kept})", {"folder": str(folder.path)})
         )
         raise failure
     on_event(Event("output", f"run folder: {folder.path}", {"folder": str(folder.path)}))
@@ -181,9 +183,7 @@ def _stepped(
     try:
         for k, f in enumerate(freqs):  # one frequency at a time, for the progress bar
             if not progress:
-                on_event(
-                    Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f})
-                )
+                on_event(Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f}))
             try:
                 point = stepped_sine(
                     config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
@@ -261,7 +261,9 @@ def _chirp(
     amplitude = math.radians(section["amplitude_deg"])
     controller = make_controller(config["controller"]["law"], config)
     on_event(
-        Event("progress", f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}) ...", {"duration_s": duration})
+        Event(
+            "progress", f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}) ...", {"duration_s": duration}
+        )
     )
     try:  # data.csv is written however the run ends
         cols = run_profile(
