@@ -121,5 +121,7 @@ def test_the_command_lines_set_items_go_to_the_laws_that_declare_them():
         match=r"^--set controller.onoff_current_a=0.8: none of the compared laws \(pdd\) has a parameter onoff",
     ):
         laws_of(["pdd"], law_sets)
-    with pytest.raises(ConfigError, match="^--set controller.law=pdd: sashil compare takes its laws from --controller"):
+    with pytest.raises(
+        ConfigError, match=r"^--set controller\.law=pdd: sashil compare takes its laws from --controller"
+    ):
         split_sets(["controller.law=pdd"])
