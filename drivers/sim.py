@@ -8,7 +8,9 @@ Each encoder's last count change is timed on the plant's continuous trajectory
 (:mod:`sashil.drivers.encoder_edges`): the samples carry it as a board's timer capture does. The
 backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
 ``RigCommand.road_speed_rad_s`` as a real board's road motor does (:class:`RoadWheel`), so a plan
-drives the road the same way on every backend.
+drives the road the same way on every backend. Being a simulation it also reports what no sensor
+measures, the plant's true damper torque and arm acceleration (:meth:`plant_truth`, declared as
+the capability ``true_torque``).
 """
 
 from __future__ import annotations

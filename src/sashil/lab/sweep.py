@@ -76,9 +76,9 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     folder line are ``output`` events. ``progress``: a bar on stderr over the stepped sine's
     frequencies, instead of a ``progress`` event per frequency.
 
-    Bad input raises ConfigError before any folder exists (a port that cannot be opened: the folder
-    is removed); a run that fails after it started raises the error that ended it, after the folder
-    is complete (the data up to the failure, the summary)."""
+    Bad input (exit code 2: ConfigError; DriverError for a port that cannot be opened) is raised with
+    no folder left; a run that fails after it started raises the error that ended it, after the
+    folder is complete (the data up to the failure, the summary)."""
     from sashil.control.registry import make_controller
     from sashil.experiments.sweep import SWEEP_COLUMNS
     from sashil.recording.run_folder import RunFolder
