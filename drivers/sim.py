@@ -8,7 +8,9 @@ Each encoder's last count change is timed on the plant's continuous trajectory
 (:mod:`sashil.drivers.encoder_edges`): the samples carry it as a board's timer capture does. The
 backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
 ``RigCommand.road_speed_rad_s`` as a real board's road motor does (:class:`RoadWheel`), so a plan
-drives the road the same way on every backend.
+drives the road the same way on every backend. Being a simulation it also reports what no sensor
+measures, the plant's true damper torque and arm acceleration (:meth:`plant_truth`, declared as
+the capability ``true_torque``).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
     TWO_PI,
+    PlantTruth,
     RigCapabilities,
     RigCommand,
     RigInterface,
@@ -71,7 +74,12 @@ class SimulatedRig(RigInterface):
 
     name = "sim"
     capabilities = RigCapabilities(
-        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+        operator_hold=True,
+        initial_current=True,
+        road_actuator=True,
+        max_rate_hz=10_000.0,
+        simulated=True,
+        true_torque=True,
     )
 
     def __init__(
@@ -288,6 +296,14 @@ class SimulatedRig(RigInterface):
         speed = cmd.road_speed_rad_s
         if speed is not None and speed == speed and speed != self.wheel.speed_rad_s:  # None/NaN: unchanged
             self.wheel.set_speed(self.plant, speed)
+
+    def plant_truth(self) -> PlantTruth:
+        """The plant's damper torque T and arm acceleration theta2_ddot = (-k*theta - T)/J now (the
+        state of the last ``read``; seed 001 eqs. 9 and 13)."""
+        plant = self.plant
+        torque = plant.damper_torque()
+        p = plant.params
+        return PlantTruth(torque, (-p.k * plant.state.theta_rad - torque) / p.J)
 
     # operator ------------------------------------------------------------------------------
     def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:

@@ -117,23 +117,6 @@ def outputs_of(args: argparse.Namespace) -> Outputs:
     )
 
 
-def open_rerun(args: argparse.Namespace, columns: Sequence[str], name: str, folder: Path) -> Any:
-    """The rerun recording the options ask for, or None (see :meth:`Outputs.open_rerun`)."""
-    return outputs_of(args).open_rerun(columns, name, folder)
-
-
-def start_can_trace(args: argparse.Namespace, rig: Any, folder: Path) -> Any:
-    """The CAN frame trace the options ask for, or None (see :meth:`Outputs.start_can_trace`)."""
-    return outputs_of(args).start_can_trace(rig, folder)
-
-
-def write_formats(
-    args: argparse.Namespace, folder: Path, config: Any, verb: str, columns: Any = None, **meta: Any
-) -> Any:
-    """The ``--format`` data files (see :meth:`Outputs.write_formats`)."""
-    return outputs_of(args).write_formats(folder, config, verb, columns, **meta)
-
-
 def formats(args: argparse.Namespace) -> tuple[str, ...]:
     """The ``--format`` values, each once (checked by :func:`resolve_config`)."""
     return tuple(dict.fromkeys(getattr(args, "format", None) or ()))
@@ -205,19 +188,6 @@ def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None
     return config
 
 
-def select_law(config: Config, name: str | None) -> str:
-    """``--controller NAME``: the law the run uses, written into ``config['controller']`` (the
-    previous law's parameters dropped) and checked with its parameters; returns the law's name."""
-    section = config["controller"]
-    if name is not None and name != section["law"]:
-        from sashil.config import check_controller
-        from sashil.control.law_config import switch_law
-
-        switch_law(section, name)
-        check_controller(config, "--controller")
-    return str(section["law"])
-
-
 def law_help() -> str:
     """The registered law names for ``--controller``'s help (``sashil laws`` lists their parameters)."""
     try:
@@ -227,25 +197,8 @@ def law_help() -> str:
     return f"{names}; or package.module:Class or path/file.py:Class (sashil laws lists their parameters)"
 
 
-def option_or_config(value: Any, option: str, config: Config, key: str) -> tuple[Any, str]:
-    """``(value, option)`` when the option was given, else the config's dotted ``key`` and its name:
-    the value a verb runs with, and what to name in a message about it."""
-    if value is not None:
-        return value, option
-    section, name = key.split(".")
-    return config[section][name], key
-
-
 def positive_seconds(option: str, value: float) -> float:
     """Check a duration argument: a finite number > 0."""
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
         raise ConfigError(f"{option}: expected a duration in seconds > 0, got {value:g}")
-    return float(value)
-
-
-def current_in_range(option: str, value: float, config: dict[str, Any]) -> float:
-    """Check a coil current argument against [0, rig.current_max_a]."""
-    i_max = config["rig"]["current_max_a"]
-    if not (math.isfinite(value) and 0.0 <= value <= i_max):
-        raise ConfigError(f"{option}: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {value:g}")
     return float(value)

@@ -39,6 +39,8 @@ VERB_CHECKS = {
     "drop-test": "sashil.experiments.drop_test:check_drops",
     "run": "sashil.lab.closed_loop:check_run",
     "simulate": "sashil.lab.simulate:check_simulate",
+    "sweep": "sashil.lab.sweep:check_sweep",
+    "compare": "sashil.lab.compare:check_compare",
 }
 
 

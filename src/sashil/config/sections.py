@@ -321,8 +321,12 @@ COMPARE = Section(
             "float", 5.0, low=0.0, high=600.0, doc="on a real rig: time at rest (0 A, road stopped) between laws"
         ),
         "jobs": Field("int", 1, low=1, high=64, doc="simulated rig: laws run in this many processes (--jobs)"),
+        "road": Field("str", "iso8608:C", doc="the road every law runs on (--road syntax)"),
+        "duration_s": Field(
+            "float", 30.0, low=0.0, low_open=True, doc="seconds per law, more than settle_s (--duration)"
+        ),
     },
-    doc="`sashil compare`: the metrics and how the laws are run",
+    doc="`sashil compare`: the road, the metrics and how the laws are run",
 )
 
 CALIBRATE = Section(

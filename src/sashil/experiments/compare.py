@@ -79,14 +79,16 @@ METRICS = (
 
 
 class MeasuredStage:
-    """A loop stage that runs ``stage`` and records the simulated plant's true arm acceleration
-    θ̈2 = (−k·θ − T)/J (seed 001 eq. 13) as ``arm_accel_true_rad_s2`` (NaN on a rig without a plant)."""
+    """A loop stage that runs ``stage`` and records the true arm acceleration θ̈2 = (−k·θ − T)/J
+    (seed 001 eq. 13) of a rig that reports it (its capability ``true_torque``: a simulated plant) as
+    ``arm_accel_true_rad_s2`` (NaN on any other rig)."""
 
-    def __init__(self, stage: Any, plant: Any):
+    def __init__(self, stage: Any, rig: Any):
+        from sashil.drivers.interface import capabilities_of
         from sashil.runtime.loop import stage_signals
 
         self.stage = stage
-        self.plant = plant
+        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.signal_names = (*stage_signals(stage), "arm_accel_true_rad_s2")
         self.arm_accel_true_rad_s2 = math.nan
 
@@ -96,10 +98,8 @@ class MeasuredStage:
         return getattr(self.stage, name)
 
     def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
-        plant = self.plant
-        if plant is not None:
-            p = plant.params
-            self.arm_accel_true_rad_s2 = (-p.k * plant.state.theta_rad - plant.damper_torque()) / p.J
+        if self._truth is not None:
+            self.arm_accel_true_rad_s2 = self._truth.plant_truth().arm_accel_rad_s2
         return self.stage.step(sample, t_ns, dt_ns)
 
 
@@ -209,7 +209,7 @@ def run_job(job: LawJob) -> LawResult:
         if road is not None:
             stage = RoadStage(stage, road)
         rig = open_rig(config)
-        stage = MeasuredStage(stage, getattr(rig, "plant", None))
+        stage = MeasuredStage(stage, rig)
         outcome = run_plan(
             config,
             rig,

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import run_plan
@@ -115,14 +115,15 @@ CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_n
 class SweepStage:
     """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
     road speed. It keeps no data: the runner's stream records every cycle, with the controller's
-    signals and the true damper torque of a simulated plant (``torque_true_nm``, NaN elsewhere)."""
+    signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
+    plant's, its capability ``true_torque``; NaN elsewhere)."""
 
     signal_names = (*CONTROLLER_SIGNALS, "torque_true_nm")
 
     def __init__(self, controller: Any, road: RoadProfile, rig: RigInterface | None = None):
         self.controller = controller
         self.road = road
-        self.plant = getattr(rig, "plant", None)
+        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.torque_true_nm = math.nan
         self._t0: int | None = None
 
@@ -135,8 +136,8 @@ class SweepStage:
         if self._t0 is None:
             self._t0 = t_ns
         t = (t_ns - self._t0) * 1e-9
-        if self.plant is not None:
-            self.torque_true_nm = self.plant.damper_torque()
+        if self._truth is not None:
+            self.torque_true_nm = self._truth.plant_truth().damper_torque_nm
         cmd = self.controller.step(sample, t_ns, dt_ns)
         cmd.road_speed_rad_s = self.road(t)[1]
         return cmd
