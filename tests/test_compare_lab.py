@@ -1,4 +1,4 @@
-"""``sashil.lab.compare.compare`` called from Python: the laws on the road of a resolved config, the
+"""``sashil.lab._compare.compare`` called from Python: the laws on the road of a resolved config, the
 run it returns, and bad input refused before any folder exists."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
-from sashil.lab.compare import CompareLaw, compare, laws_of, split_sets
+from sashil.lab._compare import CompareLaw, compare, laws_of, split_sets
 from sashil.lab.outputs import Outputs
 
 #: a short comparison: 3 s per law, the first 1 s left out, a 10 s road

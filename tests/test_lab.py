@@ -17,7 +17,7 @@ from sashil.config import default_config, dump_config
 from sashil.config.frozen import FrozenSection, thaw
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
-from sashil.lab.drop_test import drop_test
+from sashil.lab._drop_test import drop_test
 from sashil.lab.events import Event
 from sashil.lab.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
@@ -168,3 +168,14 @@ def test_sashil_run_from_python_keeps_its_signature(tmp_path):
     run = sashil.run(current_a=0.25, duration_s=0.2, out=Path(tmp_path / "R"), set=relaxed)
     assert run.summary["controller"] == "passive 0.25 A" and run.config["driver"]["clock"] == "real"
     assert run.config["run"]["duration_s"] == 0.2 and len(run.data["time_s"]) > 100
+
+
+def test_every_experiment_is_a_function_of_sashil_lab_even_after_its_module_is_imported():
+    import importlib
+
+    import sashil.lab as lab
+
+    for name in ("drop_test", "closed_loop", "sweep", "compare", "calibrate", "replay", "simulate"):
+        importlib.import_module(f"sashil.lab._{name}")
+        assert callable(getattr(lab, name)) and getattr(lab, name).__name__ == name
+        assert name in lab.__all__

@@ -14,11 +14,11 @@ import pytest
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError, DataFileError, SashilError
 from sashil.experiments.metrics import drop_metrics
-from sashil.lab.calibrate import calibrate
-from sashil.lab.drop_test import drop_test
+from sashil.lab._calibrate import calibrate
+from sashil.lab._drop_test import drop_test
+from sashil.lab._replay import recorded_config, replay
+from sashil.lab._simulate import drop_table, simulate
 from sashil.lab.outputs import Outputs
-from sashil.lab.replay import recorded_config, replay
-from sashil.lab.simulate import drop_table, simulate
 from sashil.models.registry import MODEL_PARAMS
 
 #: the seed damper of the default config

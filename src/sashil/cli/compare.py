@@ -2,7 +2,7 @@
 
 Each ``--controller`` (a law name, ``package.module:Class`` or ``path/file.py:Class``; repeatable)
 runs on the same road beside the passive damper at 0 A and at i_max, which are always included
-(:func:`sashil.lab.compare.compare`). ``--set controller.<p>=v`` goes to every compared law that
+(:func:`sashil.lab._compare.compare`). ``--set controller.<p>=v`` goes to every compared law that
 declares ``p``; every other ``--set``, ``--road``, ``--duration`` and ``--jobs`` go into the config.
 """
 
@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sashil.config.resolve import Option, resolve
-    from sashil.lab.compare import compare, laws_of, split_sets
+    from sashil.lab._compare import compare, laws_of, split_sets
     from sashil.lab.events import printer
 
     setup_logging(args)

@@ -21,8 +21,8 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from sashil.config.resolve import resolve
+    from sashil.lab._replay import recorded_config, replay
     from sashil.lab.events import printer
-    from sashil.lab.replay import recorded_config, replay
 
     own = recorded_config(args.run_folder)  # a run folder to replay, checked before anything else
     source = config_source(args)

@@ -55,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sashil.config.resolve import Option, resolve
-    from sashil.lab.closed_loop import closed_loop
+    from sashil.lab._closed_loop import closed_loop
     from sashil.lab.events import printer
 
     setup_logging(args)

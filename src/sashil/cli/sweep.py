@@ -55,8 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sashil.config.resolve import Option, resolve
+    from sashil.lab._sweep import sweep
     from sashil.lab.events import printer
-    from sashil.lab.sweep import sweep
 
     setup_logging(args)
     options = (

@@ -37,10 +37,10 @@ RIGLESS_VERBS = ("simulate",)
 #: (``named(key)`` is the option that set a key, or the key), imported when that verb resolves
 VERB_CHECKS = {
     "drop-test": "sashil.experiments.drop_test:check_drops",
-    "run": "sashil.lab.closed_loop:check_run",
-    "simulate": "sashil.lab.simulate:check_simulate",
-    "sweep": "sashil.lab.sweep:check_sweep",
-    "compare": "sashil.lab.compare:check_compare",
+    "run": "sashil.lab._closed_loop:check_run",
+    "simulate": "sashil.lab._simulate:check_simulate",
+    "sweep": "sashil.lab._sweep:check_sweep",
+    "compare": "sashil.lab._compare:check_compare",
 }
 
 
