@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
 from sashil.lab.outputs import IN_RUN_FOLDER, Outputs
-from sashil.plugins import BACKENDS_GROUP, LAWS_GROUP, entry_point_table
 from sashil.recording.formats import FORMATS
 from sashil.recording.formats import HELP as FORMAT_HELP
 
@@ -50,7 +49,9 @@ def add_set_option(parser: argparse.ArgumentParser) -> None:
 
 def add_driver_options(parser: argparse.ArgumentParser) -> None:
     """``--driver`` and ``--port`` (every verb that talks to a rig)."""
-    parser.add_argument("--driver", choices=tuple(entry_point_table(BACKENDS_GROUP)), help="override driver.name")
+    parser.add_argument(
+        "--driver", metavar="NAME", help="override driver.name: sim, serial, can, or an installed backend's name"
+    )
     parser.add_argument(
         "--port", metavar="PORT", help="pyserial URL/device path, or CAN channel (override driver.port)"
     )
@@ -189,12 +190,9 @@ def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None
 
 
 def law_help() -> str:
-    """The registered law names for ``--controller``'s help (``sashil laws`` lists their parameters)."""
-    try:
-        names = ", ".join(entry_point_table(LAWS_GROUP))
-    except ConfigError as err:
-        return f"(the laws cannot be listed: {err})"
-    return f"{names}; or package.module:Class or path/file.py:Class (sashil laws lists their parameters)"
+    """``--controller``'s help: what names a law (the installed ones are listed by ``sashil laws``, so
+    that ``--help`` scans no installed distributions)."""
+    return "a registered law's name (sashil laws lists them with their parameters), or package.module:Class or path/file.py:Class"
 
 
 def positive_seconds(option: str, value: float) -> float:
