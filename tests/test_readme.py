@@ -24,3 +24,15 @@ def test_quick_start_has_two_commands_setup_and_drop_test_then_tests():
 def test_ci_runs_the_readme_test_command():
     _, second = _quick_start_commands()
     assert second in (ROOT / ".ci" / "run").read_text()
+
+
+def test_the_readme_python_examples_run(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    blocks = [block for block in fenced_blocks((ROOT / "README.md").read_text()) if block.info == "python"]
+    assert blocks, "the README shows sashil from Python"
+    for block in blocks:
+        done = subprocess.run([sys.executable, "-c", block.body], cwd=tmp_path, capture_output=True, text=True)
+        assert done.returncode == 0, f"README.md line {block.line}:\n{done.stderr[-2000:]}"
+        assert "ok [0.5]" in done.stdout
