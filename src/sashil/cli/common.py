@@ -35,7 +35,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_set_option(parser: argparse.ArgumentParser) -> None:
-    """``--set section.key=value`` (repeatable), applied by :func:`resolve_config`."""
+    """``--set section.key=value`` (repeatable), applied by :func:`sashil.config.resolve.resolve`."""
     parser.add_argument(
         "--set",
         action="append",
@@ -100,12 +100,6 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
         group.add_argument("--format", action="append", choices=FORMATS, metavar="FMT", help=FORMAT_HELP)
 
 
-def wants_rerun(args: argparse.Namespace) -> bool:
-    return bool(
-        getattr(args, "rerun", False) or getattr(args, "rerun_connect", None) or getattr(args, "rerun_save", None)
-    )
-
-
 def outputs_of(args: argparse.Namespace) -> Outputs:
     """The :class:`~sashil.lab.outputs.Outputs` the options ask for (folder, formats, live view)."""
     return Outputs(
@@ -119,7 +113,7 @@ def outputs_of(args: argparse.Namespace) -> Outputs:
 
 
 def formats(args: argparse.Namespace) -> tuple[str, ...]:
-    """The ``--format`` values, each once (checked by :func:`resolve_config`)."""
+    """The ``--format`` values, each once (checked against the driver by :meth:`Outputs.check`)."""
     return tuple(dict.fromkeys(getattr(args, "format", None) or ()))
 
 
