@@ -63,7 +63,7 @@ DRIVER = Section(
         "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
         "max_lost_fraction": Field(
             "float",
-            0.10,
+            0.25,
             low=0.0,
             high=1.0,
             doc="a run over a link that lost more than this share of its samples ends 'lossy' (exit 5), data kept",
@@ -84,7 +84,7 @@ LOOP = Section(
         "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
         "max_missed_fraction": Field(
             "float",
-            0.10,
+            0.25,
             low=0.0,
             high=1.0,
             doc="a run that missed more than this share of its scheduled deadlines ends 'lossy' (exit 5), data kept",

@@ -51,6 +51,7 @@ def closed_loop(
     from sashil.runtime.loop import record_columns
     from sashil.runtime.session import run_session
     from sashil.runtime.timing import format_timing
+    from sashil.runtime.warmup import warm_up
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])
@@ -63,6 +64,9 @@ def closed_loop(
         road, road_text = parse_road(config["run"]["road"], config)
         if road is not None:
             stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+        # the kernels and the law warmed before the board is greeted: a board's timers start at the
+        # handshake, and the loop's first deadline follows it at once
+        warm_up(stage, lambda line: on_event(Event("progress", line)))
         # open the port and greet the board now (configure is idempotent; the loop's own call finds
         # it done): a port that cannot be opened is one line, before any set-up, output or folder
         rig.configure()
