@@ -93,9 +93,10 @@ def slcan_rig(tmp_path):
 @pytest.mark.e2e  # the emulator in its own process, a run on the wall clock over a pty
 def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
     out = tmp_path / "run"
-    config = tmp_path / "link.yaml"  # a loaded machine may starve the emulator: relaxed link timeouts
+    config = tmp_path / "link.yaml"  # a loaded machine may starve the emulator: relaxed link timeouts and budgets
     config.write_text(
-        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\nloop:\n  rt:\n    priority: 0\n    mlockall: false\n"
+        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n  max_lost_fraction: 1.0\n"
+        "loop:\n  max_missed_fraction: 1.0\n  rt:\n    priority: 0\n    mlockall: false\n"
     )
     done = subprocess.run(
         [*SASHIL, "run", "--driver", "can", "--port", slcan_rig, "--config", str(config), "--duration", "0.5",
