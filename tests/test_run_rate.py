@@ -28,6 +28,7 @@ def test_the_rate_is_configured_on_the_device(tmp_path):
             [
                 "run", "--driver", "serial", "--port", emu.port, "--rate", "500", "--duration", "0.4",
                 "--set", "driver.sample_timeout_ms=200", "--set", "driver.link_lost_ms=2000",
+                "--set", "driver.max_lost_fraction=1", "--set", "loop.max_missed_fraction=1",  # the emulator shares this process
                 "--out", str(out), "-q",
             ]
         )  # fmt: skip
