@@ -3,13 +3,14 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.runtime.signals import StopFlag
 
 __all__ = ["check_run", "closed_loop"]
 
@@ -33,13 +34,19 @@ def closed_loop(
     *,
     progress: bool = False,
     tune: bool = True,
+    views: Sequence[Any] = (),
+    stop: StopFlag | None = None,
 ) -> Run:
     """Run the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
     ``run``) in closed loop for ``run.duration_s`` (None: until stopped by a signal) and return its
     folder as a :class:`~sashil.api.Run`.
 
     ``progress``: a progress bar on the terminal. ``tune``: serve live changes of the law on the
-    folder's socket (``sashil tune``). Bad input (a port that cannot be opened) raises ConfigError
+    folder's socket (``sashil tune``). ``views``: more readers of the run's stream, each with
+    ``start(stream, timing)`` and ``close(trips, notes)`` (the live view's shape): ``stream.columns``,
+    ``stream.rows_committed`` and ``stream.copy_rows(start, stop, step)`` give the rows, and
+    ``timing.cycles`` and ``timing.missed_deadlines`` the loop's counts. ``stop``: a flag another
+    thread may set (:meth:`~sashil.runtime.signals.StopFlag.request`) to stop the run cleanly. Bad input (a port that cannot be opened) raises ConfigError
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
     from sashil.control.registry import make_stage
     from sashil.drivers import open_rig
@@ -77,6 +84,8 @@ def closed_loop(
     live = outputs.open_live_tap(config, record_columns(stage), "sashil run", folder.path)
     if progress:  # a bar on a terminal, a line every 10 s otherwise
         live = SessionHooks(live, RunProgress(duration, rate))
+    if views:
+        live = SessionHooks(live, *views)
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     on_event(
         Event(
@@ -114,7 +123,18 @@ def closed_loop(
 
     try:
         outcome = run_session(
-            config, rig, stage, folder, clock, duration, controller=label, live=live, say=say, tune=tune, finish=finish
+            config,
+            rig,
+            stage,
+            folder,
+            clock,
+            duration,
+            controller=label,
+            live=live,
+            say=say,
+            tune=tune,
+            finish=finish,
+            stop=stop,
         )
     finally:
         if trace is not None and trace_stats is None:

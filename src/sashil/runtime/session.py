@@ -23,6 +23,7 @@ from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import run_plan
+from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
 
@@ -75,6 +76,7 @@ def run_session(
     live: Any = None,
     tune: bool = False,
     finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
+    stop: StopFlag | None = None,
 ) -> SessionOutcome:
     """Run ``stage`` on ``rig`` in closed loop through the one runner
     (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
@@ -82,7 +84,8 @@ def run_session(
     law on the folder's tuning socket while the loop runs (:mod:`sashil.runtime.tune_socket`),
     recorded in ``events.csv`` and ``summary.json``'s ``tuning``. ``finish``: the verb's one hook,
     called with the session's summary once the data and timing are on disk; the keys it returns are
-    added before ``summary.json`` is written, once."""
+    added before ``summary.json`` is written, once. ``stop``: a flag another thread may set to stop
+    the run cleanly (signals are routed to it as well when the session runs on the main thread)."""
     folder.write_config(config)
     tuning, server = open_tuning(config, stage, folder, say) if tune else (None, None)
     try:
@@ -97,6 +100,7 @@ def run_session(
             realtime=realtime,
             live=live,
             tuning=tuning,
+            stop=stop,
         )
     finally:
         if tuning is not None and server is not None:
