@@ -82,6 +82,11 @@ LOOP = Section(
             "choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"
         ),
         "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
+        "process": Field(
+            "bool",
+            True,
+            doc="run the real-clock loop in a process of its own (the recorder, views and tuning stay in the session's)",
+        ),
         "max_missed_fraction": Field(
             "float",
             0.25,

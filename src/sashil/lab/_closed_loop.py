@@ -51,12 +51,14 @@ def closed_loop(
     from sashil.control.registry import make_stage
     from sashil.drivers import open_rig
     from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.recording.formats import can_formats
     from sashil.recording.plots import plot_run, plot_timing
     from sashil.recording.run_folder import RunFolder
     from sashil.recording.run_progress import RunProgress, SessionHooks
     from sashil.runtime.clock import RealClock
     from sashil.runtime.loop import record_columns
-    from sashil.runtime.session import run_session
+    from sashil.runtime.loop_process import LoopProcess
+    from sashil.runtime.session import run_loop_process, run_session
     from sashil.runtime.timing import format_timing
     from sashil.runtime.warmup import warm_up
 
@@ -65,28 +67,51 @@ def closed_loop(
     duration = config["run"]["duration_s"]
     rate = float(config["loop"]["rate_hz"])
     backend = config["driver"]["name"]
-    rig = open_rig(config)  # built, not opened
+    # the loop in a process of its own (loop.process), unless a CAN trace is asked for: its frames
+    # are taken from the rig's bus in the process that holds the rig
+    process = None
+    rig: Any = None
+    stage: Any = None
+    if config["loop"]["process"] and not can_formats(tuple(outputs.formats)):
+        process = LoopProcess(config, duration, tune=tune).start()
+        try:
+            ready = process.wait_ready(
+                lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
+            )
+        except BaseException:
+            process.close()
+            raise
+        label, road_text, columns = ready["label"], ready["road"], tuple(ready["columns"])
+    else:
+        rig = open_rig(config)  # built, not opened
+        try:
+            label, stage = make_stage(config)
+            road, road_text = parse_road(config["run"]["road"], config)
+            if road is not None:
+                stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+            # the kernels and the law warmed before the board is greeted: a board's timers start at the
+            # handshake, and the loop's first deadline follows it at once
+            warm_up(stage, lambda line: on_event(Event("progress", line)))
+            # open the port and greet the board now (configure is idempotent; the loop's own call finds
+            # it done): a port that cannot be opened is one line, before any set-up, output or folder
+            rig.configure()
+        except BaseException:
+            rig.close()
+            raise
+        columns = record_columns(stage)
     try:
-        label, stage = make_stage(config)
-        road, road_text = parse_road(config["run"]["road"], config)
-        if road is not None:
-            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
-        # the kernels and the law warmed before the board is greeted: a board's timers start at the
-        # handshake, and the loop's first deadline follows it at once
-        warm_up(stage, lambda line: on_event(Event("progress", line)))
-        # open the port and greet the board now (configure is idempotent; the loop's own call finds
-        # it done): a port that cannot be opened is one line, before any set-up, output or folder
-        rig.configure()
+        folder = RunFolder.create(outputs.out, "run")
     except BaseException:
-        rig.close()
+        if process is not None:
+            process.abort()
+        else:
+            rig.close()
         raise
-    folder = RunFolder.create(outputs.out, "run")
-    live = outputs.open_live_tap(config, record_columns(stage), "sashil run", folder.path)
+    live = outputs.open_live_tap(config, columns, "sashil run", folder.path)
     if progress:  # a bar on a terminal, a line every 10 s otherwise
         live = SessionHooks(live, RunProgress(duration, rate))
     if views:
         live = SessionHooks(live, *views)
-    clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
     on_event(
         Event(
             "progress",
@@ -94,7 +119,7 @@ def closed_loop(
             f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
         )
     )
-    trace = outputs.start_can_trace(rig, folder.path)
+    trace = outputs.start_can_trace(rig, folder.path) if process is None else None
     trace_stats: dict[str, Any] | None = None
 
     def finish(summary: dict[str, Any]) -> dict[str, Any]:
@@ -122,20 +147,35 @@ def closed_loop(
         on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
 
     try:
-        outcome = run_session(
-            config,
-            rig,
-            stage,
-            folder,
-            clock,
-            duration,
-            controller=label,
-            live=live,
-            say=say,
-            tune=tune,
-            finish=finish,
-            stop=stop,
-        )
+        if process is not None:
+            outcome = run_loop_process(
+                process,
+                config,
+                folder,
+                duration,
+                controller=label,
+                live=live,
+                say=say,
+                tune=tune,
+                finish=finish,
+                stop=stop,
+            )
+        else:
+            clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
+            outcome = run_session(
+                config,
+                rig,
+                stage,
+                folder,
+                clock,
+                duration,
+                controller=label,
+                live=live,
+                say=say,
+                tune=tune,
+                finish=finish,
+                stop=stop,
+            )
     finally:
         if trace is not None and trace_stats is None:
             trace.close()

@@ -129,7 +129,9 @@ class ControlLoop:
         warn_interval_s: float = 1.0,
         warn: Callable[[str], None] | None = None,
         tuning: Any | None = None,
+        timing: TimingStats | None = None,
     ):
+        """``timing``: statistics to fill (the run's stream's shared rings); None: private ones."""
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
         if overrun_policy not in ("skip", "fail"):
@@ -144,7 +146,10 @@ class ControlLoop:
         self.overrun_policy = overrun_policy
         self.warn_interval_ns = int(warn_interval_s * 1e9)
         self.warn = warn if warn is not None else log.warning
-        self.timing = TimingStats(rate_hz)
+        self.timing = timing if timing is not None else TimingStats(rate_hz)
+        #: called with the timing after each overrun (off the per-cycle path): the loop process
+        #: publishes its missed deadlines to the stream
+        self.on_overrun: Callable[[TimingStats], None] | None = None
         if tuning is not None:
             tuning.timing = self.timing  # a change's arrival is dated in the loop's cycles
         self.result = LoopResult(timing=self.timing)
@@ -159,6 +164,8 @@ class ControlLoop:
         #: (a wrapper that forwards the name may add signals of its own), else the stage
         source = getattr(stage, "signal_source", stage)
         self._signal_source = source if all(hasattr(source, name) for name in names) else stage
+        #: the recorder's rows are float64 slots (the run's stream: :mod:`sashil.runtime.stream`)
+        self._typed_rows = bool(getattr(recorder, "typed_rows", False))
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
@@ -286,7 +293,14 @@ class ControlLoop:
         signals = self._signals
         if signals is not None:
             if self._n_signals == 1:
-                row[5] = signals(self._signal_source)
+                value = signals(self._signal_source)
+                if self._typed_rows:
+                    row[5] = NAN if value is None else value
+                else:
+                    row[5] = value
+            elif self._typed_rows:  # a slot of float64: element by element, None as NaN
+                for k, value in enumerate(signals(self._signal_source), 5):
+                    row[k] = NAN if value is None else value
             else:
                 row[5 : 5 + self._n_signals] = signals(self._signal_source)
         row[-3] = NAN if road_speed is None else road_speed
@@ -307,6 +321,8 @@ class ControlLoop:
             )
         timing.missed_deadlines += missed
         timing.overruns += 1
+        if self.on_overrun is not None:
+            self.on_overrun(timing)
         if self._last_warn_ns is None or t_ns - self._last_warn_ns >= self.warn_interval_ns:
             more = f" (+{self._suppressed} more overrun(s) since the last warning)" if self._suppressed else ""
             self.warn(

@@ -17,8 +17,10 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from sashil import errors
+from sashil.errors import exit_code_of
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
@@ -26,6 +28,9 @@ from sashil.runtime.runner import run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
+
+if TYPE_CHECKING:
+    from sashil.runtime.loop_process import LoopProcess
 
 #: the run folder's record of live parameter changes (sashil tune)
 EVENTS_FILE = "events.csv"
@@ -125,3 +130,126 @@ def run_session(
         summary.update(finish(summary))
     folder.write_summary(summary)
     return SessionOutcome(result, summary, outcome.error, outcome.exit_code)
+
+
+def run_loop_process(
+    process: LoopProcess,
+    config: dict[str, Any],
+    folder: RunFolder,
+    duration_s: float | None,
+    *,
+    controller: str,
+    verb: str = "run",
+    say: Callable[[str], None] = _stderr,
+    live: Any = None,
+    tune: bool = False,
+    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
+    stop: StopFlag | None = None,
+) -> SessionOutcome:
+    """:func:`run_session` with the loop in its own process (:mod:`sashil.runtime.loop_process`):
+    ``process`` is ready (its rig open, its kernels warm, its stream made). The session writes
+    ``config.yaml``, checks the disk, records the stream into ``data.csv``, serves the views and the
+    tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
+    whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
+    from sashil.recording.stream_recorder import StreamRecorder
+    from sashil.runtime.loop_process import LiveTiming, SessionSignals, confirm_safe, error_of
+    from sashil.runtime.runner import check_disk, losses
+
+    stream = process.stream
+    assert stream is not None
+    rate = process.rate_hz
+    folder.write_config(config)
+    check_disk(folder.path, len(stream.columns), rate, duration_s)
+    recorder = StreamRecorder(stream, folder.file("data.csv")).start()
+    server = None
+    if tune and process.ready.get("tunable"):
+        try:
+            server = TuneServer(folder.path, handler=process.request).start()
+            say(f"live tuning: sashil tune {folder.path} controller.<param>=VALUE")
+        except OSError as err:
+            say(f"live tuning: off ({folder.path}: cannot listen on a Unix socket: {err.strerror or err})")
+    if live is not None:
+        live.start(stream, LiveTiming(stream, rate))
+    flag = stop if stop is not None else StopFlag()
+
+    def forward(kind: str, text: str) -> None:
+        say(text)
+
+    try:
+        with SessionSignals(flag):
+            process.go(folder.path)
+            end = process.wait_end(flag, forward)
+    finally:
+        if server is not None:
+            server.stop()
+    error: BaseException | None = None
+    try:
+        recorder.close()
+    except OSError as err:
+        error = err
+    timing = stream.timing(rate)
+    if end is not None:
+        timing.restore(end["timing"])
+        if end.get("clip_warning"):
+            say(end["clip_warning"])
+        if end.get("error") is not None:
+            error = error_of(end["error"])
+        status = end["exit_status"]
+    else:  # the loop process died: its rows are kept, the rig is reopened and checked
+        timing.cycles = stream.rows_committed
+        code = process.process.returncode if process.process is not None else None
+        end = {"exit_status": "error", "stop_reason": None, "trips": [], "shutdown_errors": []}
+        found = confirm_safe(config, lambda kind, text: say(text))
+        died = f"the loop process died (exit status {code}); the data up to its last committed row are kept"
+        error = errors.SashilError(died)
+        end.update(loop_died={"exit_status": code, "rig": found})
+        status = "error"
+    if error is not None and status == "ok":
+        status = "error"
+    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
+    if lost is not None:
+        error, status = lost, "lossy"
+        say(str(lost))
+    notes = end.get("tuning_notes") or []
+    live_stats = live.close(end.get("trips", []), [tuple(note) for note in notes]) if live is not None else None
+    events = (end.get("tuning") or {}).get("events") or []
+    if events:
+        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, [[event[name] for name in EVENT_COLUMNS] for event in events])
+    folder.write_timing(timing)
+    summary: dict[str, Any] = {
+        "verb": verb,
+        "exit_status": status,
+        "timing": timing.summary(),
+        "trips": end.get("trips", []),
+        "exit_code": exit_code_of(status, error),
+        "error": str(error) if error is not None else None,
+        "stop_reason": end.get("stop_reason"),
+        "controller_stats": end.get("controller_stats"),
+        "safety": end.get("safety"),
+        "realtime": end.get("realtime", {}),
+        "recording": recorder.summary(),
+        "link": end.get("link"),
+        "shutdown_errors": end.get("shutdown_errors", []),
+        "controller": controller,
+        "duration_s": duration_s,
+        "driver": config["driver"]["name"],
+        "live_view": live_stats,
+        "tuning": end.get("tuning"),
+        "loop_process": {"pid": process.process.pid if process.process else None, "threads": end.get("threads")},
+    }
+    if "loop_died" in end:
+        summary["loop_process"]["died"] = end["loop_died"]
+    if finish is not None:
+        summary.update(finish(summary))
+    folder.write_summary(summary)
+    process.close()
+    result = LoopResult(
+        cycles=timing.cycles,
+        missed_deadlines=timing.missed_deadlines,
+        exit_status=status,
+        error=summary["error"],
+        trips=list(summary["trips"]),
+        timing=timing,
+        stop_reason=summary["stop_reason"],
+    )
+    return SessionOutcome(result, summary, error, summary["exit_code"])

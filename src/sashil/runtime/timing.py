@@ -81,21 +81,39 @@ def _zeros(n: int) -> array:
     return array("q", bytes(8 * n))
 
 
+def shared_size(window: int = DEFAULT_WINDOW) -> int:
+    """Bytes of a shared buffer holding the four rings of ``window`` cycles and the histograms."""
+    return 8 * (len(COLUMNS) * window + len(HISTOGRAMS) * N_BUCKETS)
+
+
 class TimingStats:
     """Per-cycle timing rings (ns), their histograms, and the loop's miss counters (see module doc)."""
 
-    def __init__(self, rate_hz: float, window: int = DEFAULT_WINDOW):
+    def __init__(self, rate_hz: float, window: int = DEFAULT_WINDOW, shared: Any = None):
+        """``shared``: a writable buffer of :func:`shared_size` bytes to hold the rings and the
+        histograms (the run's stream, which the session process reads while the loop process
+        writes); None: private memory."""
         if window < FOLD or window & (window - 1):
             raise ValueError(f"window must be a power of two >= {FOLD}, got {window}")
         self.rate_hz = float(rate_hz)
         self.window = int(window)
         #: index mask of the rings (the loop writes column[cycle & mask])
         self.mask = self.window - 1
-        self.lateness = _zeros(self.window)
-        self.read = _zeros(self.window)
-        self.compute = _zeros(self.window)
-        self.write = _zeros(self.window)
-        self.histograms = {name: np.zeros(N_BUCKETS, dtype=np.int64) for name in HISTOGRAMS}
+        if shared is None:
+            self.lateness, self.read, self.compute, self.write = (_zeros(self.window) for _ in COLUMNS)
+            self.histograms = {name: np.zeros(N_BUCKETS, dtype=np.int64) for name in HISTOGRAMS}
+        else:
+            view = memoryview(shared).cast("B")
+            if len(view) < shared_size(self.window):
+                raise ValueError(f"shared timing buffer of {len(view)} bytes; {shared_size(self.window)} needed")
+            ring = 8 * self.window
+            rings: Any = [view[k * ring : (k + 1) * ring].cast("q") for k in range(len(COLUMNS))]
+            self.lateness, self.read, self.compute, self.write = rings
+            base = len(COLUMNS) * ring
+            self.histograms = {
+                name: np.frombuffer(view, dtype=np.int64, count=N_BUCKETS, offset=base + 8 * N_BUCKETS * k)
+                for k, name in enumerate(HISTOGRAMS)
+            }
         self.max_ns = dict.fromkeys(HISTOGRAMS, 0)
         self.folded = 0  # cycles already in the histograms
         self.cycles = 0
@@ -116,6 +134,30 @@ class TimingStats:
         if room > 0:
             self.skipped_lateness.append(values[:room])
             self.skipped_kept += min(room, missed)
+
+    def counters(self) -> dict[str, Any]:
+        """What a reader of the shared rings needs beside them to give the same :meth:`summary`: the
+        counts, the maxima and the skipped deadlines' lateness (JSON-ready)."""
+        return {
+            "cycles": self.cycles,
+            "missed_deadlines": self.missed_deadlines,
+            "overruns": self.overruns,
+            "folded": self.folded,
+            "max_ns": dict(self.max_ns),
+            "skipped_lateness": [int(v) for part in self.skipped_lateness for v in part],
+        }
+
+    def restore(self, counters: dict[str, Any]) -> TimingStats:
+        """Take the loop's :meth:`counters` (this instance reads the same shared rings)."""
+        self.cycles = int(counters["cycles"])
+        self.missed_deadlines = int(counters["missed_deadlines"])
+        self.overruns = int(counters["overruns"])
+        self.folded = int(counters["folded"])
+        self.max_ns.update({name: int(value) for name, value in counters["max_ns"].items()})
+        skipped = np.asarray(counters.get("skipped_lateness", ()), dtype=np.int64)
+        self.skipped_lateness = [skipped] if skipped.size else []
+        self.skipped_kept = int(skipped.size)
+        return self
 
     # the loop's side -------------------------------------------------------------------------
     def fold(self) -> None:

@@ -1,0 +1,290 @@
+"""The session's side of a loop in its own process: start it, feed its views, end the run's documents.
+
+The loop process (:mod:`sashil.runtime.worker`) is a fresh interpreter started with
+:func:`subprocess.Popen` (``sys.executable -m sashil.runtime.worker``): no fork of this process's
+threads and locks, no re-import of the caller's ``__main__`` (a script or notebook that calls
+``sashil.run(MyLaw)`` runs once), and the law crosses as its spec in the config, never pickled.
+sashil's real-time loop is Linux-only (``SCHED_FIFO``, ``/dev/shm``, ``os.getppid``).
+
+The session process keeps everything that is not the cycle: the recorder
+(:class:`~sashil.recording.stream_recorder.StreamRecorder`), the views (the live view, progress,
+a bench page), the tuning socket (its requests go to the loop through the stream's mailbox), and
+``summary.json``, written once at the end (:func:`end_summary`).
+
+Who stops the loop: a Ctrl-C on the terminal reaches both processes (one process group); the loop
+stops on its own signal, and the session, which catches SIGINT, SIGTERM and SIGHUP for the run,
+writes the signal into the stream's stop word, so a signal sent to the session alone stops the
+loop too. A caller's :class:`~sashil.runtime.signals.StopFlag` is passed on the same way.
+
+Faults: if the loop process dies (``kill -9``), the board's watchdog takes the coil to 0 A; the
+session keeps every committed row, then reopens the link and confirms the current it reads
+(:func:`confirm_safe`) rather than assume it, and ``summary.json`` says the loop died. If the
+session dies, the loop sees it within a cycle (:mod:`sashil.runtime.mailbox`) and ends the run
+itself (:mod:`sashil.runtime.orphan`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sashil import errors
+from sashil.config.frozen import thaw
+from sashil.runtime.signals import STOP_SIGNALS, StopFlag
+from sashil.runtime.stream import MISSED_W, STOP_BY_CALLER, STOP_W, Stream, remove_stale
+
+#: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
+REPLY_WAIT_S = 30.0
+#: how often the session looks at its messages, the caller's stop flag and the loop's health [s]
+POLL_S = 0.02
+#: current at or below which a reopened rig counts as safe [A]
+SAFE_CURRENT_A = 0.05
+
+
+def error_of(fields: Mapping[str, Any]) -> BaseException:
+    """The error the loop process reported, as its sashil class when it has one."""
+    cls = getattr(errors, str(fields.get("type")), None)
+    text = str(fields.get("text"))
+    if isinstance(cls, type) and issubclass(cls, errors.SashilError):
+        return cls(text)
+    err = errors.SashilError(f"{fields.get('type')}: {text}")
+    err.exit_code = int(fields.get("exit_code") or 1)
+    return err
+
+
+def raise_error(fields: Mapping[str, Any]) -> None:
+    """Raise :func:`error_of` the loop process's report."""
+    raise error_of(fields)
+
+
+class LiveTiming:
+    """The loop's counts as the session's views read them while it runs (``cycles``,
+    ``missed_deadlines``, ``value_ns``): from the stream, never from the loop's objects."""
+
+    def __init__(self, stream: Stream, rate_hz: float):
+        self._stream = stream
+        self._stats = stream.timing(rate_hz)
+
+    @property
+    def cycles(self) -> int:
+        return self._stream.rows_committed
+
+    @property
+    def missed_deadlines(self) -> int:
+        return int(self._stream.header[MISSED_W])
+
+    def value_ns(self, name: str, cycle: int) -> int | None:
+        self._stats.cycles = self.cycles
+        return self._stats.value_ns(name, cycle)
+
+
+class LoopProcess:
+    """One loop process: :meth:`start`, :meth:`wait_ready`, :meth:`go`, :meth:`wait_end`."""
+
+    def __init__(
+        self, config: Mapping[str, Any], duration_s: float | None, *, realtime: bool = True, tune: bool = True
+    ):
+        self.job = {
+            "config": thaw(config),
+            "duration_s": duration_s,
+            "realtime": realtime,
+            "tune": tune,
+            "session_pid": os.getpid(),
+            "log_level": _log_level(),
+        }
+        self.rate_hz = float(config["loop"]["rate_hz"])
+        self.process: subprocess.Popen[bytes] | None = None
+        self.stream: Stream | None = None
+        self.ready: dict[str, Any] = {}
+        self._messages = -1
+        self._buffer = b""
+        self._lock = threading.Lock()  # one tuning request in the mailbox at a time
+
+    # -- start ------------------------------------------------------------------------------------
+    def start(self) -> LoopProcess:
+        remove_stale()
+        read_fd, write_fd = os.pipe()
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
+                stdin=subprocess.PIPE,
+                pass_fds=(write_fd,),
+                close_fds=True,
+            )
+        finally:
+            os.close(write_fd)
+        self._messages = read_fd
+        assert self.process.stdin is not None
+        self.process.stdin.write((json.dumps(self.job) + "\n").encode())
+        self.process.stdin.flush()
+        return self
+
+    def _read(self, timeout_s: float) -> list[dict[str, Any]]:
+        """The messages that arrived within ``timeout_s`` (an empty list at the end of the pipe too)."""
+        if self._messages < 0:
+            return []
+        ready, _, _ = select.select([self._messages], [], [], timeout_s)
+        if not ready:
+            return []
+        chunk = os.read(self._messages, 65536)
+        if not chunk:
+            os.close(self._messages)
+            self._messages = -1
+            return []
+        self._buffer += chunk
+        *lines, self._buffer = self._buffer.split(b"\n")
+        return [json.loads(line) for line in lines if line.strip()]
+
+    def wait_ready(self, say: Callable[[str, str], None]) -> dict[str, Any]:
+        """Forward the warm-up's progress (``say(kind, text)``) until the loop is ready; raise the
+        loop's error (a port that cannot be opened: ConfigError) if it fails first."""
+        assert self.process is not None
+        while True:
+            for message in self._read(POLL_S):
+                kind = message["kind"]
+                if kind == "ready":
+                    self.ready = message
+                    self.stream = Stream.attach(message["stream"])
+                    self.stream.owner = True
+                    return message
+                if kind == "error":
+                    self.process.wait()
+                    raise_error(message)
+                if kind in ("progress", "warning"):
+                    say(kind, message["text"])
+            if self._messages < 0:
+                code = self.process.wait()
+                raise errors.SashilError(f"the loop process ended before it was ready (exit status {code})")
+
+    def go(self, folder: Path) -> None:
+        """Start the loop (the run folder is made and the recorder listening)."""
+        assert self.process is not None and self.process.stdin is not None
+        self.process.stdin.write((json.dumps({"folder": str(folder)}) + "\n").encode())
+        self.process.stdin.flush()
+
+    def abort(self) -> None:
+        """End a loop process that was never told to go (nothing was energised)."""
+        if self.process is not None and self.process.stdin is not None:
+            self.process.stdin.close()
+            self.process.wait()
+        self.close()
+
+    # -- run ----------------------------------------------------------------------------------------
+    def wait_end(self, stop: StopFlag | None, say: Callable[[str, str], None]) -> dict[str, Any] | None:
+        """Pass stop requests on and messages up until the loop process ends; its ``end`` message,
+        or None if it died without one."""
+        assert self.process is not None and self.stream is not None
+        header = self.stream.header
+        end = None
+        while True:
+            for message in self._read(POLL_S):
+                if message["kind"] == "end":
+                    end = message
+                elif message["kind"] in ("progress", "warning"):
+                    say(message["kind"], message["text"])
+            if stop is not None and stop.requested and not header[STOP_W]:
+                header[STOP_W] = _stop_code(stop)
+            if self._messages < 0 and self.process.poll() is not None:
+                return end
+
+    def request(self, message: dict[str, Any]) -> dict[str, Any]:
+        """A tuning request answered by the loop between two cycles (the tuning socket's handler)."""
+        assert self.stream is not None and self.process is not None
+        with self._lock:
+            number = self.stream.post(message)
+            deadline = time.monotonic() + REPLY_WAIT_S
+            while time.monotonic() < deadline:
+                reply = self.stream.reply(number)
+                if reply is not None:
+                    return dict(reply)
+                if self.process.poll() is not None:
+                    return {"ok": False, "error": "not applied: the run has ended"}
+                time.sleep(0.001)
+            return {"ok": False, "error": f"not applied: the loop did not reach a cycle within {REPLY_WAIT_S:g} s"}
+
+    def close(self) -> None:
+        if self._messages >= 0:
+            os.close(self._messages)
+            self._messages = -1
+        if self.process is not None and self.process.stdin is not None and not self.process.stdin.closed:
+            self.process.stdin.close()
+        if self.stream is not None:
+            self.stream.close()
+            self.stream = None
+
+
+def _log_level() -> int | None:
+    """The ``sashil`` logger's level when the command line set it up (the loop logs as the session
+    would, to the same stderr), else None (a library caller's logging is its own)."""
+    logger = logging.getLogger("sashil")
+    if any(getattr(handler, "_sashil", False) for handler in logger.handlers):
+        return logger.getEffectiveLevel()
+    return None
+
+
+def _stop_code(stop: StopFlag) -> int:
+    name = stop.signal_name or ""
+    return int(getattr(signal, name, STOP_BY_CALLER)) if name.startswith("SIG") else STOP_BY_CALLER
+
+
+class SessionSignals:
+    """SIGINT, SIGTERM and SIGHUP caught by the session for the run: each writes its number into
+    the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code."""
+
+    def __init__(self, flag: StopFlag):
+        self.flag = flag
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> SessionSignals:
+        if threading.current_thread() is threading.main_thread():
+
+            def handler(signum: int, frame: object) -> None:
+                self.flag.request(signal.Signals(signum).name)
+
+            self._previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._previous.items():
+            signal.signal(sig, old)
+
+
+def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> dict[str, Any]:
+    """After the loop process died: reopen the rig, read its current and leave it at 0 A. Says
+    what was found; a simulated rig ended with the process that held it."""
+    from sashil.drivers import open_rig
+    from sashil.drivers.interface import SAFE_COMMAND, capabilities_of
+
+    found: dict[str, Any] = {"reopened": False}
+    rig = open_rig(thaw(config))
+    if not capabilities_of(rig).link:
+        found["note"] = "the simulated rig ended with the loop process"
+        return found
+    try:
+        rig.configure()
+        sample = rig.read(time.monotonic_ns(), 0)
+        rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
+        found.update(reopened=True, current_a=round(float(sample.current_a), 4))
+        found["safe"] = abs(float(sample.current_a)) <= SAFE_CURRENT_A
+        rig.deactivate()
+    except Exception as err:
+        found["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        rig.close()
+    line = (
+        f"the rig reopened: coil at {found['current_a']:.3f} A"
+        if found.get("reopened")
+        else f"the rig could not be reopened to confirm 0 A: {found.get('error')}"
+    )
+    say("warning", line)
+    return found
