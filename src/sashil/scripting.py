@@ -26,6 +26,7 @@ from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
 from sashil.lab.events import Listener, printer
 from sashil.lab.outputs import Outputs
+from sashil.plugins import check_not_importing
 
 __all__ = ["drop_test", "run"]
 
@@ -109,6 +110,7 @@ def run(
     receives the run's :class:`~sashil.lab.events.Event` messages (default: printed unless ``quiet``)."""
     from sashil.lab._closed_loop import closed_loop
 
+    check_not_importing("sashil.run")
     if current_a is not None:
         if controller not in (None, "passive"):
             raise ConfigError(f"current_a: only for the passive law (got controller={controller!r})")
@@ -142,6 +144,7 @@ def drop_test(
     over at the release. ``on_event`` receives the operator's prompts and each drop's result."""
     from sashil.lab._drop_test import drop_test as run_drops
 
+    check_not_importing("sashil.drop_test")
     options = (
         Option("theta0_deg", "drop_test.theta0_deg", float(theta0_deg)),
         Option("currents_a", "drop_test.currents_a", [float(current) for current in currents_a]),

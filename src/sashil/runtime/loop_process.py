@@ -49,6 +49,8 @@ REPLY_WAIT_S = 30.0
 POLL_S = 0.02
 #: current at or below which a reopened rig counts as safe [A]
 SAFE_CURRENT_A = 0.05
+#: how long a reopened rig's coil may take to reach it [s] (the watchdog's 50 ms and the coil's lag)
+CONFIRM_S = 1.0
 
 
 def error_of(fields: Mapping[str, Any]) -> BaseException:
@@ -260,10 +262,11 @@ class SessionSignals:
 
 
 def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> dict[str, Any]:
-    """After the loop process died: reopen the rig, read its current and leave it at 0 A. Says
-    what was found; a simulated rig ended with the process that held it."""
+    """After the loop process died: reopen the rig, command 0 A and read the coil current until it
+    is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
+    deactivated. Says what was found; a simulated rig ended with the process that held it."""
     from sashil.drivers import open_rig
-    from sashil.drivers.interface import SAFE_COMMAND, capabilities_of
+    from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 
     found: dict[str, Any] = {"reopened": False}
     rig = open_rig(thaw(config))
@@ -273,18 +276,25 @@ def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> 
     try:
         rig.configure()
         sample = rig.read(time.monotonic_ns(), 0)
-        rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
-        found.update(reopened=True, current_a=round(float(sample.current_a), 4))
+        found.update(reopened=True, first_current_a=round(float(sample.current_a), 4))
+        found["watchdog"] = bool(sample.flags & FLAG_WATCHDOG)
+        rig.activate()
+        deadline = time.monotonic() + CONFIRM_S
+        while abs(float(sample.current_a)) > SAFE_CURRENT_A and time.monotonic() < deadline:
+            rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
+            sample = rig.read(time.monotonic_ns(), 0)
+        found["current_a"] = round(float(sample.current_a), 4)
         found["safe"] = abs(float(sample.current_a)) <= SAFE_CURRENT_A
+        rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
         rig.deactivate()
     except Exception as err:
         found["error"] = f"{type(err).__name__}: {err}"
     finally:
         rig.close()
-    line = (
-        f"the rig reopened: coil at {found['current_a']:.3f} A"
-        if found.get("reopened")
-        else f"the rig could not be reopened to confirm 0 A: {found.get('error')}"
-    )
+    if found.get("reopened") and "current_a" in found:
+        watchdog = " (its watchdog had cut the current)" if found["watchdog"] else ""
+        line = f"the rig reopened{watchdog}: coil at {found['current_a']:.3f} A"
+    else:
+        line = f"the rig could not be reopened to confirm 0 A: {found.get('error')}"
     say("warning", line)
     return found
