@@ -104,8 +104,10 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    stats = json.loads((out / "summary.json").read_text())["can_trace"]
-    assert stats["files"] == ["can.blf", "can.asc"] and stats["error"] is None
+    summary = json.loads((out / "summary.json").read_text())
+    stats = summary["can_trace"]
+    assert stats["files"] == ["can.blf", "can.asc"] and stats["error"] is None and stats["frames_dropped"] == 0
+    assert summary["loop_process"]["threads"] == 1  # the frames crossed the stream to the session's writer
     for name in stats["files"]:
         frames = list(can.LogReader(str(out / name)))
         assert len(frames) == stats["frames_rx"] + stats["frames_tx"]

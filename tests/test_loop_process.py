@@ -247,3 +247,24 @@ def test_kill_9_of_the_loop_over_serial_the_session_reopens_the_board_and_confir
     assert rig["reopened"] and rig["safe"] and abs(rig["current_a"]) <= 0.05, rig
     assert "the rig reopened" in err and "coil at" in err
     assert len(_rows(out)["time_s"]) > 100
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: nothing to keep off")
+def test_the_session_keeps_off_the_loops_cpu_while_it_runs(tmp_path):
+    before = os.sched_getaffinity(0)
+    loop_cpu = max(before)
+    seen: list[set[int]] = []
+
+    class Affinity:
+        def start(self, stream, timing):
+            seen.append(os.sched_getaffinity(0))
+
+        def close(self, trips, notes):
+            pass
+
+    run = closed_loop(
+        _config(0.2, f"loop.rt.cpu={loop_cpu}"), sashil.lab.Outputs(out=tmp_path / "run"), views=[Affinity()]
+    )
+    assert run.summary["realtime"]["cpu_affinity"]["detail"] == f"CPU {loop_cpu}"
+    assert run.summary["realtime"]["session"] == f"kept off CPU {loop_cpu}"
+    assert seen == [before - {loop_cpu}] and os.sched_getaffinity(0) == before

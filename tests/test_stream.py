@@ -11,7 +11,6 @@ import pytest
 
 from sashil.control.law_api import Law, Param
 from sashil.errors import RecordingError
-from sashil.recording.stream_recorder import StreamRecorder, format_block
 from sashil.runtime.mailbox import SESSION_DIED, LoopStop, MailboxTuning
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.stream import (
@@ -27,6 +26,7 @@ from sashil.runtime.stream import (
     StreamWriter,
     remove_stale,
 )
+from sashil.runtime.stream_recorder import StreamRecorder, format_block
 from sashil.runtime.timing import TimingStats
 
 COLUMNS = ("time_s", "theta_rad", "seq", "phase")

@@ -67,13 +67,11 @@ def closed_loop(
     duration = config["run"]["duration_s"]
     rate = float(config["loop"]["rate_hz"])
     backend = config["driver"]["name"]
-    # the loop in a process of its own (loop.process), unless a CAN trace is asked for: its frames
-    # are taken from the rig's bus in the process that holds the rig
     process = None
     rig: Any = None
     stage: Any = None
-    if config["loop"]["process"] and not can_formats(tuple(outputs.formats)):
-        process = LoopProcess(config, duration, tune=tune).start()
+    if config["loop"]["process"]:  # the loop in a process of its own
+        process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
         try:
             ready = process.wait_ready(
                 lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
@@ -119,13 +117,18 @@ def closed_loop(
             f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
         )
     )
-    trace = outputs.start_can_trace(rig, folder.path) if process is None else None
+    if process is None:
+        trace = outputs.start_can_trace(rig, folder.path)
+    else:
+        trace = outputs.follow_can_trace(folder.path, config["driver"]["port"], process.can_frames)
     trace_stats: dict[str, Any] | None = None
 
     def finish(summary: dict[str, Any]) -> dict[str, Any]:
         """The run's own keys, its --format files and plots, before the one summary.json is written."""
         nonlocal trace_stats
         trace_stats = trace.close() if trace is not None else None
+        if trace_stats is not None and process is not None:
+            trace_stats["frames_dropped"] += process.frames_dropped()
         extra: dict[str, Any] = {"road": road_text}
         if trace_stats is not None:
             extra["can_trace"] = trace_stats

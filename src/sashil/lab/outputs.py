@@ -8,7 +8,7 @@ experiments in :mod:`sashil.lab`, so each experiment needs one call at the start
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -94,6 +94,15 @@ class Outputs:
             return None
         trace.attach(rig)
         return trace.start()
+
+    def follow_can_trace(self, folder: Path, port: str | None, source: Callable[[], Iterable[Any]]) -> Any:
+        """The running CAN frame trace the formats ask for, fed by ``source`` (the frames of a rig
+        held by the loop process), or None."""
+        from sashil.recording.can_trace import CanTrace
+        from sashil.recording.formats import can_formats
+
+        trace = CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
+        return None if trace is None else trace.follow(source).start()
 
     def write_formats(
         self,

@@ -7,7 +7,7 @@ threads and locks, no re-import of the caller's ``__main__`` (a script or notebo
 sashil's real-time loop is Linux-only (``SCHED_FIFO``, ``/dev/shm``, ``os.getppid``).
 
 The session process keeps everything that is not the cycle: the recorder
-(:class:`~sashil.recording.stream_recorder.StreamRecorder`), the views (the live view, progress,
+(:class:`~sashil.runtime.stream_recorder.StreamRecorder`), the views (the live view, progress,
 a bench page), the tuning socket (its requests go to the loop through the stream's mailbox), and
 ``summary.json``, written once at the end (:func:`end_summary`).
 
@@ -94,9 +94,17 @@ class LoopProcess:
     """One loop process: :meth:`start`, :meth:`wait_ready`, :meth:`go`, :meth:`wait_end`."""
 
     def __init__(
-        self, config: Mapping[str, Any], duration_s: float | None, *, realtime: bool = True, tune: bool = True
+        self,
+        config: Mapping[str, Any],
+        duration_s: float | None,
+        *,
+        realtime: bool = True,
+        tune: bool = True,
+        can_trace: bool = False,
     ):
+        """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`)."""
         self.job = {
+            "can_trace": can_trace,
             "config": thaw(config),
             "duration_s": duration_s,
             "realtime": realtime,
@@ -105,12 +113,18 @@ class LoopProcess:
             "log_level": _log_level(),
         }
         self.rate_hz = float(config["loop"]["rate_hz"])
+        #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
+        self.loop_cpu: int | None = config["loop"]["rt"].get("cpu") if realtime else None
         self.process: subprocess.Popen[bytes] | None = None
         self.stream: Stream | None = None
         self.ready: dict[str, Any] = {}
         self._messages = -1
         self._buffer = b""
         self._lock = threading.Lock()  # one tuning request in the mailbox at a time
+        #: each thread's CPUs before the session kept off the loop's (``loop.rt.cpu``)
+        self._affinity: dict[int, set[int]] = {}
+        #: what the session did about the loop's CPU, for the summary's ``realtime``
+        self.session_affinity: str | None = None
 
     # -- start ------------------------------------------------------------------------------------
     def start(self) -> LoopProcess:
@@ -126,10 +140,26 @@ class LoopProcess:
         finally:
             os.close(write_fd)
         self._messages = read_fd
+        self._keep_off(self.loop_cpu)
         assert self.process.stdin is not None
         self.process.stdin.write((json.dumps(self.job) + "\n").encode())
         self.process.stdin.flush()
         return self
+
+    def _keep_off(self, cpu: int | None) -> None:
+        """Move every thread of this process off ``cpu`` (the loop's, ``loop.rt.cpu``), after the
+        loop process was started (it pins itself there); :meth:`close` moves them back."""
+        if cpu is None:
+            return
+        try:
+            for tid in (int(name) for name in os.listdir("/proc/self/task")):
+                allowed = os.sched_getaffinity(tid)
+                if cpu in allowed and len(allowed) > 1:
+                    os.sched_setaffinity(tid, allowed - {cpu})
+                    self._affinity[tid] = allowed
+            self.session_affinity = f"kept off CPU {cpu}"
+        except OSError as err:
+            self.session_affinity = f"could not keep off CPU {cpu}: {err.strerror or err}"
 
     def _read(self, timeout_s: float) -> list[dict[str, Any]]:
         """The messages that arrived within ``timeout_s`` (an empty list at the end of the pipe too)."""
@@ -214,7 +244,41 @@ class LoopProcess:
                 time.sleep(0.001)
             return {"ok": False, "error": f"not applied: the loop did not reach a cycle within {REPLY_WAIT_S:g} s"}
 
+    def can_frames(self) -> list[Any]:
+        """The CAN frames the loop process sent and received since the last call, as ``can.Message``."""
+        import can
+
+        from sashil.runtime.stream import FRAME_ERROR, FRAME_EXTENDED, FRAME_REMOTE, FRAME_RX
+
+        if self.stream is None:
+            return []
+        return [
+            can.Message(
+                timestamp=stamp,
+                arbitration_id=ident,
+                dlc=dlc,
+                data=data,
+                is_rx=bool(flags & FRAME_RX),
+                is_extended_id=bool(flags & FRAME_EXTENDED),
+                is_error_frame=bool(flags & FRAME_ERROR),
+                is_remote_frame=bool(flags & FRAME_REMOTE),
+            )
+            for stamp, ident, dlc, flags, data in self.stream.read_frames()
+        ]
+
+    def frames_dropped(self) -> int:
+        """CAN frames the loop process left out because the trace's ring was full."""
+        from sashil.runtime.stream import FRAMES_DROPPED_W
+
+        return 0 if self.stream is None else int(self.stream.header[FRAMES_DROPPED_W])
+
     def close(self) -> None:
+        for tid, allowed in self._affinity.items():
+            try:
+                os.sched_setaffinity(tid, allowed)
+            except OSError:  # a thread that has ended since
+                pass
+        self._affinity.clear()
         if self._messages >= 0:
             os.close(self._messages)
             self._messages = -1

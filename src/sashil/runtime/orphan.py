@@ -15,8 +15,8 @@ from typing import Any
 
 from sashil.errors import SashilError, exit_code_of
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.stream_recorder import append, format_block
 from sashil.runtime.stream import RECORDED_W, Stream
+from sashil.runtime.stream_recorder import append, format_block
 
 
 def finish_alone(

@@ -151,9 +151,9 @@ def run_loop_process(
     ``config.yaml``, checks the disk, records the stream into ``data.csv``, serves the views and the
     tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
     whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
-    from sashil.recording.stream_recorder import StreamRecorder
     from sashil.runtime.loop_process import LiveTiming, SessionSignals, confirm_safe, error_of
     from sashil.runtime.runner import check_disk, losses
+    from sashil.runtime.stream_recorder import StreamRecorder
 
     stream = process.stream
     assert stream is not None
@@ -226,7 +226,10 @@ def run_loop_process(
         "stop_reason": end.get("stop_reason"),
         "controller_stats": end.get("controller_stats"),
         "safety": end.get("safety"),
-        "realtime": end.get("realtime", {}),
+        "realtime": {
+            **end.get("realtime", {}),
+            **({"session": process.session_affinity} if process.session_affinity else {}),
+        },
         "recording": recorder.summary(),
         "link": end.get("link"),
         "shutdown_errors": end.get("shutdown_errors", []),

@@ -20,6 +20,7 @@ page 1                the mailbox: a request to the loop (a live parameter chang
 page 2                the mailbox's reply, as JSON
 rows                  ``capacity`` rows of ``width`` float64 (``data.csv``'s columns)
 timing                the loop's timing rings and histograms (:func:`~sashil.runtime.timing.shared_size`)
+frames                a run with a CAN trace: every frame sent and received (:class:`FrameWriter`)
 ====================  =======================================================================
 
 The file is created whole before the loop starts (``posix_fallocate``: a full disk is an error
@@ -38,6 +39,7 @@ import json
 import mmap
 import os
 import secrets
+import struct
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -75,6 +77,8 @@ THREADS_W = 15
 #: rows the recorder must have room for: 1 once the session attached a recorder (0: no recorder)
 RECORDER_W = 16
 COLUMNS_LEN_W, MAIL_LEN_W, REPLY_LEN_W = 17, 18, 19
+#: the CAN frame ring: its capacity (0: none), frames committed, frames the reader took, frames dropped
+FRAMES_CAP_W, FRAMES_W, FRAMES_READ_W, FRAMES_DROPPED_W = 20, 21, 22, 23
 HEADER_WORDS = 32
 COLUMNS_OFFSET = 8 * HEADER_WORDS
 
@@ -109,18 +113,26 @@ class Stream:
         self.rows = np.frombuffer(handle, dtype=np.float64, count=self.width * self.capacity, offset=self._rows_at)
         self.rows = self.rows.reshape(self.capacity, self.width)
         self._timing_at = self._rows_at + rows_bytes
+        self.frames_capacity = int(self.header[FRAMES_CAP_W])
+        self._frames_at = self._timing_at + _pages(shared_size(self.window))
         self._mail = memoryview(handle)[PAGE : 2 * PAGE]
         self._reply = memoryview(handle)[2 * PAGE : 3 * PAGE]
 
     # -- making and opening ---------------------------------------------------------------------
     @staticmethod
-    def size(width: int, capacity: int, window: int = DEFAULT_WINDOW) -> int:
-        """Bytes of a stream of ``capacity`` rows of ``width`` columns and a timing window."""
-        return 3 * PAGE + _pages(8 * width * capacity) + _pages(shared_size(window))
+    def size(width: int, capacity: int, window: int = DEFAULT_WINDOW, frames: int = 0) -> int:
+        """Bytes of a stream of ``capacity`` rows of ``width`` columns, a timing window and a ring
+        of ``frames`` CAN frames."""
+        return 3 * PAGE + _pages(8 * width * capacity) + _pages(shared_size(window)) + _pages(FRAME.size * frames)
 
     @classmethod
     def create(
-        cls, columns: Sequence[str], capacity: int, window: int = DEFAULT_WINDOW, folder: Path | None = None
+        cls,
+        columns: Sequence[str],
+        capacity: int,
+        window: int = DEFAULT_WINDOW,
+        folder: Path | None = None,
+        frames: int = 0,
     ) -> Stream:
         """A new stream file for ``columns``, allocated whole and touched (module doc). OSError
         (ENOSPC) when its file system cannot hold it."""
@@ -131,7 +143,7 @@ class Stream:
         if capacity < 2:
             raise ValueError("a stream holds at least 2 rows")
         path = folder / f"sashil-{os.getpid()}-{secrets.token_hex(4)}.stream"
-        size = cls.size(len(columns), capacity, window)
+        size = cls.size(len(columns), capacity, window, frames)
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
         try:
             os.posix_fallocate(fd, 0, size)
@@ -152,6 +164,7 @@ class Stream:
             window,
         )
         header[COLUMNS_LEN_W] = len(names)
+        header[FRAMES_CAP_W] = frames
         header[SESSION_PID_W] = os.getpid()
         header[MAGIC_W] = MAGIC  # last: a reader that sees the magic sees the rest
         header.release()
@@ -218,6 +231,22 @@ class Stream:
         """Rows ``start, start + step, ... < stop`` as tuples (the recorder's reader interface:
         :meth:`sashil.recording.recorder.Recorder.copy_rows`)."""
         return [tuple(row) for row in self.block(max(start, 0), stop)[::step].tolist()]
+
+    def frame_view(self) -> memoryview:
+        """The CAN frame ring's bytes (:class:`FrameWriter`, :meth:`read_frames`)."""
+        return memoryview(self._map)[self._frames_at : self._frames_at + FRAME.size * self.frames_capacity]
+
+    def read_frames(self) -> list[tuple[float, int, int, int, bytes]]:
+        """The frames committed since the last call, as ``(timestamp, id, dlc, flags, data)``, and
+        tells the writer they are taken (one reader: the session's trace)."""
+        start, stop = int(self.header[FRAMES_READ_W]), int(self.header[FRAMES_W])
+        if stop <= start:
+            return []
+        view, cap = self.frame_view(), self.frames_capacity
+        frames = [FRAME.unpack_from(view, FRAME.size * (k % cap)) for k in range(start, stop)]
+        view.release()
+        self.header[FRAMES_READ_W] = stop
+        return [(stamp, ident, dlc, flags, data[:dlc]) for stamp, ident, dlc, flags, data in frames]
 
     # -- the mailbox --------------------------------------------------------------------------------
     def post(self, message: dict[str, Any]) -> int:
@@ -307,6 +336,50 @@ class StreamWriter:
         for slot in self._slots:
             slot.release()
         self._slots = []
+
+
+#: one CAN frame in the ring: timestamp [s], identifier, length, flags (FRAME_* bits), 8 data bytes
+FRAME = struct.Struct("<dIBB2x8s")
+FRAME_RX, FRAME_EXTENDED, FRAME_ERROR, FRAME_REMOTE = 1, 2, 4, 8
+
+
+class FrameWriter:
+    """The loop process's CAN frame sink (the backend's ``frame_sink``): each frame sent or received
+    into the stream's frame ring, never waiting. A frame the reader has no room for is counted in
+    ``FRAMES_DROPPED_W`` and left out (a trace is a view of the link, not what stops a run)."""
+
+    def __init__(self, stream: Stream):
+        self._header = stream.header
+        self._view = stream.frame_view()
+        self._cap = stream.frames_capacity
+        self._head = int(stream.header[FRAMES_W])
+
+    def put(self, frame: Any) -> None:
+        head = self._head
+        header = self._header
+        if head - header[FRAMES_READ_W] >= self._cap:
+            header[FRAMES_DROPPED_W] += 1
+            return
+        flags = (
+            (FRAME_RX if frame.is_rx else 0)
+            | (FRAME_EXTENDED if frame.is_extended_id else 0)
+            | (FRAME_ERROR if frame.is_error_frame else 0)
+            | (FRAME_REMOTE if frame.is_remote_frame else 0)
+        )
+        FRAME.pack_into(
+            self._view,
+            FRAME.size * (head % self._cap),
+            frame.timestamp,
+            frame.arbitration_id,
+            frame.dlc,
+            flags,
+            bytes(frame.data),
+        )
+        self._head = head + 1
+        header[FRAMES_W] = self._head  # last: the frame is whole for the reader
+
+    def release(self) -> None:
+        self._view.release()
 
 
 def remove_stale(folder: Path | None = None) -> list[Path]:

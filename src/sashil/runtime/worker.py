@@ -34,12 +34,14 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from sashil.errors import exit_code_of
+from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
 
 #: rows of the stream per second of the loop's rate: how far the recorder may fall behind
 STREAM_SECONDS = 30.0
 #: the fewest rows a stream holds
 MIN_ROWS = 4096
+#: CAN frames the stream holds for the session's trace writer (a 1 kHz link sends about 3 per cycle)
+FRAME_ROWS = 1 << 16
 
 
 def stream_rows(rate_hz: float) -> int:
@@ -116,7 +118,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     from sashil.runtime.loop import ControlLoop, record_columns
     from sashil.runtime.mailbox import LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
-    from sashil.runtime.stream import LOOP_PID_W, MISSED_W, THREADS_W, Stream, StreamWriter
+    from sashil.runtime.stream import LOOP_PID_W, MISSED_W, STREAM_DIR, THREADS_W, FrameWriter, Stream, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
     from sashil.safety import SafetySupervisor
 
@@ -136,7 +138,17 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
             "error", type="Stopped", text=f"stopped by {flag.signal_name} before the run started", exit_code=130
         )
         return 130
-    stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"))
+    frames = FRAME_ROWS if job.get("can_trace") else 0
+    try:
+        stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
+    except OSError as err:  # before anything is energised
+        rig.close()
+        raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
+    if frames:
+        if not capabilities_of(rig).can_frames:
+            rig.close()
+            raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
+        rig.frame_sink = FrameWriter(stream).put
     stream.header[LOOP_PID_W] = os.getpid()
     stream.set_state("ready")
     law = getattr(stage, "law", None)
