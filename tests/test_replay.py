@@ -11,7 +11,6 @@ import pytest
 
 from sashil.api import load_run
 from sashil.cli import main
-from sashil.runtime import clock as clock_module
 from sashil.runtime.clock import VirtualClock
 
 
@@ -25,23 +24,11 @@ class _VirtualClock:
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
+    """A run as ``sashil run`` records it: the loop process on the real clock, the session's recorder."""
     out = tmp_path_factory.mktemp("replay") / "run"
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(clock_module, "RealClock", _VirtualClock)
-        code = main(
-            [
-                "run",
-                "-q",
-                "--duration",
-                "1",
-                "--controller",
-                "skyhook",
-                "--set",
-                "controller.c_sky=2",
-                "--out",
-                str(out),
-            ]
-        )
+    code = main(
+        ["run", "-q", "--duration", "1", "--controller", "skyhook", "--set", "controller.c_sky=2", "--out", str(out)]
+    )
     assert code == 0
     return out
 

@@ -13,8 +13,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sashil.errors import SashilError, exit_code_of
+from sashil.errors import SashilError
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime.runner import loop_summary
 from sashil.runtime.stream import RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
 
@@ -41,18 +42,19 @@ def finish_alone(
     run.write_summary(
         {
             "verb": "run",
-            "exit_status": "error",
-            "timing": timing.summary(),
-            "trips": end["trips"],
-            "exit_code": exit_code_of("error", error),
-            "error": str(error),
-            "stop_reason": end["stop_reason"],
-            "controller_stats": end["controller_stats"],
-            "safety": end["safety"],
-            "realtime": end["realtime"],
-            "recording": {"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
-            "link": end["link"],
-            "shutdown_errors": end["shutdown_errors"],
+            **loop_summary(
+                exit_status="error",
+                timing=timing.summary(),
+                trips=end["trips"],
+                error=error,
+                stop_reason=end["stop_reason"],
+                controller_stats=end["controller_stats"],
+                safety=end["safety"],
+                realtime=end["realtime"],
+                recording={"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
+                link=end["link"],
+                shutdown_errors=end["shutdown_errors"],
+            ),
             "controller": config["controller"]["law"],
             "driver": config["driver"]["name"],
             "tuning": end["tuning"],

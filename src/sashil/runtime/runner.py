@@ -104,6 +104,41 @@ def losses(config: dict[str, Any], timing: Any, link: dict[str, Any] | None) -> 
     return LossError("the run " + " and ".join(problems) + "; its data are kept") if problems else None
 
 
+def loop_summary(
+    *,
+    exit_status: str,
+    timing: dict[str, Any],
+    trips: list[dict[str, Any]],
+    error: BaseException | None,
+    stop_reason: str | None,
+    controller_stats: dict[str, Any] | None,
+    safety: dict[str, Any] | None,
+    realtime: dict[str, Any],
+    recording: dict[str, Any] | None,
+    link: dict[str, Any] | None,
+    shutdown_errors: list[str],
+    error_text: str | None = None,
+) -> dict[str, Any]:
+    """The keys of summary.json every loop run has, in one place: the run in this process
+    (:meth:`RunOutcome.summary`), in a loop process (:func:`~sashil.runtime.session.run_loop_process`)
+    and a loop whose session died (:mod:`~sashil.runtime.orphan`). ``exit_code`` follows from the
+    status and the error; ``error`` is ``error_text`` (default: the error's line) when there is one."""
+    return {
+        "exit_status": exit_status,
+        "timing": timing,
+        "trips": trips,
+        "exit_code": exit_code_of(exit_status, error),
+        "error": (error_text or str(error)) if error is not None else None,
+        "stop_reason": stop_reason,
+        "controller_stats": controller_stats,
+        "safety": safety,
+        "realtime": realtime,
+        "recording": recording,
+        "link": link,
+        "shutdown_errors": shutdown_errors,
+    }
+
+
 @dataclass
 class RunOutcome:
     """What :func:`run_plan` leaves: the loop's result, the error that ended the run (None: it ended
@@ -128,23 +163,23 @@ class RunOutcome:
         return exit_code_of(self.result.exit_status, self.error)
 
     def summary(self) -> dict[str, Any]:
-        """The common keys of summary.json (the verb adds its own)."""
+        """The common keys of summary.json (the verb adds its own): :func:`loop_summary`."""
         result = self.result
         stage = self.loop.stage
-        return {
-            "exit_status": result.exit_status,
-            "timing": self.loop.timing.summary(),
-            "trips": result.trips,
-            "exit_code": self.exit_code,
-            "error": result.error if self.error is not None else None,
-            "stop_reason": result.stop_reason,
-            "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-            "safety": self.loop.safety.summary() if self.loop.safety is not None else None,
-            "realtime": self.realtime,
-            "recording": self.recording,
-            "link": self.link,
-            "shutdown_errors": result.shutdown_errors,
-        }
+        return loop_summary(
+            exit_status=result.exit_status,
+            timing=self.loop.timing.summary(),
+            trips=result.trips,
+            error=self.error,
+            stop_reason=result.stop_reason,
+            controller_stats=stage.stats() if hasattr(stage, "stats") else None,
+            safety=self.loop.safety.summary() if self.loop.safety is not None else None,
+            realtime=self.realtime,
+            recording=self.recording,
+            link=self.link,
+            shutdown_errors=result.shutdown_errors,
+            error_text=result.error,
+        )
 
     def stop_error(self) -> Stopped | None:
         """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sashil import errors
-from sashil.errors import exit_code_of
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
@@ -152,7 +151,7 @@ def run_loop_process(
     tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
     whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
     from sashil.runtime.loop_process import LiveTiming, SessionSignals, confirm_safe, error_of
-    from sashil.runtime.runner import check_disk, losses
+    from sashil.runtime.runner import check_disk, loop_summary, losses
     from sashil.runtime.stream_recorder import StreamRecorder
 
     stream = process.stream
@@ -216,23 +215,22 @@ def run_loop_process(
     if events:
         folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, [[event[name] for name in EVENT_COLUMNS] for event in events])
     folder.write_timing(timing)
+    session_affinity = {"session": process.session_affinity} if process.session_affinity else {}
     summary: dict[str, Any] = {
         "verb": verb,
-        "exit_status": status,
-        "timing": timing.summary(),
-        "trips": end.get("trips", []),
-        "exit_code": exit_code_of(status, error),
-        "error": str(error) if error is not None else None,
-        "stop_reason": end.get("stop_reason"),
-        "controller_stats": end.get("controller_stats"),
-        "safety": end.get("safety"),
-        "realtime": {
-            **end.get("realtime", {}),
-            **({"session": process.session_affinity} if process.session_affinity else {}),
-        },
-        "recording": recorder.summary(),
-        "link": end.get("link"),
-        "shutdown_errors": end.get("shutdown_errors", []),
+        **loop_summary(
+            exit_status=status,
+            timing=timing.summary(),
+            trips=end.get("trips", []),
+            error=error,
+            stop_reason=end.get("stop_reason"),
+            controller_stats=end.get("controller_stats"),
+            safety=end.get("safety"),
+            realtime={**end.get("realtime", {}), **session_affinity},
+            recording=recorder.summary(),
+            link=end.get("link"),
+            shutdown_errors=end.get("shutdown_errors", []),
+        ),
         "controller": controller,
         "duration_s": duration_s,
         "driver": config["driver"]["name"],
