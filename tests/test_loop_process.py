@@ -124,6 +124,21 @@ def _start_run(out: Path, *args: str) -> tuple[subprocess.Popen, int]:
     return proc, int(children[0])
 
 
+def _kill_the_loop(out: Path, *args: str) -> tuple[subprocess.Popen, str]:
+    """``sashil run ARGS`` whose loop process gets SIGKILL half a second into the run; the
+    finished session process and its stderr."""
+    proc, loop_pid = _start_run(out, *args)
+    try:
+        time.sleep(0.5)
+        os.kill(loop_pid, signal.SIGKILL)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc, err
+
+
 def _gone(pid: int, timeout_s: float = 60.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -137,15 +152,7 @@ def _gone(pid: int, timeout_s: float = 60.0) -> bool:
 
 def test_kill_9_of_the_loop_keeps_the_data_and_the_summary_says_the_loop_died(tmp_path):
     out = tmp_path / "run"
-    proc, loop_pid = _start_run(out, "--duration", "30", "--current", "0.4")
-    try:
-        time.sleep(0.5)
-        os.kill(loop_pid, signal.SIGKILL)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    proc, err = _kill_the_loop(out, "--duration", "30", "--current", "0.4")
     assert proc.returncode == 1, err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_status"] == "error" and "loop process died" in summary["error"]
@@ -218,27 +225,8 @@ def test_kill_9_of_the_loop_over_serial_the_session_reopens_the_board_and_confir
     emu = Emulator(tmp_path, "serial", "python")
     out = tmp_path / "run"
     try:
-        proc, loop_pid = _start_run(
-            out,
-            "--driver",
-            "serial",
-            "--port",
-            emu.link,
-            "--config",
-            relaxed_config(tmp_path),
-            "--duration",
-            "30",
-            "--current",
-            "0.8",
-        )
-        try:
-            time.sleep(0.5)
-            os.kill(loop_pid, signal.SIGKILL)
-            _, err = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        link = ("--driver", "serial", "--port", emu.link, "--config", relaxed_config(tmp_path))
+        proc, err = _kill_the_loop(out, *link, "--duration", "30", "--current", "0.8")
     finally:
         emu.stop()
     assert proc.returncode == 1, err

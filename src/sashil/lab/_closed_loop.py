@@ -149,36 +149,20 @@ def closed_loop(
     def say(line: str) -> None:
         on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
 
+    hooks: dict[str, Any] = {
+        "controller": label,
+        "live": live,
+        "say": say,
+        "tune": tune,
+        "finish": finish,
+        "stop": stop,
+    }
     try:
         if process is not None:
-            outcome = run_loop_process(
-                process,
-                config,
-                folder,
-                duration,
-                controller=label,
-                live=live,
-                say=say,
-                tune=tune,
-                finish=finish,
-                stop=stop,
-            )
+            outcome = run_loop_process(process, config, folder, duration, **hooks)
         else:
             clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-            outcome = run_session(
-                config,
-                rig,
-                stage,
-                folder,
-                clock,
-                duration,
-                controller=label,
-                live=live,
-                say=say,
-                tune=tune,
-                finish=finish,
-                stop=stop,
-            )
+            outcome = run_session(config, rig, stage, folder, clock, duration, **hooks)
     finally:
         if trace is not None and trace_stats is None:
             trace.close()

@@ -194,6 +194,25 @@ class RunOutcome:
             raise stopped
 
 
+def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[str], None]) -> BaseException | None:
+    """Run ``loop`` under the real-time set-up ``rt`` (its steps reported through ``note``, undone
+    afterwards); the error that ended the loop, if any (the rig is then already at 0 A, deactivated
+    and closed)."""
+    try:
+        if rt is not None:
+            rt.apply()
+            for line in rt.lines():
+                note(line)
+        try:
+            loop.run()
+        except BaseException as err:
+            return err
+        return None
+    finally:
+        if rt is not None:
+            rt.restore()
+
+
 def run_plan(
     config: dict[str, Any],
     rig: Any,
@@ -262,17 +281,7 @@ def run_plan(
         if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
             live.start(recorder, loop.timing)
         try:
-            if rt is not None:
-                rt.apply()
-                for line in rt.lines():
-                    (note or say)(line)
-            try:
-                loop.run()
-            except BaseException as err:  # the rig is already at 0 A, deactivated and closed
-                error = err
-            finally:
-                if rt is not None:
-                    rt.restore()
+            error = run_realtime(loop, rt, note or say)
         finally:
             if recorder is not None:
                 try:

@@ -118,6 +118,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     from sashil.runtime.loop import ControlLoop, record_columns
     from sashil.runtime.mailbox import LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
+    from sashil.runtime.runner import run_realtime
     from sashil.runtime.stream import LOOP_PID_W, MISSED_W, STREAM_DIR, THREADS_W, FrameWriter, Stream, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
     from sashil.safety import SafetySupervisor
@@ -185,21 +186,9 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     )
     loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
     rt = RealtimeSetup.from_config(loop_cfg) if job.get("realtime", True) else None
-    error: BaseException | None = None
     stream.set_state("running")
-    try:
-        if rt is not None:
-            rt.apply()
-            for line in rt.lines():
-                messages.send("progress", text=line)
-        stream.header[THREADS_W] = threading.active_count()
-        try:
-            loop.run()
-        except BaseException as err:  # the rig is already at 0 A, deactivated and closed
-            error = err
-    finally:
-        if rt is not None:
-            rt.restore()
+    stream.header[THREADS_W] = threading.active_count()
+    error = run_realtime(loop, rt, lambda line: messages.send("progress", text=line))
     if writer.error is not None and error is None:
         error = writer.error
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
