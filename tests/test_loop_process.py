@@ -256,3 +256,17 @@ def test_the_session_keeps_off_the_loops_cpu_while_it_runs(tmp_path):
     assert run.summary["realtime"]["cpu_affinity"]["detail"] == f"CPU {loop_cpu}"
     assert run.summary["realtime"]["session"] == f"kept off CPU {loop_cpu}"
     assert seen == [before - {loop_cpu}] and os.sched_getaffinity(0) == before
+
+
+def test_a_disk_too_full_for_the_run_ends_the_loop_process_before_anything_is_energised(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    from sashil.errors import DiskSpaceError
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 10**6, 10**6))
+    with pytest.raises(DiskSpaceError, match="MB free on its disk"):
+        closed_loop(_config(60.0, "controller.current_a=0.5"), sashil.lab.Outputs(out=tmp_path / "run"))
+    assert Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").read_text().strip() == ""  # no loop process left
+    assert not (tmp_path / "run" / "data.csv").exists()

@@ -157,18 +157,27 @@ def run_loop_process(
     stream = process.stream
     assert stream is not None
     rate = process.rate_hz
-    folder.write_config(config)
-    check_disk(folder.path, len(stream.columns), rate, duration_s)
-    recorder = StreamRecorder(stream, folder.file("data.csv")).start()
+    recorder: StreamRecorder | None = None
     server = None
-    if tune and process.ready.get("tunable"):
-        try:
-            server = TuneServer(folder.path, handler=process.request).start()
-            say(f"live tuning: sashil tune {folder.path} controller.<param>=VALUE")
-        except OSError as err:
-            say(f"live tuning: off ({folder.path}: cannot listen on a Unix socket: {err.strerror or err})")
-    if live is not None:
-        live.start(stream, LiveTiming(stream, rate))
+    try:  # until the loop is told to go, a failure ends the loop process with nothing energised
+        folder.write_config(config)
+        check_disk(folder.path, len(stream.columns), rate, duration_s)
+        recorder = StreamRecorder(stream, folder.file("data.csv")).start()
+        if tune and process.ready.get("tunable"):
+            try:
+                server = TuneServer(folder.path, handler=process.request).start()
+                say(f"live tuning: sashil tune {folder.path} controller.<param>=VALUE")
+            except OSError as err:
+                say(f"live tuning: off ({folder.path}: cannot listen on a Unix socket: {err.strerror or err})")
+        if live is not None:
+            live.start(stream, LiveTiming(stream, rate))
+    except BaseException:
+        if server is not None:
+            server.stop()
+        if recorder is not None:
+            recorder.close()
+        process.abort()
+        raise
     flag = stop if stop is not None else StopFlag()
 
     def forward(kind: str, text: str) -> None:
