@@ -12,9 +12,15 @@ DEFAULT_PORT = 8765
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", metavar="FILE", help="YAML config of the rig (default: simulated rig, seed parameters)")
     parser.add_argument(
-        "--port", type=int, default=DEFAULT_PORT, metavar="N", help=f"TCP port on 127.0.0.1 (default {DEFAULT_PORT}; 0: a free one)"
+        "--config", metavar="FILE", help="YAML config of the rig (default: simulated rig, seed parameters)"
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        metavar="N",
+        help=f"TCP port on 127.0.0.1 (default {DEFAULT_PORT}; 0: a free one)",
     )
     parser.add_argument(
         "--laws", metavar="DIR", help="also offer the laws of DIR/*.py (file laws; the page never names code itself)"

@@ -73,7 +73,9 @@ class Bench:
     """One run at a time on the rig of ``config_file`` (None: the simulated rig, seed parameters),
     into ``runs_dir``, with the laws of the registry and of ``laws_dir``."""
 
-    def __init__(self, config_file: str | Path | None = None, runs_dir: str | Path = "runs", laws_dir: str | Path | None = None):
+    def __init__(
+        self, config_file: str | Path | None = None, runs_dir: str | Path = "runs", laws_dir: str | Path | None = None
+    ):
         self.config_file = None if config_file is None else Path(config_file)
         self.runs_dir = Path(runs_dir)
         self.laws: dict[str, LawChoice] = {choice.name: choice for choice in laws_catalog(laws_dir)}
@@ -117,7 +119,9 @@ class Bench:
             sets.append(f"controller.{name}={text}")
         road = choice.get("road") or None
         if road is not None and (not isinstance(road, str) or not road.startswith(PAGE_ROADS)):
-            raise ConfigError(f"--road: a page chooses {', '.join(PAGE_ROADS)} (a file road is for the command line), got {road!r}")
+            raise ConfigError(
+                f"--road: a page chooses {', '.join(PAGE_ROADS)} (a file road is for the command line), got {road!r}"
+            )
         duration = choice.get("duration_s")
         if duration is not None and not isinstance(duration, (int, float)):
             raise ConfigError(f"--duration: expected seconds, got {duration!r}")
