@@ -26,8 +26,9 @@ from sashil.panel.catalog import LawChoice, laws_catalog
 from sashil.panel.frames import decimation_step, encode_batch, next_window, select_columns
 from sashil.runtime.signals import StopFlag
 
-#: the page's trace window: about 10 s of run time is shown, so this much is kept per batch read
-WINDOW_S = 10.0
+#: after a stall, a batch reaches back at most this far (older rows may have left the stream's ring;
+#: a page wants the present)
+CATCH_UP_S = 1.0
 #: the road specs a page may give (a profile file is named on the command line, never by a page)
 PAGE_ROADS = ("sine:", "chirp:", "iso8608:", "bump:", "none")
 #: events kept for pages that join late
@@ -166,7 +167,7 @@ class Bench:
             self.view = StreamView()
             rate = float(config["loop"]["rate_hz"])
             self._step = decimation_step(rate)
-            self._keep = int(rate * WINDOW_S)
+            self._keep = max(1, int(rate * CATCH_UP_S))
             self._sent_row = 0
             model = config.get("model", {})
             self._band = (

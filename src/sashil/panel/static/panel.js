@@ -161,7 +161,7 @@
       }],
     },
   };
-  const PLOTS = [
+  const PLOTS = [ // time_s on every x axis
     { title: "arm angle θ [rad]", series: [["theta_rad", "θ", "#1565c0"]] },
     { title: "arm rate θ̇ [rad/s]", series: [["theta_dot_rad_s", "θ̇", "#1565c0"]] },
     { title: "torque [N m]: T* against T̂, feasible band", series: [["band_lo_nm", "band T(0)", "#bbb"], ["band_hi_nm", "band T(i_max)", "#bbb"], ["torque_cmd_nm", "T*", "#c62828"], ["torque_hat_nm", "T̂", "#1565c0"]], band: true },
@@ -171,10 +171,10 @@
   const sync = uPlot.sync("sashil");
   const charts = PLOTS.map((plot) => {
     const opts = {
-      title: plot.title, width: 600, height: 150,
+      title: plot.title, width: 600, height: 170,
       cursor: { sync: { key: sync.key } },
       scales: { x: { time: false } },
-      axes: [{ label: "time_s" }, {}],
+      axes: [{ size: 30 }, { size: 70, values: (u, vals) => vals.map((v) => +v.toPrecision(3)) }],
       series: [{ label: "t [s]" }, ...plot.series.map(([, label, stroke]) => ({ label, stroke, width: 1.5 }))],
       plugins: [markerPlugin],
     };
@@ -186,7 +186,7 @@
   state.charts = charts;
   function resize() {
     const width = Math.max(300, $("plots").clientWidth - 4);
-    for (const chart of charts) chart.setSize({ width, height: 150 });
+    for (const chart of charts) chart.setSize({ width, height: 170 });
   }
   window.addEventListener("resize", resize);
   resize();
