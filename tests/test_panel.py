@@ -331,3 +331,54 @@ def test_the_controlling_page_going_away(tmp_path, on_disconnect):
             assert end["stop_reason"] == "STOP (panel)"
         assert end["exit_status"] == "stopped"
         assert read_csv(Path(end["folder"]) / "data.csv")["current_cmd_a"][-1] == 0.0
+
+
+# -- the runs browser -------------------------------------------------------------------------------------
+def fake_run(runs: Path, name: str, exit_status: str = "ok") -> Path:
+    """A run folder as sashil run leaves it (the files the browser reads)."""
+    folder = runs / name
+    folder.mkdir(parents=True)
+    summary = {"verb": "run", "exit_status": exit_status, "controller": "sashil.control.laws:Passive", "road": "none"}
+    summary |= {"started_utc": "2026-11-26T10:00:00+00:00", "timing": {"cycles": 3, "missed_deadlines": 0}}
+    (folder / "summary.json").write_text(json.dumps(summary))
+    (folder / "config.yaml").write_text("loop:\n  rate_hz: 1000\n")
+    (folder / "data.csv").write_text(
+        "time_s,theta_rad,current_a,current_cmd_a,theta_road_rad\n0.0,0.1,0.0,0.0,0.0\n0.001,0.2,0.5,1.0,0.0\n0.002,0.3,0.7,1.0,0.01\n"
+    )
+    return folder
+
+
+def test_runs_lists_folders_and_serves_only_their_files(panel, tmp_path):
+    state, client = panel
+    runs = state.bench.runs_dir
+    fake_run(runs, "20261126T100000Z-run")
+    fake_run(runs, "20261126T100100Z-run", "stopped")
+    secret = tmp_path / "secret"
+    secret.mkdir()
+    (secret / "summary.json").write_text('{"verb": "secret"}')
+    (runs / "link-out").symlink_to(secret)  # a folder link out of runs/
+    (runs / "20261126T100000Z-run" / "report.md").symlink_to(secret / "summary.json")  # a file link out
+    client.get(f"/?token={TOKEN}")
+    listed = client.get("/api/runs").json()
+    assert [r["name"] for r in listed] == ["20261126T100100Z-run", "20261126T100000Z-run"]
+    assert listed[0]["exit_status"] == "stopped" and listed[1]["law"].endswith("Passive")
+    assert "report.md" not in listed[1]["files"] and "summary.json" in listed[1]["files"]
+    ok = client.get("/api/runs/20261126T100000Z-run/config.yaml")
+    assert ok.status_code == 200 and ok.text == "loop:\n  rate_hz: 1000\n"
+    for path in (
+        "/api/runs/link-out/summary.json",
+        "/api/runs/20261126T100000Z-run/report.md",
+        "/api/runs/20261126T100000Z-run/data.csv",  # not a file a page opens
+        "/api/runs/..%2Fsecret/summary.json",
+        "/api/runs/../secret/summary.json",
+        "/api/runs/%2E%2E/summary.json",
+        "/api/runs/20261126T100000Z-run/..%2F..%2Fsecret%2Fsummary.json",
+    ):
+        assert client.get(path).status_code == 404, path
+    traces = decode_batch(client.get("/api/runs/20261126T100000Z-run/traces").content)
+    np.testing.assert_array_equal(traces["theta_rad"], [0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(traces["current_a"], [0.0, 0.5, 0.7])
+    assert np.isnan(traces["torque_hat_nm"]).all()
+    assert client.get("/api/runs/link-out/traces").status_code == 404
+    client.cookies.clear()
+    assert client.get("/api/runs").status_code == 403

@@ -1,8 +1,8 @@
 """The panel in a real browser: Debian's Chromium driven by Playwright (no browser download), against
 ``sashil panel`` started as a user starts it, on the simulated rig.
 
-Set ``SASHIL_PANEL_SCREENSHOT=FILE.png`` to keep the screenshot of the Bench view the test takes
-(the manual's how-to page shows it).
+Set ``SASHIL_PANEL_SCREENSHOTS=DIR`` to keep the screenshots of the Bench and Runs views the test
+takes, as ``DIR/panel.png`` and ``DIR/panel-runs.png`` (the manual's how-to page shows them).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_panel import fake_run
 
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')")
 
@@ -32,8 +33,9 @@ FIRST_TRACE_MS = 90_000
 
 @pytest.fixture
 def panel_url(tmp_path):
-    """``sashil panel --port 0`` in a child process; its printed URL; SIGINT at the end (the server
-    stops any run at 0 A and exits)."""
+    """``sashil panel --port 0`` in a child process, with one earlier run in its runs folder; its
+    printed URL; SIGINT at the end (the server stops any run at 0 A and exits)."""
+    fake_run(tmp_path / "runs", "20261126T100000Z-run")
     child = subprocess.Popen(
         [sys.executable, "-m", "sashil", "panel", "--port", "0", "--runs", str(tmp_path / "runs")],
         stdout=subprocess.PIPE,
@@ -87,7 +89,7 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             sync_api.expect(page.locator("#refusal")).to_have_text(
                 "--set: controller.c_sky: expected a number > 0, got -1"
             )
-            assert not runs.exists() or not any(runs.iterdir())
+            assert [p.name for p in runs.iterdir()] == ["20261126T100000Z-run"]  # no new run folder
 
             c_sky.fill("1.5")
             page.evaluate("window.panelClick = performance.now()")
@@ -111,10 +113,7 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             assert tuned > 1.5
             page.wait_for_function("window.panel.markers.length === 1")
 
-            screenshot = page.screenshot(full_page=True)
-            (tmp_path / "panel.png").write_bytes(screenshot)
-            if os.environ.get("SASHIL_PANEL_SCREENSHOT"):
-                Path(os.environ["SASHIL_PANEL_SCREENSHOT"]).write_bytes(screenshot)
+            shoot(page.screenshot(), "panel.png", tmp_path)
 
             # the space bar is STOP, wherever the focus is (here, a number input)
             page.focus("#ramp")
@@ -124,6 +123,17 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             assert (status["exit_status"], status["stop_reason"]) == ("stopped", "STOP (panel)")
             shown = page.evaluate("window.panel.data")
             drawn = page.evaluate("window.panel.charts[0].data")
+
+            # Runs: the new run and an older one, overlaid on one time axis
+            name = Path(status["folder"]).name
+            page.wait_for_selector(f'#run-table input[data-run="{name}"]')
+            page.check(f'#run-table input[data-run="{name}"]')
+            page.check('#run-table input[data-run="20261126T100000Z-run"]')
+            page.click("#overlay")
+            page.wait_for_function("window.panel.overlay && window.panel.overlay.names.length === 2")
+            overlaid = page.evaluate("window.panel.overlay.data")
+            page.locator("#runs").scroll_into_view_if_needed()
+            shoot(page.locator("#runs").screenshot(), "panel-runs.png", tmp_path)
         finally:
             browser.close()
 
@@ -139,4 +149,18 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
     np.testing.assert_array_equal(data["time_s"][index], times)
     for name in ("theta_rad", "current_a", "torque_cmd_nm", "theta_road_rad"):
         np.testing.assert_allclose(np.array(shown[name], dtype=float), data[name][index], rtol=1e-9, atol=1e-12)
-    assert drawn[0] == shown["time_s"][: len(drawn[0])] or len(drawn[0]) > 0
+    assert drawn[0] == shown["time_s"]  # the plot draws exactly the rows the page holds
+    # the overlay: the older run's three rows, and the new run's angle at its own times
+    times = np.array(overlaid[0], dtype=float)
+    new_run, old_run = (np.array([np.nan if v is None else v for v in series], dtype=float) for series in overlaid[1:])
+    np.testing.assert_array_equal(old_run[np.isin(times, [0.0, 0.001, 0.002])][:3], [0.1, 0.2, 0.3])
+    at = np.isfinite(new_run)
+    index = np.searchsorted(data["time_s"], times[at])
+    np.testing.assert_allclose(new_run[at], data["theta_rad"][index], rtol=1e-9, atol=1e-12)
+
+
+def shoot(png: bytes, name: str, tmp_path: Path) -> None:
+    """Keep a screenshot in ``tmp_path``, and in ``$SASHIL_PANEL_SCREENSHOTS`` when set."""
+    (tmp_path / name).write_bytes(png)
+    if os.environ.get("SASHIL_PANEL_SCREENSHOTS"):
+        Path(os.environ["SASHIL_PANEL_SCREENSHOTS"], name).write_bytes(png)

@@ -33,6 +33,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from sashil.errors import SashilError
 from sashil.panel import guard
 from sashil.panel.bench import Bench
+from sashil.panel.runs import RUN_FILES, list_runs, run_file, run_traces
 
 STATIC = Path(__file__).with_name("static")
 #: display ticks per second: batches and status go out at this rate
@@ -188,6 +189,23 @@ def make_app(panel: Panel) -> Starlette:
         return JSONResponse(panel.bench.law_table())
 
     @guarded(changes=False)
+    async def runs(request: Request) -> Response:
+        return JSONResponse(await run_in_threadpool(list_runs, panel.bench.runs_dir))
+
+    @guarded(changes=False)
+    async def run_item(request: Request) -> Response:
+        name, item = request.path_params["name"], request.path_params["item"]
+        if item == "traces":
+            batch = await run_in_threadpool(run_traces, panel.bench.runs_dir, name)
+            if batch is None:
+                return PlainTextResponse("not found", status_code=404)
+            return Response(batch, media_type="application/octet-stream")
+        path = run_file(panel.bench.runs_dir, name, item)
+        if path is None:
+            return PlainTextResponse("not found", status_code=404)
+        return FileResponse(path, media_type=RUN_FILES[item], headers={"Cache-Control": "no-store"})
+
+    @guarded(changes=False)
     async def status(request: Request) -> Response:
         return JSONResponse(panel.bench.status())
 
@@ -309,6 +327,8 @@ def make_app(panel: Panel) -> Starlette:
         Route("/static/{name}", static),
         Route("/api/laws", laws),
         Route("/api/status", status),
+        Route("/api/runs", runs),
+        Route("/api/runs/{name}/{item}", run_item),
         Route("/api/start", start, methods=["POST"]),
         Route("/api/stop", stop, methods=["POST"]),
         Route("/api/tune", tune, methods=["POST"]),

@@ -247,11 +247,74 @@
     download("panel-visible.csv", lines.join("\n") + "\n", "text/csv");
   });
 
+  // -- runs: the folders under the runs folder, their files, several overlaid ----------------------
+  const OVERLAY_COLORS = ["#1565c0", "#c62828", "#2e7d32", "#ef6c00", "#6a1b9a", "#00838f", "#5d4037"];
+  function cell(row, text) { const td = row.insertCell(); td.textContent = text == null ? "" : String(text); return td; }
+  async function loadRuns() {
+    const response = await fetch("/api/runs", { headers: { "X-Sashil-Token": TOKEN } });
+    const runs = await response.json();
+    state.runs = runs;
+    const body = $("run-table").tBodies[0];
+    body.innerHTML = "";
+    for (const run of runs) {
+      const row = body.insertRow();
+      const box = Object.assign(document.createElement("input"), { type: "checkbox", disabled: !run.data });
+      box.dataset.run = run.name;
+      row.insertCell().appendChild(box);
+      cell(row, run.name); cell(row, run.verb); cell(row, run.law.split(":").pop()); cell(row, run.road);
+      cell(row, run.exit_status); cell(row, (run.started_utc || "").slice(0, 19)); cell(row, run.cycles); cell(row, run.missed_deadlines);
+      const files = row.insertCell();
+      for (const file of run.files) {
+        const link = Object.assign(document.createElement("a"), { href: "#", textContent: file });
+        link.addEventListener("click", (e) => { e.preventDefault(); openFile(run.name, file); });
+        files.appendChild(link);
+      }
+    }
+  }
+  async function openFile(name, file) {
+    const view = $("run-view");
+    const url = `/api/runs/${encodeURIComponent(name)}/${encodeURIComponent(file)}`;
+    view.innerHTML = `<h3>${name}/${file}</h3>`;
+    if (file.endsWith(".png")) { view.appendChild(Object.assign(document.createElement("img"), { src: url, alt: file })); return; }
+    const text = await (await fetch(url, { headers: { "X-Sashil-Token": TOKEN } })).text();
+    view.appendChild(Object.assign(document.createElement("pre"), { textContent: text }));
+  }
+  let overlayChart = null;
+  async function overlay() {
+    const names = [...$("run-table").querySelectorAll("input:checked")].map((box) => box.dataset.run);
+    const signal = $("overlay-signal").value;
+    $("overlay-note").textContent = names.length ? "" : "select one run or more";
+    if (!names.length) return;
+    const tables = [];
+    for (const name of names) {
+      const response = await fetch(`/api/runs/${encodeURIComponent(name)}/traces`, { headers: { "X-Sashil-Token": TOKEN } });
+      if (!response.ok) continue;
+      const buffer = await response.arrayBuffer();
+      const view = new DataView(buffer);
+      const n = view.getUint32(0, true);
+      const values = new Float64Array(buffer.slice(8));
+      const column = (c) => Array.from(values.subarray(COLUMNS.indexOf(c) * n, (COLUMNS.indexOf(c) + 1) * n), (v) => (Number.isNaN(v) ? null : v));
+      tables.push([column("time_s"), column(signal)]);
+    }
+    if (overlayChart) overlayChart.destroy();
+    const data = uPlot.join(tables);
+    overlayChart = new uPlot({
+      title: `${$("overlay-signal").selectedOptions[0].textContent} against time_s, runs overlaid`,
+      width: Math.max(300, $("runs").clientWidth - 24), height: 220, scales: { x: { time: false } },
+      axes: [{ size: 30 }, { size: 70, values: (u, vals) => vals.map((v) => +v.toPrecision(3)) }],
+      series: [{ label: "t [s]" }, ...names.map((name, i) => ({ label: name, stroke: OVERLAY_COLORS[i % OVERLAY_COLORS.length], width: 1.5, spanGaps: true }))],
+    }, data, $("overlay-plot"));
+    state.overlay = { names, data };
+  }
+  $("refresh-runs").addEventListener("click", loadRuns);
+  $("overlay").addEventListener("click", overlay);
+
   // -- status ------------------------------------------------------------------------------------
   function showStatus(status) {
     const previous = state.status;
     state.status = status;
     if (status.run_id !== state.runId) { state.runId = status.run_id; clearData(); }
+    if (previous.state && previous.state !== "idle" && status.state === "idle") loadRuns(); // the run's folder is complete
     state.markers = status.markers || [];
     const badge = $("state");
     badge.textContent = status.state + (status.state === "idle" && status.exit_status ? ` (last run: ${status.exit_status})` : "");
@@ -303,5 +366,5 @@
       setTimeout(connect, 1000);
     };
   }
-  loadLaws().then(connect);
+  loadLaws().then(connect).then(loadRuns);
 })();
