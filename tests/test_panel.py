@@ -382,3 +382,51 @@ def test_runs_lists_folders_and_serves_only_their_files(panel, tmp_path):
     assert client.get("/api/runs/link-out/traces").status_code == 404
     client.cookies.clear()
     assert client.get("/api/runs").status_code == 403
+
+
+# -- the board checks ---------------------------------------------------------------------------------------
+@pytest.mark.e2e
+def test_doctor_runs_in_a_child_process_only_while_idle(panel, monkeypatch):
+    state, client = panel
+    with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        children: list[list[str]] = []
+        import subprocess
+
+        real_run = subprocess.run
+
+        def spy(argv, **kwargs):
+            children.append(list(argv))
+            return real_run(argv, **kwargs)
+
+        monkeypatch.setattr(subprocess, "run", spy)
+        answer = client.post("/api/doctor", json={"driver": "sim"}, headers=headers)
+        assert answer.status_code == 200, answer.text
+        checks = {(c["group"], c["name"]): c["status"] for c in answer.json()["checks"]}
+        assert ("machine", "sched_fifo") in checks and ("port", "port") in checks
+        assert children and children[0][1:4] == ["-m", "sashil", "doctor"] and "--driver=sim" in children[0]
+        state.bench.run.state = "running"  # the rig is busy: the checks are refused, nothing is spawned
+        try:
+            busy = client.post("/api/doctor", json={"driver": "sim"}, headers=headers)
+        finally:
+            state.bench.run.state = "idle"
+        assert busy.status_code == 400 and busy.json() == {"error": "doctor: the rig is not idle (running)"}
+        assert len(children) == 1
+
+
+# -- the verb -----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["--port", "70000"], "sashil panel: error: --port: expected 0..65535, got 70000"),
+        (["--laws", "no-such-folder"], "sashil panel: error: --laws no-such-folder: not a folder"),
+        (["--config", "no-such.yaml"], "sashil panel: error: no-such.yaml"),
+    ],
+)
+def test_bad_launch_options_are_one_line_exit_2(argv, line, capsys, tmp_path, monkeypatch):
+    from sashil.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["panel", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(line) and "\n" not in err

@@ -263,6 +263,17 @@ def make_app(panel: Panel) -> Starlette:
             text, media_type="application/x-yaml", headers={"Content-Disposition": f'attachment; filename="{name}"'}
         )
 
+    @guarded(changes=True, control=True)
+    async def doctor(request: Request) -> Response:
+        data = await body(request)
+        driver, port = data.get("driver") or None, data.get("port") or None
+        if not all(value is None or isinstance(value, str) for value in (driver, port)):
+            return JSONResponse({"error": "doctor: driver and port are strings"}, status_code=400)
+        try:
+            return JSONResponse(await run_in_threadpool(panel.bench.doctor, driver, port))
+        except SashilError as err:
+            return refused(err)
+
     @guarded(changes=True)
     async def hand_over(request: Request) -> Response:
         return JSONResponse({"handed_over": panel.hand_over(request.headers.get("x-sashil-client", ""))})
@@ -335,6 +346,7 @@ def make_app(panel: Panel) -> Starlette:
         Route("/api/restore", restore, methods=["POST"]),
         Route("/api/save", save, methods=["POST"]),
         Route("/api/hand-over", hand_over, methods=["POST"]),
+        Route("/api/doctor", doctor, methods=["POST"]),
         WebSocketRoute("/ws", socket),
     ]
     return Starlette(routes=routes, lifespan=lifespan)

@@ -31,6 +31,10 @@ from sashil.runtime.signals import StopFlag
 CATCH_UP_S = 1.0
 #: the road specs a page may give (a profile file is named on the command line, never by a page)
 PAGE_ROADS = ("sine:", "chirp:", "iso8608:", "bump:", "none")
+#: the doctor's wake-up jitter measurement (seconds; the CLI's default is 5)
+DOCTOR_JITTER_S = 1.0
+#: the doctor's child process is given this long
+DOCTOR_TIMEOUT_S = 120.0
 #: events kept for pages that join late
 EVENT_HISTORY = 200
 
@@ -92,6 +96,7 @@ class Bench:
         self._step = 1
         self._keep = 1
         self._band: tuple[Mapping[str, float], float] | None = None
+        self._doctoring = False
 
     # -- choosing and starting ----------------------------------------------------------------------
     def law_table(self) -> list[dict[str, Any]]:
@@ -142,6 +147,8 @@ class Bench:
         with self._lock:
             if self.run.state != "idle":
                 raise ConfigError(f"a run is already {self.run.state}: STOP it first")
+            if self._doctoring:
+                raise ConfigError("the board checks (doctor) are running: start when they end")
             config = self.resolve(choice)
             from sashil.lab.outputs import Outputs
             from sashil.recording.run_folder import utc_stamp
@@ -216,6 +223,43 @@ class Bench:
         """The events after number ``seq`` (the oldest ones kept when a page is far behind)."""
         with self._lock:
             return [event for event in self._events if event["seq"] > seq]
+
+    # -- the board checks -------------------------------------------------------------------------------
+    def doctor(self, driver: str | None = None, port: str | None = None) -> dict[str, Any]:
+        """``sashil doctor --json`` for ``driver`` and ``port`` in a child process (its checks switch
+        to SCHED_FIFO and trip the board's watchdog on purpose: never in this process, and only
+        while the rig is idle; no run starts until they end). ConfigError (one line) when refused."""
+        import json
+        import subprocess
+        import sys
+
+        with self._lock:
+            if self.run.state != "idle" or self._doctoring:
+                raise ConfigError(
+                    f"doctor: the rig is not idle ({'checks running' if self._doctoring else self.run.state})"
+                )
+            self._doctoring = True
+        try:
+            argv = [sys.executable, "-m", "sashil", "doctor", "--json", f"--jitter-s={DOCTOR_JITTER_S:g}"]
+            # each value attached to its option: a value a page sends is never read as an option
+            argv += [
+                f"--{key}={value}"
+                for key, value in (("config", self.config_file), ("driver", driver), ("port", port))
+                if value
+            ]
+            try:
+                done = subprocess.run(
+                    argv, capture_output=True, text=True, timeout=DOCTOR_TIMEOUT_S, stdin=subprocess.DEVNULL
+                )
+            except subprocess.TimeoutExpired:
+                raise ConfigError(f"doctor: no answer within {DOCTOR_TIMEOUT_S:g} s") from None
+            if done.stdout.lstrip().startswith("{"):
+                return dict(json.loads(done.stdout))
+            lines = done.stderr.strip().splitlines()
+            raise ConfigError(lines[-1] if lines else f"doctor: exit {done.returncode}")
+        finally:
+            with self._lock:
+                self._doctoring = False
 
     # -- stopping ---------------------------------------------------------------------------------
     def stop(self, reason: str = "STOP (panel)") -> bool:

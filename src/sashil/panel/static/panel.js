@@ -90,6 +90,23 @@
     try { await post("/api/start", choice); } catch (err) { $("refusal").textContent = err.message; }
   });
 
+  // -- doctor: the board checks, in a child process, on an idle rig ---------------------------------
+  $("doctor").addEventListener("click", async () => {
+    $("refusal").textContent = "";
+    const table = $("doctor-table");
+    table.innerHTML = "<tr><td>checking ...</td></tr>";
+    try {
+      const answer = await post("/api/doctor", { driver: $("driver").value || null, port: $("port").value.trim() || null });
+      table.innerHTML = "";
+      for (const check of answer.checks) {
+        const row = table.insertRow();
+        row.className = check.status;
+        for (const text of [check.status, `${check.group}/${check.name}`, check.found + (check.fix ? ` -> ${check.fix}` : "")]) cell(row, text);
+      }
+      state.doctor = answer;
+    } catch (err) { table.innerHTML = ""; $("refusal").textContent = err.message; }
+  });
+
   // -- live tuning: sliders send on release, number inputs on Enter --------------------------------
   function drawSliders(status) {
     const box = $("sliders");
