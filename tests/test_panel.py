@@ -430,3 +430,41 @@ def test_bad_launch_options_are_one_line_exit_2(argv, line, capsys, tmp_path, mo
     assert main(["panel", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(line) and "\n" not in err
+
+
+# -- over the emulated serial link --------------------------------------------------------------------------
+@pytest.mark.e2e
+def test_a_run_over_the_emulated_serial_link_streams_and_stops_at_0_a(tmp_path):
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python")
+    try:
+        bench = Bench(relaxed_config(tmp_path), runs_dir=tmp_path / "runs")
+        panel = Panel(bench, TOKEN, PORT)
+        with (
+            TestClient(make_app(panel), base_url=BASE) as client,
+            client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+        ):
+            headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+            choice = {"law": "skyhook", "params": {"c_sky": "1.5"}, "driver": "serial", "port": emu.link}
+            started = client.post("/api/start", json=choice, headers=headers)
+            assert started.status_code == 200, started.text
+            batches: list[dict[str, np.ndarray]] = []
+            until(ws, "batch", lambda b: len(b["time_s"]) > 0, batches)
+            until(ws, "batch", lambda b: len(b["time_s"]) > 0, batches)
+            ws.send_text(json.dumps({"stop": True}))
+            end = until(ws, "status", lambda s: s["state"] == "idle", batches)
+            lines = [e["text"] for e in bench.events_since(0)]
+        assert (end["exit_status"], end["stop_reason"]) == ("stopped", "STOP (panel)"), end
+        assert any(line.startswith("safe state (0 A) confirmed by the board in ") for line in lines), lines
+        assert any(line.startswith("link: ") and " bad frames, " in line for line in lines), lines
+        folder = Path(end["folder"])
+        assert json.loads((folder / "summary.json").read_text())["driver"] == "serial"
+        data = read_csv(folder / "data.csv")
+        assert data["current_cmd_a"][-1] == 0.0
+        shown = np.concatenate([b["theta_rad"] for b in batches])
+        times = np.concatenate([b["time_s"] for b in batches])
+        index = np.searchsorted(data["time_s"], times)
+        np.testing.assert_array_equal(data["theta_rad"][index], shown)
+    finally:
+        emu.stop()

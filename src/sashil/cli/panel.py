@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from sashil.errors import ConfigError
-    from sashil.panel.app import Panel, make_app
+    from sashil.panel.app import WS_IMPL, Panel, make_app
     from sashil.panel.bench import Bench
     from sashil.panel.guard import new_token
 
@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     port = listener.getsockname()[1]
     token = new_token()
     panel = Panel(bench, token, port, args.on_disconnect)
-    server = uvicorn.Server(uvicorn.Config(make_app(panel), log_level="warning", ws="websockets", lifespan="on"))
+    server = uvicorn.Server(uvicorn.Config(make_app(panel), log_level="warning", ws=WS_IMPL, lifespan="on"))
     print(f"sashil panel: open http://127.0.0.1:{port}/?token={token}", flush=True)
     print("  (this machine only; Ctrl-C stops the server and any run at 0 A)", file=sys.stderr, flush=True)
     server.run(sockets=[listener])

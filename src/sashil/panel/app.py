@@ -40,6 +40,8 @@ STATIC = Path(__file__).with_name("static")
 FPS = 30.0
 #: batches queued per page before the oldest are dropped (a slow page sees gaps, never lag)
 QUEUE_DEPTH = 8
+#: uvicorn's websocket implementation: the websockets library's sans-I/O protocol
+WS_IMPL = "websockets-sansio"
 #: the dead-man choices when the controlling page goes away during a run
 ON_DISCONNECT = ("stop", "keep")
 STATIC_FILES = {

@@ -195,6 +195,8 @@ class Bench:
             run = closed_loop(config, outputs, self._on_event, tune=True, views=[view], stop=flag)
             status = str(run.summary.get("exit_status", "ok"))
             reason = str(run.summary.get("stop_reason") or "")
+            for line in run_health(run.summary):
+                self._on_event(Event("result", line))
         except SashilError as err:
             self._on_event(Event("warning", str(err)))
             status = "stopped" if flag.requested else "error"
@@ -374,6 +376,30 @@ class Bench:
             return None
         self._sent_row = start + len(rows) * self._step
         return encode_batch(select_columns(rows, stream.columns, self._band))
+
+
+def run_health(summary: Mapping[str, Any]) -> list[str]:
+    """The lines a page shows when a run ends: the link's health and the board's confirmation of
+    the safe state (``summary.json`` ``link``), and the share of cycles the damper clipped T*."""
+    lines = []
+    link = summary.get("link")
+    if isinstance(link, Mapping) and link:
+        lines.append(
+            f"link: {link.get('samples', 0)} samples, {link.get('samples_missed', 0)} missed, "
+            f"{link.get('bad_frames', 0)} bad frames, {link.get('timeouts', 0)} timeouts"
+        )
+        if link.get("safe_state_confirmed"):
+            lines.append(f"safe state (0 A) confirmed by the board in {link.get('safe_state_ms', 0):g} ms")
+        elif "safe_state_confirmed" in link:
+            lines.append("safe state (0 A) NOT confirmed by the board: check the rig")
+    stats = summary.get("controller_stats")
+    cycles = (summary.get("timing") or {}).get("cycles") or 0
+    if isinstance(stats, Mapping) and cycles and "clipped_cycles" in stats:
+        share = 100.0 * stats["clipped_cycles"] / cycles
+        lines.append(
+            f"clipped: T* outside the feasible band in {stats['clipped_cycles']} of {cycles} cycles ({share:.0f} %)"
+        )
+    return lines
 
 
 def _plain(value: Any) -> Any:
