@@ -468,3 +468,20 @@ def test_a_run_over_the_emulated_serial_link_streams_and_stops_at_0_a(tmp_path):
         np.testing.assert_array_equal(data["theta_rad"][index], shown)
     finally:
         emu.stop()
+
+
+@pytest.mark.e2e
+def test_report_of_selected_runs_is_sashil_reports_table(panel):
+    state, client = panel
+    fake_run(state.bench.runs_dir, "20261126T100000Z-run")
+    fake_run(state.bench.runs_dir, "20261126T100100Z-run", "stopped")
+    client.get(f"/?token={TOKEN}")
+    answer = client.post(
+        "/api/report", json={"runs": ["20261126T100000Z-run", "20261126T100100Z-run"]}, headers=CHANGES
+    )
+    assert answer.status_code == 200, answer.text
+    assert answer.text.startswith("# sashil report\n") and "## Controllers compared" in answer.text
+    assert "| `20261126T100100Z-run` | run | stopped |" in answer.text
+    refused = client.post("/api/report", json={"runs": ["../secret"]}, headers=CHANGES)
+    assert refused.json() == {"error": "report: '../secret' is not a run folder in the runs folder"}
+    assert client.post("/api/report", json={"runs": ["20261126T100000Z-run"]}).status_code == 403  # no token header

@@ -132,6 +132,10 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             page.click("#overlay")
             page.wait_for_function("window.panel.overlay && window.panel.overlay.names.length === 2")
             overlaid = page.evaluate("window.panel.overlay.data")
+            page.click("#report")  # sashil report's tables of the two runs
+            page.wait_for_function(
+                "window.panel.report && window.panel.report.includes('## Controllers compared')", timeout=120_000
+            )
             page.locator("#runs").scroll_into_view_if_needed()
             shoot(page.locator("#runs").screenshot(), "panel-runs.png", tmp_path)
         finally:

@@ -33,7 +33,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from sashil.errors import SashilError
 from sashil.panel import guard
 from sashil.panel.bench import Bench
-from sashil.panel.runs import RUN_FILES, list_runs, run_file, run_traces
+from sashil.panel.runs import RUN_FILES, list_runs, report_runs, run_file, run_traces
 
 STATIC = Path(__file__).with_name("static")
 #: display ticks per second: batches and status go out at this rate
@@ -277,6 +277,17 @@ def make_app(panel: Panel) -> Starlette:
             return refused(err)
 
     @guarded(changes=True)
+    async def report(request: Request) -> Response:
+        names = (await body(request)).get("runs")
+        if panel.bench.busy:  # a report's plotting would compete with the loop for the CPU
+            return JSONResponse({"error": "report: the rig is running: report when it is idle"}, status_code=400)
+        try:
+            text = await run_in_threadpool(report_runs, panel.bench.runs_dir, names if isinstance(names, list) else [])
+        except SashilError as err:
+            return refused(err)
+        return PlainTextResponse(text)
+
+    @guarded(changes=True)
     async def hand_over(request: Request) -> Response:
         return JSONResponse({"handed_over": panel.hand_over(request.headers.get("x-sashil-client", ""))})
 
@@ -349,6 +360,7 @@ def make_app(panel: Panel) -> Starlette:
         Route("/api/save", save, methods=["POST"]),
         Route("/api/hand-over", hand_over, methods=["POST"]),
         Route("/api/doctor", doctor, methods=["POST"]),
+        Route("/api/report", report, methods=["POST"]),
         WebSocketRoute("/ws", socket),
     ]
     return Starlette(routes=routes, lifespan=lifespan)

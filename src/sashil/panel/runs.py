@@ -109,3 +109,40 @@ def run_traces(runs_dir: str | Path, name: str) -> bytes | None:
     nan = np.full(len(range(0, n, step)), np.nan)
     traces = {c: np.asarray(data[c], dtype=float)[::step] if c in data else nan for c in PLOT_COLUMNS}
     return encode_batch(traces)
+
+
+#: seconds ``sashil report`` is given for a page's selection
+REPORT_TIMEOUT_S = 300.0
+
+
+def report_runs(runs_dir: str | Path, names: list[str]) -> str:
+    """``report.md`` of ``sashil report`` on the runs ``names`` (run in a child process, into a
+    temporary folder: the table and figures ``sashil report`` makes); ConfigError (one line) for a
+    name that is not a run or a report that fails."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from sashil.errors import ConfigError
+
+    folders = []
+    for name in names:
+        folder = run_folder(runs_dir, name) if isinstance(name, str) else None
+        if folder is None:
+            raise ConfigError(f"report: {name!r} is not a run folder in the runs folder")
+        folders.append(str(folder))
+    if not folders:
+        raise ConfigError("report: select one run or more")
+    with tempfile.TemporaryDirectory(prefix="sashil-panel-report-") as tmp:
+        out = Path(tmp) / "report"
+        argv = [sys.executable, "-m", "sashil", "report", "--quiet", f"--out={out}", "--", *folders]
+        try:
+            done = subprocess.run(
+                argv, capture_output=True, text=True, timeout=REPORT_TIMEOUT_S, stdin=subprocess.DEVNULL
+            )
+        except subprocess.TimeoutExpired:
+            raise ConfigError(f"report: no answer within {REPORT_TIMEOUT_S:g} s") from None
+        if done.returncode != 0 or not (out / "report.md").is_file():
+            lines = done.stderr.strip().splitlines()
+            raise ConfigError(lines[-1] if lines else f"report: exit {done.returncode}")
+        return (out / "report.md").read_text(encoding="utf-8")

@@ -323,6 +323,17 @@
     }, data, $("overlay-plot"));
     state.overlay = { names, data };
   }
+  $("report").addEventListener("click", async () => {
+    const names = [...$("run-table").querySelectorAll("input:checked")].map((box) => box.dataset.run);
+    const view = $("run-view");
+    view.innerHTML = "<h3>sashil report: running ...</h3>";
+    try {
+      const text = await post("/api/report", { runs: names });
+      view.innerHTML = `<h3>sashil report ${names.join(" ")}</h3>`;
+      view.appendChild(Object.assign(document.createElement("pre"), { textContent: text }));
+      state.report = text;
+    } catch (err) { view.innerHTML = ""; $("overlay-note").textContent = err.message; }
+  });
   $("refresh-runs").addEventListener("click", loadRuns);
   $("overlay").addEventListener("click", overlay);
 
