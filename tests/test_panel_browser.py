@@ -82,6 +82,17 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             page.wait_for_function("window.panel && window.panel.laws.length > 0 && window.panel.client")
             page.select_option("#law", "skyhook")
             c_sky = page.locator('#params input[data-param="c_sky"]')
+            c_sky.fill("1.5")
+
+            # the space bar on a focused Start is STOP, never a click on Start
+            requests: list[str] = []
+            page.on("request", lambda request: requests.append(request.url))
+            page.focus("#start")
+            with page.expect_response("**/api/stop") as stopped:
+                page.keyboard.press("Space")
+            assert stopped.value.json() == {"stopping": False}  # STOP, with no run to stop
+            assert not [url for url in requests if url.endswith("/api/start")]
+            assert [p.name for p in runs.iterdir()] == ["20261126T100000Z-run"]
 
             # a refused value: the CLI's one line, and nothing starts
             c_sky.fill("-1")
