@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 import threading
 from pathlib import Path
 from typing import Any
@@ -485,3 +486,104 @@ def test_report_of_selected_runs_is_sashil_reports_table(panel):
     refused = client.post("/api/report", json={"runs": ["../secret"]}, headers=CHANGES)
     assert refused.json() == {"error": "report: '../secret' is not a run folder in the runs folder"}
     assert client.post("/api/report", json={"runs": ["20261126T100000Z-run"]}).status_code == 403  # no token header
+
+
+# -- off this machine: HTTPS only, and only when asked --------------------------------------------------------
+def test_a_remote_host_is_a_name_the_server_answers_to():
+    names = guard.host_names("10.1.2.3")
+    assert guard.host_allowed("10.1.2.3:8765", 8765, names) and guard.host_allowed("localhost:8765", 8765, names)
+    assert not guard.host_allowed("evil.example:8765", 8765, names)
+    assert guard.origin_allowed("https://10.1.2.3:8765", 8765, names, "https")
+    assert not guard.origin_allowed("http://10.1.2.3:8765", 8765, names, "https")
+    assert guard.host_names("fe80::1")[-1] == "[fe80::1]"
+    assert guard.host_names("::1") == guard.LOOPBACK_NAMES and guard.is_loopback("localhost")
+    assert guard.is_wildcard("0.0.0.0") and guard.is_wildcard("::") and not guard.is_wildcard("10.1.2.3")
+
+
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (
+            ["--host", "10.1.2.3"],
+            "--host 10.1.2.3: not a loopback address: the panel can energise the coil; add --allow-remote (HTTPS only)",
+        ),
+        (
+            ["--host", "10.1.2.3", "--allow-remote"],
+            "--host 10.1.2.3 --allow-remote: plain HTTP off this machine is refused: add --tls-cert FILE and --tls-key FILE",
+        ),
+        (
+            ["--host", "0.0.0.0", "--allow-remote", "--tls-cert", "c.pem", "--tls-key", "k.pem"],
+            "--host 0.0.0.0: a wildcard address cannot be checked",
+        ),
+        (["--tls-cert", "c.pem"], "--tls-cert and --tls-key: give both or neither"),
+        (["--tls-cert", "missing.pem", "--tls-key", "k.pem"], "--tls-cert missing.pem: no such file"),
+    ],
+)
+def test_serving_off_this_machine_needs_allow_remote_and_tls(argv, line, capsys, tmp_path, monkeypatch):
+    from sashil.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.pem").write_text("x")
+    (tmp_path / "k.pem").write_text("x")
+    assert main(["panel", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"sashil panel: error: {line}") and "\n" not in err, err
+
+
+@pytest.mark.e2e
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="no openssl to make a test certificate")
+def test_https_with_a_certificate_sets_a_secure_cookie(tmp_path):
+    import http.client
+    import re
+    import signal
+    import ssl
+    import subprocess
+    import sys
+
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "1",
+            "-subj",
+            "/CN=127.0.0.1",
+            f"-keyout={key}",
+            f"-out={cert}",
+        ],
+        check=True,
+        capture_output=True,
+    )
+    argv = [sys.executable, "-m", "sashil", "panel", "--port", "0", "--runs", str(tmp_path / "runs")]
+    child = subprocess.Popen(
+        [*argv, "--tls-cert", str(cert), "--tls-key", str(key)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = child.stdout.readline() if child.stdout else ""
+        match = re.search(r"https://127\.0\.0\.1:(\d+)/\?token=([0-9a-f]+)", line)
+        assert match, line
+        port, token = int(match.group(1)), match.group(2)
+        context = ssl.create_default_context(cafile=str(cert))
+        context.check_hostname = False
+        conn = http.client.HTTPSConnection("127.0.0.1", port, context=context, timeout=30)
+        conn.request("GET", f"/?token={token}")
+        first = conn.getresponse()
+        first.read()
+        assert first.status == 303
+        assert "secure" in first.getheader("set-cookie", "").lower()
+        conn.request("POST", "/api/stop", headers={"Origin": f"http://127.0.0.1:{port}", guard.TOKEN_HEADER: token})
+        plain_origin = conn.getresponse()
+        plain_origin.read()
+        assert plain_origin.status == 403  # the page's origin is https now
+        conn.close()
+    finally:
+        child.send_signal(signal.SIGINT)
+        child.communicate(timeout=30)

@@ -72,24 +72,39 @@ class Client:
 class Panel:
     """The state the routes share: the bench, the token, the pages and which one controls."""
 
-    def __init__(self, bench: Bench, token: str, port: int, on_disconnect: str = "stop"):
+    def __init__(
+        self,
+        bench: Bench,
+        token: str,
+        port: int,
+        on_disconnect: str = "stop",
+        names: tuple[str, ...] = guard.LOOPBACK_NAMES,
+        scheme: str = "http",
+    ):
         if on_disconnect not in ON_DISCONNECT:
             raise ValueError(f"on_disconnect: expected one of {ON_DISCONNECT}, got {on_disconnect!r}")
         self.bench, self.token, self.port, self.on_disconnect = bench, token, port, on_disconnect
+        self.names, self.scheme = names, scheme
         self.clients: list[Client] = []
         self.controller: str | None = None
         self._event_seq = 0
         self._status_text = ""
 
     # -- the checks ---------------------------------------------------------------------------------
+    def host_ok(self, host: str | None) -> bool:
+        return guard.host_allowed(host, self.port, self.names)
+
+    def origin_ok(self, origin: str | None) -> bool:
+        return guard.origin_allowed(origin, self.port, self.names, self.scheme)
+
     def refusal(self, request: Request, *, changes: bool) -> Response | None:
         """A 403 for a request that fails the checks, else None."""
-        if not guard.host_allowed(request.headers.get("host"), self.port):
+        if not self.host_ok(request.headers.get("host")):
             return PlainTextResponse("forbidden: unknown Host", status_code=403)
         cookie = request.cookies.get(guard.cookie_name(self.port))
         header = request.headers.get(guard.TOKEN_HEADER)
         if changes:
-            if not guard.origin_allowed(request.headers.get("origin"), self.port):
+            if not self.origin_ok(request.headers.get("origin")):
                 return PlainTextResponse("forbidden: foreign Origin", status_code=403)
             if not guard.same_token(header, self.token):
                 return PlainTextResponse("forbidden: the token header is missing or wrong", status_code=403)
@@ -164,14 +179,20 @@ def make_app(panel: Panel) -> Starlette:
         return wrap
 
     async def index(request: Request) -> Response:
-        if not guard.host_allowed(request.headers.get("host"), panel.port):
+        if not panel.host_ok(request.headers.get("host")):
             return PlainTextResponse("forbidden: unknown Host", status_code=403)
         given = request.query_params.get("token")
         if given is not None:
             if not guard.same_token(given, panel.token):
                 return PlainTextResponse("forbidden: wrong token", status_code=403)
             response: Response = RedirectResponse("/", status_code=303)  # the token leaves the URL bar
-            response.set_cookie(guard.cookie_name(panel.port), panel.token, httponly=True, samesite="strict")
+            response.set_cookie(
+                guard.cookie_name(panel.port),
+                panel.token,
+                httponly=True,
+                samesite="strict",
+                secure=panel.scheme == "https",
+            )
             return response
         refused = panel.refusal(request, changes=False)
         if refused is not None:
@@ -294,8 +315,8 @@ def make_app(panel: Panel) -> Starlette:
     async def socket(websocket: WebSocket) -> None:
         headers = websocket.headers
         if not (
-            guard.host_allowed(headers.get("host"), panel.port)
-            and guard.origin_allowed(headers.get("origin"), panel.port)
+            panel.host_ok(headers.get("host"))
+            and panel.origin_ok(headers.get("origin"))
             and guard.same_token(guard.subprotocol_token(headers), panel.token)
         ):
             await websocket.close(code=1008)  # refused before anything is read

@@ -44,27 +44,57 @@ def same_token(given: str | None, token: str) -> bool:
     return given is not None and hmac.compare_digest(given.encode(), token.encode())
 
 
-def host_allowed(host: str | None, port: int) -> bool:
-    """The Host header names this machine's loopback server: ``127.0.0.1``, ``localhost`` or
-    ``[::1]``, with ``:port`` (or without one)."""
+def host_allowed(host: str | None, port: int, names: tuple[str, ...] = LOOPBACK_NAMES) -> bool:
+    """The Host header names this server: one of ``names`` (by default the loopback names
+    ``127.0.0.1``, ``localhost`` and ``[::1]``), with ``:port`` (or without one)."""
     if not host:
         return False
     host = host.strip().lower()
-    for name in LOOPBACK_NAMES:
-        if host == name or host == f"{name}:{port}":
-            return True
-    return False
+    return any(host == name or host == f"{name}:{port}" for name in names)
 
 
-def allowed_origins(port: int) -> tuple[str, ...]:
+def allowed_origins(port: int, names: tuple[str, ...] = LOOPBACK_NAMES, scheme: str = "http") -> tuple[str, ...]:
     """The origins of the panel's own pages."""
-    return tuple(f"http://{name}:{port}" for name in LOOPBACK_NAMES)
+    return tuple(f"{scheme}://{name}:{port}" for name in names)
 
 
-def origin_allowed(origin: str | None, port: int) -> bool:
+def origin_allowed(
+    origin: str | None, port: int, names: tuple[str, ...] = LOOPBACK_NAMES, scheme: str = "http"
+) -> bool:
     """``origin`` is the panel's own (a missing Origin is refused: every browser sends one on a
     websocket handshake and on a POST)."""
-    return origin is not None and origin.strip().lower() in allowed_origins(port)
+    return origin is not None and origin.strip().lower() in allowed_origins(port, names, scheme)
+
+
+def is_loopback(host: str) -> bool:
+    """``host`` (an address or name to listen on) is this machine's loopback."""
+    import ipaddress
+
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def is_wildcard(host: str) -> bool:
+    """``host`` is every interface (``0.0.0.0``, ``::``)."""
+    import ipaddress
+
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_unspecified
+    except ValueError:
+        return False
+
+
+def host_names(host: str) -> tuple[str, ...]:
+    """The Host header names a server listening on ``host`` answers to: the loopback names, and
+    ``host`` itself when it is another address (an IPv6 one in brackets)."""
+    if is_loopback(host):
+        return LOOPBACK_NAMES
+    name = host.lower()
+    return (*LOOPBACK_NAMES, f"[{name}]" if ":" in name and not name.startswith("[") else name)
 
 
 def subprotocol_token(headers: Mapping[str, str]) -> str | None:

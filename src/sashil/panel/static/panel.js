@@ -376,7 +376,7 @@
 
   // -- the websocket: the token is a subprotocol (a browser cannot set headers on one) -------------
   function connect() {
-    const url = `ws://${location.host}/ws`;
+    const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
     socket = new WebSocket(url, ["sashil-panel.v1", `token.${TOKEN}`]);
     socket.binaryType = "arraybuffer";
     socket.onmessage = (msg) => {
