@@ -113,6 +113,14 @@ def test_laws_come_from_the_registry_and_the_launch_folder(tmp_path):
     assert c_sky["required"]
     with pytest.raises(ConfigError, match=r"--laws .*: not a folder"):
         laws_catalog(tmp_path / "missing")
+    # an installed law's own folder: offered once, as the installed law
+    examples = Path(__file__).resolve().parents[1] / "examples" / "soft_skyhook"
+    names = [choice.name for choice in laws_catalog(examples)]
+    assert names.count("soft-skyhook") == 1
+    # another class claiming a registered name: the registry's one line
+    (tmp_path / "impostor.py").write_text(LAW_FILE.replace('"panel-probe"', '"skyhook"'))
+    with pytest.raises(ConfigError, match=r"claims the name 'skyhook'"):
+        laws_catalog(tmp_path)
 
 
 def test_a_page_names_a_law_never_code(tmp_path):
@@ -228,13 +236,17 @@ def receive(ws: Any) -> tuple[str, Any]:
 
 
 def until(ws: Any, want: str, test: Any = lambda data: True, collect: list[Any] | None = None) -> Any:
-    """Read messages until one of type ``want`` passes ``test`` (batches seen on the way are kept)."""
+    """Read messages until one of type ``want`` passes ``test`` (batches seen on the way are kept).
+    A run that ends while something else is awaited fails the test at once (a socket read has no
+    timeout: waiting on would hang)."""
     while True:
         kind, data = receive(ws)
         if kind == "batch" and collect is not None:
             collect.append(data)
         if kind == want and test(data):
             return data
+        if kind == "status" and want != "status" and data["run_id"] and data["state"] == "idle":
+            raise AssertionError(f"the run ended while waiting for a {want}: {data}")
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:

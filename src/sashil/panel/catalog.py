@@ -43,7 +43,8 @@ def _law_classes(path: Path) -> list[str]:
 
 def laws_catalog(laws_dir: str | Path | None = None) -> list[LawChoice]:
     """Every law the registry knows (built-in and installed), then those of ``laws_dir``; a file
-    law whose name a registered law already has is refused by the registry (one line)."""
+    law whose name a registered law already has is refused by the registry (one line), unless it
+    is that law's own file (an installed package's folder), which is offered once."""
     from sashil.cli.laws import describe
     from sashil.control.law_registry import find_law, known_laws
 
@@ -56,11 +57,11 @@ def laws_catalog(laws_dir: str | Path | None = None) -> list[LawChoice]:
             entries += [find_law(f"{path.resolve()}:{name}") for name in _law_classes(path)]
     choices: dict[str, LawChoice] = {}
     for entry in entries:
+        if entry.cls.name in choices:  # the installed package's own file (find_law refuses another class)
+            continue
         about = describe(entry)
         params = entry.cls.params()
         for described in about["parameters"]:  # the page draws a slider for a float
             described["kind"] = params[described["name"]].field.kind
-        if about["name"] in choices:
-            raise ConfigError(f"--laws {laws_dir}: two laws are named {about['name']!r} ({entry.spec})")
         choices[about["name"]] = LawChoice(about["name"], entry.spec, about)
     return list(choices.values())
