@@ -125,6 +125,15 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             page.wait_for_function("window.panel.markers.length === 1")
 
             shoot(page.screenshot(), "panel.png", tmp_path)
+            with page.expect_download() as saved:  # Save YAML: a config --config reads, with the tuned value
+                page.click("#save")
+            saved_yaml = Path(saved.value.path()).read_text()
+            page.check("#pause")  # the plots freeze; the CSV is of what they show
+            with page.expect_download() as visible:
+                page.click("#csv")
+            visible_csv = Path(visible.value.path()).read_text()
+            frozen = page.evaluate("window.panel.frozen.time_s.length")
+            page.uncheck("#pause")
 
             # the space bar is STOP, wherever the focus is (here, a number input)
             page.focus("#ramp")
@@ -154,6 +163,21 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
 
     folder = Path(status["folder"])
     data = read_csv(folder / "data.csv")
+    saved_config = tmp_path / "tuned.yaml"
+    saved_config.write_text(saved_yaml)
+    from sashil.config.resolve import ConfigSource, resolve
+
+    assert resolve(ConfigSource(config=saved_config), "run")["controller"]["c_sky"] == pytest.approx(tuned)
+    csv_path = tmp_path / "visible.csv"
+    csv_path.write_text(visible_csv)
+    on_screen = read_csv(csv_path)
+    from sashil.panel.frames import PLOT_COLUMNS
+
+    assert tuple(on_screen) == PLOT_COLUMNS
+    assert 0 < len(on_screen["time_s"]) <= frozen
+    rows = np.searchsorted(data["time_s"], on_screen["time_s"])
+    np.testing.assert_array_equal(data["time_s"][rows], on_screen["time_s"])
+    np.testing.assert_allclose(on_screen["current_a"], data["current_a"][rows], rtol=1e-9, atol=1e-12)
     assert data["current_cmd_a"][-1] == 0.0
     with (folder / "events.csv").open() as f:
         changes = [row for row in csv.DictReader(f) if row["key"] == "c_sky" and row["status"] == "applied"]
