@@ -94,6 +94,10 @@ VERBS: dict[str, Verb] = {
         "sashil.cli.compare",
         "run several laws on the same road and compare them (compare.md, metrics.csv, compare.png)",
     ),
+    "panel": Verb(
+        "sashil.cli.panel",
+        "the bench in a browser: run a law on a road, live traces, live tuning and STOP (127.0.0.1, token)",
+    ),
 }
 
 
