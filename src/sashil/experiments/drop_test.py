@@ -37,6 +37,22 @@ DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_c
 CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
+#: how long a drop test on a pseudo-terminal (an emulated rig) waits for its operator's hold [s]:
+#: an emulator started with --hold-deg holds the arm from its first sample on
+EMULATED_HOLD_WAIT_S = 1.0
+
+
+def pseudo_terminal(rig: Any) -> str | None:
+    """The rig's port when it is a pseudo-terminal (``/dev/pts/N``, or a link to one: an emulator's),
+    else None (a device, a socket, the simulated rig)."""
+    import os
+
+    port = getattr(getattr(rig, "settings", None), "port", None)
+    if not isinstance(port, str) or not port.startswith("/"):
+        return None
+    return port if os.path.realpath(port).startswith("/dev/pts/") else None
+
+
 #: the largest hold angle a drop test accepts [deg]
 THETA0_LIMIT_DEG = 30.0
 
@@ -86,6 +102,8 @@ class DropTestSettings:
     release_threshold_rad: float
     hold_timeout_s: float
     known_release_after_s: float | None = None  # set when the backend plays the operator
+    #: the rig's port when it is a pseudo-terminal (an emulator's link): no hand can hold that arm
+    pseudo_terminal: str | None = None
 
     @classmethod
     def from_config(
@@ -182,6 +200,7 @@ class DropTestPlan:
         self._hold_count = 0
         self.hold_angle = settings.theta0_rad
         self.held_elsewhere = False  # a simulated operator held the arm away from theta0
+        self.operator_seen = False  # a sample said a simulated operator holds the arm (FLAG_HELD)
         #: when the plan saw the arm leave the hold (host ns); the release itself is dated after the run
         self.detected_ns: int | None = None
         self._end_ns: int | None = None
@@ -207,7 +226,7 @@ class DropTestPlan:
         theta = sample.theta_rad
         if self.start_ns is None:
             self.start_ns = t_ns
-            if self.notify is not None and self.s.known_release_after_s is None:
+            if self.notify is not None and self.s.known_release_after_s is None and self.s.pseudo_terminal is None:
                 self.notify(
                     f"press the arm to {math.degrees(self.s.theta0_rad):g} deg (within "
                     f"±{math.degrees(self.s.hold_tolerance_rad):g} deg) and hold it still; now at "
@@ -239,6 +258,17 @@ class DropTestPlan:
 
     def _wait_hold(self, t_ns: int, theta: float, flags: int = 0) -> None:
         target = self.s.theta0_rad
+        if flags & FLAG_HELD:
+            self.operator_seen = True
+        port = self.s.pseudo_terminal
+        assert self.start_ns is not None  # step() sets it on the first cycle
+        if port is not None and not self.operator_seen and (t_ns - self.start_ns) * 1e-9 > EMULATED_HOLD_WAIT_S:
+            raise ConfigError(
+                f"drop test: {port} is a pseudo-terminal (an emulated rig) whose operator does not hold the arm, "
+                f"and no hand can: start the emulator with --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                f"(e.g. sashil emulate --link {port} --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                "--release-after 1) to hold it at each connection and let go"
+            )
         if flags & FLAG_HELD and abs(theta - target) > self.s.hold_tolerance_rad:
             # a simulated operator (the emulator's --hold-deg) says it holds the arm: take the hold
             # where it is rather than wait for an angle it will never press to
@@ -369,6 +399,8 @@ def run_drop_test(
         settings.known_release_after_s = release_after
         if capabilities_of(rig).initial_current:
             rig.set_initial_current(current_a)  # type: ignore[attr-defined]  # declared by the backend
+    else:
+        settings.pseudo_terminal = pseudo_terminal(rig)
     plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
     log = logging.getLogger("sashil")
     # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
