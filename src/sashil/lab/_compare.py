@@ -22,7 +22,16 @@ from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 
-__all__ = ["CompareLaw", "check_compare", "compare", "folder_name", "law_parameters", "laws_of", "own_law", "split_sets"]
+__all__ = [
+    "CompareLaw",
+    "check_compare",
+    "compare",
+    "folder_name",
+    "law_parameters",
+    "laws_of",
+    "own_law",
+    "split_sets",
+]
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,8 @@ from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
-from sashil.drivers import on_virtual_clock, open_rig
 from sashil.control.law_registry import law_label
+from sashil.drivers import on_virtual_clock, open_rig
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.lab.events import Event, Listener, ignore
