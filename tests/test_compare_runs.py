@@ -159,3 +159,15 @@ def test_drop_test_on_an_emulator_that_holds_nothing_says_how_and_leaves_no_fold
     assert "press the arm" not in err and "run folder" not in err
     last = err.strip().splitlines()[-1]
     assert "is a pseudo-terminal (an emulated rig)" in last and "--hold-deg -5" in last
+
+
+def test_a_drop_test_under_a_current_law_records_its_output_as_given(tmp_path):
+    out = tmp_path / "drop"
+    sets = ["--set", "controller.law=skyhook-onoff", "--set", "controller.onoff_current_a=0.8"]
+    assert main(["drop-test", "--current", "0", "--duration", "1", *sets, "--out", str(out), "-q"]) == 0
+    data = sashil.load_run(out).data
+    assert set(np.unique(data["current_law_a"])) == {0.0, 0.8}
+    # the law is in charge once the release is detected (the arm moved 0.5 deg, within 0.1 s): what
+    # it gave is what was sent; before that the drop's own 0 A, while the law's column says what it asked
+    after = data["time_s"] > 0.1
+    np.testing.assert_array_equal(data["current_cmd_a"][after], data["current_law_a"][after])

@@ -37,6 +37,15 @@ DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_c
 CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
+def controller_columns(controller: Any) -> tuple[str, ...]:
+    """The columns a drop test records of its controller: what the controller says it records
+    (``signal_names``: a current law's own output, ``current_law_a``, too), else
+    :data:`CONTROLLER_COLUMNS`; none without a controller."""
+    if controller is None:
+        return ()
+    return tuple(getattr(controller, "signal_names", CONTROLLER_COLUMNS))
+
+
 #: how long a drop test on a pseudo-terminal (an emulated rig) waits for its operator's hold [s]:
 #: an emulator started with --hold-deg holds the arm from its first sample on
 EMULATED_HOLD_WAIT_S = 1.0
@@ -188,7 +197,7 @@ class DropTestPlan:
         self.controller = controller
         #: the controller's per-cycle values go into the stream (the loop reads them after each step,
         #: from the controller itself: the attributes below forward them too, but slower)
-        self.signal_names = CONTROLLER_COLUMNS if controller is not None else ()
+        self.signal_names = controller_columns(controller)
         self.signal_source = controller if controller is not None else self
         self.command = RigCommand(settings.current_a)
         self.resolution = TWO_PI / counts_per_rev
@@ -206,7 +215,7 @@ class DropTestPlan:
         self._end_ns: int | None = None
 
     def __getattr__(self, name: str) -> Any:  # the controller's per-cycle signals (signal_names)
-        if name in CONTROLLER_COLUMNS and self.__dict__.get("controller") is not None:
+        if name in self.__dict__.get("signal_names", ()) and self.__dict__.get("controller") is not None:
             return getattr(self.controller, name)
         raise AttributeError(name)
 
@@ -329,11 +338,11 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
 
     The release is the backend's known instant, else the zero of the departure (see the module
     docstring) in the stream's rows of the last :data:`RELEASE_WINDOW_S` before the detection.
-    Columns: :data:`DROP_COLUMNS` (+ :data:`CONTROLLER_COLUMNS` under a controller) and ``seq``,
+    Columns: :data:`DROP_COLUMNS` (+ :func:`controller_columns` under a controller) and ``seq``,
     time zero at the release; rows up to ``duration_s`` after it (the shutdown's 0 A row included
     when the run ended earlier). ``stream`` keeps every stream column of those rows (device time,
     road speed commanded) for a caller that needs them."""
-    names = DROP_COLUMNS + (CONTROLLER_COLUMNS if plan.controller is not None else ()) + ("seq",)
+    names = DROP_COLUMNS + controller_columns(plan.controller) + ("seq",)
     empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
     if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
         return DropRecord(empty, 0, False, plan.hold_angle)

@@ -173,6 +173,10 @@ def plot_compare(path: Path, results: Sequence[LawResult], road: str = "") -> Pa
     if road:
         fig.suptitle(f"sashil compare on {road}", fontsize=10)
     ax_travel.set(xlabel="RMS θ [deg]  (travel)")
+    from matplotlib.patches import Patch
+
+    keys = [(BEST, "best (lowest RMS θ̈2)"), (PASSIVE, "best passive"), (OTHER, "law"), (REFERENCE, "passive")]
+    ax_travel.legend(handles=[Patch(color=c, label=t) for c, t in keys], **BESIDE)
     ax_travel.set_title("travel", fontsize=10, loc="left")
     shown = [r for r in (best, reference) if r is not None]
     if reference is not None and best is not None and best.label == reference.label:
