@@ -4,6 +4,7 @@ a current law's output recorded as it gave it; a law labelled by its name, its o
 
 from __future__ import annotations
 
+import json
 import textwrap
 
 import numpy as np
@@ -171,3 +172,18 @@ def test_a_drop_test_under_a_current_law_records_its_output_as_given(tmp_path):
     # it gave is what was sent; before that the drop's own 0 A, while the law's column says what it asked
     after = data["time_s"] > 0.1
     np.testing.assert_array_equal(data["current_cmd_a"][after], data["current_law_a"][after])
+
+
+def test_report_reads_an_older_compare_folder_without_law_runs(compared, tmp_path):
+    """A compare folder written before each law had a run folder: its table, no traces."""
+    old = tmp_path / "old"
+    old.mkdir()
+    for name in ("summary.json", "config.yaml", "metrics.csv", "compare.md"):
+        (old / name).write_bytes((compared / name).read_bytes())
+    summary = json.loads((old / "summary.json").read_text())
+    summary.update(schema_version=1, runs=[])
+    (old / "summary.json").write_text(json.dumps(summary))
+    out = tmp_path / "rep"
+    assert main(["report", str(old), "--out", str(out), "-q"]) == 0
+    md = (out / "report.md").read_text()
+    assert "## Compare `old`" in md and "| skyhook | " in md and "## Controllers compared" not in md

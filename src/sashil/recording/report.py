@@ -131,7 +131,8 @@ def read_record(path: str | Path) -> RunRecord:
                 raise DataFileError(f"{run.path / 'transmissibility.csv'}: missing column {name}")
         record.sweep = table
     record.timing = run.timing
-    if not record.traces and record.sweep is None:
+    compared = summary.get("verb") == "compare" and isinstance(summary.get("laws"), list)
+    if not record.traces and record.sweep is None and not compared:  # an older compare folder: its table
         raise DataFileError(f"{run.path}: no data.csv or transmissibility.csv in this run folder")
     return record
 
@@ -306,9 +307,12 @@ class Column:
 
 
 def comparison_columns(runs: Sequence[RunRecord]) -> list[Column]:
-    """Every trace of every run, and each run without a trace (a stepped sweep)."""
+    """Every trace of every run, and each run without a trace (a stepped sweep; not a compare folder
+    whose laws' runs it does not hold)."""
     out = []
     for run in runs:
+        if not run.traces and run.summary.get("verb") == "compare":
+            continue  # a compare folder without its laws' runs (an older one): its own table says it all
         out += [Column(trace.label, run, trace) for trace in run.traces] or [Column(run.label, run, None)]
     return out
 
