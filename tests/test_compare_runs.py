@@ -48,6 +48,9 @@ def test_each_law_is_a_run_folder_with_its_law_parameters_data_and_summary(compa
     assert "| skyhook | c_sky=2 | `skyhook/` |" in md
     assert "| skyhook-onoff | onoff_current_a=0.8 | `skyhook-onoff/` |" in md
     assert "seed 001" not in md  # the paper by its authors and year
+    top = (compared / "config.yaml").read_text()  # the base config says it runs none of the laws
+    assert top.startswith("# The config every law of this comparison started from")
+    assert "passive-0A/, passive-1A/, skyhook/, skyhook-onoff/" in top.splitlines()[1]
 
 
 def test_a_current_laws_output_is_recorded_and_sent_as_it_gave_it(compared):

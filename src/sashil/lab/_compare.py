@@ -302,7 +302,12 @@ def compare(
     processes = int(section["jobs"]) if virtual else 1
     road_profile, road_text = parse_road(road, config)
     folder = RunFolder.create(outputs.out, "compare")
-    folder.write_config(config)
+    note = (
+        "The config every law of this comparison started from: its controller section is not one of them.\n"
+        "Each law ran with the config.yaml of its own folder: "
+        + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
+    )
+    folder.write_config(config, note)
     subs = {}
     for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
         sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
