@@ -190,3 +190,13 @@ def test_report_reads_an_older_compare_folder_without_law_runs(compared, tmp_pat
     assert main(["report", str(old), "--out", str(out), "-q"]) == 0
     md = (out / "report.md").read_text()
     assert "## Compare `old`" in md and "| skyhook | " in md and "## Controllers compared" not in md
+
+
+def test_a_sweep_under_a_current_law_records_its_output_as_given(tmp_path):
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--f-start", "1", "--f-stop", "2", "--duration", "1", "--controller", "skyhook-onoff"]
+    sets = ["--set", "controller.onoff_current_a=0.8", "--set", "sweep.ramp_s=0.3"]
+    assert main([*argv, *sets, "--out", str(out), "-q"]) == 0
+    data = sashil.load_run(out).data
+    assert set(np.unique(data["current_law_a"][:-1])) == {0.0, 0.8}
+    np.testing.assert_array_equal(data["current_cmd_a"][:-1], data["current_law_a"][:-1])
