@@ -56,7 +56,8 @@ def test_compare_runs_each_law_beside_the_references_and_a_failing_law_says_why(
     assert float(table["passive 0 A"]["coil_energy_j"]) == 0.0
     assert float(table["passive 1 A"]["vs_best_passive_pct"]) == 0.0  # the better passive on this road
     md = (out / "compare.md").read_text()
-    assert "| clipped-optimal |" in md and "gain table empty" in md
+    assert "clipped-optimal" in md and "gain table empty" in md
+    assert "| skyhook | c_sky=2 | `skyhook/` |" in md  # each law with its parameters and its run folder
     assert (out / "compare.png").stat().st_size > 10_000
 
 

@@ -238,7 +238,8 @@ def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
     run = sweep(config, Outputs(out=tmp_path / "chirp"), events.append)
     assert run.path == tmp_path / "chirp" and run.verb == "sweep"
     data = run.data
-    assert list(data) == [*SWEEP_COLUMNS, "seq"]
+    assert list(data) == [*SWEEP_COLUMNS, "current_law_a", "seq"]  # the passive law gives a current
+    assert set(data["current_law_a"][:-1]) == {0.4}
     assert len(data["time_s"]) == 1500 + 1  # 1 s chirp + 0.5 s ramp at 1 kHz, then the 0 A row
     # the simulated rig reports its plant's true torque (capability true_torque): no NaN in the record
     assert np.all(np.isfinite(data["torque_true_nm"][:-1])) and np.any(data["torque_true_nm"] != 0.0)

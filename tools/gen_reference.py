@@ -49,6 +49,8 @@ COLUMN_DOCS = {
     "z_hat": "the observer's Bouc-Wen state ẑ",
     "torque_hat_nm": "the observer's damper torque T̂ = α(i)ẑ + c(i)θ̇",
     "torque_cmd_nm": "the law's desired torque T* (none for an on-off law)",
+    "current_law_a": "a current() law's output as the law gave it, before the safety clamp (and the "
+    "coil-lag lead when controller.lead_current_laws); current_cmd_a is what was sent",
     "seq": "the sample's sequence number on the wire (joins an emulator's truth file)",
     "device_time_us": "the board's clock at the sample",
     "arm_edge_us": "the arm encoder's last count change, device time (−1: none)",

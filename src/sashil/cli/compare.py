@@ -1,4 +1,5 @@
-"""``sashil compare``: several laws on the same road, one table (compare.md, metrics.csv, compare.png).
+"""``sashil compare``: several laws on the same road, one table (compare.md, metrics.csv, compare.png),
+and each law's run in a folder of its own.
 
 Each ``--controller`` (a law name, ``package.module:Class`` or ``path/file.py:Class``; repeatable)
 runs on the same road beside the passive damper at 0 A and at i_max, which are always included
@@ -34,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         dest="laws",
         metavar="LAW",
-        help=f"a law to compare (repeatable; passive at 0 A and at i_max are always included): {law_help()}",
+        help="a law to compare (repeatable; passive at 0 A and at i_max are always included; none: the config's own "
+        f"law, so a compared law's config.yaml compares it again): {law_help()}",
     )
     parser.add_argument(
         "--road", metavar="SPEC", help=f"the road every law runs on: {ROAD_SYNTAX} (default compare.road, iso8608:C)"

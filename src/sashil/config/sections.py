@@ -234,7 +234,20 @@ CONTROLLER = Section(
         "min_authority_nm_per_a": Field(
             "float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"
         ),
-        "lead_horizon_s": Field("float", 0.003, low=0.0, high=1.0, doc="coil-lag compensation horizon (0: off)"),
+        "lead_horizon_s": Field(
+            "float",
+            0.003,
+            low=0.0,
+            high=1.0,
+            doc="coil-lag compensation horizon (0: off): a torque law's current is commanded so the coil reaches it "
+            "within this time",
+        ),
+        "lead_current_laws": Field(
+            "bool",
+            False,
+            doc="apply the coil-lag lead to a current() law's output too (false: the current a law gives is "
+            "commanded as given, clamped to [0, i_max]; data.csv records it as current_law_a either way)",
+        ),
         "coil_tau_s": Field(
             "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
         ),

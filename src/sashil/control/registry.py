@@ -31,12 +31,13 @@ def law_reads_state(config: dict[str, Any]) -> bool:
 
 
 def make_stage(config: dict[str, Any]) -> tuple[str, Any]:
-    """The loop stage of the config's law and its label: a :class:`Controller`, or for a law that
+    """The loop stage of the config's law and its label (the law's ``name``, however ``controller.law``
+    names it: a file law is not labelled by its path): a :class:`Controller`, or for a law that
     reads no state a constant-current stage that runs the law alone (no estimator or observer)."""
     section = controller_section(config)
     entry = find_law(section["law"])
     if entry.cls.reads_state:
-        return str(section["law"]), make_controller(None, config)
+        return entry.cls.name, make_controller(None, config)
     from sashil.runtime.stages import ConstantCurrent
 
     declared = entry.cls.params()
@@ -114,6 +115,7 @@ def make_controller(
         observer=BoucWenObserver(params),
         inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"]),
         lead=CoilLagCompensator(tau, float(section["lead_horizon_s"]), i_max),
+        lead_current_laws=bool(section.get("lead_current_laws", False)),
         current_max_a=i_max,
         model_aided=bool(section["model_aided"]),
         nominal_dt_s=1.0 / rate_hz,

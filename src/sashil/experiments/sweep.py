@@ -118,17 +118,17 @@ class SweepStage:
     signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
     plant's, its capability ``true_torque``; NaN elsewhere)."""
 
-    signal_names = (*CONTROLLER_SIGNALS, "torque_true_nm")
-
     def __init__(self, controller: Any, road: RoadProfile, rig: RigInterface | None = None):
         self.controller = controller
+        #: the controller's signals (a current law's own output, current_law_a, too) and the true torque
+        self.signal_names = (*getattr(controller, "signal_names", CONTROLLER_SIGNALS), "torque_true_nm")
         self.road = road
         self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.torque_true_nm = math.nan
         self._t0: int | None = None
 
     def __getattr__(self, name: str) -> Any:  # the controller's signals (NaN for a stage without them)
-        if name in CONTROLLER_SIGNALS:
+        if name in CONTROLLER_SIGNALS or name == "current_law_a":
             return getattr(self.__dict__["controller"], name, math.nan)
         raise AttributeError(name)
 
@@ -144,10 +144,12 @@ class SweepStage:
 
 
 def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of a sweep's stream."""
+    """:data:`SWEEP_COLUMNS`, a current law's own output (``current_law_a``) when the stream has it,
+    and ``seq`` (int64) of a sweep's stream."""
     if not stream:
         return {name: np.zeros(0) for name in SWEEP_COLUMNS} | {"seq": np.zeros(0, dtype=np.int64)}
-    return {name: stream[name] for name in SWEEP_COLUMNS} | {"seq": stream["seq"].astype(np.int64)}
+    names = (*SWEEP_COLUMNS, "current_law_a") if "current_law_a" in stream else SWEEP_COLUMNS
+    return {name: stream[name] for name in names} | {"seq": stream["seq"].astype(np.int64)}
 
 
 RigFactory = Callable[[dict, RoadProfile], RigInterface]

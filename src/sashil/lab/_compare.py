@@ -11,6 +11,7 @@ gets its row saying why; the others still run.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -21,7 +22,16 @@ from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 
-__all__ = ["CompareLaw", "check_compare", "compare", "laws_of", "split_sets"]
+__all__ = [
+    "CompareLaw",
+    "check_compare",
+    "compare",
+    "folder_name",
+    "law_parameters",
+    "laws_of",
+    "own_law",
+    "split_sets",
+]
 
 
 @dataclass(frozen=True)
@@ -95,16 +105,36 @@ def laws_of(specs: Sequence[str], law_sets: Sequence[tuple[str, str]]) -> list[C
 
 def _law_config(base: Mapping[str, Any], law: CompareLaw, extra: Sequence[str] = ()) -> Any:
     """``base`` running ``law`` with its parameters, checked (ConfigError naming --controller and
-    the key) and read-only."""
+    the key) and read-only. Parameters of another law that ``base`` holds (a law's own config.yaml
+    given back with --config) are left out."""
     from sashil.config.frozen import freeze, thaw
     from sashil.config.overrides import apply_overrides
+    from sashil.config.sections import CONTROLLER
     from sashil.control.law_registry import find_law
 
     try:
-        find_law(law.law)  # an unknown law named as such, before its parameters
-        return freeze(apply_overrides(thaw(base), [f"controller.law={law.law}", *law.sets, *extra], "--set"))
+        declared = find_law(law.law).cls.params()  # an unknown law named as such, before its parameters
+        config = thaw(base)
+        section = config.get("controller") or {}
+        for key in [k for k in section if k not in CONTROLLER.fields and k not in declared]:
+            del section[key]
+        return freeze(apply_overrides(config, [f"controller.law={law.law}", *law.sets, *extra], "--set"))
     except ConfigError as err:
         raise ConfigError(f"--controller {law.law}: {err}") from None
+
+
+def folder_name(label: str) -> str:
+    """A law's sub-folder in the compare folder: its label with what a file name should not hold
+    replaced (``passive 0 A`` -> ``passive-0A``)."""
+    text = re.sub(r"(\d) A$", r"\1A", label)
+    return re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-.") or "law"
+
+
+def own_law(config: Mapping[str, Any]) -> list[CompareLaw]:
+    """The config's own law when it is not passive (a compared law's config.yaml given back with
+    --config), as the law to compare when none is named."""
+    law = (config.get("controller") or {}).get("law", "passive")
+    return [] if law == "passive" else [CompareLaw(str(law))]
 
 
 def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, duration: float) -> list[Any]:
@@ -123,6 +153,50 @@ def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, durati
         label = f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
         jobs.setdefault(label, LawJob(label, config, road, duration))
     return list(jobs.values())
+
+
+def law_parameters(result: Any, config: Mapping[str, Any]) -> dict[str, Any]:
+    """The parameters a law ran with: the law's own values as its run reported them
+    (``controller_stats.law.parameters``), else those its config gives (each declared parameter,
+    its default when unset); the passive stage's current."""
+    from sashil.control.law_registry import find_law
+
+    stats = (result.summary or {}).get("controller_stats") or {}
+    reported = (stats.get("law") or {}).get("parameters") if isinstance(stats, Mapping) else None
+    if isinstance(reported, Mapping):
+        return dict(reported)
+    section = config["controller"]
+    declared = find_law(str(section["law"])).cls.params()
+    return {key: section.get(key, param.default) for key, param in declared.items()}
+
+
+def _law_summary(result: Any, config: Mapping[str, Any], road_text: str, duration: float) -> dict[str, Any]:
+    """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
+    parameters) and its metrics (also as its one entry of ``runs``)."""
+    from sashil.control.law_registry import find_law
+
+    entry = find_law(str(config["controller"]["law"]))
+    common = dict(result.summary)
+    if not common:  # the law never started: its status says why
+        common = {"exit_status": "error", "exit_code": 1}
+    if not result.ok:
+        common["error"] = common.get("error") or result.status
+        if common.get("exit_status") == "ok":
+            common["exit_status"], common["exit_code"] = "error", 1
+    return {
+        **common,
+        "verb": "compare",
+        "driver": config["driver"]["name"],
+        "controller": result.label,
+        "controller_origin": entry.origin,
+        "parameters": law_parameters(result, config),
+        "road": road_text,
+        "duration_s": duration,
+        "status": result.status,
+        "accel_source": result.accel_source,
+        "metrics": result.metrics,
+        "runs": [{"folder": ".", "controller": result.label, **result.metrics}],
+    }
 
 
 def _run_jobs(jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_event: Listener) -> list[Any]:
@@ -170,7 +244,7 @@ def _accel_note(results: list[Any], bandwidth_hz: float) -> str:
     text = "; ".join(how[s] for s in sorted(sources)) or "none measured"
     return (
         f"θ̈2: {text}, low-passed at {bandwidth_hz:g} Hz. The road-side torque k·θ + T equals −J·θ̈2 on this "
-        "rig (seed 001 eq. 13, the road side driven), so it ranks the laws as comfort does."
+        "rig (Iskandarani & Karimi 2011, eq. 13, the road side driven), so it is not a second measure: J times RMS θ̈2."
     )
 
 
@@ -204,7 +278,10 @@ def compare(
     ``compare`` section) into a new folder, beside the passive references, and return it as a
     :class:`~sashil.api.Run`: ``metrics.csv`` (:attr:`~sashil.api.Run.tables` ``["metrics"]``),
     ``compare.md``, ``compare.png``, and ``summary.json`` with each law's status and metrics under
-    ``laws``. The config's own ``controller.law`` is not one of them.
+    ``laws``. Each law's run is a run folder of its own inside it (:attr:`~sashil.api.Run.runs`;
+    ``summary.json`` ``runs``): ``config.yaml`` with the law and its parameters, ``data.csv``,
+    ``timing.npz`` and ``summary.json``. With no ``laws``, the config's own law is compared (unless it
+    is passive): a compared law's ``config.yaml`` compares that law again.
 
     Bad input (an unknown law, a parameter its ``Param`` refuses) raises ConfigError before any
     folder exists. A law that fails or trips does not raise: its row says why, the summary ends
@@ -219,12 +296,23 @@ def compare(
     outputs.check(config["driver"]["name"])
     section = config["compare"]
     road, duration = str(section["road"]), float(section["duration_s"])
-    chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws]
+    chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws] or own_law(config)
     jobs = _jobs(config, chosen, road, duration)
     virtual = on_virtual_clock(config)
     processes = int(section["jobs"]) if virtual else 1
+    road_profile, road_text = parse_road(road, config)
     folder = RunFolder.create(outputs.out, "compare")
-    folder.write_config(config)
+    note = (
+        "The config every law of this comparison started from: its controller section is not one of them.\n"
+        "Each law ran with the config.yaml of its own folder: "
+        + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
+    )
+    folder.write_config(config, note)
+    subs = {}
+    for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
+        sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
+        sub.write_config(job.config)
+        job.folder, subs[job.label] = str(sub.path), sub
     on_event(
         Event(
             "progress",
@@ -235,7 +323,10 @@ def compare(
     start = time.perf_counter()
     results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event)
     wall = time.perf_counter() - start
-    road_profile, road_text = parse_road(road, config)
+    configs = {job.label: job.config for job in jobs}
+    summaries = {r.label: _law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
+    for label, summary in summaries.items():
+        subs[label].write_summary(summary)
     bound = _bound(config, road_profile, duration, on_event)
     header = {
         "road": f"`{road}`: {road_text}",
@@ -257,11 +348,16 @@ def compare(
         "the best constant damping (sashil.experiments.optimal_bound: direct transcription on the viscous "
         "envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], L-BFGS-B on the exact "
         "adjoint gradient; the best of two starts, not a certificate). 100 %: all the bound allows.",
+        "Each law's run is a run folder of its own (the folder column): its config.yaml (the law and its "
+        "parameters), data.csv (every cycle) and summary.json, for `sashil report`, `sashil replay` and "
+        "`sashil compare --config FOLDER/config.yaml` (that law against the references again).",
     ]
     gain = bound.gain_pct if bound is not None else float("nan")
+    params = {label: summary["parameters"] for label, summary in summaries.items()}
+    folders = {label: sub.path.name for label, sub in subs.items()}
     write_metrics_csv(folder.file("metrics.csv"), results, gain)
-    write_compare_md(folder.file("compare.md"), results, header, notes, gain)
-    plot_compare(folder.file("compare.png"), results)
+    write_compare_md(folder.file("compare.md"), results, header, notes, gain, params, folders)
+    plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}")
     failed = [r for r in results if not r.ok]
     error = (
         SashilError(
@@ -283,6 +379,18 @@ def compare(
             "optimal_bound_gain_pct": gain,
             "laws": [
                 {"law": r.label, "status": r.status, "accel_source": r.accel_source, "wall_s": r.wall_s, **r.metrics}
+                for r in results
+            ],
+            "runs": [
+                {
+                    "folder": folders[r.label],
+                    "controller": r.label,
+                    "controller_origin": summaries[r.label]["controller_origin"],
+                    "parameters": params[r.label],
+                    "exit_status": summaries[r.label]["exit_status"],
+                    "error": summaries[r.label].get("error"),
+                    **r.metrics,
+                }
                 for r in results
             ],
         }

@@ -9,8 +9,9 @@ from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
+from sashil.control.law_registry import law_label
 from sashil.drivers import on_virtual_clock, open_rig
-from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DROP_COLUMNS, run_drop_test
+from sashil.experiments.drop_test import DROP_COLUMNS, controller_columns, run_drop_test
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -64,10 +65,11 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
     theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
     currents = [float(value) for value in section["currents_a"]]
     outputs.check(config["driver"]["name"])
-    closed = _controller(config) is not None  # bad controller parameters fail here, before a folder exists
+    checked = _controller(config)  # bad controller parameters fail here, before a folder exists
+    closed = checked is not None
     folder = RunFolder.create(outputs.out, "drop-test")
-    law = config["controller"]["law"]
-    columns = DROP_COLUMNS + (CONTROLLER_COLUMNS if closed else ())
+    law, origin = law_label(config["controller"]["law"])
+    columns = DROP_COLUMNS + controller_columns(checked)
     live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     folder.write_config(config)
@@ -77,6 +79,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
         {
             "driver": config["driver"]["name"],
             "controller": law if closed else f"{law} (constant current per run)",
+            "controller_origin": origin,
             "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
         },
         several=len(currents) > 1,
@@ -157,8 +160,10 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
     )
     if live is not None:
         live.close()
-    if runs.error is not None and getattr(runs.error, "exit_code", 1) == 2 and not folder.recorded():
-        folder.discard()  # bad input found on opening the rig (a port that cannot be opened): no folder
+    if runs.error is not None and getattr(runs.error, "exit_code", 1) == 2:
+        # bad input found on opening the rig (a port that cannot be opened) or before the drop began
+        # (an emulated rig whose operator holds nothing): the drop never started, no folder
+        folder.discard()
         raise runs.error
     runs.finish()
     on_event(Event("folder", f"run folder: {folder.path} (plot {plot.name})", {"folder": str(folder.path)}))

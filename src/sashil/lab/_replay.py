@@ -24,6 +24,13 @@ def recorded_config(run_folder: str | Path) -> Path:
     file and a config."""
     run = load_run(run_folder)
     if run.data_file is None:
+        subs = [sub for sub in run.runs if sub is not run and sub.data_file is not None]
+        if subs:  # a folder of several runs (a drop test's currents, a compare's laws): each replays alone
+            names = ", ".join(f"{sub.name}/" for sub in subs[:6]) + (", …" if len(subs) > 6 else "")
+            raise DataFileError(
+                f"{run_folder}: holds {len(subs)} runs ({names}), each with its own data.csv: replay one, "
+                f"e.g. sashil replay {Path(run_folder) / subs[0].name}"
+            )
         raise DataFileError(f"{run_folder}: no data.csv: nothing to replay")
     config_file = Path(run_folder) / "config.yaml"
     if not config_file.exists():

@@ -55,8 +55,10 @@ def check_sweep(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
 
 def _label(config: Mapping[str, Any]) -> str:
     """What commanded the damper: the law, or the passive current."""
-    name = config["controller"]["law"]
-    return f"passive {config['controller']['current_a']:g} A" if name == "passive" else str(name)
+    from sashil.control.law_registry import law_label
+
+    name = law_label(config["controller"]["law"])[0]
+    return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
 
 
 def _freq_label(f_hz: float) -> str:

@@ -24,6 +24,7 @@ OPTIONAL_COLUMNS = (
     "z_hat",
     "torque_hat_nm",
     "torque_cmd_nm",
+    "current_law_a",
 )
 
 Columns = Mapping[str, "np.ndarray | Sequence[float]"]

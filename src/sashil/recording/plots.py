@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -98,10 +99,15 @@ def _angles_panel(ax: Any, cols: dict[str, np.ndarray]) -> None:
 
 
 def _current_panel(ax: Any, cols: dict[str, np.ndarray]) -> None:
-    """Measured and commanded coil current."""
-    for name, label in (("current_a", "measured i"), ("current_cmd_a", "commanded i*")):
+    """Measured and commanded coil current, and a current law's own output (what it asked for)."""
+    traces = (
+        ("current_a", "measured i", "-"),
+        ("current_cmd_a", "commanded i*", "-"),
+        ("current_law_a", "law's i", ":"),
+    )
+    for name, label, style in traces:
         if has_values(cols, name):
-            ax.plot(cols["time_s"], cols[name], lw=0.9, label=label)
+            ax.plot(cols["time_s"], cols[name], lw=0.9, ls=style, label=label)
     ax.set_ylabel("coil current [A]")
 
 
@@ -189,7 +195,8 @@ def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) 
         if ax.get_legend_handles_labels()[0]:
             ax.legend(**BESIDE)
     axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(run_title(summary, config), fontsize=10)
+    # from the left edge, wrapped to the figure's width: a long title is never cut
+    axes[0].set_title(textwrap.fill(run_title(summary, config), 110), fontsize=10, loc="left")
     return save_figure(fig, path)
 
 

@@ -159,8 +159,10 @@ class RunFolder:
         writer.writerows([["" if value is None else value for value in row] for row in rows])
         return self._write_text(name, buffer.getvalue())
 
-    def write_config(self, config: Config) -> Path:
-        return self._write_text("config.yaml", dump_config(config))
+    def write_config(self, config: Config, note: str | None = None) -> Path:
+        """``config.yaml``: the resolved config, after ``note`` as YAML comment lines when given."""
+        head = "".join(f"# {line}\n" for line in note.splitlines()) if note else ""
+        return self._write_text("config.yaml", head + dump_config(config))
 
     def write_data(self, columns: Columns, name: str = "data.csv") -> Path:
         return write_data_csv(self.file(name), columns)
