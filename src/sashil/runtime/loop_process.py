@@ -121,6 +121,9 @@ class LoopProcess:
         self._messages = -1
         self._buffer = b""
         self._lock = threading.Lock()  # one tuning request in the mailbox at a time
+        self._started = 0.0
+        #: seconds from the spawn to ready: the interpreter, the imports, the warm-up, the board's greeting
+        self.startup_s: float | None = None
         #: each thread's CPUs before the session kept off the loop's (``loop.rt.cpu``)
         self._affinity: dict[int, set[int]] = {}
         #: what the session did about the loop's CPU, for the summary's ``realtime``
@@ -128,6 +131,7 @@ class LoopProcess:
 
     # -- start ------------------------------------------------------------------------------------
     def start(self) -> LoopProcess:
+        self._started = time.perf_counter()
         remove_stale()
         read_fd, write_fd = os.pipe()
         try:
@@ -185,6 +189,7 @@ class LoopProcess:
             for message in self._read(POLL_S):
                 kind = message["kind"]
                 if kind == "ready":
+                    self.startup_s = time.perf_counter() - self._started
                     self.ready = message
                     self.stream = Stream.attach(message["stream"])
                     self.stream.owner = True

@@ -245,7 +245,11 @@ def run_loop_process(
         "driver": config["driver"]["name"],
         "live_view": live_stats,
         "tuning": end.get("tuning"),
-        "loop_process": {"pid": process.process.pid if process.process else None, "threads": end.get("threads")},
+        "loop_process": {
+            "pid": process.process.pid if process.process else None,
+            "threads": end.get("threads"),
+            "startup_s": None if process.startup_s is None else round(process.startup_s, 3),
+        },
     }
     if "loop_died" in end:
         summary["loop_process"]["died"] = end["loop_died"]
