@@ -115,6 +115,7 @@ def closed_loop(
             "progress",
             f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
             f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+            {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
         )
     )
     if process is None:
