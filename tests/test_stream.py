@@ -227,3 +227,22 @@ def test_timing_on_shared_rings_gives_the_loop_s_summary_to_a_reader(tmp_path):
     private = TimingStats(1000.0, 4096)
     assert isinstance(private.lateness[0], int)
     writer_side.close()
+
+
+def test_a_closed_stream_gives_its_last_counts_and_no_rows(tmp_path):
+    made = Stream.create(COLUMNS, capacity=8, window=4096, folder=tmp_path)
+    writer = StreamWriter(made)
+    for k in range(3):
+        _commit(writer, k)
+    writer.release()
+    made.close()
+    assert not made.path.exists()  # the owner removes its file
+    assert made.rows_committed == 3 and made.copy_rows(0, 3) == []  # a view that outlived the run
+
+
+def test_a_stop_request_is_passed_on_when_it_is_made():
+    flag = StopFlag()
+    told: list[str | None] = []
+    flag.on_request = lambda: told.append(flag.signal_name)
+    flag.request("STOP (page)")
+    assert flag.requested and told == ["STOP (page)"]

@@ -234,6 +234,16 @@ class LoopProcess:
             if self._messages < 0 and self.process.poll() is not None:
                 return end
 
+    def pass_stop(self, stop: StopFlag) -> Callable[[], None]:
+        """What passes a request of ``stop`` to the loop: its code into the stream's stop word."""
+        header = self.stream.header if self.stream is not None else None
+
+        def tell() -> None:
+            if header is not None and not header[STOP_W]:
+                header[STOP_W] = _stop_code(stop)
+
+        return tell
+
     def request(self, message: dict[str, Any]) -> dict[str, Any]:
         """A tuning request answered by the loop between two cycles (the tuning socket's handler)."""
         assert self.stream is not None and self.process is not None

@@ -183,11 +183,13 @@ def run_loop_process(
     def forward(kind: str, text: str) -> None:
         say(text)
 
+    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
     try:
         with SessionSignals(flag):
             process.go(folder.path)
             end = process.wait_end(flag, forward)
     finally:
+        flag.on_request = None
         if server is not None:
             server.stop()
     error: BaseException | None = None

@@ -102,7 +102,8 @@ class Stream:
         self.path = path
         self._map = handle
         self.owner = owner
-        self.header = memoryview(handle)[:PAGE].cast("q")
+        #: the header's int64 words (after :meth:`close`, a copy of their last values)
+        self.header: Any = memoryview(handle)[:PAGE].cast("q")
         self.width = int(self.header[WIDTH_W])
         self.capacity = int(self.header[CAPACITY_W])
         self.window = int(self.header[WINDOW_W])
@@ -185,9 +186,12 @@ class Stream:
         return cls(path, mapped, owner=False)
 
     def close(self, unlink: bool | None = None) -> None:
-        """Unmap; the owner (or ``unlink=True``) removes the file too."""
+        """Unmap; the owner (or ``unlink=True``) removes the file too. A view that still holds the
+        stream reads its last counts and no rows."""
         self.rows = np.empty((0, self.width))
-        for view in (self.header, self._mail, self._reply):
+        header = self.header
+        self.header = list(header)
+        for view in (header, self._mail, self._reply):
             view.release()
         with contextlib.suppress(BufferError):  # a timing view still held: the map goes with the process
             self._map.close()
@@ -223,7 +227,7 @@ class Stream:
         """A copy of committed rows ``start .. stop - 1`` (row numbers as :attr:`rows_committed`
         counts them) as a ``(n, width)`` array; the caller keeps within the last ``capacity``."""
         stop = min(stop, self.rows_committed)
-        if stop <= start:
+        if stop <= start or not self.rows.size:
             return np.empty((0, self.width))
         return self.rows[np.arange(start, stop) % self.capacity]
 
