@@ -82,7 +82,7 @@ def test_a_callers_stop_flag_stops_the_loop_process_cleanly(tmp_path):
         stop=flag,
     )
     assert run.summary["exit_status"] == "stopped" and run.summary["exit_code"] == 130
-    assert run.summary["stop_reason"] == "stop requested"
+    assert run.summary["stop_reason"] == "STOP (test)"  # the caller's own words
     data = _rows(run.path)
     assert len(data["time_s"]) >= 200 and data["current_cmd_a"][-1] == 0.0
     assert views and int(views[0]) >= 200

@@ -357,6 +357,9 @@ def make_app(panel: Panel) -> Starlette:
                 panel.tick()
                 await asyncio.sleep(1.0 / FPS)
 
+        from sashil.runtime.loop_process import start_ahead, stop_ahead
+
+        start_ahead()  # the first run's loop process imports and warms up before the first click
         task = asyncio.create_task(broadcaster())
         try:
             yield
@@ -364,6 +367,7 @@ def make_app(panel: Panel) -> Starlette:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
+            stop_ahead()
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
 

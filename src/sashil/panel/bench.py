@@ -208,6 +208,9 @@ class Bench:
                 self.run.exit_status = status
                 self.run.stop_reason = reason or (flag.signal_name or "")
             self._on_event(Event("progress", f"run ended: {status}", {"exit_status": status}))
+            from sashil.runtime.loop_process import start_ahead
+
+            start_ahead()  # the next run's loop process, ready before the next click
 
     def _on_event(self, event: Event) -> None:
         if event.kind == "progress" and event.text.startswith("sashil run:"):

@@ -121,9 +121,12 @@ class LoopProcess:
         self._messages = -1
         self._buffer = b""
         self._lock = threading.Lock()  # one tuning request in the mailbox at a time
-        self._started = 0.0
-        #: seconds from the spawn to ready: the interpreter, the imports, the warm-up, the board's greeting
+        self._started = self._spawned = 0.0
+        #: seconds from the job to ready: what the run waited for (the law imported and warmed, the
+        #: board greeted; the rest was done ahead when the process was started ahead)
         self.startup_s: float | None = None
+        #: seconds from the spawn to ready: the interpreter, the imports, the warm-up, the greeting
+        self.since_spawn_s: float | None = None
         #: each thread's CPUs before the session kept off the loop's (``loop.rt.cpu``)
         self._affinity: dict[int, set[int]] = {}
         #: what the session did about the loop's CPU, for the summary's ``realtime``
@@ -131,19 +134,10 @@ class LoopProcess:
 
     # -- start ------------------------------------------------------------------------------------
     def start(self) -> LoopProcess:
+        """Give the job to a loop process started ahead (:func:`start_ahead`), else start one."""
         self._started = time.perf_counter()
         remove_stale()
-        read_fd, write_fd = os.pipe()
-        try:
-            self.process = subprocess.Popen(
-                [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
-                stdin=subprocess.PIPE,
-                pass_fds=(write_fd,),
-                close_fds=True,
-            )
-        finally:
-            os.close(write_fd)
-        self._messages = read_fd
+        self.process, self._messages, self._spawned = _take_ahead() or _spawn()
         self._keep_off(self.loop_cpu)
         assert self.process.stdin is not None
         self.process.stdin.write((json.dumps(self.job) + "\n").encode())
@@ -190,6 +184,7 @@ class LoopProcess:
                 kind = message["kind"]
                 if kind == "ready":
                     self.startup_s = time.perf_counter() - self._started
+                    self.since_spawn_s = time.perf_counter() - self._spawned
                     self.ready = message
                     self.stream = Stream.attach(message["stream"])
                     self.stream.owner = True
@@ -302,6 +297,60 @@ class LoopProcess:
         if self.stream is not None:
             self.stream.close()
             self.stream = None
+
+
+def _spawn() -> tuple[subprocess.Popen[bytes], int, float]:
+    """A new loop process (it imports and warms its kernels, then waits for its job on stdin), the
+    descriptor its messages arrive on, and when it was started (``time.perf_counter``)."""
+    started = time.perf_counter()
+    read_fd, write_fd = os.pipe()
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
+            stdin=subprocess.PIPE,
+            pass_fds=(write_fd,),
+            close_fds=True,
+        )
+    except BaseException:
+        os.close(read_fd)
+        raise
+    finally:
+        os.close(write_fd)
+    return process, read_fd, started
+
+
+#: a loop process started ahead of its run, with its messages' descriptor
+_ahead: tuple[subprocess.Popen[bytes], int, float] | None = None
+
+
+def start_ahead() -> None:
+    """Start a loop process now, to be given the next run's job: its interpreter, imports and
+    kernels are ready by the time the session has resolved the config (``sashil run`` calls this
+    first; a bench page after each run). One waits at a time; unused, it ends with this process."""
+    global _ahead
+    if _ahead is not None and _ahead[0].poll() is None:
+        return
+    _ahead = _spawn()
+
+
+def stop_ahead() -> None:
+    """End the loop process started ahead, if one waits (a server that stops)."""
+    taken = _take_ahead()
+    if taken is not None:
+        process, fd, _ = taken
+        if process.stdin is not None:
+            process.stdin.close()  # no job: it exits
+        process.wait()
+        os.close(fd)
+
+
+def _take_ahead() -> tuple[subprocess.Popen[bytes], int, float] | None:
+    global _ahead
+    taken, _ahead = _ahead, None
+    if taken is not None and taken[0].poll() is not None:  # it ended (a signal): not usable
+        os.close(taken[1])
+        return None
+    return taken
 
 
 def _log_level() -> int | None:

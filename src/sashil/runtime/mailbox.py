@@ -30,12 +30,14 @@ from sashil.runtime.tuning import LiveTuning, TuneEvent
 
 #: the stop reason of a loop whose session process died
 SESSION_DIED = "the session process died"
+#: the loop's stop reason for a caller's stop (the session knows the caller's own words for it)
+CALLER_STOP = "stop requested"
 
 
 def stop_reason(code: int) -> str:
     """The reason a stop word gives: a signal's name, or the caller's stop."""
     if code == STOP_BY_CALLER:
-        return "stop requested"
+        return CALLER_STOP
     try:
         return signal.Signals(code).name
     except ValueError:

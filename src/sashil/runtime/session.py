@@ -151,6 +151,7 @@ def run_loop_process(
     tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
     whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
     from sashil.runtime.loop_process import LiveTiming, SessionSignals, confirm_safe, error_of
+    from sashil.runtime.mailbox import CALLER_STOP
     from sashil.runtime.runner import check_disk, loop_summary, losses
     from sashil.runtime.stream_recorder import StreamRecorder
 
@@ -234,7 +235,9 @@ def run_loop_process(
             timing=timing.summary(),
             trips=end.get("trips", []),
             error=error,
-            stop_reason=end.get("stop_reason"),
+            stop_reason=flag.signal_name
+            if end.get("stop_reason") == CALLER_STOP and flag.signal_name
+            else end.get("stop_reason"),
             controller_stats=end.get("controller_stats"),
             safety=end.get("safety"),
             realtime={**end.get("realtime", {}), **session_affinity},
@@ -251,6 +254,7 @@ def run_loop_process(
             "pid": process.process.pid if process.process else None,
             "threads": end.get("threads"),
             "startup_s": None if process.startup_s is None else round(process.startup_s, 3),
+            "since_spawn_s": None if process.since_spawn_s is None else round(process.since_spawn_s, 3),
         },
     }
     if "loop_died" in end:

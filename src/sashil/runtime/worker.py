@@ -4,6 +4,9 @@ It runs the cycle and nothing else: the rig's I/O, the safety supervisor, the pl
 controller and the lab's law, each cycle's row into the run's stream (:mod:`sashil.runtime.stream`).
 No other Python thread runs in it. What it does, in order:
 
+0. imports the loop's modules and loads every numba kernel (:func:`prepare`), so a process
+   started ahead of its run (:func:`sashil.runtime.loop_process.start_ahead`) has done it when
+   the job arrives;
 1. reads its job from stdin, one JSON line: the resolved config (the law named by its spec in
    ``controller.law``: a registered name, ``package.module:Class`` or ``file.py:Class``, imported
    here, never unpickled), the duration, and whether to apply ``loop.rt`` and serve live tuning;
@@ -96,6 +99,20 @@ def build(config: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, st
     return rig, stage, label, road_text
 
 
+def prepare(messages: Messages) -> None:
+    """What every run needs, done before the job arrives (a process started ahead of its run does
+    it while the session resolves the config): the loop's modules imported and every numba kernel
+    compiled or loaded from the cache, its progress sent on an empty cache."""
+    import sashil.control.registry
+    import sashil.drivers
+    import sashil.experiments.road_option
+    import sashil.runtime.loop
+    import sashil.safety  # noqa: F401 - imported now, used by run()
+    from sashil.runtime.warmup import warm_kernels
+
+    warm_kernels(lambda line: messages.send("progress", text=line))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m sashil.runtime.worker", description=__doc__.split("\n\n")[0])
     parser.add_argument("--messages", type=int, required=True, help="descriptor for the messages to the session")
@@ -105,7 +122,11 @@ def main(argv: list[str] | None = None) -> int:
 
     with catch_stop_signals() as flag:
         try:
-            return run(json.loads(sys.stdin.readline()), messages, flag)
+            prepare(messages)
+            job = sys.stdin.readline()
+            if not job.strip():  # a process started ahead that was never given a run
+                return 0
+            return run(json.loads(job), messages, flag)
         except BaseException as err:
             messages.send("error", **error_fields(err))
             return exit_code_of("error", err) or 1
