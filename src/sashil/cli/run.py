@@ -54,13 +54,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
-    from sashil.lab._closed_loop import closed_loop
-    from sashil.lab.events import printer
-    from sashil.runtime.loop_process import start_ahead
+    from sashil.runtime.loop_process import start_ahead, stop_ahead
 
     setup_logging(args)
     start_ahead()  # the loop process imports and warms up while the config is resolved here
+    try:
+        return _run(args)
+    finally:
+        stop_ahead()  # not taken (bad input, loop.process: false): it ends here
+
+
+def _run(args: argparse.Namespace) -> int:
+    from sashil.config.resolve import Option, resolve
+    from sashil.lab._closed_loop import closed_loop
+    from sashil.lab.events import printer
+
     if args.current is not None:
         if args.controller not in (None, "passive"):
             raise ConfigError(f"--current: only for --controller passive (got --controller {args.controller})")

@@ -45,6 +45,7 @@ def printer(quiet: bool = False, stream: Any = None) -> Listener:
             return
         out = sys.stdout if event.kind == "output" else (stream or sys.stderr)
         prefix = "  " if event.kind in ("prompt", "result") else ""
-        print(prefix + event.text, file=out, flush=True)
+        out.write(prefix + event.text + "\n")  # one write: a loop process's own lines never land inside it
+        out.flush()
 
     return show

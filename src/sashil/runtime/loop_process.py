@@ -111,6 +111,7 @@ class LoopProcess:
             "tune": tune,
             "session_pid": os.getpid(),
             "log_level": _log_level(),
+            "sys_path": list(sys.path),  # a law's module imports there as it does here
         }
         self.rate_hz = float(config["loop"]["rate_hz"])
         #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)

@@ -150,6 +150,8 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         logger = logging.getLogger("sashil")
         logger.addHandler(handler)
         logger.setLevel(int(job["log_level"]))
+    if job.get("sys_path"):  # the session's import path: a law named as module:Class imports as it did there
+        sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
     config = job["config"]
     loop_cfg = config["loop"]
     rate = float(loop_cfg["rate_hz"])
