@@ -163,15 +163,15 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         )
         return 130
     frames = FRAME_ROWS if job.get("can_trace") else 0
+    if frames and not capabilities_of(rig).can_frames:
+        rig.close()
+        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
     try:
         stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
     except OSError as err:  # before anything is energised
         rig.close()
         raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
     if frames:
-        if not capabilities_of(rig).can_frames:
-            rig.close()
-            raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
         rig.frame_sink = FrameWriter(stream).put
     stream.header[LOOP_PID_W] = os.getpid()
     stream.set_state("ready")
