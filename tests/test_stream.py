@@ -246,3 +246,26 @@ def test_a_stop_request_is_passed_on_when_it_is_made():
     flag.on_request = lambda: told.append(flag.signal_name)
     flag.request("STOP (page)")
     assert flag.requested and told == ["STOP (page)"]
+
+
+def test_a_third_stop_signal_kills_a_loop_process_that_does_not_stop():
+    import subprocess
+    from types import SimpleNamespace
+
+    from sashil.runtime.loop_process import SessionSignals
+
+    before = signal.getsignal(signal.SIGTERM)
+    child = subprocess.Popen(["sleep", "60"])  # a loop process that never reaches its next cycle
+    flag = StopFlag()
+    try:
+        with SessionSignals(flag, SimpleNamespace(process=child)):  # type: ignore[arg-type]
+            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert flag.requested and flag.signal_name == "SIGTERM" and child.poll() is None
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert child.wait(timeout=10) == -signal.SIGKILL
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    assert signal.getsignal(signal.SIGTERM) is before  # the session's handlers are gone after the run

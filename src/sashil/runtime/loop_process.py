@@ -370,17 +370,28 @@ def _stop_code(stop: StopFlag) -> int:
 
 class SessionSignals:
     """SIGINT, SIGTERM and SIGHUP caught by the session for the run: each writes its number into
-    the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code."""
+    the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code.
+    A third one ends a loop process that does not stop (``kill``: the board's watchdog then takes
+    the coil to 0 A, and the session confirms it as after any death of the loop)."""
 
-    def __init__(self, flag: StopFlag):
+    #: stop signals after which a loop process that has not ended is killed
+    KILL_AFTER = 3
+
+    def __init__(self, flag: StopFlag, process: LoopProcess | None = None):
         self.flag = flag
+        self.process = process
+        self.count = 0
         self._previous: dict[int, Any] = {}
 
     def __enter__(self) -> SessionSignals:
         if threading.current_thread() is threading.main_thread():
 
             def handler(signum: int, frame: object) -> None:
+                self.count += 1
                 self.flag.request(signal.Signals(signum).name)
+                child = self.process.process if self.process is not None else None
+                if self.count >= self.KILL_AFTER and child is not None and child.poll() is None:
+                    child.kill()
 
             self._previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
         return self

@@ -186,7 +186,7 @@ def run_loop_process(
 
     flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
     try:
-        with SessionSignals(flag):
+        with SessionSignals(flag, process):
             process.go(folder.path)
             end = process.wait_end(flag, forward)
     finally:
