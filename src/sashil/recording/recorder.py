@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from sashil.recording.data_file import write_all
+
 #: rows formatted per slice (a slice holds the GIL for roughly SLICE_ROWS * 3 µs)
 SLICE_ROWS = 16
 SLICE_BUDGET_NS = 80_000
@@ -203,10 +205,7 @@ class Recorder:
             self._write_all("".join(chunks).encode())
 
     def _write_all(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            written = os.write(self._fd, view)  # type: ignore[arg-type]
-            view = view[written:]
+        write_all(self._fd, data)  # type: ignore[arg-type]
         self.writes += 1
 
     def stream(self) -> dict[str, np.ndarray]:

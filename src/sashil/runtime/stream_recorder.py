@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.recording.data_file import write_all
 from sashil.runtime.stream import RECORDED_W, RECORDER_W, Stream
 
 #: columns whose values are integers (device counters, codes); written without a decimal point
@@ -49,9 +50,7 @@ def format_block(columns: tuple[str, ...], block: np.ndarray) -> str:
 
 def append(fd: int, text: str) -> None:
     """Write all of ``text`` to ``fd``."""
-    view = memoryview(text.encode())
-    while view:
-        view = view[os.write(fd, view) :]
+    write_all(fd, text.encode())
 
 
 class StreamRecorder:
