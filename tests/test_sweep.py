@@ -319,6 +319,7 @@ def test_a_stepped_sines_views_see_each_frequency_and_a_stop_ends_the_sweep_at_0
     )  # the first frequency whole (ramp 0.5, settle 1, measure 1, ramp down 0.5 s), the 0 A row
     summary = json.loads((tmp_path / "stepped" / "summary.json").read_text())
     assert summary["exit_status"] == "stopped" and [r["exit_status"] for r in summary["runs"]] == ["ok", "stopped"]
+    assert summary["runs"][1]["safe_state"] is None  # stopped before its first cycle: nothing to settle
     stopped = (tmp_path / "stepped" / "f1.732Hz" / "cycles.csv").read_text().splitlines()  # log spacing
     assert len(stopped) - 1 == seen[3][1] == 0  # stopped before its first cycle: nothing energised
 

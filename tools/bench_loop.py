@@ -359,7 +359,9 @@ def paired(config: dict, args: argparse.Namespace) -> int:
                 f"loop process threads {pair['own']['loop_process']['threads']}",
                 flush=True,
             )
-    print(f"paired: p99 goal met in {met_p99} of {args.paired}, missed-deadline goal met in {met_missed} of {args.paired}")
+    print(
+        f"paired: p99 goal met in {met_p99} of {args.paired}, missed-deadline goal met in {met_missed} of {args.paired}"
+    )
     return 0
 
 

@@ -271,7 +271,8 @@ def run_sweep(
     streams every cycle there as it runs. ``live``: views of the stream (``start(stream, timing)``,
     ``close(trips, notes)``); ``stop``: a :class:`~sashil.runtime.signals.StopFlag` another thread
     may set. A signal or a stop ends the run cleanly and raises :class:`~sashil.errors.Stopped`
-    (exit 130) after ``keep``.
+    (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
+    settled at 0 A after a stop).
     """
     from sashil.experiments.drop_test import default_clock
     from sashil.runtime.plan_process import in_loop_process, run_plan_process
@@ -305,9 +306,10 @@ def run_sweep(
     columns = sweep_columns(outcome.stream)
     if keep is not None:
         keep(columns)
-    if outcome.error is not None:
-        raise outcome.error
-    outcome.raise_stop()
+    ended = outcome.error if outcome.error is not None else outcome.stop_error()
+    if ended is not None:
+        ended.safe_state = outcome.result.safe_state  # type: ignore[attr-defined]  # the run's summary row shows it
+        raise ended
     return columns, stage
 
 

@@ -141,6 +141,7 @@ def drop_test(
                 **record.metrics.as_dict(),
                 "timing": record.loop.timing.summary() if record.loop.timing is not None else None,
                 "trips": record.loop.trips,
+                "safe_state": record.loop.safe_state,
                 "link": record.extra.get("link"),
                 "realtime": record.extra.get("realtime"),
                 "can_trace": record.extra.get("can_trace"),

@@ -212,7 +212,7 @@ def _stepped(
                 )[0]
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
-                    runs.add(_freq_label(f), {"frequency_hz": f}, err)
+                    runs.add(_freq_label(f), {"frequency_hz": f, "safe_state": getattr(err, "safe_state", None)}, err)
                 raise
             points.append(point)
             extra["points"].append(point.__dict__)
@@ -301,7 +301,7 @@ def _chirp(
         )
     except SashilError as err:
         if err.exit_code != ConfigError.exit_code:
-            runs.add("chirp", {}, err)
+            runs.add("chirp", {"safe_state": getattr(err, "safe_state", None)}, err)
         raise
     outputs.write_formats(folder.path, config, "sweep", cols, exit_status="ok", controller=label)
     plot_chirp(

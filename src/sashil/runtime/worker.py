@@ -125,6 +125,11 @@ def sweep_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages:
 #: what a loop process can run: a plan's ``kind`` (its ``spec()``) and the function that builds it
 #: in the loop process from the config, the spec, the rig and the message channel
 PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
+#: plans whose board is greeted when the loop starts, not before ``ready``: an operator (a person, or
+#: an emulator's ``--hold-deg``) holds the arm from the greeting and lets go a while after it, so a
+#: drop's hold must start with its loop (a port that cannot be opened then ends the run at once,
+#: with nothing energised, and the drop test leaves no folder)
+GREET_AT_START = frozenset({"drop-test"})
 
 
 def build(config: dict[str, Any], spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
@@ -142,7 +147,8 @@ def build(config: dict[str, Any], spec: dict[str, Any], messages: Messages) -> t
     try:
         stage, label, road_text = make(config, spec, rig, messages)
         warm_up(stage, lambda line: messages.send("progress", text=line))
-        rig.configure()
+        if spec.get("kind") not in GREET_AT_START:
+            rig.configure()
     except BaseException:
         rig.close()
         raise
