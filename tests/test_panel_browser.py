@@ -203,3 +203,51 @@ def shoot(png: bytes, name: str, tmp_path: Path) -> None:
     (tmp_path / name).write_bytes(png)
     if os.environ.get("SASHIL_PANEL_SCREENSHOTS"):
         Path(os.environ["SASHIL_PANEL_SCREENSHOTS"], name).write_bytes(png)
+
+
+def test_a_drop_test_from_the_page_in_chromium(panel_url):
+    """Choose a drop test, refuse a bad current with the CLI's line, run two currents: the page
+    labels each sub-run, draws its rows and shows each drop's result; the run is in Runs."""
+    url, runs = panel_url
+    with sync_api.sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.goto(url)
+            page.wait_for_function("window.panel && window.panel.laws.length > 0 && window.panel.client")
+            page.select_option("#experiment", "drop-test")
+            assert page.locator("#law").input_value() == "passive"  # a drop test's constant current
+            assert page.locator("#road").is_hidden() and page.locator("#currents").is_visible()
+            page.fill("#currents", "0 9")
+            page.click("#start")
+            sync_api.expect(page.locator("#refusal")).to_have_text(
+                "--current: expected a current in [0, 1] A (rig.current_max_a), got 9"
+            )
+            assert [p.name for p in runs.iterdir()] == ["20261126T100000Z-run"]  # nothing started
+            page.fill("#currents", "0 1")
+            page.fill("#drop-duration", "1.5")
+            labels: list[str] = []
+            page.expose_function("noteSubRun", lambda text: labels.append(text))
+            page.evaluate(
+                "new MutationObserver(() => window.noteSubRun(document.getElementById('sub-run').textContent))"
+                ".observe(document.getElementById('sub-run'), {childList: true, characterData: true, subtree: true})"
+            )
+            page.click("#start")
+            page.wait_for_function(
+                "window.panel.status.run_id === 1 && window.panel.status.state === 'idle'", timeout=FIRST_TRACE_MS
+            )
+            status = page.evaluate("window.panel.status")
+            sync_api.expect(page.locator("#sub-run")).to_have_text("drop test 2 of 2: 1 A")
+            sync_api.expect(page.locator("#results li").filter(has_text="period ")).to_have_count(2)
+            shown = page.evaluate("window.panel.data")
+            page.wait_for_selector(f'#run-table td:text-is("{Path(status["folder"]).name}")')
+        finally:
+            browser.close()
+    assert status["exit_status"] == "ok" and status["experiment"] == "drop-test"
+    assert "drop test 1 of 2: 0 A" in labels
+    cycles = read_csv(Path(status["folder"]) / "i1.000A" / "cycles.csv")  # the last sub-run's own rows
+    times = np.array(shown["time_s"], dtype=float)
+    assert len(times) > 10
+    index = np.searchsorted(cycles["time_s"], times)
+    np.testing.assert_array_equal(cycles["time_s"][index], times)
+    np.testing.assert_allclose(np.array(shown["theta_rad"], dtype=float), cycles["theta_rad"][index], rtol=1e-9)
