@@ -601,7 +601,6 @@ def test_https_with_a_certificate_sets_a_secure_cookie(tmp_path):
         child.communicate(timeout=30)
 
 
-
 # -- choosing an experiment: a drop test and a sweep, resolved as their verbs resolve them ----------------
 def cli_line(argv: list[str], capsys: Any) -> str:
     """The one line ``sashil VERB ...`` prints for bad input (after ``sashil VERB: error:``), exit 2."""
@@ -815,7 +814,7 @@ def rows_match(batches: list[dict[str, np.ndarray]], data: dict[str, np.ndarray]
 
 @pytest.mark.e2e
 def test_a_drop_test_from_the_page_runs_each_current_asked(panel):
-    state, client = panel
+    _, client = panel
     with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
         headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
         choice = {"experiment": "drop-test", "law": "passive", "currents_a": "0 1", "duration_s": 1.5, "theta0_deg": -5}

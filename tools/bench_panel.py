@@ -14,8 +14,9 @@ first trace on a page with the kernels' cache warm, the click made :data:`AHEAD_
 opened (the loop process the server starts ahead is ready by then); the trace delay (a batch's transport from
 the server's read to the page, and the age of its newest row when read, whose sum plus one display
 tick bounds a row's delay); the server thread's CPU as a share of one core while streaming; STOP
-to 0 A commanded in cycles, and the measured current's decay to 5 % after it. Timing on a shared
-machine is noisy: run it on an otherwise idle box.
+to 0 A commanded in cycles, and the measured current's decay to 5 % after it; how often the page's
+status carried the stream's live health counts, and the page's safe-state line after STOP. Timing
+on a shared machine is noisy: run it on an otherwise idle box.
 
     python tools/bench_panel.py                 # 30 s runs, two pages
     python tools/bench_panel.py --quick         # 1.5 s runs, one page: the code path only (seconds)
@@ -164,7 +165,11 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         time.sleep(0.001)
     first_trace_s = crowd[0].arrivals[0][0] - clicked
     cpu0, wall0 = time.clock_gettime(clock_id), time.perf_counter()
-    time.sleep(duration)
+    health_seen = 0  # status reads that carried the stream's live health counts
+    end = wall0 + duration
+    while time.perf_counter() < end:
+        time.sleep(min(0.1, max(0.0, end - time.perf_counter())))
+        health_seen += bool(bench.status()["health_live"])
     cpu1, wall1 = time.clock_gettime(clock_id), time.perf_counter()
     crowd[-1].outbox.append(json.dumps({"stop": True}))  # STOP from a page
     bench.join()
@@ -173,6 +178,7 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         page.join()
     server.should_exit = True
     serving.join()
+    shown = bench.status()
     folder = Path(bench.run.folder)
     summary = json.loads((folder / "summary.json").read_text())
     transport = [(arrived - reads[newest][0]) for page in crowd for arrived, newest in page.arrivals if newest in reads]
@@ -198,6 +204,9 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         "decay_ms": None if below is None or start_current == 0 else (times[below] - times[zero]) * 1e3,
         "rows_after": len(rows) - 1 - zero,
         "batches": sum(len(p.arrivals) for p in crowd),
+        "health_seen": health_seen,
+        "health": shown["health"],
+        "safe_state_line": shown["safe_state_line"],
     }
 
 
@@ -242,6 +251,11 @@ def main() -> int:
             else f"{decay:.1f} ms"
         )
     )
+    print(
+        f"health while streaming: {panel['health_seen']} of the status reads (every 0.1 s) carried the stream's "
+        f"live counts; at the end {panel['health']}"
+    )
+    print(f"the page's line after STOP: {panel['safe_state_line'] or 'none (summary.json has no safe_state)'}")
     print(f"exit status: bare {bare['exit_status']}, panel {panel['summary']['exit_status']}")
     return 0
 

@@ -139,6 +139,8 @@ class StreamView:
         return bool(self.segments) and self.segments[-1].closed
 
     def start(self, stream: Any, timing: Any) -> StreamView:
+        if self.segments and not self.segments[-1].closed:
+            self.close()  # a sub-run that ended unannounced: its rows are kept all the same
         with self.lock:
             index = len(self.segments)
             label = self.labels[index] if index < len(self.labels) else ""
@@ -301,7 +303,9 @@ class Bench:
                 Option("--f-start", "sweep.f_start_hz", _number(choice.get("f_start_hz"), "--f-start")),
                 Option("--f-stop", "sweep.f_stop_hz", _number(choice.get("f_stop_hz"), "--f-stop")),
                 Option("--duration", "sweep.duration_s", duration),
-                Option("--amplitude-deg", "sweep.amplitude_deg", _number(choice.get("amplitude_deg"), "--amplitude-deg")),
+                Option(
+                    "--amplitude-deg", "sweep.amplitude_deg", _number(choice.get("amplitude_deg"), "--amplitude-deg")
+                ),
                 Option("--stepped", "sweep.stepped", _stepped(choice.get("stepped"))),
                 Option("--steps", "sweep.steps", _number(choice.get("steps"), "--steps", int)),
             )
@@ -613,7 +617,7 @@ class Bench:
             stream = segment.stream
             committed = int(stream.rows_committed)
             start, stop = next_window(committed, self._sent_row, self._step, self._keep)
-            if stop > start or not segment.closed or view.segment(self._segment + 1) is None:
+            if stop > start or view.segment(self._segment + 1) is None:
                 break
             self._segment, self._sent_row = self._segment + 1, 0  # this sub-run is sent whole: the next
         if stop <= start:
