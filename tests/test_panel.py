@@ -735,6 +735,15 @@ def test_each_sub_run_is_sent_to_its_end_then_the_next_labelled(tmp_path):
 
     first, timing = HealthyStream(columns), Counts()
     view.start(first, timing)
+    from sashil.lab.events import Event
+
+    bench._on_event(Event("prompt", "press the arm to -5 deg and hold it still"))  # the operator's instruction
+    assert bench.status()["prompt"] == "press the arm to -5 deg and hold it still"
+    assert bench.events_since(0)[-1] == {
+        "seq": 1,
+        "kind": "prompt",
+        "text": "press the arm to -5 deg and hold it still",
+    }
     first.add(rows(0, 10, 0.0))
     timing.cycles, timing.missed_deadlines = 10, 1
     first.counts.update(samples_lost=2, bad_frames=1, clipped_cycles=4)
@@ -752,6 +761,7 @@ def test_each_sub_run_is_sent_to_its_end_then_the_next_labelled(tmp_path):
     first.open = False  # its stream is closed next: only the rows copied at close remain
     second = HealthyStream(columns)
     view.start(second, Counts())
+    assert bench.status()["prompt"] == ""  # a new sub-run's instructions start afresh
     second.add(rows(0, 6, 1.0))
 
     tail = decode_batch(bench.next_batch())
