@@ -270,3 +270,39 @@ def test_a_disk_too_full_for_the_run_ends_the_loop_process_before_anything_is_en
         closed_loop(_config(60.0, "controller.current_a=0.5"), sashil.lab.Outputs(out=tmp_path / "run"))
     assert Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").read_text().strip() == ""  # no loop process left
     assert not (tmp_path / "run" / "data.csv").exists()
+
+
+def test_a_drop_test_on_the_real_clock_runs_each_drop_in_a_loop_process(tmp_path):
+    """The drop's plan is built again in the loop process; the session's twin takes what it saw,
+    and the record, its metrics and the views are as in one process."""
+    relaxed = ("loop.max_missed_fraction=1.0", "driver.max_lost_fraction=1.0", "loop.rt.priority=0")
+    sets = (*relaxed, "drop_test.currents_a=[0.0,0.8]", "drop_test.duration_s=1.5")
+    views: list[tuple[str, int]] = []
+
+    class Counting:
+        def start(self, stream, timing):
+            self.stream = stream
+            views.append(("start", 0))
+
+        def close(self, trips, notes):
+            views.append(("close", self.stream.rows_committed))
+
+    events: list[sashil.lab.Event] = []
+    real = resolve(ConfigSource(sets=(*sets, "driver.clock=real")), "drop-test")
+    run = sashil.lab.drop_test(real, sashil.lab.Outputs(out=tmp_path / "real"), events.append, views=[Counting()])
+    virtual = sashil.lab.drop_test(
+        resolve(ConfigSource(sets=(*sets, "driver.clock=virtual")), "drop-test"),
+        sashil.lab.Outputs(out=tmp_path / "virtual"),
+    )
+    assert run.summary["exit_status"] == "ok", run.summary
+    for entry, twin in zip(run.summary["runs"], virtual.summary["runs"], strict=True):
+        process = entry["loop_process"]
+        assert process["pid"] != os.getpid() and process["threads"] == 1
+        assert entry["release_estimated"] is False  # the simulated operator let go, and said when
+        assert entry["peaks_deg"][:2] == pytest.approx(twin["peaks_deg"][:2], abs=0.1)
+        assert entry["period_s"] == pytest.approx(twin["period_s"], rel=0.02)
+    assert [kind for kind, _ in views] == ["start", "close"] * 2
+    assert all(rows > 1500 for kind, rows in views if kind == "close")  # the hold and 1.5 s after the release
+    cycles = read_data_csv(run.path / "i0.800A" / "cycles.csv", required=(), min_rows=0)
+    assert cycles["current_cmd_a"][-1] == 0.0 and np.all(cycles["current_cmd_a"][:-1] == 0.8)
+    assert not list(Path("/dev/shm").glob(f"sashil-{os.getpid()}-*"))

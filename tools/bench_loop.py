@@ -17,7 +17,12 @@ SCHED_FIFO priority, mlockall, GC off, timer slack) and the same loop code
    interpreter (the shape the loop process replaces), for comparison;
 4. **own process at 5 kHz** (``--fast-rate``), for its miss rate;
 5. with ``--link``: the own-process run over serial against ``sashil emulate`` (the Python board,
-   and the C board when a C compiler is found), and the one-process run with the Python board.
+   and the C board when a C compiler is found), and the one-process run with the Python board;
+6. with ``--paired``: the own-process run and a bare loop at the same time, each on its own CPU
+   (the loop process pinned by ``loop.rt.cpu`` to the last CPU, the bare loop in a second
+   interpreter on the first, beside the session process). On a VM whose host pauses it for
+   milliseconds at random, the runs before and after see different pauses; run at once, both
+   see the same minute.
 
 Prints each run's lateness p50/p99/p99.9/max, missed deadlines, median compute, the loop process's
 start-up (spawn, imports, warm-up and the board's greeting, until it says ready), and the goals:
@@ -29,13 +34,16 @@ CAP_SYS_NICE).
     python tools/bench_loop.py                 # 60 s runs at 1 kHz, 10 s at 5 kHz
     python tools/bench_loop.py --link          # and over serial against the emulated boards
     python tools/bench_loop.py --duration 5    # quick look
+    python tools/bench_loop.py --paired 3      # and three runs of the own process beside a bare loop
     python tools/bench_loop.py --quick         # 0.5 s per run: the code path only (seconds)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -183,6 +191,31 @@ class Emulated:
         self.proc.communicate(timeout=30)
 
 
+def paired_run(config: dict, rate: float, duration: float, folder: Path, config_path: str | None) -> dict:
+    """The own-process run (:func:`session_run`, its loop pinned to the last CPU) and a bare loop in a
+    second interpreter on the first CPU, at the same time. The bare loop starts first and runs
+    ``duration`` + 3 s, so that it spans the own process's start-up and its whole run."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        raise SystemExit("bench_loop: --paired needs two CPUs")
+    priority = config["loop"]["rt"]["priority"]
+    bare_cmd = [sys.executable, __file__, "--bare-json", "--duration", f"{duration + 3.0:g}", "--rate", f"{rate:g}",
+                "--priority", str(priority), "--cpu", str(cpus[0])] + (["--config", config_path] if config_path else [])  # fmt: skip
+    bare = subprocess.Popen(bare_cmd, stdout=subprocess.PIPE, text=True)
+    try:
+        pinned = json.loads(json.dumps(config))
+        pinned["loop"]["rt"]["cpu"] = cpus[-1]
+        own = session_run(pinned, rate, duration, folder, process=True)
+        out, _ = bare.communicate(timeout=duration + 120)
+    finally:
+        if bare.poll() is None:
+            bare.kill()
+            bare.wait()
+    if bare.returncode != 0:
+        raise SystemExit(f"bench_loop: the paired bare loop failed (exit {bare.returncode})")
+    return {"own": own, "bare": json.loads(out)}
+
+
 def late_cycles(timing: dict, rate: float, cycles: int) -> int:
     """The bare loop's cycles later than one period, scaled to ``cycles`` (its misses)."""
     bare_cycles = timing["cycles"] + timing["missed_deadlines"]
@@ -208,13 +241,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fast-duration", type=float, default=10.0)
     parser.add_argument("--priority", type=int, help="override loop.rt.priority (0: no SCHED_FIFO)")
     parser.add_argument("--link", action="store_true", help="also over serial against the emulated boards")
+    parser.add_argument(
+        "--paired", type=int, default=0, metavar="N", help="N runs of the own process beside a bare loop at once"
+    )
     parser.add_argument("--quick", action="store_true", help="0.5 s per run (seconds; the figures mean little)")
+    parser.add_argument("--bare-json", action="store_true", help=argparse.SUPPRESS)  # a paired run's bare loop
+    parser.add_argument("--cpu", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.quick:
         args.duration = args.fast_duration = 0.5
     config = load_config(args.config)
     if args.priority is not None:
         config["loop"]["rt"]["priority"] = args.priority
+    if args.bare_json:
+        config["loop"]["rt"]["cpu"] = args.cpu
+        print(json.dumps(bare_run(config, args.rate, args.duration)["timing"]))
+        return 0
+    if args.paired:
+        return paired(config, args)
 
     bare = bare_run(config, args.rate, args.duration)
     print("real-time set-up: " + ", ".join(f"{k} {v['status']}" for k, v in bare["realtime"].items()))
@@ -291,6 +335,31 @@ def main(argv: list[str] | None = None) -> int:
             f"deadlines ({100 * t['missed_deadlines'] / max(t['cycles'] + t['missed_deadlines'], 1):.3f} %)"
         )
     print("note: timing depends on machine load; other processes on a shared box make these numbers noisy")
+    return 0
+
+
+def paired(config: dict, args: argparse.Namespace) -> int:
+    """``--paired N``: N own-process runs, each beside a bare loop at the same time; the goals per pair."""
+    met_p99 = met_missed = 0
+    with tempfile.TemporaryDirectory(prefix="bench_loop-") as tmp:
+        for n in range(args.paired):
+            pair = paired_run(config, args.rate, args.duration, Path(tmp) / f"pair{n}", args.config)
+            own, bare = pair["own"]["timing"], pair["bare"]
+            print(line(f"pair {n + 1}: bare", bare), flush=True)
+            print(line(f"pair {n + 1}: own", own), flush=True)
+            b99, f99 = bare["lateness_us"]["p99"], own["lateness_us"]["p99"]
+            allowed = late_cycles(bare, args.rate, own["cycles"])
+            p99_ok, missed_ok = f99 <= b99 + 5, own["missed_deadlines"] <= allowed
+            met_p99 += p99_ok
+            met_missed += missed_ok
+            print(
+                f"  p99 {f99:.2f} us against the bare loop's {b99:.2f} + 5 us ({'met' if p99_ok else 'missed'}); "
+                f"missed {own['missed_deadlines']} against the bare loop's {allowed} "
+                f"({'met' if missed_ok else 'missed'}); start-up {pair['own']['startup_s']:.2f} s; "
+                f"loop process threads {pair['own']['loop_process']['threads']}",
+                flush=True,
+            )
+    print(f"paired: p99 goal met in {met_p99} of {args.paired}, missed-deadline goal met in {met_missed} of {args.paired}")
     return 0
 
 

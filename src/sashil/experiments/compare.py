@@ -233,7 +233,7 @@ def run_job(job: LawJob) -> LawResult:
     result.wall_s = time.perf_counter() - start
     result.summary = outcome.summary()
     if folder is not None:
-        folder.write_timing(outcome.loop.timing)
+        folder.write_timing(outcome.timing)
     loop = outcome.result
     if outcome.error is not None or loop.exit_status != "ok":
         trips = "; ".join(str(trip.get("reason", trip)) for trip in loop.trips)

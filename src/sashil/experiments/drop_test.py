@@ -29,6 +29,7 @@ from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.runtime.clock import Clock, RealClock, VirtualClock
 from sashil.runtime.loop import LoopResult
+from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
 
 #: columns of a drop test's data.csv (docs/architecture.md names)
@@ -195,6 +196,9 @@ class DropTestPlan:
         self.notify = notify
         # optional loop stage (sashil.control) that commands the damper after the release
         self.controller = controller
+        #: the controller is the config's law (made by :func:`config_controller`): a loop process
+        #: can make its own
+        self.from_config = False
         #: the controller's per-cycle values go into the stream (the loop reads them after each step,
         #: from the controller itself: the attributes below forward them too, but slower)
         self.signal_names = controller_columns(controller)
@@ -213,6 +217,38 @@ class DropTestPlan:
         #: when the plan saw the arm leave the hold (host ns); the release itself is dated after the run
         self.detected_ns: int | None = None
         self._end_ns: int | None = None
+
+    #: what the loop process sends back after the run (:meth:`facts`): what the plan saw
+    FACTS = ("start_ns", "detected_ns", "hold_angle", "held_elsewhere", "operator_seen", "phase")
+
+    def spec(self) -> dict[str, Any] | None:
+        """What a loop process builds this drop from (:func:`plan_drop`), or None when it cannot:
+        a controller other than the config's law (:data:`CONFIG_LAW`) stays in this process."""
+        if self.controller is not None and not self.from_config:
+            return None
+        return {
+            "kind": "drop-test",
+            "theta0_deg": math.degrees(self.s.theta0_rad),
+            "current_a": self.s.current_a,
+            "duration_s": self.s.duration_s,
+        }
+
+    def facts(self) -> dict[str, Any]:
+        """What the plan saw during the run, which the record is derived from (:func:`drop_record`),
+        with the settings the backend decided (it plays the operator; a pseudo-terminal's port)."""
+        return {
+            **{name: getattr(self, name) for name in self.FACTS},
+            "known_release_after_s": self.s.known_release_after_s,
+            "pseudo_terminal": self.s.pseudo_terminal,
+        }
+
+    def absorb(self, facts: dict[str, Any]) -> None:
+        """Take the :meth:`facts` of the same plan run in the loop process."""
+        for name in self.FACTS:
+            setattr(self, name, facts[name])
+        self.phase_code = self.PHASES.index(self.phase)
+        self.s.known_release_after_s = facts["known_release_after_s"]
+        self.s.pseudo_terminal = facts["pseudo_terminal"]
 
     def __getattr__(self, name: str) -> Any:  # the controller's per-cycle signals (signal_names)
         if name in self.__dict__.get("signal_names", ()) and self.__dict__.get("controller") is not None:
@@ -380,6 +416,49 @@ def default_clock(config: dict[str, Any]) -> Clock:
     return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
 
 
+#: ``run_drop_test(controller=CONFIG_LAW)``: the config's law takes over at the release, made where
+#: the loop runs (in the loop process too)
+CONFIG_LAW = "config"
+
+
+def config_controller(config: dict[str, Any]) -> Any:
+    """The config's controller, which takes over at the release, or None for a law that reads no
+    state (such as the passive law: the drop's constant current throughout)."""
+    from sashil.control.registry import law_reads_state, make_controller
+
+    return make_controller(None, config) if law_reads_state(config) else None
+
+
+def plan_drop(
+    config: dict[str, Any],
+    spec: dict[str, Any],
+    rig: RigInterface,
+    notify: Callable[[str], None] | None = None,
+    controller: Any = CONFIG_LAW,
+) -> DropTestPlan:
+    """The plan of one drop (``spec``: ``theta0_deg``, ``current_a``, ``duration_s``) on ``rig``:
+    a backend that plays the operator holds the arm now and lets go after the hold time (with the
+    coil already at the drop's current when it can). ``controller``: the stage that takes over at
+    the release (:data:`CONFIG_LAW`: the config's law, None: the constant current throughout)."""
+    settings = DropTestSettings.from_config(config, spec["theta0_deg"], spec["current_a"], spec["duration_s"])
+    release_after = max(settings.hold_time_s + 0.1, 0.3)
+    if rig.operator_hold(settings.theta0_rad, release_after):
+        settings.known_release_after_s = release_after
+        if capabilities_of(rig).initial_current:
+            rig.set_initial_current(settings.current_a)  # type: ignore[attr-defined]  # declared by the backend
+    else:
+        settings.pseudo_terminal = pseudo_terminal(rig)
+    from_config = isinstance(controller, str) and controller == CONFIG_LAW
+    plan = DropTestPlan(
+        settings,
+        config["rig"]["encoder_counts_per_rev"],
+        config_controller(config) if from_config else controller,
+        notify,
+    )
+    plan.from_config = from_config
+    return plan
+
+
 def run_drop_test(
     config: dict[str, Any],
     theta0_deg: float = -5.0,
@@ -390,48 +469,80 @@ def run_drop_test(
     controller: Any = None,
     notify: Callable[[str], None] | None = None,
     data_path: str | Path | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
+    trace: Any = None,
 ) -> DropRecord:
-    """One drop test at a constant current (or, after the release, under ``controller``).
+    """One drop test at a constant current (or, after the release, under ``controller``: a stage,
+    or :data:`CONFIG_LAW` for the config's law).
 
-    ``data_path``: where the runner streams every cycle of the loop as it runs (the hold included,
-    time from the loop's start); the record returned is the part from the release.
+    On the real clock with ``loop.process`` (the default) the drop runs in a loop process of its
+    own (:mod:`sashil.runtime.loop_process`), which opens the rig, plays or waits for the operator
+    and runs the plan; its prompts reach ``notify`` as they come. A controller other than the
+    config's law runs in this process (it cannot cross to another). ``rig``: the rig for a run in
+    this process (default: the config's). ``data_path``: where every cycle of the loop is streamed
+    as it runs (the hold included, time from the loop's start); the record returned is the part
+    from the release. ``live``: views of the stream (``start(stream, timing)``, ``close(trips,
+    notes)``); ``stop``: a :class:`~sashil.runtime.signals.StopFlag` another thread may set;
+    ``trace``: a :class:`~sashil.recording.can_trace.CanTrace` (not started) fed the run's CAN
+    frames, closed after the run (its statistics in ``record.extra["can_trace"]``).
 
     Returns the record from the release on. An error that ends the test early (a driver error, a
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
-    settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
-    rig = rig if rig is not None else open_rig(config)
+    spec = {"kind": "drop-test", "theta0_deg": theta0_deg, "current_a": current_a, "duration_s": duration_s}
     clock = clock if clock is not None else default_clock(config)
-    release_after = max(settings.hold_time_s + 0.1, 0.3)
-    if rig.operator_hold(settings.theta0_rad, release_after):
-        settings.known_release_after_s = release_after
-        if capabilities_of(rig).initial_current:
-            rig.set_initial_current(current_a)  # type: ignore[attr-defined]  # declared by the backend
-    else:
-        settings.pseudo_terminal = pseudo_terminal(rig)
-    plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
     log = logging.getLogger("sashil")
-    # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
-    outcome = run_plan(
-        config,
-        rig,
-        plan,
-        clock,
-        data_path=data_path,
-        rate_hz=settings.rate_hz,
-        say=log.warning,
-        note=log.debug,
-        read_stream=True,
-    )
+    by_config = isinstance(controller, str) and controller == CONFIG_LAW
+    if in_loop_process(config, clock) and (controller is None or by_config):
+        # the plan here is the loop process's twin: it takes the facts that one saw after the run
+        settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
+        plan = DropTestPlan(
+            settings, config["rig"]["encoder_counts_per_rev"], config_controller(config) if by_config else None, notify
+        )
+        plan.from_config = by_config
+        outcome = run_plan_process(
+            config, plan, None, data_path=data_path, say=log.warning, live=live, stop=stop, trace=trace
+        )
+    else:
+        rig = rig if rig is not None else open_rig(config)
+        plan = plan_drop(config, spec, rig, notify, controller)
+        if trace is not None:
+            trace.attach(rig)
+            trace.start()
+        try:
+            # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
+            outcome = run_plan(
+                config,
+                rig,
+                plan,
+                clock,
+                data_path=data_path,
+                say=log.warning,
+                note=log.debug,
+                read_stream=True,
+                live=live,
+                stop=stop,
+            )
+        finally:
+            trace_stats = trace.close() if trace is not None else None
+        outcome.can_trace = trace_stats
+    if live is not None:
+        live.close(outcome.result.trips, ())
     # whatever ended the test early, the rig is at 0 A, deactivated and closed
     error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
-    record = drop_record(outcome.stream, plan, outcome.loop.start_ns)
+    record = drop_record(outcome.stream, plan, outcome.start_ns)
     record.loop = outcome.result
     record.error = error
     columns = record.columns
+    if outcome.can_trace is not None:
+        record.extra["can_trace"] = outcome.can_trace
+    if outcome.loop_process is not None:
+        record.extra["loop_process"] = outcome.loop_process
     if outcome.link is not None:
         record.extra["link"] = outcome.link
     if outcome.realtime:

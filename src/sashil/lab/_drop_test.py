@@ -4,31 +4,26 @@ at each constant current (seed 001 section 8), one sub-run per current."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
 from sashil.control.law_registry import law_label
-from sashil.drivers import on_virtual_clock, open_rig
-from sashil.experiments.drop_test import DROP_COLUMNS, controller_columns, run_drop_test
+from sashil.drivers import on_virtual_clock
+from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, config_controller, controller_columns, run_drop_test
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_progress import SessionHooks
 from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
+from sashil.runtime.signals import StopFlag
 
 __all__ = ["drop_test", "result_line"]
-
-
-def _controller(config: Any) -> Any:
-    """The config's controller, which takes over at the release (None: a law that reads no state,
-    such as the passive law: the drop's constant current throughout)."""
-    from sashil.control.registry import law_reads_state, make_controller
-
-    return make_controller(None, config) if law_reads_state(config) else None
 
 
 def _label(current: float) -> str:
@@ -51,12 +46,23 @@ def result_warnings(metrics: DropMetrics) -> list[str]:
     return []
 
 
-def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
+def drop_test(
+    config: Any,
+    outputs: Outputs | None = None,
+    on_event: Listener = ignore,
+    *,
+    views: Sequence[Any] = (),
+    stop: StopFlag | None = None,
+) -> Run:
     """Run the drop tests of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
     ``drop-test``: ``drop_test.theta0_deg``, ``currents_a``, ``duration_s``) into a new run folder.
 
     Each current is a sub-run (``i0.000A/``, ...) when there are several. The law in
     ``controller.law`` takes over at the release (``passive``: the constant current throughout).
+    On the real clock each drop runs in a loop process of its own (``loop.process``). ``views``:
+    readers of each drop's stream, as :func:`sashil.lab.closed_loop` takes them (each gets
+    ``start(stream, timing)`` and ``close(trips, notes)`` once per drop, with that drop's stream).
+    ``stop``: a flag another thread may set to end the current drop at 0 A and the test.
     Returns the folder as a :class:`~sashil.api.Run`. Bad input raises ConfigError before any folder
     exists; a run that fails after it started raises the error that ended it, after the folder is
     complete (its data up to the failure, its plot and summary)."""
@@ -65,7 +71,7 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
     theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
     currents = [float(value) for value in section["currents_a"]]
     outputs.check(config["driver"]["name"])
-    checked = _controller(config)  # bad controller parameters fail here, before a folder exists
+    checked = config_controller(config)  # bad controller parameters fail here, before a folder exists
     closed = checked is not None
     folder = RunFolder.create(outputs.out, "drop-test")
     law, origin = law_label(config["controller"]["law"])
@@ -90,21 +96,18 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = runs.folder_for(_label(current))
-        rig = open_rig(config)
-        trace = outputs.start_can_trace(rig, target.path)
-        try:
-            record = run_drop_test(
-                config,
-                theta0_deg,
-                current,
-                duration,
-                rig=rig,
-                controller=_controller(config) if closed else None,
-                notify=prompt,
-                data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
-            )
-        finally:
-            trace_stats = trace.close() if trace is not None else None
+        record = run_drop_test(
+            config,
+            theta0_deg,
+            current,
+            duration,
+            controller=CONFIG_LAW if closed else None,
+            notify=prompt,
+            data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
+            live=SessionHooks(*views) if views else None,
+            stop=stop,
+            trace=outputs.can_trace(target.path, config["driver"]["port"]),
+        )
         if runs.several:  # the sub-folder's config reruns its one drop
             own = thaw(config)
             own["drop_test"]["currents_a"] = [current]
@@ -140,7 +143,8 @@ def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = 
                 "trips": record.loop.trips,
                 "link": record.extra.get("link"),
                 "realtime": record.extra.get("realtime"),
-                "can_trace": trace_stats,
+                "can_trace": record.extra.get("can_trace"),
+                "loop_process": record.extra.get("loop_process"),
             },
             record.error,
         )

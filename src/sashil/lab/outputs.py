@@ -83,13 +83,16 @@ class Outputs:
         extra = ("lateness_us",) + (("band_lo_nm", "band_hi_nm") if band is not None else ())
         return LiveTap(self.open_rerun(tuple(columns) + extra, name, folder), band=band)
 
-    def start_can_trace(self, rig: Any, folder: Path) -> Any:
-        """The running CAN frame trace the formats ask for, attached to ``rig``, or None."""
+    def can_trace(self, folder: Path, port: str | None) -> Any:
+        """The CAN frame trace the formats ask for, into ``folder``, not started, or None."""
         from sashil.recording.can_trace import CanTrace
         from sashil.recording.formats import can_formats
 
-        port = getattr(getattr(rig, "settings", None), "port", None)
-        trace = CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
+        return CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
+
+    def start_can_trace(self, rig: Any, folder: Path) -> Any:
+        """The running CAN frame trace the formats ask for, attached to ``rig``, or None."""
+        trace = self.can_trace(folder, getattr(getattr(rig, "settings", None), "port", None))
         if trace is None:
             return None
         trace.attach(rig)
@@ -98,10 +101,7 @@ class Outputs:
     def follow_can_trace(self, folder: Path, port: str | None, source: Callable[[], Iterable[Any]]) -> Any:
         """The running CAN frame trace the formats ask for, fed by ``source`` (the frames of a rig
         held by the loop process), or None."""
-        from sashil.recording.can_trace import CanTrace
-        from sashil.recording.formats import can_formats
-
-        trace = CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
+        trace = self.can_trace(folder, port)
         return None if trace is None else trace.follow(source).start()
 
     def write_formats(

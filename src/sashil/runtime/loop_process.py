@@ -35,6 +35,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +48,8 @@ from sashil.runtime.stream import MISSED_W, STOP_BY_CALLER, STOP_W, Stream, remo
 REPLY_WAIT_S = 30.0
 #: how often the session looks at its messages, the caller's stop flag and the loop's health [s]
 POLL_S = 0.02
+#: the loop process's messages the session passes on to the caller as they come
+SAID = ("progress", "warning", "prompt")
 #: current at or below which a reopened rig counts as safe [A]
 SAFE_CURRENT_A = 0.05
 #: how long a reopened rig's coil may take to reach it [s] (the watchdog's 50 ms and the coil's lag)
@@ -101,9 +104,14 @@ class LoopProcess:
         realtime: bool = True,
         tune: bool = True,
         can_trace: bool = False,
+        plan: Mapping[str, Any] | None = None,
     ):
-        """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`)."""
+        """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`).
+        ``plan``: the plan's spec (``plan.spec()``: its ``kind`` and arguments, which the loop
+        process builds the plan from: :data:`sashil.runtime.worker.PLANS`); None: ``sashil run``'s
+        stage, the config's law on its road."""
         self.job = {
+            "plan": dict(plan) if plan is not None else {"kind": "run"},
             "can_trace": can_trace,
             "config": thaw(config),
             "duration_s": duration_s,
@@ -193,16 +201,18 @@ class LoopProcess:
                 if kind == "error":
                     self.process.wait()
                     raise_error(message)
-                if kind in ("progress", "warning"):
+                if kind in SAID:
                     say(kind, message["text"])
             if self._messages < 0:
                 code = self.process.wait()
                 raise errors.SashilError(f"the loop process ended before it was ready (exit status {code})")
 
-    def go(self, folder: Path) -> None:
-        """Start the loop (the run folder is made and the recorder listening)."""
+    def go(self, data_path: Path, verb: str = "run") -> None:
+        """Start the loop (the run folder is made and the recorder writing ``data_path``, where the
+        loop appends the rest of the rows itself if the session dies, with the ``verb``'s summary)."""
         assert self.process is not None and self.process.stdin is not None
-        self.process.stdin.write((json.dumps({"folder": str(folder)}) + "\n").encode())
+        message = {"folder": str(data_path.parent), "data": data_path.name, "verb": verb}
+        self.process.stdin.write((json.dumps(message) + "\n").encode())
         self.process.stdin.flush()
 
     def abort(self) -> None:
@@ -223,7 +233,7 @@ class LoopProcess:
             for message in self._read(POLL_S):
                 if message["kind"] == "end":
                     end = message
-                elif message["kind"] in ("progress", "warning"):
+                elif message["kind"] in SAID:
                     say(message["kind"], message["text"])
             if stop is not None and stop.requested and not header[STOP_W]:
                 header[STOP_W] = _stop_code(stop)
@@ -438,3 +448,113 @@ def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> 
         line = f"the rig could not be reopened to confirm 0 A: {found.get('error')}"
     say("warning", line)
     return found
+
+
+@dataclass
+class LoopEnd:
+    """How a run in a loop process ended, as the session saw it (:func:`drive`)."""
+
+    #: the loop's ``end`` message (exit status, trips, timing counters, link statistics, the plan's
+    #: facts, ...); when the loop process died, what the session found instead (``loop_died``)
+    end: dict[str, Any]
+    error: BaseException | None
+    exit_status: str
+    #: the loop's timing, read from the stream's shared rings (valid until :meth:`LoopProcess.close`)
+    timing: Any
+    #: the recorder's rows written and dropped
+    recording: dict[str, Any]
+    stop: StopFlag
+
+
+def drive(
+    process: LoopProcess,
+    config: Mapping[str, Any],
+    data_path: Path,
+    duration_s: float | None,
+    *,
+    say: Callable[[str, str], None],
+    live: Any = None,
+    tune_folder: Path | None = None,
+    stop: StopFlag | None = None,
+    verb: str = "run",
+) -> LoopEnd:
+    """The session's part of a run in the ready loop ``process``: check the disk, record the stream
+    into ``data_path``, serve the views (``live``: ``start(stream, timing)``) and, with
+    ``tune_folder``, the tuning socket there; tell the loop to go, pass stop requests and signals
+    on, and pass its messages up (``say(kind, text)``: progress, warning, prompt) until it ends.
+    If it died, keep its rows and reopen the rig to confirm 0 A (:func:`confirm_safe`). A run that
+    lost more than the config allows ends ``lossy``. A failure before the go ends the loop process
+    with nothing energised and raises."""
+    from sashil.runtime.mailbox import CALLER_STOP
+    from sashil.runtime.runner import check_disk, losses
+    from sashil.runtime.stream_recorder import StreamRecorder
+    from sashil.runtime.tune_socket import TuneServer
+
+    stream = process.stream
+    assert stream is not None
+    rate = process.rate_hz
+    recorder: StreamRecorder | None = None
+    server = None
+    try:  # until the loop is told to go, a failure ends the loop process with nothing energised
+        check_disk(data_path.parent, len(stream.columns), rate, duration_s)
+        recorder = StreamRecorder(stream, data_path).start()
+        if tune_folder is not None and process.ready.get("tunable"):
+            try:
+                server = TuneServer(tune_folder, handler=process.request).start()
+                say("progress", f"live tuning: sashil tune {tune_folder} controller.<param>=VALUE")
+            except OSError as err:
+                say(
+                    "warning",
+                    f"live tuning: off ({tune_folder}: cannot listen on a Unix socket: {err.strerror or err})",
+                )
+        if live is not None:
+            live.start(stream, LiveTiming(stream, rate))
+    except BaseException:
+        if server is not None:
+            server.stop()
+        if recorder is not None:
+            recorder.close()
+        process.abort()
+        raise
+    flag = stop if stop is not None else StopFlag()
+    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
+    try:
+        with SessionSignals(flag, process):
+            process.go(data_path, verb)
+            end = process.wait_end(flag, say)
+    finally:
+        flag.on_request = None
+        if server is not None:
+            server.stop()
+    error: BaseException | None = None
+    try:
+        recorder.close()
+    except OSError as err:
+        error = err
+    timing = stream.timing(rate)
+    if end is not None:
+        timing.restore(end["timing"])
+        if end.get("clip_warning"):
+            say("warning", end["clip_warning"])
+        if end.get("error") is not None:
+            error = error_of(end["error"])
+        status = end["exit_status"]
+        if end.get("stop_reason") == CALLER_STOP and flag.signal_name:
+            end["stop_reason"] = flag.signal_name
+    else:  # the loop process died: its rows are kept, the rig is reopened and checked
+        timing.cycles = stream.rows_committed
+        code = process.process.returncode if process.process is not None else None
+        end = {"exit_status": "error", "stop_reason": None, "trips": [], "shutdown_errors": []}
+        found = confirm_safe(config, say)
+        error = errors.SashilError(
+            f"the loop process died (exit status {code}); the data up to its last committed row are kept"
+        )
+        end.update(loop_died={"exit_status": code, "rig": found})
+        status = "error"
+    if error is not None and status == "ok":
+        status = "error"
+    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None  # type: ignore[arg-type]
+    if lost is not None:
+        error, status = lost, "lossy"
+        say("warning", str(lost))
+    return LoopEnd(end, error, status, timing, recorder.summary(), flag)

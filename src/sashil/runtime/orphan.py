@@ -21,11 +21,18 @@ from sashil.runtime.stream_recorder import append, format_block
 
 
 def finish_alone(
-    stream: Stream, writer: Any, folder: Path, config: dict[str, Any], end: dict[str, Any], timing: Any
+    stream: Stream,
+    writer: Any,
+    data: Path,
+    config: dict[str, Any],
+    end: dict[str, Any],
+    timing: Any,
+    verb: str = "run",
 ) -> None:
-    """Append the unrecorded rows to ``folder/data.csv`` and write the run's documents (module doc)."""
+    """Append the unrecorded rows to ``data`` (the run's data.csv, or a drop's cycles file) and
+    write the documents of its folder for ``verb`` (module doc)."""
     start, stop = int(stream.header[RECORDED_W]), writer.rows_committed
-    data = folder / "data.csv"
+    folder = data.parent
     fd = os.open(data, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
     try:
         if os.fstat(fd).st_size == 0:
@@ -36,12 +43,12 @@ def finish_alone(
         os.close(fd)
     stream.header[RECORDED_W] = stop
     stream.set_state("died")
-    run = RunFolder(folder, "run")
+    run = RunFolder(folder, verb)
     run.write_timing(timing)
     error = SashilError(f"{end['stop_reason']}: the loop stopped at 0 A and wrote the rest of the data itself")
     run.write_summary(
         {
-            "verb": "run",
+            "verb": verb,
             **loop_summary(
                 exit_status="error",
                 timing=timing.summary(),

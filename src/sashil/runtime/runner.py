@@ -141,22 +141,27 @@ def loop_summary(
 
 @dataclass
 class RunOutcome:
-    """What :func:`run_plan` leaves: the loop's result, the error that ended the run (None: it ended
-    normally or by a signal), and the pieces of the summary the runner owns."""
+    """What :func:`run_plan` leaves, whether the loop ran in this process or in its own: the loop's
+    result, the error that ended the run (None: it ended normally or by a signal), its timing and
+    start, and the keys of summary.json every loop run has (:func:`loop_summary`)."""
 
-    loop: ControlLoop
+    result: LoopResult
     error: BaseException | None
     stop: StopFlag
+    timing: Any
+    #: the loop's start on CLOCK_MONOTONIC [ns] (the stream's ``time_s`` counts from it)
+    start_ns: int
+    common: dict[str, Any]
     realtime: dict[str, Any] = field(default_factory=dict)
     recording: dict[str, Any] | None = None
     link: dict[str, Any] | None = None
     #: the stream's columns (``run_plan(read_stream=True)``): time from the loop's start, one row per
     #: cycle and the shutdown's safe-state row; empty when the run recorded nothing
     stream: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def result(self) -> LoopResult:
-        return self.loop.result
+    #: the CAN trace's statistics when the run was traced
+    can_trace: dict[str, Any] | None = None
+    #: the loop process that ran the loop (pid, threads, start-up; ``died`` when it did), None: this one
+    loop_process: dict[str, Any] | None = None
 
     @property
     def exit_code(self) -> int:
@@ -164,22 +169,7 @@ class RunOutcome:
 
     def summary(self) -> dict[str, Any]:
         """The common keys of summary.json (the verb adds its own): :func:`loop_summary`."""
-        result = self.result
-        stage = self.loop.stage
-        return loop_summary(
-            exit_status=result.exit_status,
-            timing=self.loop.timing.summary(),
-            trips=result.trips,
-            error=self.error,
-            stop_reason=result.stop_reason,
-            controller_stats=stage.stats() if hasattr(stage, "stats") else None,
-            safety=self.loop.safety.summary() if self.loop.safety is not None else None,
-            realtime=self.realtime,
-            recording=self.recording,
-            link=self.link,
-            shutdown_errors=result.shutdown_errors,
-            error_text=result.error,
-        )
+        return dict(self.common)
 
     def stop_error(self) -> Stopped | None:
         """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""
@@ -313,12 +303,31 @@ def run_plan(
         loop.result.exit_status = "lossy"
         loop.result.error = str(lost)
         say(str(lost))
+    result = loop.result
+    realtime_report = rt.report() if rt is not None else {}
+    recording = recorder.summary() if recorder is not None and data_path is not None else None
     return RunOutcome(
-        loop,
+        result,
         error,
         flag,
-        realtime=rt.report() if rt is not None else {},
-        recording=recorder.summary() if recorder is not None and data_path is not None else None,
+        loop.timing,
+        loop.start_ns,
+        loop_summary(
+            exit_status=result.exit_status,
+            timing=loop.timing.summary(),
+            trips=result.trips,
+            error=error,
+            stop_reason=result.stop_reason,
+            controller_stats=plan.stats() if hasattr(plan, "stats") else None,
+            safety=loop.safety.summary() if loop.safety is not None else None,
+            realtime=realtime_report,
+            recording=recording,
+            link=link,
+            shutdown_errors=result.shutdown_errors,
+            error_text=result.error,
+        ),
+        realtime=realtime_report,
+        recording=recording,
         link=link,
         stream=stream,
     )

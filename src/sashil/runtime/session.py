@@ -19,7 +19,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from sashil import errors
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
@@ -115,7 +114,7 @@ def run_session(
     live_stats = live.close(result.trips, notes) if live is not None else None
     if tuning is not None and tuning.events:
         folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, tuning.rows())
-    folder.write_timing(outcome.loop.timing)
+    folder.write_timing(outcome.timing)
     summary: dict[str, Any] = {
         "verb": verb,
         **outcome.summary(),
@@ -150,77 +149,26 @@ def run_loop_process(
     ``config.yaml``, checks the disk, records the stream into ``data.csv``, serves the views and the
     tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
     whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
-    from sashil.runtime.loop_process import LiveTiming, SessionSignals, confirm_safe, error_of
-    from sashil.runtime.mailbox import CALLER_STOP
-    from sashil.runtime.runner import check_disk, loop_summary, losses
-    from sashil.runtime.stream_recorder import StreamRecorder
+    from sashil.runtime.loop_process import drive
+    from sashil.runtime.runner import loop_summary
 
-    stream = process.stream
-    assert stream is not None
-    rate = process.rate_hz
-    recorder: StreamRecorder | None = None
-    server = None
-    try:  # until the loop is told to go, a failure ends the loop process with nothing energised
+    try:
         folder.write_config(config)
-        check_disk(folder.path, len(stream.columns), rate, duration_s)
-        recorder = StreamRecorder(stream, folder.file("data.csv")).start()
-        if tune and process.ready.get("tunable"):
-            try:
-                server = TuneServer(folder.path, handler=process.request).start()
-                say(f"live tuning: sashil tune {folder.path} controller.<param>=VALUE")
-            except OSError as err:
-                say(f"live tuning: off ({folder.path}: cannot listen on a Unix socket: {err.strerror or err})")
-        if live is not None:
-            live.start(stream, LiveTiming(stream, rate))
     except BaseException:
-        if server is not None:
-            server.stop()
-        if recorder is not None:
-            recorder.close()
         process.abort()
         raise
-    flag = stop if stop is not None else StopFlag()
-
-    def forward(kind: str, text: str) -> None:
-        say(text)
-
-    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
-    try:
-        with SessionSignals(flag, process):
-            process.go(folder.path)
-            end = process.wait_end(flag, forward)
-    finally:
-        flag.on_request = None
-        if server is not None:
-            server.stop()
-    error: BaseException | None = None
-    try:
-        recorder.close()
-    except OSError as err:
-        error = err
-    timing = stream.timing(rate)
-    if end is not None:
-        timing.restore(end["timing"])
-        if end.get("clip_warning"):
-            say(end["clip_warning"])
-        if end.get("error") is not None:
-            error = error_of(end["error"])
-        status = end["exit_status"]
-    else:  # the loop process died: its rows are kept, the rig is reopened and checked
-        timing.cycles = stream.rows_committed
-        code = process.process.returncode if process.process is not None else None
-        end = {"exit_status": "error", "stop_reason": None, "trips": [], "shutdown_errors": []}
-        found = confirm_safe(config, lambda kind, text: say(text))
-        died = f"the loop process died (exit status {code}); the data up to its last committed row are kept"
-        error = errors.SashilError(died)
-        end.update(loop_died={"exit_status": code, "rig": found})
-        status = "error"
-    if error is not None and status == "ok":
-        status = "error"
-    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
-    if lost is not None:
-        error, status = lost, "lossy"
-        say(str(lost))
+    ended = drive(
+        process,
+        config,
+        folder.file("data.csv"),
+        duration_s,
+        say=lambda kind, text: say(text),
+        live=live,
+        tune_folder=folder.path if tune else None,
+        stop=stop,
+        verb=verb,
+    )
+    end, timing, error, status = ended.end, ended.timing, ended.error, ended.exit_status
     notes = end.get("tuning_notes") or []
     live_stats = live.close(end.get("trips", []), [tuple(note) for note in notes]) if live is not None else None
     events = (end.get("tuning") or {}).get("events") or []
@@ -235,13 +183,11 @@ def run_loop_process(
             timing=timing.summary(),
             trips=end.get("trips", []),
             error=error,
-            stop_reason=flag.signal_name
-            if end.get("stop_reason") == CALLER_STOP and flag.signal_name
-            else end.get("stop_reason"),
+            stop_reason=end.get("stop_reason"),
             controller_stats=end.get("controller_stats"),
             safety=end.get("safety"),
             realtime={**end.get("realtime", {}), **session_affinity},
-            recording=recorder.summary(),
+            recording=ended.recording,
             link=end.get("link"),
             shutdown_errors=end.get("shutdown_errors", []),
         ),

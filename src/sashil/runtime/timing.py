@@ -159,6 +159,16 @@ class TimingStats:
         self.skipped_kept = int(skipped.size)
         return self
 
+    def copy(self) -> TimingStats:
+        """The same statistics in private memory (a reader of a stream's shared rings keeps them
+        after the stream is closed)."""
+        other = TimingStats(self.rate_hz, self.window)
+        for name in COLUMNS:
+            np.frombuffer(getattr(other, name), dtype=np.int64)[:] = np.frombuffer(getattr(self, name), dtype=np.int64)
+        for name, values in self.histograms.items():
+            other.histograms[name][:] = values
+        return other.restore(self.counters())
+
     # the loop's side -------------------------------------------------------------------------
     def fold(self) -> None:
         """Add the cycles recorded since the last fold to the histograms (the loop calls this every

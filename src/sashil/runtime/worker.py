@@ -77,20 +77,47 @@ def error_fields(err: BaseException) -> dict[str, Any]:
     return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
 
 
-def build(config: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
-    """The rig (built, configured: its port open and the board greeted) and the warmed stage, its
-    label and the road's text."""
+def run_stage(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+    """``sashil run``'s stage: the config's law on its road (the rig's road motor gets the profile's
+    speed); its label and the road's text."""
     from sashil.control.registry import make_stage
-    from sashil.drivers import open_rig
     from sashil.experiments.road_option import RoadStage, parse_road
+
+    label, stage = make_stage(config)
+    road, road_text = parse_road(config["run"]["road"], config)
+    if road is not None:
+        stage = RoadStage(stage, road)
+    return stage, label, road_text
+
+
+def drop_test_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+    """One drop of a drop test (:func:`sashil.experiments.drop_test.plan_drop`), its operator
+    prompts sent to the session as they come."""
+    from sashil.experiments.drop_test import plan_drop
+
+    plan = plan_drop(config, spec, rig, lambda line: messages.send("prompt", text=line))
+    return plan, str(config["controller"]["law"]), "none"
+
+
+#: what a loop process can run: a plan's ``kind`` (its ``spec()``) and the function that builds it
+#: in the loop process from the config, the spec, the rig and the message channel
+PLANS = {"run": run_stage, "drop-test": drop_test_plan}
+
+
+def build(config: dict[str, Any], spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
+    """The rig (built, configured: its port open and the board greeted) and the warmed plan of
+    ``spec`` (:data:`PLANS`), its label and the road's text."""
+    from sashil.drivers import open_rig
     from sashil.runtime.warmup import warm_up
 
+    make = PLANS.get(str(spec.get("kind")))
+    if make is None:
+        raise ConfigError(
+            f"the loop process cannot run a plan of kind {spec.get('kind')!r} (it runs {', '.join(PLANS)})"
+        )
     rig = open_rig(config)
     try:
-        label, stage = make_stage(config)
-        road, road_text = parse_road(config["run"]["road"], config)
-        if road is not None:
-            stage = RoadStage(stage, road)
+        stage, label, road_text = make(config, spec, rig, messages)
         warm_up(stage, lambda line: messages.send("progress", text=line))
         rig.configure()
     except BaseException:
@@ -155,7 +182,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     config = job["config"]
     loop_cfg = config["loop"]
     rate = float(loop_cfg["rate_hz"])
-    rig, stage, label, road_text = build(config, messages)
+    rig, stage, label, road_text = build(config, job.get("plan") or {"kind": "run"}, messages)
     if flag.requested:  # a signal during the warm-up: nothing energised
         rig.close()
         messages.send(
@@ -185,7 +212,8 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         rig.close()
         stream.close(unlink=True)
         return 1
-    folder = Path(json.loads(go)["folder"])
+    started = json.loads(go)
+    folder = Path(started["folder"])
     session_pid = int(job["session_pid"])
     stop = LoopStop(flag, stream, session_pid)
     tuning = None
@@ -235,12 +263,22 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         "tuning": tuning.summary() if tuning is not None else None,
         "tuning_notes": tuning.notes() if tuning is not None else [],
         "threads": int(stream.header[THREADS_W]),
+        "start_ns": loop.start_ns,
+        "plan": stage.facts() if hasattr(stage, "facts") else None,
     }
     stream.set_state("ended")
     if stop.orphaned:
         from sashil.runtime.orphan import finish_alone
 
-        finish_alone(stream, writer, folder, config, end, loop.timing)
+        finish_alone(
+            stream,
+            writer,
+            folder / started.get("data", "data.csv"),
+            config,
+            end,
+            loop.timing,
+            started.get("verb", "run"),
+        )
     else:
         messages.send("end", **end)
     writer.release()

@@ -1,0 +1,146 @@
+"""A verb's plan run in a loop process of its own: the same :class:`~sashil.runtime.runner.RunOutcome`
+as :func:`~sashil.runtime.runner.run_plan` gives in this process.
+
+On the real clock, with ``loop.process`` (the default), a plan that says how to build it
+(``plan.spec()``: its ``kind`` and arguments, :data:`sashil.runtime.worker.PLANS`) runs in a loop
+process (:mod:`sashil.runtime.loop_process`): the rig, the safety supervisor and the plan live
+there, and nothing else. This process keeps the plan's twin, which takes what the loop process's
+plan saw (``plan.absorb(facts)``) after the run, records the stream into the data file, feeds the
+views and the CAN trace, passes stop requests on, and reads the stream back for the verb's record.
+A simulated run on the virtual clock stays in this process (:func:`in_loop_process`).
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sashil.errors import DataFileError
+from sashil.recording.data_file import read_data_csv
+from sashil.runtime.loop import LoopResult
+from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
+from sashil.runtime.signals import StopFlag
+
+log = logging.getLogger("sashil")
+
+
+def in_loop_process(config: Mapping[str, Any], clock: Any) -> bool:
+    """Whether a run of ``config`` on ``clock`` runs its loop in a process of its own: on the real
+    clock with ``loop.process`` true."""
+    return not getattr(clock, "virtual", False) and bool(config["loop"].get("process", False))
+
+
+def run_plan_process(
+    config: Mapping[str, Any],
+    plan: Any,
+    duration_s: float | None,
+    *,
+    data_path: str | Path | None = None,
+    say: Callable[[str], None] = log.warning,
+    live: Any = None,
+    stop: StopFlag | None = None,
+    trace: Any = None,
+) -> RunOutcome:
+    """Run ``plan`` (its :meth:`spec` built again in the loop process) for ``duration_s`` (None:
+    until the plan ends) and return what :func:`~sashil.runtime.runner.run_plan` would, with the
+    stream read back from ``data_path`` (a temporary file when None). The plan's prompts to the
+    operator reach its ``notify`` as they come; warnings reach ``say``. ``live``: views of the
+    stream; ``stop``: a flag another thread may set; ``trace``: a
+    :class:`~sashil.recording.can_trace.CanTrace`, not started, fed the loop's CAN frames. Bad
+    input found in the loop process before the run (a port that cannot be opened) raises, with
+    nothing energised; what ends the run does not raise."""
+    from sashil.runtime.loop_process import LoopProcess, drive
+
+    spec = plan.spec()
+    if spec is None:
+        raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")
+    notify = getattr(plan, "notify", None)
+
+    def forward(kind: str, text: str) -> None:
+        if kind == "prompt" and notify is not None:
+            notify(text)
+        elif kind == "progress" and text.startswith("realtime:"):
+            log.debug("%s", text)
+        else:
+            say(text)
+
+    process = LoopProcess(config, duration_s, tune=False, can_trace=trace is not None, plan=spec).start()
+    try:
+        process.wait_ready(forward)
+    except BaseException:
+        process.close()
+        raise
+    scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-") if data_path is None else None
+    path = Path(scratch.name) / CYCLES_FILE if scratch is not None else Path(data_path)  # type: ignore[arg-type]
+    trace_stats = None
+    try:
+        if trace is not None:
+            trace.follow(process.can_frames).start()
+        try:
+            ended = drive(process, config, path, duration_s, say=forward, live=live, stop=stop, verb=str(spec["kind"]))
+        finally:
+            if trace is not None:
+                trace_stats = trace.close()
+                trace_stats["frames_dropped"] += process.frames_dropped()
+        timing = ended.timing.copy()  # the stream's shared rings end with the process
+    finally:
+        pid = process.process.pid if process.process is not None else None
+        startup_s = process.startup_s
+        process.close()
+    end = ended.end
+    if end.get("plan") is not None and hasattr(plan, "absorb"):
+        plan.absorb(end["plan"])
+    try:
+        stream = read_data_csv(path, required=(), min_rows=0)
+    except DataFileError:  # a stream the disk lost: what ended the run says why
+        stream = {}
+    if scratch is not None:
+        scratch.cleanup()
+    error = ended.error
+    result = LoopResult(
+        cycles=timing.cycles,
+        missed_deadlines=timing.missed_deadlines,
+        exit_status=ended.exit_status,
+        error=str(error) if error is not None else None,
+        trips=list(end.get("trips", [])),
+        timing=timing,
+        stop_reason=end.get("stop_reason"),
+        shutdown_errors=list(end.get("shutdown_errors", [])),
+    )
+    common = loop_summary(
+        exit_status=ended.exit_status,
+        timing=timing.summary(),
+        trips=result.trips,
+        error=error,
+        stop_reason=result.stop_reason,
+        controller_stats=end.get("controller_stats"),
+        safety=end.get("safety"),
+        realtime=end.get("realtime", {}),
+        recording=ended.recording if data_path is not None else None,
+        link=end.get("link"),
+        shutdown_errors=result.shutdown_errors,
+    )
+    loop_process: dict[str, Any] = {
+        "pid": pid,
+        "threads": end.get("threads"),
+        "startup_s": None if startup_s is None else round(startup_s, 3),
+    }
+    if "loop_died" in end:
+        loop_process["died"] = end["loop_died"]
+    return RunOutcome(
+        result,
+        error,
+        ended.stop,
+        timing,
+        int(end.get("start_ns") or 0),
+        common,
+        realtime=end.get("realtime", {}),
+        recording=ended.recording if data_path is not None else None,
+        link=end.get("link"),
+        stream=stream,
+        can_trace=trace_stats,
+        loop_process=loop_process,
+    )
