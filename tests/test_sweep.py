@@ -282,6 +282,47 @@ def test_the_sweep_function_runs_a_stepped_sine_a_sub_run_per_frequency(tmp_path
     assert len([e for e in events if e.kind == "output"]) == 1 + 2 + 1 + 1  # header, rows, integrated, folder
 
 
+def test_a_stepped_sines_views_see_each_frequency_and_a_stop_ends_the_sweep_at_0_a(tmp_path):
+    from sashil.config.resolve import Option
+    from sashil.errors import Stopped
+    from sashil.lab._sweep import sweep
+    from sashil.lab.outputs import Outputs
+    from sashil.runtime.signals import StopFlag
+
+    config = _resolved(
+        Option("--stepped", "sweep.stepped", True),
+        Option("--steps", "sweep.steps", 3),
+        Option("--f-start", "sweep.f_start_hz", 1.0),
+        Option("--f-stop", "sweep.f_stop_hz", 3.0),
+        sets=("sweep.settle_s=1", "sweep.measure_s=1", "sweep.ramp_s=0.5", "controller.current_a=0.3"),
+    )
+    flag = StopFlag()
+    seen: list[tuple[str, int]] = []
+
+    class StopOnTheSecond:
+        """A page's view: it watches each frequency's stream and presses STOP as the second starts."""
+
+        def start(self, stream, timing):
+            self.stream = stream
+            seen.append(("start", stream.rows_committed))
+            if len(seen) == 3:
+                flag.request("STOP (test)")
+
+        def close(self, trips, notes):
+            seen.append(("close", self.stream.rows_committed))
+
+    with pytest.raises(Stopped):
+        sweep(config, Outputs(out=tmp_path / "stepped"), views=[StopOnTheSecond()], stop=flag)
+    assert [kind for kind, _ in seen] == ["start", "close", "start", "close"]
+    assert (
+        seen[1][1] == 3000 + 1
+    )  # the first frequency whole (ramp 0.5, settle 1, measure 1, ramp down 0.5 s), the 0 A row
+    summary = json.loads((tmp_path / "stepped" / "summary.json").read_text())
+    assert summary["exit_status"] == "stopped" and [r["exit_status"] for r in summary["runs"]] == ["ok", "stopped"]
+    stopped = (tmp_path / "stepped" / "f1.732Hz" / "cycles.csv").read_text().splitlines()  # log spacing
+    assert len(stopped) - 1 == seen[3][1] == 0  # stopped before its first cycle: nothing energised
+
+
 @pytest.mark.parametrize(
     "options, sets, message",
     [

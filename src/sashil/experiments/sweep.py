@@ -172,6 +172,9 @@ def run_profile(
     clock: Clock | None = None,
     keep: Callable[[dict[str, np.ndarray]], object] | None = None,
     data_path: str | Path | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
 ) -> dict[str, np.ndarray]:
     """One run of ``controller`` under the road profile through the one runner
     (:func:`~sashil.runtime.runner.run_plan`: safety, signals, real-time set-up on the real clock,
@@ -180,7 +183,9 @@ def run_profile(
     Clock: ``clock``, else the config's (:func:`~sashil.experiments.drop_test.default_clock`: the
     virtual one for the simulated rig, the real one for a link). ``keep`` gets the columns recorded
     so far however the run ends (a link fault, a safety trip, a stop), before the error
-    propagates. ``data_path``: the runner streams every cycle there as it runs. A signal ends the
+    propagates. ``data_path``: the runner streams every cycle there as it runs. ``live``: views of
+    the stream (``start(stream, timing)``, ``close(trips, notes)``); ``stop``: a
+    :class:`~sashil.runtime.signals.StopFlag` another thread may set. A signal or a stop ends the
     run cleanly and raises :class:`~sashil.errors.Stopped` (exit 130) after ``keep``.
     """
     from sashil.experiments.drop_test import default_clock
@@ -199,7 +204,11 @@ def run_profile(
         say=log.warning,
         note=log.debug,
         read_stream=True,
+        live=live,
+        stop=stop,
     )
+    if live is not None:
+        live.close(outcome.result.trips, ())
     columns = sweep_columns(outcome.stream)
     if keep is not None:
         keep(columns)
@@ -231,10 +240,14 @@ def stepped_sine(
     rig_factory: RigFactory | None = None,
     keep: Callable[[float, dict[str, np.ndarray]], None] | None = None,
     stream_to: Callable[[float], Path] | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
 ) -> list[SteppedPoint]:
     """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section).
     ``keep(frequency_hz, columns)`` gets each frequency's time series once it has run;
-    ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to."""
+    ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to; ``live``
+    and ``stop``: each frequency's run's views and stop flag (:func:`run_profile`)."""
     sweep = config["sweep"]
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
@@ -244,18 +257,20 @@ def stepped_sine(
         controller = make_controller()
         # the road ramps down after the measurement: a rig that stays up between frequencies (a link)
         # starts the next one at rest instead of with a step of the road speed
-        stop = start + measure
+        stop_s = start + measure
         cols = run_profile(
             config,
             controller,
-            sine_profile(amplitude, f, sweep["ramp_s"], stop),
-            stop + sweep["ramp_s"],
+            sine_profile(amplitude, f, sweep["ramp_s"], stop_s),
+            stop_s + sweep["ramp_s"],
             rig_factory,
             data_path=stream_to(f) if stream_to is not None else None,
+            live=live,
+            stop=stop,
         )
         if keep is not None:
             keep(f, cols)
-        window = (cols["time_s"] >= start - 1e-9) & (cols["time_s"] < stop - 1e-9)
+        window = (cols["time_s"] >= start - 1e-9) & (cols["time_s"] < stop_s - 1e-9)
         body = cols["theta_rad"][window] + cols["theta_road_rad"][window]
         road = cols["theta_road_rad"][window]
         body_rms, road_rms = ac_rms(body), ac_rms(road)

@@ -10,7 +10,7 @@ through events.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +18,7 @@ from sashil.api import Run, load_run
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.runtime.signals import StopFlag
 
 __all__ = ["TRANSMISSIBILITY_COLUMNS", "check_sweep", "sweep"]
 
@@ -66,7 +67,15 @@ def _freq_label(f_hz: float) -> str:
     return f"f{f_hz:.3f}Hz"
 
 
-def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore, *, progress: bool = False) -> Run:
+def sweep(
+    config: Any,
+    outputs: Outputs | None = None,
+    on_event: Listener = ignore,
+    *,
+    progress: bool = False,
+    views: Sequence[Any] = (),
+    stop: StopFlag | None = None,
+) -> Run:
     """Run the sweep of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
     ``sweep``: the ``sweep`` section; the law ``controller.law``, ``passive`` for a constant
     ``controller.current_a``) into a new run folder, and return it as a :class:`~sashil.api.Run`.
@@ -76,7 +85,10 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     each of ``sweep.steps`` frequencies in a sub-folder of its own and writes the transmissibility
     table (``transmissibility.csv``, ``.png``; the points in ``summary.json``). The tables and the
     folder line are ``output`` events. ``progress``: a bar on stderr over the stepped sine's
-    frequencies, instead of a ``progress`` event per frequency.
+    frequencies, instead of a ``progress`` event per frequency. ``views``: readers of each run's
+    stream, as :func:`sashil.lab.closed_loop` takes them (a stepped sine's view gets
+    ``start(stream, timing)`` and ``close(trips, notes)`` once per frequency); ``stop``: a flag
+    another thread may set to end the running frequency at 0 A and the sweep (exit 130).
 
     Bad input (exit code 2: ConfigError; DriverError for a port that cannot be opened) is raised with
     no folder left; a run that fails after it started raises the error that ended it, after the
@@ -84,12 +96,14 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     from sashil.control.registry import make_controller
     from sashil.experiments.sweep import SWEEP_COLUMNS
     from sashil.recording.run_folder import RunFolder
+    from sashil.recording.run_progress import SessionHooks
     from sashil.recording.run_set import RunSet
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])
     make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
     stepped = bool(config["sweep"]["stepped"])
+    watch = {"live": SessionHooks(*views) if views else None, "stop": stop}
     folder = RunFolder.create(outputs.out, "sweep")
     live = (
         None
@@ -122,9 +136,9 @@ def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = igno
     failure: SashilError | None = None
     try:
         if stepped:
-            _stepped(config, label, folder, rig_factory, runs, extra, outputs, on_event, progress)
+            _stepped(config, label, folder, rig_factory, runs, extra, outputs, on_event, progress, watch)
         else:
-            _chirp(config, label, folder, live, rig_factory, runs, extra, outputs, on_event)
+            _chirp(config, label, folder, live, rig_factory, runs, extra, outputs, on_event, watch)
     except SashilError as err:
         failure = err
     finally:
@@ -155,6 +169,7 @@ def _stepped(
     outputs: Outputs,
     on_event: Listener,
     progress: bool,
+    watch: dict[str, Any],
 ) -> None:
     """The stepped sine: each frequency's run into ``runs`` and its sub-folder, the table and plot
     into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
@@ -188,7 +203,7 @@ def _stepped(
                 on_event(Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f}))
             try:
                 point = stepped_sine(
-                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
+                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to, **watch
                 )[0]
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
@@ -247,6 +262,7 @@ def _chirp(
     extra: dict[str, Any],
     outputs: Outputs,
     on_event: Listener,
+    watch: dict[str, Any],
 ) -> None:
     """The chirp: one run into ``folder`` (data.csv however it ends, chirp.png, the live view), the
     body's RMS and peak into ``extra``."""
@@ -276,6 +292,7 @@ def _chirp(
             rig_factory,
             keep=folder.write_data,
             data_path=folder.file(CYCLES_FILE),  # every cycle streamed as it runs
+            **watch,
         )
     except SashilError as err:
         if err.exit_code != ConfigError.exit_code:
