@@ -903,3 +903,39 @@ def test_stop_shows_the_decay_and_the_boards_confirmation(panel):
     assert len(decay) >= 2  # the page drew the decay, to within one decimation step of its end
     rate = float(state.bench._config["loop"]["rate_hz"])
     assert data["time_s"][-1] - decay[-1] < decimation_step(rate) / rate + 1e-9
+
+
+@pytest.mark.e2e
+def test_stop_during_a_drop_test_ends_its_current_drop_and_the_test(tmp_path):
+    """Over the emulated serial link (its operator holds the arm at -5 deg and lets go after 1 s):
+    STOP during the first of two drops ends that drop at 0 A, and the second never starts."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python", "--hold-deg", "-5", "--release-after", "1")
+    try:
+        bench = Bench(relaxed_config(tmp_path), runs_dir=tmp_path / "runs")
+        panel = Panel(bench, TOKEN, PORT)
+        with (
+            TestClient(make_app(panel), base_url=BASE) as client,
+            client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+        ):
+            headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+            choice = {"experiment": "drop-test", "law": "passive", "currents_a": [0.5, 1.0], "duration_s": 20}
+            choice |= {"driver": "serial", "port": emu.link}
+            started = client.post("/api/start", json=choice, headers=headers)
+            assert started.status_code == 200, started.text
+            until(ws, "status", lambda s: s["prompt"].startswith("release detected: "))  # the arm swings
+            ws.send_text(json.dumps({"stop": True}))
+            end, _, _ = by_sub_run(ws)
+            prompts = [e["text"] for e in bench.events_since(0) if e["kind"] == "prompt"]
+    finally:
+        emu.stop()
+    assert end["exit_status"] == "stopped" and end["stop_reason"] == "STOP (panel)", end
+    assert end["sub_run"] == {"index": 1, "of": 2, "label": "0.5 A"} and end["prompt"] == ""
+    assert [text.split(" ")[:2] for text in prompts] == [["hold", "detected"], ["release", "detected:"]]
+    folder = Path(end["folder"])
+    summary = json.loads((folder / "summary.json").read_text())
+    assert [run["current_a"] for run in summary["runs"]] == [0.5]
+    assert not (folder / "i1.000A").exists()
+    cycles = read_csv(folder / "i0.500A" / "cycles.csv")
+    assert cycles["current_cmd_a"][-1] == 0.0 and cycles["time_s"][-1] < 15.0  # ended early, at 0 A
