@@ -431,8 +431,8 @@ class Bench:
                 self.run.state = "running"
             elif event.kind == "prompt":
                 self.run.prompt = event.text  # shown until the next one, the next sub-run or the end
-            elif event.kind in ("result", "output") and event.text.strip():
-                self.run.results.append(event.text)
+            elif event.kind in ("result", "output") and event.text.strip() and "folder" not in event.data:
+                self.run.results.append(event.text)  # the folder line is an event, not a result
         self._add_event(event.kind, event.text)
 
     def _add_event(self, kind: str, text: str) -> None:
