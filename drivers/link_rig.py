@@ -35,6 +35,7 @@ from typing import Any
 
 from sashil.drivers.interface import (
     FLAG_HELD,
+    FLAG_WATCHDOG,
     NO_EDGE,
     RigCapabilities,
     RigCommand,
@@ -124,6 +125,7 @@ class LinkRig(RigInterface):
             "gap_max_ms": 0.0,
             "zero_current_after_ms": 0.0,
             "clock_fallback": 0,  # 1: the board said its crystal failed (it runs on its internal oscillator)
+            "watchdog_samples": 0,  # samples the board flagged: its watchdog had cut the coil
         }
         #: the last deactivate after an active session: did a sample show the coil at rest, how soon
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
@@ -367,6 +369,8 @@ class LinkRig(RigInterface):
             if newest is None:
                 newest = self._ride_through_gap(start)
         seq, sample = newest
+        if sample.flags & FLAG_WATCHDOG:
+            self.stats["watchdog_samples"] += 1
         if sample.flags & FLAG_HELD and not self._held_noted:
             self._note_held()
         device_time_us = self._unwrap_device_time(sample.device_time_us)

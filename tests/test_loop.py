@@ -330,8 +330,12 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     folder.path.mkdir()
     outcome = run_session(config, rig, StopAt(), folder, clock, None, say=lambda line: None, realtime=False)
     assert outcome.exit_code == 130 and outcome.result.stop_reason == "SIGTERM"
-    assert len(_rows(folder.path)["time_s"]) == 30 + 1  # and the safe state's row
-    assert rig.currents[-2:] == [0.0, 0.0] and rig.calls["close"] == 1
+    # this rig's current never falls (0.1 A more per read): the loop reads on at 0 A for SETTLE_S, one
+    # row per period, and says the safe state was not confirmed
+    settled = outcome.summary["safe_state"]
+    assert settled["reads"] == 500 and settled["after_s"] == pytest.approx(0.5) and not settled["confirmed"]
+    assert len(_rows(folder.path)["time_s"]) == 30 + 500 + 1  # and the safe state's row
+    assert rig.currents[-502:] == [0.0] * 502 and rig.calls["close"] == 1
 
 
 def test_an_unexpected_error_in_the_stage_ends_at_0_a(tmp_path, config):

@@ -85,6 +85,12 @@ def test_a_callers_stop_flag_stops_the_loop_process_cleanly(tmp_path):
     assert run.summary["stop_reason"] == "STOP (test)"  # the caller's own words
     data = _rows(run.path)
     assert len(data["time_s"]) >= 200 and data["current_cmd_a"][-1] == 0.0
+    # after the STOP the loop read on at 0 A: the measured current decays with the coil's lag to <= 0.05 A
+    settled = run.summary["safe_state"]
+    tail = data["current_a"][-settled["reads"] - 1 :]
+    assert settled["confirmed"] and 0.0 < settled["after_s"] < 0.5 and tail[-1] <= 0.05
+    assert tail[0] > 0.3 and np.all(np.diff(tail) <= 1e-9)  # from the 0.5 A it carried, falling all the way
+    assert np.all(data["current_cmd_a"][-settled["reads"] - 1 :] == 0.0)
     assert views and int(views[0]) >= 200
 
 
@@ -177,7 +183,9 @@ def test_kill_9_of_the_session_ends_the_run_at_0_a_with_every_row_on_disk(tmp_pa
     assert summary["loop_process"]["session_died"] is True
     data = _rows(out)
     cycles = summary["timing"]["cycles"]
-    assert cycles < 30_000 and len(data["time_s"]) == cycles + 1  # every cycle, then the safe state's row
+    settled = summary["safe_state"]  # the loop read on at 0 A until the coil's current decayed
+    assert settled["confirmed"] and settled["current_a"] <= 0.05 and settled["reads"] > 0
+    assert cycles < 30_000 and len(data["time_s"]) == cycles + settled["reads"] + 1  # then the safe state's row
     assert np.all(np.diff(data["seq"][:-1]) == 1) and data["current_cmd_a"][-1] == 0.0
     assert data["road_speed_cmd_rad_s"][-1] == 0.0  # the road at rest
 
@@ -306,3 +314,24 @@ def test_a_drop_test_on_the_real_clock_runs_each_drop_in_a_loop_process(tmp_path
     cycles = read_data_csv(run.path / "i0.800A" / "cycles.csv", required=(), min_rows=0)
     assert cycles["current_cmd_a"][-1] == 0.0 and np.all(cycles["current_cmd_a"][:-1] == 0.8)
     assert not list(Path("/dev/shm").glob(f"sashil-{os.getpid()}-*"))
+
+
+def test_the_views_read_the_runs_health_while_it_runs(tmp_path):
+    """Clipped cycles (and, on a link, lost samples, bad frames, watchdog samples) reach the stream's
+    header about ten times a second; a view reads them without touching the loop's objects."""
+    health: list[dict[str, int]] = []
+
+    class Health:
+        def start(self, stream, timing):
+            self.stream = stream
+
+        def close(self, trips, notes):
+            health.append(self.stream.health())
+
+    # a skyhook gain far beyond what the damper can give: most cycles are clipped
+    config = _config(1.0, "controller.law=skyhook", "controller.c_sky=50", "run.road=sine:1.5:2")
+    run = closed_loop(config, sashil.lab.Outputs(out=tmp_path / "run"), views=[Health()])
+    clipped = run.summary["controller_stats"]["clipped_cycles"]
+    assert clipped > 100
+    assert clipped - 100 <= health[0]["clipped_cycles"] <= clipped  # written every 100 cycles at 1 kHz
+    assert health[0]["samples_lost"] == health[0]["bad_frames"] == health[0]["watchdog"] == 0  # no link

@@ -145,7 +145,8 @@ def test_after_kill_9_of_a_drop_test_its_loop_process_ends_the_drop_with_every_r
     assert summary["stop_reason"] == "the session process died"
     lines = (out / "cycles.csv").read_text().splitlines()
     last = dict(zip(lines[0].split(","), lines[-1].split(","), strict=True))
-    assert len(lines) - 1 == summary["timing"]["cycles"] + 1  # every cycle, then the safe state's row
+    settled = summary["safe_state"]["reads"]  # rows read at 0 A while the coil's current decayed
+    assert len(lines) - 1 == summary["timing"]["cycles"] + settled + 1  # every cycle, then the safe state's row
     assert float(last["current_cmd_a"]) == 0.0 and float(last["road_speed_cmd_rad_s"]) == 0.0
 
 

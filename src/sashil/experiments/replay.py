@@ -11,8 +11,9 @@ was commanded.
 It is open loop: the recorded plant responded to the recorded commands, not to the replayed ones.
 Replaying the run's own law and config reproduces its commands; another law's commands say what
 that law would have asked for in the states the run went through, never what would have happened.
-The run's last row (the shutdown's 0 A, after the last cycle) and rows the safety supervisor
-changed (``trip_code`` not 0) are marked, not replayed as the controller's. A run whose law was
+The run's last row (the shutdown's 0 A, after the last cycle), the rows read at 0 A while the
+coil settled after a stop (``phase`` -1) and rows the safety supervisor changed (``trip_code`` not
+0) are marked, not replayed as the controller's. A run whose law was
 tuned live (``events.csv``) is replayed with the same changes at the same cycles.
 """
 
@@ -30,6 +31,7 @@ import yaml
 from sashil.control.controller import Controller
 from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.errors import DataFileError
+from sashil.runtime.loop import SETTLE_PHASE
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
 
 #: what a replay needs of a recorded data.csv
@@ -109,8 +111,13 @@ def replay(
     time_list = time_s.tolist()
     road_cmd = data.get("road_speed_cmd_rad_s")
     speeds = None if road_cmd is None else [v if math.isfinite(v) else None for v in road_cmd.tolist()]
-    # the stream ends on the shutdown's safe-state row: the last cycle's sample again, at 0 A
+    # the stream ends on the shutdown's safe-state row (the last sample again, at 0 A), after a stop
+    # on the rows read while the coil settled at 0 A: no law ran in either
     last = n - 1 if n > 1 and seq[-1] == seq[-2] else n
+    if "phase" in data:
+        settling = np.flatnonzero(np.asarray(data["phase"]) == SETTLE_PHASE)
+        if settling.size:
+            last = int(settling[0])
     torque_cmd, current_cmd, torque_hat, z_hat = [], [], [], []
     command = controller.command
     step = controller.step

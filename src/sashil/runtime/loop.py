@@ -65,6 +65,13 @@ NAN = float("nan")
 STAGE_SIGNALS = tuple(name for name in OPTIONAL_COLUMNS if name != "theta_road_rad")
 
 
+#: after a stop the loop reads on at 0 A until the coil's measured current is at most this [A]
+SAFE_CURRENT_A = 0.05
+#: ... or for at most this long [s] (the coil's lag is tens of milliseconds)
+SETTLE_S = 0.5
+#: the ``phase`` of the rows read while settling at 0 A after a stop (no law ran in them)
+SETTLE_PHASE = -1
+
 #: the recorder may use the interpreter until this long before the loop's next wake-up
 WRITER_GUARD_NS = 50_000
 
@@ -93,6 +100,8 @@ class LoopResult:
     timing: TimingStats | None = None
     stop_reason: str | None = None
     shutdown_errors: list[str] = field(default_factory=list)
+    #: after a stop, how the coil's measured current settled at 0 A (:meth:`ControlLoop._settle`)
+    safe_state: dict | None = None
 
 
 def stage_signals(stage: object) -> tuple[str, ...]:
@@ -260,6 +269,11 @@ class ControlLoop:
             result.error = str(err) or type(err).__name__
             self._finish(t, sample, safety.trip_code if isinstance(err, SafetyTrip) and safety is not None else 0)
             raise
+        if result.exit_status == "stopped" and sample is not None:
+            try:
+                t, sample = self._settle(t, sample)
+            except Exception as err:  # the rig failed while settling: the shutdown below still runs
+                result.shutdown_errors.append(f"settle at 0 A: {type(err).__name__}: {err}")
         self._finish(t, sample, 0)
         if result.shutdown_errors:
             result.exit_status = "error"
@@ -269,7 +283,13 @@ class ControlLoop:
 
     # helpers (off the per-cycle path unless noted) ---------------------------------------------
     def _record(
-        self, t_ns: int, sample: RigSample | None, current_cmd: float, road_speed: float | None, trip_code: int
+        self,
+        t_ns: int,
+        sample: RigSample | None,
+        current_cmd: float,
+        road_speed: float | None,
+        trip_code: int,
+        phase: int | None = None,
     ) -> None:
         """Fill one data row in the recorder's ring (per cycle; no allocation)."""
         recorder = self.recorder
@@ -304,9 +324,40 @@ class ControlLoop:
             else:
                 row[5 : 5 + self._n_signals] = signals(self._signal_source)
         row[-3] = NAN if road_speed is None else road_speed
-        row[-2] = getattr(self.stage, "phase_code", 0)
+        row[-2] = getattr(self.stage, "phase_code", 0) if phase is None else phase
         row[-1] = trip_code
         recorder.commit_row()  # type: ignore[union-attr]
+
+    def _settle(self, t_ns: int, sample: RigSample) -> tuple[int, RigSample]:
+        """After a stop: command 0 A with the road at rest and read on, one period apart, until the
+        coil's measured current is at most :data:`SAFE_CURRENT_A` or :data:`SETTLE_S` have passed.
+        Each read is a row (``current_cmd_a`` 0, ``phase`` :data:`SETTLE_PHASE`), so the record shows the current decaying with the
+        coil's lag; :attr:`LoopResult.safe_state` says where and when it ended. Returns the last
+        read's time and sample."""
+        rig, clock, period = self.rig, self.clock, self.period_ns
+        paced = capabilities_of(rig).device_paced
+        start = last = t_ns
+        deadline = t_ns + period
+        reads = 0
+        rig.write(SAFE_COMMAND, t_ns, 0)
+        while abs(sample.current_a) > SAFE_CURRENT_A and deadline - start <= SETTLE_S * 1e9:
+            if not paced:
+                clock.sleep_until(deadline)
+            t_ns = clock.now_ns()
+            sample = rig.read(t_ns, t_ns - last)
+            last = t_ns
+            if self.recorder is not None:
+                self._record(t_ns, sample, SAFE_COMMAND.current_a, 0.0, 0, SETTLE_PHASE)
+            rig.write(SAFE_COMMAND, t_ns, 0)  # a host-paced board answers each command with a sample
+            reads += 1
+            deadline += period
+        self.result.safe_state = {
+            "current_a": round(float(sample.current_a), 4),
+            "after_s": round((t_ns - start) * 1e-9, 4),
+            "confirmed": abs(sample.current_a) <= SAFE_CURRENT_A,
+            "reads": reads,  # rows the settling added to the record
+        }
+        return t_ns, sample
 
     def _overrun(self, t_ns: int, late_ns: int) -> None:
         missed = late_ns // self.period_ns

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import os
 import signal
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from sashil.errors import ConfigError
 from sashil.runtime.signals import StopFlag
-from sashil.runtime.stream import STOP_BY_CALLER, STOP_W, Stream
+from sashil.runtime.stream import BAD_FRAMES_W, CLIPPED_W, SAMPLES_LOST_W, STOP_BY_CALLER, STOP_W, WATCHDOG_W, Stream
 from sashil.runtime.tune_socket import answer
 from sashil.runtime.tuning import LiveTuning, TuneEvent
 
@@ -45,19 +45,30 @@ def stop_reason(code: int) -> str:
 
 
 class LoopStop:
-    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals."""
+    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals. The loop
+    asks it once per cycle; every ``every`` cycles it also calls ``tick`` (the health's writer)."""
 
-    __slots__ = ("_flag", "_header", "_session_pid", "orphaned")
+    __slots__ = ("_countdown", "_every", "_flag", "_header", "_session_pid", "_tick", "orphaned")
 
-    def __init__(self, flag: StopFlag, stream: Stream, session_pid: int):
+    def __init__(
+        self, flag: StopFlag, stream: Stream, session_pid: int, tick: Callable[[], None] | None = None, every: int = 100
+    ):
         self._flag = flag
         self._header = stream.header
         self._session_pid = session_pid
         #: the session died: the loop is alone with the stream and the run folder
         self.orphaned = False
+        self._tick = tick
+        self._every = max(1, int(every))
+        self._countdown = 0
 
     @property
     def requested(self) -> bool:
+        if self._tick is not None:
+            self._countdown -= 1
+            if self._countdown <= 0:
+                self._countdown = self._every
+                self._tick()
         if self._flag.requested:
             return True
         code = self._header[STOP_W]
@@ -73,6 +84,28 @@ class LoopStop:
     @property
     def signal_name(self) -> str | None:
         return self._flag.signal_name
+
+
+class HealthWriter:
+    """Writes the run's health into the stream's header (:data:`~sashil.runtime.stream.HEALTH_WORDS`)
+    from the rig's link counters and the controller's clip count, for the views while the run runs."""
+
+    def __init__(self, stream: Stream, rig: Any, stage: Any):
+        self._header = stream.header
+        self._rig = rig if hasattr(rig, "stats") else None
+        self._controller = stage if hasattr(stage, "clip_count") else getattr(stage, "controller", None)
+
+    def __call__(self) -> None:
+        header = self._header
+        rig = self._rig
+        if rig is not None:
+            stats = rig.stats
+            header[SAMPLES_LOST_W] = stats.get("samples_missed", 0)
+            header[WATCHDOG_W] = stats.get("watchdog_samples", 0)
+            header[BAD_FRAMES_W] = rig.codec_counters().get("bad_frames", 0)
+        controller = self._controller
+        if controller is not None:
+            header[CLIPPED_W] = getattr(controller, "clip_count", 0)
 
 
 class MailboxTuning(LiveTuning):

@@ -61,6 +61,7 @@ def finish_alone(
                 recording={"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
                 link=end["link"],
                 shutdown_errors=end["shutdown_errors"],
+                safe_state=end.get("safe_state"),
             ),
             "controller": config["controller"]["law"],
             "driver": config["driver"]["name"],

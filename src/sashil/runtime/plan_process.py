@@ -109,6 +109,7 @@ def run_plan_process(
         timing=timing,
         stop_reason=end.get("stop_reason"),
         shutdown_errors=list(end.get("shutdown_errors", [])),
+        safe_state=end.get("safe_state"),
     )
     common = loop_summary(
         exit_status=ended.exit_status,
@@ -122,6 +123,7 @@ def run_plan_process(
         recording=ended.recording if data_path is not None else None,
         link=end.get("link"),
         shutdown_errors=result.shutdown_errors,
+        safe_state=end.get("safe_state"),
     )
     loop_process: dict[str, Any] = {
         "pid": pid,

@@ -118,11 +118,13 @@ def loop_summary(
     link: dict[str, Any] | None,
     shutdown_errors: list[str],
     error_text: str | None = None,
+    safe_state: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The keys of summary.json every loop run has, in one place: the run in this process
     (:meth:`RunOutcome.summary`), in a loop process (:func:`~sashil.runtime.session.run_loop_process`)
     and a loop whose session died (:mod:`~sashil.runtime.orphan`). ``exit_code`` follows from the
-    status and the error; ``error`` is ``error_text`` (default: the error's line) when there is one."""
+    status and the error; ``error`` is ``error_text`` (default: the error's line) when there is one.
+    ``safe_state``: after a stop, the coil's measured current at 0 A and how soon it got there."""
     return {
         "exit_status": exit_status,
         "timing": timing,
@@ -136,6 +138,7 @@ def loop_summary(
         "recording": recording,
         "link": link,
         "shutdown_errors": shutdown_errors,
+        "safe_state": safe_state,
     }
 
 
@@ -325,6 +328,7 @@ def run_plan(
             link=link,
             shutdown_errors=result.shutdown_errors,
             error_text=result.error,
+            safe_state=result.safe_state,
         ),
         realtime=realtime_report,
         recording=recording,

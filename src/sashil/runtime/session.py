@@ -190,6 +190,7 @@ def run_loop_process(
             recording=ended.recording,
             link=end.get("link"),
             shutdown_errors=end.get("shutdown_errors", []),
+            safe_state=end.get("safe_state"),
         ),
         "controller": controller,
         "duration_s": duration_s,
@@ -217,5 +218,6 @@ def run_loop_process(
         trips=list(summary["trips"]),
         timing=timing,
         stop_reason=summary["stop_reason"],
+        safe_state=end.get("safe_state"),
     )
     return SessionOutcome(result, summary, error, summary["exit_code"])

@@ -79,6 +79,15 @@ RECORDER_W = 16
 COLUMNS_LEN_W, MAIL_LEN_W, REPLY_LEN_W = 17, 18, 19
 #: the CAN frame ring: its capacity (0: none), frames committed, frames the reader took, frames dropped
 FRAMES_CAP_W, FRAMES_W, FRAMES_READ_W, FRAMES_DROPPED_W = 20, 21, 22, 23
+#: the run's health as the loop last wrote it (about ten times a second): samples lost on the link,
+#: bad frames, samples the board flagged with its watchdog, cycles the controller clipped
+SAMPLES_LOST_W, BAD_FRAMES_W, WATCHDOG_W, CLIPPED_W = 24, 25, 26, 27
+HEALTH_WORDS = {
+    "samples_lost": SAMPLES_LOST_W,
+    "bad_frames": BAD_FRAMES_W,
+    "watchdog": WATCHDOG_W,
+    "clipped_cycles": CLIPPED_W,
+}
 HEADER_WORDS = 32
 COLUMNS_OFFSET = 8 * HEADER_WORDS
 
@@ -213,6 +222,10 @@ class Stream:
 
     def set_state(self, state: str) -> None:
         self.header[STATE_W] = STATES.index(state)
+
+    def health(self) -> dict[str, int]:
+        """The run's health while it runs (:data:`HEALTH_WORDS`, as the loop last wrote them)."""
+        return {name: int(self.header[word]) for name, word in HEALTH_WORDS.items()}
 
     def timing(self, rate_hz: float) -> TimingStats:
         """The loop's :class:`~sashil.runtime.timing.TimingStats` over the stream's shared rings."""

@@ -164,7 +164,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     from sashil.drivers.interface import capabilities_of
     from sashil.runtime.clock import RealClock
     from sashil.runtime.loop import ControlLoop, record_columns
-    from sashil.runtime.mailbox import LoopStop, MailboxTuning
+    from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
     from sashil.runtime.runner import run_realtime
     from sashil.runtime.stream import LOOP_PID_W, MISSED_W, STREAM_DIR, THREADS_W, FrameWriter, Stream, StreamWriter
@@ -215,7 +215,8 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     started = json.loads(go)
     folder = Path(started["folder"])
     session_pid = int(job["session_pid"])
-    stop = LoopStop(flag, stream, session_pid)
+    # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
+    stop = LoopStop(flag, stream, session_pid, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
     tuning = None
     if tunable:
         tuning = MailboxTuning(law, rate, float(config["controller"].get(RAMP_KEY, 0.0)), stream)
@@ -254,6 +255,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         "stop_reason": result.stop_reason,
         "trips": result.trips,
         "shutdown_errors": result.shutdown_errors,
+        "safe_state": result.safe_state,
         "timing": loop.timing.counters(),
         "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
         "safety": loop.safety.summary() if loop.safety is not None else None,
