@@ -14,7 +14,8 @@ first trace on a page with the kernels' cache warm, the click made :data:`AHEAD_
 opened (the loop process the server starts ahead is ready by then); the trace delay (a batch's transport from
 the server's read to the page, and the age of its newest row when read, whose sum plus one display
 tick bounds a row's delay); the server thread's CPU as a share of one core while streaming; STOP
-to 0 A commanded in cycles, and the measured current's decay to 5 % after it; how often the page's
+to 0 A commanded in cycles, and the measured current's decay in data.csv after it, down to the
+loop's safe level (:data:`~sashil.runtime.loop.SAFE_CURRENT_A`, where it stops reading); how often the page's
 status carried the stream's live health counts, and the page's safe-state line after STOP. Timing
 on a shared machine is noisy: run it on an otherwise idle box.
 
@@ -192,7 +193,9 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
     at = stop_rows[0] if stop_rows else len(rows) - 1
     zero = next((i for i in range(at, len(rows)) if command[i] == 0.0 and np.all(command[i:] == 0.0)), len(rows) - 1)
     start_current = abs(current[zero])
-    below = next((i for i in range(zero, len(rows)) if abs(current[i]) <= 0.05 * start_current), None)
+    from sashil.runtime.loop import SAFE_CURRENT_A
+
+    below = next((i for i in range(zero, len(rows)) if abs(current[i]) <= SAFE_CURRENT_A), None)
     return {
         "summary": summary,
         "first_trace_s": first_trace_s,
@@ -201,7 +204,8 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         "server_cpu": (cpu1 - cpu0) / (wall1 - wall0),
         "stop_cycles": zero - at,
         "current_at_stop_a": start_current,
-        "decay_ms": None if below is None or start_current == 0 else (times[below] - times[zero]) * 1e3,
+        "decay_ms": None if below is None else (times[below] - times[zero]) * 1e3,
+        "safe_level_a": SAFE_CURRENT_A,
         "rows_after": len(rows) - 1 - zero,
         "batches": sum(len(p.arrivals) for p in crowd),
         "health_seen": health_seen,
@@ -244,7 +248,7 @@ def main() -> int:
     decay = panel["decay_ms"]
     print(
         f"STOP to 0 A commanded: {panel['stop_cycles']} cycle(s) (goal <= 2); measured current "
-        f"{panel['current_at_stop_a']:.3f} A then, to 5 % in "
+        f"{panel['current_at_stop_a']:.3f} A then, down to {panel['safe_level_a']:g} A in "
         + (
             f"n/a: the stream ends {panel['rows_after']} row(s) after 0 A was commanded"
             if decay is None
