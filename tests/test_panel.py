@@ -886,6 +886,9 @@ def test_stop_shows_the_decay_and_the_boards_confirmation(panel):
         assert started.status_code == 200, started.text
         batches: list[dict[str, np.ndarray]] = []
         until(ws, "batch", lambda b: len(b["time_s"]) and b["current_a"][-1] > 0.9, batches)  # the coil is on
+        live = until(ws, "status", lambda s: s["health_live"])  # the loop process's stream reports its health
+        assert live["health"] == {"samples_lost": 0, "bad_frames": 0, "watchdog": 0, "clipped_cycles": 0}
+        assert live["clipped_share"] == 0.0 and live["cycles"] > 0  # a constant current is never clipped
         assert client.post("/api/stop", headers=CHANGES).json() == {"stopping": True}
         end, shown, _ = by_sub_run(ws)
     batches += shown.get(0, [])

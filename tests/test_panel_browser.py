@@ -134,6 +134,10 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             assert tuned > 1.5
             page.wait_for_function("window.panel.markers.length === 1")
 
+            # the loop's health as it runs: the loop process's stream reports it
+            page.wait_for_function("window.panel.status.health_live === true")
+            for shown_count in ("missed ", "clipped ", "lost ", "bad frames ", "watchdog "):
+                sync_api.expect(page.locator("#health")).to_contain_text(shown_count)
             shoot(page.screenshot(), "panel.png", tmp_path)
             with page.expect_download() as saved:  # Save YAML: a config --config reads, with the tuned value
                 page.click("#save")
@@ -151,6 +155,11 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             page.wait_for_function("window.panel.status.state === 'idle'", timeout=30_000)
             status = page.evaluate("window.panel.status")
             assert (status["exit_status"], status["stop_reason"]) == ("stopped", "STOP (panel)")
+            safe = status["safe_state"]  # summary.json's: the coil read down to 0.05 A at 0 A, shown in one line
+            sync_api.expect(page.locator("#safe-state")).to_have_text(
+                f"0 A confirmed: coil at {safe['current_a']:.3f} A {1e3 * safe['after_s']:.0f} ms after STOP"
+            )
+            sync_api.expect(page.locator("#safe-state")).to_have_class("confirmed")
             shown = page.evaluate("window.panel.data")
             drawn = page.evaluate("window.panel.charts[0].data")
 
