@@ -928,6 +928,8 @@ def test_stop_during_a_drop_test_ends_its_current_drop_and_the_test(tmp_path):
             started = client.post("/api/start", json=choice, headers=headers)
             assert started.status_code == 200, started.text
             until(ws, "status", lambda s: s["prompt"].startswith("release detected: "))  # the arm swings
+            refused = client.post("/api/tune", json={"set": {"current_a": 0.2}}, headers=headers)
+            assert refused.json() == {"error": "live tuning: a run on a road is tuned live, not a drop-test"}
             ws.send_text(json.dumps({"stop": True}))
             end, _, _ = by_sub_run(ws)
             prompts = [e["text"] for e in bench.events_since(0) if e["kind"] == "prompt"]
