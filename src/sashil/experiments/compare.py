@@ -231,7 +231,7 @@ def run_job(job: LawJob) -> LawResult:
         result.wall_s = time.perf_counter() - start
         return result
     result.wall_s = time.perf_counter() - start
-    result.summary = outcome.summary()
+    result.summary = dict(outcome.summary)
     if folder is not None:
         folder.write_timing(outcome.timing)
     loop = outcome.result

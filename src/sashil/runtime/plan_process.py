@@ -111,7 +111,7 @@ def run_plan_process(
         shutdown_errors=list(end.get("shutdown_errors", [])),
         safe_state=end.get("safe_state"),
     )
-    common = loop_summary(
+    summary = loop_summary(
         exit_status=ended.exit_status,
         timing=timing.summary(),
         trips=result.trips,
@@ -138,7 +138,7 @@ def run_plan_process(
         ended.stop,
         timing,
         int(end.get("start_ns") or 0),
-        common,
+        summary,
         realtime=end.get("realtime", {}),
         recording=ended.recording if data_path is not None else None,
         link=end.get("link"),

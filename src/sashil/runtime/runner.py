@@ -16,7 +16,7 @@ when, what to measure. The runner owns everything around it, the same for ``run`
   loop at 0 A (:class:`~sashil.errors.RecordingError`, exit 1);
 * the rig's lifecycle: configure, activate, and whatever ends the run, 0 A, the road at rest,
   deactivate (which waits for the device to confirm it), close;
-* the common part of ``summary.json`` (:meth:`RunOutcome.summary`).
+* the common part of ``summary.json`` (:attr:`RunOutcome.summary`).
 
 Plans command; one stream records. A plan keeps no copy of the data: what a verb writes beyond
 the stream (a drop test's record from the release, a sweep's transmissibility, a calibration
@@ -144,9 +144,10 @@ def loop_summary(
 
 @dataclass
 class RunOutcome:
-    """What :func:`run_plan` leaves, whether the loop ran in this process or in its own: the loop's
-    result, the error that ended the run (None: it ended normally or by a signal), its timing and
-    start, and the keys of summary.json every loop run has (:func:`loop_summary`)."""
+    """What a loop run leaves, whether it ran in this process (:func:`run_plan`,
+    :func:`~sashil.runtime.session.run_session`) or in its own (``run_plan_process``,
+    ``run_loop_process``): the loop's result, the error that ended the run (None: it ended normally
+    or by a signal), its timing and start, and its summary.json keys."""
 
     result: LoopResult
     error: BaseException | None
@@ -154,7 +155,9 @@ class RunOutcome:
     timing: Any
     #: the loop's start on CLOCK_MONOTONIC [ns] (the stream's ``time_s`` counts from it)
     start_ns: int
-    common: dict[str, Any]
+    #: summary.json: the keys every loop run has (:func:`loop_summary`), and the session's own when
+    #: a session wrote the run's folder (:func:`~sashil.runtime.session.run_session`)
+    summary: dict[str, Any]
     realtime: dict[str, Any] = field(default_factory=dict)
     recording: dict[str, Any] | None = None
     link: dict[str, Any] | None = None
@@ -169,10 +172,6 @@ class RunOutcome:
     @property
     def exit_code(self) -> int:
         return exit_code_of(self.result.exit_status, self.error)
-
-    def summary(self) -> dict[str, Any]:
-        """The common keys of summary.json (the verb adds its own): :func:`loop_summary`."""
-        return dict(self.common)
 
     def stop_error(self) -> Stopped | None:
         """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""

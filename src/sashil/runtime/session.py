@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
-from sashil.runtime.runner import run_plan
+from sashil.runtime.runner import RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
@@ -56,14 +55,6 @@ def open_tuning(
     return tuning, server
 
 
-@dataclass
-class SessionOutcome:
-    result: LoopResult
-    summary: dict[str, Any]
-    error: BaseException | None
-    exit_code: int
-
-
 def run_session(
     config: dict[str, Any],
     rig: Any,
@@ -80,7 +71,7 @@ def run_session(
     tune: bool = False,
     finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
     stop: StopFlag | None = None,
-) -> SessionOutcome:
+) -> RunOutcome:
     """Run ``stage`` on ``rig`` in closed loop through the one runner
     (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
     timing file and ``summary.json`` (see module doc). ``tune``: serve live changes of the stage's
@@ -117,7 +108,7 @@ def run_session(
     folder.write_timing(outcome.timing)
     summary: dict[str, Any] = {
         "verb": verb,
-        **outcome.summary(),
+        **outcome.summary,
         "controller": controller,
         "duration_s": duration_s,
         "driver": config["driver"]["name"],
@@ -127,7 +118,8 @@ def run_session(
     if finish is not None:
         summary.update(finish(summary))
     folder.write_summary(summary)
-    return SessionOutcome(result, summary, outcome.error, outcome.exit_code)
+    outcome.summary = summary
+    return outcome
 
 
 def run_loop_process(
@@ -143,7 +135,7 @@ def run_loop_process(
     tune: bool = False,
     finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
     stop: StopFlag | None = None,
-) -> SessionOutcome:
+) -> RunOutcome:
     """:func:`run_session` with the loop in its own process (:mod:`sashil.runtime.loop_process`):
     ``process`` is ready (its rig open, its kernels warm, its stream made). The session writes
     ``config.yaml``, checks the disk, records the stream into ``data.csv``, serves the views and the
@@ -209,6 +201,7 @@ def run_loop_process(
     if finish is not None:
         summary.update(finish(summary))
     folder.write_summary(summary)
+    timing = timing.copy()  # the stream's shared rings end with the process
     process.close()
     result = LoopResult(
         cycles=timing.cycles,
@@ -220,4 +213,4 @@ def run_loop_process(
         stop_reason=summary["stop_reason"],
         safe_state=end.get("safe_state"),
     )
-    return SessionOutcome(result, summary, error, summary["exit_code"])
+    return RunOutcome(result, error, ended.stop, timing, int(end.get("start_ns") or 0), summary)
