@@ -410,8 +410,8 @@ class Bench:
                 self._on_event(Event("result", line))
             safe = safe_state(summary)
             line = safe_state_line(safe, flag.requested) if safe is not None else ""
-            if line:
-                self._on_event(Event("result" if safe and safe.get("confirmed") else "warning", line))
+            if line:  # an event; the page shows it on its own line, not among the results
+                self._add_event("result" if safe and safe.get("confirmed") else "warning", line)
             with self._lock:
                 self.run.state = "idle"
                 self.run.exit_status = status
@@ -568,9 +568,9 @@ class Bench:
         with self._lock:
             run = self.run
             live = health is not None
-            if health is None and run.state == "idle" and run.final_health is not None:
-                health = run.final_health
-                cycles = cycles or run.final_cycles
+            if run.state == "idle" and run.final_health is not None:  # the summary's counts are exact
+                health = {**(health or {}), **run.final_health}
+                cycles, live = run.final_cycles or cycles, False
             clipped = health.get("clipped_cycles") if health is not None else None
             sub_run = None
             if shown is not None and (len(run.plan) > 1 or run.experiment != "run"):

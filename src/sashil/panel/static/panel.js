@@ -405,7 +405,7 @@
     if (h.samples_lost != null) item(`lost ${h.samples_lost}`, h.samples_lost > 0, "samples lost on the link");
     if (h.bad_frames != null) item(`bad frames ${h.bad_frames}`, h.bad_frames > 0);
     if (h.watchdog != null) item(`watchdog ${h.watchdog}`, h.watchdog > 0, "the board's watchdog");
-    if (!status.health_live) item("(summary)", false, "the counts of summary.json: this loop's stream reported none while it ran");
+    if (!status.health_live) item("(summary)", false, "the counts of the run's summary.json");
   }
   function applyRole() {
     const controls = state.client !== null && state.client === state.controller;
