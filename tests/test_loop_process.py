@@ -335,3 +335,40 @@ def test_the_views_read_the_runs_health_while_it_runs(tmp_path):
     assert clipped > 100
     assert clipped - 100 <= health[0]["clipped_cycles"] <= clipped  # written every 100 cycles at 1 kHz
     assert health[0]["samples_lost"] == health[0]["bad_frames"] == health[0]["watchdog"] == 0  # no link
+
+
+def test_a_sweep_on_the_real_clock_runs_each_frequency_in_a_loop_process(tmp_path):
+    """A stepped sine's frequencies each run in a loop process of their own: the views read the
+    loop process's stream, and the transmissibility and clipping counts come back as in one process."""
+    from sashil.runtime.stream import LOOP_PID_W
+
+    relaxed = ("loop.max_missed_fraction=1.0", "driver.max_lost_fraction=1.0", "loop.rt.priority=0")
+    sets = ("sweep.stepped=true", "sweep.steps=2", "sweep.f_start_hz=0.3", "sweep.f_stop_hz=5", "sweep.settle_s=1",
+            "sweep.measure_s=1", "sweep.ramp_s=0.3", "controller.law=skyhook", "controller.c_sky=40")  # fmt: skip
+    pids: list[int] = []
+
+    class Pid:
+        def start(self, stream, timing):
+            pids.append(int(stream.header[LOOP_PID_W]))
+
+        def close(self, trips, notes):
+            pass
+
+    real = sashil.lab.sweep(
+        resolve(ConfigSource(sets=(*relaxed, *sets, "driver.clock=real")), "sweep"),
+        sashil.lab.Outputs(out=tmp_path / "real"),
+        views=[Pid()],
+    )
+    virtual = sashil.lab.sweep(
+        resolve(ConfigSource(sets=(*relaxed, *sets, "driver.clock=virtual")), "sweep"),
+        sashil.lab.Outputs(out=tmp_path / "v"),
+    )
+    assert len(pids) == 2 and os.getpid() not in pids and len(set(pids)) == 2
+    # the arm follows the road well below resonance and stays behind it above (the real clock's
+    # periods jitter on a loaded machine, the virtual clock's do not: the figures agree loosely)
+    slow, fast = real.summary["points"]
+    assert slow["transmissibility"] == pytest.approx(virtual.summary["points"][0]["transmissibility"], abs=0.1)
+    assert fast["transmissibility"] < 0.9 * slow["transmissibility"]
+    for point, twin in zip(real.summary["points"], virtual.summary["points"], strict=True):
+        # the loop process's controller counted the clipped cycles; they came back with the run
+        assert point["clipped_cycles"] == pytest.approx(twin["clipped_cycles"], rel=0.3) and point["clipped_cycles"] > 0

@@ -81,9 +81,28 @@ def _profile(
     return road
 
 
+@dataclass(frozen=True)
+class SweepRoad:
+    """A sweep's road profile and what it was made from (:func:`road_of` makes it again: a loop
+    process builds the same road from the spec)."""
+
+    spec: dict[str, Any]
+    profile: RoadProfile
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        return self.profile(t)
+
+
+def road_of(spec: dict[str, Any]) -> SweepRoad:
+    """The road of a :class:`SweepRoad`'s ``spec`` (``shape`` chirp or sine and its arguments)."""
+    shapes: dict[str, Callable[..., SweepRoad]] = {"chirp": chirp_profile, "sine": sine_profile}
+    arguments = {key: value for key, value in spec.items() if key != "shape"}
+    return shapes[spec["shape"]](**arguments)
+
+
 def chirp_profile(
     amplitude_rad: float, f_start_hz: float, f_stop_hz: float, duration_s: float, ramp_s: float = 1.0
-) -> RoadProfile:
+) -> SweepRoad:
     """theta1(t) = A*sin(2*pi*(f0*t + (f1 - f0)*t^2/(2*T))), frequency held at f1 after T."""
     rate = (f_stop_hz - f_start_hz) / duration_s
 
@@ -93,13 +112,15 @@ def chirp_profile(
         end = TWO_PI * (f_start_hz * duration_s + 0.5 * rate * duration_s**2)
         return end + TWO_PI * f_stop_hz * (t - duration_s), TWO_PI * f_stop_hz, 0.0
 
-    return _profile(amplitude_rad, ramp_s, phase)
+    spec = {"shape": "chirp", "amplitude_rad": amplitude_rad, "f_start_hz": f_start_hz, "f_stop_hz": f_stop_hz}
+    return SweepRoad({**spec, "duration_s": duration_s, "ramp_s": ramp_s}, _profile(amplitude_rad, ramp_s, phase))
 
 
-def sine_profile(amplitude_rad: float, f_hz: float, ramp_s: float = 1.0, stop_s: float | None = None) -> RoadProfile:
+def sine_profile(amplitude_rad: float, f_hz: float, ramp_s: float = 1.0, stop_s: float | None = None) -> SweepRoad:
     """theta1(t) = A(t)*sin(2*pi*f*t); from ``stop_s`` on the amplitude ramps back to 0."""
     w = TWO_PI * f_hz
-    return _profile(amplitude_rad, ramp_s, lambda t: (w * t, w, 0.0), stop_s)
+    spec = {"shape": "sine", "amplitude_rad": amplitude_rad, "f_hz": f_hz, "ramp_s": ramp_s, "stop_s": stop_s}
+    return SweepRoad(spec, _profile(amplitude_rad, ramp_s, lambda t: (w * t, w, 0.0), stop_s))
 
 
 def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = "linear") -> list[float]:
@@ -126,11 +147,43 @@ class SweepStage:
         self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.torque_true_nm = math.nan
         self._t0: int | None = None
+        #: what the loop process's twin of this stage counted (:meth:`absorb`), None: it ran here
+        self.seen: dict[str, Any] | None = None
 
     def __getattr__(self, name: str) -> Any:  # the controller's signals (NaN for a stage without them)
         if name in CONTROLLER_SIGNALS or name == "current_law_a":
             return getattr(self.__dict__["controller"], name, math.nan)
         raise AttributeError(name)
+
+    def spec(self) -> dict[str, Any] | None:
+        """What a loop process builds this run from (the config's law on the same road:
+        :func:`sweep_stage`), or None when it cannot (a road without a spec)."""
+        if not isinstance(self.road, SweepRoad):
+            return None
+        return {"kind": "sweep", "road": self.road.spec}
+
+    def facts(self) -> dict[str, Any]:
+        """The controller's counts after the run (its clipped cycles, its summary statistics)."""
+        stats = getattr(self.controller, "stats", None)
+        return {"clip_count": int(getattr(self.controller, "clip_count", 0)), "stats": stats() if stats else None}
+
+    def absorb(self, facts: dict[str, Any]) -> None:
+        """Take the :meth:`facts` of the same run in the loop process (:attr:`clip_count`, :meth:`stats`)."""
+        self.seen = facts
+
+    @property
+    def clip_count(self) -> int:
+        """The controller's clipped cycles (as the loop process's controller counted them, when it ran there)."""
+        seen = self.__dict__.get("seen")
+        return int(seen["clip_count"]) if seen is not None else int(getattr(self.controller, "clip_count", 0))
+
+    def stats(self) -> dict[str, Any] | None:
+        """The controller's summary statistics (the loop process's controller's, when it ran there)."""
+        seen = self.__dict__.get("seen")
+        if seen is not None:
+            return seen["stats"]
+        stats = getattr(self.controller, "stats", None)
+        return stats() if stats is not None else None
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
         if self._t0 is None:
@@ -155,6 +208,13 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 RigFactory = Callable[[dict, RoadProfile], RigInterface]
 
 
+def sweep_stage(config: dict[str, Any], spec: dict[str, Any], rig: RigInterface) -> SweepStage:
+    """A sweep run's stage built in a loop process: the config's law on the road of ``spec``."""
+    from sashil.control.registry import make_controller
+
+    return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
+
+
 def default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
@@ -176,37 +236,70 @@ def run_profile(
     live: Any = None,
     stop: Any = None,
 ) -> dict[str, np.ndarray]:
+    """One run of ``controller`` under the road profile (:func:`run_sweep`); the recorded columns."""
+    columns, _ = run_sweep(
+        config, controller, road, duration_s, rig_factory, clock, keep, data_path, live=live, stop=stop
+    )
+    return columns
+
+
+def run_sweep(
+    config: dict[str, Any],
+    controller: Any,
+    road: RoadProfile,
+    duration_s: float,
+    rig_factory: RigFactory | None = None,
+    clock: Clock | None = None,
+    keep: Callable[[dict[str, np.ndarray]], object] | None = None,
+    data_path: str | Path | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
+    law_of_config: bool = False,
+) -> tuple[dict[str, np.ndarray], SweepStage]:
     """One run of ``controller`` under the road profile through the one runner
     (:func:`~sashil.runtime.runner.run_plan`: safety, signals, real-time set-up on the real clock,
-    the road at rest and 0 A at the end); returns the recorded columns.
+    the road at rest and 0 A at the end); returns the recorded columns and the run's stage (its
+    :attr:`~SweepStage.clip_count` and :meth:`~SweepStage.stats`).
 
-    Clock: ``clock``, else the config's (:func:`~sashil.experiments.drop_test.default_clock`: the
-    virtual one for the simulated rig, the real one for a link). ``keep`` gets the columns recorded
-    so far however the run ends (a link fault, a safety trip, a stop), before the error
-    propagates. ``data_path``: the runner streams every cycle there as it runs. ``live``: views of
-    the stream (``start(stream, timing)``, ``close(trips, notes)``); ``stop``: a
-    :class:`~sashil.runtime.signals.StopFlag` another thread may set. A signal or a stop ends the
-    run cleanly and raises :class:`~sashil.errors.Stopped` (exit 130) after ``keep``.
+    ``law_of_config``: ``controller`` is the config's law, so on the real clock with
+    ``loop.process`` a loop process can run the same stage of its own (:func:`sweep_stage`; the
+    road a :class:`SweepRoad`); ``rig_factory`` then goes unused. Clock: ``clock``, else the
+    config's (:func:`~sashil.experiments.drop_test.default_clock`: the virtual one for the simulated
+    rig, the real one for a link). ``keep`` gets the columns recorded so far however the run ends
+    (a link fault, a safety trip, a stop), before the error propagates. ``data_path``: the runner
+    streams every cycle there as it runs. ``live``: views of the stream (``start(stream, timing)``,
+    ``close(trips, notes)``); ``stop``: a :class:`~sashil.runtime.signals.StopFlag` another thread
+    may set. A signal or a stop ends the run cleanly and raises :class:`~sashil.errors.Stopped`
+    (exit 130) after ``keep``.
     """
     from sashil.experiments.drop_test import default_clock
+    from sashil.runtime.plan_process import in_loop_process, run_plan_process
 
-    rig = (rig_factory or default_rig)(config, road)
-    stage = SweepStage(controller, road, rig)
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
-    outcome = run_plan(
-        config,
-        rig,
-        stage,
-        clock,
-        duration_s,
-        data_path=data_path,
-        say=log.warning,
-        note=log.debug,
-        read_stream=True,
-        live=live,
-        stop=stop,
-    )
+    twin = SweepStage(controller, road)
+    if law_of_config and in_loop_process(config, clock) and twin.spec() is not None:
+        stage = twin
+        outcome = run_plan_process(
+            config, stage, duration_s, data_path=data_path, say=log.warning, live=live, stop=stop
+        )
+    else:
+        rig = (rig_factory or default_rig)(config, road)
+        stage = SweepStage(controller, road, rig)
+        outcome = run_plan(
+            config,
+            rig,
+            stage,
+            clock,
+            duration_s,
+            data_path=data_path,
+            say=log.warning,
+            note=log.debug,
+            read_stream=True,
+            live=live,
+            stop=stop,
+        )
     if live is not None:
         live.close(outcome.result.trips, ())
     columns = sweep_columns(outcome.stream)
@@ -215,7 +308,7 @@ def run_profile(
     if outcome.error is not None:
         raise outcome.error
     outcome.raise_stop()
-    return columns
+    return columns, stage
 
 
 def ac_rms(x: np.ndarray) -> float:
@@ -243,11 +336,13 @@ def stepped_sine(
     *,
     live: Any = None,
     stop: Any = None,
+    law_of_config: bool = False,
 ) -> list[SteppedPoint]:
     """Transmissibility per frequency: a fresh controller and rig per frequency (``sweep`` section).
     ``keep(frequency_hz, columns)`` gets each frequency's time series once it has run;
     ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to; ``live``
-    and ``stop``: each frequency's run's views and stop flag (:func:`run_profile`)."""
+    and ``stop``: each frequency's run's views and stop flag; ``law_of_config``: ``make_controller``
+    makes the config's law (:func:`run_sweep`)."""
     sweep = config["sweep"]
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
@@ -258,7 +353,7 @@ def stepped_sine(
         # the road ramps down after the measurement: a rig that stays up between frequencies (a link)
         # starts the next one at rest instead of with a step of the road speed
         stop_s = start + measure
-        cols = run_profile(
+        cols, stage = run_sweep(
             config,
             controller,
             sine_profile(amplitude, f, sweep["ramp_s"], stop_s),
@@ -267,6 +362,7 @@ def stepped_sine(
             data_path=stream_to(f) if stream_to is not None else None,
             live=live,
             stop=stop,
+            law_of_config=law_of_config,
         )
         if keep is not None:
             keep(f, cols)
@@ -281,7 +377,7 @@ def stepped_sine(
                 road_rms,
                 body_rms / road_rms if road_rms > 0 else math.nan,
                 nrmse(cols["torque_hat_nm"][window], cols["torque_true_nm"][window]),
-                int(getattr(controller, "clip_count", 0)),
+                stage.clip_count,
             )
         )
     return points

@@ -103,7 +103,12 @@ def sweep(
     outputs.check(config["driver"]["name"])
     make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
     stepped = bool(config["sweep"]["stepped"])
-    watch = {"live": SessionHooks(*views) if views else None, "stop": stop}
+    from sashil.recording.formats import can_formats
+
+    # the config's law runs each frequency, so on the real clock a loop process runs it (unless the
+    # CAN frames are traced: a sweep's one trace follows the rigs in this process)
+    in_process_only = bool(can_formats(tuple(outputs.formats)))
+    watch = {"live": SessionHooks(*views) if views else None, "stop": stop, "law_of_config": not in_process_only}
     folder = RunFolder.create(outputs.out, "sweep")
     live = (
         None
@@ -267,7 +272,7 @@ def _chirp(
     """The chirp: one run into ``folder`` (data.csv however it ends, chirp.png, the live view), the
     body's RMS and peak into ``extra``."""
     from sashil.control.registry import make_controller
-    from sashil.experiments.sweep import ac_rms, chirp_profile, run_profile
+    from sashil.experiments.sweep import ac_rms, chirp_profile, run_sweep
     from sashil.recording.labels import controller_label
     from sashil.recording.plots import plot_chirp
     from sashil.recording.rerun_log import feasible_band
@@ -284,7 +289,7 @@ def _chirp(
         )
     )
     try:  # data.csv is written however the run ends
-        cols = run_profile(
+        cols, stage = run_sweep(
             config,
             controller,
             chirp_profile(amplitude, f_start, f_stop, duration, section["ramp_s"]),
@@ -320,8 +325,8 @@ def _chirp(
         "road_rms_rad": ac_rms(cols["theta_road_rad"]),
         "body_peak_rad": body_peak,
         "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
-        "clipped_cycles": int(getattr(controller, "clip_count", 0)),
-        "controller_stats": controller.stats() if hasattr(controller, "stats") else None,
+        "clipped_cycles": stage.clip_count,
+        "controller_stats": stage.stats(),
     }
     on_event(
         Event(

@@ -99,9 +99,17 @@ def drop_test_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messa
     return plan, str(config["controller"]["law"]), "none"
 
 
+def sweep_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+    """One run of a sweep (a chirp, or one frequency of a stepped sine): the config's law on the road
+    of the spec (:func:`sashil.experiments.sweep.sweep_stage`)."""
+    from sashil.experiments.sweep import sweep_stage
+
+    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
+
+
 #: what a loop process can run: a plan's ``kind`` (its ``spec()``) and the function that builds it
 #: in the loop process from the config, the spec, the rig and the message channel
-PLANS = {"run": run_stage, "drop-test": drop_test_plan}
+PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 
 
 def build(config: dict[str, Any], spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
