@@ -944,3 +944,47 @@ def test_stop_during_a_drop_test_ends_its_current_drop_and_the_test(tmp_path):
     assert not (folder / "i1.000A").exists()
     cycles = read_csv(folder / "i0.500A" / "cycles.csv")
     assert cycles["current_cmd_a"][-1] == 0.0 and cycles["time_s"][-1] < 15.0  # ended early, at 0 A
+
+
+@pytest.mark.e2e
+def test_stop_during_a_sweep_ends_its_frequency_and_the_sweep(tmp_path):
+    """A stepped sine over the emulated serial link (each frequency's loop in a loop process of its
+    own, its health live on the page): STOP during the first frequency ends it at 0 A, and the
+    second never starts."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python")
+    try:
+        config = Path(relaxed_config(tmp_path))
+        config.write_text(config.read_text() + "sweep:\n  settle_s: 5.0\n  measure_s: 5.0\n")
+        bench = Bench(config, runs_dir=tmp_path / "runs")
+        panel = Panel(bench, TOKEN, PORT)
+        with (
+            TestClient(make_app(panel), base_url=BASE) as client,
+            client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+        ):
+            headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+            choice = {"experiment": "sweep", "law": "passive", "params": {"current_a": "0.5"}}
+            choice |= {
+                "f_start_hz": 1,
+                "f_stop_hz": 2,
+                "stepped": True,
+                "steps": 2,
+                "driver": "serial",
+                "port": emu.link,
+            }
+            started = client.post("/api/start", json=choice, headers=headers)
+            assert started.status_code == 200, started.text
+            live = until(ws, "status", lambda s: s["health_live"] and s["cycles"] > 500)
+            assert live["sub_run"] == {"index": 1, "of": 2, "label": "1 Hz"}
+            assert set(live["health"]) == {"samples_lost", "bad_frames", "watchdog", "clipped_cycles"}
+            ws.send_text(json.dumps({"stop": True}))
+            end, _, _ = by_sub_run(ws)
+    finally:
+        emu.stop()
+    assert end["exit_status"] == "stopped" and end["stop_reason"] == "STOP (panel)", end
+    assert end["sub_run"]["index"] == 1
+    folder = Path(end["folder"])
+    assert (folder / "f1.000Hz").is_dir() and not (folder / "f2.000Hz").exists()
+    cycles = read_csv(folder / "f1.000Hz" / "cycles.csv")
+    assert cycles["current_cmd_a"][-1] == 0.0 and cycles["time_s"][-1] < 9.0  # ended early, at 0 A
