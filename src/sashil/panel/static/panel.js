@@ -404,7 +404,7 @@
     if (h.clipped_cycles != null) item(`clipped ${status.clipped_share == null ? "-" : (100 * status.clipped_share).toFixed(1)} %`, false, `${h.clipped_cycles} cycles with T* outside the feasible band`);
     if (h.samples_lost != null) item(`lost ${h.samples_lost}`, h.samples_lost > 0, "samples lost on the link");
     if (h.bad_frames != null) item(`bad frames ${h.bad_frames}`, h.bad_frames > 0);
-    if (h.watchdog != null) item(`watchdog ${h.watchdog}`, h.watchdog > 0, "the board's watchdog");
+    if (h.watchdog != null) item(`watchdog ${h.watchdog}`, h.watchdog > 0, "samples the board flagged with its watchdog");
     if (!status.health_live) item("(summary)", false, "the counts of the run's summary.json");
   }
   function applyRole() {
