@@ -6,6 +6,7 @@ the host rides through link gaps of up to 0.5 s (a shared CI machine pauses proc
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -47,6 +48,8 @@ def test_calibrate_an_emulated_damper_over_serial(tmp_path):
     summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
     runs = summary["runs"]
     assert all(r["release_estimated"] for r in runs)  # found in the data: nobody told the host
+    # each step ran in a loop process of its own (one thread), the step's stage built there from its spec
+    assert all(r["loop_process"]["threads"] == 1 and r["loop_process"]["pid"] != os.getpid() for r in runs)
     road = next(r for r in runs if r["kind"] == "road")
     data = (tmp_path / "cal" / "runs" / road["name"] / "data.csv").read_text().splitlines()
     header = data[0].split(",")

@@ -10,6 +10,7 @@ emulator's and the bench's motor).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from sashil.calibrate.plan import Step
+from sashil.calibrate.plan import RoadChirp, Step
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
@@ -57,6 +58,16 @@ class StepStage:
         self._t0_ns: int | None = None
         self._road_speed = 0.0
         self._cycle = 0
+
+    def spec(self) -> dict[str, Any]:
+        """What a loop process builds this stage from (:meth:`from_spec`): the step."""
+        return {"kind": "calibration-step", "step": dataclasses.asdict(self.step_def)}
+
+    @classmethod
+    def from_spec(cls, spec: dict[str, Any]) -> StepStage:
+        fields = dict(spec["step"])
+        road = fields.pop("road", None)
+        return cls(Step(**fields, road=RoadChirp(**road) if road is not None else None))
 
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
         if sample.flags & FLAG_STUCK_SENSOR:
@@ -121,8 +132,9 @@ def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = 
     extra: dict[str, Any] = {}
     if record.metrics is not None:
         extra["metrics"] = record.metrics.as_dict()
-    if "link" in record.extra:
-        extra["link"] = record.extra["link"]
+    for key in ("link", "loop_process"):  # the link's statistics; the loop process that ran the step
+        if key in record.extra:
+            extra[key] = record.extra[key]
     if record.loop is not None:
         extra["trips"] = record.loop.trips
     return StepResult(step, columns, math.degrees(record.hold_angle_rad), record.release_estimated, error, extra)

@@ -98,6 +98,7 @@ def _summary_row(res: StepResult) -> dict[str, Any]:
         **{key: value for key, value in ending(res.error).items() if key != "exit_code"},
         "link": res.extra.get("link"),
         "gap_repeats": res.extra.get("gap_repeats", 0),
+        "loop_process": res.extra.get("loop_process"),
     }
 
 

@@ -222,15 +222,22 @@ class DropTestPlan:
     FACTS = ("start_ns", "detected_ns", "hold_angle", "held_elsewhere", "operator_seen", "phase")
 
     def spec(self) -> dict[str, Any] | None:
-        """What a loop process builds this drop from (:func:`plan_drop`), or None when it cannot:
-        a controller other than the config's law (:data:`CONFIG_LAW`) stays in this process."""
-        if self.controller is not None and not self.from_config:
-            return None
+        """What a loop process builds this drop from (:func:`plan_drop`), or None when it cannot: a
+        controller that is neither the config's law (:data:`CONFIG_LAW`) nor one with a ``spec()``
+        of its own (a calibration step's stage) stays in this process."""
+        controller: Any = None
+        if self.from_config:
+            controller = CONFIG_LAW
+        elif self.controller is not None:
+            controller = self.controller.spec() if hasattr(self.controller, "spec") else None
+            if controller is None:
+                return None
         return {
             "kind": "drop-test",
             "theta0_deg": math.degrees(self.s.theta0_rad),
             "current_a": self.s.current_a,
             "duration_s": self.s.duration_s,
+            "controller": controller,
         }
 
     def facts(self) -> dict[str, Any]:
@@ -496,13 +503,16 @@ def run_drop_test(
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
     by_config = isinstance(controller, str) and controller == CONFIG_LAW
-    if in_loop_process(config, clock) and (controller is None or by_config):
-        # the plan here is the loop process's twin: it takes the facts that one saw after the run
-        settings = DropTestSettings.from_config(config, theta0_deg, current_a, duration_s)
-        plan = DropTestPlan(
-            settings, config["rig"]["encoder_counts_per_rev"], config_controller(config) if by_config else None, notify
-        )
-        plan.from_config = by_config
+    # the plan here is the loop process's twin when one runs it: it takes the facts that one saw
+    twin = DropTestPlan(
+        DropTestSettings.from_config(config, theta0_deg, current_a, duration_s),
+        config["rig"]["encoder_counts_per_rev"],
+        config_controller(config) if by_config else controller,
+        notify,
+    )
+    twin.from_config = by_config
+    if in_loop_process(config, clock) and twin.spec() is not None:
+        plan = twin
         outcome = run_plan_process(
             config, plan, None, data_path=data_path, say=log.warning, live=live, stop=stop, trace=trace
         )

@@ -92,11 +92,26 @@ def run_stage(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: 
 
 def drop_test_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
     """One drop of a drop test (:func:`sashil.experiments.drop_test.plan_drop`), its operator
-    prompts sent to the session as they come."""
-    from sashil.experiments.drop_test import plan_drop
+    prompts sent to the session as they come; the stage that takes over at the release is the
+    config's law, none, or one of :data:`STAGES` built from its spec."""
+    from sashil.experiments.drop_test import CONFIG_LAW, plan_drop
 
-    plan = plan_drop(config, spec, rig, lambda line: messages.send("prompt", text=line))
+    controller = spec.get("controller", CONFIG_LAW)
+    if isinstance(controller, dict):
+        controller = STAGES[str(controller.get("kind"))](controller)
+    plan = plan_drop(config, spec, rig, lambda line: messages.send("prompt", text=line), controller)
     return plan, str(config["controller"]["law"]), "none"
+
+
+def calibration_step(spec: dict[str, Any]) -> Any:
+    """A calibration step's stage (:class:`sashil.calibrate.rig.StepStage`) from its spec."""
+    from sashil.calibrate.rig import StepStage
+
+    return StepStage.from_spec(spec)
+
+
+#: the stages a drop's plan can hand over to at the release, by the ``kind`` of their spec
+STAGES = {"calibration-step": calibration_step}
 
 
 def sweep_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
