@@ -599,3 +599,392 @@ def test_https_with_a_certificate_sets_a_secure_cookie(tmp_path):
     finally:
         child.send_signal(signal.SIGINT)
         child.communicate(timeout=30)
+
+
+# -- choosing an experiment: a drop test and a sweep, resolved as their verbs resolve them ----------------
+def cli_line(argv: list[str], capsys: Any) -> str:
+    """The one line ``sashil VERB ...`` prints for bad input (after ``sashil VERB: error:``), exit 2."""
+    from sashil.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err, err
+    return err.split(": error: ", 1)[1]
+
+
+@pytest.mark.parametrize(
+    ("choice", "argv"),
+    [
+        ({"experiment": "drop-test", "theta0_deg": 45}, ["drop-test", "--theta0-deg", "45"]),
+        ({"experiment": "drop-test", "theta0_deg": -0.1}, ["drop-test", "--theta0-deg", "-0.1"]),
+        ({"experiment": "drop-test", "currents_a": "0 9"}, ["drop-test", "--current", "0", "--current", "9"]),
+        ({"experiment": "drop-test", "currents_a": [0.5, 0.5]}, ["drop-test", "--current", "0.5", "--current", "0.5"]),
+        ({"experiment": "drop-test", "duration_s": -2}, ["drop-test", "--duration", "-2"]),
+        ({"experiment": "sweep", "f_start_hz": 2, "f_stop_hz": 1}, ["sweep", "--f-start", "2", "--f-stop", "1"]),
+        ({"experiment": "sweep", "f_stop_hz": 500}, ["sweep", "--f-stop", "500"]),
+        ({"experiment": "sweep", "stepped": True, "steps": 1}, ["sweep", "--stepped", "--steps", "1"]),
+        ({"experiment": "sweep", "amplitude_deg": 40}, ["sweep", "--amplitude-deg", "40"]),
+        (
+            {"experiment": "sweep", "stepped": True, "f_start_hz": 2, "f_stop_hz": 2},
+            ["sweep", "--stepped", "--f-start", "2", "--f-stop", "2"],
+        ),
+    ],
+)
+def test_a_bad_experiment_value_is_the_clis_line_and_nothing_starts(panel, choice, argv, capsys, monkeypatch):
+    state, client = panel
+    monkeypatch.chdir(state.bench.runs_dir.parent)
+    expected = cli_line(argv, capsys)  # the command line's own refusal of the same value
+    assert not Path("runs").exists()
+    with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        answer = client.post("/api/start", json={"law": "passive", **choice}, headers=headers)
+    assert answer.status_code == 400
+    assert answer.json() == {"error": expected}
+    assert not state.bench.runs_dir.exists() and not state.bench.busy
+
+
+def test_a_page_value_that_is_no_number_is_argparses_line(tmp_path):
+    bench = Bench(runs_dir=tmp_path / "runs")
+    for choice, line in (
+        ({"theta0_deg": "x"}, "argument --theta0-deg: invalid float value: 'x'"),
+        ({"currents_a": "0 one"}, "argument --current: invalid float value: 'one'"),
+        ({"currents_a": {"a": 1}}, "argument --current: invalid float value: {'a': 1}"),
+        ({"duration_s": True}, "argument --duration: invalid float value: True"),
+    ):
+        with pytest.raises(ConfigError) as refused:
+            bench.resolve({"experiment": "drop-test", "law": "passive", **choice})
+        assert str(refused.value) == line
+    with pytest.raises(ConfigError, match=r"^argument --steps: invalid int value: 2\.5$"):
+        bench.resolve({"experiment": "sweep", "law": "passive", "steps": 2.5})
+    with pytest.raises(ConfigError, match=r"^experiment: expected one of run, drop-test, sweep, got 'calibrate'$"):
+        bench.resolve({"experiment": "calibrate", "law": "passive"})
+    config = bench.resolve(
+        {"experiment": "drop-test", "law": "passive", "theta0_deg": "-4", "currents_a": "0, 0.5 1", "duration_s": 2}
+    )
+    assert (config["drop_test"]["theta0_deg"], list(config["drop_test"]["currents_a"])) == (-4.0, [0.0, 0.5, 1.0])
+    assert config["drop_test"]["duration_s"] == 2.0
+    sweep = bench.resolve(
+        {"experiment": "sweep", "law": "passive", "f_start_hz": 1, "f_stop_hz": 2, "stepped": True, "steps": 3}
+    )
+    assert (sweep["sweep"]["f_start_hz"], sweep["sweep"]["f_stop_hz"], sweep["sweep"]["steps"]) == (1.0, 2.0, 3)
+    assert not (tmp_path / "runs").exists()
+
+
+def test_sub_runs_are_labelled_in_the_order_their_loops_run(tmp_path):
+    from sashil.experiments.sweep import frequencies
+    from sashil.panel.bench import sub_runs
+
+    bench = Bench(runs_dir=tmp_path / "runs")
+    drop = bench.resolve({"experiment": "drop-test", "law": "passive", "currents_a": [1, 0, 0.25]})
+    assert sub_runs(drop, "drop-test") == ["1 A", "0 A", "0.25 A"]
+    stepped = bench.resolve(
+        {"experiment": "sweep", "law": "passive", "f_start_hz": 1, "f_stop_hz": 4, "stepped": True, "steps": 3}
+    )
+    assert sub_runs(stepped, "sweep") == [f"{f:.3g} Hz" for f in frequencies(1, 4, 3, stepped["sweep"]["spacing"])]
+    chirp = bench.resolve({"experiment": "sweep", "law": "passive", "f_start_hz": 1, "f_stop_hz": 4, "duration_s": 5})
+    assert sub_runs(chirp, "sweep") == ["chirp 1-4 Hz over 5 s"]
+
+
+class HealthyStream:
+    """An in-memory stream (the recorder's reader interface) that reports health as the loop
+    process's stream does, and gives no rows once closed (as a closed stream)."""
+
+    def __init__(self, columns: tuple[str, ...]):
+        from sashil.recording.recorder import Recorder
+
+        self.recorder = Recorder(None, columns, keep=True)
+        self.columns = self.recorder.columns
+        self.counts = {"samples_lost": 0, "bad_frames": 0, "watchdog": 0, "clipped_cycles": 0}
+        self.open = True
+
+    @property
+    def rows_committed(self) -> int:
+        return self.recorder.rows_committed
+
+    def add(self, rows: list[list[float]]) -> None:
+        for values in rows:
+            row = self.recorder.begin_row()
+            row[:] = values
+            self.recorder.commit_row()
+
+    def copy_rows(self, start: int, stop: int, step: int = 1) -> list[tuple[Any, ...]]:
+        return self.recorder.copy_rows(start, stop, step) if self.open else []
+
+    def health(self) -> dict[str, int]:
+        return dict(self.counts)
+
+
+class Counts:
+    def __init__(self) -> None:
+        self.cycles = 0
+        self.missed_deadlines = 0
+
+
+def test_each_sub_run_is_sent_to_its_end_then_the_next_labelled(tmp_path):
+    """A view gets start() and close() once per sub-run, each time with a fresh stream: the page is
+    sent every sub-run's rows in order (the rows after the last batch included, read after its
+    stream closed), and the status names the sub-run of the rows it was last sent."""
+    from sashil.panel.bench import StreamView
+
+    bench = Bench(runs_dir=tmp_path / "runs")
+    bench.run.plan, bench.run.experiment, bench.run.state = ["0 A", "1 A"], "drop-test", "running"
+    bench._step, bench._keep = 2, 1000
+    bench.view = view = StreamView(bench.run.plan, bench._keep, bench._sub_run_started)
+    columns = ("time_s", "theta_rad", "current_a", "current_cmd_a")
+    rows = lambda a, b, cmd: [[i / 1000, -0.01 * i, 0.1, cmd] for i in range(a, b)]  # noqa: E731
+
+    first, timing = HealthyStream(columns), Counts()
+    view.start(first, timing)
+    from sashil.lab.events import Event
+
+    bench._on_event(Event("prompt", "press the arm to -5 deg and hold it still"))  # the operator's instruction
+    assert bench.status()["prompt"] == "press the arm to -5 deg and hold it still"
+    assert bench.events_since(0)[-1] == {
+        "seq": 1,
+        "kind": "prompt",
+        "text": "press the arm to -5 deg and hold it still",
+    }
+    first.add(rows(0, 10, 0.0))
+    timing.cycles, timing.missed_deadlines = 10, 1
+    first.counts.update(samples_lost=2, bad_frames=1, clipped_cycles=4)
+    sent = decode_batch(bench.next_batch())
+    np.testing.assert_array_equal(sent["time_s"], np.arange(0, 10, 2) / 1000)  # every 2nd row, on the grid
+    status = bench.status()
+    assert status["sub_run"] == {"index": 1, "of": 2, "label": "0 A"}
+    assert status["health"] == {"samples_lost": 2, "bad_frames": 1, "watchdog": 0, "clipped_cycles": 4}
+    assert status["health_live"] and status["clipped_share"] == 0.4 and status["missed_share"] == 0.1
+    assert bench.next_batch() is None  # nothing new
+
+    first.add(rows(10, 21, 0.0))  # the sub-run's last rows, not yet sent when it ends
+    timing.cycles = 21
+    view.close([], [])
+    first.open = False  # its stream is closed next: only the rows copied at close remain
+    second = HealthyStream(columns)
+    view.start(second, Counts())
+    assert bench.status()["prompt"] == ""  # a new sub-run's instructions start afresh
+    second.add(rows(0, 6, 1.0))
+
+    tail = decode_batch(bench.next_batch())
+    np.testing.assert_array_equal(tail["time_s"], np.arange(10, 21, 2) / 1000)
+    assert bench.status()["sub_run"]["label"] == "0 A" and bench.status()["cycles"] == 21  # the counts it ended with
+    head = decode_batch(bench.next_batch())
+    np.testing.assert_array_equal(head["time_s"], np.arange(0, 6, 2) / 1000)
+    np.testing.assert_array_equal(head["current_cmd_a"], [1.0, 1.0, 1.0])
+    assert bench.status()["sub_run"] == {"index": 2, "of": 2, "label": "1 A"}
+    assert bench.next_batch() is None
+
+
+def test_the_safe_state_line_and_the_summarys_health():
+    from sashil.panel.bench import safe_state, safe_state_line, summary_health
+
+    confirmed = {"current_a": 0.0123, "after_s": 0.038, "confirmed": True}
+    assert safe_state_line(confirmed, True) == "0 A confirmed: coil at 0.012 A 38 ms after STOP"
+    late = {"current_a": 0.31, "after_s": 0.5, "confirmed": False}
+    assert safe_state_line(late, False) == "0 A NOT confirmed: coil at 0.310 A 500 ms after the end: check the rig"
+    assert safe_state({"safe_state": confirmed}) == confirmed
+    drops = {"runs": [{"safe_state": late}, {"safe_state": confirmed}]}  # a drop test's sub-runs: the last
+    assert safe_state(drops) == confirmed and safe_state({"exit_status": "ok"}) is None
+    summary = {
+        "runs": [
+            {"link": {"samples_missed": 2, "bad_frames": 1}, "controller_stats": {"clipped_cycles": 5}},
+            {"link": {"samples_missed": 1, "bad_frames": 0}, "controller_stats": {"clipped_cycles": 7}},
+        ]
+    }
+    assert summary_health(summary) == {"samples_lost": 3, "bad_frames": 1, "clipped_cycles": 12}
+    assert summary_health({"controller_stats": {"clipped_cycles": 3}}) == {"clipped_cycles": 3}
+    assert summary_health({"exit_status": "ok"}) is None
+
+
+def by_sub_run(ws: Any) -> tuple[dict[str, Any], dict[int, list[dict[str, np.ndarray]]], list[dict[str, Any]]]:
+    """Read until the experiment ends: its last status, the batches sent of each sub-run (numbered
+    by the status sent before them) and every status seen."""
+    shown: dict[int, list[dict[str, np.ndarray]]] = {}
+    statuses: list[dict[str, Any]] = []
+    index = 0
+    while True:
+        kind, data = receive(ws)
+        if kind == "batch":
+            shown.setdefault(index, []).append(data)
+        elif kind == "status":
+            statuses.append(data)
+            index = data["sub_run"]["index"] if data["sub_run"] else 0
+            if data["run_id"] and data["state"] == "idle":
+                return data, shown, statuses
+
+
+def rows_match(batches: list[dict[str, np.ndarray]], data: dict[str, np.ndarray], names: tuple[str, ...]) -> int:
+    """Every row of ``batches`` is a row of ``data`` at the same time with the same values; their count."""
+    shown = {name: np.concatenate([b[name] for b in batches]) for name in ("time_s", *names)}
+    index = np.searchsorted(data["time_s"], shown["time_s"])
+    np.testing.assert_array_equal(data["time_s"][index], shown["time_s"])
+    for name in names:
+        np.testing.assert_allclose(shown[name], data[name][index], rtol=1e-9, atol=1e-12, err_msg=name)
+    return len(shown["time_s"])
+
+
+@pytest.mark.e2e
+def test_a_drop_test_from_the_page_runs_each_current_asked(panel):
+    _, client = panel
+    with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        choice = {"experiment": "drop-test", "law": "passive", "currents_a": "0 1", "duration_s": 1.5, "theta0_deg": -5}
+        started = client.post("/api/start", json=choice, headers=headers)
+        assert started.status_code == 200, started.text
+        end, shown, statuses = by_sub_run(ws)
+    folder = Path(started.json()["folder"])
+    assert folder.name.endswith("-drop-test") and end["folder"] == str(folder)
+    assert end["exit_status"] == "ok" and end["experiment"] == "drop-test"
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["verb"] == "drop-test"
+    assert [run["current_a"] for run in summary["runs"]] == [0.0, 1.0]
+    labels = {s["sub_run"]["index"]: s["sub_run"]["label"] for s in statuses if s["sub_run"]}
+    assert labels == {1: "0 A", 2: "1 A"} and end["sub_run"] == {"index": 2, "of": 2, "label": "1 A"}
+    # each sub-run's traces are rows of its own loop's stream (cycles.csv: time from its loop's start)
+    for index, name in ((1, "i0.000A"), (2, "i1.000A")):
+        cycles = read_csv(folder / name / "cycles.csv")
+        assert rows_match(shown[index], cycles, ("theta_rad", "current_a", "current_cmd_a")) > 10
+        assert np.all(np.concatenate([b["current_cmd_a"] for b in shown[index]])[:5] == float(name[1:6]))
+    assert sum(line.startswith("period ") for line in end["results"]) == 2  # each drop's figures
+
+
+@pytest.mark.e2e
+def test_a_stepped_sweep_from_the_page_runs_its_frequencies(tmp_path):
+    config = tmp_path / "short.yaml"
+    config.write_text("sweep:\n  settle_s: 0.5\n  measure_s: 1.0\n  ramp_s: 0.2\n")
+    bench = Bench(config, runs_dir=tmp_path / "runs")
+    panel = Panel(bench, TOKEN, PORT)
+    with (
+        TestClient(make_app(panel), base_url=BASE) as client,
+        client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+    ):
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        choice = {"experiment": "sweep", "law": "passive", "params": {"current_a": "0.5"}}
+        choice |= {"f_start_hz": 1, "f_stop_hz": 2, "stepped": True, "steps": 2, "amplitude_deg": 2}
+        started = client.post("/api/start", json=choice, headers=headers)
+        assert started.status_code == 200, started.text
+        end, shown, statuses = by_sub_run(ws)
+    folder = Path(started.json()["folder"])
+    assert folder.name.endswith("-sweep") and end["exit_status"] == "ok"
+    summary = json.loads((folder / "summary.json").read_text())
+    assert [round(p["frequency_hz"], 6) for p in summary["points"]] == [1.0, 2.0]
+    assert {s["sub_run"]["label"] for s in statuses if s["sub_run"]} == {"1 Hz", "2 Hz"}
+    for index, name in ((1, "f1.000Hz"), (2, "f2.000Hz")):
+        cycles = read_csv(folder / name / "cycles.csv")
+        assert rows_match(shown[index], cycles, ("theta_rad", "theta_road_rad", "current_cmd_a")) > 10
+    assert any("transmissibility" in line for line in end["results"])
+
+
+@pytest.mark.e2e
+def test_stop_shows_the_decay_and_the_boards_confirmation(panel):
+    """After STOP the loop reads on at 0 A until the coil is at the safe level: the page is sent
+    those rows too, and shows the one line of summary.json's safe_state once the run ended."""
+    state, client = panel
+    with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        choice = {"law": "passive", "params": {"current_a": "1.0"}, "road": "none"}
+        started = client.post("/api/start", json=choice, headers=headers)
+        assert started.status_code == 200, started.text
+        batches: list[dict[str, np.ndarray]] = []
+        until(ws, "batch", lambda b: len(b["time_s"]) and b["current_a"][-1] > 0.9, batches)  # the coil is on
+        live = until(ws, "status", lambda s: s["health_live"])  # the loop process's stream reports its health
+        assert live["health"] == {"samples_lost": 0, "bad_frames": 0, "watchdog": 0, "clipped_cycles": 0}
+        assert live["clipped_share"] == 0.0 and live["cycles"] > 0  # a constant current is never clipped
+        assert client.post("/api/stop", headers=CHANGES).json() == {"stopping": True}
+        end, shown, _ = by_sub_run(ws)
+    batches += shown.get(0, [])
+    folder = Path(end["folder"])
+    safe = json.loads((folder / "summary.json").read_text())["safe_state"]
+    assert end["safe_state"] == safe and safe["confirmed"]
+    line = f"0 A confirmed: coil at {safe['current_a']:.3f} A {1e3 * safe['after_s']:.0f} ms after STOP"
+    assert end["safe_state_line"] == line and abs(safe["current_a"]) <= 0.05
+    data = read_csv(folder / "data.csv")
+    zero = int(np.flatnonzero(data["current_cmd_a"] != 0.0)[-1]) + 1  # from here on, 0 A commanded
+    assert data["current_a"][zero] > 0.5 and abs(data["current_a"][-1]) <= 0.05  # the decay is recorded
+    assert rows_match(batches, data, ("current_a", "current_cmd_a")) > 10
+    times = np.concatenate([b["time_s"] for b in batches])
+    decay = times[times >= data["time_s"][zero]]
+    assert len(decay) >= 2  # the page drew the decay, to within one decimation step of its end
+    rate = float(state.bench._config["loop"]["rate_hz"])
+    assert data["time_s"][-1] - decay[-1] < decimation_step(rate) / rate + 1e-9
+
+
+@pytest.mark.e2e
+def test_stop_during_a_drop_test_ends_its_current_drop_and_the_test(tmp_path):
+    """Over the emulated serial link (its operator holds the arm at -5 deg and lets go after 1 s):
+    STOP during the first of two drops ends that drop at 0 A, and the second never starts."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python", "--hold-deg", "-5", "--release-after", "1")
+    try:
+        bench = Bench(relaxed_config(tmp_path), runs_dir=tmp_path / "runs")
+        panel = Panel(bench, TOKEN, PORT)
+        with (
+            TestClient(make_app(panel), base_url=BASE) as client,
+            client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+        ):
+            headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+            choice = {"experiment": "drop-test", "law": "passive", "currents_a": [0.5, 1.0], "duration_s": 20}
+            choice |= {"driver": "serial", "port": emu.link}
+            started = client.post("/api/start", json=choice, headers=headers)
+            assert started.status_code == 200, started.text
+            until(ws, "status", lambda s: s["prompt"].startswith("release detected: "))  # the arm swings
+            refused = client.post("/api/tune", json={"set": {"current_a": 0.2}}, headers=headers)
+            assert refused.json() == {"error": "live tuning: a run on a road is tuned live, not a drop-test"}
+            ws.send_text(json.dumps({"stop": True}))
+            end, _, _ = by_sub_run(ws)
+            prompts = [e["text"] for e in bench.events_since(0) if e["kind"] == "prompt"]
+    finally:
+        emu.stop()
+    assert end["exit_status"] == "stopped" and end["stop_reason"] == "STOP (panel)", end
+    assert end["sub_run"] == {"index": 1, "of": 2, "label": "0.5 A"} and end["prompt"] == ""
+    assert [text.split(" ")[:2] for text in prompts] == [["hold", "detected"], ["release", "detected:"]]
+    folder = Path(end["folder"])
+    summary = json.loads((folder / "summary.json").read_text())
+    assert [run["current_a"] for run in summary["runs"]] == [0.5]
+    assert not (folder / "i1.000A").exists()
+    cycles = read_csv(folder / "i0.500A" / "cycles.csv")
+    assert cycles["current_cmd_a"][-1] == 0.0 and cycles["time_s"][-1] < 15.0  # ended early, at 0 A
+
+
+@pytest.mark.e2e
+def test_stop_during_a_sweep_ends_its_frequency_and_the_sweep(tmp_path):
+    """A stepped sine over the emulated serial link (each frequency's loop in a loop process of its
+    own, its health live on the page): STOP during the first frequency ends it at 0 A, and the
+    second never starts."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python")
+    try:
+        config = Path(relaxed_config(tmp_path))
+        config.write_text(config.read_text() + "sweep:\n  settle_s: 5.0\n  measure_s: 5.0\n")
+        bench = Bench(config, runs_dir=tmp_path / "runs")
+        panel = Panel(bench, TOKEN, PORT)
+        with (
+            TestClient(make_app(panel), base_url=BASE) as client,
+            client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+        ):
+            headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+            choice = {"experiment": "sweep", "law": "passive", "params": {"current_a": "0.5"}}
+            choice |= {
+                "f_start_hz": 1,
+                "f_stop_hz": 2,
+                "stepped": True,
+                "steps": 2,
+                "driver": "serial",
+                "port": emu.link,
+            }
+            started = client.post("/api/start", json=choice, headers=headers)
+            assert started.status_code == 200, started.text
+            live = until(ws, "status", lambda s: s["health_live"] and s["cycles"] > 500)
+            assert live["sub_run"] == {"index": 1, "of": 2, "label": "1 Hz"}
+            assert set(live["health"]) == {"samples_lost", "bad_frames", "watchdog", "clipped_cycles"}
+            ws.send_text(json.dumps({"stop": True}))
+            end, _, _ = by_sub_run(ws)
+    finally:
+        emu.stop()
+    assert end["exit_status"] == "stopped" and end["stop_reason"] == "STOP (panel)", end
+    assert end["sub_run"]["index"] == 1
+    folder = Path(end["folder"])
+    assert (folder / "f1.000Hz").is_dir() and not (folder / "f2.000Hz").exists()
+    cycles = read_csv(folder / "f1.000Hz" / "cycles.csv")
+    assert cycles["current_cmd_a"][-1] == 0.0 and cycles["time_s"][-1] < 9.0  # ended early, at 0 A

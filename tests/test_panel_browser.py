@@ -7,6 +7,7 @@ takes, as ``DIR/panel.png`` and ``DIR/panel-runs.png`` (the manual's how-to page
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import re
@@ -14,6 +15,7 @@ import shutil
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -31,13 +33,14 @@ pytestmark = [
 FIRST_TRACE_MS = 90_000
 
 
-@pytest.fixture
-def panel_url(tmp_path):
-    """``sashil panel --port 0`` in a child process, with one earlier run in its runs folder; its
-    printed URL; SIGINT at the end (the server stops any run at 0 A and exits)."""
+@contextlib.contextmanager
+def serve_panel(tmp_path: Path, *options: str) -> Iterator[tuple[str, Path]]:
+    """``sashil panel --port 0 [options]`` in a child process, with one earlier run in its runs
+    folder; its printed URL and runs folder; SIGINT at the end (the server stops any run at 0 A and
+    exits)."""
     fake_run(tmp_path / "runs", "20261126T100000Z-run")
     child = subprocess.Popen(
-        [sys.executable, "-m", "sashil", "panel", "--port", "0", "--runs", str(tmp_path / "runs")],
+        [sys.executable, "-m", "sashil", "panel", "--port", "0", "--runs", str(tmp_path / "runs"), *options],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -57,6 +60,13 @@ def panel_url(tmp_path):
         for stream in (child.stdout, child.stderr):
             if stream is not None:
                 stream.close()
+
+
+@pytest.fixture
+def panel_url(tmp_path):
+    """The panel on the simulated rig (:func:`serve_panel`)."""
+    with serve_panel(tmp_path) as served:
+        yield served
 
 
 def read_csv(path: Path) -> dict[str, np.ndarray]:
@@ -124,6 +134,10 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             assert tuned > 1.5
             page.wait_for_function("window.panel.markers.length === 1")
 
+            # the loop's health as it runs: the loop process's stream reports it
+            page.wait_for_function("window.panel.status.health_live === true")
+            for shown_count in ("missed ", "clipped ", "lost ", "bad frames ", "watchdog "):
+                sync_api.expect(page.locator("#health")).to_contain_text(shown_count)
             shoot(page.screenshot(), "panel.png", tmp_path)
             with page.expect_download() as saved:  # Save YAML: a config --config reads, with the tuned value
                 page.click("#save")
@@ -141,6 +155,11 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
             page.wait_for_function("window.panel.status.state === 'idle'", timeout=30_000)
             status = page.evaluate("window.panel.status")
             assert (status["exit_status"], status["stop_reason"]) == ("stopped", "STOP (panel)")
+            safe = status["safe_state"]  # summary.json's: the coil read down to 0.05 A at 0 A, shown in one line
+            sync_api.expect(page.locator("#safe-state")).to_have_text(
+                f"0 A confirmed: coil at {safe['current_a']:.3f} A {1e3 * safe['after_s']:.0f} ms after STOP"
+            )
+            sync_api.expect(page.locator("#safe-state")).to_have_class("confirmed")
             shown = page.evaluate("window.panel.data")
             drawn = page.evaluate("window.panel.charts[0].data")
 
@@ -203,3 +222,68 @@ def shoot(png: bytes, name: str, tmp_path: Path) -> None:
     (tmp_path / name).write_bytes(png)
     if os.environ.get("SASHIL_PANEL_SCREENSHOTS"):
         Path(os.environ["SASHIL_PANEL_SCREENSHOTS"], name).write_bytes(png)
+
+
+def test_a_drop_test_from_the_page_in_chromium(tmp_path):
+    """Choose a drop test, refuse a bad current with the CLI's line, drop at two currents over the
+    emulated serial link (whose operator holds the arm at -5 deg and lets go after 1 s): the page
+    shows the operator's instructions in its prompt box, labels each sub-run, draws its rows and
+    lists each drop's result; the run is in Runs."""
+    from test_link_e2e import Emulator, relaxed_config
+
+    emu = Emulator(tmp_path, "serial", "python", "--hold-deg", "-5", "--release-after", "1")
+    try:
+        with (
+            serve_panel(tmp_path, "--config", relaxed_config(tmp_path)) as (url, runs),
+            sync_api.sync_playwright() as playwright,
+        ):
+            browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True)
+            try:
+                page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                page.goto(url)
+                page.wait_for_function("window.panel && window.panel.laws.length > 0 && window.panel.client")
+                page.select_option("#experiment", "drop-test")
+                assert page.locator("#law").input_value() == "passive"  # a drop test's constant current
+                assert page.locator("#road").is_hidden() and page.locator("#currents").is_visible()
+                page.select_option("#driver", "serial")
+                page.fill("#port", emu.link)
+                page.fill("#currents", "0 9")
+                page.click("#start")
+                sync_api.expect(page.locator("#refusal")).to_have_text(
+                    "--current: expected a current in [0, 1] A (rig.current_max_a), got 9"
+                )
+                assert [p.name for p in runs.iterdir()] == ["20261126T100000Z-run"]  # nothing started
+                page.fill("#currents", "0 1")
+                page.fill("#drop-duration", "1.5")
+                seen: dict[str, list[str]] = {"sub-run": [], "prompt": []}
+                page.expose_function("note", lambda box, text: seen[box].append(text))
+                page.evaluate(
+                    """for (const id of ["sub-run", "prompt"]) new MutationObserver(() => {
+                         const box = document.getElementById(id);
+                         if (!box.hidden) window.note(id, box.textContent);
+                       }).observe(document.getElementById(id), {childList: true, characterData: true, subtree: true, attributes: true})"""
+                )
+                page.click("#start")
+                page.wait_for_function(
+                    "window.panel.status.run_id === 1 && window.panel.status.state === 'idle'", timeout=FIRST_TRACE_MS
+                )
+                status = page.evaluate("window.panel.status")
+                sync_api.expect(page.locator("#sub-run")).to_have_text("drop test 2 of 2: 1 A")
+                sync_api.expect(page.locator("#results li").filter(has_text="period ")).to_have_count(2)
+                sync_api.expect(page.locator("#prompt")).to_be_hidden()  # the instructions end with the run
+                shown = page.evaluate("window.panel.data")
+                page.wait_for_selector(f'#run-table td:text-is("{Path(status["folder"]).name}")')
+            finally:
+                browser.close()
+    finally:
+        emu.stop()
+    assert status["exit_status"] == "ok" and status["experiment"] == "drop-test", status
+    assert "drop test 1 of 2: 0 A" in seen["sub-run"]
+    assert any(text.startswith("hold detected at ") and "release the arm when ready" in text for text in seen["prompt"])
+    assert any(text.startswith("release detected: ") for text in seen["prompt"])
+    cycles = read_csv(Path(status["folder"]) / "i1.000A" / "cycles.csv")  # the last sub-run's own rows
+    times = np.array(shown["time_s"], dtype=float)
+    assert len(times) > 10
+    index = np.searchsorted(cycles["time_s"], times)
+    np.testing.assert_array_equal(cycles["time_s"][index], times)
+    np.testing.assert_allclose(np.array(shown["theta_rad"], dtype=float), cycles["theta_rad"][index], rtol=1e-9)

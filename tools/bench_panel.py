@@ -14,8 +14,10 @@ first trace on a page with the kernels' cache warm, the click made :data:`AHEAD_
 opened (the loop process the server starts ahead is ready by then); the trace delay (a batch's transport from
 the server's read to the page, and the age of its newest row when read, whose sum plus one display
 tick bounds a row's delay); the server thread's CPU as a share of one core while streaming; STOP
-to 0 A commanded in cycles, and the measured current's decay to 5 % after it. Timing on a shared
-machine is noisy: run it on an otherwise idle box.
+to 0 A commanded in cycles, and the measured current's decay in data.csv after it, down to the
+loop's safe level (:data:`~sashil.runtime.loop.SAFE_CURRENT_A`, where it stops reading); how often the page's
+status carried the stream's live health counts, and the page's safe-state line after STOP. Timing
+on a shared machine is noisy: run it on an otherwise idle box.
 
     python tools/bench_panel.py                 # 30 s runs, two pages
     python tools/bench_panel.py --quick         # 1.5 s runs, one page: the code path only (seconds)
@@ -164,7 +166,11 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         time.sleep(0.001)
     first_trace_s = crowd[0].arrivals[0][0] - clicked
     cpu0, wall0 = time.clock_gettime(clock_id), time.perf_counter()
-    time.sleep(duration)
+    health_seen = 0  # status reads that carried the stream's live health counts
+    end = wall0 + duration
+    while time.perf_counter() < end:
+        time.sleep(min(0.1, max(0.0, end - time.perf_counter())))
+        health_seen += bool(bench.status()["health_live"])
     cpu1, wall1 = time.clock_gettime(clock_id), time.perf_counter()
     crowd[-1].outbox.append(json.dumps({"stop": True}))  # STOP from a page
     bench.join()
@@ -173,6 +179,7 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         page.join()
     server.should_exit = True
     serving.join()
+    shown = bench.status()
     folder = Path(bench.run.folder)
     summary = json.loads((folder / "summary.json").read_text())
     transport = [(arrived - reads[newest][0]) for page in crowd for arrived, newest in page.arrivals if newest in reads]
@@ -186,7 +193,9 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
     at = stop_rows[0] if stop_rows else len(rows) - 1
     zero = next((i for i in range(at, len(rows)) if command[i] == 0.0 and np.all(command[i:] == 0.0)), len(rows) - 1)
     start_current = abs(current[zero])
-    below = next((i for i in range(zero, len(rows)) if abs(current[i]) <= 0.05 * start_current), None)
+    from sashil.runtime.loop import SAFE_CURRENT_A
+
+    below = next((i for i in range(zero, len(rows)) if abs(current[i]) <= SAFE_CURRENT_A), None)
     return {
         "summary": summary,
         "first_trace_s": first_trace_s,
@@ -195,9 +204,13 @@ def panel_run(runs: Path, duration: float, pages: int) -> dict[str, Any]:
         "server_cpu": (cpu1 - cpu0) / (wall1 - wall0),
         "stop_cycles": zero - at,
         "current_at_stop_a": start_current,
-        "decay_ms": None if below is None or start_current == 0 else (times[below] - times[zero]) * 1e3,
+        "decay_ms": None if below is None else (times[below] - times[zero]) * 1e3,
+        "safe_level_a": SAFE_CURRENT_A,
         "rows_after": len(rows) - 1 - zero,
         "batches": sum(len(p.arrivals) for p in crowd),
+        "health_seen": health_seen,
+        "health": shown["health"],
+        "safe_state_line": shown["safe_state_line"],
     }
 
 
@@ -235,13 +248,18 @@ def main() -> int:
     decay = panel["decay_ms"]
     print(
         f"STOP to 0 A commanded: {panel['stop_cycles']} cycle(s) (goal <= 2); measured current "
-        f"{panel['current_at_stop_a']:.3f} A then, to 5 % in "
+        f"{panel['current_at_stop_a']:.3f} A then, down to {panel['safe_level_a']:g} A in "
         + (
             f"n/a: the stream ends {panel['rows_after']} row(s) after 0 A was commanded"
             if decay is None
             else f"{decay:.1f} ms"
         )
     )
+    print(
+        f"health while streaming: {panel['health_seen']} of the status reads (every 0.1 s) carried the stream's "
+        f"live counts; at the end {panel['health']}"
+    )
+    print(f"the page's line after STOP: {panel['safe_state_line'] or 'none (summary.json has no safe_state)'}")
     print(f"exit status: bare {bare['exit_status']}, panel {panel['summary']['exit_status']}")
     return 0
 

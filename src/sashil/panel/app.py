@@ -147,7 +147,10 @@ class Panel:
             client.offer(message)
 
     def tick(self) -> None:
-        """One display tick: the status when it changed, new events, the new rows as one batch."""
+        """One display tick: the status when it changed, new events, the new rows as one batch. The
+        batch is read first and the status names the sub-run it belongs to, and is queued before
+        it: a page starts a sub-run's traces afresh before its first rows arrive."""
+        batch = self.bench.next_batch()
         status = json.dumps({"type": "status", **self.bench.status()})
         if status != self._status_text:
             self._status_text = status
@@ -156,7 +159,6 @@ class Panel:
         if events:
             self._event_seq = events[-1]["seq"]
             self.broadcast(json.dumps({"type": "events", "events": events}))
-        batch = self.bench.next_batch()
         if batch is not None:
             self.broadcast(batch)
 

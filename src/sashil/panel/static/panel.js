@@ -11,7 +11,7 @@
   const $ = (id) => document.getElementById(id);
 
   const state = {
-    client: null, controller: null, status: {}, laws: [], runId: 0,
+    client: null, controller: null, status: {}, laws: [], runId: 0, subRun: 0,
     data: Object.fromEntries(COLUMNS.map((c) => [c, []])),
     frozen: null, dirty: false, batches: 0, bytes: 0, markers: [], redraws: 0,
   };
@@ -76,17 +76,35 @@
   }
   $("law").addEventListener("change", drawParams);
 
+  // -- the experiment: a run on a road, a drop test or a sweep, each with its verb's own values -------
+  function showExperiment() {
+    const experiment = $("experiment").value;
+    for (const group of document.querySelectorAll(".experiment")) group.hidden = group.dataset.experiment !== experiment;
+  }
+  $("experiment").addEventListener("change", () => {
+    // a drop test is a constant current until the release: the passive law unless one is chosen after
+    if ($("experiment").value === "drop-test" && lawOf("passive")) { $("law").value = "passive"; drawParams(); }
+    showExperiment();
+  });
+  function numberOf(id) { const text = $(id).value.trim(); return text === "" ? null : Number(text); }
+
   // -- start -------------------------------------------------------------------------------------
   $("start").addEventListener("click", async () => {
     $("refusal").textContent = "";
     const params = {};
     for (const input of $("params").querySelectorAll("input")) params[input.dataset.param] = input.value;
-    const duration = $("duration").value.trim();
-    const choice = {
-      law: $("law").value, params, road: $("road").value.trim() || null,
-      duration_s: duration === "" ? null : Number(duration),
-      driver: $("driver").value || null, port: $("port").value.trim() || null,
-    };
+    const experiment = $("experiment").value;
+    const choice = { experiment, law: $("law").value, params, driver: $("driver").value || null, port: $("port").value.trim() || null };
+    if (experiment === "run") Object.assign(choice, { road: $("road").value.trim() || null, duration_s: numberOf("duration") });
+    else if (experiment === "drop-test") {
+      Object.assign(choice, { theta0_deg: numberOf("theta0"), currents_a: $("currents").value.trim() || null, duration_s: numberOf("drop-duration") });
+    } else {
+      const mode = $("stepped").value;
+      Object.assign(choice, {
+        f_start_hz: numberOf("f-start"), f_stop_hz: numberOf("f-stop"), amplitude_deg: numberOf("amplitude"),
+        duration_s: numberOf("sweep-duration"), steps: numberOf("steps"), stepped: mode === "" ? null : mode === "stepped",
+      });
+    }
     try { await post("/api/start", choice); } catch (err) { $("refusal").textContent = err.message; }
   });
 
@@ -218,6 +236,8 @@
     const n = view.getUint32(0, true);
     const width = view.getUint32(4, true);
     const values = new Float64Array(buffer.slice(8));
+    const held = state.data.time_s;
+    if (n && held.length && values[0] < held[held.length - 1]) clearData(); // a new sub-run's time starts again
     for (let j = 0; j < width && j < COLUMNS.length; j++) {
       const column = state.data[COLUMNS[j]];
       for (let i = 0; i < n; i++) {
@@ -341,18 +361,51 @@
   function showStatus(status) {
     const previous = state.status;
     state.status = status;
-    if (status.run_id !== state.runId) { state.runId = status.run_id; clearData(); }
+    const subRun = status.sub_run ? status.sub_run.index : 0;
+    if (status.run_id !== state.runId || subRun !== state.subRun) { state.runId = status.run_id; state.subRun = subRun; clearData(); }
     if (previous.state && previous.state !== "idle" && status.state === "idle") loadRuns(); // the run's folder is complete
     state.markers = status.markers || [];
     const badge = $("state");
     badge.textContent = status.state + (status.state === "idle" && status.exit_status ? ` (last run: ${status.exit_status})` : "");
     badge.className = `badge ${status.state}`;
-    $("counts").textContent = status.run_id
-      ? `${status.law}  cycles ${status.cycles}  missed ${status.missed_deadlines} (${(100 * status.missed_share).toFixed(2)} %)  ${status.folder}`
+    $("counts").textContent = status.run_id ? `${status.experiment} ${status.law}  cycles ${status.cycles}  ${status.folder}` : "";
+    showHealth(status);
+    const names = { "drop-test": "drop test", sweep: "sweep", run: "run" };
+    $("sub-run").textContent = status.sub_run
+      ? `${names[status.experiment] || status.experiment} ${status.sub_run.index} of ${status.sub_run.of}${status.sub_run.label ? `: ${status.sub_run.label}` : ""}`
       : "";
+    const prompt = $("prompt");
+    prompt.hidden = !(status.prompt && status.state !== "idle");
+    prompt.textContent = status.prompt || "";
+    const safe = $("safe-state");
+    safe.hidden = !status.safe_state_line;
+    safe.textContent = status.safe_state_line || "";
+    safe.className = status.safe_state && status.safe_state.confirmed ? "confirmed" : "unconfirmed";
+    const results = $("results");
+    if (results.childElementCount !== (status.results || []).length) {
+      results.innerHTML = "";
+      for (const line of status.results || []) results.appendChild(Object.assign(document.createElement("li"), { textContent: line }));
+    }
     if (previous.run_id !== status.run_id || previous.state !== status.state
         || JSON.stringify(previous.values) !== JSON.stringify(status.values)) drawSliders(status);
     applyRole();
+  }
+  function showHealth(status) {
+    const box = $("health");
+    box.innerHTML = "";
+    if (!status.run_id) return;
+    const item = (text, bad, title) => box.appendChild(Object.assign(document.createElement("span"), { textContent: text + "  ", className: bad ? "bad" : "", title: title || "" }));
+    item(`missed ${status.missed_deadlines} (${(100 * status.missed_share).toFixed(2)} %)`, status.missed_deadlines > 0);
+    const h = status.health;
+    if (!h) {
+      if (status.state !== "idle") item("link health: at the end", false, "this loop's stream reports no health while it runs: the summary's, when it ends");
+      return;
+    }
+    if (h.clipped_cycles != null) item(`clipped ${status.clipped_share == null ? "-" : (100 * status.clipped_share).toFixed(1)} %`, false, `${h.clipped_cycles} cycles with T* outside the feasible band`);
+    if (h.samples_lost != null) item(`lost ${h.samples_lost}`, h.samples_lost > 0, "samples lost on the link");
+    if (h.bad_frames != null) item(`bad frames ${h.bad_frames}`, h.bad_frames > 0);
+    if (h.watchdog != null) item(`watchdog ${h.watchdog}`, h.watchdog > 0, "samples the board flagged with its watchdog");
+    if (!status.health_live) item("(summary)", false, "the counts of the run's summary.json");
   }
   function applyRole() {
     const controls = state.client !== null && state.client === state.controller;
@@ -360,7 +413,7 @@
     $("role").textContent = controls ? "you control" : "watching (STOP works)";
     $("hand-over").hidden = !controls;
     for (const el of document.querySelectorAll("#bench input, #bench select, #bench button")) el.disabled = !controls || running;
-    for (const el of document.querySelectorAll("#tuning input, #tuning #restore")) el.disabled = !controls || !running;
+    for (const el of document.querySelectorAll("#tuning input, #tuning #restore")) el.disabled = !controls || !running || state.status.experiment !== "run";
   }
   function showEvents(events) {
     const list = $("events");
@@ -394,5 +447,6 @@
       setTimeout(connect, 1000);
     };
   }
+  showExperiment();
   loadLaws().then(connect).then(loadRuns);
 })();
