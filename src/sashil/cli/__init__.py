@@ -96,7 +96,7 @@ VERBS: dict[str, Verb] = {
     ),
     "panel": Verb(
         "sashil.cli.panel",
-        "the bench in a browser: run a law on a road, live traces, live tuning and STOP (127.0.0.1, token)",
+        "the bench in a browser: a run on a road, a drop test or a sweep, live traces, live tuning and STOP (127.0.0.1, token)",
     ),
 }
 
