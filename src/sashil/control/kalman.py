@@ -67,7 +67,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm, solve_discrete_are
 
 from sashil.control.edge_kalman import edge_cycle
 from sashil.control.estimator import EstimatorOutputs
@@ -107,6 +106,8 @@ EDGE_BAD_SHARE = 0.01
 
 def discrete_model(dt: float, accel_psd: float, road_jerk_psd: float, bias_psd: float) -> tuple[np.ndarray, np.ndarray]:
     """(F, Q) of the state model (module docstring) over one period ``dt`` (Van Loan's method)."""
+    from scipy.linalg import expm  # loaded when a filter is built: a passive run never pays for it
+
     a = np.zeros((6, 6))
     a[THETA, THETA_DOT] = 1.0
     a[THETA_DOT, ROAD_DDOT] = -1.0
@@ -133,6 +134,8 @@ def steady_state(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The 6x2 steady-state Kalman gain for measurement noise variance ``angle_var`` on each encoder,
     and the predicted covariance it comes from."""
+    from scipy.linalg import solve_discrete_are  # loaded when a filter is built
+
     f, q = discrete_model(dt, accel_psd, road_jerk_psd, bias_psd)
     h = np.array([[1.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
     r = np.eye(2) * angle_var
