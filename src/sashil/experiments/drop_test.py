@@ -486,8 +486,9 @@ def run_drop_test(
 
     On the real clock with ``loop.process`` (the default) the drop runs in a loop process of its
     own (:mod:`sashil.runtime.loop_process`), which opens the rig, plays or waits for the operator
-    and runs the plan; its prompts reach ``notify`` as they come. A controller other than the
-    config's law runs in this process (it cannot cross to another). ``rig``: the rig for a run in
+    and runs the plan; its prompts reach ``notify`` as they come. A controller crosses to it as the
+    config's law or as its own ``spec()`` (a calibration step's stage); any other runs its drop in
+    this process. ``rig``: the rig for a run in
     this process (default: the config's). ``data_path``: where every cycle of the loop is streamed
     as it runs (the hold included, time from the loop's start); the record returned is the part
     from the release. ``live``: views of the stream (``start(stream, timing)``, ``close(trips,
@@ -502,16 +503,18 @@ def run_drop_test(
     spec = {"kind": "drop-test", "theta0_deg": theta0_deg, "current_a": current_a, "duration_s": duration_s}
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
-    by_config = isinstance(controller, str) and controller == CONFIG_LAW
-    # the plan here is the loop process's twin when one runs it: it takes the facts that one saw
-    twin = DropTestPlan(
-        DropTestSettings.from_config(config, theta0_deg, current_a, duration_s),
-        config["rig"]["encoder_counts_per_rev"],
-        config_controller(config) if by_config else controller,
-        notify,
-    )
-    twin.from_config = by_config
-    if in_loop_process(config, clock) and twin.spec() is not None:
+    twin = None
+    if in_loop_process(config, clock):
+        # the plan here is the loop process's twin: it takes the facts that one saw after the run
+        by_config = isinstance(controller, str) and controller == CONFIG_LAW
+        twin = DropTestPlan(
+            DropTestSettings.from_config(config, theta0_deg, current_a, duration_s),
+            config["rig"]["encoder_counts_per_rev"],
+            config_controller(config) if by_config else controller,
+            notify,
+        )
+        twin.from_config = by_config
+    if twin is not None and twin.spec() is not None:
         plan = twin
         outcome = run_plan_process(
             config, plan, None, data_path=data_path, say=log.warning, live=live, stop=stop, trace=trace
