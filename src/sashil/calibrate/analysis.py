@@ -43,6 +43,7 @@ from sashil.identify.fit import (
     simulate_fitted,
 )
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
+from sashil.identify.road import angle_acceleration, applied_road_angle, speed_steps_acceleration
 from sashil.identify.rig_models import MODELS
 from sashil.stats import nrmse
 
@@ -56,6 +57,8 @@ REST_TAIL_S = 0.5
 GAP_S = 0.040
 #: a record shorter than this (samples) after the cuts is left out
 MIN_RECORD_SAMPLES = 300
+#: the road angle the board applied at each sample [rad] (:func:`with_applied_road`)
+APPLIED_ROAD = "theta_road_applied_rad"
 #: values of n the profile refits at (geometric over the fit's bounds)
 N_PROFILE = (0.1, 0.25, 0.6, 1.5)
 #: output-error evaluations of each profile point's refinement (each costs a Jacobian)
@@ -142,7 +145,10 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
     the data (a link: the bench or the emulator) starts at its first turning point."""
     out = []
     for r in results:
-        cols = until_gap(trimmed(r.columns, counts_per_rev) if r.step.road is None else r.columns)
+        cols = r.columns
+        if r.step.road is not None:
+            cols = with_applied_road(cols, counts_per_rev)
+        cols = until_gap(trimmed(cols, counts_per_rev) if r.step.road is None else cols)
         if cols["time_s"].size < MIN_RECORD_SAMPLES:
             continue  # cut too short by a link gap: left out (the report lists it without NRMSE)
         z0_sign = None
@@ -151,7 +157,9 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
             if turned is not None:
                 cols, z0_sign = turned
         record = record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign)
-        if "road_speed_cmd_rad_s" in cols:
+        if APPLIED_ROAD in cols:
+            record = dataclasses.replace(record, acc_road=angle_acceleration(cols["time_s"], cols[APPLIED_ROAD]))
+        elif "road_speed_cmd_rad_s" in cols:
             record = dataclasses.replace(
                 record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
             )
@@ -161,15 +169,31 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
     return out
 
 
+def with_applied_road(columns: dict[str, np.ndarray], counts_per_rev: int) -> dict[str, np.ndarray]:
+    """``columns`` with the road angle the board applied at each sample (:data:`APPLIED_ROAD`, from
+    the road encoder's edges on the device's clock: :func:`sashil.identify.road.applied_road_angle`),
+    when the record carries the edges and the encoder reported enough of them; else unchanged."""
+    if "road_edge_s" not in columns or "road_edge_dir" not in columns or "theta_road_rad" not in columns:
+        return columns
+    q = 2.0 * math.pi / counts_per_rev
+    angle = applied_road_angle(
+        columns["time_s"],
+        columns["road_edge_s"],
+        columns["road_edge_dir"],
+        np.rint(columns["theta_road_rad"] / q),
+        q,
+        columns.get("road_speed_cmd_rad_s"),
+    )
+    return columns if angle is None else {**columns, APPLIED_ROAD: angle}
+
+
 def road_acceleration(time_s: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
     """The road wheel's acceleration from the speeds commanded each cycle: the wheel steps to the
     cycle's command right after the cycle's sample (the emulator's wheel, a motor with a fast
     speed loop), so the speed changes by ``cmd[j] - cmd[j-1]`` within the interval after sample j.
     Smoothing the recorded road angle instead (11 encoder counts for a 1 deg road) overstated the
     forcing by half at 3 Hz, and a fit to a 1 A road run could not follow it."""
-    step = np.diff(speed_cmd, prepend=speed_cmd[:1])
-    dt = np.diff(time_s, append=time_s[-1] + (time_s[-1] - time_s[-2] if time_s.size > 1 else 1e-3))
-    return step / np.maximum(dt, 1e-6)
+    return speed_steps_acceleration(time_s, np.diff(speed_cmd, prepend=speed_cmd[:1]))
 
 
 @dataclass

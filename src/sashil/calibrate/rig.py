@@ -78,7 +78,9 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     is the sample's sequence number. Over a link the host's times carry the link's latency jitter
     (rows 0.03-11 ms apart at 1 kHz on a busy machine), which an output-error fit reads as
     dynamics; a repeated sample (a link gap) is dropped. A road step (``road``) adds the wheel
-    speed commanded in each row's cycle (``road_speed_cmd_rad_s``), all from the runner's stream."""
+    speed commanded in each row's cycle (``road_speed_cmd_rad_s``) and the road encoder's last edge
+    as each sample carried it, on the same clock (``road_edge_s``: NaN none; ``road_edge_dir``
+    +1/-1, 0 none): where the board's wheel was, and when. All from the runner's stream."""
     columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
     stream = record.stream
     if columns["time_s"].size == 0 or "device_time_us" not in stream or record.device_release_s is None:
@@ -90,6 +92,11 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     out["time_s"] = t[keep]
     if road:
         out["road_speed_cmd_rad_s"] = held_speed(stream["road_speed_cmd_rad_s"])[keep]
+        if "road_edge_us" in stream:
+            edge_us = np.asarray(stream["road_edge_us"], dtype=float)
+            edge_s = np.where(edge_us >= 0.0, edge_us * 1e-6 - record.device_release_s, np.nan)
+            out["road_edge_s"] = edge_s[keep]
+            out["road_edge_dir"] = np.asarray(stream["road_edge_dir"])[keep].astype(np.int64)
     return out
 
 

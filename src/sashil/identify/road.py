@@ -1,0 +1,105 @@
+"""The road wheel's angle as the board applied it, read from the road encoder's edge times.
+
+The fit's road forcing is ``-J * theta1_ddot`` (seed 001 eq. 13 with the road side driven). The
+speeds a host commands reach a board over a link late by a varying amount, so the road they
+describe is shifted in time against the recorded arm: by the delay times the speed, a count or so
+at the calibration chirp's top speed. The road encoder's edges say where the road was and when, on
+the device's clock: a count ``n`` reached going up crossed the boundary ``(n - 1/2) q``, going down
+``(n + 1/2) q``, at the instant the board stamped (``drivers/protocol.md``, "Encoder edges"). Those
+points carry no quantisation.
+
+Between edges (4-100 ms apart on a 1 deg chirp) the commanded speeds give the road's shape: the
+road angle is their integral on the device's clock plus a correction the edges measure (the
+accumulated delay of the commands so far), linear between edges. On a rig that applies each
+command at once the correction is a constant. Without commanded speeds a cubic spline through the
+edges is the road angle (its error over the longest gap, at a reversal of a 1 deg, 3 Hz chirp:
+5/384 h^4 max|theta1 4th derivative|, about 2e-5 rad, 1 % of a count).
+
+The boundary each edge crossed is chained from edge to edge (consecutive edges of directions
+``d0, d1`` are ``(d0 + d1) / 2`` counts apart when none was missed between them) and anchored on
+the counts by a running median, so a count that angle noise flipped does not move an edge; a
+missed edge (two in one sample period, or lost samples) shifts the anchor, which the median
+follows within a few edges.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.ndimage import median_filter
+
+#: edges the running median anchors each boundary on (odd)
+ANCHOR_EDGES = 15
+#: fewest edges the spline needs (a cubic with not-a-knot ends)
+MIN_EDGES = 4
+
+
+def edge_boundaries(
+    edge_s: np.ndarray, edge_dir: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The road encoder's distinct edges: their times [s] and the boundaries they crossed [counts,
+    half-integers], from each sample's last edge (``edge_s``: NaN none; ``edge_dir`` +1/-1, 0 none)
+    and its count. Edges out of time order are left out. None: fewer than MIN_EDGES edges."""
+    edge_s = np.asarray(edge_s, dtype=float)
+    edge_dir = np.asarray(edge_dir, dtype=float)
+    counts = np.asarray(counts, dtype=float)
+    valid = np.isfinite(edge_s) & (edge_dir != 0.0)
+    t, d, n = edge_s[valid], np.sign(edge_dir[valid]), counts[valid]
+    if t.size == 0:
+        return None
+    later = np.ones(t.size, dtype=bool)  # each edge once (the first sample that carried it), in time order
+    later[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
+    t, d, n = t[later], d[later], n[later]
+    if t.size < MIN_EDGES:
+        return None
+    chain = np.concatenate(([0.0], np.cumsum(0.5 * (d[:-1] + d[1:]))))
+    offset = median_filter(n - 0.5 * d - chain, size=min(ANCHOR_EDGES, t.size | 1), mode="nearest")
+    return t, chain + offset
+
+
+def applied_road_angle(
+    time_s: np.ndarray,
+    edge_s: np.ndarray,
+    edge_dir: np.ndarray,
+    counts: np.ndarray,
+    quantum_rad: float,
+    speed_cmd_rad_s: np.ndarray | None = None,
+) -> np.ndarray | None:
+    """The road angle [rad] at each sample time ``time_s`` (the device's clock, as ``edge_s``) through
+    the edges' boundaries (:func:`edge_boundaries`; ``counts``: the road encoder's count of each
+    sample, ``quantum_rad`` its size). With the commanded speeds (``speed_cmd_rad_s``, each held from
+    its row's sample on) the angle is their integral plus the correction the edges measure, linear
+    between edges and held beyond the first and the last one: the link's delay of each command
+    shows up as that correction. Without them, a cubic spline through the edges, held beyond its
+    ends. None when the encoder reported fewer than MIN_EDGES edges."""
+    time_s = np.asarray(time_s, dtype=float)
+    edges = edge_boundaries(edge_s, edge_dir, counts)
+    if edges is None:
+        return None
+    t_edge, boundary = edges
+    angle = boundary * quantum_rad
+    if speed_cmd_rad_s is None:
+        inside = np.clip(time_s, t_edge[0], t_edge[-1])
+        return np.asarray(CubicSpline(t_edge, angle)(inside))
+    travelled = np.zeros(time_s.size)
+    if time_s.size > 1:
+        travelled[1:] = np.cumsum(np.asarray(speed_cmd_rad_s, dtype=float)[:-1] * np.diff(time_s))
+    correction = angle - np.interp(t_edge, time_s, travelled)
+    return travelled + np.interp(time_s, t_edge, correction)
+
+
+def speed_steps_acceleration(time_s: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """The road acceleration that steps the wheel's speed by ``steps[j]`` right after sample j,
+    as the fit's simulation reads it (linear between samples: ``steps[j]`` over the interval after
+    the sample)."""
+    dt = np.diff(time_s, append=time_s[-1] + (time_s[-1] - time_s[-2] if time_s.size > 1 else 1e-3))
+    return steps / np.maximum(dt, 1e-6)
+
+
+def angle_acceleration(time_s: np.ndarray, theta_road_rad: np.ndarray) -> np.ndarray:
+    """The road acceleration of a road angle known at each sample: the speed over each interval is
+    the angle's chord, and it steps from one interval's to the next at the sample between them."""
+    speed = np.diff(theta_road_rad) / np.maximum(np.diff(time_s), 1e-9)
+    steps = np.zeros(time_s.size)
+    steps[1:-1] = np.diff(speed)
+    return speed_steps_acceleration(time_s, steps)
