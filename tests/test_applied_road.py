@@ -10,7 +10,8 @@ import pytest
 from sashil.calibrate.analysis import APPLIED_ROAD, records_of, road_acceleration, with_applied_road
 from sashil.calibrate.plan import RoadChirp, Step
 from sashil.calibrate.rig import StepResult
-from sashil.identify.road import angle_acceleration, applied_road_angle, edge_boundaries
+from sashil.identify.data import load_records
+from sashil.identify.road import angle_acceleration, applied_road_angle, count_quantum, edge_boundaries
 
 COUNTS = 4096
 Q = 2.0 * math.pi / COUNTS
@@ -148,3 +149,18 @@ def test_calibration_takes_the_road_from_the_edges_when_the_record_has_them() ->
     (record,) = records_of([older], COUNTS)
     t = older.columns["time_s"]
     assert record.acc_road == pytest.approx(road_acceleration(t, older.columns["road_speed_cmd_rad_s"]))
+
+
+def test_identify_reads_the_applied_road_from_a_data_file(tmp_path) -> None:
+    """A road run's data.csv (calibrate writes the edges beside the counts) fitted by ``identify``:
+    the same road as calibrate's, the count read from the road angle's steps."""
+    rng = np.random.default_rng(5)
+    result, truth = road_result(rng.uniform(1e-3, 9e-3, 1500))
+    path = tmp_path / "data.csv"
+    names = list(result.columns)
+    rows = np.column_stack([result.columns[n] for n in names])
+    np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="", fmt="%.9g")
+    (record,) = load_records([path])
+    (calibrated,) = records_of([result], COUNTS)
+    assert count_quantum(result.columns["theta_road_rad"]) == pytest.approx(Q)
+    assert record.acc_road == pytest.approx(calibrated.acc_road, rel=1e-4, abs=1e-3)

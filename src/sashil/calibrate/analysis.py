@@ -43,7 +43,7 @@ from sashil.identify.fit import (
     simulate_fitted,
 )
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
-from sashil.identify.road import angle_acceleration, applied_road_angle, speed_steps_acceleration
+from sashil.identify.road import APPLIED_ROAD, road_of_columns, speed_steps_acceleration
 from sashil.identify.rig_models import MODELS
 from sashil.stats import nrmse
 
@@ -57,8 +57,6 @@ REST_TAIL_S = 0.5
 GAP_S = 0.040
 #: a record shorter than this (samples) after the cuts is left out
 MIN_RECORD_SAMPLES = 300
-#: the road angle the board applied at each sample [rad] (:func:`with_applied_road`)
-APPLIED_ROAD = "theta_road_applied_rad"
 #: values of n the profile refits at (geometric over the fit's bounds)
 N_PROFILE = (0.1, 0.25, 0.6, 1.5)
 #: output-error evaluations of each profile point's refinement (each costs a Jacobian)
@@ -158,7 +156,7 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
                 cols, z0_sign = turned
         record = record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign)
         if APPLIED_ROAD in cols:
-            record = dataclasses.replace(record, acc_road=angle_acceleration(cols["time_s"], cols[APPLIED_ROAD]))
+            pass  # record_from_columns took the road from it
         elif "road_speed_cmd_rad_s" in cols:
             record = dataclasses.replace(
                 record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
@@ -171,24 +169,15 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
 
 def with_applied_road(columns: dict[str, np.ndarray], counts_per_rev: int) -> dict[str, np.ndarray]:
     """``columns`` with the road angle the board applied at each sample (:data:`APPLIED_ROAD`, from
-    the road encoder's edges on the device's clock: :func:`sashil.identify.road.applied_road_angle`),
+    the road encoder's edges on the device's clock: :func:`sashil.identify.road.road_of_columns`),
     when the record carries the edges and the encoder reported enough of them; else unchanged."""
-    if "road_edge_s" not in columns or "road_edge_dir" not in columns or "theta_road_rad" not in columns:
-        return columns
-    q = 2.0 * math.pi / counts_per_rev
-    angle = applied_road_angle(
-        columns["time_s"],
-        columns["road_edge_s"],
-        columns["road_edge_dir"],
-        np.rint(columns["theta_road_rad"] / q),
-        q,
-        columns.get("road_speed_cmd_rad_s"),
-    )
+    angle = road_of_columns(columns, 2.0 * math.pi / counts_per_rev)
     return columns if angle is None else {**columns, APPLIED_ROAD: angle}
 
 
 def road_acceleration(time_s: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
-    """The road wheel's acceleration from the speeds commanded each cycle: the wheel steps to the
+    """The road wheel's acceleration from the speeds commanded each cycle (a record without the
+    road encoder's edges, as older run folders are): the wheel steps to the
     cycle's command right after the cycle's sample (the emulator's wheel, a motor with a fast
     speed loop), so the speed changes by ``cmd[j] - cmd[j-1]`` within the interval after sample j.
     Smoothing the recorded road angle instead (11 encoder counts for a 1 deg road) overstated the

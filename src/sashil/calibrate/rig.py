@@ -21,6 +21,7 @@ from sashil.calibrate.plan import Step
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
+from sashil.identify.road import held_speed
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
@@ -98,14 +99,6 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
             out["road_edge_s"] = edge_s[keep]
             out["road_edge_dir"] = np.asarray(stream["road_edge_dir"])[keep].astype(np.int64)
     return out
-
-
-def held_speed(commanded: np.ndarray) -> np.ndarray:
-    """The road wheel's speed in each row: the last speed commanded (NaN: the cycle changed
-    nothing), 0 before the first command (the wheel starts at rest)."""
-    index = np.where(np.isfinite(commanded), np.arange(commanded.size), -1)
-    index = np.maximum.accumulate(index) if index.size else index
-    return np.where(index >= 0, commanded[np.maximum(index, 0)], 0.0)
 
 
 def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = None) -> StepResult:

@@ -28,6 +28,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import median_filter
 
+#: the column of the road angle the board applied at each sample [rad]
+APPLIED_ROAD = "theta_road_applied_rad"
 #: edges the running median anchors each boundary on (odd)
 ANCHOR_EDGES = 15
 #: fewest edges the spline needs (a cubic with not-a-knot ends)
@@ -86,6 +88,50 @@ def applied_road_angle(
         travelled[1:] = np.cumsum(np.asarray(speed_cmd_rad_s, dtype=float)[:-1] * np.diff(time_s))
     correction = angle - np.interp(t_edge, time_s, travelled)
     return travelled + np.interp(time_s, t_edge, correction)
+
+
+def held_speed(commanded: np.ndarray) -> np.ndarray:
+    """The road wheel's speed in each row: the last speed commanded (NaN: the cycle changed
+    nothing), 0 before the first command (the wheel starts at rest)."""
+    index = np.where(np.isfinite(commanded), np.arange(commanded.size), -1)
+    index = np.maximum.accumulate(index) if index.size else index
+    return np.where(index >= 0, commanded[np.maximum(index, 0)], 0.0)
+
+
+def count_quantum(angle_rad: np.ndarray) -> float:
+    """The encoder count [rad] of a recorded angle: its smallest step between samples when every
+    step is a whole number of it; 0 when the angle never moved or is not a count."""
+    steps = np.abs(np.diff(angle_rad))
+    moved = steps[steps > 0.0]
+    if moved.size == 0:
+        return 0.0
+    quantum = float(moved.min())
+    ratio = moved / quantum
+    return quantum if bool(np.all(np.abs(ratio - np.round(ratio)) <= 1e-6 * np.maximum(ratio, 1.0))) else 0.0
+
+
+def road_of_columns(columns: dict[str, np.ndarray], quantum_rad: float | None = None) -> np.ndarray | None:
+    """The applied road angle of a record's columns (:func:`applied_road_angle`): ``road_edge_s``
+    (the road encoder's last edge of each sample, on ``time_s``'s clock), ``road_edge_dir``,
+    ``theta_road_rad`` (its count) and, when present, ``road_speed_cmd_rad_s``. ``quantum_rad``:
+    the encoder's count (None: read from ``theta_road_rad``'s steps). None without the edges."""
+    if APPLIED_ROAD in columns:
+        return np.asarray(columns[APPLIED_ROAD], dtype=float)
+    if not {"road_edge_s", "road_edge_dir", "theta_road_rad"} <= columns.keys():
+        return None
+    road = np.asarray(columns["theta_road_rad"], dtype=float)
+    q = quantum_rad or count_quantum(road)
+    if q <= 0.0:
+        return None
+    speed = columns.get("road_speed_cmd_rad_s")
+    return applied_road_angle(
+        columns["time_s"],
+        columns["road_edge_s"],
+        columns["road_edge_dir"],
+        np.rint(road / q),
+        q,
+        None if speed is None else held_speed(np.asarray(speed, dtype=float)),
+    )
 
 
 def speed_steps_acceleration(time_s: np.ndarray, steps: np.ndarray) -> np.ndarray:
