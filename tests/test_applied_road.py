@@ -155,7 +155,7 @@ def test_identify_reads_the_applied_road_from_a_data_file(tmp_path) -> None:
     """A road run's data.csv (calibrate writes the edges beside the counts) fitted by ``identify``:
     the same road as calibrate's, the count read from the road angle's steps."""
     rng = np.random.default_rng(5)
-    result, truth = road_result(rng.uniform(1e-3, 9e-3, 1500))
+    result, _ = road_result(rng.uniform(1e-3, 9e-3, 1500))
     path = tmp_path / "data.csv"
     names = list(result.columns)
     rows = np.column_stack([result.columns[n] for n in names])

@@ -43,8 +43,8 @@ from sashil.identify.fit import (
     simulate_fitted,
 )
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
-from sashil.identify.road import APPLIED_ROAD, road_of_columns, speed_steps_acceleration
 from sashil.identify.rig_models import MODELS
+from sashil.identify.road import APPLIED_ROAD, road_of_columns, speed_steps_acceleration
 from sashil.stats import nrmse
 
 #: the arm is at rest once it stays within this many encoder counts of its final angle
