@@ -25,8 +25,9 @@ from sashil.identify.road import held_speed
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
-#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase the fit
-#: follows exactly (the commanded speeds are recorded), at a quarter of the link traffic per cycle
+#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase (the
+#: commanded speeds are recorded, and shape the applied road between the road encoder's edges), at a
+#: quarter of the link traffic per cycle
 ROAD_UPDATE_CYCLES = 4
 
 
