@@ -164,3 +164,12 @@ def test_identify_reads_the_applied_road_from_a_data_file(tmp_path) -> None:
     (calibrated,) = records_of([result], COUNTS)
     assert count_quantum(result.columns["theta_road_rad"]) == pytest.approx(Q)
     assert record.acc_road == pytest.approx(calibrated.acc_road, rel=1e-4, abs=1e-3)
+
+
+def test_the_chain_starts_again_after_lost_samples() -> None:
+    """Samples lost while the road crossed two boundaries: the next edge is anchored on its own
+    count, not chained from the edge before the gap."""
+    time_s = np.array([0.000, 0.001, 0.002, 0.003, 0.004, 0.008, 0.009, 0.010, 0.011, 0.012])
+    counts = np.array([0, 1, 2, 3, 4, 7, 8, 9, 10, 11], dtype=float)
+    _, boundary = edge_boundaries(time_s - 1e-4, np.ones(10), counts, time_s)
+    assert boundary.tolist() == (counts - 0.5).tolist()

@@ -17,9 +17,9 @@ edges is the road angle (its error over the longest gap, at a reversal of a 1 de
 
 The boundary each edge crossed is chained from edge to edge (consecutive edges of directions
 ``d0, d1`` are ``(d0 + d1) / 2`` counts apart when none was missed between them) and anchored on
-the counts by a running median, so a count that angle noise flipped does not move an edge; a
-missed edge (two in one sample period, or lost samples) shifts the anchor, which the median
-follows within a few edges.
+the counts by a running median, so a count that angle noise flipped does not move an edge. The
+chain starts again where an edge may have been missed (lost samples, or two counts in one sample
+period).
 """
 
 from __future__ import annotations
@@ -37,26 +37,40 @@ MIN_EDGES = 4
 
 
 def edge_boundaries(
-    edge_s: np.ndarray, edge_dir: np.ndarray, counts: np.ndarray
+    edge_s: np.ndarray, edge_dir: np.ndarray, counts: np.ndarray, time_s: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The road encoder's distinct edges: their times [s] and the boundaries they crossed [counts,
     half-integers], from each sample's last edge (``edge_s``: NaN none; ``edge_dir`` +1/-1, 0 none)
-    and its count. Edges out of time order are left out. None: fewer than MIN_EDGES edges."""
+    and its count. Edges out of time order are left out. The chain of boundaries starts again where
+    an edge may have been missed: after samples were lost (``time_s``: a step of more than 1.5
+    median periods) or where the count moved two or more between samples. None: fewer than
+    MIN_EDGES edges."""
     edge_s = np.asarray(edge_s, dtype=float)
     edge_dir = np.asarray(edge_dir, dtype=float)
     counts = np.asarray(counts, dtype=float)
-    valid = np.isfinite(edge_s) & (edge_dir != 0.0)
-    t, d, n = edge_s[valid], np.sign(edge_dir[valid]), counts[valid]
-    if t.size == 0:
+    missed = np.zeros(counts.size, dtype=bool)
+    missed[1:] = np.abs(np.diff(counts)) >= 2.0
+    if time_s is not None and counts.size > 2:
+        step = np.diff(np.asarray(time_s, dtype=float))
+        missed[1:] |= step > 1.5 * float(np.median(step))
+    run = np.cumsum(missed)  # the chain each sample belongs to
+    rows = np.flatnonzero(np.isfinite(edge_s) & (edge_dir != 0.0))
+    if rows.size == 0:
         return None
+    t = edge_s[rows]
     later = np.ones(t.size, dtype=bool)  # each edge once (the first sample that carried it), in time order
     later[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
-    t, d, n = t[later], d[later], n[later]
+    rows, t = rows[later], t[later]
     if t.size < MIN_EDGES:
         return None
-    chain = np.concatenate(([0.0], np.cumsum(0.5 * (d[:-1] + d[1:]))))
-    offset = median_filter(n - 0.5 * d - chain, size=min(ANCHOR_EDGES, t.size | 1), mode="nearest")
-    return t, chain + offset
+    d, measured, chain_of = np.sign(edge_dir[rows]), counts[rows] - 0.5 * np.sign(edge_dir[rows]), run[rows]
+    boundary = np.empty(t.size)
+    for chain in np.unique(chain_of):
+        k = np.flatnonzero(chain_of == chain)
+        chained = np.concatenate(([0.0], np.cumsum(0.5 * (d[k][:-1] + d[k][1:]))))
+        offset = median_filter(measured[k] - chained, size=min(ANCHOR_EDGES, k.size | 1), mode="mirror")
+        boundary[k] = chained + offset
+    return t, boundary
 
 
 def applied_road_angle(
@@ -75,7 +89,7 @@ def applied_road_angle(
     shows up as that correction. Without them, a cubic spline through the edges, held beyond its
     ends. None when the encoder reported fewer than MIN_EDGES edges."""
     time_s = np.asarray(time_s, dtype=float)
-    edges = edge_boundaries(edge_s, edge_dir, counts)
+    edges = edge_boundaries(edge_s, edge_dir, counts, time_s)
     if edges is None:
         return None
     t_edge, boundary = edges
