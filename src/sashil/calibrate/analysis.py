@@ -140,7 +140,9 @@ def gap_cut(result: StepResult, counts_per_rev: int) -> float | None:
 
 def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Record]:
     """Fit records of the steps: drops cut once at rest; a step whose release was estimated from
-    the data (a link: the bench or the emulator) starts at its first turning point."""
+    the data (a link: the bench or the emulator) starts at its first turning point. A road run's
+    forcing is the road the board applied (:func:`with_applied_road`), or where its record lacks the
+    road encoder's edges the commanded speeds (:func:`road_acceleration`)."""
     out = []
     for r in results:
         cols = r.columns
@@ -155,8 +157,8 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
             if turned is not None:
                 cols, z0_sign = turned
         record = record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign)
-        if APPLIED_ROAD in cols:
-            pass  # record_from_columns took the road from it
+        if APPLIED_ROAD in cols:  # record_from_columns took the road's forcing from it
+            pass
         elif "road_speed_cmd_rad_s" in cols:
             record = dataclasses.replace(
                 record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
