@@ -173,3 +173,18 @@ def test_the_chain_starts_again_after_lost_samples() -> None:
     counts = np.array([0, 1, 2, 3, 4, 7, 8, 9, 10, 11], dtype=float)
     _, boundary = edge_boundaries(time_s - 1e-4, np.ones(10), counts, time_s)
     assert boundary.tolist() == (counts - 0.5).tolist()
+
+
+def test_counts_flipped_by_angle_noise_do_not_move_the_edges() -> None:
+    """Angle noise of 0.3 counts before quantisation (the simulated rig's): right after an edge the
+    angle is near the boundary and about half the counts there are off by one; the edges are not."""
+    rng = np.random.default_rng(11)
+    commanded_at, speeds = chirp_commands(6.0)
+    t = np.arange(0.0, 6.0, PERIOD_S)
+    counts, edge_s, edge_dir = encoder_samples(commanded_at, speeds, t)
+    truth = road_path(commanded_at, speeds, t)
+    noisy = np.rint(truth / Q + rng.normal(0.0, 0.3, t.size))
+    assert np.mean(noisy != counts) > 0.2
+    _, clean = edge_boundaries(edge_s, edge_dir, counts, t)
+    _, boundary = edge_boundaries(edge_s, edge_dir, noisy, t)
+    assert boundary.tolist() == clean.tolist()

@@ -17,21 +17,21 @@ edges is the road angle (its error over the longest gap, at a reversal of a 1 de
 
 The boundary each edge crossed is chained from edge to edge (consecutive edges of directions
 ``d0, d1`` are ``(d0 + d1) / 2`` counts apart when none was missed between them) and anchored on
-the counts by a running median, so a count that angle noise flipped does not move an edge. The
-chain starts again where an edge may have been missed (lost samples, or two counts in one sample
-period).
+the median of the counts of every sample after each edge, so counts that angle noise flipped (most
+often right after an edge, where the angle is near the boundary) do not move an edge. The chain
+starts again where samples were lost; an edge missed otherwise (two in one sample period: a road
+faster than a count per period, 8 times the calibration chirp's top speed) is not detected.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.ndimage import median_filter
 
 #: the column of the road angle the board applied at each sample [rad]
 APPLIED_ROAD = "theta_road_applied_rad"
-#: edges the running median anchors each boundary on (odd)
-ANCHOR_EDGES = 15
 #: fewest edges the spline needs (a cubic with not-a-knot ends)
 MIN_EDGES = 4
 
@@ -42,17 +42,15 @@ def edge_boundaries(
     """The road encoder's distinct edges: their times [s] and the boundaries they crossed [counts,
     half-integers], from each sample's last edge (``edge_s``: NaN none; ``edge_dir`` +1/-1, 0 none)
     and its count. Edges out of time order are left out. The chain of boundaries starts again where
-    an edge may have been missed: after samples were lost (``time_s``: a step of more than 1.5
-    median periods) or where the count moved two or more between samples. None: fewer than
-    MIN_EDGES edges."""
+    samples were lost (``time_s``: a step of more than 1.5 median periods), where an edge may have
+    been missed. None: fewer than MIN_EDGES edges."""
     edge_s = np.asarray(edge_s, dtype=float)
     edge_dir = np.asarray(edge_dir, dtype=float)
     counts = np.asarray(counts, dtype=float)
     missed = np.zeros(counts.size, dtype=bool)
-    missed[1:] = np.abs(np.diff(counts)) >= 2.0
     if time_s is not None and counts.size > 2:
         step = np.diff(np.asarray(time_s, dtype=float))
-        missed[1:] |= step > 1.5 * float(np.median(step))
+        missed[1:] = step > 1.5 * float(np.median(step))
     run = np.cumsum(missed)  # the chain each sample belongs to
     rows = np.flatnonzero(np.isfinite(edge_s) & (edge_dir != 0.0))
     if rows.size == 0:
@@ -60,16 +58,23 @@ def edge_boundaries(
     t = edge_s[rows]
     later = np.ones(t.size, dtype=bool)  # each edge once (the first sample that carried it), in time order
     later[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
-    rows, t = rows[later], t[later]
+    first, t = rows[later], t[later]
     if t.size < MIN_EDGES:
         return None
-    d, measured, chain_of = np.sign(edge_dir[rows]), counts[rows] - 0.5 * np.sign(edge_dir[rows]), run[rows]
+    d = np.sign(edge_dir[first])
+    # every sample that carried an edge, and which one: its count is that edge's count after it
+    carried = np.searchsorted(t, edge_s[rows])
+    same = (carried < t.size) & (t[np.minimum(carried, t.size - 1)] == edge_s[rows])
+    rows, carried = rows[same], carried[same]
     boundary = np.empty(t.size)
-    for chain in np.unique(chain_of):
-        k = np.flatnonzero(chain_of == chain)
+    for chain in np.unique(run[first]):
+        k = np.flatnonzero(run[first] == chain)
         chained = np.concatenate(([0.0], np.cumsum(0.5 * (d[k][:-1] + d[k][1:]))))
-        offset = median_filter(measured[k] - chained, size=min(ANCHOR_EDGES, k.size | 1), mode="mirror")
-        boundary[k] = chained + offset
+        at = np.zeros(t.size)
+        at[k] = chained + 0.5 * d[k]  # the count after each edge, less the chain's offset
+        mine = run[rows] == chain
+        offset = float(np.median(counts[rows[mine]] - at[carried[mine]]))
+        boundary[k] = chained + math.floor(offset) + 0.5  # a boundary lies half-way between counts
     return t, boundary
 
 
