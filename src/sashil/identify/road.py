@@ -17,21 +17,24 @@ edges is the road angle (its error over the longest gap, at a reversal of a 1 de
 
 The boundary each edge crossed is chained from edge to edge (consecutive edges of directions
 ``d0, d1`` are ``(d0 + d1) / 2`` counts apart when none was missed between them) and anchored on
-the median of the counts of every sample after each edge, so counts that angle noise flipped (most
-often right after an edge, where the angle is near the boundary) do not move an edge. The chain
-starts again where samples were lost; an edge missed otherwise (two in one sample period: a road
-faster than a count per period, 8 times the calibration chirp's top speed) is not detected.
+each edge's own count (the median count of the samples that carried it) through a running median
+over ANCHOR_EDGES edges: counts that angle noise flipped (most often right after an edge, where
+the angle is near the boundary) do not move an edge, and an edge the samples missed (lost
+samples, or two changes in one sample period) is a step of the offset that the median keeps. The
+chain also starts again where samples were lost.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.ndimage import median_filter
 
 #: the column of the road angle the board applied at each sample [rad]
 APPLIED_ROAD = "theta_road_applied_rad"
+#: edges whose anchors a running median takes (odd): a missed edge is a step of the chain's
+#: offset, which the median keeps where it is; a count flipped by noise is an outlier it drops
+ANCHOR_EDGES = 7
 #: fewest edges the spline needs (a cubic with not-a-knot ends)
 MIN_EDGES = 4
 
@@ -66,15 +69,17 @@ def edge_boundaries(
     carried = np.searchsorted(t, edge_s[rows])
     same = (carried < t.size) & (t[np.minimum(carried, t.size - 1)] == edge_s[rows])
     rows, carried = rows[same], carried[same]
+    # each edge's own anchor: the median count of the samples that carried it, less the chain
+    residual = counts[rows] - 0.5 * d[carried]
+    split = np.flatnonzero(np.diff(carried)) + 1
+    own = np.full(t.size, np.nan)
+    own[carried[np.r_[0, split]]] = [float(np.median(part)) for part in np.split(residual, split)]
     boundary = np.empty(t.size)
     for chain in np.unique(run[first]):
         k = np.flatnonzero(run[first] == chain)
         chained = np.concatenate(([0.0], np.cumsum(0.5 * (d[k][:-1] + d[k][1:]))))
-        at = np.zeros(t.size)
-        at[k] = chained + 0.5 * d[k]  # the count after each edge, less the chain's offset
-        mine = run[rows] == chain
-        offset = float(np.median(counts[rows[mine]] - at[carried[mine]]))
-        boundary[k] = chained + math.floor(offset) + 0.5  # a boundary lies half-way between counts
+        offset = median_filter(own[k] - chained, size=min(ANCHOR_EDGES, k.size | 1), mode="mirror")
+        boundary[k] = chained + np.floor(offset) + 0.5  # a boundary lies half-way between counts
     return t, boundary
 
 
