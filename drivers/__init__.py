@@ -57,5 +57,5 @@ def declared_capabilities(config: dict[str, Any]) -> RigCapabilities:
 
 
 def on_virtual_clock(config: dict[str, Any]) -> bool:
-    """Whether runs of this config go on simulated time: a simulated backend with ``driver.clock: virtual``."""
-    return config["driver"]["clock"] == "virtual" and declared_capabilities(config).simulated
+    """Whether runs of this config go on simulated time: a simulated backend whose ``driver.clock`` is not ``real``."""
+    return config["driver"]["clock"] != "real" and declared_capabilities(config).simulated

@@ -14,6 +14,7 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from enum import Enum
+from typing import NamedTuple
 
 TWO_PI = 2.0 * math.pi
 
@@ -110,6 +111,18 @@ class RigCapabilities:
     #: a simulation, not hardware: it may run on simulated time (``driver.clock: virtual``) and a
     #: verb may pick a demonstration default (``sashil run``'s road) that would be wrong on a bench
     simulated: bool = False
+    #: the backend reports the plant's true damper torque (a simulation): ``plant_truth`` returns it
+    #: and the arm acceleration it causes, which no sensor of a real rig measures
+    true_torque: bool = False
+
+
+class PlantTruth(NamedTuple):
+    """What a simulated plant knows of itself at the last sample and no sensor measures."""
+
+    #: the damper torque T = alpha(i)*z + c(i)*theta_dot (seed 001 eq. 9)
+    damper_torque_nm: float
+    #: the arm's angular acceleration theta2_ddot = (-k*theta - T)/J (seed 001 eq. 13, the road side driven)
+    arm_accel_rad_s2: float
 
 
 def capabilities_of(rig: object) -> RigCapabilities:
@@ -162,6 +175,12 @@ class RigInterface(ABC):
         when a person has to do it (the bench): the drop test then waits for the hold.
         """
         return False
+
+    # simulation ----------------------------------------------------------------------------
+    def plant_truth(self) -> PlantTruth:
+        """The plant's true damper torque and arm acceleration at the last sample; only a backend
+        that declares ``capabilities.true_torque`` (a simulation) has them."""
+        raise NotImplementedError(f"{self.name}: the backend does not report the plant's true torque")
 
     # context manager -----------------------------------------------------------------------
     def __enter__(self) -> RigInterface:

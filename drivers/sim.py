@@ -8,7 +8,9 @@ Each encoder's last count change is timed on the plant's continuous trajectory
 (:mod:`sashil.drivers.encoder_edges`): the samples carry it as a board's timer capture does. The
 backend can play the drop-test operator (:meth:`operator_hold`), and its road wheel obeys
 ``RigCommand.road_speed_rad_s`` as a real board's road motor does (:class:`RoadWheel`), so a plan
-drives the road the same way on every backend.
+drives the road the same way on every backend. Being a simulation it also reports what no sensor
+measures, the plant's true damper torque and arm acceleration (:meth:`plant_truth`, declared as
+the capability ``true_torque``).
 """
 
 from __future__ import annotations
@@ -17,11 +19,12 @@ import math
 import random
 from typing import Any
 
-from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing
+from sashil.drivers.encoder_edges import hermite, last_crossing, quick_test
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
     TWO_PI,
+    PlantTruth,
     RigCapabilities,
     RigCommand,
     RigInterface,
@@ -43,6 +46,9 @@ class RoadWheel:
     rate theta2_dot, so the relative rate theta_dot = theta2_dot - theta1_dot drops by the speed
     change (unless the operator holds the arm).
     """
+
+    #: theta1_ddot is 0 between speed commands (the plant skips the road's force)
+    accelerates = False
 
     def __init__(self) -> None:
         self._t0 = 0.0
@@ -68,7 +74,12 @@ class SimulatedRig(RigInterface):
 
     name = "sim"
     capabilities = RigCapabilities(
-        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+        operator_hold=True,
+        initial_current=True,
+        road_actuator=True,
+        max_rate_hz=10_000.0,
+        simulated=True,
+        true_torque=True,
     )
 
     def __init__(
@@ -83,6 +94,7 @@ class SimulatedRig(RigInterface):
         self.plant = plant
         self.counts_per_rev = int(counts_per_rev)
         self._counts_per_rad = self.counts_per_rev / TWO_PI
+        self._count_rad = TWO_PI / self.counts_per_rev  # one count [rad]
         self.angle_noise_rad = float(angle_noise_rad)
         self.current_noise_a = float(current_noise_a)
         self._rng = random.Random(noise_seed)
@@ -99,7 +111,6 @@ class SimulatedRig(RigInterface):
         self.road_edge: tuple[int, int] | None = None
         self._arm_end: float | None = None  # the angles at the end of the last step (a jump since: an edge)
         self._road_end: float | None = None
-        self._found: tuple[tuple[float, int] | None, tuple[float, int] | None] = (None, None)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> SimulatedRig:
@@ -200,23 +211,24 @@ class SimulatedRig(RigInterface):
         )
 
     # encoder edges ---------------------------------------------------------------------------
-    def _substep_edges(
+    def _crossings(
         self,
         t0: float,
         h: float,
         theta: tuple[float, float, float, float],
-        road_ends: tuple[float, float, float, float],
+        road_ends: tuple[float, float],
+        bulges: tuple[float, float],
         q: float,
-    ) -> None:
-        """The last count change of each encoder over one sub-step from plant time ``t0`` of ``h`` s,
-        as (fraction of the sub-step, direction) or None, into ``self._found``. ``theta``: the relative
-        angle's Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the
-        road angle at both ends and its rate at both ends."""
+    ) -> tuple[tuple[float, int] | None, tuple[float, int] | None]:
+        """The last count change of each encoder (arm, road) over one sub-step from plant time ``t0`` of
+        ``h`` s, each as (fraction of the sub-step, direction) or None. ``theta``: the relative angle's
+        Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the road
+        angle at both ends; ``bulges``: how far the arm's and the road's curves may stray from their
+        chords (:meth:`_advance` computes them for its quick test)."""
         y0, m0, y1, m1 = theta
-        r0, r1, rv0, rv1 = road_ends
+        r0, r1 = road_ends
+        arm_bulge, road_bulge = bulges
         road = self.plant.road
-        # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
-        road_bulge = 0.0 if road is None else 0.125 * h * abs(rv1 - rv0)
 
         def road_angle(s: float) -> float:
             return r0 if road is None else road(t0 + s * h)[0]
@@ -224,8 +236,8 @@ class SimulatedRig(RigInterface):
         def arm(s: float) -> float:
             return hermite(y0, m0, y1, m1, s) + road_angle(s)
 
-        self._found = (
-            last_crossing(arm, y0 + r0, y1 + r1, hermite_bulge(y0, m0, y1, m1) + road_bulge, q),
+        return (
+            last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, q),
             last_crossing(road_angle, r0, r1, road_bulge, q),
         )
 
@@ -246,27 +258,35 @@ class SimulatedRig(RigInterface):
 
     def _advance(self, seconds: float, from_ns: float, to_ns: float) -> None:
         """Step the plant ``seconds`` (host time ``from_ns`` to ``to_ns``) in the sub-steps it would take
-        in one call, timing each encoder's last count change on the way (module docstring)."""
+        in one call, timing each encoder's last count change on the way (module docstring): the
+        curves between the sub-step's ends are searched only when the quick test
+        (:func:`~sashil.drivers.encoder_edges.quick_test`) cannot rule a count change out."""
         plant = self.plant
         st = plant.state
         count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
         h = seconds / count
         h_ns = (to_ns - from_ns) / count
-        q = TWO_PI / self.counts_per_rev
-        self._jumps(from_ns)
+        q = self._count_rad
+        if st.theta_rad + st.theta_road_rad != self._arm_end or st.theta_road_rad != self._road_end:
+            self._jumps(from_ns)  # moved since the last step's end (an operator's hold)
+        step, command, smooth_road = plant.step, self._command, plant.road is not None
         for j in range(count):
             t0, y0, v0 = st.time_s, st.theta_rad, st.theta_dot_rad_s
             r0, rv0 = st.theta_road_rad, st.theta_road_dot_rad_s
-            plant.step(h, self._command)
-            ends = (y0, h * v0, st.theta_rad, h * st.theta_dot_rad_s)
-            self._substep_edges(t0, h, ends, (r0, st.theta_road_rad, rv0, st.theta_road_dot_rad_s), q)
-            found_arm, found_road = self._found
-            start_ns = from_ns + j * h_ns
+            step(h, command)
+            y1, r1 = st.theta_rad, st.theta_road_rad
+            m0, m1 = h * v0, h * st.theta_dot_rad_s
+            # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
+            road_bulge = 0.125 * h * abs(st.theta_road_dot_rad_s - rv0) if smooth_road else 0.0
+            arm_bulge = quick_test(y0, m0, y1, m1, r0, r1, road_bulge, q)
+            if arm_bulge < 0.0:
+                continue  # no count changed (the common case at 1 kHz)
+            found_arm, found_road = self._crossings(t0, h, (y0, m0, y1, m1), (r0, r1), (arm_bulge, road_bulge), q)
             if found_arm is not None:
-                self.arm_edge = (math.ceil(start_ns + found_arm[0] * h_ns), found_arm[1])
+                self.arm_edge = (math.ceil(from_ns + j * h_ns + found_arm[0] * h_ns), found_arm[1])
             if found_road is not None:
-                self.road_edge = (math.ceil(start_ns + found_road[0] * h_ns), found_road[1])
-        self._arm_end, self._road_end = self._angles()
+                self.road_edge = (math.ceil(from_ns + j * h_ns + found_road[0] * h_ns), found_road[1])
+        self._arm_end, self._road_end = st.theta_rad + st.theta_road_rad, st.theta_road_rad
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         if self.state is not RigState.ACTIVE:
@@ -276,6 +296,14 @@ class SimulatedRig(RigInterface):
         speed = cmd.road_speed_rad_s
         if speed is not None and speed == speed and speed != self.wheel.speed_rad_s:  # None/NaN: unchanged
             self.wheel.set_speed(self.plant, speed)
+
+    def plant_truth(self) -> PlantTruth:
+        """The plant's damper torque T and arm acceleration theta2_ddot = (-k*theta - T)/J now (the
+        state of the last ``read``; seed 001 eqs. 9 and 13)."""
+        plant = self.plant
+        torque = plant.damper_torque()
+        p = plant.params
+        return PlantTruth(torque, (-p.k * plant.state.theta_rad - torque) / p.J)
 
     # operator ------------------------------------------------------------------------------
     def operator_hold(self, theta_rad: float, release_after_s: float) -> bool:

@@ -1,4 +1,5 @@
-"""Shared fixtures: the default config, and a guard that fails any test that leaks a resource.
+"""Shared fixtures: the default config, a guard that fails any test that leaks a resource, and how the
+tests are shared out between pytest-xdist's workers.
 
 The guard (autouse) compares what is open after a test with what was open before it: python-can
 buses not shut down, threads still alive, pseudo-terminal fds still open, child processes still
@@ -12,12 +13,15 @@ on their own (a join, not a sleep).
 from __future__ import annotations
 
 import copy
+import functools
 import os
+import re
 import signal
 import threading
 import time
 import weakref
 from collections.abc import Iterator
+from pathlib import Path
 
 import can
 import pytest
@@ -37,6 +41,38 @@ def _tracking_init(self: can.BusABC, *args: object, **kwargs: object) -> None:
 
 
 can.BusABC.__init__ = _tracking_init  # type: ignore[method-assign]
+
+
+#: a fixture made once for a whole module (or class): a calibration, a firmware build, a QEMU session, a fit
+_SHARED_FIXTURE = re.compile(r"""scope\s*=\s*["'](module|class|package)["']""")
+
+
+@functools.cache
+def _module_shares_a_fixture(path: str) -> bool:
+    try:
+        return bool(_SHARED_FIXTURE.search(Path(path).read_text(encoding="utf-8")))
+    except OSError:
+        return True  # unknown: keep its tests together, as a serial run would
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """``--dist loadscope`` (pyproject's addopts), one work unit per test, except that the tests of a
+    module that makes a fixture for all its tests run together on one worker, which makes it once.
+
+    Plain loadscope keeps every module on one worker, and the longest module (each tool's quick mode,
+    one after another) then sets the suite's time; one test per unit would make each worker compute
+    a module's calibration or firmware image again."""
+    if config.getoption("dist") != "loadscope":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleWhenShared(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if _module_shares_a_fixture(str(config.rootpath / module)) else nodeid
+
+    return ModuleWhenShared(config, log)
 
 
 @pytest.fixture

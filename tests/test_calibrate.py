@@ -161,10 +161,14 @@ def test_inertia_given_scales_the_torques(tmp_path, capsys):
 @pytest.mark.parametrize(
     "args, calibrate, needle",
     [
-        (["--inertia", "0"], None, "--inertia: expected the arm's inertia J > 0"),
-        (["--inertia", "-1.5"], None, "--inertia: expected the arm's inertia J > 0"),
-        (["--inertia", "nan"], None, "--inertia"),
-        (["--extra-steps", "12"], None, "--extra-steps: expected 0 to 9 extra steps, got 12"),
+        (["--inertia", "0"], None, "--inertia: calibrate.inertia_kg_m2: expected a number > 0 or null, got 0.0"),
+        (["--inertia", "-1.5"], None, "--inertia: calibrate.inertia_kg_m2: expected a number > 0"),
+        (["--inertia", "nan"], None, "--inertia: calibrate.inertia_kg_m2"),
+        (
+            ["--extra-steps", "12"],
+            None,
+            "--extra-steps: calibrate.extra_steps: expected an integer >= 0 and <= 9, got 12",
+        ),
         ([], {"currents_a": [0.5], "small_currents_a": [0.5], "road_currents_a": []}, "cannot be identified"),
         ([], {"currents_a": [0.0, 2.0]}, "calibrate.currents_a: expected currents in [0, 1] A"),
         ([], {"max_rig_time_s": 30.0}, "calibrate.max_rig_time_s"),

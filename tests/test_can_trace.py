@@ -93,9 +93,10 @@ def slcan_rig(tmp_path):
 @pytest.mark.e2e  # the emulator in its own process, a run on the wall clock over a pty
 def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
     out = tmp_path / "run"
-    config = tmp_path / "link.yaml"  # a loaded machine may starve the emulator: relaxed link timeouts
+    config = tmp_path / "link.yaml"  # a loaded machine may starve the emulator: relaxed link timeouts and budgets
     config.write_text(
-        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\nloop:\n  rt:\n    priority: 0\n    mlockall: false\n"
+        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n  max_lost_fraction: 1.0\n"
+        "loop:\n  max_missed_fraction: 1.0\n  rt:\n    priority: 0\n    mlockall: false\n"
     )
     done = subprocess.run(
         [*SASHIL, "run", "--driver", "can", "--port", slcan_rig, "--config", str(config), "--duration", "0.5",
@@ -103,8 +104,10 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    stats = json.loads((out / "summary.json").read_text())["can_trace"]
-    assert stats["files"] == ["can.blf", "can.asc"] and stats["error"] is None
+    summary = json.loads((out / "summary.json").read_text())
+    stats = summary["can_trace"]
+    assert stats["files"] == ["can.blf", "can.asc"] and stats["error"] is None and stats["frames_dropped"] == 0
+    assert summary["loop_process"]["threads"] == 1  # the frames crossed the stream to the session's writer
     for name in stats["files"]:
         frames = list(can.LogReader(str(out / name)))
         assert len(frames) == stats["frames_rx"] + stats["frames_tx"]

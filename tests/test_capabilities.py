@@ -16,13 +16,46 @@ def _config(name: str, pacing: str = "device") -> dict:
 def test_each_backend_declares_its_capabilities():
     sim = open_rig(default_config())
     assert sim.capabilities == RigCapabilities(
-        operator_hold=True, initial_current=True, road_actuator=True, max_rate_hz=10_000.0, simulated=True
+        operator_hold=True,
+        initial_current=True,
+        road_actuator=True,
+        max_rate_hz=10_000.0,
+        simulated=True,
+        true_torque=True,
     )
     serial = open_rig(_config("serial"))  # nothing is opened before configure()
     assert serial.capabilities == RigCapabilities(road_actuator=True, device_paced=True, link=True)
     assert open_rig(_config("serial", "host")).capabilities.device_paced is False
     can = open_rig(_config("can"))
     assert can.capabilities.can_frames and can.capabilities.link and not can.capabilities.operator_hold
+
+
+def test_the_simulated_rig_reports_its_plants_true_torque_and_a_link_does_not():
+    import math
+
+    import pytest
+
+    from sashil.drivers.interface import RigCommand
+
+    config = default_config()
+    config["controller"]["current_a"] = 0.5
+    sim = open_rig(config)
+    sim.configure()
+    sim.activate()
+    sim.write(RigCommand(0.5, road_speed_rad_s=2.0), 0, 0)
+    for k in range(1, 40):
+        sim.read(k * 1_000_000, 1_000_000)
+    truth, plant = sim.plant_truth(), sim.plant
+    state, p = plant.state, plant.params
+    # seed 001 eq. 9: T = (alpha1 + alpha2 i) z + (c1 + c2 i) theta_dot; eq. 13: J theta2_ddot = -k theta - T
+    torque = (p.alpha1 + p.alpha2 * state.current_a) * state.z + (p.c1 + p.c2 * state.current_a) * state.theta_dot_rad_s
+    assert truth.damper_torque_nm == pytest.approx(torque, rel=1e-12) and abs(torque) > 1e-3
+    assert truth.arm_accel_rad_s2 == pytest.approx((-p.k * state.theta_rad - torque) / p.J, rel=1e-12)
+    assert math.isfinite(truth.arm_accel_rad_s2)
+    serial = open_rig(_config("serial"))
+    assert not serial.capabilities.true_torque
+    with pytest.raises(NotImplementedError, match="serial: the backend does not report the plant's true torque"):
+        serial.plant_truth()
 
 
 def test_a_stand_in_without_a_declaration_is_a_bare_rig():

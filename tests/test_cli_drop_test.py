@@ -63,11 +63,13 @@ def test_several_currents_have_one_subfolder_each(tmp_path):
 @pytest.mark.parametrize(
     "args,message",
     [
-        (["--duration", "-1"], "--duration: expected a duration in seconds > 0, got -1"),
-        (["--theta0-deg", "31"], "--theta0-deg: expected an angle within ±30 deg, got 31"),
+        (["--duration", "-1"], "--duration: drop_test.duration_s: expected a number > 0, got -1"),
+        (["--theta0-deg", "31"], "--theta0-deg: drop_test.theta0_deg: expected a number >= -30 and <= 30, got 31"),
+        (["--theta0-deg", "0.2"], "--theta0-deg: expected an angle at least drop_test.release_threshold_deg"),
         (["--current", "1.5"], "--current: expected a current in [0, 1] A (rig.current_max_a), got 1.5"),
         (["--current", "-0.1"], "--current: expected a current in [0, 1] A"),
-        (["--duration", "nan"], "--duration: expected a duration in seconds > 0"),
+        (["--duration", "nan"], "--duration: drop_test.duration_s: expected a number > 0"),
+        (["--current", "0.5", "--current", "0.5"], "--current: each current once, got [0.5, 0.5]"),
     ],
 )
 def test_bad_arguments_exit_2_and_write_nothing(tmp_path, capsys, args, message):

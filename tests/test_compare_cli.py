@@ -4,13 +4,12 @@ a failing law's row saying why, parallel runs equal to sequential ones, and bad 
 from __future__ import annotations
 
 import csv
-import re
 import shlex
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_blocks import example
 
 from sashil.cli import main
 from sashil.experiments.compare import arm_acceleration
@@ -57,7 +56,8 @@ def test_compare_runs_each_law_beside_the_references_and_a_failing_law_says_why(
     assert float(table["passive 0 A"]["coil_energy_j"]) == 0.0
     assert float(table["passive 1 A"]["vs_best_passive_pct"]) == 0.0  # the better passive on this road
     md = (out / "compare.md").read_text()
-    assert "| clipped-optimal |" in md and "gain table empty" in md
+    assert "clipped-optimal" in md and "gain table empty" in md
+    assert "| skyhook | c_sky=2 | `skyhook/` |" in md  # each law with its parameters and its run folder
     assert (out / "compare.png").stat().st_size > 10_000
 
 
@@ -97,11 +97,8 @@ def test_bad_input_is_one_line_exit_2_nothing_run(tmp_path, capsys, extra, key):
     assert len(err) == 1 and key in err[0]
 
 
-def test_the_readme_compare_example_runs(tmp_path):
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = readme.split("#### The laws a lab compares", 1)[1].split("\n#### ", 1)[0]
-    (command,) = re.findall(r"```sh\n(sashil compare .*?)\n```", section, flags=re.S)
-    argv = shlex.split(command)
+def test_the_manuals_compare_example_runs(tmp_path):
+    argv = shlex.split(example("how-to/compare-laws.md", "sh", "sashil compare"))
     assert argv[0] == "sashil"
     assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
     assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}

@@ -18,7 +18,7 @@ from sashil.config import default_config
 from sashil.drivers import can_codec, firmware
 from sashil.drivers.emulator import Operator, build_device
 from sashil.drivers.emulator.wire import WireBytes, WireCan
-from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing
+from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing, quick_test, stays_in_cell
 from sashil.drivers.interface import NO_EDGE, RigCommand
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -62,6 +62,41 @@ def test_the_hermite_curve_has_its_ends_and_slopes_and_the_bulge_bounds_it():
     bulge = hermite_bulge(y0, m0, y1, m1)
     worst = max(abs(hermite(y0, m0, y1, m1, k / 1000) - (y0 + (y1 - y0) * k / 1000)) for k in range(1001))
     assert worst <= bulge
+
+
+def test_the_quick_test_rules_out_an_edge_only_where_the_search_finds_none():
+    """quick_test (compiled, every simulated cycle) says -1 exactly when both curves keep their count's
+    cell, else gives the arm curve's bound; the search over a sub-step it lets through finds the
+    same edges as over one it does not (seeded sub-steps of a swinging arm over a turning road)."""
+    import random
+
+    rng = random.Random(7)
+    ruled_out = searched = 0
+    for _ in range(3000):
+        y0 = rng.uniform(-0.1, 0.1)
+        speed = rng.choice([0.3, 3.0])  # counts per sub-step: a slow arm (mostly no edge) or a fast one
+        m0, m1 = rng.uniform(-speed, speed) * Q, rng.uniform(-speed, speed) * Q
+        y1 = y0 + 0.5 * (m0 + m1) + rng.uniform(-0.1, 0.1) * Q
+        r0 = rng.choice([0.0, rng.uniform(-0.05, 0.05)])
+        r1 = r0 + rng.choice([0.0, rng.uniform(-2, 2) * Q])
+        road_bulge = rng.choice([0.0, abs(rng.gauss(0.0, 0.1)) * Q])
+        result = quick_test(y0, m0, y1, m1, r0, r1, road_bulge, Q)
+        arm_bulge = hermite_bulge(y0, m0, y1, m1) + road_bulge
+        keeps = stays_in_cell(y0 + r0, y1 + r1, arm_bulge, Q) and stays_in_cell(r0, r1, road_bulge, Q)
+        if keeps:
+            ruled_out += 1
+            assert result == -1.0
+
+            def arm(s: float, y0=y0, m0=m0, y1=y1, m1=m1, r0=r0, r1=r1) -> float:
+                return hermite(y0, m0, y1, m1, s) + r0 + s * (r1 - r0)
+
+            assert last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, Q) is None
+        else:
+            searched += 1
+            assert result == arm_bulge
+    assert ruled_out > 500 and searched > 500  # both branches exercised
+    # an angle exactly on a count's boundary is not inside the cell (round half to even, as Python)
+    assert not stays_in_cell(0.5 * Q, 0.5 * Q, 0.0, Q) and stays_in_cell(0.4 * Q, 0.4 * Q, 0.0, Q)
 
 
 def test_last_crossing_of_a_straight_line_is_its_last_boundary():

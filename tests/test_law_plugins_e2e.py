@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_blocks import example
 from test_link_e2e import Emulator, relaxed_config, sashil
 
 import sashil as sashil_api
@@ -92,14 +93,10 @@ def test_a_law_slower_than_its_period_lets_the_device_watchdog_rest_the_coil(tmp
     assert t_us[rest] - t_us[last] <= 50_000 + 1_000 + 35_000, (t_us[rest] - t_us[last]) / 1e3
 
 
-def test_the_readme_python_example_runs(tmp_path, monkeypatch):
-    import re
-
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = readme.split("#### Write your own controller", 1)[1].split("**From Python**", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
+def test_the_tutorials_python_example_runs(tmp_path, monkeypatch):
+    code = example("tutorials/your-own-law.md", "python", "sashil.run(")
     monkeypatch.chdir(tmp_path)  # the runs' default folders land under runs/ here
     scope: dict = {}
-    exec(compile(code.replace("duration_s=5", "duration_s=1"), "README.md", "exec"), scope)
+    exec(compile(code, "your-own-law.md", "exec"), scope)
     assert scope["run"].config["controller"]["law"] == "soft-skyhook"
     assert [r.name for r in scope["drop"].runs] == ["i0.000A", "i1.000A"]

@@ -71,11 +71,14 @@ def sashil(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
 
 def relaxed_config(tmp: Path) -> str:
     """A config file that relaxes the link's timeouts (sample timeout, hence the write timeout, 250 ms;
-    link lost 500 ms): the runs that use it compare what they record, and a loaded machine can starve
-    the emulator process for longer than the bench defaults allow (the timeouts themselves are tested
-    with the defaults)."""
+    link lost 500 ms) and its loss budgets (any share of deadlines or samples): the runs that use it
+    compare what they record, and a loaded machine can starve the emulator process for longer than
+    the bench defaults allow (the timeouts and budgets themselves are tested with the defaults)."""
     path = tmp / "link.yaml"
-    path.write_text("driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n")
+    path.write_text(
+        "driver:\n  sample_timeout_ms: 250.0\n  link_lost_ms: 500.0\n  max_lost_fraction: 1.0\n"
+        "loop:\n  max_missed_fraction: 1.0\n"
+    )
     return str(path)
 
 

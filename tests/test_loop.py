@@ -457,7 +457,7 @@ def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monke
     from sashil.runtime import runner
 
     order: list[str] = []
-    monkeypatch.setattr(runner, "compile_kernels", lambda: order.append("compile"))
+    monkeypatch.setattr(runner, "warm_up", lambda plan, say: order.append("compile"))
 
     class Watched(FaultyRig):
         def configure(self):
@@ -466,3 +466,42 @@ def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monke
 
     runner.run_plan(config, Watched(), ConstantCurrent(0.1), VirtualClock(), 0.01, realtime=False)
     assert order == ["compile", "configure"]
+
+
+def test_signals_are_read_from_the_stage_s_signal_source_when_it_has_them_all():
+    """A plan that runs a controller names it as its ``signal_source``: the rows carry the
+    controller's values; a wrapper adding a signal of its own keeps reading from itself."""
+    from sashil.recording.recorder import Recorder
+
+    class Source:
+        z_hat = 0.25
+
+    class Plan(ConstantCurrent):
+        signal_names = ("z_hat",)
+
+        def __init__(self):
+            super().__init__(0.3)
+            self.signal_source = Source()
+
+        @property
+        def z_hat(self):  # the slow path a signal_source saves: never read
+            raise AssertionError("read through the plan")
+
+    class Wrapper(ConstantCurrent):
+        signal_names = ("z_hat", "torque_in_nm")
+
+        def __init__(self, plan):
+            super().__init__(0.3)
+            self.plan, self.torque_in_nm = plan, 1.5
+            self.signal_source = plan.signal_source  # forwarded, but it lacks torque_in_nm
+
+        @property
+        def z_hat(self):
+            return self.plan.signal_source.z_hat
+
+    for stage, expected in ((Plan(), {"z_hat": 0.25}), (Wrapper(Plan()), {"z_hat": 0.25, "torque_in_nm": 1.5})):
+        recorder = Recorder(None, record_columns(stage), keep=True)
+        ControlLoop(FaultyRig(), stage, VirtualClock(), 1000.0, 0.005, recorder=recorder).run()
+        stream = recorder.stream()
+        for name, value in expected.items():
+            assert stream[name].tolist() == [value] * 6, name  # 5 cycles and the shutdown's row

@@ -22,14 +22,17 @@ from sashil.recording.run_folder import RunFolder
 
 @pytest.fixture
 def figures(monkeypatch) -> list[Any]:
-    """The figures the code under test saved, kept open (``plt.close`` records them instead)."""
+    """The figures the code under test made, in order (each kept for the test to read)."""
     kept: list[Any] = []
-    plt = plots.pyplot()  # matplotlib.pyplot on the Agg backend
-    close = plt.close
-    monkeypatch.setattr(plt, "close", lambda fig=None: kept.append(fig))
-    yield kept
-    for fig in kept:
-        close(fig)
+    make = plots._Figures.subplots
+
+    def subplots(*args: Any, **kwargs: Any) -> tuple[Any, Any]:
+        fig, axes = make(*args, **kwargs)
+        kept.append(fig)
+        return fig, axes
+
+    monkeypatch.setattr(plots._Figures, "subplots", staticmethod(subplots))
+    return kept
 
 
 def legend_texts(ax: Any) -> list[str]:
@@ -96,7 +99,7 @@ def test_run_png_law_with_target_has_band_and_legends_beside_the_traces(tmp_path
     plots.plot_run(folder / "run.png", folder, summary)
     (fig,) = figures
     angles, current, torque = fig.axes
-    assert "skyhook (c_sky=2)" in angles.get_title() and "road sine 1 Hz" in angles.get_title()
+    assert "skyhook (c_sky=2)" in angles.get_title("left") and "road sine 1 Hz" in angles.get_title("left")
     assert angles.get_ylabel() == "angle [deg]" and current.get_ylabel() == "coil current [A]"
     assert torque.get_ylabel() == "damper torque [N·m]" and torque.get_xlabel() == "time [s]"
     assert legend_texts(angles) == ["θ (relative angle)", "θ1 (road)", "θ2 (arm)"]
@@ -116,7 +119,7 @@ def test_run_png_of_an_on_off_law_lists_no_target_torque(tmp_path, figures):
 def test_run_png_of_a_passive_run_has_no_torque_panel(tmp_path, figures):
     folder = loop_folder(tmp_path, "passive", "passive")
     plots.plot_run(folder / "run.png", folder, None)
-    assert len(figures[0].axes) == 2 and figures[0].axes[0].get_title() == "sashil run"
+    assert len(figures[0].axes) == 2 and figures[0].axes[0].get_title("left") == "sashil run"
 
 
 def test_timing_png_of_a_short_run_ends_at_its_maximum_with_readable_ticks(tmp_path, figures):

@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
+
+from doc_blocks import fenced_blocks, section
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _quick_start_commands() -> list[str]:
-    text = (ROOT / "README.md").read_text()
-    section = text.split("## Quick start", 1)[1].split("\n## ", 1)[0]
-    blocks = re.findall(r"```[a-z]*\n(.*?)```", section, flags=re.S)
+    blocks = fenced_blocks(section((ROOT / "README.md").read_text(), "## Quick start"))
     assert len(blocks) == 1, "one fenced block under ## Quick start"
-    return [line for line in blocks[0].splitlines() if line.strip()]
+    return [line for line in blocks[0].body.splitlines() if line.strip()]
 
 
 def test_quick_start_has_two_commands_setup_and_drop_test_then_tests():
@@ -25,3 +24,15 @@ def test_quick_start_has_two_commands_setup_and_drop_test_then_tests():
 def test_ci_runs_the_readme_test_command():
     _, second = _quick_start_commands()
     assert second in (ROOT / ".ci" / "run").read_text()
+
+
+def test_the_readme_python_examples_run(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    blocks = [block for block in fenced_blocks((ROOT / "README.md").read_text()) if block.info == "python"]
+    assert blocks, "the README shows sashil from Python"
+    for block in blocks:
+        done = subprocess.run([sys.executable, "-c", block.body], cwd=tmp_path, capture_output=True, text=True)
+        assert done.returncode == 0, f"README.md line {block.line}:\n{done.stderr[-2000:]}"
+        assert "ok [0.5]" in done.stdout

@@ -35,6 +35,29 @@ def test_rows_reach_the_file_in_order(tmp_path):
     assert recorder.rows_dropped == 0
 
 
+def test_a_kept_stream_holds_the_values_the_file_parses_back_to(tmp_path):
+    """keep=True: every row in memory as well (more than the ring's capacity, none dropped), and its
+    columns equal, bit for bit, what the file's text parses back to; without a file, no thread."""
+    path = tmp_path / "data.csv"
+    recorder = Recorder(path, COLUMNS, capacity=16, lossless=True, keep=True).start()
+    fill(recorder, 300)
+    recorder.close()
+    kept, parsed = recorder.stream(), read_data_csv(path, required=COLUMNS)
+    assert list(kept) == list(COLUMNS) and recorder.rows_dropped == 0 and recorder.rows_written == 300
+    for name in COLUMNS:
+        assert kept[name].dtype == parsed[name].dtype and kept[name].tobytes() == parsed[name].tobytes(), name
+    memory = Recorder(None, COLUMNS, keep=True).start()
+    assert memory._thread is None
+    fill(memory, 5)
+    row = memory.begin_row()  # begun, never committed: not in the stream
+    row[0] = 99.0
+    memory.close()
+    assert memory.stream()["seq"].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert {name: values.size for name, values in Recorder(None, COLUMNS, keep=True).stream().items()} == dict.fromkeys(
+        COLUMNS, 0
+    )
+
+
 def test_a_full_ring_drops_and_counts_instead_of_blocking(tmp_path):
     recorder = Recorder(tmp_path / "data.csv", COLUMNS, capacity=16)
     fill(recorder, 20)  # the writer is not running: the ring fills up

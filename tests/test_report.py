@@ -10,7 +10,7 @@ import pytest
 from sashil.cli import main
 from sashil.errors import DataFileError
 from sashil.recording.data_file import write_data_csv
-from sashil.recording.report import RunRecord, drop_torque, load_run, markdown_summary
+from sashil.recording.report import RunRecord, drop_torque, markdown_summary, read_record
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -108,10 +108,10 @@ def test_bad_run_folder_is_one_line_exit_2_and_nothing_written(tmp_path, capsys)
     out = tmp_path / "R"
     assert main(["report", str(tmp_path / "empty"), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "summary.json: no such file" in err
+    assert err.count("\n") == 0 and "empty: no summary.json or data file: not a sashil run folder" in err
     assert not out.exists()
     with pytest.raises(DataFileError, match="not a folder"):
-        load_run(tmp_path / "missing")
+        read_record(tmp_path / "missing")
 
 
 def test_summary_marks_missing_values(tmp_path):

@@ -19,7 +19,7 @@ def _verb_help(verb: str, capsys) -> str:
 
 @pytest.mark.parametrize("verb", list(VERBS))
 def test_every_verb_help_has_an_example(verb, capsys):
-    module = importlib.import_module(VERBS[verb])
+    module = importlib.import_module(VERBS[verb].module)
     assert module.EXAMPLE.startswith(f"sashil {verb}")
     text = _verb_help(verb, capsys)
     assert f"example:\n  {module.EXAMPLE}" in text

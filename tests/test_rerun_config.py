@@ -12,8 +12,8 @@ import yaml
 
 import sashil
 from sashil.cli import main
-from sashil.cli import run as run_cli
 from sashil.recording.data_file import read_data_csv
+from sashil.runtime import clock as clock_module
 from sashil.runtime.clock import VirtualClock
 
 #: the columns that must agree: what was commanded and what the arm did
@@ -36,19 +36,29 @@ def rerun(verb: str, folder: Path, out: Path, *extra: str) -> None:
 
 @pytest.fixture
 def virtual_run_clock(monkeypatch):
-    """``sashil run`` on the virtual clock (it always takes the real one), so two runs can agree."""
+    """``sashil run`` on the virtual clock (it always takes the real one), so two runs can agree; the
+    runs keep their loop in this process (``loop.process: false``), where the clock is replaced."""
 
     class Clock:
         @staticmethod
         def for_rate(spin_margin_us: float, rate_hz: float) -> VirtualClock:
             return VirtualClock()
 
-    monkeypatch.setattr(run_cli, "RealClock", Clock)
+    monkeypatch.setattr(clock_module, "RealClock", Clock)
 
 
 def test_run_config_holds_the_law_road_rate_and_duration_and_reruns_them(tmp_path, virtual_run_clock):
     first, again = tmp_path / "a", tmp_path / "b"
-    argv = ["--controller", "skyhook", "--set", "controller.c_sky=2", "--road", "sine:2.2:1.5"]
+    argv = [
+        "--controller",
+        "skyhook",
+        "--set",
+        "controller.c_sky=2",
+        "--road",
+        "sine:2.2:1.5",
+        "--set",
+        "loop.process=false",
+    ]
     assert main(["run", *argv, "--rate", "500", "--duration", "0.6", "--out", str(first), "-q"]) == 0
     config = sashil.load_run(first).config
     assert config["controller"]["law"] == "skyhook" and config["controller"]["c_sky"] == 2.0
@@ -66,6 +76,7 @@ def test_run_current_is_saved_as_the_passive_law_and_its_current(tmp_path, virtu
     skyhook.write_text("controller:\n  law: skyhook\n  c_sky: 2.0\n")
     first, again = tmp_path / "a", tmp_path / "b"
     argv = ["run", "--config", str(skyhook), "--current", "0.3", "--duration", "0.3", "--out", str(first), "-q"]
+    argv += ["--set", "loop.process=false"]  # the clock is replaced in this process
     assert main(argv) == 0
     controller = sashil.load_run(first).config["controller"]
     assert (controller["law"], controller["current_a"]) == ("passive", 0.3)

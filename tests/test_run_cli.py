@@ -20,12 +20,16 @@ CLI = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--rate", "0"], "--rate: expected a loop rate in Hz > 0, got 0"),
-        (["--rate", "-5"], "--rate: expected a loop rate in Hz > 0, got -5"),
-        (["--rate", "50000"], "--rate: 50000 Hz is above what the sim backend can do (10000 Hz)"),
-        (["--duration", "-1"], "--duration: expected a duration in seconds > 0, got -1"),
+        (["--rate", "0"], "--rate: loop.rate_hz: expected a number > 0 and <= 20000, got 0"),
+        (["--rate", "-5"], "--rate: loop.rate_hz: expected a number > 0 and <= 20000, got -5"),
+        (["--rate", "15000"], "--rate: 15000 Hz is above what the sim backend can do (10000 Hz)"),
+        (["--duration", "-1"], "--duration: run.duration_s: expected a number > 0 or null, got -1"),
+        (["--set", "driver.clock=virtual"], "driver.clock: virtual: sashil run runs on the real clock"),
         (["--controller", "no-such-law"], "no-such-law"),
-        (["--current", "3"], "--current: expected a current in [0, 1] A (rig.current_max_a), got 3"),
+        (
+            ["--current", "3"],
+            "--current: controller.current_a: expected a current in [0, 1] A (rig.current_max_a), got 3",
+        ),
         (["--controller", "skyhook", "--current", "0.5"], "--current: only for --controller passive"),
     ],
 )

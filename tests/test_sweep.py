@@ -6,6 +6,7 @@ import copy
 import json
 import math
 
+import numpy as np
 import pytest
 
 from sashil.cli import main
@@ -184,7 +185,7 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
         (["--controller", "skyhook"], "controller.c_sky"),
         (["--f-start", "3", "--f-stop", "1"], "--f-stop: expected a frequency at or above --f-start (3 Hz)"),
         (["--stepped", "--f-start", "2", "--f-stop", "2"], "--f-stop: a stepped sine needs a frequency above"),
-        (["--current", "5"], "--current: expected a current in [0, 1]"),
+        (["--current", "5"], "--current: controller.current_a: expected a current in [0, 1]"),
     ],
 )
 def test_sweep_cli_bad_input_is_one_line(tmp_path, capsys, argv, message):
@@ -212,3 +213,111 @@ def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch()
     ratios = [x / min(a, b) for x, a, b in zip(law, soft, hard, strict=True)]
     assert max(ratios) <= 1.03, ratios
     assert soft[1] > 2 * hard[1] and hard[3] > soft[3]  # the two passive settings each lose somewhere
+
+
+# the library function, called from Python ------------------------------------------------------
+def _resolved(*options, **source):
+    from sashil.config.resolve import ConfigSource, resolve
+
+    return resolve(ConfigSource(options=options, **source), "sweep")
+
+
+def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
+    from sashil.config.resolve import Option
+    from sashil.experiments.sweep import SWEEP_COLUMNS
+    from sashil.lab._sweep import sweep
+    from sashil.lab.outputs import Outputs
+
+    config = _resolved(
+        Option("--f-start", "sweep.f_start_hz", 1.5),
+        Option("--f-stop", "sweep.f_stop_hz", 2.5),
+        Option("--duration", "sweep.duration_s", 1.0),
+        sets=("sweep.ramp_s=0.5", "controller.current_a=0.4"),
+    )
+    events = []
+    run = sweep(config, Outputs(out=tmp_path / "chirp"), events.append)
+    assert run.path == tmp_path / "chirp" and run.verb == "sweep"
+    data = run.data
+    assert list(data) == [*SWEEP_COLUMNS, "current_law_a", "seq"]  # the passive law gives a current
+    assert set(data["current_law_a"][:-1]) == {0.4}
+    assert len(data["time_s"]) == 1500 + 1  # 1 s chirp + 0.5 s ramp at 1 kHz, then the 0 A row
+    # the simulated rig reports its plant's true torque (capability true_torque): no NaN in the record
+    assert np.all(np.isfinite(data["torque_true_nm"][:-1])) and np.any(data["torque_true_nm"] != 0.0)
+    summary = run.summary
+    assert summary["exit_status"] == "ok" and summary["mode"] == "chirp" and summary["controller"] == "passive 0.4 A"
+    assert {"road", "body_rms_rad", "road_rms_rad", "body_peak_rad", "observer_nrmse", "clipped_cycles"} <= set(summary)
+    body = data["theta_rad"] + data["theta_road_rad"]  # the arm angle theta2 = theta + theta1
+    assert summary["body_rms_rad"] == pytest.approx(float(np.std(body)), rel=1e-12)
+    assert summary["road"] == "chirp 1.5-2.5 Hz over 1 s, 1 deg"
+    assert run.config["sweep"]["duration_s"] == 1.0 and run.config["controller"]["current_a"] == 0.4
+    outputs = [e.text for e in events if e.kind == "output"]
+    assert outputs[0].startswith("chirp 1.5-2.5 Hz over 1 s (passive 0.4 A): body RMS ")
+    assert outputs[-1] == f"run folder: {run.path}"
+
+
+def test_the_sweep_function_runs_a_stepped_sine_a_sub_run_per_frequency(tmp_path):
+    from sashil.config.resolve import Option
+    from sashil.lab._sweep import TRANSMISSIBILITY_COLUMNS, sweep
+    from sashil.lab.outputs import Outputs
+
+    config = _resolved(
+        Option("--stepped", "sweep.stepped", True),
+        Option("--steps", "sweep.steps", 2),
+        Option("--f-start", "sweep.f_start_hz", 0.3),
+        Option("--f-stop", "sweep.f_stop_hz", 5.0),
+        sets=("sweep.settle_s=3", "sweep.measure_s=2", "sweep.ramp_s=0.5", "sweep.spacing=linear"),
+    )
+    events = []
+    run = sweep(config, Outputs(out=tmp_path / "stepped"), events.append)
+    assert [r.name for r in run.runs] == ["f0.300Hz", "f5.000Hz"]
+    table = run.tables["transmissibility"]
+    assert list(table) == list(TRANSMISSIBILITY_COLUMNS) and list(table["frequency_hz"]) == [0.3, 5.0]
+    # far below the 1.66 Hz resonance the arm follows the road; far above it, it stays behind
+    assert table["transmissibility"][0] == pytest.approx(1.0, abs=0.05) and table["transmissibility"][1] < 0.3
+    assert [p["transmissibility"] for p in run.summary["points"]] == list(table["transmissibility"])
+    assert run.summary["integrated_body_rms_rad"] == pytest.approx(
+        math.sqrt(np.mean(table["body_rms_rad"] ** 2)), rel=1e-12
+    )
+    assert [e.data["frequency_hz"] for e in events if e.kind == "progress"] == [0.3, 5.0]
+    assert len([e for e in events if e.kind == "output"]) == 1 + 2 + 1 + 1  # header, rows, integrated, folder
+
+
+@pytest.mark.parametrize(
+    "options, sets, message",
+    [
+        ((("--f-start", "sweep.f_start_hz", 3.0), ("--f-stop", "sweep.f_stop_hz", 1.0)), (), "--f-stop: expected a frequency at or above --f-start (3 Hz), got 1"),
+        ((("--f-start", "sweep.f_start_hz", 150.0),), (), "--f-start: expected a frequency in (0, 100] Hz, got 150"),
+        ((), ("sweep.stepped=true", "sweep.f_start_hz=2", "sweep.f_stop_hz=2"), "sweep.f_stop_hz: a stepped sine needs a frequency above sweep.f_start_hz"),
+        ((("--amplitude-deg", "sweep.amplitude_deg", 30.0),), (), "--amplitude-deg: sweep.amplitude_deg: expected a number > 0 and <= 20"),
+    ],
+)  # fmt: skip
+def test_the_sweep_options_are_checked_when_the_config_is_resolved(options, sets, message):
+    from sashil.config.resolve import Option
+    from sashil.errors import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        _resolved(*(Option(*option) for option in options), sets=sets)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_sweep_function_leaves_no_folder_on_bad_input(tmp_path):
+    import re
+
+    from sashil.config.frozen import freeze, thaw
+    from sashil.errors import ConfigError, DriverError
+    from sashil.lab._sweep import sweep
+    from sashil.lab.outputs import Outputs
+
+    port = tmp_path / "no-port"
+    config = _resolved(driver="serial", port=str(port), sets=("sweep.f_start_hz=1", "sweep.f_stop_hz=1"))
+    with pytest.raises(DriverError, match=re.escape(f"serial port {port}: cannot open")) as err:
+        sweep(config, Outputs(out=tmp_path / "x"))
+    assert err.value.exit_code == ConfigError.exit_code and not (tmp_path / "x").exists()  # bad input: exit 2
+    skyhook = thaw(_resolved())
+    skyhook["controller"]["law"] = "skyhook"  # a config that did not go through resolve: no c_sky
+    with pytest.raises(ConfigError, match=r"controller\.c_sky"):
+        sweep(freeze(skyhook), Outputs(out=tmp_path / "y"))
+    assert not (tmp_path / "y").exists()
+    with pytest.raises(ConfigError, match="--format asc: a CAN frame trace needs the can driver"):
+        sweep(_resolved(), Outputs(out=tmp_path / "z", formats=("asc",)))
+    assert not (tmp_path / "z").exists()

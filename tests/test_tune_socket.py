@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from doc_blocks import example
 
 from sashil.cli import main
 from sashil.cli.tune import parse_changes
@@ -166,10 +167,10 @@ def test_tune_arguments_parse_as_yaml_like_set():
 
 
 def readme_commands() -> list[list[str]]:
-    """The README's `sashil tune` example, one argv per line (comments and the `&` dropped)."""
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    block = readme.split("### Tuning a running law: `sashil tune`", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
-    return [shlex.split(line.split("#", 1)[0].replace(" &", "")) for line in block.strip().splitlines()]
+    """The manual's `sashil tune` example, one argv per `sashil` line (comments and the `&` dropped)."""
+    block = example("how-to/tune-live.md", "sh", "sashil tune")
+    lines = [line.split("#", 1)[0].replace(" &", "") for line in block.splitlines() if line.startswith("sashil ")]
+    return [shlex.split(line) for line in lines]
 
 
 @pytest.mark.e2e

@@ -230,11 +230,10 @@ def test_run_png_marks_each_applied_change_on_every_panel():
     tuning.service(0.25, 250)
     with pytest.raises(ConfigError):
         tuning.submit({"gain": -1.0})
-    fig, axes = pyplot().subplots(3, 1)
+    _fig, axes = pyplot().subplots(3, 1)
     _mark_live_changes(axes, tuning.summary())
     assert [[line.get_xdata()[0] for line in ax.lines] for ax in axes] == [[0.25]] * 3  # the refusal is not drawn
     assert [text.get_text() for text in axes[0].texts] == ["gain = 2.0"]
-    pyplot().close(fig)
 
 
 def test_a_change_that_arrives_before_the_loop_started_is_dated_at_cycle_zero():

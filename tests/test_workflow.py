@@ -359,17 +359,14 @@ def test_road_profile_file(tmp_path):
         parse_road(str(bad), default_config())
 
 
-def test_the_readme_python_example_runs(drop_runs, capsys):
-    import re
-    from pathlib import Path
+def test_the_manuals_analysis_example_runs(drop_runs, capsys):
+    from doc_blocks import example
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = readme.split("### Analyse a run in Python", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
+    code = example("how-to/python.md", "python", "load_run")
     single, multi = drop_runs
     code = code.replace('"runs/20261124T101500Z-run"', repr(str(single)))
     code = code.replace('"runs/20261124T102000Z-drop-test"', repr(str(multi)))
-    exec(compile(code, "README.md", "exec"), {})
+    exec(compile(code, "python.md", "exec"), {})
     lines = capsys.readouterr().out.splitlines()
     assert [line.split()[0] for line in lines] == ["i0.000A", "i1.000A"]
 

@@ -24,7 +24,8 @@ relative half-width, the median and worst relative error, and the worst miss in 
 
 ``--transport serial|slcan`` calibrates the emulated damper over a link (the wall clock, one at a
 time; ``--board``: the emulator's board) and reads the intervals from params.yaml; ``--keep DIR``
-keeps each calibration folder there (``d<N>/`` and the truth ``d<N>.truth.json``).
+keeps each calibration folder there (``d<N>/``, the true damper ``d<N>.truth.json`` and the
+emulator's ground truth of every sample ``d<N>.truth.csv``).
 ``--reanalyse DIR`` fits kept folders again, twice on the same records: with the road forcing from
 the commanded speeds, and from the road the board applied (the road encoder's edges,
 :mod:`sashil.identify.road`); per damper and per quantity it prints coverage, half-width, error and
@@ -53,7 +54,7 @@ import numpy as np
 import yaml
 
 from sashil.calibrate import calibrate_emulated, calibrate_rig
-from sashil.calibrate.analysis import analyse, records_of
+from sashil.calibrate.analysis import APPLIED_ROAD, analyse, records_of, with_applied_road
 from sashil.calibrate.emulated import BOARDS
 from sashil.calibrate.plan import plan_from_config
 from sashil.calibrate.rig import StepResult
@@ -70,6 +71,7 @@ from sashil.identify.intervals import (
     quantities,
 )
 from sashil.identify.rig_models import MODELS, bouc_wen_rescale
+from sashil.identify.road import held_speed
 from sashil.recording.data_file import read_data_csv
 from sashil.stats import nrmse
 
@@ -130,16 +132,16 @@ def calibrate_case(args: tuple[dict, int, dict | None, str]) -> dict:
     }
 
 
-def serial_case(args: tuple[dict, int, dict | None, str, str, str]) -> dict:
+def serial_case(args: tuple[dict, int, dict | None, str, str, str, str | None]) -> dict:
     """One calibration of the emulated damper over a link (``transport`` serial or slcan, the
     emulator's ``board``; real pyserial or python-can, the wall clock): the intervals as params.yaml
-    holds them."""
-    truth, noise_seed, plan, folder, transport, board = args
+    holds them. ``truth_csv``: where the emulator writes its ground truth (None: nowhere)."""
+    truth, noise_seed, plan, folder, transport, board, truth_csv = args
     config = default_config()
     config["model"]["params"].update(truth)
     config["calibrate"].update(plan or {})
     started = time.perf_counter()
-    path = calibrate_emulated(config, folder, transport=transport, inertia=truth["J"], board=board)
+    path = calibrate_emulated(config, folder, transport=transport, inertia=truth["J"], board=board, truth=truth_csv)
     doc = yaml.safe_load(Path(path).read_text())
     return {"truth": truth, "noise_seed": noise_seed, "params_doc": doc, "wall_s": time.perf_counter() - started}
 
@@ -164,9 +166,12 @@ def kept_results(folder: Path, road: str) -> tuple[dict, list[StepResult], list[
 
 def reanalyse_case(args: tuple[Path, dict, str]) -> dict:
     """Fit a kept calibration again (``road``: where the fit takes the road from); its intervals,
-    true quantities and held-out NRMSE against the true plant."""
+    true quantities and held-out NRMSE against the true plant. Both fits are judged on the same
+    held-out records (their road the applied one where the runs carry the edges): the fitted and
+    the true damper's response to the same inputs."""
     folder, truth, road = args
-    config, fit, held = kept_results(folder, road)
+    config, fit, _ = kept_results(folder, road)
+    _, _, held = kept_results(folder, "applied")
     counts = int(config["rig"]["encoder_counts_per_rev"])
     current_max = float(config["rig"]["current_max_a"])
     cal = analyse(
@@ -182,6 +187,73 @@ def reanalyse_case(args: tuple[Path, dict, str]) -> dict:
         "held_out": max(nrmses) if nrmses else math.nan,
         "uses_edges": any("road_edge_s" in r.columns for r in fit),
     }
+
+
+def road_against_truth(folder: Path, truth_csv: Path) -> list[dict]:
+    """Per road run of a kept calibration, how far the road each fit takes is from the road the
+    emulated wheel applied (the emulator's ground truth of the same samples) [counts]: the applied
+    road (the edges) and the commanded one (the integral of the held speeds). The fit reads only
+    the road's acceleration, so each error is taken about its own mean (``rms``, ``worst``); the
+    applied road's mean error (``bias``) is its offset from the true angle. Samples are joined on
+    the sequence number and the device time modulo 2^24 (SLCAN's wire clock; the host unwraps it)."""
+    from sashil.drivers.emulator import read_truth_csv
+
+    config = load_config(folder / "config.yaml")
+    counts = int(config["rig"]["encoder_counts_per_rev"])
+    q = 2.0 * math.pi / counts
+    truth = read_truth_csv(truth_csv)
+    wrap = 1 << 24
+    row_of = {
+        (int(sq) & 0xFFFF, int(dev) % wrap): k
+        for k, (sq, dev) in enumerate(zip(truth["seq"], truth["device_time_us"], strict=True))
+    }
+    out = []
+    for row in json.loads((folder / "summary.json").read_text())["runs"]:
+        if row["kind"] != "road":
+            continue
+        run = folder / "runs" / row["name"]
+        columns = read_data_csv(run / "data.csv", required=("time_s",))
+        cycles = read_data_csv(run / "cycles.csv", required=("seq", "device_time_us"))
+        device_of = {int(sq): int(dev) for sq, dev in zip(cycles["seq"], cycles["device_time_us"], strict=True)}
+        rows = [row_of.get((int(sq) & 0xFFFF, device_of.get(int(sq), -1) % wrap)) for sq in columns["seq"]]
+        found = np.array([r is not None for r in rows])
+        if not found.any():
+            continue
+        true_road = truth["theta_road_true_rad"][[r for r in rows if r is not None]]
+        applied = with_applied_road(columns, counts).get(APPLIED_ROAD)
+        t = columns["time_s"]
+        held = held_speed(columns["road_speed_cmd_rad_s"])
+        commanded = np.concatenate(([0.0], np.cumsum(held[:-1] * np.diff(t))))
+        edges = columns.get("road_edge_s")
+        moving = found.copy()
+        if edges is not None and np.isfinite(edges).any():
+            moving &= (t >= np.nanmin(edges)) & (t <= np.nanmax(edges))
+        result = {"name": row["name"], "joined": float(found.mean())}
+        for label, road in (("applied", applied), ("commanded", commanded)):
+            if road is None:
+                continue
+            error = (road[found] - true_road)[moving[found]] / q
+            centred = error - error.mean()
+            result[label] = {
+                "rms": float(np.sqrt(np.mean(centred**2))),
+                "worst": float(np.max(np.abs(centred))),
+                "bias": float(error.mean()),
+            }
+        out.append(result)
+    return out
+
+
+def samples_lost(folder: Path) -> list[float]:
+    """The fraction of the board's samples each run of a kept calibration lost on the link (missed:
+    a gap in the sequence numbers; skipped: the host took a newer one), from ``summary.json``."""
+    out = []
+    for row in json.loads((folder / "summary.json").read_text())["runs"]:
+        link = row.get("link") or {}
+        lost = int(link.get("samples_missed", 0)) + int(link.get("samples_skipped", 0))
+        sent = int(link.get("samples", 0)) + int(link.get("samples_missed", 0))
+        if sent:
+            out.append(lost / sent)
+    return out
 
 
 def report_reanalysis(base: Path, jobs: int) -> None:
@@ -211,7 +283,8 @@ def report_reanalysis(base: Path, jobs: int) -> None:
             )
         held = [d["held_out"] for d in rows[road]]
         print(
-            f"{road:>10} held-out NRMSE against the true plant: median {100 * np.median(held):.2f} %, worst {100 * max(held):.2f} %"
+            f"{road:>10} held-out NRMSE against the true plant (worst run of each damper, the same held-out "
+            f"records): median {100 * np.median(held):.2f} %, worst {100 * max(held):.2f} %"
         )
     for f, c, a in zip(folders, rows["commanded"], rows["applied"], strict=True):
         cells = "  ".join(
@@ -221,6 +294,37 @@ def report_reanalysis(base: Path, jobs: int) -> None:
         )
         print(
             f"  {f.name}: half-widths commanded->applied: {cells}; held-out {100 * c['held_out']:.2f}->{100 * a['held_out']:.2f} %"
+        )
+    judged = [
+        (f, road_against_truth(f, base / f"{f.name}.truth.csv"))
+        for f in folders
+        if (base / f"{f.name}.truth.csv").exists()
+    ]
+    runs = [r for _, rs in judged for r in rs if "applied" in r]
+    if runs:
+        print(
+            f"the road against the emulated wheel's true angle, {len(runs)} road runs [counts, each error about its mean; "
+            "bias: the applied road's mean error]"
+        )
+        for label in ("commanded", "applied"):
+            rms = [r[label]["rms"] for r in runs]
+            worst = [r[label]["worst"] for r in runs]
+            bias = [r[label]["bias"] for r in runs]
+            print(
+                f"{label:>10}: RMS median {np.median(rms):.3f}, worst {max(rms):.3f}; largest error {max(worst):.3f}"
+                + (
+                    f"; bias median {np.median(bias):+.3f}, worst {max(bias, key=abs):+.3f}"
+                    if label == "applied"
+                    else ""
+                )
+            )
+    lost = [samples_lost(f) for f in folders]
+    every = [x for runs in lost for x in runs]
+    if every:
+        print(
+            f"samples lost on the link per run: median {100 * np.median(every):.2f} %, worst {100 * max(every):.2f} % "
+            f"({len(every)} runs); per calibration worst: "
+            + ", ".join(f"{f.name} {100 * max(runs, default=0.0):.2f} %" for f, runs in zip(folders, lost, strict=True))
         )
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
@@ -402,7 +506,8 @@ def main() -> None:
                 print(f".. {time.strftime('%H:%M:%S')} damper {d} over {args.transport}", flush=True)
                 (where / f"d{d}.truth.json").write_text(json.dumps(truth))
                 plan = QUICK_PLAN if args.quick else None
-                rows.append(serial_case((truth, 0, plan, str(where / f"d{d}"), args.transport, args.board)))
+                truth_csv = str(where / f"d{d}.truth.csv") if args.keep else None
+                rows.append(serial_case((truth, 0, plan, str(where / f"d{d}"), args.transport, args.board, truth_csv)))
         print(
             f"sashil calibrate over {args.transport} against the emulated damper ({args.board} board): {count} dampers "
             f"(generator seed {args.damper_seed})"

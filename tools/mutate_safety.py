@@ -178,7 +178,8 @@ def _child(spec: str) -> int:
         mutant = Mutant(target, data["index"], data["op"], data["new"], 0, "")
         sys.meta_path.insert(0, _Finder(target.module, ROOT / target.path, mutated_code(mutant)))
     os.chdir(ROOT)
-    return int(pytest.main(["-x", "-q", "-p", "no:cacheprovider", "-m", "not e2e", *TESTS]))
+    # -n 0: the mutant is in this process's importer, so the tests run here, not in xdist workers
+    return int(pytest.main(["-x", "-q", "-n", "0", "-p", "no:cacheprovider", "-m", "not e2e", *TESTS]))
 
 
 def run(mutant: Mutant | None, timeout_s: float) -> tuple[bool, str]:
@@ -320,7 +321,8 @@ def _c_child(data: dict) -> int:
         except DriverError:
             return 3
         os.chdir(ROOT)
-        return int(pytest.main(["-x", "-q", "-p", "no:cacheprovider", *data["tests"]]))
+        # -n 0: firmware.HERE points at the mutant in this process only, so the tests run here
+        return int(pytest.main(["-x", "-q", "-n", "0", "-p", "no:cacheprovider", *data["tests"]]))
 
 
 def run_c(mutant: CMutant | None, tests: list[str], cache: str, timeout_s: float) -> tuple[bool | None, str]:

@@ -1,13 +1,40 @@
-"""sashil: hardware-in-the-loop control of the SAS rig with a rotary MR damper."""
+"""sashil: hardware-in-the-loop control of the SAS rig with a rotary MR damper.
 
-from importlib.metadata import PackageNotFoundError, version
+The package's attributes load on first use (PEP 562), so ``import sashil`` and ``sashil --version``
+import no numerics: ``sashil.run``, ``sashil.drop_test``, ``sashil.load_run`` and ``sashil.Run``
+bring in what they need when they are first touched.
+"""
 
-try:  # the one version is pyproject.toml's [project] version, read from the installed metadata
-    __version__ = version("sashil")
-except PackageNotFoundError:  # pragma: no cover - running from a tree that was never installed
-    __version__ = "0+unknown"
+from __future__ import annotations
 
-from sashil.api import Run, load_run  # the Python API: sashil.load_run(folder)
-from sashil.scripting import drop_test, run  # experiments from Python: the CLI's verbs, the same run folder
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from sashil._version import __version__
+
+if TYPE_CHECKING:
+    from sashil.api import Run, load_run
+    from sashil.scripting import drop_test, run
+
+#: public name -> the module that defines it
+_LAZY = {
+    "Run": "sashil.api",
+    "load_run": "sashil.api",
+    "drop_test": "sashil.scripting",
+    "run": "sashil.scripting",
+}
 
 __all__ = ["Run", "__version__", "drop_test", "load_run", "run"]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sashil' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

@@ -153,11 +153,15 @@ class Run:
         """Other CSV tables in the folder by file stem (e.g. ``transmissibility``)."""
         from sashil.recording.data_file import read_data_csv
 
-        return {
-            path.stem: read_data_csv(path, required=(), min_rows=0)
-            for path in sorted(self.path.glob("*.csv"))
-            if path.name != "data.csv"
-        }
+        tables = {}
+        for path in sorted(self.path.glob("*.csv")):
+            if path.name == "data.csv":
+                continue
+            try:
+                tables[path.stem] = read_data_csv(path, required=(), min_rows=0)
+            except DataFileError:  # a table with text columns (compare's metrics.csv: the law, its status)
+                tables[path.stem] = _read_text_table(path)
+        return tables
 
     @cached_property
     def timing(self) -> dict[str, np.ndarray] | None:
@@ -177,6 +181,29 @@ class Run:
         from sashil.recording.units import column_unit
 
         return {name: column_unit(name) for name in self.data}
+
+
+def _read_text_table(path: Path) -> dict[str, np.ndarray]:
+    """A CSV table whose columns are not all numbers: a column whose every cell is a number (an
+    empty one: NaN) as floats, any other as text."""
+    import csv
+
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            rows = [row for row in csv.reader(handle) if row]
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataFileError(f"{path}: cannot read ({err})") from None
+    if not rows:
+        return {}
+    header, body = [name.strip() for name in rows[0]], rows[1:]
+    columns: dict[str, np.ndarray] = {}
+    for index, name in enumerate(header):
+        cells = [row[index] if index < len(row) else "" for row in body]
+        try:
+            columns[name] = np.array([float(cell) if cell.strip() else np.nan for cell in cells])
+        except ValueError:
+            columns[name] = np.array(cells, dtype=str)
+    return columns
 
 
 def _has_pyarrow() -> bool:

@@ -78,6 +78,13 @@ class DeadlineMissedError(SashilError):
     exit_code = 4
 
 
+class LossError(SashilError):
+    """A run lost more of its deadlines or samples than the config allows (``loop.max_missed_fraction``,
+    ``driver.max_lost_fraction``): its data are kept, but it does not end ``ok``."""
+
+    exit_code = 5
+
+
 #: the exit code of a clean stop on SIGINT/SIGTERM/SIGHUP (128 + SIGINT, the shell's convention)
 EXIT_STOPPED = 130
 
@@ -94,6 +101,7 @@ EXIT_STATUS_CODES: dict[str, int] = {
     "stopped": EXIT_STOPPED,
     "safety_trip": SafetyTrip.exit_code,
     "deadline_missed": DeadlineMissedError.exit_code,
+    "lossy": LossError.exit_code,
     "error": SashilError.exit_code,
 }
 
@@ -106,6 +114,8 @@ def status_of(error: BaseException) -> str:
         return "safety_trip"
     if isinstance(error, DeadlineMissedError):
         return "deadline_missed"
+    if isinstance(error, LossError):
+        return "lossy"
     return "error"
 
 

@@ -89,8 +89,27 @@ def load_class(spec: str, where: str) -> type:
     return target
 
 
+class LawFileImport(BaseException):
+    """Raised by a run started while a law's file is being imported: a script that defines its law
+    and calls ``sashil.run(MyLaw)`` at its top level, with no ``if __name__ == "__main__":``
+    guard, is imported for its class (by the session's checks and by the loop process), and that
+    import must not start a second run. The import stops there and keeps what the file defined."""
+
+
+#: law files being imported right now (nested imports count)
+_importing = 0
+
+
+def check_not_importing(what: str) -> None:
+    """Raise :class:`LawFileImport` when called from the top level of a law file being imported."""
+    if _importing:
+        raise LawFileImport(f"{what} called while its law's file is imported")
+
+
 def _import_file(path: Path, where: str) -> object:
-    """Import a Python file as a module of its own (a stable name per absolute path, cached)."""
+    """Import a Python file as a module of its own (a stable name per absolute path, cached). A run
+    the file starts at its top level ends the import there (:class:`LawFileImport`)."""
+    global _importing
     if not path.is_file():
         raise ConfigError(f"{where}: {path}: no such file")
     resolved = path.resolve()
@@ -103,9 +122,14 @@ def _import_file(path: Path, where: str) -> object:
         raise ConfigError(f"{where}: {path}: not a Python file")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
+    _importing += 1
     try:
         spec.loader.exec_module(module)
+    except LawFileImport:
+        pass  # the file's own run, not this import's business: what it defined before is kept
     except BaseException:
         del sys.modules[name]
         raise
+    finally:
+        _importing -= 1
     return module

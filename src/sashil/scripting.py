@@ -1,8 +1,9 @@
 """Experiments from a script or notebook: ``sashil.run(...)`` and ``sashil.drop_test(...)``.
 
-Each call runs the same verb as the command line (``sashil run`` / ``sashil drop-test``: one
-runner, the safety supervisor, the same run folder) and returns the folder as the
-:class:`~sashil.api.Run` that :func:`sashil.load_run` gives::
+Each call resolves its config (:func:`sashil.config.resolve.resolve`) and calls the experiment's
+library function (:mod:`sashil.lab`), as the command line does (one runner, the safety supervisor,
+the same run folder), and returns the folder as the :class:`~sashil.api.Run` that
+:func:`sashil.load_run` gives::
 
     run = sashil.run("skyhook", duration_s=5, set={"controller.c_sky": 2.0})
     run.data["current_cmd_a"], run.summary["timing"]["compute_us"]["p99"]
@@ -14,15 +15,18 @@ that fails after it started raises the error that ended it, with the folder kept
 from __future__ import annotations
 
 import inspect
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from sashil.api import Run, load_run
-from sashil.errors import ConfigError, SashilError
+from sashil.api import Run
+from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.errors import ConfigError
+from sashil.lab.events import Listener, printer
+from sashil.lab.outputs import Outputs
+from sashil.plugins import check_not_importing
 
 __all__ = ["drop_test", "run"]
 
@@ -54,51 +58,35 @@ def set_items(values: Mapping[str, Any] | Iterable[str]) -> list[str]:
     return [str(item) for item in values]
 
 
-def _common(
-    argv: list[str],
+def _source(
     config: str | Path | Mapping[str, Any] | None,
     params: str | Path | None,
-    overrides: list[str],
+    sets: Mapping[str, Any] | Iterable[str],
+    controller: str | type | None,
     driver: str | None,
     port: str | None,
-    out: str | Path | None,
-    folder: Path,
-) -> list[str]:
-    if isinstance(config, Mapping):
-        path = folder / "config.yaml"
-        path.write_text(yaml.safe_dump(dict(config), sort_keys=False))
-        config = path
-    if config is not None:
-        argv += ["--config", str(config)]
-    if params is not None:
-        argv += ["--params", str(params)]
-    for item in overrides:
-        argv += ["--set", item]
-    if driver is not None:
-        argv += ["--driver", driver]
-    if port is not None:
-        argv += ["--port", port]
-    if out is not None:
-        argv += ["--out", str(out)]
-    return argv
+    options: Sequence[Option],
+) -> ConfigSource:
+    return ConfigSource(
+        config=config,
+        params=params,
+        controller=law_spec(controller) if controller is not None else None,
+        sets=tuple(set_items(sets)),
+        options=tuple(options),
+        driver=driver,
+        port=port,
+    )
 
 
-def _run_verb(verb: str, argv: Sequence[str]) -> Run:
-    from sashil.cli import build_parser
-    from sashil.recording.run_folder import CREATED, discard_unused
-
-    args = build_parser().parse_args([verb, *argv])
-    CREATED.clear()
-    try:
-        code = int(args._module.run(args) or 0)
-    except SashilError as err:
-        if isinstance(err, ConfigError):
-            discard_unused()
-        raise
-    folders = [path for path, _ in CREATED]
-    if not folders:
-        raise SashilError(f"sashil {verb}: no run folder was written (exit code {code})")
-    return load_run(folders[0])
+def _listener(quiet: bool, on_event: Listener | None) -> Listener:
+    """The caller's listener, else printed lines: all of them, or with ``quiet`` only the operator's
+    prompts and warnings."""
+    if on_event is not None:
+        return on_event
+    show = printer(quiet=True)
+    if not quiet:
+        return printer(quiet=False)
+    return lambda event: show(event) if event.kind in ("prompt", "warning") else None
 
 
 def run(
@@ -115,24 +103,26 @@ def run(
     port: str | None = None,
     out: str | Path | None = None,
     quiet: bool = True,
+    on_event: Listener | None = None,
 ) -> Run:
     """``sashil run`` from Python: ``controller`` (a law name, ``module:Class``, ``file.py:Class`` or a
-    Law class), ``set`` as ``{"controller.c_sky": 2.0}`` or ``["controller.c_sky=2"]``."""
-    with tempfile.TemporaryDirectory() as tmp:
-        argv = _common(
-            ["--duration", repr(float(duration_s))], config, params, set_items(set), driver, port, out, Path(tmp)
-        )
-        if controller is not None:
-            argv += ["--controller", law_spec(controller)]
-        if current_a is not None:
-            argv += ["--current", repr(float(current_a))]
-        if road is not None:
-            argv += ["--road", road]
-        if rate_hz is not None:
-            argv += ["--rate", repr(float(rate_hz))]
-        if quiet:
-            argv.append("-q")
-        return _run_verb("run", argv)
+    Law class), ``set`` as ``{"controller.c_sky": 2.0}`` or ``["controller.c_sky=2"]``. ``on_event``
+    receives the run's :class:`~sashil.lab.events.Event` messages (default: printed unless ``quiet``)."""
+    from sashil.lab._closed_loop import closed_loop
+
+    check_not_importing("sashil.run")
+    if current_a is not None:
+        if controller not in (None, "passive"):
+            raise ConfigError(f"current_a: only for the passive law (got controller={controller!r})")
+        controller = "passive"
+    options = (
+        Option("duration_s", "run.duration_s", float(duration_s)),
+        Option("rate_hz", "loop.rate_hz", None if rate_hz is None else float(rate_hz)),
+        Option("current_a", "controller.current_a", None if current_a is None else float(current_a)),
+        Option("road", "run.road", road),
+    )
+    resolved = resolve(_source(config, params, set, controller, driver, port, options), "run")
+    return closed_loop(resolved, Outputs(out=out), _listener(quiet, on_event), progress=not quiet)
 
 
 def drop_test(
@@ -148,17 +138,17 @@ def drop_test(
     port: str | None = None,
     out: str | Path | None = None,
     quiet: bool = True,
+    on_event: Listener | None = None,
 ) -> Run:
     """``sashil drop-test`` from Python: one sub-run per current (``run.runs``); ``controller`` takes
-    over at the release."""
-    overrides = set_items(set)
-    if controller is not None:
-        overrides.insert(0, f"controller.law={law_spec(controller)}")
-    with tempfile.TemporaryDirectory() as tmp:
-        argv = ["--theta0-deg", repr(float(theta0_deg)), "--duration", repr(float(duration_s))]
-        for current in currents_a:
-            argv += ["--current", repr(float(current))]
-        argv = _common(argv, config, params, overrides, driver, port, out, Path(tmp))
-        if quiet:
-            argv.append("-q")
-        return _run_verb("drop-test", argv)
+    over at the release. ``on_event`` receives the operator's prompts and each drop's result."""
+    from sashil.lab._drop_test import drop_test as run_drops
+
+    check_not_importing("sashil.drop_test")
+    options = (
+        Option("theta0_deg", "drop_test.theta0_deg", float(theta0_deg)),
+        Option("currents_a", "drop_test.currents_a", [float(current) for current in currents_a]),
+        Option("duration_s", "drop_test.duration_s", float(duration_s)),
+    )
+    resolved = resolve(_source(config, params, set, controller, driver, port, options), "drop-test")
+    return run_drops(resolved, Outputs(out=out), _listener(quiet, on_event))

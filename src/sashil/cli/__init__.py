@@ -1,8 +1,10 @@
 # PYTHON_ARGCOMPLETE_OK
 """The ``sashil`` command: one verb per module in this package, loaded on use.
 
-Each verb module defines ``HELP`` (one line), ``EXAMPLE`` (a command line), ``add_arguments(parser)``
-and ``run(args) -> int``. Errors a user can cause end as one line on stderr and exit code 2 (bad
+:data:`VERBS` holds each verb's module and its one-line help, so ``sashil --help`` and
+``sashil --version`` import no verb, and ``sashil VERB ...`` imports that verb's module only. A verb
+module defines ``EXAMPLE`` (a command line), ``add_arguments(parser)`` (argparse only: no physics,
+no numpy) and ``run(args) -> int``, which parses, calls the experiment's library function and prints. Errors a user can cause end as one line on stderr and exit code 2 (bad
 input) or the code of their :class:`~sashil.errors.SashilError` kind; never a traceback.
 """
 
@@ -10,40 +12,94 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import NoReturn
+from typing import NamedTuple, NoReturn
 
-from sashil import __version__
+from sashil._version import __version__
 from sashil.errors import (
     EXIT_STATUS_CODES,
     EXIT_STOPPED,
     ConfigError,
     DeadlineMissedError,
+    LossError,
     SafetyTrip,
     SashilError,
     Stopped,
 )
 
-#: verb -> module (docs/architecture.md fixed verbs)
-VERBS: dict[str, str] = {
-    "drop-test": "sashil.cli.drop_test",
-    "run": "sashil.cli.run",
-    "sweep": "sashil.cli.sweep",
-    "calibrate": "sashil.cli.calibrate",
-    "identify": "sashil.cli.identify",
-    "simulate": "sashil.cli.simulate",
-    "emulate": "sashil.cli.emulate",
-    "report": "sashil.cli.report",
-    "laws": "sashil.cli.laws",
-    "doctor": "sashil.cli.doctor",
-    "replay": "sashil.cli.replay",
-    "tune": "sashil.cli.tune",
-    "compare": "sashil.cli.compare",
+
+class Verb(NamedTuple):
+    """A verb's module (imported on use) and its one line of help."""
+
+    module: str
+    help: str
+
+
+#: verb -> its module and help (docs/architecture.md fixed verbs)
+VERBS: dict[str, Verb] = {
+    "drop-test": Verb(
+        "sashil.cli.drop_test",
+        "drop test: hold the arm at theta0, release, record the free oscillation at constant current(s)",
+    ),
+    "run": Verb(
+        "sashil.cli.run",
+        "run the rig in closed loop at a fixed rate (real clock), recording data.csv and timing",
+    ),
+    "sweep": Verb(
+        "sashil.cli.sweep",
+        "sweep: road excitation theta1 = A sin(phi(t)), a linear chirp or stepped sine (transmissibility table)",
+    ),
+    "calibrate": Verb(
+        "sashil.cli.calibrate",
+        "calibrate: run the drop-test/road plan on the rig, fit the damper model, validate it on held-out runs",
+    ),
+    "identify": Verb(
+        "sashil.cli.identify",
+        "identify the damper model from recorded runs and write a parameter file",
+    ),
+    "simulate": Verb(
+        "sashil.cli.simulate",
+        "simulate a model (from --params) on recorded inputs or a drop test, for validation",
+    ),
+    "emulate": Verb(
+        "sashil.cli.emulate",
+        "run the emulated rig (interface board + simulated plant) on a pty, for the serial or can driver",
+    ),
+    "report": Verb(
+        "sashil.cli.report",
+        "report on run folders: θ(t) overlays, hysteresis loops, transmissibility, timing, report.md",
+    ),
+    "laws": Verb(
+        "sashil.cli.laws",
+        "list the control laws found (built-in, installed packages, or a given class) and their parameters",
+    ),
+    "doctor": Verb(
+        "sashil.cli.doctor",
+        "check the machine, the port and the board for the rig: ok / warn / fail, what was found, the fix",
+    ),
+    "replay": Verb(
+        "sashil.cli.replay",
+        "run a law offline on a recorded run's samples: what it would have commanded, beside what was",
+    ),
+    "tune": Verb(
+        "sashil.cli.tune",
+        "change a running law's parameters (sashil run's tuning socket), or list them",
+    ),
+    "compare": Verb(
+        "sashil.cli.compare",
+        "run several laws on the same road and compare them (compare.md, metrics.csv, compare.png)",
+    ),
+    "panel": Verb(
+        "sashil.cli.panel",
+        "the bench in a browser: run a law on a road, live traces, live tuning and STOP (127.0.0.1, token)",
+    ),
 }
+
 
 #: the exit codes explained in ``sashil --help`` (the codes themselves live in sashil.errors)
 EXIT_CODES = {
@@ -52,6 +108,7 @@ EXIT_CODES = {
     ConfigError.exit_code: "bad input: a config key, parameter file, data file, CLI argument or port; nothing energised",
     SafetyTrip.exit_code: "a safety trip stopped the run (angle interlock, sensor timeout, stale samples)",
     DeadlineMissedError.exit_code: "a deadline was missed with overrun policy 'fail'",
+    LossError.exit_code: "the run lost more deadlines or samples than loop.max_missed_fraction / driver.max_lost_fraction allow (data kept)",
     EXIT_STOPPED: "stopped by SIGINT/SIGTERM after a clean shutdown (0 A, data and summary written)",
 }
 
@@ -61,7 +118,26 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def add_verb(sub: argparse._SubParsersAction, verb: str) -> argparse.ArgumentParser:
+    """The parser of ``verb``, its module imported and its arguments added."""
+    entry = VERBS[verb]
+    module = importlib.import_module(entry.module)
+    verb_parser: argparse.ArgumentParser = sub.add_parser(
+        verb,
+        help=entry.help,
+        description=entry.help,
+        epilog=f"example:\n  {module.EXAMPLE}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    module.add_arguments(verb_parser)
+    verb_parser.set_defaults(_module=module)
+    return verb_parser
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``sashil`` parser. With ``argv``, only the verb it names is loaded (the others are listed
+    by their help line, so ``sashil --help`` stays fast); without it, every verb is loaded (for
+    documentation and shell completion)."""
     epilog = "exit codes:\n" + "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
     parser = _Parser(
         prog="sashil",
@@ -71,17 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
-    for verb, module_name in VERBS.items():
-        module = importlib.import_module(module_name)
-        verb_parser = sub.add_parser(
-            verb,
-            help=module.HELP,
-            description=module.HELP,
-            epilog=f"example:\n  {module.EXAMPLE}",
-            formatter_class=argparse.RawDescriptionHelpFormatter,
-        )
-        module.add_arguments(verb_parser)
-        verb_parser.set_defaults(_module=module)
+    wanted = set(VERBS) if argv is None else {next((a for a in argv if not a.startswith("-")), "")}
+    for verb, entry in VERBS.items():
+        if verb in wanted:
+            add_verb(sub, verb)
+        else:  # listed in --help; never parsed (the verb in argv is the only one loaded)
+            sub.add_parser(verb, help=entry.help)
     return parser
 
 
@@ -106,8 +177,11 @@ def _stop_outside_the_loop() -> Iterator[None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    if argv is None:  # a shell asking for completions (argcomplete, when installed) is answered here
+    completing = argv is None and "_ARGCOMPLETE" in os.environ
+    if argv is None:
+        argv = sys.argv[1:]
+    parser = build_parser(None if completing else argv)
+    if completing:  # a shell asking for completions (argcomplete, when installed) is answered here
         from sashil.cli.completion import enable
 
         enable(parser)

@@ -10,7 +10,6 @@ from sashil.cli.common import add_config_options, add_driver_options, resolve_co
 from sashil.diagnostics import FAIL, WARN, Check, exit_code, table
 from sashil.errors import ConfigError
 
-HELP = "check the machine, the port and the board for the rig: ok / warn / fail, what was found, the fix"
 EXAMPLE = "sashil doctor --driver serial --port /dev/ttyUSB0"
 
 

@@ -10,7 +10,6 @@ import sys
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
 from sashil.errors import ConfigError
 
-HELP = "run the emulated rig (interface board + simulated plant) on a pty, for the serial or can driver"
 EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
 
 

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from sashil.errors import ConfigError
 
-HELP = "identify the damper model from recorded runs and write a parameter file"
 EXAMPLE = "sashil identify runs/a/data.csv runs/b/data.csv --model all --out params.yaml"
 
 MODEL_CHOICES = ("bouc-wen", "dahl", "lugre", "bingham", "all")

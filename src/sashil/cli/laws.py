@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.control.law_registry import LawEntry, find_law, known_laws
+if TYPE_CHECKING:
+    from sashil.control.law_registry import LawEntry
 
-HELP = "list the control laws found (built-in, installed packages, or a given class) and their parameters"
 EXAMPLE = "sashil laws --law examples/soft_skyhook/soft_skyhook.py:SoftSkyhook"
 
 
@@ -68,6 +68,8 @@ def _text(laws: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.control.law_registry import find_law, known_laws
+
     entries = known_laws() + [find_law(spec) for spec in args.law]
     laws = [describe(entry) for entry in entries]
     print(json.dumps(laws, indent=2) if args.json else _text(laws))

@@ -6,14 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from sashil.api import load_run as load_run_api
 from sashil.cli.common import add_output_options, add_verbosity_options, say
-from sashil.recording.formats import check_formats, write_data_formats
-from sashil.recording.matlab import export_mat
-from sashil.recording.report import write_report
-from sashil.recording.run_folder import RunFolder
 
-HELP = "report on run folders: θ(t) overlays, hysteresis loops, transmissibility, timing, report.md"
 EXAMPLE = "sashil report runs/drop-0A runs/drop-1A --out runs/compare"
 
 
@@ -32,12 +26,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.api import load_run as load_run_api
+    from sashil.recording.formats import check_formats, write_data_formats
+    from sashil.recording.matlab import export_mat
+    from sashil.recording.report import write_report
+    from sashil.recording.run_folder import RunFolder
+
     progress = lambda line: say(args, f"sashil report: {line}")  # noqa: E731
     # read everything before creating the output folder: bad input leaves nothing behind
-    from sashil.recording.report import load_run
+    from sashil.recording.report import read_record
 
     for run_dir in args.run_dirs:
-        load_run(run_dir)
+        read_record(run_dir)
     check_formats(args.format, None)  # a missing library is named before anything is written
     folder = RunFolder.create(args.out, "report")
     _runs, files = write_report(args.run_dirs, folder.path, progress)

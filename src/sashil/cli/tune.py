@@ -7,13 +7,9 @@ import json
 from typing import Any
 
 from sashil.cli.common import add_verbosity_options, setup_logging
-from sashil.config.overrides import parse_override
 from sashil.errors import ConfigError
-from sashil.runtime.tune_socket import request
-from sashil.runtime.tuning import RAMP_KEY, check_ramp
 
-HELP = "change a running law's parameters (sashil run's tuning socket), or list them"
-EXAMPLE = "sashil tune runs/run-20261125T101500Z controller.c_sky=2.5 controller.tune_ramp_s=1"
+EXAMPLE = "sashil tune runs/20261125T101500Z-run controller.c_sky=2.5 controller.tune_ramp_s=1"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,10 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
     """``["controller.c_sky=2", "controller.tune_ramp_s=1"]`` -> ``({"c_sky": 2}, 1.0)``; ConfigError
     (one line naming the argument) for anything but ``controller.<param>=VALUE``."""
+    from sashil.config.overrides import parse_override
+    from sashil.runtime.tuning import RAMP_KEY, check_ramp
+
     values: dict[str, Any] = {}
     ramp: float | None = None
     for text in texts:
-        path, value = parse_override(text)
+        path, value = parse_override(text, "sashil tune")
         if path[0] != "controller" or len(path) != 2:
             raise ConfigError(
                 f"sashil tune {text!r}: only a running law's parameters can change: controller.<param>=VALUE"
@@ -50,6 +49,8 @@ def parse_changes(texts: list[str]) -> tuple[dict[str, Any], float | None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.runtime.tune_socket import request
+
     setup_logging(args)
     values, ramp = parse_changes(args.changes)
     message: dict[str, Any] = {"set": values, "ramp_s": ramp} if values else {"get": True}

@@ -123,4 +123,6 @@ def apply_params(config: Config, params_path: str | Path) -> Config:
 
 def dump_config(config: Config) -> str:
     """The resolved config as YAML text (what a run folder's ``config.yaml`` holds)."""
-    return yaml.safe_dump(config, sort_keys=False, default_flow_style=False)
+    from sashil.config.frozen import thaw
+
+    return yaml.safe_dump(thaw(config), sort_keys=False, default_flow_style=False)

@@ -11,7 +11,7 @@ e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'``.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import yaml
@@ -24,20 +24,21 @@ from sashil.errors import ConfigError
 SOURCE = "--set"
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """``"loop.rt.priority=0"`` -> ``(["loop", "rt", "priority"], 0)``; the value is read as YAML."""
+def parse_override(text: str, source: str = SOURCE) -> tuple[list[str], Any]:
+    """``"loop.rt.priority=0"`` -> ``(["loop", "rt", "priority"], 0)``; the value is read as YAML
+    (``source``: the option or command named in an error)."""
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value (e.g. loop.rate_hz=500)")
+        raise ConfigError(f"{source} {text!r}: expected section.key=value (e.g. loop.rate_hz=500)")
     path = key.split(".")
     if len(path) < 2 or any(not part for part in path):
-        raise ConfigError(f"{SOURCE} {text!r}: expected section.key=value, with a dotted key (e.g. loop.rate_hz=500)")
+        raise ConfigError(f"{source} {text!r}: expected section.key=value, with a dotted key (e.g. loop.rate_hz=500)")
     try:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError as err:
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise ConfigError(f"{SOURCE}: {key}: not a valid YAML value ({problem}): {raw!r}") from None
+        raise ConfigError(f"{source}: {key}: not a valid YAML value ({problem}): {raw!r}") from None
     return path, value
 
 
@@ -55,21 +56,29 @@ def _set(doc: dict[str, Any], path: list[str], value: Any) -> None:
 def apply_overrides(config: dict[str, Any], overrides: Iterable[str], source: str = SOURCE) -> dict[str, Any]:
     """A validated copy of ``config`` with each ``section.key=value`` override applied in order
     (``source``: the option named in error messages)."""
-    overrides = list(overrides)
-    if not overrides:
-        return config
-    doc = copy.deepcopy(config)
-    parsed = [parse_override(text) for text in overrides]
-    for path, value in parsed:
+    return apply_values(config, [parse_override(text) for text in overrides], source)
+
+
+def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], Any]], source: str) -> dict[str, Any]:
+    """A validated copy of ``config`` with each ``(dotted path, value)`` set in order, checked as a
+    config file is (``source``: the option named in error messages); ``config`` itself when there is
+    nothing to set."""
+    if not values:
+        return config  # type: ignore[return-value]
+    doc: dict[str, Any] = copy.deepcopy(dict(config))
+    for path, value in values:
         if path == ["controller", "law"] and isinstance(doc.get("controller"), dict):
             # the previous law's parameters go with it, unless set alongside the new law
             from sashil.control.law_config import switch_law
 
-            keep = {p[1] for p, _ in parsed if len(p) == 2 and p[0] == "controller"}
+            keep = {p[1] for p, _ in values if len(p) == 2 and p[0] == "controller"}
             switch_law(doc["controller"], value, keep)
         else:
             _set(doc, path, value)
     out = validate(doc, SCHEMA, source)
+    if out["model"]["name"] != "bouc-wen" and isinstance(doc.get("model"), dict):
+        # the schema's default parameters are the Bouc-Wen seed's: another model keeps its own only
+        out["model"]["params"] = dict(doc["model"].get("params") or {})
     from sashil.config import check_controller
     from sashil.models.registry import check_model
 

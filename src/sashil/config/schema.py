@@ -28,8 +28,9 @@ class Field:
 
     def expected(self) -> str:
         """Human description of what the field accepts."""
-        if self.kind == "choice":
-            return "one of " + ", ".join(repr(c) for c in self.choices)
+        if self.kind.rstrip("?") == "choice":
+            text = "one of " + ", ".join(repr(c) for c in self.choices)
+            return text + (" or null" if self.kind.endswith("?") else "")
         if self.kind == "bool":
             return "true or false"
         if self.kind in ("str", "str?"):
@@ -67,7 +68,7 @@ class Field:
                 raise fail()
             return value
         if kind == "float_list":
-            if not isinstance(value, list):
+            if not isinstance(value, (list, tuple)):  # a resolved (read-only) config holds tuples
                 raise fail()
             out = []
             for item in value:

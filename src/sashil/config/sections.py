@@ -41,7 +41,12 @@ DRIVER = Section(
     {
         "name": Field("choice", "sim", choices=tuple(BACKENDS)),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
-        "clock": Field("choice", "virtual", choices=("virtual", "real"), doc="sim backend only"),
+        "clock": Field(
+            "choice?",
+            None,
+            choices=("virtual", "real"),
+            doc="sim backend only; null: the verb's own (virtual for drop-test, sweep, calibrate; real for run)",
+        ),
         # serial and can backends (drivers/protocol.md)
         "baud": Field("int", 1_000_000, low=1200, high=100_000_000, doc="serial line rate (ignored by ptys)"),
         "can_interface": Field(
@@ -56,6 +61,13 @@ DRIVER = Section(
             "float", 25.0, low=0.0, high=60_000.0, doc="the run ends after this long without a sample"
         ),
         "connect_timeout_s": Field("float", 1.0, low=0.01, high=60.0, doc="handshake answers"),
+        "max_lost_fraction": Field(
+            "float",
+            0.25,
+            low=0.0,
+            high=1.0,
+            doc="a run over a link that lost more than this share of its samples ends 'lossy' (exit 5), data kept",
+        ),
     },
     doc="which backend talks to the rig",
 )
@@ -70,6 +82,18 @@ LOOP = Section(
             "choice", "skip", choices=("skip", "fail"), doc="a missed deadline: skip whole periods, or stop (exit 4)"
         ),
         "warn_interval_s": Field("float", 1.0, low=0.0, doc="at most one overrun warning per this interval"),
+        "process": Field(
+            "bool",
+            True,
+            doc="run the real-clock loop in a process of its own (the recorder, views and tuning stay in the session's)",
+        ),
+        "max_missed_fraction": Field(
+            "float",
+            0.25,
+            low=0.0,
+            high=1.0,
+            doc="a run that missed more than this share of its scheduled deadlines ends 'lossy' (exit 5), data kept",
+        ),
         "rt": Section(
             {
                 "priority": Field("int", 50, low=0, high=99, doc="SCHED_FIFO priority (0: leave the scheduler alone)"),
@@ -210,7 +234,20 @@ CONTROLLER = Section(
         "min_authority_nm_per_a": Field(
             "float", 1e-3, low=0.0, low_open=True, doc="0 A when |alpha2*z + c2*v| is below this"
         ),
-        "lead_horizon_s": Field("float", 0.003, low=0.0, high=1.0, doc="coil-lag compensation horizon (0: off)"),
+        "lead_horizon_s": Field(
+            "float",
+            0.003,
+            low=0.0,
+            high=1.0,
+            doc="coil-lag compensation horizon (0: off): a torque law's current is commanded so the coil reaches it "
+            "within this time",
+        ),
+        "lead_current_laws": Field(
+            "bool",
+            False,
+            doc="apply the coil-lag lead to a current() law's output too (false: the current a law gives is "
+            "commanded as given, clamped to [0, i_max]; data.csv records it as current_law_a either way)",
+        ),
         "coil_tau_s": Field(
             "float?", None, low=0.0, high=1.0, doc="coil lag the controller assumes (null: rig.coil_tau_s)"
         ),
@@ -302,8 +339,12 @@ COMPARE = Section(
             "float", 5.0, low=0.0, high=600.0, doc="on a real rig: time at rest (0 A, road stopped) between laws"
         ),
         "jobs": Field("int", 1, low=1, high=64, doc="simulated rig: laws run in this many processes (--jobs)"),
+        "road": Field("str", "iso8608:C", doc="the road every law runs on (--road syntax)"),
+        "duration_s": Field(
+            "float", 30.0, low=0.0, low_open=True, doc="seconds per law, more than settle_s (--duration)"
+        ),
     },
-    doc="`sashil compare`: the metrics and how the laws are run",
+    doc="`sashil compare`: the road, the metrics and how the laws are run",
 )
 
 CALIBRATE = Section(

@@ -2,8 +2,16 @@
 
 ``step(sample, t_ns, dt_ns) -> RigCommand`` (the loop's stage protocol). The per-cycle values
 (``theta_dot_rad_s``, ``z_hat``, ``torque_hat_nm``, ``torque_cmd_nm``, the band, the currents) are
-plain attributes overwritten every cycle, for a recorder to copy; the returned command object is
+plain attributes overwritten every cycle, for a recorder to copy (:attr:`Controller.signal_names`:
+the law's own output is recorded as given, ``torque_cmd_nm`` for a torque law, ``current_law_a``
+for a current law, beside the ``current_cmd_a`` the loop sent); the returned command object is
 reused (no allocation per cycle).
+
+The coil-lag lead (:class:`~sashil.control.inverse.CoilLagCompensator`) drives the coil towards
+the inverse's current for a torque law. A current law's output is commanded as the law gave it
+(clamped to [0, i_max]) unless ``lead_current_laws``: the law chose amperes, and the lead would
+command more than it asked for while the coil catches up (3.86 times the step with the 3 ms
+horizon on a 10 ms coil).
 
 The estimator's model acceleration for the next cycle comes from the rig model
 (seed 001 eq. 13): ``theta2_ddot = (-k*theta - T_hat)/J`` (the relative channel subtracts theta1_ddot).
@@ -43,6 +51,8 @@ from sashil.errors import LawError, SafetyTrip
 
 NAN = float("nan")
 INF = float("inf")
+#: the docs/architecture.md data.csv columns every controller records (a current law adds current_law_a)
+SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
 def _first_line(err: BaseException) -> str:
@@ -64,11 +74,16 @@ class Controller:
         model_aided: bool = True,
         nominal_dt_s: float = 0.001,
         origin: str = "",
+        lead_current_laws: bool = False,
     ):
         self.law = law
         #: where the law came from (built-in, a package, a file), for messages and summary.json
         self.origin = origin
         self.direct = law.output_kind() == "current"
+        #: what the loop records each cycle: the law's own current beside the command for a current law
+        self.signal_names = SIGNALS + (("current_law_a",) if self.direct else ())
+        #: whether the coil-lag lead acts on a current law's output (module docstring)
+        self.lead_direct = bool(lead_current_laws)
         self._law_output = law.current if self.direct else law.torque
         self.state = LawState()
         self.estimator = estimator
@@ -97,6 +112,7 @@ class Controller:
         self.z_hat = 0.0
         self.torque_hat_nm = 0.0
         self.torque_cmd_nm = NAN
+        self.current_law_a = NAN  # a current law's output as it gave it
         self.band_lo_nm = 0.0
         self.band_hi_nm = 0.0
         self.current_target_a = 0.0
@@ -111,7 +127,7 @@ class Controller:
         """0 A (the safe state of an MR damper) once the estimator has failed; counted per cycle."""
         self.fallback_cycles += 1
         self.cycles += 1
-        self.torque_cmd_nm = NAN
+        self.torque_cmd_nm = self.current_law_a = NAN  # the law was not asked
         self.current_target_a = self.current_cmd_a = 0.0
         self.command.current_a = 0.0
         return self.command
@@ -245,12 +261,13 @@ class Controller:
             out = self._checked(out)
         if self.direct:
             self.torque_cmd_nm = NAN
-            target = out
+            self.current_law_a = target = out
+            cmd = self.lead.command(target, measured) if self.lead_direct else target
         else:
             self.torque_cmd_nm = out
             target = inv.current(out, z, v)
+            cmd = self.lead.command(target, measured)
         self.current_target_a = target
-        cmd = self.lead.command(target, measured)
         # safety clamp: the coil only ever sees a finite current in [0, i_max]
         safe = clamp_current(cmd, self.current_max_a)
         if safe != cmd:  # outside [0, i_max], or NaN (never equal to itself)

@@ -37,12 +37,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from sashil.models._jit import jit
+from sashil.models._jit import jit, loop_kernel
 
 #: a measurement's variance never goes below this share of a count squared (keeps P positive)
 VARIANCE_FLOOR_COUNTS2 = 1e-6
 
 
+def _state() -> tuple[np.ndarray, np.ndarray]:
+    """A state vector and a covariance of the types a cycle passes (float64, C order)."""
+    return np.zeros(6), np.eye(6)
+
+
+@loop_kernel(lambda: (*_state(), np.ones(6), 0.0, 1.0))
 @jit
 def _scalar_update(x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: float, variance: float) -> None:
     """x += K e, P -= K h P with K = P h / (h P h + r): one scalar measurement."""
@@ -62,6 +68,7 @@ def _scalar_update(x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: floa
             p[i, j] -= ph[i] * ph[j] / s
 
 
+@loop_kernel(lambda: (0.0, 1.0))
 @jit
 def _cell(innovation: float, zone: float) -> float:
     """The distance from the prediction to the count's cell of half-width ``zone`` (0 inside it)."""
@@ -72,6 +79,9 @@ def _cell(innovation: float, zone: float) -> float:
     return 0.0
 
 
+@loop_kernel(
+    lambda: (*_state(), np.eye(6), 1.0, 1e-3, 0.0, 0.0, 0.0, 0.0, 1e-4, 0.0, 1e-4, 0.0, 1e-7, 1e-7, 1e-3, 1e-11, 1e-4)
+)
 @jit
 def edge_cycle(
     x: np.ndarray,

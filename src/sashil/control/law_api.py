@@ -172,6 +172,15 @@ class Law:
 
     #: the name ``controller.law`` and ``--controller`` select it by
     name: ClassVar[str] = ""
+    #: whether the law reads the rig's state each cycle. True (the default): the estimator, the
+    #: Bouc-Wen observer, the feasible band and the coil lead run for it. False (a law that ignores
+    #: the state, such as a constant current): it runs as a constant-current stage without them,
+    #: and a drop test records no controller columns for it.
+    reads_state: ClassVar[bool] = True
+
+    def label(self) -> str:
+        """What a run calls the law in its summary and plots (``controller``): its name by default."""
+        return self.name
 
     def __init__(self, context: LawContext | None = None, **params: Any):
         self.context = context

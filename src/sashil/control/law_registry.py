@@ -19,7 +19,7 @@ from sashil.control.law_api import Law
 from sashil.errors import ConfigError
 from sashil.plugins import LAWS_GROUP, entry_point_table, is_class_spec, load_class
 
-__all__ = ["LawEntry", "find_law", "known_laws", "law_names"]
+__all__ = ["LawEntry", "find_law", "known_laws", "law_label", "law_names"]
 
 WHERE = "controller.law"
 
@@ -31,6 +31,13 @@ class LawEntry:
     spec: str
     cls: type[Law]
     origin: str
+
+
+def law_label(spec: str) -> tuple[str, str]:
+    """What a run calls the law ``spec`` names, and where it came from: its ``name`` (never the
+    path or module it was given by) and its origin (``built-in``, ``package NAME``, ``file PATH``)."""
+    entry = find_law(spec)
+    return entry.cls.name, entry.origin
 
 
 def law_names() -> list[str]:

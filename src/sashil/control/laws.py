@@ -46,7 +46,11 @@ class Passive(Law):
     """A constant current (no inverse): the damper as a passive damper of c(i), alpha(i)."""
 
     name = "passive"
+    reads_state = False
     current_a = Param(0.0, unit="A", low=0.0, high=10.0, doc="the constant current")
+
+    def label(self) -> str:
+        return f"passive {self.current_a:g} A"
 
     def parameters_changed(self) -> None:
         _current_in_range("current_a", self.current_a, self)

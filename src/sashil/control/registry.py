@@ -22,7 +22,27 @@ from sashil.control.law_registry import find_law
 from sashil.control.observer import BoucWenObserver
 from sashil.models.registry import rig_params
 
-__all__ = ["controller_section", "make_controller", "make_estimator"]
+__all__ = ["controller_section", "law_reads_state", "make_controller", "make_estimator", "make_stage"]
+
+
+def law_reads_state(config: dict[str, Any]) -> bool:
+    """Whether the config's law reads the rig's state (:attr:`sashil.control.law_api.Law.reads_state`)."""
+    return bool(find_law(controller_section(config)["law"]).cls.reads_state)
+
+
+def make_stage(config: dict[str, Any]) -> tuple[str, Any]:
+    """The loop stage of the config's law and its label (the law's ``name``, however ``controller.law``
+    names it: a file law is not labelled by its path): a :class:`Controller`, or for a law that
+    reads no state a constant-current stage that runs the law alone (no estimator or observer)."""
+    section = controller_section(config)
+    entry = find_law(section["law"])
+    if entry.cls.reads_state:
+        return entry.cls.name, make_controller(None, config)
+    from sashil.runtime.stages import ConstantCurrent
+
+    declared = entry.cls.params()
+    law = build_law(entry, config, {key: value for key, value in section.items() if key in declared})
+    return law.label(), ConstantCurrent(law=law)
 
 
 def controller_section(config: dict[str, Any]) -> dict[str, Any]:
@@ -95,6 +115,7 @@ def make_controller(
         observer=BoucWenObserver(params),
         inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"]),
         lead=CoilLagCompensator(tau, float(section["lead_horizon_s"]), i_max),
+        lead_current_laws=bool(section.get("lead_current_laws", False)),
         current_max_a=i_max,
         model_aided=bool(section["model_aided"]),
         nominal_dt_s=1.0 / rate_hz,

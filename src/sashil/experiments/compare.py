@@ -1,11 +1,14 @@
 """``sashil compare``: each law on the same road through the one runner, and its metrics.
 
 A :class:`LawJob` is one law's run: its label, its checked config (``controller.law`` and its
-parameters), the road spec and the duration. :func:`run_job` builds the stage (a constant current
-for ``passive``, else the controller of :func:`sashil.control.registry.make_controller`), wraps it in
-the road (:class:`~sashil.experiments.road_option.RoadStage`: the road motor's speed each cycle),
-runs it with :func:`sashil.runtime.runner.run_plan` and derives the metrics from the stream.
-A job is picklable, so on the simulated rig jobs may run in parallel processes.
+parameters), the road spec, the duration and its run folder. :func:`run_job` builds the stage (a
+constant current for ``passive``, else the controller of
+:func:`sashil.control.registry.make_controller`), wraps it in the road
+(:class:`~sashil.experiments.road_option.RoadStage`: the road motor's speed each cycle), runs it with
+:func:`sashil.runtime.runner.run_plan`, streaming every cycle into the folder's ``data.csv`` (and
+its loop timing into ``timing.npz``), and derives the metrics from the stream. A job is picklable,
+so on the simulated rig jobs may run in parallel processes; the caller writes each folder's
+``config.yaml`` before and its ``summary.json`` after (:attr:`LawResult.summary`).
 
 Metrics, after ``compare.settle_s``:
 
@@ -18,8 +21,6 @@ Metrics, after ``compare.settle_s``:
   those as jumps) (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS in quadrature at
   20 Hz, the same for every law);
 * travel: RMS of the relative angle θ;
-* handling proxy: RMS of the road-side torque k·θ + T. With the road side driven (seed 001 eq. 13,
-  T_in = 0) it equals −J·θ̈2, so on this rig it ranks laws exactly as comfort does;
 * peak measured current, and the energy to the coil R·∫i² dt (R = ``compare.coil_resistance_ohm``).
 """
 
@@ -28,6 +29,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,6 +49,8 @@ class LawJob:
     config: dict[str, Any]
     road: str
     duration_s: float
+    #: the law's run folder (created, its config.yaml written): data.csv and timing.npz go there
+    folder: str | None = None
 
 
 @dataclass
@@ -63,6 +67,8 @@ class LawResult:
     trace: list[float] = field(default_factory=list)
     #: where θ̈2 came from: "plant" (a simulated rig's true state) or "encoders"
     accel_source: str = ""
+    #: the runner's common summary keys of the law's run (timing, trips, controller_stats, ...)
+    summary: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -72,21 +78,22 @@ class LawResult:
 METRICS = (
     "rms_accel_rad_s2",
     "rms_theta_deg",
-    "rms_road_torque_nm",
     "peak_current_a",
     "coil_energy_j",
 )
 
 
 class MeasuredStage:
-    """A loop stage that runs ``stage`` and records the simulated plant's true arm acceleration
-    θ̈2 = (−k·θ − T)/J (seed 001 eq. 13) as ``arm_accel_true_rad_s2`` (NaN on a rig without a plant)."""
+    """A loop stage that runs ``stage`` and records the true arm acceleration θ̈2 = (−k·θ − T)/J
+    (seed 001 eq. 13) of a rig that reports it (its capability ``true_torque``: a simulated plant) as
+    ``arm_accel_true_rad_s2`` (NaN on any other rig)."""
 
-    def __init__(self, stage: Any, plant: Any):
+    def __init__(self, stage: Any, rig: Any):
+        from sashil.drivers.interface import capabilities_of
         from sashil.runtime.loop import stage_signals
 
         self.stage = stage
-        self.plant = plant
+        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.signal_names = (*stage_signals(stage), "arm_accel_true_rad_s2")
         self.arm_accel_true_rad_s2 = math.nan
 
@@ -96,10 +103,8 @@ class MeasuredStage:
         return getattr(self.stage, name)
 
     def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
-        plant = self.plant
-        if plant is not None:
-            p = plant.params
-            self.arm_accel_true_rad_s2 = (-p.k * plant.state.theta_rad - plant.damper_torque()) / p.J
+        if self._truth is not None:
+            self.arm_accel_true_rad_s2 = self._truth.plant_truth().arm_accel_rad_s2
         return self.stage.step(sample, t_ns, dt_ns)
 
 
@@ -168,12 +173,10 @@ def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str
     current = np.asarray(stream["current_a"], dtype=float)[:-1][keep]
     current = np.where(np.isfinite(current), current, 0.0)
     a = accel[keep]
-    J = float(config["model"]["params"]["J"])
     rms_a = float(np.sqrt(np.mean(a * a)))
     metrics = {
         "rms_accel_rad_s2": rms_a,
         "rms_theta_deg": math.degrees(float(np.sqrt(np.mean(theta * theta)))),
-        "rms_road_torque_nm": J * rms_a,
         "peak_current_a": float(np.max(current)),
         "coil_energy_j": float(section["coil_resistance_ohm"]) * float(np.sum(current * current)) / rate,
     }
@@ -198,10 +201,12 @@ def run_job(job: LawJob) -> LawResult:
     from sashil.drivers import open_rig
     from sashil.experiments.drop_test import default_clock
     from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.recording.run_folder import RunFolder
     from sashil.runtime.runner import run_plan
 
     config = job.config
     result = LawResult(job.label, metrics=dict.fromkeys(METRICS, math.nan))
+    folder = RunFolder(Path(job.folder), "compare") if job.folder is not None else None
     start = time.perf_counter()
     try:
         road, _ = parse_road(job.road, config)
@@ -209,13 +214,14 @@ def run_job(job: LawJob) -> LawResult:
         if road is not None:
             stage = RoadStage(stage, road)
         rig = open_rig(config)
-        stage = MeasuredStage(stage, getattr(rig, "plant", None))
+        stage = MeasuredStage(stage, rig)
         outcome = run_plan(
             config,
             rig,
             stage,
             default_clock(config),
             job.duration_s,
+            data_path=folder.file("data.csv") if folder is not None else None,
             read_stream=True,
             realtime=False,
             say=lambda _: None,
@@ -225,6 +231,9 @@ def run_job(job: LawJob) -> LawResult:
         result.wall_s = time.perf_counter() - start
         return result
     result.wall_s = time.perf_counter() - start
+    result.summary = outcome.summary()
+    if folder is not None:
+        folder.write_timing(outcome.loop.timing)
     loop = outcome.result
     if outcome.error is not None or loop.exit_status != "ok":
         trips = "; ".join(str(trip.get("reason", trip)) for trip in loop.trips)

@@ -37,6 +37,58 @@ DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_c
 CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
+def controller_columns(controller: Any) -> tuple[str, ...]:
+    """The columns a drop test records of its controller: what the controller says it records
+    (``signal_names``: a current law's own output, ``current_law_a``, too), else
+    :data:`CONTROLLER_COLUMNS`; none without a controller."""
+    if controller is None:
+        return ()
+    return tuple(getattr(controller, "signal_names", CONTROLLER_COLUMNS))
+
+
+#: how long a drop test on a pseudo-terminal (an emulated rig) waits for its operator's hold [s]:
+#: an emulator started with --hold-deg holds the arm from its first sample on
+EMULATED_HOLD_WAIT_S = 1.0
+
+
+def pseudo_terminal(rig: Any) -> str | None:
+    """The rig's port when it is a pseudo-terminal (``/dev/pts/N``, or a link to one: an emulator's),
+    else None (a device, a socket, the simulated rig)."""
+    import os
+
+    port = getattr(getattr(rig, "settings", None), "port", None)
+    if not isinstance(port, str) or not port.startswith("/"):
+        return None
+    return port if os.path.realpath(port).startswith("/dev/pts/") else None
+
+
+#: the largest hold angle a drop test accepts [deg]
+THETA0_LIMIT_DEG = 30.0
+
+
+def check_drops(config: dict[str, Any], named: Callable[[str], str]) -> None:
+    """The ``drop_test`` keys a run can honour: a hold angle within ±THETA0_LIMIT_DEG and far enough
+    from 0 for the release to be seen, and each current once, within [0, rig.current_max_a];
+    ``named(key)`` is the option that set a key (``--current``), or the key."""
+    section = config["drop_test"]
+    theta0 = section["theta0_deg"]
+    if not (math.isfinite(theta0) and abs(theta0) <= THETA0_LIMIT_DEG):
+        raise ConfigError(
+            f"{named('drop_test.theta0_deg')}: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {theta0:g}"
+        )
+    check_theta0(config, theta0, named("drop_test.theta0_deg"))
+    currents = list(section["currents_a"])
+    where = named("drop_test.currents_a")
+    if not currents:
+        raise ConfigError(f"{where}: expected at least one current, got []")
+    i_max = config["rig"]["current_max_a"]
+    for value in currents:
+        if not (math.isfinite(value) and 0.0 <= value <= i_max):
+            raise ConfigError(f"{where}: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {value:g}")
+    if len(set(currents)) != len(currents):
+        raise ConfigError(f"{where}: each current once, got {currents}")
+
+
 def check_theta0(config: dict[str, Any], theta0_deg: float, option: str = "--theta0-deg") -> None:
     """Refuse a hold angle the release could not be detected from: the release is the arm moving
     ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
@@ -59,6 +111,8 @@ class DropTestSettings:
     release_threshold_rad: float
     hold_timeout_s: float
     known_release_after_s: float | None = None  # set when the backend plays the operator
+    #: the rig's port when it is a pseudo-terminal (an emulator's link): no hand can hold that arm
+    pseudo_terminal: str | None = None
 
     @classmethod
     def from_config(
@@ -141,8 +195,10 @@ class DropTestPlan:
         self.notify = notify
         # optional loop stage (sashil.control) that commands the damper after the release
         self.controller = controller
-        #: the controller's per-cycle values go into the stream (the loop reads them after each step)
-        self.signal_names = CONTROLLER_COLUMNS if controller is not None else ()
+        #: the controller's per-cycle values go into the stream (the loop reads them after each step,
+        #: from the controller itself: the attributes below forward them too, but slower)
+        self.signal_names = controller_columns(controller)
+        self.signal_source = controller if controller is not None else self
         self.command = RigCommand(settings.current_a)
         self.resolution = TWO_PI / counts_per_rev
         self.phase = "wait-hold"
@@ -153,12 +209,13 @@ class DropTestPlan:
         self._hold_count = 0
         self.hold_angle = settings.theta0_rad
         self.held_elsewhere = False  # a simulated operator held the arm away from theta0
+        self.operator_seen = False  # a sample said a simulated operator holds the arm (FLAG_HELD)
         #: when the plan saw the arm leave the hold (host ns); the release itself is dated after the run
         self.detected_ns: int | None = None
         self._end_ns: int | None = None
 
     def __getattr__(self, name: str) -> Any:  # the controller's per-cycle signals (signal_names)
-        if name in CONTROLLER_COLUMNS and self.__dict__.get("controller") is not None:
+        if name in self.__dict__.get("signal_names", ()) and self.__dict__.get("controller") is not None:
             return getattr(self.controller, name)
         raise AttributeError(name)
 
@@ -178,7 +235,7 @@ class DropTestPlan:
         theta = sample.theta_rad
         if self.start_ns is None:
             self.start_ns = t_ns
-            if self.notify is not None and self.s.known_release_after_s is None:
+            if self.notify is not None and self.s.known_release_after_s is None and self.s.pseudo_terminal is None:
                 self.notify(
                     f"press the arm to {math.degrees(self.s.theta0_rad):g} deg (within "
                     f"±{math.degrees(self.s.hold_tolerance_rad):g} deg) and hold it still; now at "
@@ -210,6 +267,17 @@ class DropTestPlan:
 
     def _wait_hold(self, t_ns: int, theta: float, flags: int = 0) -> None:
         target = self.s.theta0_rad
+        if flags & FLAG_HELD:
+            self.operator_seen = True
+        port = self.s.pseudo_terminal
+        assert self.start_ns is not None  # step() sets it on the first cycle
+        if port is not None and not self.operator_seen and (t_ns - self.start_ns) * 1e-9 > EMULATED_HOLD_WAIT_S:
+            raise ConfigError(
+                f"drop test: {port} is a pseudo-terminal (an emulated rig) whose operator does not hold the arm, "
+                f"and no hand can: start the emulator with --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                f"(e.g. sashil emulate --link {port} --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                "--release-after 1) to hold it at each connection and let go"
+            )
         if flags & FLAG_HELD and abs(theta - target) > self.s.hold_tolerance_rad:
             # a simulated operator (the emulator's --hold-deg) says it holds the arm: take the hold
             # where it is rather than wait for an angle it will never press to
@@ -270,11 +338,11 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
 
     The release is the backend's known instant, else the zero of the departure (see the module
     docstring) in the stream's rows of the last :data:`RELEASE_WINDOW_S` before the detection.
-    Columns: :data:`DROP_COLUMNS` (+ :data:`CONTROLLER_COLUMNS` under a controller) and ``seq``,
+    Columns: :data:`DROP_COLUMNS` (+ :func:`controller_columns` under a controller) and ``seq``,
     time zero at the release; rows up to ``duration_s`` after it (the shutdown's 0 A row included
     when the run ended earlier). ``stream`` keeps every stream column of those rows (device time,
     road speed commanded) for a caller that needs them."""
-    names = DROP_COLUMNS + (CONTROLLER_COLUMNS if plan.controller is not None else ()) + ("seq",)
+    names = DROP_COLUMNS + controller_columns(plan.controller) + ("seq",)
     empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
     if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
         return DropRecord(empty, 0, False, plan.hold_angle)
@@ -340,6 +408,8 @@ def run_drop_test(
         settings.known_release_after_s = release_after
         if capabilities_of(rig).initial_current:
             rig.set_initial_current(current_a)  # type: ignore[attr-defined]  # declared by the backend
+    else:
+        settings.pseudo_terminal = pseudo_terminal(rig)
     plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], controller, notify)
     log = logging.getLogger("sashil")
     # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle

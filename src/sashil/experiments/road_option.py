@@ -25,15 +25,11 @@ import numpy as np
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError
 from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
+from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD, SYNTAX
 from sashil.experiments.sweep import chirp_profile, sine_profile
 from sashil.models.plant import RoadProfile
 
-#: the excitation of ``sashil run`` on the simulated rig when no --road is given (below resonance)
-DEFAULT_SIM_ROAD = "sine:1.0"
-SYNTAX = (
-    "sine:F_HZ[:AMP_DEG], chirp:F0_HZ:F1_HZ:SECONDS[:AMP_DEG], iso8608:CLASS[:SPEED_M_S] (class A-H), "
-    "bump:HEIGHT_DEG, FILE.csv (time_s, theta_road_rad) or none"
-)
+__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road"]
 
 
 def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | None, str]:

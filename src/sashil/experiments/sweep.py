@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import run_plan
@@ -115,19 +115,20 @@ CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_n
 class SweepStage:
     """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
     road speed. It keeps no data: the runner's stream records every cycle, with the controller's
-    signals and the true damper torque of a simulated plant (``torque_true_nm``, NaN elsewhere)."""
-
-    signal_names = (*CONTROLLER_SIGNALS, "torque_true_nm")
+    signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
+    plant's, its capability ``true_torque``; NaN elsewhere)."""
 
     def __init__(self, controller: Any, road: RoadProfile, rig: RigInterface | None = None):
         self.controller = controller
+        #: the controller's signals (a current law's own output, current_law_a, too) and the true torque
+        self.signal_names = (*getattr(controller, "signal_names", CONTROLLER_SIGNALS), "torque_true_nm")
         self.road = road
-        self.plant = getattr(rig, "plant", None)
+        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
         self.torque_true_nm = math.nan
         self._t0: int | None = None
 
     def __getattr__(self, name: str) -> Any:  # the controller's signals (NaN for a stage without them)
-        if name in CONTROLLER_SIGNALS:
+        if name in CONTROLLER_SIGNALS or name == "current_law_a":
             return getattr(self.__dict__["controller"], name, math.nan)
         raise AttributeError(name)
 
@@ -135,18 +136,20 @@ class SweepStage:
         if self._t0 is None:
             self._t0 = t_ns
         t = (t_ns - self._t0) * 1e-9
-        if self.plant is not None:
-            self.torque_true_nm = self.plant.damper_torque()
+        if self._truth is not None:
+            self.torque_true_nm = self._truth.plant_truth().damper_torque_nm
         cmd = self.controller.step(sample, t_ns, dt_ns)
         cmd.road_speed_rad_s = self.road(t)[1]
         return cmd
 
 
 def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """:data:`SWEEP_COLUMNS` and ``seq`` (int64) of a sweep's stream."""
+    """:data:`SWEEP_COLUMNS`, a current law's own output (``current_law_a``) when the stream has it,
+    and ``seq`` (int64) of a sweep's stream."""
     if not stream:
         return {name: np.zeros(0) for name in SWEEP_COLUMNS} | {"seq": np.zeros(0, dtype=np.int64)}
-    return {name: stream[name] for name in SWEEP_COLUMNS} | {"seq": stream["seq"].astype(np.int64)}
+    names = (*SWEEP_COLUMNS, "current_law_a") if "current_law_a" in stream else SWEEP_COLUMNS
+    return {name: stream[name] for name in names} | {"seq": stream["seq"].astype(np.int64)}
 
 
 RigFactory = Callable[[dict, RoadProfile], RigInterface]

@@ -12,9 +12,26 @@ import hashlib
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable)
+
+#: the kernels a loop cycle can call, by qualified name: (kernel, a function returning arguments that
+#: compile it, or load it from numba's cache, for the signature the cycle calls it with). Filled by
+#: :func:`loop_kernel`; :mod:`sashil.runtime.warmup` calls each before the loop's first deadline.
+LOOP_KERNELS: dict[str, tuple[Callable[..., Any], Callable[[], tuple[Any, ...]]]] = {}
+
+
+def loop_kernel(warm_arguments: Callable[[], tuple[Any, ...]]) -> Callable[[F], F]:
+    """Register a compiled kernel that a loop cycle calls (directly or from another kernel), with
+    the arguments of a call of the cycle's signature (the same types: float64 scalars, C arrays)."""
+
+    def register(kernel: F) -> F:
+        LOOP_KERNELS[f"{kernel.__module__}.{kernel.__name__}"] = (kernel, warm_arguments)
+        return kernel
+
+    return register
+
 
 _PACKAGE = Path(__file__).resolve().parent.parent
 #: sources whose compiled kernels call each other: numba's cache checks only a function's own file,

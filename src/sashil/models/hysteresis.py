@@ -35,7 +35,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from sashil.models._jit import jit
+from sashil.models._jit import jit, loop_kernel
 from sashil.models.seed import BOUC_WEN_SEED
 
 #: a float, or an array of them (the laws apply element-wise)
@@ -92,6 +92,7 @@ class BoucWenParams:
         return self.alpha1 * z + self.c1 * theta_dot, self.alpha2 * z + self.c2 * theta_dot
 
 
+@loop_kernel(lambda: (0.0, 1e-4, 1.0, 1.0, 2.0, 1.0, 1.0))
 @jit
 def advance_z(z: float, dtheta: float, beta: float, gamma: float, delta: float, n: float, z_u: float) -> float:
     """z after the arm turns by ``dtheta`` from ``z`` (seed 001 eq. 17 integrated in the angle).
@@ -200,6 +201,8 @@ class BoucWenZ:
 
 
 def compile_kernels() -> None:
-    """Compile (or load from numba's cache) the kernels a controller calls every cycle, so that the
-    first cycle of a run is on time: a cold cache costs about half a second at the first call."""
-    advance_z(0.0, 1e-4, 1.0, 1.0, 2.0, 1.0, 1.0)
+    """Compile (or load from numba's cache) every kernel a loop cycle can call, so that the first
+    cycle of a run is on time (:func:`sashil.runtime.warmup.warm_kernels`)."""
+    from sashil.runtime.warmup import warm_kernels
+
+    warm_kernels()

@@ -26,10 +26,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sashil.drivers.interface import clamp_current
-from sashil.models._jit import jit
+from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
 
-#: road-side motion: t [s] -> (theta1 [rad], theta1_dot [rad/s], theta1_ddot [rad/s^2])
+#: road-side motion: t [s] -> (theta1 [rad], theta1_dot [rad/s], theta1_ddot [rad/s^2]); a profile
+#: whose theta1_ddot is always 0 may say so with an attribute ``accelerates = False`` (the plant then
+#: skips the road's force, which is 0)
 RoadProfile = Callable[[float], "tuple[float, float, float]"]
 
 
@@ -47,6 +49,9 @@ class PlantState:
     torque_in_nm: float = 0.0
 
 
+@loop_kernel(
+    lambda: (0.0, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, 1.0, 109.0, 0.7, 1.5, 1.0, 1.0, 873.0, 1.0, 700.0, 0.099, 0.9, 0.0)
+)
 @jit
 def rig_substep(
     theta: float,
@@ -187,8 +192,10 @@ class RigPlant:
         else:
             J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u = self._coefficients
             force = 0.0
+            # a road that never accelerates (a wheel whose speed steps are applied as jumps) adds no force
+            forced = torque_in is not None or (road is not None and getattr(road, "accelerates", True))
             for _ in range(count):
-                if road is not None or torque_in is not None:
+                if forced:
                     t_mid = t + 0.5 * h
                     tin = 0.0 if torque_in is None else float(torque_in(t_mid))
                     force = tin - (0.0 if road is None else J * road(t_mid)[2])

@@ -19,7 +19,7 @@ import collections
 import os
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +57,8 @@ class CanTrace:
         self.frames_tx = 0
         self.frames_dropped = 0  # queued after the writer failed (counted, not written)
         self.error: BaseException | None = None
+        #: frames from another process (:meth:`follow`), taken at each drain
+        self._source: Callable[[], Iterable[Any]] | None = None
         #: the hot-path entry point: ``trace.put(message)``
         self.put = self._queue.append
 
@@ -79,6 +81,12 @@ class CanTrace:
             )
         rig.frame_sink = self.put
         return rig
+
+    def follow(self, source: Callable[[], Iterable[Any]]) -> CanTrace:
+        """Take the frames of a rig held by another process: ``source()`` returns the
+        ``can.Message`` objects that arrived since its last call (the loop process's frame ring)."""
+        self._source = source
+        return self
 
     # lifecycle -------------------------------------------------------------------------------
     def start(self) -> CanTrace:
@@ -161,10 +169,14 @@ class CanTrace:
         count = len(self._queue)
         for _ in range(count):
             self._queue.popleft()
+        if self._source is not None:
+            count += sum(1 for _ in self._source())
         self.frames_dropped += count
 
     def _drain(self, slice_frames: int = SLICE_FRAMES) -> None:
         queue, loggers, channel = self._queue, self._loggers, self.channel
+        if self._source is not None:
+            queue.extend(self._source())
         while queue:
             for _ in range(min(slice_frames, len(queue))):
                 msg = queue.popleft()

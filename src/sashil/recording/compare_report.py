@@ -4,20 +4,22 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sashil.experiments.compare import METRICS, LawResult
+from sashil.recording.labels import format_parameters
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 
-__all__ = ["best_passive", "plot_compare", "write_compare_md", "write_metrics_csv"]
+__all__ = ["best_law", "best_passive", "plot_compare", "write_compare_md", "write_metrics_csv"]
 
 COLUMNS = ("law", "status", *METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
 HEADINGS = {
     "rms_accel_rad_s2": "RMS θ̈2 [rad/s²]",
     "rms_theta_deg": "RMS θ [deg]",
-    "rms_road_torque_nm": "RMS road torque [N m]",
     "peak_current_a": "peak i [A]",
     "coil_energy_j": "coil energy [J]",
     "vs_best_passive_pct": "θ̈2 vs best passive",
@@ -30,6 +32,11 @@ def best_passive(results: Sequence[LawResult]) -> LawResult | None:
     """The passive run (a constant current) with the lowest RMS arm acceleration."""
     passive = [r for r in results if r.label.startswith("passive") and r.ok]
     return min(passive, key=lambda r: r.metrics["rms_accel_rad_s2"], default=None)
+
+
+def best_law(results: Sequence[LawResult]) -> LawResult | None:
+    """The run (a law or a passive reference) with the lowest RMS arm acceleration."""
+    return min((r for r in results if r.ok), key=lambda r: r.metrics["rms_accel_rad_s2"], default=None)
 
 
 def _rows(results: Sequence[LawResult], bound_gain_pct: float) -> list[dict[str, Any]]:
@@ -84,44 +91,109 @@ def write_compare_md(
     header: dict[str, str],
     notes: Sequence[str],
     bound_gain_pct: float = math.nan,
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+    folders: Mapping[str, str] | None = None,
 ) -> Path:
-    """The comparison as a Markdown table, with what ran (``header``) and how to read it (``notes``)."""
+    """The comparison as a Markdown table, with what ran (``header``), each law's ``parameters`` and
+    run folder (``folders``), by label, and how to read it (``notes``); the best law in bold."""
+    parameters, folders = parameters or {}, folders or {}
+    best = best_law(results)
     lines = ["# sashil compare", ""]
     lines += [f"- **{key}:** {value}" for key, value in header.items()]
     keys = (*METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
-    lines += ["", "| law | " + " | ".join(HEADINGS[k] for k in keys) + " | status |"]
-    lines.append("|---|" + "---:|" * len(keys) + "---|")
+    lines += ["", "| law | parameters | folder | " + " | ".join(HEADINGS[k] for k in keys) + " | status |"]
+    lines.append("|---|---|---|" + "---:|" * len(keys) + "---|")
     for row in _rows(results, bound_gain_pct):
-        lines.append(f"| {row['law']} | " + " | ".join(_cell(k, row[k]) for k in keys) + f" | {row['status']} |")
+        label = row["law"]
+        name = f"**{label}** (best)" if best is not None and label == best.label else label
+        params = _parameter_text(parameters.get(label, {})) or "–"
+        folder = f"`{folders[label]}/`" if label in folders else "–"
+        cells = " | ".join(_cell(k, row[k]) for k in keys)
+        lines.append(f"| {name} | {params} | {folder} | {cells} | {row['status']} |")
     lines += ["", *(f"- {note}" for note in notes), ""]
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
 
 
-def plot_compare(path: Path, results: Sequence[LawResult]) -> Path:
-    """PSD of the arm acceleration, its first seconds, and a bar chart of RMS θ̈2 and RMS θ."""
+#: the colours of compare.png: the best run, the best passive reference, other laws, other references
+BEST, PASSIVE, OTHER, REFERENCE = "tab:green", "black", "tab:blue", "0.6"
+
+
+def _parameter_text(params: Mapping[str, Any]) -> str:
+    """``c_sky=2, onoff_current_a=default`` (a parameter left to the law's own default: ``default``)."""
+    return format_parameters({k: "default" if v is None else v for k, v in params.items()})
+
+
+def _colour(result: LawResult, best: LawResult | None, reference: LawResult | None) -> str:
+    if best is not None and result.label == best.label:
+        return BEST
+    if reference is not None and result.label == reference.label:
+        return PASSIVE
+    return REFERENCE if result.label.startswith("passive") else OTHER
+
+
+def plot_compare(path: Path, results: Sequence[LawResult], road: str = "") -> Path:
+    """``compare.png``: RMS θ̈2 and RMS θ of every run side by side, best first, the best run and
+    the best passive reference marked; the PSD and the first seconds of θ̈2 of those two only (every
+    law's are in its own run folder)."""
     plt = pyplot()
-    fig, (ax_psd, ax_t, ax_bar) = plt.subplots(3, 1, figsize=(9, 10))
-    done = [r for r in results if r.ok]
-    for r in done:
-        ax_psd.loglog(r.psd_f[1:], r.psd[1:], label=r.label, lw=1)
-        ax_t.plot(r.trace_t, r.trace, label=r.label, lw=0.8)
-    ax_psd.set(xlabel="frequency [Hz]", ylabel="PSD of θ̈2 [(rad/s²)²/Hz]", title="arm acceleration")
-    ax_t.set(xlabel="time [s]", ylabel="θ̈2 [rad/s²]")
-    if done:
+    fig, axes = plt.subplots(3, 2, figsize=(10, 10), height_ratios=(1.3, 1.0, 1.0), width_ratios=(1.6, 1.0))
+    ax_accel, ax_travel = axes[0]
+    grid = axes[0][0].get_gridspec()
+    for ax in (*axes[1], *axes[2]):
+        ax.remove()
+    ax_psd, ax_t = fig.add_subplot(grid[1, :]), fig.add_subplot(grid[2, :])
+    best, reference = best_law(results), best_passive(results)
+    done = sorted((r for r in results if r.ok), key=lambda r: r.metrics["rms_accel_rad_s2"])
+    order = [*done, *(r for r in results if not r.ok)]
+    y = np.arange(len(order))[::-1]
+    colours = [_colour(r, best, reference) for r in order]
+    accel = [r.metrics["rms_accel_rad_s2"] if r.ok else 0.0 for r in order]
+    travel = [r.metrics["rms_theta_deg"] if r.ok else 0.0 for r in order]
+    ax_accel.barh(y, accel, color=colours)
+    ax_travel.barh(y, travel, color=colours)
+    ax_accel.set_yticks(y, [r.label for r in order], fontsize=9)
+    ax_travel.set_yticks(y, [""] * len(order))
+    top = max(accel, default=1.0) or 1.0
+    for yi, r, value in zip(y, order, accel, strict=True):
+        if not r.ok:
+            ax_accel.text(0.0, yi, f" did not finish: {r.status[:40]}", va="center", fontsize=8, color="tab:red")
+            continue
+        text = f"{value:.3g}"
+        if reference is not None:
+            text += f"  ({100.0 * (1.0 - value / reference.metrics['rms_accel_rad_s2']):+.1f} %)"
+        if best is not None and r.label == best.label:
+            text += "  best"
+        ax_accel.text(top * 1.02, yi, text, va="center", fontsize=8, fontweight="bold" if r is best else "normal")
+    if reference is not None:
+        ax_accel.axvline(reference.metrics["rms_accel_rad_s2"], color=PASSIVE, ls="--", lw=0.8)
+    ax_accel.set_xlim(0.0, top * 1.6)
+    ax_accel.set(xlabel="RMS θ̈2 [rad/s²]  (lower is more comfortable; % vs the best passive, dashed)")
+    ax_accel.set_title("comfort", fontsize=10, loc="left")
+    if road:
+        fig.suptitle(f"sashil compare on {road}", fontsize=10)
+    ax_travel.set(xlabel="RMS θ [deg]  (travel)")
+    from matplotlib.patches import Patch
+
+    keys = [(BEST, "best (lowest RMS θ̈2)"), (PASSIVE, "best passive"), (OTHER, "law"), (REFERENCE, "passive")]
+    ax_travel.legend(handles=[Patch(color=c, label=t) for c, t in keys], **BESIDE)
+    ax_travel.set_title("travel", fontsize=10, loc="left")
+    shown = [r for r in (best, reference) if r is not None]
+    if reference is not None and best is not None and best.label == reference.label:
+        shown = [best]
+    for r in shown:
+        style = {"color": _colour(r, best, reference), "lw": 1.4 if r is best else 1.0}
+        f, pxx = np.asarray(r.psd_f), np.asarray(r.psd)
+        ax_psd.semilogy(f[1:], pxx[1:], label=r.label + (" (best)" if r is best else " (best passive)"), **style)
+        ax_t.plot(r.trace_t, r.trace, label=r.label, **style)
+    peaks = [float(np.max(r.psd[1:])) for r in shown if len(r.psd) > 1]
+    if peaks:
+        ax_psd.set_ylim(max(peaks) * 1e-4, max(peaks) * 3.0)  # four decades: where comfort is decided
+        ax_psd.set_xlim(0.0, max(float(shown[0].psd_f[-1]) / 2.0, 1.0))  # up to twice the low-pass corner
+    ax_psd.set(xlabel="frequency [Hz]", ylabel="PSD of θ̈2 [(rad/s²)²/Hz]")
+    ax_psd.set_title("where the best run differs from the best passive one", fontsize=10, loc="left")
+    ax_t.set(xlabel="time [s] (after compare.settle_s)", ylabel="θ̈2 [rad/s²]")
+    if shown:
         ax_psd.legend(**BESIDE)
         ax_t.legend(**BESIDE)
-    labels = [r.label for r in results]
-    accel = [r.metrics["rms_accel_rad_s2"] if r.ok else 0.0 for r in results]
-    travel = [r.metrics["rms_theta_deg"] if r.ok else 0.0 for r in results]
-    x = range(len(results))
-    ax_bar.bar([i - 0.2 for i in x], accel, width=0.4, label="RMS θ̈2 [rad/s²]")
-    ax_travel = ax_bar.twinx()
-    ax_travel.bar([i + 0.2 for i in x], travel, width=0.4, color="tab:orange", label="RMS θ [deg]")
-    ax_bar.set_xticks(list(x), labels, rotation=30, ha="right", fontsize=8)
-    ax_bar.set_ylabel("RMS θ̈2 [rad/s²]")
-    ax_travel.set_ylabel("RMS θ [deg]")
-    for i, r in enumerate(results):
-        if not r.ok:
-            ax_bar.text(i, 0.0, "failed", rotation=90, ha="center", va="bottom", fontsize=8)
     return save_figure(fig, path)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -24,9 +25,17 @@ OPTIONAL_COLUMNS = (
     "z_hat",
     "torque_hat_nm",
     "torque_cmd_nm",
+    "current_law_a",
 )
 
 Columns = Mapping[str, "np.ndarray | Sequence[float]"]
+
+
+def write_all(fd: int, data: bytes) -> None:
+    """Write all of ``data`` to the descriptor ``fd`` (``os.write`` may take part of it)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view) :]
 
 
 def format_rows(columns: Columns) -> str:

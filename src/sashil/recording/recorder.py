@@ -6,6 +6,12 @@ is allocated, nothing blocks: when the writer falls ``capacity`` rows behind, ro
 counted (``rows_dropped``), never waited for. On simulated time (``lossless``), where no deadline
 can be missed, the loop waits for the writer instead, so the stream holds every row.
 
+Kept stream (``keep=True``, simulated time): every row stays in memory as well (the ring grows and is
+never reused) and :meth:`Recorder.stream` returns the columns as float arrays, the values the file
+would parse back to (``repr`` round-trips a float exactly); ``path=None`` then keeps the rows without
+a file or a writer thread. A plan that derives its records from the stream reads them from there
+rather than parsing the CSV text again.
+
 Writer thread: formats committed rows as CSV text in small slices and appends them to the file
 with ``os.write`` on an ``O_APPEND`` descriptor, each write holding whole lines only, at least
 every ``flush_interval_s`` (default 0.25 s, and always within 1 s). So after a crash or SIGKILL
@@ -20,12 +26,18 @@ window stays closed too long the writer writes anyway, keeping the flush promise
 
 from __future__ import annotations
 
+import itertools
 import os
+import sys
 import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+
+from sashil.recording.data_file import write_all
 
 #: rows formatted per slice (a slice holds the GIL for roughly SLICE_ROWS * 3 µs)
 SLICE_ROWS = 16
@@ -38,21 +50,29 @@ class Recorder:
 
     def __init__(
         self,
-        path: str | Path,
+        path: str | Path | None,
         columns: Sequence[str],
         capacity: int = 65536,
         flush_interval_s: float = 0.25,
         lossless: bool = False,
+        keep: bool = False,
     ):
         if not 0 < flush_interval_s <= 1.0:
             raise ValueError("flush_interval_s must be in (0, 1] s")
-        self.path = Path(path)
+        if path is None and not keep:
+            raise ValueError("a recorder without a file keeps its rows (keep=True)")
+        self.path = None if path is None else Path(path)
         self.columns = tuple(columns)
         self.capacity = int(capacity)
         self.lossless = bool(lossless)
+        #: every row stays in memory (module docstring): the ring grows one row per cycle instead
+        self.keep = bool(keep)
         self.flush_interval_ns = int(flush_interval_s * 1e9)
         width = len(self.columns)
-        self._ring: list[list[Any]] = [[0.0] * width for _ in range(self.capacity)]
+        self._width = width
+        #: the ring's length: rows are reused modulo this (never, when the rows are kept)
+        self._bound = sys.maxsize if self.keep else self.capacity
+        self._ring: list[list[Any]] = [] if self.keep else [[0.0] * width for _ in range(self.capacity)]
         self._scratch: list[Any] = [0.0] * width
         self._head = 0  # rows committed (written by the loop thread only)
         self._tail = 0  # rows formatted (written by the writer thread only)
@@ -68,7 +88,9 @@ class Recorder:
 
     # lifecycle -------------------------------------------------------------------------------
     def start(self) -> Recorder:
-        """Create the file, write the header line, start the writer thread."""
+        """Create the file, write the header line, start the writer thread (none without a file)."""
+        if self.path is None:
+            return self
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
         self._write_all((",".join(self.columns) + "\n").encode())
         self._thread = threading.Thread(target=self._run, name="sashil-recorder", daemon=True)
@@ -102,6 +124,12 @@ class Recorder:
     def begin_row(self) -> list[Any]:
         """The row to fill this cycle (a preallocated list; a scratch row when the ring is full)."""
         head = self._head
+        if self.keep:  # a new row for each committed one, kept
+            ring = self._ring
+            if head == len(ring):
+                ring.append([0.0] * self._width)
+            self._slot_ok = True
+            return ring[head]
         if head - self._tail >= self.capacity and self.lossless:
             while head - self._tail >= self.capacity and self.error is None and self._thread is not None:
                 time.sleep(POLL_S / 10)  # simulated time: wait for the writer rather than drop a row
@@ -126,7 +154,7 @@ class Recorder:
         """Copies of committed rows ``start, start+step, ... < stop`` (row numbers as counted by
         ``rows_committed``) for a reader off the hot path such as the live view. Rows older than
         ``rows_committed - capacity`` are gone; the caller keeps clear of them."""
-        ring, cap = self._ring, self.capacity
+        ring, cap = self._ring, self._bound
         stop = min(stop, self._head)
         return [tuple(ring[i % cap]) for i in range(max(start, 0), stop, step)]
 
@@ -161,7 +189,7 @@ class Recorder:
             self.error = err
 
     def _format_slice(self, max_rows: int) -> str:
-        ring, cap = self._ring, self.capacity
+        ring, cap = self._ring, self._bound
         tail = self._tail
         end = min(self._head, tail + max_rows)
         lines = [",".join(map(repr, ring[i % cap])) for i in range(tail, end)]
@@ -177,11 +205,20 @@ class Recorder:
             self._write_all("".join(chunks).encode())
 
     def _write_all(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            written = os.write(self._fd, view)  # type: ignore[arg-type]
-            view = view[written:]
+        write_all(self._fd, data)  # type: ignore[arg-type]
         self.writes += 1
+
+    def stream(self) -> dict[str, np.ndarray]:
+        """The kept rows (``keep=True``) as one float array per column, in commit order."""
+        if not self.keep:
+            raise ValueError("the recorder keeps no rows (keep=False)")
+        count, width = self._head, self._width
+        values = itertools.chain.from_iterable(itertools.islice(self._ring, count))
+        try:
+            table = np.fromiter(values, dtype=float, count=count * width).reshape(count, width).T.copy()
+        except (TypeError, ValueError):  # a stage signal that is not a number (None: NaN, as numpy reads it)
+            table = np.array(self._ring[:count], dtype=float).reshape(count, width).T.copy()
+        return dict(zip(self.columns, table, strict=True))
 
     def summary(self) -> dict[str, Any]:
         return {

@@ -19,7 +19,6 @@ law's parameters and current (not by its folder), and writes:
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -28,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from sashil.api import load_run
 from sashil.errors import DataFileError
-from sashil.recording.data_file import read_data_csv
 from sashil.recording.labels import (
     changed_parameters,
     controller_label,
@@ -40,7 +39,7 @@ from sashil.recording.labels import (
     law_parameters,
     unique_labels,
 )
-from sashil.recording.plots import BESIDE, pyplot, read_run_config, save_figure
+from sashil.recording.plots import BESIDE, pyplot, save_figure
 
 #: the drop-test torque's low-pass cut-off as a multiple of the natural frequency sqrt(k/J)/2pi
 DROP_CUTOFF_RATIO = 3.0
@@ -60,6 +59,9 @@ class Trace:
     metrics: dict[str, Any] | None = None
     params: dict[str, float] | None = None
     folder: str = ""
+    #: the trace's own run: its config.yaml and summary.json (a sub-run's, else the folder's)
+    config: dict[str, Any] = field(default_factory=dict)
+    summary: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -75,29 +77,12 @@ class RunRecord:
     config: dict[str, Any] = field(default_factory=dict)
 
 
-def _read_json(path: Path) -> dict[str, Any]:
+def _model_params(config: dict[str, Any]) -> dict[str, float] | None:
+    """k, J of a run's config (None when it has no model)."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataFileError(f"{path}: no such file (is {path.parent} a sashil run folder?)") from None
-    except (OSError, ValueError) as err:
-        raise DataFileError(f"{path}: not readable JSON ({err})") from None
-    if not isinstance(doc, dict):
-        raise DataFileError(f"{path}: expected a JSON object")
-    return doc
-
-
-def _model_params(folder: Path) -> dict[str, float] | None:
-    """k, J of the run's config.yaml (None when absent)."""
-    try:
-        import yaml
-
-        config = yaml.safe_load((folder / "config.yaml").read_text(encoding="utf-8"))
         params = config["model"]["params"]
         return {"k": float(params["k"]), "J": float(params.get("J", 1.0))}
-    except (OSError, KeyError, TypeError, ValueError, ImportError):
-        return None
-    except Exception:
+    except (KeyError, TypeError, ValueError):
         return None
 
 
@@ -111,38 +96,44 @@ def _trace_label(entry: dict[str, Any] | None, summary: dict[str, Any], config: 
     return controller_label(summary, config)
 
 
-def load_run(path: str | Path) -> RunRecord:
-    """One run folder: its summary, its traces (one per drop-test current), sweep table, timing."""
-    path = Path(path)
-    if not path.is_dir():
-        raise DataFileError(f"{path}: not a folder (expected a sashil run folder)")
-    summary = _read_json(path / "summary.json")
-    config = read_run_config(path)
-    record = RunRecord(path, controller_label(summary, config), summary, config=config)
-    runs = summary.get("runs") if isinstance(summary.get("runs"), list) else None
+def read_record(path: str | Path) -> RunRecord:
+    """One run folder as the report needs it: its summary, its traces (one per drop-test current),
+    sweep table and timing, read through :func:`sashil.api.load_run`, the one run-folder reader."""
+    run = load_run(path)
+    if not (run.path / "summary.json").is_file():
+        raise DataFileError(f"{run.path / 'summary.json'}: no such file (is {run.path} a sashil run folder?)")
+    summary, config = run.summary, run.config
+    label = controller_label(summary, config)
+    if summary.get("verb") == "compare" and isinstance(summary.get("laws"), list):
+        label = f"compare of {len(summary['laws'])} laws"  # the folder's own config runs none of them
+    record = RunRecord(run.path, label, summary, config=config)
+    entries = summary.get("runs") if isinstance(summary.get("runs"), list) else None
     if summary.get("mode") == "stepped":
-        runs = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
-    if runs:
-        for entry in runs:
-            sub = path / str(entry.get("folder", "."))
-            columns = read_data_csv(sub / "data.csv")
-            params = _model_params(sub) or _model_params(path)
-            record.traces.append(Trace(_trace_label(entry, summary, config), columns, entry, params, path.name))
-    elif (path / "data.csv").exists():
-        columns = read_data_csv(path / "data.csv")
-        record.traces.append(Trace(record.label, columns, None, _model_params(path), path.name))
-    table = path / "transmissibility.csv"
-    if table.exists():
-        record.sweep = read_data_csv(table, required=("frequency_hz", "transmissibility"), min_rows=1)
-    timing = path / "timing.npz"
-    if timing.exists():
-        try:
-            with np.load(timing) as data:
-                record.timing = {name: np.asarray(data[name]) for name in data.files}
-        except (OSError, ValueError) as err:
-            raise DataFileError(f"{timing}: not a readable timing file ({err})") from None
-    if not record.traces and record.sweep is None:
-        raise DataFileError(f"{path}: no data.csv or transmissibility.csv in this run folder")
+        entries = None  # a stepped sweep's sub-runs (one per frequency) are summarised by its table
+    for sub in run.runs if entries or run.data_file is not None else ():
+        if sub.data_file is None:
+            continue
+        columns = sub.data
+        missing = [name for name in ("time_s", "theta_rad", "current_a") if name not in columns]
+        if missing:
+            raise DataFileError(f"{sub.data_file}: missing column(s) {', '.join(missing)}")
+        entry = sub.metrics if entries else None
+        own = sub.config or config
+        trace_label = _trace_label(entry, summary, own) if entries else record.label
+        params = _model_params(sub.config) or _model_params(config)
+        folder = run.path.name if sub is run else f"{run.path.name}/{sub.name}"
+        own_summary = sub.summary if sub is not run else summary
+        record.traces.append(Trace(trace_label, columns, entry, params, folder, own, own_summary))
+    table = run.tables.get("transmissibility")
+    if table is not None:
+        for name in ("frequency_hz", "transmissibility"):
+            if name not in table:
+                raise DataFileError(f"{run.path / 'transmissibility.csv'}: missing column {name}")
+        record.sweep = table
+    record.timing = run.timing
+    compared = summary.get("verb") == "compare" and isinstance(summary.get("laws"), list)
+    if not record.traces and record.sweep is None and not compared:  # an older compare folder: its table
+        raise DataFileError(f"{run.path}: no data.csv or transmissibility.csv in this run folder")
     return record
 
 
@@ -316,9 +307,12 @@ class Column:
 
 
 def comparison_columns(runs: Sequence[RunRecord]) -> list[Column]:
-    """Every trace of every run, and each run without a trace (a stepped sweep)."""
+    """Every trace of every run, and each run without a trace (a stepped sweep; not a compare folder
+    whose laws' runs it does not hold)."""
     out = []
     for run in runs:
+        if not run.traces and run.summary.get("verb") == "compare":
+            continue  # a compare folder without its laws' runs (an older one): its own table says it all
         out += [Column(trace.label, run, trace) for trace in run.traces] or [Column(run.label, run, None)]
     return out
 
@@ -351,9 +345,10 @@ def clipped_share(column: Column) -> tuple[int, int] | None:
     loop's cycles (``timing.cycles``, else the recorded rows); a stepped sweep's over all frequencies."""
     run, trace = column.run, column.trace
     metrics = (trace.metrics if trace else None) or {}
-    stats = metrics.get("controller_stats") or run.summary.get("controller_stats")
+    own = (trace.summary if trace else None) or run.summary
+    stats = metrics.get("controller_stats") or own.get("controller_stats")
     if isinstance(stats, dict) and isinstance(stats.get("clipped_cycles"), int):
-        timing = metrics.get("timing") or run.summary.get("timing") or {}
+        timing = metrics.get("timing") or own.get("timing") or {}
         cycles = timing.get("cycles") if isinstance(timing, dict) else None
         if not isinstance(cycles, int) or cycles <= 0:
             cycles = int(trace.columns["time_s"].size) if trace is not None else 0
@@ -391,11 +386,11 @@ def _share_text(share: tuple[int, int] | None) -> str:
 def compare_section(columns: Sequence[Column]) -> list[str]:
     """What ran and how the body moved, one column per trace: the comparison of controllers."""
     rows: list[tuple[str, Callable[[Column], str]]] = [
-        ("folder", lambda c: f"`{c.run.path.name}`"),
-        ("controller", lambda c: law_name((c.trace.metrics if c.trace else None) or c.run.summary, c.run.config)),
+        ("folder", lambda c: f"`{c.trace.folder if c.trace and c.trace.folder else c.run.path.name}`"),
+        ("controller", lambda c: law_name((c.trace.metrics if c.trace else None) or c.run.summary, _config_of(c))),
         (
             "parameters (set away from the defaults)",
-            lambda c: format_parameters(changed_parameters(c.run.config)) or "–",
+            lambda c: format_parameters(changed_parameters(_config_of(c))) or "–",
         ),
         ("road", road_of),
         ("RMS body angle θ2 [deg]", lambda c: _body_text(c, 0)),
@@ -412,6 +407,39 @@ def compare_section(columns: Sequence[Column]) -> list[str]:
     return lines
 
 
+def _config_of(column: Column) -> dict[str, Any]:
+    """The config a column ran with: its trace's own run's, else its folder's."""
+    return column.trace.config if column.trace is not None and column.trace.config else column.run.config
+
+
+def compared_laws_section(runs: Sequence[RunRecord]) -> list[str]:
+    """Each compare folder's own table (its ``summary.json`` ``laws``): comfort as compare measured
+    it (θ̈2 of the plant on a simulated rig, else of the encoders, low-passed at
+    ``compare.accel_bandwidth_hz``), after ``compare.settle_s``."""
+    lines: list[str] = []
+    for run in runs:
+        laws = run.summary.get("laws")
+        if run.summary.get("verb") != "compare" or not isinstance(laws, list):
+            continue
+        lines += ["", f"## Compare `{run.path.name}` (its metrics.csv)", ""]
+        rows = [
+            [
+                str(law.get("law")),
+                _fmt(law.get("rms_accel_rad_s2")),
+                _fmt(law.get("rms_theta_deg")),
+                _fmt(law.get("peak_current_a")),
+                _fmt(law.get("coil_energy_j")),
+                str(law.get("status")),
+            ]
+            for law in laws
+            if isinstance(law, dict)
+        ]
+        header = ["law", "RMS θ̈2 [rad/s²]", "RMS θ [deg]", "peak i [A]", "coil energy [J]", "status"]
+        lines += _table(header, rows)
+        lines += ["", f"Road: {run.summary.get('road', '–')}; see `{run.path.name}/compare.md` for the notes."]
+    return lines
+
+
 def _body_text(column: Column, which: int) -> str:
     if column.trace is not None:
         value = body_motion(column.trace)[which]
@@ -423,18 +451,25 @@ def _body_text(column: Column, which: int) -> str:
 
 
 def settings_section(runs: Sequence[RunRecord]) -> list[str]:
-    """The controller keys each run's config.yaml set (not null) side by side: with several runs the
-    keys whose values differ, and one line for those every run shares."""
-    if not any(controller_section(run.config) for run in runs):
+    """The controller keys each run's config.yaml set (not null) side by side (each law of a compare
+    folder: its own run's): with several the keys whose values differ, and one line for those every
+    run shares."""
+    pairs: list[tuple[str, dict[str, Any]]] = []
+    for run in runs:  # a compare folder's laws each ran with a config of their own
+        if run.summary.get("verb") == "compare" and run.traces:
+            pairs += [(trace.label, trace.config) for trace in run.traces]
+        else:
+            pairs.append((run.label, run.config))
+    if not any(controller_section(config) for _, config in pairs):
         return []
-    params = [{"law": controller_section(run.config).get("law"), **law_parameters(run.config)} for run in runs]
+    params = [{"law": controller_section(config).get("law"), **law_parameters(config)} for _, config in pairs]
     keys = list(dict.fromkeys(key for p in params for key in p))
     cells = {key: [format_value(p[key]) if p.get(key) is not None else "–" for p in params] for key in keys}
-    same = [key for key in keys if len(runs) > 1 and len(set(cells[key])) == 1]
+    same = [key for key in keys if len(pairs) > 1 and len(set(cells[key])) == 1]
     rows = [[f"`{key}`", *cells[key]] for key in keys if key not in same]
     lines = ["", "## Controller settings (config.yaml `controller:`)", ""]
     if rows:
-        lines += _table(["key", *(run.label for run in runs)], rows)
+        lines += _table(["key", *(label for label, _ in pairs)], rows)
     if same:
         lines += ["", "The same in every run: " + ", ".join(f"`{key}` = {cells[key][0]}" for key in same) + "."]
     return lines
@@ -472,6 +507,7 @@ def markdown_summary(runs: Sequence[RunRecord], plots: Sequence[Path]) -> str:
     columns = comparison_columns(runs)
     if columns:
         lines += compare_section(columns)
+    lines += compared_laws_section(runs)
     lines += settings_section(runs)
     lines += transmissibility_section(runs)
     drops = [trace for run in runs for trace in run.traces if trace.metrics and "period_s" in trace.metrics]
@@ -518,7 +554,7 @@ def write_report(
     runs = []
     for run_dir in run_dirs:
         progress(f"reading {run_dir}")
-        runs.append(load_run(run_dir))
+        runs.append(read_record(run_dir))
     name_uniquely(runs)
     traces = [trace for run in runs for trace in run.traces]
     plots: list[Path] = []

@@ -104,6 +104,7 @@ class RunFolder:
         self.path = path
         self.verb = verb
         self.started_utc = utc_now()
+        self.summary_written = False
 
     @classmethod
     def create(cls, out: str | Path | None, verb: str, root: str | Path = "runs") -> RunFolder:
@@ -129,6 +130,16 @@ class RunFolder:
     def file(self, name: str) -> Path:
         return self.path / name
 
+    def discard(self) -> None:
+        """Remove what this folder holds (and the folder, when this process made it): a run that
+        never started leaves nothing behind."""
+        made = next((was_made for path, was_made in CREATED if path == self.path), True)
+        if made:
+            shutil.rmtree(self.path, ignore_errors=True)
+        else:
+            for child in self.path.iterdir():
+                shutil.rmtree(child, ignore_errors=True) if child.is_dir() else child.unlink(missing_ok=True)
+
     def recorded(self) -> bool:
         """Whether any recorded row (``data.csv`` or ``cycles.csv``, here or in a sub-folder) is on disk."""
         return any(_has_rows(f) for name in DATA_FILES for f in self.path.rglob(name))
@@ -148,8 +159,10 @@ class RunFolder:
         writer.writerows([["" if value is None else value for value in row] for row in rows])
         return self._write_text(name, buffer.getvalue())
 
-    def write_config(self, config: Config) -> Path:
-        return self._write_text("config.yaml", dump_config(config))
+    def write_config(self, config: Config, note: str | None = None) -> Path:
+        """``config.yaml``: the resolved config, after ``note`` as YAML comment lines when given."""
+        head = "".join(f"# {line}\n" for line in note.splitlines()) if note else ""
+        return self._write_text("config.yaml", head + dump_config(config))
 
     def write_data(self, columns: Columns, name: str = "data.csv") -> Path:
         return write_data_csv(self.file(name), columns)
@@ -171,7 +184,12 @@ class RunFolder:
         return target
 
     def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
-        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`."""
+        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`, written once,
+        at the end of the run (a second write is a bug: RuntimeError)."""
+        if name == "summary.json":
+            if self.summary_written:
+                raise RuntimeError(f"{self.path}: summary.json is written once, at the end of the run")
+            self.summary_written = True
         doc = {
             **normalise(summary, self.verb),
             "started_utc": self.started_utc.isoformat(),

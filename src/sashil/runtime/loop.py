@@ -98,7 +98,8 @@ class LoopResult:
 def stage_signals(stage: object) -> tuple[str, ...]:
     """The per-cycle values a stage exposes for recording: ``stage.signal_names`` when it says,
     else those of its attributes named like the docs/architecture.md columns (``theta_dot_rad_s``, ``z_hat``,
-    ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step``."""
+    ``torque_hat_nm``, ``torque_cmd_nm``, ``torque_in_nm``), read after every ``step`` (from the
+    stage's ``signal_source`` when it names one)."""
     names = getattr(stage, "signal_names", None)
     if names is None:
         names = tuple(name for name in STAGE_SIGNALS if hasattr(stage, name))
@@ -128,7 +129,9 @@ class ControlLoop:
         warn_interval_s: float = 1.0,
         warn: Callable[[str], None] | None = None,
         tuning: Any | None = None,
+        timing: TimingStats | None = None,
     ):
+        """``timing``: statistics to fill (the run's stream's shared rings); None: private ones."""
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
         if overrun_policy not in ("skip", "fail"):
@@ -143,7 +146,10 @@ class ControlLoop:
         self.overrun_policy = overrun_policy
         self.warn_interval_ns = int(warn_interval_s * 1e9)
         self.warn = warn if warn is not None else log.warning
-        self.timing = TimingStats(rate_hz)
+        self.timing = timing if timing is not None else TimingStats(rate_hz)
+        #: called with the timing after each overrun (off the per-cycle path): the loop process
+        #: publishes its missed deadlines to the stream
+        self.on_overrun: Callable[[TimingStats], None] | None = None
         if tuning is not None:
             tuning.timing = self.timing  # a change's arrival is dated in the loop's cycles
         self.result = LoopResult(timing=self.timing)
@@ -153,6 +159,13 @@ class ControlLoop:
         names = stage_signals(stage)
         self._n_signals = len(names)
         self._signals = attrgetter(*names) if names else None
+        #: the object the signals are read from: the one the stage names as their ``signal_source``
+        #: (a plan that runs a controller: its plain attributes, read directly) when it has them all
+        #: (a wrapper that forwards the name may add signals of its own), else the stage
+        source = getattr(stage, "signal_source", stage)
+        self._signal_source = source if all(hasattr(source, name) for name in names) else stage
+        #: the recorder's rows are float64 slots (the run's stream: :mod:`sashil.runtime.stream`)
+        self._typed_rows = bool(getattr(recorder, "typed_rows", False))
 
     # the run ---------------------------------------------------------------------------------
     def run(self) -> LoopResult:
@@ -280,9 +293,16 @@ class ControlLoop:
         signals = self._signals
         if signals is not None:
             if self._n_signals == 1:
-                row[5] = signals(self.stage)
+                value = signals(self._signal_source)
+                if self._typed_rows:
+                    row[5] = NAN if value is None else value
+                else:
+                    row[5] = value
+            elif self._typed_rows:  # a slot of float64: element by element, None as NaN
+                for k, value in enumerate(signals(self._signal_source), 5):
+                    row[k] = NAN if value is None else value
             else:
-                row[5 : 5 + self._n_signals] = signals(self.stage)
+                row[5 : 5 + self._n_signals] = signals(self._signal_source)
         row[-3] = NAN if road_speed is None else road_speed
         row[-2] = getattr(self.stage, "phase_code", 0)
         row[-1] = trip_code
@@ -291,6 +311,7 @@ class ControlLoop:
     def _overrun(self, t_ns: int, late_ns: int) -> None:
         missed = late_ns // self.period_ns
         timing = self.timing
+        timing.skip(late_ns, self.period_ns, missed)
         if self.overrun_policy == "fail":
             timing.missed_deadlines += missed
             timing.overruns += 1
@@ -300,6 +321,8 @@ class ControlLoop:
             )
         timing.missed_deadlines += missed
         timing.overruns += 1
+        if self.on_overrun is not None:
+            self.on_overrun(timing)
         if self._last_warn_ns is None or t_ns - self._last_warn_ns >= self.warn_interval_ns:
             more = f" (+{self._suppressed} more overrun(s) since the last warning)" if self._suppressed else ""
             self.warn(

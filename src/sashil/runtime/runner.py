@@ -4,7 +4,8 @@ A *plan* is a loop stage (``step(sample, t_ns, dt_ns) -> RigCommand | None``): w
 when, what to measure. The runner owns everything around it, the same for ``run``, ``drop-test``,
 ``sweep`` and the calibration plan:
 
-* the per-cycle kernels compiled (numba) before the rig is touched, so the first cycle is on time;
+* the warm-up before the rig is touched (:mod:`sashil.runtime.warmup`: every numba kernel a cycle
+  can call compiled or loaded, the law called once and reset), so the first cycle is on time;
 * the disk checked before anything is energised (:func:`check_disk`, a :class:`DiskSpaceError`,
   exit 2, when the run folder's disk cannot hold the run);
 * the best-effort real-time set-up on the real clock (``loop.rt``), undone afterwards;
@@ -21,8 +22,10 @@ Plans command; one stream records. A plan keeps no copy of the data: what a verb
 the stream (a drop test's record from the release, a sweep's transmissibility, a calibration
 step on the device's clock) it derives after the run from the stream's columns
 (``read_stream=True``: :attr:`RunOutcome.stream`), whose rows carry the sample's ``seq`` and device
-time, the road speed commanded and the plan's ``phase``. Without a ``data_path`` the stream goes
-to a temporary file that is read back and removed.
+time, the road speed commanded and the plan's ``phase``. On simulated time the recorder keeps those
+rows in memory as well (the values the file parses back to), so nothing is parsed again, and without
+a ``data_path`` no file is written. On the real clock the loop's hot path allocates nothing: the
+stream goes to the file (a temporary one without a ``data_path``) and is read back after the run.
 """
 
 from __future__ import annotations
@@ -36,8 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DataFileError, DiskSpaceError, Stopped, exit_code_of
-from sashil.models.hysteresis import compile_kernels
+from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -45,6 +47,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
+from sashil.runtime.warmup import warm_up
 from sashil.safety import SafetySupervisor
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
@@ -78,6 +81,64 @@ def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | N
     return need
 
 
+def losses(config: dict[str, Any], timing: Any, link: dict[str, Any] | None) -> LossError | None:
+    """The :class:`~sashil.errors.LossError` of a run that missed more of its scheduled deadlines than
+    ``loop.max_missed_fraction`` or lost more of its samples than ``driver.max_lost_fraction``
+    allows, naming what was lost and the key; None when it stayed within both."""
+    problems = []
+    scheduled = timing.cycles + timing.missed_deadlines
+    allowed = float(config["loop"]["max_missed_fraction"])
+    if scheduled and timing.missed_deadlines > allowed * scheduled:
+        problems.append(
+            f"missed {timing.missed_deadlines} of {scheduled} deadlines ({100 * timing.missed_deadlines / scheduled:.2g} %; "
+            f"loop.max_missed_fraction allows {100 * allowed:g} %)"
+        )
+    if link:
+        lost = int(link.get("samples_missed", 0))
+        expected = int(link.get("samples", 0)) + lost
+        allowed = float(config["driver"]["max_lost_fraction"])
+        if expected and lost > allowed * expected:
+            problems.append(
+                f"lost {lost} of {expected} samples ({100 * lost / expected:.2g} %; driver.max_lost_fraction allows {100 * allowed:g} %)"
+            )
+    return LossError("the run " + " and ".join(problems) + "; its data are kept") if problems else None
+
+
+def loop_summary(
+    *,
+    exit_status: str,
+    timing: dict[str, Any],
+    trips: list[dict[str, Any]],
+    error: BaseException | None,
+    stop_reason: str | None,
+    controller_stats: dict[str, Any] | None,
+    safety: dict[str, Any] | None,
+    realtime: dict[str, Any],
+    recording: dict[str, Any] | None,
+    link: dict[str, Any] | None,
+    shutdown_errors: list[str],
+    error_text: str | None = None,
+) -> dict[str, Any]:
+    """The keys of summary.json every loop run has, in one place: the run in this process
+    (:meth:`RunOutcome.summary`), in a loop process (:func:`~sashil.runtime.session.run_loop_process`)
+    and a loop whose session died (:mod:`~sashil.runtime.orphan`). ``exit_code`` follows from the
+    status and the error; ``error`` is ``error_text`` (default: the error's line) when there is one."""
+    return {
+        "exit_status": exit_status,
+        "timing": timing,
+        "trips": trips,
+        "exit_code": exit_code_of(exit_status, error),
+        "error": (error_text or str(error)) if error is not None else None,
+        "stop_reason": stop_reason,
+        "controller_stats": controller_stats,
+        "safety": safety,
+        "realtime": realtime,
+        "recording": recording,
+        "link": link,
+        "shutdown_errors": shutdown_errors,
+    }
+
+
 @dataclass
 class RunOutcome:
     """What :func:`run_plan` leaves: the loop's result, the error that ended the run (None: it ended
@@ -102,23 +163,23 @@ class RunOutcome:
         return exit_code_of(self.result.exit_status, self.error)
 
     def summary(self) -> dict[str, Any]:
-        """The common keys of summary.json (the verb adds its own)."""
+        """The common keys of summary.json (the verb adds its own): :func:`loop_summary`."""
         result = self.result
         stage = self.loop.stage
-        return {
-            "exit_status": result.exit_status,
-            "timing": self.loop.timing.summary(),
-            "trips": result.trips,
-            "exit_code": self.exit_code,
-            "error": result.error if self.error is not None else None,
-            "stop_reason": result.stop_reason,
-            "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-            "safety": self.loop.safety.summary() if self.loop.safety is not None else None,
-            "realtime": self.realtime,
-            "recording": self.recording,
-            "link": self.link,
-            "shutdown_errors": result.shutdown_errors,
-        }
+        return loop_summary(
+            exit_status=result.exit_status,
+            timing=self.loop.timing.summary(),
+            trips=result.trips,
+            error=self.error,
+            stop_reason=result.stop_reason,
+            controller_stats=stage.stats() if hasattr(stage, "stats") else None,
+            safety=self.loop.safety.summary() if self.loop.safety is not None else None,
+            realtime=self.realtime,
+            recording=self.recording,
+            link=self.link,
+            shutdown_errors=result.shutdown_errors,
+            error_text=result.error,
+        )
 
     def stop_error(self) -> Stopped | None:
         """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""
@@ -131,6 +192,25 @@ class RunOutcome:
         stopped = self.stop_error()
         if stopped is not None:
             raise stopped
+
+
+def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[str], None]) -> BaseException | None:
+    """Run ``loop`` under the real-time set-up ``rt`` (its steps reported through ``note``, undone
+    afterwards); the error that ended the loop, if any (the rig is then already at 0 A, deactivated
+    and closed)."""
+    try:
+        if rt is not None:
+            rt.apply()
+            for line in rt.lines():
+                note(line)
+        try:
+            loop.run()
+        except BaseException as err:
+            return err
+        return None
+    finally:
+        if rt is not None:
+            rt.restore()
 
 
 def run_plan(
@@ -166,14 +246,16 @@ def run_plan(
     columns = record_columns(plan)
     recorder = None
     scratch = None
-    if data_path is None and read_stream:
+    real_clock = not getattr(clock, "virtual", False)
+    keep = read_stream and not real_clock  # the stream in memory (module docstring)
+    if data_path is None and read_stream and not keep:
         scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-")
         data_path = Path(scratch.name) / CYCLES_FILE
-    real_clock = not getattr(clock, "virtual", False)
     if data_path is not None:
         data_path = Path(data_path)
         check_disk(data_path.parent, len(columns), rate, duration_s)
-        recorder = Recorder(data_path, columns, lossless=not real_clock)
+    if data_path is not None or keep:
+        recorder = Recorder(data_path, columns, lossless=not real_clock, keep=keep)
     rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
@@ -190,7 +272,7 @@ def run_plan(
         warn=say,
         tuning=tuning,
     )
-    compile_kernels()  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
+    warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None
     with catch_stop_signals(stop) as flag:
         loop.stop = flag
@@ -199,17 +281,7 @@ def run_plan(
         if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
             live.start(recorder, loop.timing)
         try:
-            if rt is not None:
-                rt.apply()
-                for line in rt.lines():
-                    (note or say)(line)
-            try:
-                loop.run()
-            except BaseException as err:  # the rig is already at 0 A, deactivated and closed
-                error = err
-            finally:
-                if rt is not None:
-                    rt.restore()
+            error = run_realtime(loop, rt, note or say)
         finally:
             if recorder is not None:
                 try:
@@ -225,19 +297,28 @@ def run_plan(
     if clip_line is not None:
         say(clip_line)
     stream: dict[str, Any] = {}
-    if read_stream and data_path is not None:
+    if keep and recorder is not None:
+        stream = recorder.stream()
+    elif read_stream and data_path is not None:
         try:
             stream = read_data_csv(data_path, required=(), min_rows=0)
         except DataFileError:  # a stream the disk lost: what ended the run says why
             stream = {}
     if scratch is not None:
         scratch.cleanup()
+    link = rig.link_stats() if capabilities_of(rig).link else None
+    lost = losses(config, loop.timing, link) if error is None and loop.result.exit_status == "ok" else None
+    if lost is not None:  # a run that lost what the config does not allow does not end ok
+        error = lost
+        loop.result.exit_status = "lossy"
+        loop.result.error = str(lost)
+        say(str(lost))
     return RunOutcome(
         loop,
         error,
         flag,
         realtime=rt.report() if rt is not None else {},
-        recording=recorder.summary() if recorder is not None else None,
-        link=rig.link_stats() if capabilities_of(rig).link else None,
+        recording=recorder.summary() if recorder is not None and data_path is not None else None,
+        link=link,
         stream=stream,
     )

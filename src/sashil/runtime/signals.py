@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from sashil.errors import Stopped
@@ -21,15 +21,19 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 class StopFlag:
     """Set by a signal (or by any code that wants the loop to stop cleanly)."""
 
-    __slots__ = ("requested", "signal_name")
+    __slots__ = ("on_request", "requested", "signal_name")
 
     def __init__(self) -> None:
         self.requested = False
         self.signal_name: str | None = None
+        #: called after each request (a loop in another process is told at once through its stream)
+        self.on_request: Callable[[], None] | None = None
 
     def request(self, reason: str = "stop requested") -> None:
         self.signal_name = self.signal_name or reason
         self.requested = True
+        if self.on_request is not None:
+            self.on_request()
 
 
 def stopped_error(flag: StopFlag) -> Stopped:

@@ -13,7 +13,9 @@ Nothing is allocated per cycle.
 (``rate_hz``, ``cycles``, ``missed_deadlines``, ``lateness_us``, ``compute_us``) and, beside them,
 ``read_us``, ``write_us`` and ``cycle_us`` (read+compute+write): p50/p99/p99.9 exact while the run
 fits in the ring, from the histograms beyond it (``quantiles_from``: ``exact`` or ``histogram``);
-``max`` always exact. ``recent(name)`` is the ring's content in cycle order (what ``timing.npz``
+``max`` always exact. Lateness counts every *scheduled* cycle: the deadlines an overrun skipped
+(:meth:`TimingStats.skip`) enter its quantiles with the lateness each had when the late cycle
+finally ran, so a run that lost half its deadlines cannot report a small p99. ``recent(name)`` is the ring's content in cycle order (what ``timing.npz``
 holds: the last ``window`` cycles).
 """
 
@@ -79,26 +81,83 @@ def _zeros(n: int) -> array:
     return array("q", bytes(8 * n))
 
 
+def shared_size(window: int = DEFAULT_WINDOW) -> int:
+    """Bytes of a shared buffer holding the four rings of ``window`` cycles and the histograms."""
+    return 8 * (len(COLUMNS) * window + len(HISTOGRAMS) * N_BUCKETS)
+
+
 class TimingStats:
     """Per-cycle timing rings (ns), their histograms, and the loop's miss counters (see module doc)."""
 
-    def __init__(self, rate_hz: float, window: int = DEFAULT_WINDOW):
+    def __init__(self, rate_hz: float, window: int = DEFAULT_WINDOW, shared: Any = None):
+        """``shared``: a writable buffer of :func:`shared_size` bytes to hold the rings and the
+        histograms (the run's stream, which the session process reads while the loop process
+        writes); None: private memory."""
         if window < FOLD or window & (window - 1):
             raise ValueError(f"window must be a power of two >= {FOLD}, got {window}")
         self.rate_hz = float(rate_hz)
         self.window = int(window)
         #: index mask of the rings (the loop writes column[cycle & mask])
         self.mask = self.window - 1
-        self.lateness = _zeros(self.window)
-        self.read = _zeros(self.window)
-        self.compute = _zeros(self.window)
-        self.write = _zeros(self.window)
-        self.histograms = {name: np.zeros(N_BUCKETS, dtype=np.int64) for name in HISTOGRAMS}
+        if shared is None:
+            self.lateness, self.read, self.compute, self.write = (_zeros(self.window) for _ in COLUMNS)
+            self.histograms = {name: np.zeros(N_BUCKETS, dtype=np.int64) for name in HISTOGRAMS}
+        else:
+            view = memoryview(shared).cast("B")
+            if len(view) < shared_size(self.window):
+                raise ValueError(f"shared timing buffer of {len(view)} bytes; {shared_size(self.window)} needed")
+            ring = 8 * self.window
+            rings: Any = [view[k * ring : (k + 1) * ring].cast("q") for k in range(len(COLUMNS))]
+            self.lateness, self.read, self.compute, self.write = rings
+            base = len(COLUMNS) * ring
+            self.histograms = {
+                name: np.frombuffer(view, dtype=np.int64, count=N_BUCKETS, offset=base + 8 * N_BUCKETS * k)
+                for k, name in enumerate(HISTOGRAMS)
+            }
         self.max_ns = dict.fromkeys(HISTOGRAMS, 0)
         self.folded = 0  # cycles already in the histograms
         self.cycles = 0
         self.missed_deadlines = 0  # whole periods skipped because a cycle started too late
         self.overruns = 0  # occasions on which periods were skipped
+        #: lateness of the skipped deadlines (ns), kept for exact quantiles up to ``window`` of them
+        self.skipped_lateness: list[np.ndarray] = []
+        self.skipped_kept = 0
+
+    def skip(self, late_ns: int, period_ns: int, missed: int) -> None:
+        """Count the ``missed`` deadlines an overrun skipped: the cycle that ran ``late_ns`` after its
+        deadline passed the next ``missed`` ones, each then ``late_ns - j * period_ns`` late (j = 1..)."""
+        if missed <= 0:
+            return
+        values = late_ns - period_ns * np.arange(1, missed + 1, dtype=np.int64)
+        self.histograms["lateness"] += np.bincount(bucket_of(values), minlength=N_BUCKETS)
+        room = self.window - self.skipped_kept
+        if room > 0:
+            self.skipped_lateness.append(values[:room])
+            self.skipped_kept += min(room, missed)
+
+    def counters(self) -> dict[str, Any]:
+        """What a reader of the shared rings needs beside them to give the same :meth:`summary`: the
+        counts, the maxima and the skipped deadlines' lateness (JSON-ready)."""
+        return {
+            "cycles": self.cycles,
+            "missed_deadlines": self.missed_deadlines,
+            "overruns": self.overruns,
+            "folded": self.folded,
+            "max_ns": dict(self.max_ns),
+            "skipped_lateness": [int(v) for part in self.skipped_lateness for v in part],
+        }
+
+    def restore(self, counters: dict[str, Any]) -> TimingStats:
+        """Take the loop's :meth:`counters` (this instance reads the same shared rings)."""
+        self.cycles = int(counters["cycles"])
+        self.missed_deadlines = int(counters["missed_deadlines"])
+        self.overruns = int(counters["overruns"])
+        self.folded = int(counters["folded"])
+        self.max_ns.update({name: int(value) for name, value in counters["max_ns"].items()})
+        skipped = np.asarray(counters.get("skipped_lateness", ()), dtype=np.int64)
+        self.skipped_lateness = [skipped] if skipped.size else []
+        self.skipped_kept = int(skipped.size)
+        return self
 
     # the loop's side -------------------------------------------------------------------------
     def fold(self) -> None:
@@ -139,11 +198,17 @@ class TimingStats:
         return self.recent(name).astype(float) * 1e-3
 
     def stats_us(self, name: str) -> dict[str, float | None]:
-        """``{p50, p99, p99_9, max}`` of a column (or ``cycle``) in µs (None for an empty run)."""
-        if self.cycles <= self.window:  # all of it is in the ring: exact
+        """``{p50, p99, p99_9, max}`` of a column (or ``cycle``) in µs (None for an empty run); lateness
+        with the skipped deadlines (see module doc)."""
+        skipped = self.missed_deadlines if name == "lateness" else 0
+        exact = self.cycles <= self.window and skipped <= self.skipped_kept
+        if exact:  # all of it is in the ring (and the skipped deadlines kept): exact
             if name == "cycle":
                 return quantiles_us(self.column_us("read") + self.column_us("compute") + self.column_us("write"))
-            return quantiles_us(self.column_us(name))
+            values = self.column_us(name)
+            if skipped:
+                values = np.concatenate([values, *(part.astype(float) * 1e-3 for part in self.skipped_lateness)])
+            return quantiles_us(values)
         self.fold()
         counts = self.histograms[name]
         out: dict[str, float | None] = {key: round(histogram_quantile_ns(counts, q) * 1e-3, 3) for key, q in QUANTILES}

@@ -30,11 +30,12 @@ import shutil
 import socket
 import tempfile
 import threading
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from sashil.errors import ConfigError, SashilError
-from sashil.runtime.tuning import LiveTuning
+from sashil.runtime.tuning import LiveTuning, TuneEvent
 
 #: the socket's name in the run folder
 SOCKET_NAME = "tune.sock"
@@ -62,9 +63,19 @@ def _jsonable(value: Any) -> Any:
 class TuneServer:
     """Serves ``tuning`` on ``folder/tune.sock`` from its own thread; ``start()``, then ``stop()``."""
 
-    def __init__(self, folder: str | Path, tuning: LiveTuning):
+    def __init__(
+        self,
+        folder: str | Path,
+        tuning: LiveTuning | None = None,
+        handler: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+    ):
+        """Serve ``tuning`` (a law in this process), or pass each decoded request to ``handler``
+        (a law in the loop process: :mod:`sashil.runtime.loop_process`)."""
+        if (tuning is None) == (handler is None):
+            raise ValueError("give the tuning or a handler")
         self.folder = Path(folder)
         self.tuning = tuning
+        self.handler = handler
         self.path = self.folder / SOCKET_NAME
         self._private_dir: str | None = None
         self._listener: socket.socket | None = None
@@ -144,9 +155,8 @@ class TuneServer:
         conn.sendall((json.dumps(self.handle(raw), default=str) + "\n").encode())
 
     def handle(self, raw: bytes) -> dict[str, Any]:
-        """The answer to one request line (see the module doc)."""
-        tuning = self.tuning
-        law = tuning.law
+        """The answer to one request line (see the module doc): decoded here, answered by the
+        ``handler`` given (the run's loop process) or by :func:`answer` on the tuning."""
         if len(raw) > MAX_REQUEST_BYTES:
             return {"ok": False, "error": f"request larger than {MAX_REQUEST_BYTES} bytes"}
         try:
@@ -155,17 +165,29 @@ class TuneServer:
             return {"ok": False, "error": f"not a JSON request: {err}"}
         if not isinstance(request, dict):
             return {"ok": False, "error": "expected a JSON object ({'set': {...}} or {'get': true})"}
-        if request.get("get"):
-            values = {key: _jsonable(value) for key, value in law.parameter_values().items()}
-            return {"ok": True, "law": law.name, "parameters": values, "ramp_s": tuning.ramp_s}
-        changes = request.get("set")
-        if not isinstance(changes, dict):
-            return {"ok": False, "error": "expected {'set': {param: value, ...}}"}
-        try:
-            events = tuning.submit(changes, request.get("ramp_s"))
-        except ConfigError as err:
-            return {"ok": False, "error": str(err)}
-        return {"ok": True, "law": law.name, "events": [event.as_dict() for event in events]}
+        if self.handler is not None:
+            return self.handler(request)
+        assert self.tuning is not None
+        return answer(self.tuning, request, self.tuning.submit)
+
+
+def answer(
+    tuning: Any, request: dict[str, Any], submit: Callable[[Mapping[str, Any], Any], list[TuneEvent]]
+) -> dict[str, Any]:
+    """The answer to one decoded request: ``get`` the law's values, or ``set`` them through
+    ``submit(changes, ramp_s)`` (which returns the applied events or raises ConfigError)."""
+    law = tuning.law
+    if request.get("get"):
+        values = {key: _jsonable(value) for key, value in law.parameter_values().items()}
+        return {"ok": True, "law": law.name, "parameters": values, "ramp_s": tuning.ramp_s}
+    changes = request.get("set")
+    if not isinstance(changes, dict):
+        return {"ok": False, "error": "expected {'set': {param: value, ...}}"}
+    try:
+        events = submit(changes, request.get("ramp_s"))
+    except ConfigError as err:
+        return {"ok": False, "error": str(err)}
+    return {"ok": True, "law": law.name, "events": [event.as_dict() for event in events]}
 
 
 # -- the client ----------------------------------------------------------------------------------

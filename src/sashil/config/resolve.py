@@ -1,0 +1,195 @@
+"""The one resolution of a run's config: file, parameters, ``--set``, the law, the driver, the port
+and the verb's own options, checked by the schema once, into a read-only config.
+
+Every verb and ``sashil.run(...)`` describe where their config comes from as a
+:class:`ConfigSource`; :func:`resolve` applies it in a fixed order and resolves what depends on
+the backend (its declared capabilities): the clock a verb runs on, the loop rate the backend can
+keep, ``sashil run``'s default road. The result is frozen (:mod:`sashil.config.frozen`): nothing
+downstream writes into it, and ``config.yaml`` records exactly what ran. A key a verb cannot honour
+is refused in one line naming it, never silently replaced.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sashil.config import Config, apply_params, check_controller, load_config
+from sashil.config.frozen import FrozenSection, freeze
+from sashil.config.overrides import apply_values, parse_override
+from sashil.config.schema import validate
+from sashil.config.sections import SCHEMA
+from sashil.errors import ConfigError
+from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
+
+__all__ = ["ConfigSource", "Option", "resolve"]
+
+#: verbs that run on the real clock whatever the backend
+REAL_CLOCK_VERBS = ("run",)
+#: verbs that drive no rig (a model on recorded inputs): no key of theirs depends on a backend, and
+#: their model need not be one the rig can run
+RIGLESS_VERBS = ("simulate",)
+#: verb -> ``module:function(config, named)`` that checks the verb's own keys beyond the schema
+#: (``named(key)`` is the option that set a key, or the key), imported when that verb resolves
+VERB_CHECKS = {
+    "drop-test": "sashil.experiments.drop_test:check_drops",
+    "run": "sashil.lab._closed_loop:check_run",
+    "simulate": "sashil.lab._simulate:check_simulate",
+    "sweep": "sashil.lab._sweep:check_sweep",
+    "compare": "sashil.lab._compare:check_compare",
+}
+
+
+@dataclass(frozen=True)
+class Option:
+    """A verb option that sets a config key: its name as the user gave it (``--duration``), the
+    dotted key (``run.duration_s``) and the value (None: not given, the config's value stands)."""
+
+    name: str
+    key: str
+    value: Any
+
+
+@dataclass(frozen=True)
+class ConfigSource:
+    """Where a run's config comes from, in the order :func:`resolve` applies it."""
+
+    #: a YAML file, an already-loaded mapping (checked like a file), or None for the defaults
+    config: str | Path | Mapping[str, Any] | None = None
+    #: a parameter file from ``sashil identify`` that replaces the model
+    params: str | Path | None = None
+    #: the law (``--controller``): a registered name, ``package.module:Class`` or ``file.py:Class``
+    controller: str | None = None
+    #: ``--set`` texts, ``section.key=value`` with a YAML value
+    sets: Sequence[str] = ()
+    #: the verb's own options, each a config key
+    options: Sequence[Option] = ()
+    driver: str | None = None
+    port: str | None = None
+
+
+def _load(source: ConfigSource) -> Config:
+    if isinstance(source.config, Mapping):
+        from sashil.config.frozen import thaw
+        from sashil.models.registry import check_model
+
+        config = validate(thaw(source.config), SCHEMA, "config")
+        check_model(config["model"], "config", "model")
+        check_controller(config, "config")
+        return config
+    return load_config(source.config)
+
+
+def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> FrozenSection:
+    """The read-only config ``verb`` runs with (see the module doc). Order: the file (or defaults),
+    ``params``, the law then each ``--set``, the verb's options, ``--driver``/``--port``; then the
+    backend-dependent keys. Every step is checked before anything is opened or written; a model
+    the verb cannot run (not in ``models``, default the rig models) is refused."""
+    from sashil.models.registry import RIG_MODELS
+
+    config = _load(source)
+    if source.params is not None:
+        config = apply_params(config, source.params)
+        check_controller(config, str(source.params))  # the law's checks against the new model
+    sets = [parse_override(text) for text in source.sets]
+    if source.controller:  # the law before its --set keys, which may set its parameters
+        config = apply_values(
+            config, [(["controller", "law"], source.controller), *sets], "--set" if sets else "--controller"
+        )
+    else:
+        config = apply_values(config, sets, "--set")
+    for option in source.options:
+        if option.value is not None:
+            config = apply_values(config, [(option.key.split("."), option.value)], option.name)
+    _check_model(config, source, verb, models if models is not None else RIG_MODELS)
+    if source.params is not None and _mismatched(config.get("mismatch") or {}):
+        logging.getLogger("sashil").warning(
+            "--params %s: the config's mismatch: section is applied on top of these parameters "
+            "(the simulated plant differs from them)",
+            source.params,
+        )
+    if source.driver is not None:
+        config = apply_values(config, [(["driver", "name"], source.driver)], "--driver")
+    if source.port is not None:
+        config = apply_values(config, [(["driver", "port"], source.port)], "--port")
+    if verb not in RIGLESS_VERBS:
+        _resolve_backend(config, source, verb)
+    check = VERB_CHECKS.get(verb or "")
+    if check is not None:  # the verb's own checks of its keys, naming the option that set each
+        module, _, name = check.partition(":")
+        getattr(importlib.import_module(module), name)(config, lambda key: _named(source, key))
+    return freeze(config)
+
+
+def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> None:
+    """The keys that depend on the backend's declared capabilities, set in ``config`` before it is frozen."""
+    from sashil.drivers import declared_capabilities
+
+    caps = declared_capabilities(config)
+    driver = config["driver"]
+    if source.port is not None and not caps.link:
+        raise ConfigError(
+            f"--port {source.port}: the driver is {driver['name']}, which has no port; add --driver serial or --driver can"
+        )
+    clock = driver["clock"]
+    if verb in REAL_CLOCK_VERBS:
+        if clock == "virtual":
+            raise ConfigError(
+                f"driver.clock: virtual: sashil {verb} runs on the real clock; leave driver.clock null "
+                "(or real), or run the simulated rig on virtual time with sashil drop-test, sweep or compare"
+            )
+        driver["clock"] = "real"
+    elif clock is None:
+        driver["clock"] = "virtual" if caps.simulated else "real"
+    rate = float(config["loop"]["rate_hz"])
+    where = _named(source, "loop.rate_hz")
+    if caps.max_rate_hz is not None and rate > caps.max_rate_hz:
+        raise ConfigError(
+            f"{where}: {rate:g} Hz is above what the {driver['name']} backend can do ({caps.max_rate_hz:g} Hz)"
+        )
+    if verb == "run" and config["run"]["road"] is None:
+        config["run"]["road"] = DEFAULT_SIM_ROAD if caps.simulated else "none"
+
+
+def _named(source: ConfigSource, key: str) -> str:
+    """How the user gave ``key``: the verb option that set it, else the key itself."""
+    for option in source.options:
+        if option.key == key and option.value is not None:
+            return option.name
+    return key
+
+
+def _check_model(config: Config, source: ConfigSource, verb: str | None, models: Sequence[str]) -> None:
+    """ConfigError, one line naming where the model came from (``--set model.name``, ``--params``
+    or ``--config``), when the verb cannot run the config's model."""
+    from sashil.models.registry import MODEL_PARAMS
+
+    name = config["model"]["name"]
+    if name in models:
+        return
+    sets = [item for item in source.sets if item.partition("=")[0].strip() == "model.name"]
+    if sets:
+        where = f"--set {sets[-1]}"
+    elif source.params is not None:
+        where = f"--params {source.params}"
+    else:
+        where = f"--config {source.config if not isinstance(source.config, Mapping) else '(mapping)'}"
+    who = f"sashil {verb}" if verb else "this verb"
+    raise ConfigError(
+        f"{where}: a {name} model; {who} runs {' or '.join(models)} models only (the rig plant and the "
+        f"controller's observer are Bouc-Wen); sashil simulate runs {', '.join(MODEL_PARAMS)}"
+    )
+
+
+def _mismatched(section: Mapping[str, Any]) -> bool:
+    """Whether a ``mismatch`` section changes the simulated plant at all."""
+    return bool(
+        section.get("fraction")
+        or any(section.get("params", {}).values())
+        or section.get("coil_tau")
+        or any(section.get(key) is not None for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"))
+    )

@@ -1,0 +1,185 @@
+"""``sashil run`` as a library function: the rig in closed loop on the real clock, at a fixed
+rate, under a law and a road, into a run folder (data.csv, timing, run.png, summary.json)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from sashil.api import Run, load_run
+from sashil.errors import ConfigError, SashilError
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+from sashil.runtime.signals import StopFlag
+
+__all__ = ["check_run", "closed_loop"]
+
+
+def check_run(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+    """The ``run`` keys a run can honour: the road parses (named as the option or key that gave it)."""
+    from sashil.experiments.road_option import parse_road
+
+    spec = config["run"]["road"]
+    try:
+        parse_road(spec, config)  # type: ignore[arg-type]
+    except ConfigError as err:
+        where = named("run.road")
+        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
+
+
+def closed_loop(
+    config: Any,
+    outputs: Outputs | None = None,
+    on_event: Listener = ignore,
+    *,
+    progress: bool = False,
+    tune: bool = True,
+    views: Sequence[Any] = (),
+    stop: StopFlag | None = None,
+) -> Run:
+    """Run the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    ``run``) in closed loop for ``run.duration_s`` (None: until stopped by a signal) and return its
+    folder as a :class:`~sashil.api.Run`.
+
+    ``progress``: a progress bar on the terminal. ``tune``: serve live changes of the law on the
+    folder's socket (``sashil tune``). ``views``: more readers of the run's stream, each with
+    ``start(stream, timing)`` and ``close(trips, notes)`` (the live view's shape): ``stream.columns``,
+    ``stream.rows_committed`` and ``stream.copy_rows(start, stop, step)`` give the rows, and
+    ``timing.cycles`` and ``timing.missed_deadlines`` the loop's counts. ``stop``: a flag another
+    thread may set (:meth:`~sashil.runtime.signals.StopFlag.request`) to stop the run cleanly. Bad input (a port that cannot be opened) raises ConfigError
+    with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
+    from sashil.control.registry import make_stage
+    from sashil.drivers import open_rig
+    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.recording.formats import can_formats
+    from sashil.recording.plots import plot_run, plot_timing
+    from sashil.recording.run_folder import RunFolder
+    from sashil.recording.run_progress import RunProgress, SessionHooks
+    from sashil.runtime.clock import RealClock
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.loop_process import LoopProcess
+    from sashil.runtime.session import run_loop_process, run_session
+    from sashil.runtime.timing import format_timing
+    from sashil.runtime.warmup import warm_up
+
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.check(config["driver"]["name"])
+    duration = config["run"]["duration_s"]
+    rate = float(config["loop"]["rate_hz"])
+    backend = config["driver"]["name"]
+    process = None
+    rig: Any = None
+    stage: Any = None
+    if config["loop"]["process"]:  # the loop in a process of its own
+        process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
+        try:
+            ready = process.wait_ready(
+                lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
+            )
+        except BaseException:
+            process.close()
+            raise
+        label, road_text, columns = ready["label"], ready["road"], tuple(ready["columns"])
+    else:
+        rig = open_rig(config)  # built, not opened
+        try:
+            label, stage = make_stage(config)
+            road, road_text = parse_road(config["run"]["road"], config)
+            if road is not None:
+                stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+            # the kernels and the law warmed before the board is greeted: a board's timers start at the
+            # handshake, and the loop's first deadline follows it at once
+            warm_up(stage, lambda line: on_event(Event("progress", line)))
+            # open the port and greet the board now (configure is idempotent; the loop's own call finds
+            # it done): a port that cannot be opened is one line, before any set-up, output or folder
+            rig.configure()
+        except BaseException:
+            rig.close()
+            raise
+        columns = record_columns(stage)
+    try:
+        folder = RunFolder.create(outputs.out, "run")
+    except BaseException:
+        if process is not None:
+            process.abort()
+        else:
+            rig.close()
+        raise
+    live = outputs.open_live_tap(config, columns, "sashil run", folder.path)
+    if progress:  # a bar on a terminal, a line every 10 s otherwise
+        live = SessionHooks(live, RunProgress(duration, rate))
+    if views:
+        live = SessionHooks(live, *views)
+    on_event(
+        Event(
+            "progress",
+            f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
+            f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+            {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
+        )
+    )
+    if process is None:
+        trace = outputs.start_can_trace(rig, folder.path)
+    else:
+        trace = outputs.follow_can_trace(folder.path, config["driver"]["port"], process.can_frames)
+    trace_stats: dict[str, Any] | None = None
+
+    def finish(summary: dict[str, Any]) -> dict[str, Any]:
+        """The run's own keys, its --format files and plots, before the one summary.json is written."""
+        nonlocal trace_stats
+        trace_stats = trace.close() if trace is not None else None
+        if trace_stats is not None and process is not None:
+            trace_stats["frames_dropped"] += process.frames_dropped()
+        extra: dict[str, Any] = {"road": road_text}
+        if trace_stats is not None:
+            extra["can_trace"] = trace_stats
+        if (folder.path / "data.csv").exists():
+            outputs.write_formats(
+                folder.path,
+                config,
+                "run",
+                exit_status=summary.get("exit_status", "ok"),
+                controller=summary.get("controller"),
+            )
+            plot_run(folder.path / "run.png", folder.path, {**summary, **extra})
+        timing = load_run(folder.path).timing
+        if timing is not None and len(timing.get("lateness_ns", ())):
+            plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
+        return extra
+
+    def say(line: str) -> None:
+        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
+
+    hooks: dict[str, Any] = {
+        "controller": label,
+        "live": live,
+        "say": say,
+        "tune": tune,
+        "finish": finish,
+        "stop": stop,
+    }
+    try:
+        if process is not None:
+            outcome = run_loop_process(process, config, folder, duration, **hooks)
+        else:
+            clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
+            outcome = run_session(config, rig, stage, folder, clock, duration, **hooks)
+    finally:
+        if trace is not None and trace_stats is None:
+            trace.close()
+    if isinstance(outcome.error, SashilError) and outcome.error.exit_code == ConfigError.exit_code:
+        folder.discard()
+        raise outcome.error  # bad input (a port that cannot be opened): nothing ran, no folder
+    summary = outcome.summary
+    on_event(Event("result", format_timing(summary["timing"]), {"timing": summary["timing"]}))
+    for trip in summary["trips"]:
+        on_event(Event("warning", f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", trip))
+    on_event(Event("folder", f"run folder: {folder.path}", {"folder": str(folder.path)}))
+    if outcome.result.exit_status == "stopped":
+        on_event(Event("warning", f"sashil run: stopped by {outcome.result.stop_reason}; damper at 0 A"))
+    error = outcome.error
+    if error is not None and not isinstance(error, KeyboardInterrupt):
+        if isinstance(error, SashilError):
+            raise error
+        raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
+    return load_run(folder.path)

@@ -1,0 +1,402 @@
+"""``sashil compare`` as a library function: several laws on the same road, one table
+(``compare.md``, ``metrics.csv``, ``compare.png``).
+
+Each law runs on the road ``compare.road`` for ``compare.duration_s`` through the one runner
+(:mod:`sashil.experiments.compare`), beside the passive damper at 0 A and at i_max, which are always
+included. Every law is checked before anything runs. On the simulated rig on the virtual clock the
+laws may run in ``compare.jobs`` parallel processes; on any other rig they run one after another,
+the rig at rest (0 A, the road stopped) for ``compare.rest_s`` in between. A law that fails or trips
+gets its row saying why; the others still run.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sashil.api import Run, load_run
+from sashil.errors import ConfigError, SashilError
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+
+__all__ = [
+    "CompareLaw",
+    "check_compare",
+    "compare",
+    "folder_name",
+    "law_parameters",
+    "laws_of",
+    "own_law",
+    "split_sets",
+]
+
+
+@dataclass(frozen=True)
+class CompareLaw:
+    """One law to compare, as ``--controller`` and ``--set`` give it: ``law`` (a registered name,
+    ``package.module:Class`` or ``path/file.py:Class``) and ``sets``, its parameters as
+    ``controller.<param>=value`` texts (YAML values, checked by the law's ``Param``s)."""
+
+    law: str
+    sets: Sequence[str] = ()
+
+
+def check_compare(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+    """The ``compare`` keys a run can honour: the road parses, and each law runs longer than the
+    start its metrics leave out (``compare.settle_s``); ``named(key)`` is the option that set a key
+    (``--road``, ``--duration``), or the key."""
+    from sashil.experiments.road_option import parse_road
+
+    section = config["compare"]
+    try:
+        parse_road(section["road"], config)  # type: ignore[arg-type]
+    except ConfigError as err:
+        where = named("compare.road")
+        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
+    duration, settle = float(section["duration_s"]), float(section["settle_s"])
+    if duration <= settle:
+        raise ConfigError(
+            f"{named('compare.duration_s')}: expected more than compare.settle_s = {settle:g} s (the start of each "
+            f"law's run the metrics leave out), got {duration:g}"
+        )
+
+
+def split_sets(overrides: Sequence[str]) -> tuple[list[str], list[tuple[str, str]]]:
+    """``--set`` items for the base config, and ``(param, item)`` for the laws' own parameters
+    (``controller.<p>`` that is not a key of the controller section)."""
+    from sashil.config.overrides import parse_override
+    from sashil.config.sections import CONTROLLER
+
+    base, law_sets = [], []
+    for item in overrides:
+        path, _ = parse_override(item)
+        if path == ["controller", "law"]:
+            raise ConfigError(f"--set {item}: sashil compare takes its laws from --controller (repeatable)")
+        if len(path) == 2 and path[0] == "controller" and path[1] not in CONTROLLER.fields:
+            law_sets.append((path[1], item))
+        else:
+            base.append(item)
+    return base, law_sets
+
+
+def laws_of(specs: Sequence[str], law_sets: Sequence[tuple[str, str]]) -> list[CompareLaw]:
+    """The laws of repeated ``--controller``, each with the ``--set`` items (from :func:`split_sets`)
+    of the parameters it declares; ConfigError for an unknown law, or an item no law declares."""
+    from sashil.control.law_registry import find_law
+
+    laws, used = [], set()
+    for spec in specs:
+        try:
+            declared = find_law(spec).cls.params()
+        except ConfigError as err:
+            raise ConfigError(f"--controller {spec}: {err}") from None
+        used |= set(declared)
+        laws.append(CompareLaw(spec, tuple(item for key, item in law_sets if key in declared)))
+    for key, item in law_sets:
+        if key not in used:
+            raise ConfigError(
+                f"--set {item}: none of the compared laws ({', '.join(specs) or 'none'}) has a parameter {key}"
+            )
+    return laws
+
+
+def _law_config(base: Mapping[str, Any], law: CompareLaw, extra: Sequence[str] = ()) -> Any:
+    """``base`` running ``law`` with its parameters, checked (ConfigError naming --controller and
+    the key) and read-only. Parameters of another law that ``base`` holds (a law's own config.yaml
+    given back with --config) are left out."""
+    from sashil.config.frozen import freeze, thaw
+    from sashil.config.overrides import apply_overrides
+    from sashil.config.sections import CONTROLLER
+    from sashil.control.law_registry import find_law
+
+    try:
+        declared = find_law(law.law).cls.params()  # an unknown law named as such, before its parameters
+        config = thaw(base)
+        section = config.get("controller") or {}
+        for key in [k for k in section if k not in CONTROLLER.fields and k not in declared]:
+            del section[key]
+        return freeze(apply_overrides(config, [f"controller.law={law.law}", *law.sets, *extra], "--set"))
+    except ConfigError as err:
+        raise ConfigError(f"--controller {law.law}: {err}") from None
+
+
+def folder_name(label: str) -> str:
+    """A law's sub-folder in the compare folder: its label with what a file name should not hold
+    replaced (``passive 0 A`` -> ``passive-0A``)."""
+    text = re.sub(r"(\d) A$", r"\1A", label)
+    return re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-.") or "law"
+
+
+def own_law(config: Mapping[str, Any]) -> list[CompareLaw]:
+    """The config's own law when it is not passive (a compared law's config.yaml given back with
+    --config), as the law to compare when none is named."""
+    law = (config.get("controller") or {}).get("law", "passive")
+    return [] if law == "passive" else [CompareLaw(str(law))]
+
+
+def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, duration: float) -> list[Any]:
+    """The references (passive at 0 A and i_max) and each law, every config checked."""
+    from sashil.control.law_registry import find_law
+    from sashil.experiments.compare import LawJob
+
+    i_max = float(base["rig"]["current_max_a"])
+    jobs: dict[str, LawJob] = {}
+    for current in (0.0, i_max):
+        config = _law_config(base, CompareLaw("passive"), [f"controller.current_a={current}"])
+        jobs.setdefault(f"passive {current:g} A", LawJob(f"passive {current:g} A", config, road, duration))
+    for law in laws:
+        config = _law_config(base, law)
+        name = find_law(law.law).cls.name or law.law
+        label = f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
+        jobs.setdefault(label, LawJob(label, config, road, duration))
+    return list(jobs.values())
+
+
+def law_parameters(result: Any, config: Mapping[str, Any]) -> dict[str, Any]:
+    """The parameters a law ran with: the law's own values as its run reported them
+    (``controller_stats.law.parameters``), else those its config gives (each declared parameter,
+    its default when unset); the passive stage's current."""
+    from sashil.control.law_registry import find_law
+
+    stats = (result.summary or {}).get("controller_stats") or {}
+    reported = (stats.get("law") or {}).get("parameters") if isinstance(stats, Mapping) else None
+    if isinstance(reported, Mapping):
+        return dict(reported)
+    section = config["controller"]
+    declared = find_law(str(section["law"])).cls.params()
+    return {key: section.get(key, param.default) for key, param in declared.items()}
+
+
+def _law_summary(result: Any, config: Mapping[str, Any], road_text: str, duration: float) -> dict[str, Any]:
+    """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
+    parameters) and its metrics (also as its one entry of ``runs``)."""
+    from sashil.control.law_registry import find_law
+
+    entry = find_law(str(config["controller"]["law"]))
+    common = dict(result.summary)
+    if not common:  # the law never started: its status says why
+        common = {"exit_status": "error", "exit_code": 1}
+    if not result.ok:
+        common["error"] = common.get("error") or result.status
+        if common.get("exit_status") == "ok":
+            common["exit_status"], common["exit_code"] = "error", 1
+    return {
+        **common,
+        "verb": "compare",
+        "driver": config["driver"]["name"],
+        "controller": result.label,
+        "controller_origin": entry.origin,
+        "parameters": law_parameters(result, config),
+        "road": road_text,
+        "duration_s": duration,
+        "status": result.status,
+        "accel_source": result.accel_source,
+        "metrics": result.metrics,
+        "runs": [{"folder": ".", "controller": result.label, **result.metrics}],
+    }
+
+
+def _run_jobs(jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_event: Listener) -> list[Any]:
+    """Run the jobs: in ``processes`` processes on the virtual clock, else one after another with
+    the rig at rest for ``rest_s`` between them."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from sashil.experiments.compare import run_job
+
+    def done(result: Any) -> None:
+        on_event(
+            Event(
+                "progress",
+                f"sashil compare: {result.label}: {result.status} ({result.wall_s:.1f} s)",
+                {"law": result.label, "status": result.status},
+            )
+        )
+
+    if virtual and processes > 1:
+        # fork: a worker starts at once with the parent's imports, and no resource-tracker process
+        # outlives the pool (spawn's would); the parent runs no thread at this point
+        with ProcessPoolExecutor(max_workers=processes, mp_context=get_context("fork")) as pool:
+            results = list(pool.map(run_job, jobs))
+        for result in results:
+            done(result)
+        return results
+    results = []
+    for i, job in enumerate(jobs):
+        if i and not virtual and rest_s > 0:
+            time.sleep(rest_s)  # the runner left the rig at 0 A with the road stopped: let it settle
+        result = run_job(job)
+        done(result)
+        results.append(result)
+    return results
+
+
+def _accel_note(results: list[Any], bandwidth_hz: float) -> str:
+    """How θ̈2 was measured (the simulated plant's own, or the encoders'), for compare.md."""
+    sources = {r.accel_source for r in results if r.ok}
+    how = {
+        "plant": "the simulated plant's own, (−k·θ − T)/J of its true state",
+        "encoders": "the arm angle θ2 = θ + θ1 from the encoders, differentiated twice",
+    }
+    text = "; ".join(how[s] for s in sorted(sources)) or "none measured"
+    return (
+        f"θ̈2: {text}, low-passed at {bandwidth_hz:g} Hz. The road-side torque k·θ + T equals −J·θ̈2 on this "
+        "rig (Iskandarani & Karimi 2011, eq. 13, the road side driven), so it is not a second measure: J times RMS θ̈2."
+    )
+
+
+def _bound(config: Mapping[str, Any], road: Any, duration: float, on_event: Listener) -> Any:
+    """The optimal bound on this road for the config's model (None without a road, or when the run
+    is shorter than the settling time)."""
+    from sashil.experiments.optimal_bound import optimal_bound
+    from sashil.models.hysteresis import BoucWenParams
+
+    settle = float(config["compare"]["settle_s"])
+    if road is None or duration <= settle:
+        return None
+    params = BoucWenParams.from_mapping(config["model"]["params"])
+    start = time.perf_counter()
+    bound = optimal_bound(params, float(config["rig"]["current_max_a"]), road, duration, settle)
+    on_event(
+        Event(
+            "progress",
+            f"sashil compare: optimal bound {bound.gain_pct:.1f} % below passive ({time.perf_counter() - start:.1f} s)",
+            {"gain_pct": bound.gain_pct},
+        )
+    )
+    return bound
+
+
+def compare(
+    config: Any, laws: Sequence[CompareLaw | str], outputs: Outputs | None = None, on_event: Listener = ignore
+) -> Run:
+    """Compare ``laws`` (each a :class:`CompareLaw`, or a law spec without parameters) on the road
+    of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb ``compare``: the
+    ``compare`` section) into a new folder, beside the passive references, and return it as a
+    :class:`~sashil.api.Run`: ``metrics.csv`` (:attr:`~sashil.api.Run.tables` ``["metrics"]``),
+    ``compare.md``, ``compare.png``, and ``summary.json`` with each law's status and metrics under
+    ``laws``. Each law's run is a run folder of its own inside it (:attr:`~sashil.api.Run.runs`;
+    ``summary.json`` ``runs``): ``config.yaml`` with the law and its parameters, ``data.csv``,
+    ``timing.npz`` and ``summary.json``. With no ``laws``, the config's own law is compared (unless it
+    is passive): a compared law's ``config.yaml`` compares that law again.
+
+    Bad input (an unknown law, a parameter its ``Param`` refuses) raises ConfigError before any
+    folder exists. A law that fails or trips does not raise: its row says why, the summary ends
+    ``error`` (exit code 1) naming it, and a ``warning`` event says so."""
+    from sashil.drivers import on_virtual_clock
+    from sashil.experiments.road_option import parse_road
+    from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
+    from sashil.recording.run_folder import RunFolder
+    from sashil.recording.run_set import ending
+
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.check(config["driver"]["name"])
+    section = config["compare"]
+    road, duration = str(section["road"]), float(section["duration_s"])
+    chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws] or own_law(config)
+    jobs = _jobs(config, chosen, road, duration)
+    virtual = on_virtual_clock(config)
+    processes = int(section["jobs"]) if virtual else 1
+    road_profile, road_text = parse_road(road, config)
+    folder = RunFolder.create(outputs.out, "compare")
+    note = (
+        "The config every law of this comparison started from: its controller section is not one of them.\n"
+        "Each law ran with the config.yaml of its own folder: "
+        + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
+    )
+    folder.write_config(config, note)
+    subs = {}
+    for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
+        sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
+        sub.write_config(job.config)
+        job.folder, subs[job.label] = str(sub.path), sub
+    on_event(
+        Event(
+            "progress",
+            f"sashil compare: {len(jobs)} laws, road {road}, {duration:g} s each, {processes} process(es) -> {folder.path}",
+            {"folder": str(folder.path)},
+        )
+    )
+    start = time.perf_counter()
+    results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event)
+    wall = time.perf_counter() - start
+    configs = {job.label: job.config for job in jobs}
+    summaries = {r.label: _law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
+    for label, summary in summaries.items():
+        subs[label].write_summary(summary)
+    bound = _bound(config, road_profile, duration, on_event)
+    header = {
+        "road": f"`{road}`: {road_text}",
+        "duration": f"{duration:g} s per law, the first {section['settle_s']:g} s left out of the metrics",
+        "rig": f"{config['driver']['name']} ({'virtual clock' if virtual else 'real clock'}), {config['loop']['rate_hz']:g} Hz",
+        "wall time": f"{wall:.1f} s for {len(jobs)} laws in {processes} process(es)",
+    }
+    if bound is not None:
+        header["optimal bound"] = (
+            f"RMS θ̈2 {bound.rms_accel_bound:.4g} rad/s² against {bound.rms_accel_passive:.4g} for the best constant "
+            f"damping ({bound.c_passive:.3g} N m s/rad), {bound.gain_pct:.1f} % below it, in the model's viscous "
+            "envelope (the hysteretic term left out), knowing the road in advance"
+        )
+    notes = [
+        _accel_note(results, float(section["accel_bandwidth_hz"])),
+        f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
+        "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
+        "Share of the bound: the law's gain over the best passive run as a share of the optimal bound's gain over "
+        "the best constant damping (sashil.experiments.optimal_bound: direct transcription on the viscous "
+        "envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], L-BFGS-B on the exact "
+        "adjoint gradient; the best of two starts, not a certificate). 100 %: all the bound allows.",
+        "Each law's run is a run folder of its own (the folder column): its config.yaml (the law and its "
+        "parameters), data.csv (every cycle) and summary.json, for `sashil report`, `sashil replay` and "
+        "`sashil compare --config FOLDER/config.yaml` (that law against the references again).",
+    ]
+    gain = bound.gain_pct if bound is not None else float("nan")
+    params = {label: summary["parameters"] for label, summary in summaries.items()}
+    folders = {label: sub.path.name for label, sub in subs.items()}
+    write_metrics_csv(folder.file("metrics.csv"), results, gain)
+    write_compare_md(folder.file("compare.md"), results, header, notes, gain, params, folders)
+    plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}")
+    failed = [r for r in results if not r.ok]
+    error = (
+        SashilError(
+            f"{len(failed)} of {len(results)} laws did not finish: "
+            + "; ".join(f"{r.label}: {r.status}" for r in failed)
+        )
+        if failed
+        else None
+    )
+    folder.write_summary(
+        {
+            "verb": "compare",
+            "driver": config["driver"]["name"],
+            **ending(error),
+            "road": f"{road}: {road_text}",
+            "duration_s": duration,
+            "processes": processes,
+            "wall_s": wall,
+            "optimal_bound_gain_pct": gain,
+            "laws": [
+                {"law": r.label, "status": r.status, "accel_source": r.accel_source, "wall_s": r.wall_s, **r.metrics}
+                for r in results
+            ],
+            "runs": [
+                {
+                    "folder": folders[r.label],
+                    "controller": r.label,
+                    "controller_origin": summaries[r.label]["controller_origin"],
+                    "parameters": params[r.label],
+                    "exit_status": summaries[r.label]["exit_status"],
+                    "error": summaries[r.label].get("error"),
+                    **r.metrics,
+                }
+                for r in results
+            ],
+        }
+    )
+    on_event(Event("progress", f"sashil compare: {wall:.1f} s of wall time", {"wall_s": wall}))
+    on_event(Event("folder", f"compare folder: {folder.path}", {"folder": str(folder.path)}))
+    if error is not None:
+        on_event(Event("warning", f"sashil compare: {error}", {"failed": [r.label for r in failed]}))
+    return load_run(folder.path)

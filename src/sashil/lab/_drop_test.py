@@ -1,0 +1,172 @@
+"""The drop test as a library function: hold the arm at θ0, release, record the free oscillation
+at each constant current (seed 001 section 8), one sub-run per current."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from sashil.api import Run, load_run
+from sashil.config.frozen import thaw
+from sashil.control.law_registry import law_label
+from sashil.drivers import on_virtual_clock, open_rig
+from sashil.experiments.drop_test import DROP_COLUMNS, controller_columns, run_drop_test
+from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+from sashil.recording.plots import plot_drop_test
+from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_set import RunSet, ending
+from sashil.runtime.runner import CYCLES_FILE
+
+__all__ = ["drop_test", "result_line"]
+
+
+def _controller(config: Any) -> Any:
+    """The config's controller, which takes over at the release (None: a law that reads no state,
+    such as the passive law: the drop's constant current throughout)."""
+    from sashil.control.registry import law_reads_state, make_controller
+
+    return make_controller(None, config) if law_reads_state(config) else None
+
+
+def _label(current: float) -> str:
+    return f"i{current:.3f}A"
+
+
+def result_line(metrics: DropMetrics, duration_s: float) -> str:
+    """One drop's period, first peaks, damping ratio and settling, as reported after it."""
+    period = "-" if metrics.period_s is None else f"{metrics.period_s:.3f} s"
+    peaks = ", ".join(f"{p:.2f}" for p in metrics.peaks_deg[:4])
+    return f"period {period}, peaks [{peaks}] deg, {damping_text(metrics)}, {settling_text(metrics, duration_s)}"
+
+
+def result_warnings(metrics: DropMetrics) -> list[str]:
+    """What the operator should know about a drop's figures: no peaks, or a damping ratio the record cut short."""
+    if metrics.peaks_note is not None:
+        return [f"no peaks: {metrics.peaks_note}"]
+    if metrics.damping_note is not None and (metrics.damping_ratio is None or metrics.damping_record_short):
+        return [metrics.damping_note]
+    return []
+
+
+def drop_test(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
+    """Run the drop tests of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    ``drop-test``: ``drop_test.theta0_deg``, ``currents_a``, ``duration_s``) into a new run folder.
+
+    Each current is a sub-run (``i0.000A/``, ...) when there are several. The law in
+    ``controller.law`` takes over at the release (``passive``: the constant current throughout).
+    Returns the folder as a :class:`~sashil.api.Run`. Bad input raises ConfigError before any folder
+    exists; a run that fails after it started raises the error that ended it, after the folder is
+    complete (its data up to the failure, its plot and summary)."""
+    outputs = outputs if outputs is not None else Outputs()
+    section = config["drop_test"]
+    theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
+    currents = [float(value) for value in section["currents_a"]]
+    outputs.check(config["driver"]["name"])
+    checked = _controller(config)  # bad controller parameters fail here, before a folder exists
+    closed = checked is not None
+    folder = RunFolder.create(outputs.out, "drop-test")
+    law, origin = law_label(config["controller"]["law"])
+    columns = DROP_COLUMNS + controller_columns(checked)
+    live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
+    live_offset_s = 0.0
+    folder.write_config(config)
+    runs = RunSet(
+        folder,
+        "drop-test",
+        {
+            "driver": config["driver"]["name"],
+            "controller": law if closed else f"{law} (constant current per run)",
+            "controller_origin": origin,
+            "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
+        },
+        several=len(currents) > 1,
+    )
+    overlay = []
+    prompt = lambda line: on_event(Event("prompt", line))  # noqa: E731
+    for current in currents:
+        label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
+        on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
+        target = runs.folder_for(_label(current))
+        rig = open_rig(config)
+        trace = outputs.start_can_trace(rig, target.path)
+        try:
+            record = run_drop_test(
+                config,
+                theta0_deg,
+                current,
+                duration,
+                rig=rig,
+                controller=_controller(config) if closed else None,
+                notify=prompt,
+                data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
+            )
+        finally:
+            trace_stats = trace.close() if trace is not None else None
+        if runs.several:  # the sub-folder's config reruns its one drop
+            own = thaw(config)
+            own["drop_test"]["currents_a"] = [current]
+            target.write_config(own)
+        target.write_data(record.columns)
+        assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
+        outputs.write_formats(
+            target.path,
+            config,
+            "drop-test",
+            record.columns,
+            exit_status=ending(record.error)["exit_status"],
+            current_a=current,
+            controller=label,
+        )
+        if live is not None:
+            live.note(
+                live_offset_s,
+                f"drop test from {theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)",
+            )
+            live.log_columns(record.columns, live_offset_s)
+            live_offset_s += duration + 1.0
+        entry = runs.add(
+            _label(current),
+            {
+                "current_a": current,
+                "controller": label,
+                "theta0_deg": theta0_deg,
+                "hold_angle_deg": math.degrees(record.hold_angle_rad),
+                "release_estimated": record.release_estimated,
+                **record.metrics.as_dict(),
+                "timing": record.loop.timing.summary() if record.loop.timing is not None else None,
+                "trips": record.loop.trips,
+                "link": record.extra.get("link"),
+                "realtime": record.extra.get("realtime"),
+                "can_trace": trace_stats,
+            },
+            record.error,
+        )
+        if runs.failed:
+            overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
+            break
+        overlay.append({**entry, **record.columns, "label": label})
+        on_event(Event("result", result_line(record.metrics, duration), {"current_a": current}))
+        for note in result_warnings(record.metrics):
+            on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
+    under = f", under {law}" if closed else ""
+    plot = plot_drop_test(
+        folder.file("drop_test.png"),
+        overlay,
+        f"Drop test from {theta0_deg:g}°{under} ({config['driver']['name']} rig)",
+        band_deg=section["settle_band_deg"],
+    )
+    if live is not None:
+        live.close()
+    if runs.error is not None and getattr(runs.error, "exit_code", 1) == 2:
+        # bad input found on opening the rig (a port that cannot be opened) or before the drop began
+        # (an emulated rig whose operator holds nothing): the drop never started, no folder
+        folder.discard()
+        raise runs.error
+    runs.finish()
+    on_event(Event("folder", f"run folder: {folder.path} (plot {plot.name})", {"folder": str(folder.path)}))
+    if runs.error is not None:
+        raise runs.error  # the data up to it is on disk
+    return load_run(Path(folder.path))

@@ -1,0 +1,192 @@
+"""``sashil simulate`` as a library function: a damper model (any of bouc-wen, dahl, lugre,
+bingham) run on recorded inputs or on a drop test, into a run folder (data.csv, theta.png,
+summary.json), with the fit to the recorded angle when there is one."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sashil.api import Run, load_run
+from sashil.errors import ConfigError
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+
+__all__ = ["check_simulate", "drop_table", "input_file", "simulate"]
+
+
+def input_file(value: str, where: str = "--input") -> Path:
+    """The data file of ``simulate.input`` (``where``: the option or key that gave it): the file
+    itself, or a run folder's ``data.csv``; a folder of several runs is refused, naming them."""
+    path = Path(value)
+    if not path.is_dir():
+        return path
+    if (path / "data.csv").is_file():
+        return path / "data.csv"
+    runs = sorted(found.parent.name for found in path.glob("*/data.csv"))
+    if runs:
+        example = f"--input {path / runs[0]}" if where == "--input" else f"{where}: {path / runs[0]}"
+        raise ConfigError(
+            f"{where} {path}: a folder of {len(runs)} runs ({', '.join(runs[:4])}{', ...' if len(runs) > 4 else ''}); "
+            f"simulate takes one, e.g. {example}"
+        )
+    raise ConfigError(f"{where} {path}: a folder without data.csv (expected a data.csv or a run folder)")
+
+
+def check_simulate(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+    """The ``simulate`` keys a run can honour: an input that is a data file or one run's folder."""
+    value = config["simulate"]["input"]
+    if value:
+        input_file(value, named("simulate.input"))
+
+
+def _inputs(config: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
+    """The model's inputs (time, current, road, torque and the initial angle), the recorded angle
+    to compare with (None for a drop test) and a description of the source."""
+    from sashil.identify.simulate import drop_test_inputs
+    from sashil.recording.data_file import read_data_csv
+
+    section = config["simulate"]
+    if not section["input"]:
+        theta0, current = section["theta0_deg"], section["current_a"]
+        return (
+            drop_test_inputs(theta0, current, section["duration_s"]),
+            None,
+            f"drop test theta0 {theta0:g} deg, {current:g} A",
+        )
+    data_file = input_file(section["input"], "simulate.input")
+    inputs = read_data_csv(data_file, required=("time_s",), min_rows=2)
+    if "current_a" not in inputs and "current_cmd_a" not in inputs:
+        raise ConfigError(f"{data_file}: missing column current_a (or current_cmd_a)")
+    measured = inputs.get("theta_rad")
+    if measured is None:
+        inputs["theta_rad"] = np.zeros_like(inputs["time_s"])
+    return inputs, measured, str(data_file)
+
+
+def simulate(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
+    """Run the model of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    ``simulate`` and ``models=sashil.models.registry.MODEL_PARAMS``) on ``simulate.input`` (a
+    data.csv or a run folder; None: a drop test from ``simulate.theta0_deg`` at ``current_a`` for
+    ``duration_s``), starting at rest or moving (``simulate.start``), into a new run folder.
+
+    Returns the folder as a :class:`~sashil.api.Run`: ``data.csv`` (the simulated columns, and
+    ``theta_measured_rad`` beside them for a recorded input), ``theta.png`` and ``summary.json``
+    (``model``, ``input``, ``samples``; ``rms_rad`` and ``nrmse`` against the recorded angle; the
+    drop-test metrics of both angles when the input is a drop). Bad input (an unreadable data file,
+    one without a current column) raises ConfigError before any folder exists. Events: ``output``
+    lines (the folder and the fit, the drop-test table), as ``sashil simulate`` prints them."""
+    from sashil.identify.simulate import simulate_columns
+    from sashil.recording.run_folder import RunFolder
+    from sashil.stats import nrmse
+
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.check_folder_only("simulate")
+    model = config["model"]["name"]
+    params = dict(config["model"]["params"])
+    if model == "bouc-wen":
+        from sashil.models.hysteresis import BoucWenParams
+
+        params = {**BoucWenParams().as_dict(), **params}
+    inputs, measured, source = _inputs(config)
+    columns = simulate_columns(model, params, inputs, start_at_rest=config["simulate"]["start"] == "rest")
+    folder = RunFolder.create(outputs.out, "simulate")
+    folder.write_config(config)
+    if measured is not None:
+        columns["theta_measured_rad"] = measured
+    folder.write_data(columns)
+    summary: dict[str, Any] = {"model": model, "input": source, "samples": int(columns["time_s"].size)}
+    if measured is not None:
+        summary["rms_rad"] = float(np.sqrt(np.mean((columns["theta_rad"] - measured) ** 2)))
+        summary["nrmse"] = nrmse(columns["theta_rad"], measured)
+    _plot(folder.file("theta.png"), columns, model, source, summary.get("nrmse"))
+    drops = (
+        _drop_metrics(config, columns, measured, inputs)
+        if not config["simulate"]["input"] or _is_drop(inputs)
+        else None
+    )
+    if drops is not None:
+        summary["drop_test"] = {name: metrics.as_dict() for name, metrics in drops.items()}
+    folder.write_summary(summary)
+    fit = f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else ""
+    on_event(Event("output", f"simulated {model} on {source}: {folder.path}{fit}", {"folder": str(folder.path)}))
+    if drops is not None:
+        on_event(Event("output", drop_table(drops), summary["drop_test"]))
+    return load_run(folder.path)
+
+
+def _is_drop(inputs: Mapping[str, np.ndarray]) -> bool:
+    """Whether an input record is a drop test: no road motion and no input torque."""
+    road, torque = inputs.get("theta_road_rad"), inputs.get("torque_in_nm")
+    still = road is None or not np.any(np.nan_to_num(road))
+    return still and (torque is None or not np.any(np.nan_to_num(torque)))
+
+
+def _drop_metrics(
+    config: Mapping[str, Any], columns: Mapping[str, np.ndarray], measured: np.ndarray | None, inputs: Mapping[str, Any]
+) -> dict[str, Any]:
+    """Drop-test metrics (period, peaks, ζ) of the simulated angle and, when given, the recorded one,
+    with the config's settling band and encoder resolution."""
+    from sashil.experiments.metrics import drop_metrics
+
+    band = config["drop_test"]["settle_band_deg"]
+    resolution = 2.0 * math.pi / config["rig"]["encoder_counts_per_rev"]
+    out = {"simulated": drop_metrics(columns["time_s"], columns["theta_rad"], band, resolution)}
+    if measured is not None:
+        out["recorded"] = drop_metrics(inputs["time_s"], measured, band, resolution)
+    return out
+
+
+def drop_table(drops: Mapping[str, Any]) -> str:
+    """Period, first peaks and ζ of each drop-test record, side by side."""
+
+    def number(value: float | None, digits: int = 3) -> str:
+        return "-" if value is None else f"{value:.{digits}f}"
+
+    rows = [
+        ("period [s]", lambda m: number(m.period_s)),
+        ("first peaks [deg]", lambda m: ", ".join(f"{p:.2f}" for p in m.peaks_deg[:4]) or "none"),
+        ("damping ratio ζ", lambda m: number(m.damping_ratio, 4)),
+    ]
+    names = list(drops)
+    width = max(12, *(len(get(drops[n])) + 3 for n in names for _, get in rows))
+    lines = [f"{'drop test':<20}" + "".join(f"{n:>{width}}" for n in names)]
+    lines += [f"{title:<20}" + "".join(f"{get(drops[n]):>{width}}" for n in names) for title, get in rows]
+    return "\n".join(lines)
+
+
+def _plot(path: Path, columns: Mapping[str, np.ndarray], model: str, source: str, error: float | None) -> None:
+    """``theta.png``: the simulated angle (and the recorded one when given, with the residual
+    simulated − recorded below it); the title names the model, the input and the NRMSE."""
+    from matplotlib.ticker import MaxNLocator
+
+    from sashil.recording.plots import BESIDE, pyplot, save_figure
+
+    measured = columns.get("theta_measured_rad")
+    rows = 2 if measured is not None else 1
+    fig, axes = pyplot().subplots(
+        rows, 1, figsize=(10, 2.2 + 1.6 * rows), sharex=True, squeeze=False, height_ratios=[2.5, 1][:rows]
+    )
+    top = axes[0, 0]
+    t = columns["time_s"]
+    if measured is not None:
+        top.plot(t, np.degrees(measured), "k", lw=1.2, label="recorded")
+    top.plot(t, np.degrees(columns["theta_rad"]), color="tab:red", lw=0.9, label=f"{model} simulation")
+    top.set_ylabel("θ [deg]")
+    title = f"sashil simulate: {model} on {source}"
+    top.set_title(title + (f", NRMSE {100 * error:.3g} %" if error is not None else ""), fontsize=10)
+    top.legend(**BESIDE)
+    if measured is not None:
+        bottom = axes[1, 0]
+        bottom.plot(t, np.degrees(columns["theta_rad"] - measured), color="tab:blue", lw=0.7)
+        bottom.axhline(0.0, color="0.4", lw=0.6)
+        bottom.set_ylabel("sim − rec [deg]")
+        bottom.yaxis.set_major_locator(MaxNLocator(nbins=4, symmetric=True))  # few ticks: labels do not collide
+    for ax in axes[:, 0]:
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    save_figure(fig, path, dpi=110)

@@ -1,0 +1,318 @@
+"""``sashil sweep`` as a library function: road-side excitation through the resonance, a chirp or
+a stepped sine with its transmissibility per frequency, into a run folder.
+
+The excitation and its measurement are :mod:`sashil.experiments.sweep`; this module runs them on the
+config's rig, writes the folder (``data.csv`` and ``chirp.png`` of a chirp; a sub-folder per
+frequency, ``transmissibility.csv`` and ``transmissibility.png`` of a stepped sine) and reports
+through events.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sashil.api import Run, load_run
+from sashil.errors import ConfigError, SashilError
+from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.outputs import Outputs
+
+__all__ = ["TRANSMISSIBILITY_COLUMNS", "check_sweep", "sweep"]
+
+#: the columns of a stepped sine's ``transmissibility.csv``, one row per frequency
+TRANSMISSIBILITY_COLUMNS = (
+    "frequency_hz",
+    "body_rms_rad",
+    "road_rms_rad",
+    "transmissibility",
+    "observer_nrmse",
+    "clipped_cycles",
+)
+
+
+def check_sweep(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+    """The ``sweep`` keys a run can honour: each frequency in (0, loop.rate_hz / 10], the stop at or
+    above the start, and above it for a stepped sine; ``named(key)`` is the option that set a key
+    (``--f-stop``), or the key."""
+    section = config["sweep"]
+    f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
+    start_name, stop_name = named("sweep.f_start_hz"), named("sweep.f_stop_hz")
+    top = config["loop"]["rate_hz"] / 10
+    for option, value in ((start_name, f_start), (stop_name, f_stop)):
+        if not (math.isfinite(value) and 0.0 < value <= top):
+            raise ConfigError(f"{option}: expected a frequency in (0, {top:g}] Hz, got {value:g}")
+    if f_stop < f_start:
+        raise ConfigError(
+            f"{stop_name}: expected a frequency at or above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+    if section["stepped"] and f_stop == f_start:
+        raise ConfigError(
+            f"{stop_name}: a stepped sine needs a frequency above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+
+
+def _label(config: Mapping[str, Any]) -> str:
+    """What commanded the damper: the law, or the passive current."""
+    from sashil.control.law_registry import law_label
+
+    name = law_label(config["controller"]["law"])[0]
+    return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
+
+
+def _freq_label(f_hz: float) -> str:
+    """Sub-folder of one stepped-sine frequency, e.g. ``f1.650Hz``."""
+    return f"f{f_hz:.3f}Hz"
+
+
+def sweep(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore, *, progress: bool = False) -> Run:
+    """Run the sweep of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    ``sweep``: the ``sweep`` section; the law ``controller.law``, ``passive`` for a constant
+    ``controller.current_a``) into a new run folder, and return it as a :class:`~sashil.api.Run`.
+
+    A chirp (``sweep.stepped`` false) is one run: ``data.csv`` (:data:`~sashil.experiments.sweep.SWEEP_COLUMNS`
+    and ``seq``), ``chirp.png``, and the body's RMS and peak in ``summary.json``. A stepped sine runs
+    each of ``sweep.steps`` frequencies in a sub-folder of its own and writes the transmissibility
+    table (``transmissibility.csv``, ``.png``; the points in ``summary.json``). The tables and the
+    folder line are ``output`` events. ``progress``: a bar on stderr over the stepped sine's
+    frequencies, instead of a ``progress`` event per frequency.
+
+    Bad input (exit code 2: ConfigError; DriverError for a port that cannot be opened) is raised with
+    no folder left; a run that fails after it started raises the error that ended it, after the
+    folder is complete (the data up to the failure, the summary)."""
+    from sashil.control.registry import make_controller
+    from sashil.experiments.sweep import SWEEP_COLUMNS
+    from sashil.recording.run_folder import RunFolder
+    from sashil.recording.run_set import RunSet
+
+    outputs = outputs if outputs is not None else Outputs()
+    outputs.check(config["driver"]["name"])
+    make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
+    stepped = bool(config["sweep"]["stepped"])
+    folder = RunFolder.create(outputs.out, "sweep")
+    live = (
+        None
+        if stepped
+        else outputs.open_rerun((*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
+    )
+    folder.write_config(config)
+    label = _label(config)
+    traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
+
+    def rig_factory(cfg: Any, road: Any) -> Any:  # every rig of the sweep feeds the one trace
+        from sashil.experiments.sweep import default_rig
+
+        rig = default_rig(cfg, road)
+        if traces:
+            traces[0].attach(rig)
+        else:
+            trace = outputs.start_can_trace(rig, folder.path)
+            if trace is not None:
+                traces.append(trace)
+        return rig
+
+    runs = RunSet(
+        folder,
+        "sweep",
+        {"driver": config["driver"]["name"], "controller": label, "mode": "stepped" if stepped else "chirp"},
+        several=stepped,
+    )
+    extra: dict[str, Any] = {}
+    failure: SashilError | None = None
+    try:
+        if stepped:
+            _stepped(config, label, folder, rig_factory, runs, extra, outputs, on_event, progress)
+        else:
+            _chirp(config, label, folder, live, rig_factory, runs, extra, outputs, on_event)
+    except SashilError as err:
+        failure = err
+    finally:
+        trace_stats = traces[0].close() if traces else None
+    if failure is not None and failure.exit_code == ConfigError.exit_code and not folder.recorded():
+        folder.discard()  # bad input found on opening the rig (a port that cannot be opened): no folder
+        raise failure
+    if traces:
+        extra["can_trace"] = trace_stats
+    runs.finish(**extra)
+    if failure is not None:
+        kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
+        on_event(
+            Event("folder", f"run folder: {folder.path} (the sweep ended early; {kept})", {"folder": str(folder.path)})
+        )
+        raise failure
+    on_event(Event("output", f"run folder: {folder.path}", {"folder": str(folder.path)}))
+    return load_run(folder.path)
+
+
+def _stepped(
+    config: Any,
+    label: str,
+    folder: Any,
+    rig_factory: Any,
+    runs: Any,
+    extra: dict[str, Any],
+    outputs: Outputs,
+    on_event: Listener,
+    progress: bool,
+) -> None:
+    """The stepped sine: each frequency's run into ``runs`` and its sub-folder, the table and plot
+    into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
+    from sashil.control.registry import make_controller
+    from sashil.experiments.sweep import frequencies, stepped_sine
+    from sashil.identify.progress import Progress
+    from sashil.runtime.runner import CYCLES_FILE
+
+    section = config["sweep"]
+    name = config["controller"]["law"]
+    f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
+    freqs = frequencies(f_start, f_stop, section["steps"], section["spacing"])
+    bar = Progress(len(freqs), "stepped sine", enabled=progress)
+    points = []
+    extra["points"] = []
+
+    def stream_to(f: float) -> Path:
+        """Each frequency in its own sub-folder (a run folder of its own), its cycles streamed there."""
+        sub = runs.folder_for(_freq_label(f))
+        sub.write_config(config)
+        return sub.file(CYCLES_FILE)
+
+    def keep(f: float, cols: dict[str, Any]) -> None:
+        sub = runs.folder_for(_freq_label(f))
+        sub.write_data(cols)
+        outputs.write_formats(sub.path, config, "sweep", cols, exit_status="ok", controller=label, frequency_hz=f)
+
+    try:
+        for k, f in enumerate(freqs):  # one frequency at a time, for the progress bar
+            if not progress:
+                on_event(Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f}))
+            try:
+                point = stepped_sine(
+                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to
+                )[0]
+            except SashilError as err:  # the frequencies done so far are kept
+                if err.exit_code != ConfigError.exit_code:
+                    runs.add(_freq_label(f), {"frequency_hz": f}, err)
+                raise
+            points.append(point)
+            extra["points"].append(point.__dict__)
+            runs.add(_freq_label(f), dict(point.__dict__))
+            bar.advance(1, f"{f:.3g} Hz")
+    finally:
+        bar.close()
+    rows = [[getattr(p, column) for column in TRANSMISSIBILITY_COLUMNS] for p in points]
+    folder.write_rows("transmissibility.csv", TRANSMISSIBILITY_COLUMNS, rows)
+    on_event(Event("output", f"{'f [Hz]':>8} {'body RMS [deg]':>15} {'transmissibility':>17} {'observer NRMSE':>15}"))
+    for p in points:
+        on_event(
+            Event(
+                "output",
+                f"{p.frequency_hz:8.3f} {math.degrees(p.body_rms_rad):15.4f} {p.transmissibility:17.4f} "
+                f"{100 * p.observer_nrmse:14.1f}%",
+                dict(p.__dict__),
+            )
+        )
+    _plot(folder, points, label, config)
+    integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
+    on_event(
+        Event(
+            "output",
+            f"integrated body RMS over the frequencies: {math.degrees(integrated):.4f} deg ({label})",
+            {"integrated_body_rms_rad": integrated},
+        )
+    )
+    extra.update(
+        road=f"stepped sine {f_start:g}-{f_stop:g} Hz, {len(freqs)} steps, {section['amplitude_deg']:g} deg",
+        integrated_body_rms_rad=integrated,
+    )
+
+
+def _plot(folder: Any, points: list[Any], label: str, config: Any) -> None:
+    """``transmissibility.png``, the curve named by the law, its parameters and current."""
+    from sashil.recording.labels import controller_label
+    from sashil.recording.plots import plot_transmissibility
+
+    freq = [p.frequency_hz for p in points]
+    curve = (controller_label({"controller": label}, config), freq, [p.transmissibility for p in points])
+    plot_transmissibility(folder.file("transmissibility.png"), [curve])
+
+
+def _chirp(
+    config: Any,
+    label: str,
+    folder: Any,
+    live: Any,
+    rig_factory: Any,
+    runs: Any,
+    extra: dict[str, Any],
+    outputs: Outputs,
+    on_event: Listener,
+) -> None:
+    """The chirp: one run into ``folder`` (data.csv however it ends, chirp.png, the live view), the
+    body's RMS and peak into ``extra``."""
+    from sashil.control.registry import make_controller
+    from sashil.experiments.sweep import ac_rms, chirp_profile, run_profile
+    from sashil.recording.labels import controller_label
+    from sashil.recording.plots import plot_chirp
+    from sashil.recording.rerun_log import feasible_band
+    from sashil.runtime.runner import CYCLES_FILE
+    from sashil.stats import nrmse
+
+    section = config["sweep"]
+    f_start, f_stop, duration = section["f_start_hz"], section["f_stop_hz"], section["duration_s"]
+    amplitude = math.radians(section["amplitude_deg"])
+    controller = make_controller(config["controller"]["law"], config)
+    on_event(
+        Event(
+            "progress", f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}) ...", {"duration_s": duration}
+        )
+    )
+    try:  # data.csv is written however the run ends
+        cols = run_profile(
+            config,
+            controller,
+            chirp_profile(amplitude, f_start, f_stop, duration, section["ramp_s"]),
+            duration + section["ramp_s"],
+            rig_factory,
+            keep=folder.write_data,
+            data_path=folder.file(CYCLES_FILE),  # every cycle streamed as it runs
+        )
+    except SashilError as err:
+        if err.exit_code != ConfigError.exit_code:
+            runs.add("chirp", {}, err)
+        raise
+    outputs.write_formats(folder.path, config, "sweep", cols, exit_status="ok", controller=label)
+    plot_chirp(
+        folder.file("chirp.png"),
+        cols,
+        f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {section['amplitude_deg']:g} deg road "
+        f"({controller_label({'controller': label}, config)})",
+        chirp=(f_start, f_stop, duration),
+    )
+    if live is not None:
+        shown = dict(cols)
+        if config["model"]["name"] == "bouc-wen":
+            feasible_band(shown, config["model"]["params"], config["rig"]["current_max_a"])
+        live.log_columns(shown)
+        live.close()
+    body = cols["theta_rad"] + cols["theta_road_rad"]
+    body_rms, body_peak = ac_rms(body), float(max(abs(body.max()), abs(body.min())))
+    summary = {
+        "road": f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {section['amplitude_deg']:g} deg",
+        "body_rms_rad": body_rms,
+        "road_rms_rad": ac_rms(cols["theta_road_rad"]),
+        "body_peak_rad": body_peak,
+        "observer_nrmse": nrmse(cols["torque_hat_nm"], cols["torque_true_nm"]),
+        "clipped_cycles": int(getattr(controller, "clip_count", 0)),
+        "controller_stats": controller.stats() if hasattr(controller, "stats") else None,
+    }
+    on_event(
+        Event(
+            "output",
+            f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}): body RMS "
+            f"{math.degrees(body_rms):.4f} deg, peak {math.degrees(body_peak):.3f} deg",
+            {"body_rms_rad": body_rms, "body_peak_rad": body_peak},
+        )
+    )
+    runs.add("chirp", {})
+    extra.update(summary)

@@ -1,0 +1,440 @@
+"""The session's side of a loop in its own process: start it, feed its views, end the run's documents.
+
+The loop process (:mod:`sashil.runtime.worker`) is a fresh interpreter started with
+:func:`subprocess.Popen` (``sys.executable -m sashil.runtime.worker``): no fork of this process's
+threads and locks, no re-import of the caller's ``__main__`` (a script or notebook that calls
+``sashil.run(MyLaw)`` runs once), and the law crosses as its spec in the config, never pickled.
+sashil's real-time loop is Linux-only (``SCHED_FIFO``, ``/dev/shm``, ``os.getppid``).
+
+The session process keeps everything that is not the cycle: the recorder
+(:class:`~sashil.runtime.stream_recorder.StreamRecorder`), the views (the live view, progress,
+a bench page), the tuning socket (its requests go to the loop through the stream's mailbox), and
+``summary.json``, written once at the end (:func:`end_summary`).
+
+Who stops the loop: a Ctrl-C on the terminal reaches both processes (one process group); the loop
+stops on its own signal, and the session, which catches SIGINT, SIGTERM and SIGHUP for the run,
+writes the signal into the stream's stop word, so a signal sent to the session alone stops the
+loop too. A caller's :class:`~sashil.runtime.signals.StopFlag` is passed on the same way.
+
+Faults: if the loop process dies (``kill -9``), the board's watchdog takes the coil to 0 A; the
+session keeps every committed row, then reopens the link and confirms the current it reads
+(:func:`confirm_safe`) rather than assume it, and ``summary.json`` says the loop died. If the
+session dies, the loop sees it within a cycle (:mod:`sashil.runtime.mailbox`) and ends the run
+itself (:mod:`sashil.runtime.orphan`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sashil import errors
+from sashil.config.frozen import thaw
+from sashil.runtime.signals import STOP_SIGNALS, StopFlag
+from sashil.runtime.stream import MISSED_W, STOP_BY_CALLER, STOP_W, Stream, remove_stale
+
+#: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
+REPLY_WAIT_S = 30.0
+#: how often the session looks at its messages, the caller's stop flag and the loop's health [s]
+POLL_S = 0.02
+#: current at or below which a reopened rig counts as safe [A]
+SAFE_CURRENT_A = 0.05
+#: how long a reopened rig's coil may take to reach it [s] (the watchdog's 50 ms and the coil's lag)
+CONFIRM_S = 1.0
+
+
+def error_of(fields: Mapping[str, Any]) -> BaseException:
+    """The error the loop process reported, as its sashil class when it has one."""
+    cls = getattr(errors, str(fields.get("type")), None)
+    text = str(fields.get("text"))
+    if isinstance(cls, type) and issubclass(cls, errors.SashilError):
+        return cls(text)
+    err = errors.SashilError(f"{fields.get('type')}: {text}")
+    err.exit_code = int(fields.get("exit_code") or 1)
+    return err
+
+
+def raise_error(fields: Mapping[str, Any]) -> None:
+    """Raise :func:`error_of` the loop process's report."""
+    raise error_of(fields)
+
+
+class LiveTiming:
+    """The loop's counts as the session's views read them while it runs (``cycles``,
+    ``missed_deadlines``, ``value_ns``): from the stream, never from the loop's objects."""
+
+    def __init__(self, stream: Stream, rate_hz: float):
+        self._stream = stream
+        self._stats = stream.timing(rate_hz)
+
+    @property
+    def cycles(self) -> int:
+        return self._stream.rows_committed
+
+    @property
+    def missed_deadlines(self) -> int:
+        return int(self._stream.header[MISSED_W])
+
+    def value_ns(self, name: str, cycle: int) -> int | None:
+        self._stats.cycles = self.cycles
+        return self._stats.value_ns(name, cycle)
+
+
+class LoopProcess:
+    """One loop process: :meth:`start`, :meth:`wait_ready`, :meth:`go`, :meth:`wait_end`."""
+
+    def __init__(
+        self,
+        config: Mapping[str, Any],
+        duration_s: float | None,
+        *,
+        realtime: bool = True,
+        tune: bool = True,
+        can_trace: bool = False,
+    ):
+        """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`)."""
+        self.job = {
+            "can_trace": can_trace,
+            "config": thaw(config),
+            "duration_s": duration_s,
+            "realtime": realtime,
+            "tune": tune,
+            "session_pid": os.getpid(),
+            "log_level": _log_level(),
+            "sys_path": list(sys.path),  # a law's module imports there as it does here
+        }
+        self.rate_hz = float(config["loop"]["rate_hz"])
+        #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
+        self.loop_cpu: int | None = config["loop"]["rt"].get("cpu") if realtime else None
+        self.process: subprocess.Popen[bytes] | None = None
+        self.stream: Stream | None = None
+        self.ready: dict[str, Any] = {}
+        self._messages = -1
+        self._buffer = b""
+        self._lock = threading.Lock()  # one tuning request in the mailbox at a time
+        self._started = self._spawned = 0.0
+        #: seconds from the job to ready: what the run waited for (the law imported and warmed, the
+        #: board greeted; the rest was done ahead when the process was started ahead)
+        self.startup_s: float | None = None
+        #: seconds from the spawn to ready: the interpreter, the imports, the warm-up, the greeting
+        self.since_spawn_s: float | None = None
+        #: each thread's CPUs before the session kept off the loop's (``loop.rt.cpu``)
+        self._affinity: dict[int, set[int]] = {}
+        #: what the session did about the loop's CPU, for the summary's ``realtime``
+        self.session_affinity: str | None = None
+
+    # -- start ------------------------------------------------------------------------------------
+    def start(self) -> LoopProcess:
+        """Give the job to a loop process started ahead (:func:`start_ahead`), else start one."""
+        self._started = time.perf_counter()
+        remove_stale()
+        self.process, self._messages, self._spawned = _take_ahead() or _spawn()
+        self._keep_off(self.loop_cpu)
+        assert self.process.stdin is not None
+        self.process.stdin.write((json.dumps(self.job) + "\n").encode())
+        self.process.stdin.flush()
+        return self
+
+    def _keep_off(self, cpu: int | None) -> None:
+        """Move every thread of this process off ``cpu`` (the loop's, ``loop.rt.cpu``), after the
+        loop process was started (it pins itself there); :meth:`close` moves them back."""
+        if cpu is None:
+            return
+        try:
+            for tid in (int(name) for name in os.listdir("/proc/self/task")):
+                allowed = os.sched_getaffinity(tid)
+                if cpu in allowed and len(allowed) > 1:
+                    os.sched_setaffinity(tid, allowed - {cpu})
+                    self._affinity[tid] = allowed
+            self.session_affinity = f"kept off CPU {cpu}"
+        except OSError as err:
+            self.session_affinity = f"could not keep off CPU {cpu}: {err.strerror or err}"
+
+    def _read(self, timeout_s: float) -> list[dict[str, Any]]:
+        """The messages that arrived within ``timeout_s`` (an empty list at the end of the pipe too)."""
+        if self._messages < 0:
+            return []
+        ready, _, _ = select.select([self._messages], [], [], timeout_s)
+        if not ready:
+            return []
+        chunk = os.read(self._messages, 65536)
+        if not chunk:
+            os.close(self._messages)
+            self._messages = -1
+            return []
+        self._buffer += chunk
+        *lines, self._buffer = self._buffer.split(b"\n")
+        return [json.loads(line) for line in lines if line.strip()]
+
+    def wait_ready(self, say: Callable[[str, str], None]) -> dict[str, Any]:
+        """Forward the warm-up's progress (``say(kind, text)``) until the loop is ready; raise the
+        loop's error (a port that cannot be opened: ConfigError) if it fails first."""
+        assert self.process is not None
+        while True:
+            for message in self._read(POLL_S):
+                kind = message["kind"]
+                if kind == "ready":
+                    self.startup_s = time.perf_counter() - self._started
+                    self.since_spawn_s = time.perf_counter() - self._spawned
+                    self.ready = message
+                    self.stream = Stream.attach(message["stream"])
+                    self.stream.owner = True
+                    return message
+                if kind == "error":
+                    self.process.wait()
+                    raise_error(message)
+                if kind in ("progress", "warning"):
+                    say(kind, message["text"])
+            if self._messages < 0:
+                code = self.process.wait()
+                raise errors.SashilError(f"the loop process ended before it was ready (exit status {code})")
+
+    def go(self, folder: Path) -> None:
+        """Start the loop (the run folder is made and the recorder listening)."""
+        assert self.process is not None and self.process.stdin is not None
+        self.process.stdin.write((json.dumps({"folder": str(folder)}) + "\n").encode())
+        self.process.stdin.flush()
+
+    def abort(self) -> None:
+        """End a loop process that was never told to go (nothing was energised)."""
+        if self.process is not None and self.process.stdin is not None:
+            self.process.stdin.close()
+            self.process.wait()
+        self.close()
+
+    # -- run ----------------------------------------------------------------------------------------
+    def wait_end(self, stop: StopFlag | None, say: Callable[[str, str], None]) -> dict[str, Any] | None:
+        """Pass stop requests on and messages up until the loop process ends; its ``end`` message,
+        or None if it died without one."""
+        assert self.process is not None and self.stream is not None
+        header = self.stream.header
+        end = None
+        while True:
+            for message in self._read(POLL_S):
+                if message["kind"] == "end":
+                    end = message
+                elif message["kind"] in ("progress", "warning"):
+                    say(message["kind"], message["text"])
+            if stop is not None and stop.requested and not header[STOP_W]:
+                header[STOP_W] = _stop_code(stop)
+            if self._messages < 0 and self.process.poll() is not None:
+                return end
+
+    def pass_stop(self, stop: StopFlag) -> Callable[[], None]:
+        """What passes a request of ``stop`` to the loop: its code into the stream's stop word."""
+        header = self.stream.header if self.stream is not None else None
+
+        def tell() -> None:
+            if header is not None and not header[STOP_W]:
+                header[STOP_W] = _stop_code(stop)
+
+        return tell
+
+    def request(self, message: dict[str, Any]) -> dict[str, Any]:
+        """A tuning request answered by the loop between two cycles (the tuning socket's handler)."""
+        assert self.stream is not None and self.process is not None
+        with self._lock:
+            number = self.stream.post(message)
+            deadline = time.monotonic() + REPLY_WAIT_S
+            while time.monotonic() < deadline:
+                reply = self.stream.reply(number)
+                if reply is not None:
+                    return dict(reply)
+                if self.process.poll() is not None:
+                    return {"ok": False, "error": "not applied: the run has ended"}
+                time.sleep(0.001)
+            return {"ok": False, "error": f"not applied: the loop did not reach a cycle within {REPLY_WAIT_S:g} s"}
+
+    def can_frames(self) -> list[Any]:
+        """The CAN frames the loop process sent and received since the last call, as ``can.Message``."""
+        import can
+
+        from sashil.runtime.stream import FRAME_ERROR, FRAME_EXTENDED, FRAME_REMOTE, FRAME_RX
+
+        if self.stream is None:
+            return []
+        return [
+            can.Message(
+                timestamp=stamp,
+                arbitration_id=ident,
+                dlc=dlc,
+                data=data,
+                is_rx=bool(flags & FRAME_RX),
+                is_extended_id=bool(flags & FRAME_EXTENDED),
+                is_error_frame=bool(flags & FRAME_ERROR),
+                is_remote_frame=bool(flags & FRAME_REMOTE),
+            )
+            for stamp, ident, dlc, flags, data in self.stream.read_frames()
+        ]
+
+    def frames_dropped(self) -> int:
+        """CAN frames the loop process left out because the trace's ring was full."""
+        from sashil.runtime.stream import FRAMES_DROPPED_W
+
+        return 0 if self.stream is None else int(self.stream.header[FRAMES_DROPPED_W])
+
+    def close(self) -> None:
+        for tid, allowed in self._affinity.items():
+            try:
+                os.sched_setaffinity(tid, allowed)
+            except OSError:  # a thread that has ended since
+                pass
+        self._affinity.clear()
+        if self._messages >= 0:
+            os.close(self._messages)
+            self._messages = -1
+        if self.process is not None and self.process.stdin is not None and not self.process.stdin.closed:
+            self.process.stdin.close()
+        if self.stream is not None:
+            self.stream.close()
+            self.stream = None
+
+
+def _spawn() -> tuple[subprocess.Popen[bytes], int, float]:
+    """A new loop process (it imports and warms its kernels, then waits for its job on stdin), the
+    descriptor its messages arrive on, and when it was started (``time.perf_counter``)."""
+    started = time.perf_counter()
+    read_fd, write_fd = os.pipe()
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
+            stdin=subprocess.PIPE,
+            pass_fds=(write_fd,),
+            close_fds=True,
+        )
+    except BaseException:
+        os.close(read_fd)
+        raise
+    finally:
+        os.close(write_fd)
+    return process, read_fd, started
+
+
+#: a loop process started ahead of its run, with its messages' descriptor
+_ahead: tuple[subprocess.Popen[bytes], int, float] | None = None
+
+
+def start_ahead() -> None:
+    """Start a loop process now, to be given the next run's job: its interpreter, imports and
+    kernels are ready by the time the session has resolved the config (``sashil run`` calls this
+    first; a bench page after each run). One waits at a time; unused, it ends with this process."""
+    global _ahead
+    if _ahead is not None and _ahead[0].poll() is None:
+        return
+    _ahead = _spawn()
+
+
+def stop_ahead() -> None:
+    """End the loop process started ahead, if one waits (a server that stops)."""
+    taken = _take_ahead()
+    if taken is not None:
+        process, fd, _ = taken
+        if process.stdin is not None:
+            process.stdin.close()  # no job: it exits
+        process.wait()
+        os.close(fd)
+
+
+def _take_ahead() -> tuple[subprocess.Popen[bytes], int, float] | None:
+    global _ahead
+    taken, _ahead = _ahead, None
+    if taken is not None and taken[0].poll() is not None:  # it ended (a signal): not usable
+        os.close(taken[1])
+        return None
+    return taken
+
+
+def _log_level() -> int | None:
+    """The ``sashil`` logger's level when the command line set it up (the loop logs as the session
+    would, to the same stderr), else None (a library caller's logging is its own)."""
+    logger = logging.getLogger("sashil")
+    if any(getattr(handler, "_sashil", False) for handler in logger.handlers):
+        return logger.getEffectiveLevel()
+    return None
+
+
+def _stop_code(stop: StopFlag) -> int:
+    name = stop.signal_name or ""
+    return int(getattr(signal, name, STOP_BY_CALLER)) if name.startswith("SIG") else STOP_BY_CALLER
+
+
+class SessionSignals:
+    """SIGINT, SIGTERM and SIGHUP caught by the session for the run: each writes its number into
+    the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code.
+    A third one ends a loop process that does not stop (``kill``: the board's watchdog then takes
+    the coil to 0 A, and the session confirms it as after any death of the loop)."""
+
+    #: stop signals after which a loop process that has not ended is killed
+    KILL_AFTER = 3
+
+    def __init__(self, flag: StopFlag, process: LoopProcess | None = None):
+        self.flag = flag
+        self.process = process
+        self.count = 0
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> SessionSignals:
+        if threading.current_thread() is threading.main_thread():
+
+            def handler(signum: int, frame: object) -> None:
+                self.count += 1
+                self.flag.request(signal.Signals(signum).name)
+                child = self.process.process if self.process is not None else None
+                if self.count >= self.KILL_AFTER and child is not None and child.poll() is None:
+                    child.kill()
+
+            self._previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._previous.items():
+            signal.signal(sig, old)
+
+
+def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> dict[str, Any]:
+    """After the loop process died: reopen the rig, command 0 A and read the coil current until it
+    is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
+    deactivated. Says what was found; a simulated rig ended with the process that held it."""
+    from sashil.drivers import open_rig
+    from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
+
+    found: dict[str, Any] = {"reopened": False}
+    rig = open_rig(thaw(config))
+    if not capabilities_of(rig).link:
+        found["note"] = "the simulated rig ended with the loop process"
+        return found
+    try:
+        rig.configure()
+        sample = rig.read(time.monotonic_ns(), 0)
+        found.update(reopened=True, first_current_a=round(float(sample.current_a), 4))
+        found["watchdog"] = bool(sample.flags & FLAG_WATCHDOG)
+        rig.activate()
+        deadline = time.monotonic() + CONFIRM_S
+        while abs(float(sample.current_a)) > SAFE_CURRENT_A and time.monotonic() < deadline:
+            rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
+            sample = rig.read(time.monotonic_ns(), 0)
+        found["current_a"] = round(float(sample.current_a), 4)
+        found["safe"] = abs(float(sample.current_a)) <= SAFE_CURRENT_A
+        rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
+        rig.deactivate()
+    except Exception as err:
+        found["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        rig.close()
+    if found.get("reopened") and "current_a" in found:
+        watchdog = " (its watchdog had cut the current)" if found["watchdog"] else ""
+        line = f"the rig reopened{watchdog}: coil at {found['current_a']:.3f} A"
+    else:
+        line = f"the rig could not be reopened to confirm 0 A: {found.get('error')}"
+    say("warning", line)
+    return found

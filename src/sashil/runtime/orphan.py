@@ -1,0 +1,63 @@
+"""A loop whose session died ends the run alone: every row on disk, and a summary that says so.
+
+The loop process has already stopped at 0 A with the road at rest (its shutdown path). The
+session's recorder wrote rows up to the stream's ``recorded`` word; the rest, down to the safe
+state's row, is appended to ``data.csv`` here in the same format, and ``timing.npz`` and
+``summary.json`` are written (``exit_status: error``, ``stop_reason``: the session died). The
+stream file stays, marked ``died``, until the next run's :func:`~sashil.runtime.stream.remove_stale`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from sashil.errors import SashilError
+from sashil.recording.run_folder import RunFolder
+from sashil.runtime.runner import loop_summary
+from sashil.runtime.stream import RECORDED_W, Stream
+from sashil.runtime.stream_recorder import append, format_block
+
+
+def finish_alone(
+    stream: Stream, writer: Any, folder: Path, config: dict[str, Any], end: dict[str, Any], timing: Any
+) -> None:
+    """Append the unrecorded rows to ``folder/data.csv`` and write the run's documents (module doc)."""
+    start, stop = int(stream.header[RECORDED_W]), writer.rows_committed
+    data = folder / "data.csv"
+    fd = os.open(data, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    try:
+        if os.fstat(fd).st_size == 0:
+            append(fd, ",".join(stream.columns) + "\n")
+        append(fd, format_block(stream.columns, stream.block(start, stop)))
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    stream.header[RECORDED_W] = stop
+    stream.set_state("died")
+    run = RunFolder(folder, "run")
+    run.write_timing(timing)
+    error = SashilError(f"{end['stop_reason']}: the loop stopped at 0 A and wrote the rest of the data itself")
+    run.write_summary(
+        {
+            "verb": "run",
+            **loop_summary(
+                exit_status="error",
+                timing=timing.summary(),
+                trips=end["trips"],
+                error=error,
+                stop_reason=end["stop_reason"],
+                controller_stats=end["controller_stats"],
+                safety=end["safety"],
+                realtime=end["realtime"],
+                recording={"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
+                link=end["link"],
+                shutdown_errors=end["shutdown_errors"],
+            ),
+            "controller": config["controller"]["law"],
+            "driver": config["driver"]["name"],
+            "tuning": end["tuning"],
+            "loop_process": {"pid": os.getpid(), "threads": end["threads"], "session_died": True},
+        }
+    )

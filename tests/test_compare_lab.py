@@ -1,0 +1,125 @@
+"""``sashil.lab._compare.compare`` called from Python: the laws on the road of a resolved config, the
+run it returns, and bad input refused before any folder exists."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.errors import ConfigError
+from sashil.lab._compare import CompareLaw, compare, laws_of, split_sets
+from sashil.lab.outputs import Outputs
+
+#: a short comparison: 3 s per law, the first 1 s left out, a 10 s road
+SHORT = ("compare.settle_s=1", "road.period_s=10")
+
+
+def _config(*options: Option, sets: tuple[str, ...] = SHORT):
+    return resolve(
+        ConfigSource(sets=sets, options=(Option("--duration", "compare.duration_s", 3.0), *options)), "compare"
+    )
+
+
+def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tmp_path):
+    events = []
+    laws = [CompareLaw("skyhook", ("controller.c_sky=2",)), "pdd"]
+    run = compare(_config(), laws, Outputs(out=tmp_path / "cmp"), events.append)
+    assert run.path == tmp_path / "cmp" and run.verb == "compare"
+    table = run.tables["metrics"]
+    assert list(table["law"]) == ["passive 0 A", "passive 1 A", "skyhook", "pdd"]
+    assert list(table["status"]) == ["ok"] * 4
+    assert {"rms_accel_rad_s2", "rms_theta_deg", "peak_current_a", "coil_energy_j"} <= set(table)
+    # on this rig the road-side torque k*theta + T is -J*theta2_ddot: not a second column
+    assert "rms_road_torque_nm" not in table
+    assert table["peak_current_a"][1] == pytest.approx(1.0, abs=0.01) and table["coil_energy_j"][0] == 0.0
+    summary = run.summary
+    assert summary["exit_status"] == "ok" and summary["exit_code"] == 0 and summary["driver"] == "sim"
+    assert summary["road"].startswith("iso8608:C: ISO 8608 class C") and summary["duration_s"] == 3.0
+    assert [law["law"] for law in summary["laws"]] == list(table["law"])
+    # theta2_ddot is the simulated plant's own (its capability true_torque), not the encoders'
+    assert {law["accel_source"] for law in summary["laws"]} == {"plant"}
+    assert [law["rms_accel_rad_s2"] for law in summary["laws"]] == list(table["rms_accel_rad_s2"])
+    assert math.isfinite(summary["optimal_bound_gain_pct"])
+    assert run.config["compare"]["road"] == "iso8608:C" and run.config["controller"]["law"] == "passive"
+    assert {"compare.md", "compare.png", "config.yaml", "metrics.csv", "summary.json"} <= {
+        p.name for p in run.path.iterdir()
+    }
+    assert [e.data["law"] for e in events if "law" in e.data] == list(table["law"])
+    assert [e.text for e in events if e.kind == "folder"] == [f"compare folder: {run.path}"]
+
+
+def test_a_law_that_fails_gets_its_row_and_the_summary_names_it(tmp_path):
+    fails = tmp_path / "fails.py"
+    fails.write_text(
+        "from sashil.control import Law\n\n\nclass Fails(Law):\n    name = 'fails'\n\n"
+        "    def torque(self, state):\n        raise ValueError('gain table empty')\n"
+    )
+    events = []
+    run = compare(_config(), [f"{fails}:Fails"], Outputs(out=tmp_path / "cmp"), events.append)
+    summary = run.summary
+    assert summary["exit_status"] == "error" and summary["exit_code"] == 1
+    assert summary["error"].startswith("1 of 3 laws did not finish: fails: error: law 'fails'")
+    assert list(run.tables["metrics"]["status"])[:2] == ["ok", "ok"]
+    assert [e.text for e in events if e.kind == "warning"] == [f"sashil compare: {summary['error']}"]
+
+
+@pytest.mark.parametrize(
+    "laws, message",
+    [
+        (["nope"], "--controller nope: controller.law: unknown law 'nope'"),
+        ([CompareLaw("lqr-clipped", ("controller.q_theta=-1",))], "--controller lqr-clipped: --set: controller.q_theta: expected a number >= 0"),
+        (["skyhook"], "--controller skyhook: --set: controller.c_sky: law 'skyhook' needs c_sky"),
+    ],
+)  # fmt: skip
+def test_a_law_that_cannot_run_is_refused_before_any_folder(tmp_path, laws, message):
+    with pytest.raises(ConfigError) as err:
+        compare(_config(), laws, Outputs(out=tmp_path / "never"))
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+    assert not (tmp_path / "never").exists()
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ((Option("--road", "compare.road", "iso8608:Q"),), "--road iso8608:Q: expected an ISO 8608 road class A-H"),
+        ((Option("--duration", "compare.duration_s", 1.0),), "--duration: expected more than compare.settle_s = 1 s"),
+        ((Option("--jobs", "compare.jobs", 0),), "--jobs: compare.jobs: expected an integer >= 1"),
+    ],
+)
+def test_the_compare_options_are_checked_when_the_config_is_resolved(options, message):
+    with pytest.raises(ConfigError) as err:
+        _config(*options)
+    assert str(err.value).startswith(message)
+
+
+def test_a_road_from_the_config_is_named_by_its_key():
+    with pytest.raises(ConfigError, match=r"^compare.road iso8608:Q: expected an ISO 8608 road class"):
+        resolve(ConfigSource(config={"compare": {"road": "iso8608:Q"}}), "compare")
+
+
+def test_the_command_lines_set_items_go_to_the_laws_that_declare_them():
+    sets = [
+        "compare.settle_s=1",
+        "controller.onoff_current_a=0.8",
+        "controller.c_sky=2",
+        "controller.estimator=tracking",
+    ]
+    base, law_sets = split_sets(sets)
+    assert base == ["compare.settle_s=1", "controller.estimator=tracking"]  # a controller section key: the config's
+    assert laws_of(["skyhook", "pdd", "skyhook-add", "skyhook-onoff"], law_sets) == [
+        CompareLaw("skyhook", ("controller.c_sky=2",)),
+        CompareLaw("pdd", ()),
+        CompareLaw("skyhook-add", ("controller.onoff_current_a=0.8",)),
+        CompareLaw("skyhook-onoff", ("controller.onoff_current_a=0.8",)),
+    ]
+    with pytest.raises(
+        ConfigError,
+        match=r"^--set controller.onoff_current_a=0.8: none of the compared laws \(pdd\) has a parameter onoff",
+    ):
+        laws_of(["pdd"], law_sets)
+    with pytest.raises(
+        ConfigError, match=r"^--set controller\.law=pdd: sashil compare takes its laws from --controller"
+    ):
+        split_sets(["controller.law=pdd"])

@@ -1,0 +1,127 @@
+"""The manual (docs/, built with mkdocs) cannot drift from the code, and its examples run.
+
+- The reference pages tools/gen_reference.py writes equal what it writes now from the code.
+- The CLI reference lists every verb and every option, the config reference every key, and
+  nothing the code does not have.
+- Every code block of the tutorials and how-to guides is ``sh`` or ``python`` (run here, page by page,
+  in order, in a fresh folder), ``text`` or ``yaml`` (shown, not run), or says what it needs
+  (``*Needs a board on /dev/ttyACM0.*`` on the line before it, see tests/doc_blocks.py).
+- The site builds in mkdocs' strict mode when the docs extra is installed (``pip install -e '.[docs]'``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from doc_blocks import fenced_blocks
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+sys.path.insert(0, str(ROOT / "tools"))
+
+import gen_reference  # noqa: E402
+
+RUN = {"sh", "python"}
+SHOWN = {"text", "yaml"}
+#: the pages whose examples run as tests
+EXAMPLE_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + sorted((DOCS / "how-to").glob("*.md"))
+
+
+def test_generated_reference_is_current():
+    stale = gen_reference.stale_pages(DOCS / "reference")
+    assert not stale, f"docs/reference/{', '.join(stale)} differ from the code: run python tools/gen_reference.py"
+
+
+def test_cli_reference_has_every_verb_and_option_and_no_other():
+    from sashil.cli import VERBS, build_parser
+
+    page = (DOCS / "reference" / "cli.md").read_text(encoding="utf-8")
+    documented = re.findall(r"^## (\S+)$", page, flags=re.M)
+    assert documented == list(VERBS)
+    parsers = gen_reference.verb_parsers(build_parser())
+    for verb, chunk in zip(documented, re.split(r"^## \S+$", page, flags=re.M)[1:], strict=True):
+        options = {o for a in parsers[verb]._actions for o in a.option_strings if a.help != argparse.SUPPRESS}
+        listed = set(re.findall(r"^\| `(-[-\w]+)", chunk, flags=re.M)) | set(re.findall(r", `(-[-\w]+)", chunk))
+        assert listed == options - {"-h", "--help"}, verb
+
+
+def test_config_reference_has_every_key_and_no_other():
+    from sashil.config.schema import Section
+    from sashil.config.sections import SCHEMA
+
+    def keys(fields, prefix=""):
+        for name, spec in fields.items():
+            if isinstance(spec, Section):
+                if spec.open_keys:
+                    yield prefix + name
+                yield from keys(spec.fields, f"{prefix}{name}.")
+            else:
+                yield prefix + name
+
+    page = (DOCS / "reference" / "config.md").read_text(encoding="utf-8")
+    assert re.findall(r"^\| `([\w.]+)` \|", page, flags=re.M) == list(keys(SCHEMA))
+
+
+@pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_block_runs_or_says_what_it_needs(page: Path):
+    for block in fenced_blocks(page.read_text(encoding="utf-8")):
+        assert block.info in RUN | SHOWN, f"{page.name}:{block.line}: a fence needs one of {sorted(RUN | SHOWN)}"
+        if block.info in SHOWN:
+            assert not block.needs, f"{page.name}:{block.line}: a shown block runs nothing, it needs nothing"
+
+
+def _script(page: Path, folder: Path) -> str:
+    """The page's runnable blocks as one bash script (python blocks written beside it and run)."""
+    # a block that fails leaves nothing behind: what the page started in the background is stopped
+    lines = ["set -euo pipefail", "trap 'jobs -p | xargs -r kill -INT 2>/dev/null || true; wait' EXIT"]
+    for n, block in enumerate(fenced_blocks(page.read_text(encoding="utf-8"))):
+        if block.needs or block.info not in RUN:
+            continue
+        if block.info == "python":
+            (folder / f"block{n}.py").write_text(block.body, encoding="utf-8")
+            lines.append(f'"{sys.executable}" block{n}.py')
+        else:
+            lines.append(block.body)
+    lines.append("wait")  # anything a block started in the background
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_examples_run(page: Path, tmp_path: Path):
+    script = _script(page, tmp_path)
+    if script.count("\n") <= 3:
+        pytest.skip(f"{page.name}: no block runs here (none, or each needs hardware)")
+    for name in ("configs", "examples", "drivers"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, f"{page.name}: exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+
+
+@pytest.mark.e2e
+def test_site_builds_strictly(tmp_path: Path):
+    if shutil.which("mkdocs", path=str(Path(sys.executable).parent)) is None:
+        pytest.skip("mkdocs is not installed: pip install -e '.[docs]' builds the manual")
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "mkdocs"), "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=ROOT,
+        env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    pages = list((tmp_path / "site").rglob("*.html"))
+    loads = re.compile(
+        r"""<(?:script|img|iframe)[^>]+src=["']https?://|<link[^>]+href=["']https?://|url\(["']?https?://"""
+    )
+    fetched = [p for p in pages if loads.search(p.read_text(encoding="utf-8"))]
+    assert not fetched, f"pages that load from the network: {fetched[:3]}"
