@@ -54,7 +54,7 @@ import numpy as np
 import yaml
 
 from sashil.calibrate import calibrate_emulated, calibrate_rig
-from sashil.calibrate.analysis import APPLIED_ROAD, analyse, records_of, with_applied_road
+from sashil.calibrate.analysis import APPLIED_ROAD, analyse, records_of, until_gap, with_applied_road
 from sashil.calibrate.emulated import BOARDS
 from sashil.calibrate.plan import plan_from_config
 from sashil.calibrate.rig import StepResult
@@ -191,8 +191,9 @@ def reanalyse_case(args: tuple[Path, dict, str]) -> dict:
 
 def road_against_truth(folder: Path, truth_csv: Path) -> list[dict]:
     """Per road run of a kept calibration, how far the road each fit takes is from the road the
-    emulated wheel applied (the emulator's ground truth of the same samples) [counts]: the applied
-    road (the edges) and the commanded one (the integral of the held speeds). The fit reads only
+    emulated wheel applied (the emulator's ground truth of the same samples) [counts], over the part
+    of the record the fit reads (up to its first link gap): the applied road (the edges) and the
+    commanded one (the integral of the held speeds). The fit reads only
     the road's acceleration, so each error is taken about its own mean (``rms``, ``worst``); the
     applied road's mean error (``bias``) is its offset from the true angle. Samples are joined on
     the sequence number and the device time modulo 2^24 (SLCAN's wire clock; the host unwraps it)."""
@@ -213,8 +214,12 @@ def road_against_truth(folder: Path, truth_csv: Path) -> list[dict]:
             continue
         run = folder / "runs" / row["name"]
         columns = read_data_csv(run / "data.csv", required=("time_s",))
-        cycles = read_data_csv(run / "cycles.csv", required=("seq", "device_time_us"))
-        device_of = {int(sq): int(dev) for sq, dev in zip(cycles["seq"], cycles["device_time_us"], strict=True)}
+        device_of: dict[int, int] = {}
+        for path in sorted(run.glob("cycles*.csv")):  # the attempt the record is of (a gap repeats a step)
+            cycles = read_data_csv(path, required=("seq", "device_time_us"))
+            found_here = {int(sq): int(dev) for sq, dev in zip(cycles["seq"], cycles["device_time_us"], strict=True)}
+            if np.isin(columns["seq"], list(found_here)).sum() > np.isin(columns["seq"], list(device_of)).sum():
+                device_of = found_here
         rows = [row_of.get((int(sq) & 0xFFFF, device_of.get(int(sq), -1) % wrap)) for sq in columns["seq"]]
         found = np.array([r is not None for r in rows])
         if not found.any():
@@ -225,7 +230,7 @@ def road_against_truth(folder: Path, truth_csv: Path) -> list[dict]:
         held = held_speed(columns["road_speed_cmd_rad_s"])
         commanded = np.concatenate(([0.0], np.cumsum(held[:-1] * np.diff(t))))
         edges = columns.get("road_edge_s")
-        moving = found.copy()
+        moving = found & (np.arange(t.size) < until_gap(columns)["time_s"].size)  # the part the fit reads
         if edges is not None and np.isfinite(edges).any():
             moving &= (t >= np.nanmin(edges)) & (t <= np.nanmax(edges))
         result = {"name": row["name"], "joined": float(found.mean())}
