@@ -334,8 +334,8 @@ def report_reanalysis(base: Path, jobs: int) -> None:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
-def report_serial(rows: list[dict]) -> None:
-    """Coverage of params.yaml's intervals_95 over serial; the old +-1.96 sigma x inflation where
+def report_serial(rows: list[dict], transport: str) -> None:
+    """Coverage of params.yaml's intervals_95 over ``transport``; the old +-1.96 sigma x inflation where
     it is a raw parameter's (k = k, c_0a = c1, yield_0a = alpha1 at a unit z bound)."""
     raw = {"k": "k", "c_0a": "c1", "yield_0a": "alpha1"}
     print(
@@ -368,7 +368,7 @@ def report_serial(rows: list[dict]) -> None:
         print(f"  damper {d}: held-out NRMSE {100 * cal['held_out_nrmse_mean']:.2f} %{suspect}")
     fits = [case["params_doc"]["calibration"]["fit_s"] for case in rows]
     print(
-        f"{len(rows)} calibrations over serial; fit {np.median(fits):.1f} s median, {max(fits):.1f} s worst; "
+        f"{len(rows)} calibrations over {transport}; fit {np.median(fits):.1f} s median, {max(fits):.1f} s worst; "
         f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
     )
 
@@ -517,7 +517,7 @@ def main() -> None:
             f"sashil calibrate over {args.transport} against the emulated damper ({args.board} board): {count} dampers "
             f"(generator seed {args.damper_seed})"
         )
-        report_serial(rows)
+        report_serial(rows, args.transport)
         return
     with tempfile.TemporaryDirectory(prefix="bench-intervals-") as tmp:
         rows = cases(truths, seeds, QUICK_PLAN if args.quick else None, Path(tmp), args.cache, args.jobs)

@@ -179,9 +179,9 @@ def with_applied_road(columns: dict[str, np.ndarray], counts_per_rev: int) -> di
 
 def road_acceleration(time_s: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
     """The road wheel's acceleration from the speeds commanded each cycle (a record without the
-    road encoder's edges, as older run folders are): the wheel steps to the
-    cycle's command right after the cycle's sample (the emulator's wheel, a motor with a fast
-    speed loop), so the speed changes by ``cmd[j] - cmd[j-1]`` within the interval after sample j.
+    road encoder's edges, as older run folders are): the wheel steps to the cycle's command
+    at the cycle's sample (the emulator's wheel, a motor with a fast speed loop), so the speed
+    changes by ``cmd[j] - cmd[j-1]`` at sample j (:func:`sashil.identify.road.speed_steps_acceleration`).
     Smoothing the recorded road angle instead (11 encoder counts for a 1 deg road) overstated the
     forcing by half at 3 Hz, and a fit to a 1 A road run could not follow it."""
     return speed_steps_acceleration(time_s, np.diff(speed_cmd, prepend=speed_cmd[:1]))

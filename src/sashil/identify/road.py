@@ -159,11 +159,21 @@ def road_of_columns(columns: dict[str, np.ndarray], quantum_rad: float | None = 
 
 
 def speed_steps_acceleration(time_s: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """The road acceleration that steps the wheel's speed by ``steps[j]`` right after sample j,
-    as the fit's simulation reads it (linear between samples: ``steps[j]`` over the interval after
-    the sample)."""
-    dt = np.diff(time_s, append=time_s[-1] + (time_s[-1] - time_s[-2] if time_s.size > 1 else 1e-3))
-    return steps / np.maximum(dt, 1e-6)
+    """The road acceleration at each sample that steps the wheel's speed by ``steps[j]`` at sample j,
+    as the fit's simulation reads it (:func:`sashil.identify.kernels.simulate_rig` interpolates the
+    acceleration linearly between samples): a triangle on sample j, zero on its neighbours, whose
+    area is the step, ``2 steps[j] / (dt before + dt after)``. Half of it acts before the sample and
+    half after, so its centre stays on the sample, and the speed is right after every step however
+    unevenly the samples are spaced (a link loses some). Divided by the interval after the sample
+    alone, a step next to a lost sample would change the speed by (dt before + dt after) / (2 dt
+    after) times itself: a road speed off for the rest of the record."""
+    time_s = np.asarray(time_s, dtype=float)
+    if time_s.size < 2:
+        return np.zeros_like(np.asarray(steps, dtype=float))
+    dt = np.diff(time_s)
+    before = np.concatenate((dt[:1], dt))  # the first sample's triangle as wide as its interval after
+    after = np.concatenate((dt, dt[-1:]))
+    return np.asarray(steps, dtype=float) * 2.0 / np.maximum(before + after, 2e-6)
 
 
 def angle_acceleration(time_s: np.ndarray, theta_road_rad: np.ndarray) -> np.ndarray:
