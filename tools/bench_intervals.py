@@ -512,7 +512,14 @@ def main() -> None:
                 (where / f"d{d}.truth.json").write_text(json.dumps(truth))
                 plan = QUICK_PLAN if args.quick else None
                 truth_csv = str(where / f"d{d}.truth.csv") if args.keep else None
-                rows.append(serial_case((truth, 0, plan, str(where / f"d{d}"), args.transport, args.board, truth_csv)))
+                try:
+                    rows.append(
+                        serial_case((truth, 0, plan, str(where / f"d{d}"), args.transport, args.board, truth_csv))
+                    )
+                except SashilError as err:  # a lossy run on a loaded host: counted apart, no interval to judge
+                    print(f"calibration failed (left out): damper {d}: {err}", flush=True)
+        if not rows:
+            raise SystemExit(f"no calibration over {args.transport} finished")
         print(
             f"sashil calibrate over {args.transport} against the emulated damper ({args.board} board): {count} dampers "
             f"(generator seed {args.damper_seed})"
