@@ -4,8 +4,9 @@
 simulated plant (:class:`~sashil.models.plant.RigPlant`, seed 001 eqs. 9-17) at the instant the
 sample is taken: the sample's sequence number as on the wire (16 bit, wraps), the device time
 (microseconds since the device booted, before the wire truncates it to 32/24 bit), the plant time,
-and the true relative angle theta, rate theta_dot, Bouc-Wen state z, coil current i and damper
-torque T = alpha(i) z + c(i) theta_dot (``RigPlant.damper_torque``). A host joins its data.csv
+and the true relative angle theta, rate theta_dot, Bouc-Wen state z, coil current i, damper
+torque T = alpha(i) z + c(i) theta_dot (``RigPlant.damper_torque``) and the road angle theta1 the
+road wheel applied. A host joins its data.csv
 (column ``seq``) with these rows to compare what the controller estimated and asked for with what
 the plant did.
 
@@ -34,6 +35,7 @@ TRUTH_COLUMNS = (
     "z_true",
     "current_true_a",
     "torque_true_nm",
+    "theta_road_true_rad",
 )
 #: rows per preallocated block (65536 rows x 8 float64 = 4 MiB, about a minute at 1 kHz)
 BLOCK_ROWS = 65536
@@ -60,6 +62,7 @@ class TruthLog:
         row = self._blocks[-1][self._n]
         row[0], row[1], row[2], row[3] = seq, device_time_us, st.time_s, st.theta_rad
         row[4], row[5], row[6], row[7] = st.theta_dot_rad_s, st.z, st.current_a, plant.damper_torque()
+        row[8] = st.theta_road_rad
         self._n += 1
 
     def columns(self) -> dict[str, np.ndarray]:

@@ -44,6 +44,7 @@ from sashil.identify.fit import (
 )
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
 from sashil.identify.rig_models import MODELS
+from sashil.identify.road import APPLIED_ROAD, road_of_columns, speed_steps_acceleration
 from sashil.stats import nrmse
 
 #: the arm is at rest once it stays within this many encoder counts of its final angle
@@ -139,10 +140,15 @@ def gap_cut(result: StepResult, counts_per_rev: int) -> float | None:
 
 def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Record]:
     """Fit records of the steps: drops cut once at rest; a step whose release was estimated from
-    the data (a link: the bench or the emulator) starts at its first turning point."""
+    the data (a link: the bench or the emulator) starts at its first turning point. A road run's
+    forcing is the road the board applied (:func:`with_applied_road`), or where its record lacks the
+    road encoder's edges the commanded speeds (:func:`road_acceleration`)."""
     out = []
     for r in results:
-        cols = until_gap(trimmed(r.columns, counts_per_rev) if r.step.road is None else r.columns)
+        cols = r.columns
+        if r.step.road is not None:
+            cols = with_applied_road(cols, counts_per_rev)
+        cols = until_gap(trimmed(cols, counts_per_rev) if r.step.road is None else cols)
         if cols["time_s"].size < MIN_RECORD_SAMPLES:
             continue  # cut too short by a link gap: left out (the report lists it without NRMSE)
         z0_sign = None
@@ -151,7 +157,9 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
             if turned is not None:
                 cols, z0_sign = turned
         record = record_from_columns(r.step.name, cols, start_at_rest=True, z0_sign=z0_sign)
-        if "road_speed_cmd_rad_s" in cols:
+        if APPLIED_ROAD in cols:  # record_from_columns took the road's forcing from it
+            pass
+        elif "road_speed_cmd_rad_s" in cols:
             record = dataclasses.replace(
                 record, acc_road=road_acceleration(cols["time_s"], cols["road_speed_cmd_rad_s"])
             )
@@ -161,15 +169,22 @@ def records_of(results: Sequence[StepResult], counts_per_rev: int) -> list[Recor
     return out
 
 
+def with_applied_road(columns: dict[str, np.ndarray], counts_per_rev: int) -> dict[str, np.ndarray]:
+    """``columns`` with the road angle the board applied at each sample (:data:`APPLIED_ROAD`, from
+    the road encoder's edges on the device's clock: :func:`sashil.identify.road.road_of_columns`),
+    when the record carries the edges and the encoder reported enough of them; else unchanged."""
+    angle = road_of_columns(columns, 2.0 * math.pi / counts_per_rev)
+    return columns if angle is None else {**columns, APPLIED_ROAD: angle}
+
+
 def road_acceleration(time_s: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
-    """The road wheel's acceleration from the speeds commanded each cycle: the wheel steps to the
-    cycle's command right after the cycle's sample (the emulator's wheel, a motor with a fast
-    speed loop), so the speed changes by ``cmd[j] - cmd[j-1]`` within the interval after sample j.
+    """The road wheel's acceleration from the speeds commanded each cycle (a record without the
+    road encoder's edges, as older run folders are): the wheel steps to the cycle's command
+    at the cycle's sample (the emulator's wheel, a motor with a fast speed loop), so the speed
+    changes by ``cmd[j] - cmd[j-1]`` at sample j (:func:`sashil.identify.road.speed_steps_acceleration`).
     Smoothing the recorded road angle instead (11 encoder counts for a 1 deg road) overstated the
     forcing by half at 3 Hz, and a fit to a 1 A road run could not follow it."""
-    step = np.diff(speed_cmd, prepend=speed_cmd[:1])
-    dt = np.diff(time_s, append=time_s[-1] + (time_s[-1] - time_s[-2] if time_s.size > 1 else 1e-3))
-    return step / np.maximum(dt, 1e-6)
+    return speed_steps_acceleration(time_s, np.diff(speed_cmd, prepend=speed_cmd[:1]))
 
 
 @dataclass

@@ -23,6 +23,7 @@ from sashil.errors import DriverIOError
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
 HOST_PRIORITY, EMULATOR_PRIORITY = 65, 70  # above other real-time tests on a shared machine
 SASHIL = [sys.executable, "-m", "sashil"]
+BOARDS = ("auto", "c", "python")  # sashil emulate --board
 
 
 def calibrate_emulated(
@@ -33,6 +34,7 @@ def calibrate_emulated(
     model: str | None = None,
     truth: str | Path | None = None,
     timeout_s: float = 900.0,
+    board: str = "auto",
 ) -> Path:
     """Calibrate the damper of ``plant_config`` emulated over ``transport``; returns params.yaml's path.
 
@@ -43,11 +45,14 @@ def calibrate_emulated(
     machine's pauses (100 ms seen with other real-time processes at priority 60) do not end a run. ``out``: the calibration
     folder (must not exist or be empty). ``inertia``: J given to ``--inertia`` (None: J = 1).
     ``model``: ``--model``. ``truth``: also write the emulator's ground truth CSV (``--truth``).
+    ``board``: the emulator's ``--board`` (c, python, or auto: c where a C compiler is found).
     A failed calibration raises :class:`~sashil.errors.DriverIOError` with its last error line;
     the emulator process is always stopped.
     """
     if transport not in TRANSPORTS:
         raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
+    if board not in BOARDS:
+        raise ValueError(f"board: expected one of {', '.join(BOARDS)}, got {board!r}")
     config = copy.deepcopy(plant_config)
     config["driver"].update(sample_timeout_ms=300.0, link_lost_ms=2000.0)
     config["loop"]["rt"]["priority"] = max(config["loop"]["rt"]["priority"], HOST_PRIORITY)
@@ -58,7 +63,7 @@ def calibrate_emulated(
         link = str(Path(tmp) / "rig")
         emulate = [*SASHIL, "emulate", "--config", str(config_path), "--transport", transport, "--link", link]
         emulate += ["--hold-deg", *(f"{a:g}" for a in angles), "--release-after", "1"]
-        emulate += ["--priority", str(EMULATOR_PRIORITY)]
+        emulate += ["--priority", str(EMULATOR_PRIORITY), "--board", board]
         if truth is not None:
             emulate += ["--truth", str(truth)]
         # the emulator's log goes to a file: a pipe nobody reads fills up and stalls the device

@@ -22,11 +22,13 @@ from sashil.calibrate.plan import RoadChirp, Step
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
+from sashil.identify.road import held_speed
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
-#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase the fit
-#: follows exactly (the commanded speeds are recorded), at a quarter of the link traffic per cycle
+#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase (the
+#: commanded speeds are recorded, and shape the applied road between the road encoder's edges), at a
+#: quarter of the link traffic per cycle
 ROAD_UPDATE_CYCLES = 4
 
 
@@ -89,7 +91,9 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     is the sample's sequence number. Over a link the host's times carry the link's latency jitter
     (rows 0.03-11 ms apart at 1 kHz on a busy machine), which an output-error fit reads as
     dynamics; a repeated sample (a link gap) is dropped. A road step (``road``) adds the wheel
-    speed commanded in each row's cycle (``road_speed_cmd_rad_s``), all from the runner's stream."""
+    speed commanded in each row's cycle (``road_speed_cmd_rad_s``) and the road encoder's last edge
+    as each sample carried it, on the same clock (``road_edge_s``: NaN none; ``road_edge_dir``
+    +1/-1, 0 none): where the board's wheel was, and when. All from the runner's stream."""
     columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
     stream = record.stream
     if columns["time_s"].size == 0 or "device_time_us" not in stream or record.device_release_s is None:
@@ -101,15 +105,12 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     out["time_s"] = t[keep]
     if road:
         out["road_speed_cmd_rad_s"] = held_speed(stream["road_speed_cmd_rad_s"])[keep]
+        if "road_edge_us" in stream:
+            edge_us = np.asarray(stream["road_edge_us"], dtype=float)
+            edge_s = np.where(edge_us >= 0.0, edge_us * 1e-6 - record.device_release_s, np.nan)
+            out["road_edge_s"] = edge_s[keep]
+            out["road_edge_dir"] = np.asarray(stream["road_edge_dir"])[keep].astype(np.int64)
     return out
-
-
-def held_speed(commanded: np.ndarray) -> np.ndarray:
-    """The road wheel's speed in each row: the last speed commanded (NaN: the cycle changed
-    nothing), 0 before the first command (the wheel starts at rest)."""
-    index = np.where(np.isfinite(commanded), np.arange(commanded.size), -1)
-    index = np.maximum.accumulate(index) if index.size else index
-    return np.where(index >= 0, commanded[np.maximum(index, 0)], 0.0)
 
 
 def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = None) -> StepResult:

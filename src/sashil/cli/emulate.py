@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="ground truth: write FILE (CSV) on exit with one row per sample sent: seq (as on the wire), "
         "device_time_us, plant_time_s and the plant's true theta_true_rad, theta_dot_true_rad_s, "
-        "z_true, current_true_a, torque_true_nm; join with the host's data.csv on seq",
+        "z_true, current_true_a, torque_true_nm, theta_road_true_rad; join with the host's data.csv on seq",
     )
     op = parser.add_argument_group("operator (drop test)")
     op.add_argument(

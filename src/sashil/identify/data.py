@@ -16,6 +16,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from sashil.errors import DataFileError
+from sashil.identify.road import angle_acceleration, road_of_columns
 from sashil.recording.data_file import read_data_csv
 
 #: fewest samples and shortest duration a record may have to be fitted
@@ -106,13 +107,19 @@ def smooth_derivatives(time_s: np.ndarray, theta: np.ndarray, window_s: float | 
 def record_from_columns(
     name: str, columns: dict[str, np.ndarray], start_at_rest: bool = True, z0_sign: float | None = None
 ) -> Record:
-    """Build a record from data.csv columns (checked by the caller)."""
+    """Build a record from data.csv columns (checked by the caller). The road-side acceleration is
+    the applied road's (:func:`sashil.identify.road.road_of_columns`) when the columns carry the
+    road encoder's edges on ``time_s``'s clock (``road_edge_s``, ``road_edge_dir``, as calibrate's
+    road runs do), else the smoothed ``theta_road_rad``'s."""
     t = np.asarray(columns["time_s"], dtype=float)
     theta = np.asarray(columns["theta_rad"], dtype=float)
     current = np.asarray(columns["current_a"], dtype=float)
     torque_in = np.asarray(columns.get("torque_in_nm", np.zeros_like(t)), dtype=float)
     torque_in = np.where(np.isfinite(torque_in), torque_in, 0.0)
-    if "theta_road_rad" in columns and np.any(columns["theta_road_rad"] != 0.0):
+    applied = road_of_columns(columns)
+    if applied is not None:  # the road the board applied, from its encoder's edges
+        acc_road = angle_acceleration(t, applied)
+    elif "theta_road_rad" in columns and np.any(columns["theta_road_rad"] != 0.0):
         road = np.where(np.isfinite(columns["theta_road_rad"]), columns["theta_road_rad"], 0.0)
         acc_road = smooth_derivatives(t, road)[2]
     else:
