@@ -100,6 +100,7 @@ def run_plan_process(
     if scratch is not None:
         scratch.cleanup()
     error = ended.error
+    recording = ended.recording if data_path is not None else None  # a temporary stream file is no recording
     result = LoopResult(
         cycles=timing.cycles,
         missed_deadlines=timing.missed_deadlines,
@@ -120,7 +121,7 @@ def run_plan_process(
         controller_stats=end.get("controller_stats"),
         safety=end.get("safety"),
         realtime=end.get("realtime", {}),
-        recording=ended.recording if data_path is not None else None,
+        recording=recording,
         link=end.get("link"),
         shutdown_errors=result.shutdown_errors,
         safe_state=end.get("safe_state"),
@@ -140,7 +141,7 @@ def run_plan_process(
         int(end.get("start_ns") or 0),
         summary,
         realtime=end.get("realtime", {}),
-        recording=ended.recording if data_path is not None else None,
+        recording=recording,
         link=end.get("link"),
         stream=stream,
         can_trace=trace_stats,
