@@ -8,8 +8,7 @@ is asked for.
 
 from __future__ import annotations
 
-from typing import Any
-
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import SAFE_COMMAND, RigCapabilities, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverError
 from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
@@ -42,12 +41,12 @@ def backend_class(name: str) -> type[RigInterface]:
         raise DriverError(f"{err} (the backend is not available)") from None
 
 
-def open_rig(config: dict[str, Any]) -> RigInterface:
+def open_rig(config: RunConfig) -> RigInterface:
     """Build (not yet configure) the rig backend the config's ``driver`` section names."""
     return backend_class(config["driver"]["name"]).from_config(config)  # type: ignore[attr-defined]
 
 
-def declared_capabilities(config: dict[str, Any]) -> RigCapabilities:
+def declared_capabilities(config: RunConfig) -> RigCapabilities:
     """What the config's backend declares (the rig object is built; nothing is opened or sent)."""
     rig = open_rig(config)
     try:
@@ -56,6 +55,6 @@ def declared_capabilities(config: dict[str, Any]) -> RigCapabilities:
         rig.close()
 
 
-def on_virtual_clock(config: dict[str, Any]) -> bool:
+def on_virtual_clock(config: RunConfig) -> bool:
     """Whether runs of this config go on simulated time: a simulated backend whose ``driver.clock`` is not ``real``."""
     return config["driver"]["clock"] != "real" and declared_capabilities(config).simulated

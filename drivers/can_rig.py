@@ -18,6 +18,7 @@ from typing import Any
 
 import can
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
 from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import PROTOCOL_VERSION, Hello, Message, Version
@@ -96,9 +97,9 @@ class CanRig(LinkRig):
         self._fd: int | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> CanRig:
+    def from_config(cls, config: RunConfig) -> CanRig:
         driver = config["driver"]
-        return cls(LinkSettings(config), driver["can_interface"], driver["can_bitrate"], driver["can_options"])
+        return cls(LinkSettings(config), driver["can_interface"], driver["can_bitrate"], dict(driver["can_options"]))
 
     def describe(self) -> str:
         return f"can {self.interface}:{self.settings.port}"

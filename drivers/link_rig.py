@@ -33,6 +33,7 @@ from abc import abstractmethod
 from collections.abc import Callable
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import (
     FLAG_HELD,
     FLAG_WATCHDOG,
@@ -78,7 +79,7 @@ PROBE_S = 0.25
 class LinkSettings:
     """The ``driver`` and ``loop`` keys a link backend needs, checked once."""
 
-    def __init__(self, config: dict[str, Any]):
+    def __init__(self, config: RunConfig):
         driver = config["driver"]
         self.port: str | None = driver["port"]
         self.rate_hz = int(round(config["loop"]["rate_hz"]))

@@ -15,6 +15,7 @@ from typing import Any
 
 import serial
 
+from sashil.config.typed import RunConfig
 from sashil.drivers import slcan_codec
 from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import Message
@@ -72,7 +73,7 @@ class SerialRig(LinkRig):
         self.low_latency = "not asked (port not open)"
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> SerialRig:
+    def from_config(cls, config: RunConfig) -> SerialRig:
         return cls(LinkSettings(config), baud=config["driver"]["baud"])
 
     def describe(self) -> str:

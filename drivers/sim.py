@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import math
 import random
-from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.encoder_edges import hermite, last_crossing, quick_test
 from sashil.drivers.interface import (
     FLAG_HELD,
@@ -113,7 +113,7 @@ class SimulatedRig(RigInterface):
         self._road_end: float | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> SimulatedRig:
+    def from_config(cls, config: RunConfig) -> SimulatedRig:
         """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
         from sashil.models.mismatch import plant_config
 

@@ -16,8 +16,9 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.transports import (
     DeviceTransport,
@@ -42,7 +43,7 @@ BOARDS = ("python", "c")
 
 
 def build_device(
-    config: dict[str, Any],
+    config: RunConfig,
     operator: Operator | None = None,
     faults: Faults | None = None,
     fixed_rate_hz: int | None = None,
@@ -200,7 +201,7 @@ class EmulatorThread:
 
     def __init__(
         self,
-        config: dict[str, Any],
+        config: RunConfig,
         transport: str = "serial",
         operator: Operator | None = None,
         faults: Faults | None = None,

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import (
     FLAG_FAULT,
     FLAG_OVERCURRENT,
@@ -87,7 +88,7 @@ class SafetySupervisor:
         self._out = RigCommand(0.0)
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> SafetySupervisor:
+    def from_config(cls, config: RunConfig) -> SafetySupervisor:
         safety, rig = config["safety"], config["rig"]
         return cls(
             current_max_a=rig["current_max_a"],

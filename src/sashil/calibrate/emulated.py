@@ -8,16 +8,16 @@ order (``--hold-deg A B ...``); ``sashil calibrate`` then runs against it over p
 
 from __future__ import annotations
 
-import copy
 import signal
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
 
 from sashil.calibrate.plan import plan_from_config
 from sashil.config import dump_config
+from sashil.config.frozen import freeze_config, thaw
+from sashil.config.typed import RunConfig
 from sashil.errors import DriverIOError
 
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
@@ -27,7 +27,7 @@ BOARDS = ("auto", "c", "python")  # sashil emulate --board
 
 
 def calibrate_emulated(
-    plant_config: dict[str, Any],
+    plant_config: RunConfig,
     out: str | Path,
     transport: str = "serial",
     inertia: float | None = None,
@@ -53,9 +53,10 @@ def calibrate_emulated(
         raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if board not in BOARDS:
         raise ValueError(f"board: expected one of {', '.join(BOARDS)}, got {board!r}")
-    config = copy.deepcopy(plant_config)
-    config["driver"].update(sample_timeout_ms=300.0, link_lost_ms=2000.0)
-    config["loop"]["rt"]["priority"] = max(config["loop"]["rt"]["priority"], HOST_PRIORITY)
+    derived = thaw(plant_config)
+    derived["driver"].update(sample_timeout_ms=300.0, link_lost_ms=2000.0)
+    derived["loop"]["rt"]["priority"] = max(derived["loop"]["rt"]["priority"], HOST_PRIORITY)
+    config = freeze_config(derived)
     angles = plan_from_config(config).operator_angles_deg()
     with tempfile.TemporaryDirectory(prefix="sashil-cal-") as tmp:
         config_path = Path(tmp) / "plant.yaml"

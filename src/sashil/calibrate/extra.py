@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +42,7 @@ class Suggestion:
     predicted: float  # its predicted relative half-width with the step added
 
 
-def candidates(section: dict, current_max_a: float, road: RoadChirp) -> list[Step]:
+def candidates(section: Mapping[str, Any], current_max_a: float, road: RoadChirp) -> list[Step]:
     """Drops from the plan's large and small angles, and road chirps, at 0 A, i_max/2 and i_max."""
     currents = (0.0, 0.5 * current_max_a, current_max_a)
     out = []

@@ -12,9 +12,11 @@ section (:func:`plan_from_config`).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.experiments.drop_test import check_theta0
 
@@ -105,7 +107,7 @@ class Plan:
         return [s for s in self.steps if s.role == "validate"]
 
 
-def road_chirp(section: dict[str, Any]) -> RoadChirp:
+def road_chirp(section: Mapping[str, Any]) -> RoadChirp:
     """The road chirp of a ``calibrate`` section. It ends ROAD_REST_S before the record does: its
     last speed command is exactly 0 (a wheel left turning would move the road under the next run)."""
     return RoadChirp(
@@ -117,14 +119,14 @@ def road_chirp(section: dict[str, Any]) -> RoadChirp:
     )
 
 
-def plan_from_config(config: dict[str, Any], source: str = "config") -> Plan:
+def plan_from_config(config: RunConfig, source: str = "config") -> Plan:
     """The plan of the config's ``calibrate`` section, checked against the rig (one-line ConfigError).
 
     Currents must lie in [0, rig.current_max_a]; the fit needs at least two currents when the model
     has current terms (checked by the caller, which knows whether they are asked for); the estimated
     rig time must stay within ``max_rig_time_s``; the road chirp must stay below a tenth of the
     loop rate."""
-    section = config["calibrate"]
+    section: Mapping[str, Any] = config["calibrate"]
     i_max = float(config["rig"]["current_max_a"])
     limit = float(config["rig"]["angle_limit_deg"])
 

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from sashil.calibrate.plan import RoadChirp, Step
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
@@ -113,7 +114,7 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     return out
 
 
-def run_step(config: dict[str, Any], step: Step, data_path: str | Path | None = None) -> StepResult:
+def run_step(config: RunConfig, step: Step, data_path: str | Path | None = None) -> StepResult:
     """Run one step on the config's rig; errors that end it early are in ``result.error`` (the rig is
     already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError.
     ``data_path``: where the runner streams the step's every cycle as it runs."""

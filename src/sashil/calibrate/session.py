@@ -18,6 +18,8 @@ from sashil.calibrate.extra import candidates, suggest
 from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
+from sashil.config.frozen import freeze_config, thaw
+from sashil.config.typed import RunConfig
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
@@ -130,7 +132,7 @@ def _stopped(runs: RunSet, results: list[StepResult], rig_s: float, say: Callabl
 
 
 def calibrate_rig(
-    config: dict[str, Any],
+    config: RunConfig,
     out: str | Path | None = None,
     inertia: float | None = None,
     model: str | None = None,
@@ -161,7 +163,9 @@ def calibrate_rig(
     say = say or (lambda text: None)
     J = check_inertia(inertia)
     if model is not None:
-        config = {**config, "calibrate": {**config["calibrate"], "model": model}}
+        derived = thaw(config)
+        derived["calibrate"]["model"] = model
+        config = freeze_config(derived)
     plan = plan_from_config(config, source)
     check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
     folder = RunFolder.create(out, "calibrate")

@@ -23,6 +23,7 @@ from sashil.recording.formats import HELP as FORMAT_HELP
 
 if TYPE_CHECKING:
     from sashil.config.resolve import ConfigSource, Option
+    from sashil.config.typed import RunConfig
 
 Config = dict[str, Any]
 
@@ -169,16 +170,15 @@ def config_source(args: argparse.Namespace, options: Sequence[Option] = ()) -> C
     )
 
 
-def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None) -> Config:
-    """A writable copy of the config of the common options, resolved and checked
-    (:func:`~sashil.config.resolve.resolve`), and the ``--format`` values checked against its driver:
-    for the verbs that still derive keys from their options after resolving."""
-    from sashil.config.frozen import thaw
+def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None) -> RunConfig:
+    """The config of the common options, resolved and checked (:func:`~sashil.config.resolve.resolve`,
+    read-only), and the ``--format`` values checked against its driver: for the verbs whose own
+    options set no config key (``doctor``, ``emulate``)."""
     from sashil.config.resolve import resolve
 
     if getattr(args, "current", None) is not None and getattr(args, "controller", None) not in (None, "passive"):
         raise ConfigError(f"--current: only for --controller passive (got --controller {args.controller})")
-    config = thaw(resolve(config_source(args), getattr(args, "verb", None), models))
+    config = resolve(config_source(args), getattr(args, "verb", None), models)
     outputs_of(args).check(config["driver"]["name"])
     return config
 

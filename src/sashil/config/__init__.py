@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -121,7 +122,7 @@ def apply_params(config: Config, params_path: str | Path) -> Config:
     return out
 
 
-def dump_config(config: Config) -> str:
+def dump_config(config: Mapping[str, Any]) -> str:
     """The resolved config as YAML text (what a run folder's ``config.yaml`` holds)."""
     from sashil.config.frozen import thaw
 

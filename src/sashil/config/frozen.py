@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn, cast
 
-__all__ = ["FrozenSection", "freeze", "thaw"]
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
+
+__all__ = ["FrozenSection", "freeze", "freeze_config", "thaw"]
 
 
 class FrozenSection(dict[str, Any]):
@@ -49,6 +52,12 @@ def freeze(config: Mapping[str, Any], where: str = "") -> FrozenSection:
     )
     section._where = where
     return section
+
+
+def freeze_config(config: Mapping[str, Any]) -> RunConfig:
+    """A whole config (one :func:`~sashil.config.resolve.resolve` checked, or a copy derived from
+    such a one: a sub-run's, the simulated plant's) frozen and typed as the resolved config it is."""
+    return cast("RunConfig", freeze(config))
 
 
 def _freeze_value(value: Any, where: str) -> Any:

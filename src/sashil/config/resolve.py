@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from sashil.config import Config, apply_params, check_controller, load_config
-from sashil.config.frozen import FrozenSection, freeze
+from sashil.config.frozen import freeze_config
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
 
@@ -84,11 +85,13 @@ def _load(source: ConfigSource) -> Config:
     return load_config(source.config)
 
 
-def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> FrozenSection:
+def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> RunConfig:
     """The read-only config ``verb`` runs with (see the module doc). Order: the file (or defaults),
     ``params``, the law then each ``--set``, the verb's options, ``--driver``/``--port``; then the
     backend-dependent keys. Every step is checked before anything is opened or written; a model
-    the verb cannot run (not in ``models``, default the rig models) is refused."""
+    the verb cannot run (not in ``models``, default the rig models) is refused. The result is a
+    :class:`~sashil.config.frozen.FrozenSection` typed as :class:`~sashil.config.typed.RunConfig`
+    (the schema's sections, generated from it), so mypy checks every read of it."""
     from sashil.models.registry import RIG_MODELS
 
     config = _load(source)
@@ -122,14 +125,14 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
     if check is not None:  # the verb's own checks of its keys, naming the option that set each
         module, _, name = check.partition(":")
         getattr(importlib.import_module(module), name)(config, lambda key: _named(source, key))
-    return freeze(config)
+    return freeze_config(config)
 
 
 def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> None:
     """The keys that depend on the backend's declared capabilities, set in ``config`` before it is frozen."""
     from sashil.drivers import declared_capabilities
 
-    caps = declared_capabilities(config)
+    caps = declared_capabilities(freeze_config(config))
     driver = config["driver"]
     if source.port is not None and not caps.link:
         raise ConfigError(

@@ -9,7 +9,7 @@ folder's ``config.yaml`` says which law ran with which parameters.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sashil.control.law_api import Law, LawContext
@@ -25,13 +25,13 @@ def _core_keys() -> dict[str, Any]:
     return CONTROLLER.fields
 
 
-def law_parameters(section: dict[str, Any]) -> dict[str, Any]:
+def law_parameters(section: Mapping[str, Any]) -> dict[str, Any]:
     """The section's keys that are law parameters (everything but the controller's own keys)."""
     core = _core_keys()
     return {key: value for key, value in section.items() if key not in core}
 
 
-def law_context(config: dict[str, Any]) -> LawContext | None:
+def law_context(config: Mapping[str, Any]) -> LawContext | None:
     """What a law may know of the rig: the controller's Bouc-Wen model, current range and rate
     (None when the config's model is not the rig's Bouc-Wen model)."""
     from sashil.models.hysteresis import BoucWenParams
@@ -46,13 +46,14 @@ def law_context(config: dict[str, Any]) -> LawContext | None:
     )
 
 
-def build_law(entry: LawEntry, config: dict[str, Any], section: dict[str, Any]) -> Law:
+def build_law(entry: LawEntry, config: Mapping[str, Any], section: Mapping[str, Any]) -> Law:
     """An instance of ``entry``'s law with the section's parameters (ConfigError naming the key)."""
     return entry.cls(law_context(config), **law_parameters(section))
 
 
 def check_controller(config: dict[str, Any], source: str) -> None:
-    """Check ``controller.law`` and its parameters in place; fill in every parameter's value.
+    """Check ``controller.law`` and its parameters in place (a config being resolved, not yet
+    frozen); fill in every parameter's value.
 
     Errors are one line ``<source>: controller.<key>: <problem>``."""
     section = config.get("controller")

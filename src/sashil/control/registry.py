@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.control.controller import Controller
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
@@ -25,12 +26,12 @@ from sashil.models.registry import rig_params
 __all__ = ["controller_section", "law_reads_state", "make_controller", "make_estimator", "make_stage"]
 
 
-def law_reads_state(config: dict[str, Any]) -> bool:
+def law_reads_state(config: RunConfig) -> bool:
     """Whether the config's law reads the rig's state (:attr:`sashil.control.law_api.Law.reads_state`)."""
     return bool(find_law(controller_section(config)["law"]).cls.reads_state)
 
 
-def make_stage(config: dict[str, Any]) -> tuple[str, Any]:
+def make_stage(config: RunConfig) -> tuple[str, Any]:
     """The loop stage of the config's law and its label (the law's ``name``, however ``controller.law``
     names it: a file law is not labelled by its path): a :class:`Controller`, or for a law that
     reads no state a constant-current stage that runs the law alone (no estimator or observer)."""
@@ -45,7 +46,7 @@ def make_stage(config: dict[str, Any]) -> tuple[str, Any]:
     return law.label(), ConstantCurrent(law=law)
 
 
-def controller_section(config: dict[str, Any]) -> dict[str, Any]:
+def controller_section(config: RunConfig) -> dict[str, Any]:
     """The config's ``controller`` section (defaults when a config predates it)."""
     from sashil.config.schema import defaults
     from sashil.config.sections import CONTROLLER
@@ -53,9 +54,7 @@ def controller_section(config: dict[str, Any]) -> dict[str, Any]:
     return {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
 
 
-def make_estimator(
-    section: dict[str, Any], config: dict[str, Any], rate_hz: float
-) -> RigEstimator | KalmanRigEstimator:
+def make_estimator(section: dict[str, Any], config: RunConfig, rate_hz: float) -> RigEstimator | KalmanRigEstimator:
     """The ``controller.estimator``: the rig-model Kalman filter or the fixed-bandwidth tracking filters."""
     if section.get("estimator", "kalman") == "kalman":
         estimator = KalmanRigEstimator(
@@ -81,7 +80,7 @@ def make_estimator(
 
 def make_controller(
     name: str | None,
-    config: dict[str, Any],
+    config: RunConfig,
     torque: Callable[[float], float] | None = None,
 ) -> Controller:
     """A :class:`Controller` running law ``name`` (None: ``controller.law``) on the config's model.

@@ -7,12 +7,13 @@ trips the host goes quiet; the board's watchdog must trip and report it in a Sta
 
 from __future__ import annotations
 
-import copy
 import time
 from typing import Any
 
 import numpy as np
 
+from sashil.config.frozen import freeze_config, thaw
+from sashil.config.typed import RunConfig
 from sashil.diagnostics import FAIL, OK, WARN, Check
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG
@@ -29,11 +30,11 @@ def _check(name: str, status: str, found: str, fix: str = "", data: dict[str, An
     return Check("board", name, status, found, fix, data or {})
 
 
-def board_checks(config: dict[str, Any], rounds: int) -> list[Check]:
+def board_checks(config: RunConfig, rounds: int) -> list[Check]:
     """Hello/Version, ``rounds`` round trips at ``loop.rate_hz``, and the watchdog trip."""
-    host_paced = copy.deepcopy(config)
+    host_paced = thaw(config)
     host_paced["driver"]["pacing"] = "host"
-    rig = open_rig(host_paced)
+    rig = open_rig(freeze_config(host_paced))
     if not isinstance(rig, LinkRig):
         rig.close()
         return [_check("hello", OK, f"driver {config['driver']['name']}: no link to check")]

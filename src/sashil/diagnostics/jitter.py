@@ -9,6 +9,7 @@ pure, so tests feed it numbers.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -21,7 +22,7 @@ from sashil.runtime.rt_setup import RealtimeSetup
 EDGES_US = (0, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000)
 
 
-def measure(loop: dict[str, Any], seconds: float, rate_hz: float | None = None) -> dict[str, Any]:
+def measure(loop: Mapping[str, Any], seconds: float, rate_hz: float | None = None) -> dict[str, Any]:
     """Wake at the loop's rate for ``seconds`` and report the lateness (µs) of each wake-up:
     p50/p99/max, the misses (a wake-up a whole period late), a histogram, and the set-up's outcomes."""
     rate = float(rate_hz if rate_hz is not None else loop["rate_hz"])

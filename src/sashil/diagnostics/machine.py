@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import resource
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -227,7 +228,7 @@ def timer_slack(facts: MachineFacts, configured_ns: int) -> Check:
     )
 
 
-def machine_checks(facts: MachineFacts, loop: dict[str, Any]) -> list[Check]:
+def machine_checks(facts: MachineFacts, loop: Mapping[str, Any]) -> list[Check]:
     """Every machine check for the config's ``loop`` section."""
     rt = loop["rt"]
     return [

@@ -13,7 +13,7 @@ import os
 import pwd
 import stat
 import subprocess
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -178,7 +178,7 @@ def tty_checks(port: str, rate_hz: float, sys_root: Path = Path("/sys"), access:
 
 
 def port_checks(
-    driver: dict[str, Any],
+    driver: Mapping[str, Any],
     rate_hz: float,
     sys_root: Path = Path("/sys"),
     access: Any = os.access,

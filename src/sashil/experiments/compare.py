@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from sashil.config.typed import RunConfig
+
 __all__ = ["LawJob", "LawResult", "MeasuredStage", "metrics_of", "run_job"]
 
 #: seconds of arm acceleration kept for the time-trace plot, and its decimation
@@ -46,7 +48,7 @@ class LawJob:
     """One law's run (picklable: a process runs it on the simulated rig)."""
 
     label: str
-    config: dict[str, Any]
+    config: RunConfig
     road: str
     duration_s: float
     #: the law's run folder (created, its config.yaml written): data.csv and timing.npz go there
@@ -157,7 +159,7 @@ def sample_times(stream: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None
     return times, first
 
 
-def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
+def metrics_of(stream: dict[str, Any], config: RunConfig) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
     """The metrics of a law's stream (module docstring), its time and θ̈2 after the settling, and
     where θ̈2 came from."""
     rate = float(config["loop"]["rate_hz"])
@@ -183,7 +185,7 @@ def metrics_of(stream: dict[str, Any], config: dict[str, Any]) -> tuple[dict[str
     return metrics, time_s[keep], a, source
 
 
-def _stage(config: dict[str, Any]) -> Any:
+def _stage(config: RunConfig) -> Any:
     from sashil.control.registry import make_controller
     from sashil.runtime.stages import ConstantCurrent
 

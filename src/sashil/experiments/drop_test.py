@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.config.typed import RunConfig
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
@@ -67,7 +68,7 @@ def pseudo_terminal(rig: Any) -> str | None:
 THETA0_LIMIT_DEG = 30.0
 
 
-def check_drops(config: dict[str, Any], named: Callable[[str], str]) -> None:
+def check_drops(config: RunConfig, named: Callable[[str], str]) -> None:
     """The ``drop_test`` keys a run can honour: a hold angle within ±THETA0_LIMIT_DEG and far enough
     from 0 for the release to be seen, and each current once, within [0, rig.current_max_a];
     ``named(key)`` is the option that set a key (``--current``), or the key."""
@@ -90,7 +91,7 @@ def check_drops(config: dict[str, Any], named: Callable[[str], str]) -> None:
         raise ConfigError(f"{where}: each current once, got {currents}")
 
 
-def check_theta0(config: dict[str, Any], theta0_deg: float, option: str = "--theta0-deg") -> None:
+def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-deg") -> None:
     """Refuse a hold angle the release could not be detected from: the release is the arm moving
     ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
     threshold = config["drop_test"]["release_threshold_deg"]
@@ -116,9 +117,7 @@ class DropTestSettings:
     pseudo_terminal: str | None = None
 
     @classmethod
-    def from_config(
-        cls, config: dict[str, Any], theta0_deg: float, current_a: float, duration_s: float
-    ) -> DropTestSettings:
+    def from_config(cls, config: RunConfig, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
         drop = config["drop_test"]
         check_theta0(config, theta0_deg, "theta0_deg")
         return cls(
@@ -413,7 +412,7 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
     return record
 
 
-def default_clock(config: dict[str, Any]) -> Clock:
+def default_clock(config: RunConfig) -> Clock:
     """Simulated time for a simulated backend unless the config asks for the real clock
     (:func:`sashil.drivers.on_virtual_clock`), else the real clock."""
     from sashil.drivers import on_virtual_clock
@@ -428,7 +427,7 @@ def default_clock(config: dict[str, Any]) -> Clock:
 CONFIG_LAW = "config"
 
 
-def config_controller(config: dict[str, Any]) -> Any:
+def config_controller(config: RunConfig) -> Any:
     """The config's controller, which takes over at the release, or None for a law that reads no
     state (such as the passive law: the drop's constant current throughout)."""
     from sashil.control.registry import law_reads_state, make_controller
@@ -437,7 +436,7 @@ def config_controller(config: dict[str, Any]) -> Any:
 
 
 def plan_drop(
-    config: dict[str, Any],
+    config: RunConfig,
     spec: dict[str, Any],
     rig: RigInterface,
     notify: Callable[[str], None] | None = None,
@@ -467,7 +466,7 @@ def plan_drop(
 
 
 def run_drop_test(
-    config: dict[str, Any],
+    config: RunConfig,
     theta0_deg: float = -5.0,
     current_a: float = 0.0,
     duration_s: float = 10.0,

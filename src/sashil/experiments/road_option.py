@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError
 from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
@@ -32,7 +33,7 @@ from sashil.models.plant import RoadProfile
 __all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road"]
 
 
-def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | None, str]:
+def parse_road(text: str | None, config: RunConfig) -> tuple[RoadProfile | None, str]:
     """``(profile, description)`` of a ``--road`` value (``(None, "none")`` for ``none``)."""
     if text is None or text.strip() == "none":
         return None, "none"
@@ -74,7 +75,7 @@ def parse_road(text: str | None, config: dict[str, Any]) -> tuple[RoadProfile | 
     raise ConfigError(f"--road {text}: expected {SYNTAX}")
 
 
-def iso8608_road(text: str, rest: str, config: dict[str, Any]) -> tuple[RoadProfile, str]:
+def iso8608_road(text: str, rest: str, config: RunConfig) -> tuple[RoadProfile, str]:
     """``iso8608:CLASS[:SPEED_M_S]``: the class's road at the speed (default ``road.speed_m_s``)
     through ``road.lever_m``, one period of ``road.period_s`` at the loop's rate, faded in over
     ``sweep.ramp_s``."""

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
@@ -205,17 +206,17 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: stream[name] for name in names} | {"seq": stream["seq"].astype(np.int64)}
 
 
-RigFactory = Callable[[dict, RoadProfile], RigInterface]
+RigFactory = Callable[[RunConfig, RoadProfile], RigInterface]
 
 
-def sweep_stage(config: dict[str, Any], spec: dict[str, Any], rig: RigInterface) -> SweepStage:
+def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> SweepStage:
     """A sweep run's stage built in a loop process: the config's law on the road of ``spec``."""
     from sashil.control.registry import make_controller
 
     return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
 
 
-def default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
+def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
     from sashil.drivers import open_rig
@@ -224,7 +225,7 @@ def default_rig(config: dict[str, Any], road: RoadProfile) -> RigInterface:
 
 
 def run_profile(
-    config: dict[str, Any],
+    config: RunConfig,
     controller: Any,
     road: RoadProfile,
     duration_s: float,
@@ -244,7 +245,7 @@ def run_profile(
 
 
 def run_sweep(
-    config: dict[str, Any],
+    config: RunConfig,
     controller: Any,
     road: RoadProfile,
     duration_s: float,
@@ -329,7 +330,7 @@ class SteppedPoint:
 
 
 def stepped_sine(
-    config: dict[str, Any],
+    config: RunConfig,
     make_controller: Callable[[], Any],
     freqs: list[float],
     rig_factory: RigFactory | None = None,

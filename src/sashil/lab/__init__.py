@@ -6,7 +6,8 @@ returns the :class:`~sashil.api.Run` of the folder it wrote.
   :func:`simulate` (``sashil simulate``), :func:`sweep` (``sashil sweep``), :func:`compare`
   (``sashil compare``);
 * :func:`resolve` turns a :class:`ConfigSource` (file, parameters, ``--set``, law, driver, port,
-  the verb's options) into the read-only config they take;
+  the verb's options) into the read-only config they take, typed as :class:`RunConfig` (a
+  ``TypedDict`` per schema section, generated from the schema: mypy checks each key a script reads);
 * progress, operator prompts, results and warnings reach the caller as :class:`Event` objects
   (``on_event``); the command line prints them, a script or a page receives them.
 
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from sashil.config.resolve import ConfigSource, Option, resolve
+    from sashil.config.typed import RunConfig
     from sashil.lab._calibrate import calibrate
     from sashil.lab._closed_loop import closed_loop
     from sashil.lab._compare import CompareLaw, compare
@@ -37,6 +39,7 @@ _LAZY = {
     "ConfigSource": "sashil.config.resolve",
     "Option": "sashil.config.resolve",
     "resolve": "sashil.config.resolve",
+    "RunConfig": "sashil.config.typed",
     "calibrate": "sashil.lab._calibrate",
     "closed_loop": "sashil.lab._closed_loop",
     "drop_test": "sashil.lab._drop_test",
@@ -55,6 +58,7 @@ __all__ = [
     "Event",
     "Option",
     "Outputs",
+    "RunConfig",
     "calibrate",
     "closed_loop",
     "compare",

@@ -5,9 +5,9 @@ the damper model, validate it on the held-out runs, and write the calibration fo
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 
@@ -15,7 +15,7 @@ __all__ = ["calibrate"]
 
 
 def calibrate(
-    config: Any, outputs: Outputs | None = None, on_event: Listener = ignore, *, source: str = "config"
+    config: RunConfig, outputs: Outputs | None = None, on_event: Listener = ignore, *, source: str = "config"
 ) -> Run:
     """Calibrate the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
     ``calibrate``): the plan, model, arm inertia J, exponent profile and extra steps are its

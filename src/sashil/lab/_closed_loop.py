@@ -3,10 +3,11 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -15,20 +16,20 @@ from sashil.runtime.signals import StopFlag
 __all__ = ["check_run", "closed_loop"]
 
 
-def check_run(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+def check_run(config: RunConfig, named: Callable[[str], str]) -> None:
     """The ``run`` keys a run can honour: the road parses (named as the option or key that gave it)."""
     from sashil.experiments.road_option import parse_road
 
     spec = config["run"]["road"]
     try:
-        parse_road(spec, config)  # type: ignore[arg-type]
+        parse_road(spec, config)
     except ConfigError as err:
         where = named("run.road")
         raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
 
 
 def closed_loop(
-    config: Any,
+    config: RunConfig,
     outputs: Outputs | None = None,
     on_event: Listener = ignore,
     *,

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -44,7 +45,7 @@ class CompareLaw:
     sets: Sequence[str] = ()
 
 
-def check_compare(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+def check_compare(config: RunConfig, named: Callable[[str], str]) -> None:
     """The ``compare`` keys a run can honour: the road parses, and each law runs longer than the
     start its metrics leave out (``compare.settle_s``); ``named(key)`` is the option that set a key
     (``--road``, ``--duration``), or the key."""
@@ -52,7 +53,7 @@ def check_compare(config: Mapping[str, Any], named: Callable[[str], str]) -> Non
 
     section = config["compare"]
     try:
-        parse_road(section["road"], config)  # type: ignore[arg-type]
+        parse_road(section["road"], config)
     except ConfigError as err:
         where = named("compare.road")
         raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
@@ -130,7 +131,7 @@ def folder_name(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-.") or "law"
 
 
-def own_law(config: Mapping[str, Any]) -> list[CompareLaw]:
+def own_law(config: RunConfig) -> list[CompareLaw]:
     """The config's own law when it is not passive (a compared law's config.yaml given back with
     --config), as the law to compare when none is named."""
     law = (config.get("controller") or {}).get("law", "passive")
@@ -155,7 +156,7 @@ def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, durati
     return list(jobs.values())
 
 
-def law_parameters(result: Any, config: Mapping[str, Any]) -> dict[str, Any]:
+def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
     """The parameters a law ran with: the law's own values as its run reported them
     (``controller_stats.law.parameters``), else those its config gives (each declared parameter,
     its default when unset); the passive stage's current."""
@@ -170,7 +171,7 @@ def law_parameters(result: Any, config: Mapping[str, Any]) -> dict[str, Any]:
     return {key: section.get(key, param.default) for key, param in declared.items()}
 
 
-def _law_summary(result: Any, config: Mapping[str, Any], road_text: str, duration: float) -> dict[str, Any]:
+def _law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
     """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
     parameters) and its metrics (also as its one entry of ``runs``)."""
     from sashil.control.law_registry import find_law
@@ -248,7 +249,7 @@ def _accel_note(results: list[Any], bandwidth_hz: float) -> str:
     )
 
 
-def _bound(config: Mapping[str, Any], road: Any, duration: float, on_event: Listener) -> Any:
+def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) -> Any:
     """The optimal bound on this road for the config's model (None without a road, or when the run
     is shorter than the settling time)."""
     from sashil.experiments.optimal_bound import optimal_bound
@@ -271,7 +272,7 @@ def _bound(config: Mapping[str, Any], road: Any, duration: float, on_event: List
 
 
 def compare(
-    config: Any, laws: Sequence[CompareLaw | str], outputs: Outputs | None = None, on_event: Listener = ignore
+    config: RunConfig, laws: Sequence[CompareLaw | str], outputs: Outputs | None = None, on_event: Listener = ignore
 ) -> Run:
     """Compare ``laws`` (each a :class:`CompareLaw`, or a law spec without parameters) on the road
     of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb ``compare``: the

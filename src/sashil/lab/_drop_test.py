@@ -10,6 +10,7 @@ from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
+from sashil.config.typed import RunConfig
 from sashil.control.law_registry import law_label
 from sashil.drivers import on_virtual_clock
 from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, config_controller, controller_columns, run_drop_test
@@ -47,7 +48,7 @@ def result_warnings(metrics: DropMetrics) -> list[str]:
 
 
 def drop_test(
-    config: Any,
+    config: RunConfig,
     outputs: Outputs | None = None,
     on_event: Listener = ignore,
     *,

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.errors import DataFileError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -38,7 +39,9 @@ def recorded_config(run_folder: str | Path) -> Path:
     return config_file
 
 
-def replay(config: Any, run_folder: str | Path, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
+def replay(
+    config: RunConfig, run_folder: str | Path, outputs: Outputs | None = None, on_event: Listener = ignore
+) -> Run:
     """Replay the recorded run in ``run_folder`` through the law of a resolved ``config``
     (:func:`sashil.config.resolve.resolve` with verb ``replay``; resolve the run's own
     :func:`recorded_config` to replay it with its own law) into a new run folder.

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -37,14 +38,14 @@ def input_file(value: str, where: str = "--input") -> Path:
     raise ConfigError(f"{where} {path}: a folder without data.csv (expected a data.csv or a run folder)")
 
 
-def check_simulate(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+def check_simulate(config: RunConfig, named: Callable[[str], str]) -> None:
     """The ``simulate`` keys a run can honour: an input that is a data file or one run's folder."""
     value = config["simulate"]["input"]
     if value:
         input_file(value, named("simulate.input"))
 
 
-def _inputs(config: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
+def _inputs(config: RunConfig) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
     """The model's inputs (time, current, road, torque and the initial angle), the recorded angle
     to compare with (None for a drop test) and a description of the source."""
     from sashil.identify.simulate import drop_test_inputs
@@ -68,7 +69,7 @@ def _inputs(config: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarra
     return inputs, measured, str(data_file)
 
 
-def simulate(config: Any, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
+def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
     """Run the model of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
     ``simulate`` and ``models=sashil.models.registry.MODEL_PARAMS``) on ``simulate.input`` (a
     data.csv or a run folder; None: a drop test from ``simulate.theta0_deg`` at ``current_a`` for
@@ -127,7 +128,7 @@ def _is_drop(inputs: Mapping[str, np.ndarray]) -> bool:
 
 
 def _drop_metrics(
-    config: Mapping[str, Any], columns: Mapping[str, np.ndarray], measured: np.ndarray | None, inputs: Mapping[str, Any]
+    config: RunConfig, columns: Mapping[str, np.ndarray], measured: np.ndarray | None, inputs: Mapping[str, Any]
 ) -> dict[str, Any]:
     """Drop-test metrics (period, peaks, ζ) of the simulated angle and, when given, the recorded one,
     with the config's settling band and encoder resolution."""

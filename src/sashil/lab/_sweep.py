@@ -10,11 +10,12 @@ through events.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -33,7 +34,7 @@ TRANSMISSIBILITY_COLUMNS = (
 )
 
 
-def check_sweep(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
+def check_sweep(config: RunConfig, named: Callable[[str], str]) -> None:
     """The ``sweep`` keys a run can honour: each frequency in (0, loop.rate_hz / 10], the stop at or
     above the start, and above it for a stepped sine; ``named(key)`` is the option that set a key
     (``--f-stop``), or the key."""
@@ -54,7 +55,7 @@ def check_sweep(config: Mapping[str, Any], named: Callable[[str], str]) -> None:
         )
 
 
-def _label(config: Mapping[str, Any]) -> str:
+def _label(config: RunConfig) -> str:
     """What commanded the damper: the law, or the passive current."""
     from sashil.control.law_registry import law_label
 
@@ -68,7 +69,7 @@ def _freq_label(f_hz: float) -> str:
 
 
 def sweep(
-    config: Any,
+    config: RunConfig,
     outputs: Outputs | None = None,
     on_event: Listener = ignore,
     *,
@@ -165,7 +166,7 @@ def sweep(
 
 
 def _stepped(
-    config: Any,
+    config: RunConfig,
     label: str,
     folder: Any,
     rig_factory: Any,
@@ -247,7 +248,7 @@ def _stepped(
     )
 
 
-def _plot(folder: Any, points: list[Any], label: str, config: Any) -> None:
+def _plot(folder: Any, points: list[Any], label: str, config: RunConfig) -> None:
     """``transmissibility.png``, the curve named by the law, its parameters and current."""
     from sashil.recording.labels import controller_label
     from sashil.recording.plots import plot_transmissibility
@@ -258,7 +259,7 @@ def _plot(folder: Any, points: list[Any], label: str, config: Any) -> None:
 
 
 def _chirp(
-    config: Any,
+    config: RunConfig,
     label: str,
     folder: Any,
     live: Any,

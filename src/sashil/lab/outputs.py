@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil import __version__
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 
 __all__ = ["IN_RUN_FOLDER", "Outputs"]
@@ -69,7 +70,7 @@ class Outputs:
             columns, save=save, viewer=self.rerun_viewer, connect=self.rerun_connect, name=name, bind=self.rerun_bind
         )
 
-    def open_live_tap(self, config: Mapping[str, Any], columns: Sequence[str], name: str, folder: Path) -> Any:
+    def open_live_tap(self, config: RunConfig, columns: Sequence[str], name: str, folder: Path) -> Any:
         """A :class:`~sashil.recording.rerun_log.LiveTap` for a loop run, or None without a live view.
         The feasible torque band is added for the Bouc-Wen model."""
         if not self.live_view:
@@ -107,7 +108,7 @@ class Outputs:
     def write_formats(
         self,
         folder: Path,
-        config: Mapping[str, Any],
+        config: RunConfig,
         verb: str,
         columns: Mapping[str, Any] | None = None,
         *,

@@ -30,8 +30,9 @@ near the bound. The result is finite and inside the bound for every increment an
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class BoucWenParams:
     n: float = BOUC_WEN_SEED["n"]
 
     @classmethod
-    def from_mapping(cls, params: dict) -> BoucWenParams:
+    def from_mapping(cls, params: Mapping[str, Any]) -> BoucWenParams:
         """Build from a ``params`` mapping (config ``model.params`` or a parameter file)."""
         return cls(**{key: float(params[key]) for key in cls.__dataclass_fields__ if key in params})
 

@@ -13,17 +13,19 @@ opposite directions change the yield torque alpha*z_u by a factor, not by 10 %.
 
 from __future__ import annotations
 
-import copy
 import random
+from collections.abc import Mapping
 from typing import Any
 
+from sashil.config.frozen import freeze_config, thaw
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
 PARAMETER_ORDER = tuple(BoucWenParams.__dataclass_fields__)  # J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n
 
 
-def mismatch_fractions(section: dict[str, Any]) -> dict[str, float]:
+def mismatch_fractions(section: Mapping[str, Any]) -> dict[str, float]:
     """Per-parameter fractions of the ``mismatch`` section (pattern first, ``params`` overriding)."""
     fraction = float(section.get("fraction", 0.0) or 0.0)
     pattern = section.get("pattern", "alternate")
@@ -50,10 +52,10 @@ def mismatch_fractions(section: dict[str, Any]) -> dict[str, float]:
     return out
 
 
-def plant_config(config: dict[str, Any]) -> dict[str, Any]:
+def plant_config(config: RunConfig) -> RunConfig:
     """A copy of ``config`` describing the simulated plant (model and rig after the mismatch)."""
     section = config.get("mismatch") or {}
-    out = copy.deepcopy(config)
+    out: dict[str, Any] = thaw(config)
     fractions = mismatch_fractions(section)
     params = out["model"]["params"]
     for key, frac in fractions.items():
@@ -63,7 +65,8 @@ def plant_config(config: dict[str, Any]) -> dict[str, Any]:
         raise ConfigError("mismatch: the plant's beta + gamma must stay > 0 (bounded z)")
     rig = out["rig"]
     rig["coil_tau_s"] = rig["coil_tau_s"] * (1.0 + float(section.get("coil_tau", 0.0) or 0.0))
+    overrides: Mapping[str, Any] = section
     for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"):
-        if section.get(key) is not None:
-            rig[key] = section[key]
-    return out
+        if overrides.get(key) is not None:
+            rig[key] = overrides[key]
+    return freeze_config(out)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from sashil.errors import ConfigError
@@ -61,7 +62,7 @@ def check_model(section: dict[str, Any], source: str, where: str, complete: bool
     return {"name": name, "params": out}
 
 
-def rig_params(model_section: dict[str, Any]) -> BoucWenParams:
+def rig_params(model_section: Mapping[str, Any]) -> BoucWenParams:
     """The Bouc-Wen parameters the simulated rig runs on (only Bouc-Wen drives the rig plant)."""
     if model_section.get("name", "bouc-wen") != "bouc-wen":
         raise ConfigError(f"model.name: the simulated rig runs the bouc-wen model, got {model_section['name']!r}")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil import __version__
-from sashil.config import Config, dump_config
+from sashil.config import dump_config
 from sashil.errors import ConfigError
 from sashil.recording.data_file import Columns, write_data_csv
 from sashil.recording.summary_schema import normalise
@@ -159,7 +159,7 @@ class RunFolder:
         writer.writerows([["" if value is None else value for value in row] for row in rows])
         return self._write_text(name, buffer.getvalue())
 
-    def write_config(self, config: Config, note: str | None = None) -> Path:
+    def write_config(self, config: Mapping[str, Any], note: str | None = None) -> Path:
         """``config.yaml``: the resolved config, after ``note`` as YAML comment lines when given."""
         head = "".join(f"# {line}\n" for line in note.splitlines()) if note else ""
         return self._write_text("config.yaml", head + dump_config(config))

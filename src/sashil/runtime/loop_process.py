@@ -41,6 +41,7 @@ from typing import Any
 
 from sashil import errors
 from sashil.config.frozen import thaw
+from sashil.config.typed import RunConfig
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import MISSED_W, STOP_BY_CALLER, STOP_W, Stream, remove_stale
 
@@ -98,7 +99,7 @@ class LoopProcess:
 
     def __init__(
         self,
-        config: Mapping[str, Any],
+        config: RunConfig,
         duration_s: float | None,
         *,
         realtime: bool = True,
@@ -411,7 +412,7 @@ class SessionSignals:
             signal.signal(sig, old)
 
 
-def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> dict[str, Any]:
+def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str, Any]:
     """After the loop process died: reopen the rig, command 0 A and read the coil current until it
     is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
     deactivated. Says what was found; a simulated rig ended with the process that held it."""
@@ -419,7 +420,7 @@ def confirm_safe(config: Mapping[str, Any], say: Callable[[str, str], None]) -> 
     from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 
     found: dict[str, Any] = {"reopened": False}
-    rig = open_rig(thaw(config))
+    rig = open_rig(config)
     if not capabilities_of(rig).link:
         found["note"] = "the simulated rig ended with the loop process"
         return found
@@ -468,7 +469,7 @@ class LoopEnd:
 
 def drive(
     process: LoopProcess,
-    config: Mapping[str, Any],
+    config: RunConfig,
     data_path: Path,
     duration_s: float | None,
     *,
@@ -553,7 +554,7 @@ def drive(
         status = "error"
     if error is not None and status == "ok":
         status = "error"
-    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None  # type: ignore[arg-type]
+    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
     if lost is not None:
         error, status = lost, "lossy"
         say("warning", str(lost))

@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.errors import SashilError
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import loop_summary
@@ -24,7 +25,7 @@ def finish_alone(
     stream: Stream,
     writer: Any,
     data: Path,
-    config: dict[str, Any],
+    config: RunConfig,
     end: dict[str, Any],
     timing: Any,
     verb: str = "run",

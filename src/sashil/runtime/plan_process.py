@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import logging
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.loop import LoopResult
@@ -27,14 +28,14 @@ from sashil.runtime.signals import StopFlag
 log = logging.getLogger("sashil")
 
 
-def in_loop_process(config: Mapping[str, Any], clock: Any) -> bool:
+def in_loop_process(config: RunConfig, clock: Any) -> bool:
     """Whether a run of ``config`` on ``clock`` runs its loop in a process of its own: on the real
     clock with ``loop.process`` true."""
     return not getattr(clock, "virtual", False) and bool(config["loop"].get("process", False))
 
 
 def run_plan_process(
-    config: Mapping[str, Any],
+    config: RunConfig,
     plan: Any,
     duration_s: float | None,
     *,

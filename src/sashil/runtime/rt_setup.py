@@ -18,6 +18,7 @@ import ctypes.util
 import gc
 import os
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -64,7 +65,7 @@ class RealtimeSetup:
     _saved: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def from_config(cls, loop_section: dict[str, Any]) -> RealtimeSetup:
+    def from_config(cls, loop_section: Mapping[str, Any]) -> RealtimeSetup:
         rt = loop_section["rt"]
         return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"], rt["gil_switch_us"])
 

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sashil.config.typed import RunConfig
 from sashil.drivers.interface import capabilities_of
 from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
 from sashil.recording.data_file import read_data_csv
@@ -81,7 +82,7 @@ def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | N
     return need
 
 
-def losses(config: dict[str, Any], timing: Any, link: dict[str, Any] | None) -> LossError | None:
+def losses(config: RunConfig, timing: Any, link: dict[str, Any] | None) -> LossError | None:
     """The :class:`~sashil.errors.LossError` of a run that missed more of its scheduled deadlines than
     ``loop.max_missed_fraction`` or lost more of its samples than ``driver.max_lost_fraction``
     allows, naming what was lost and the key; None when it stayed within both."""
@@ -206,7 +207,7 @@ def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[st
 
 
 def run_plan(
-    config: dict[str, Any],
+    config: RunConfig,
     rig: Any,
     plan: Any,
     clock: Clock,

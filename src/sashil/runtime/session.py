@@ -18,6 +18,7 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+from sashil.config.typed import RunConfig
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
@@ -38,7 +39,7 @@ def _stderr(line: str) -> None:
 
 
 def open_tuning(
-    config: dict[str, Any], stage: Any, folder: RunFolder, say: Callable[[str], None]
+    config: RunConfig, stage: Any, folder: RunFolder, say: Callable[[str], None]
 ) -> tuple[LiveTuning | None, TuneServer | None]:
     """The live tuning of ``stage``'s law on ``folder``'s socket, started; (None, None) when the
     stage has no law or the socket cannot be made (said in one line: the run goes on untuned)."""
@@ -56,7 +57,7 @@ def open_tuning(
 
 
 def run_session(
-    config: dict[str, Any],
+    config: RunConfig,
     rig: Any,
     stage: Any,
     folder: RunFolder,
@@ -124,7 +125,7 @@ def run_session(
 
 def run_loop_process(
     process: LoopProcess,
-    config: dict[str, Any],
+    config: RunConfig,
     folder: RunFolder,
     duration_s: float | None,
     *,

@@ -37,6 +37,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from sashil.config.frozen import freeze_config
+from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
 
 #: rows of the stream per second of the loop's rate: how far the recorder may fall behind
@@ -77,7 +79,7 @@ def error_fields(err: BaseException) -> dict[str, Any]:
     return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
 
 
-def run_stage(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+def run_stage(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
     """``sashil run``'s stage: the config's law on its road (the rig's road motor gets the profile's
     speed); its label and the road's text."""
     from sashil.control.registry import make_stage
@@ -90,7 +92,7 @@ def run_stage(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: 
     return stage, label, road_text
 
 
-def drop_test_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+def drop_test_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
     """One drop of a drop test (:func:`sashil.experiments.drop_test.plan_drop`), its operator
     prompts sent to the session as they come; the stage that takes over at the release is the
     config's law, none, or one of :data:`STAGES` built from its spec."""
@@ -114,7 +116,7 @@ def calibration_step(spec: dict[str, Any]) -> Any:
 STAGES = {"calibration-step": calibration_step}
 
 
-def sweep_plan(config: dict[str, Any], spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
+def sweep_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
     """One run of a sweep (a chirp, or one frequency of a stepped sine): the config's law on the road
     of the spec (:func:`sashil.experiments.sweep.sweep_stage`)."""
     from sashil.experiments.sweep import sweep_stage
@@ -132,7 +134,7 @@ PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 GREET_AT_START = frozenset({"drop-test"})
 
 
-def build(config: dict[str, Any], spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
+def build(config: RunConfig, spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
     """The rig (built, configured: its port open and the board greeted) and the warmed plan of
     ``spec`` (:data:`PLANS`), its label and the road's text."""
     from sashil.drivers import open_rig
@@ -208,7 +210,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         logger.setLevel(int(job["log_level"]))
     if job.get("sys_path"):  # the session's import path: a law named as module:Class imports as it did there
         sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
-    config = job["config"]
+    config = freeze_config(job["config"])  # read-only here too, as the session resolved it
     loop_cfg = config["loop"]
     rate = float(loop_cfg["rate_hz"])
     rig, stage, label, road_text = build(config, job.get("plan") or {"kind": "run"}, messages)
