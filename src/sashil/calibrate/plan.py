@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from sashil.config.typed import RunConfig
+from sashil.config.verb_checks import check_theta0
 from sashil.errors import ConfigError
-from sashil.experiments.drop_test import check_theta0
 
 #: rig time a step costs beyond its record (connect, the operator's hold and release), an estimate
 STEP_OVERHEAD_S = 2.0

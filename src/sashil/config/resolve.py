@@ -11,14 +11,13 @@ is refused in one line naming it, never silently replaced.
 
 from __future__ import annotations
 
-import importlib
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sashil.config import Config, apply_params, check_controller, load_config
+from sashil.config import Config, apply_params, check_controller, load_config, verb_checks
 from sashil.config.frozen import freeze_config
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
@@ -34,14 +33,14 @@ REAL_CLOCK_VERBS = ("run",)
 #: verbs that drive no rig (a model on recorded inputs): no key of theirs depends on a backend, and
 #: their model need not be one the rig can run
 RIGLESS_VERBS = ("simulate",)
-#: verb -> ``module:function(config, named)`` that checks the verb's own keys beyond the schema
-#: (``named(key)`` is the option that set a key, or the key), imported when that verb resolves
-VERB_CHECKS = {
-    "drop-test": "sashil.experiments.drop_test:check_drops",
-    "run": "sashil.lab._closed_loop:check_run",
-    "simulate": "sashil.lab._simulate:check_simulate",
-    "sweep": "sashil.lab._sweep:check_sweep",
-    "compare": "sashil.lab._compare:check_compare",
+#: verb -> ``function(config, named)`` that checks the verb's own keys beyond the schema
+#: (``named(key)`` is the option that set a key, or the key)
+VERB_CHECKS: dict[str, Callable[[RunConfig, Callable[[str], str]], None]] = {
+    "drop-test": verb_checks.check_drops,
+    "run": verb_checks.check_run,
+    "simulate": verb_checks.check_simulate,
+    "sweep": verb_checks.check_sweep,
+    "compare": verb_checks.check_compare,
 }
 
 
@@ -121,11 +120,11 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
         config = apply_values(config, [(["driver", "port"], source.port)], "--port")
     if verb not in RIGLESS_VERBS:
         _resolve_backend(config, source, verb)
+    resolved = freeze_config(config)
     check = VERB_CHECKS.get(verb or "")
     if check is not None:  # the verb's own checks of its keys, naming the option that set each
-        module, _, name = check.partition(":")
-        getattr(importlib.import_module(module), name)(config, lambda key: _named(source, key))
-    return freeze_config(config)
+        check(resolved, lambda key: _named(source, key))
+    return resolved
 
 
 def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> None:

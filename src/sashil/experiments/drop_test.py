@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from sashil.config.typed import RunConfig
+from sashil.config.verb_checks import check_theta0
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
@@ -62,44 +63,6 @@ def pseudo_terminal(rig: Any) -> str | None:
     if not isinstance(port, str) or not port.startswith("/"):
         return None
     return port if os.path.realpath(port).startswith("/dev/pts/") else None
-
-
-#: the largest hold angle a drop test accepts [deg]
-THETA0_LIMIT_DEG = 30.0
-
-
-def check_drops(config: RunConfig, named: Callable[[str], str]) -> None:
-    """The ``drop_test`` keys a run can honour: a hold angle within ±THETA0_LIMIT_DEG and far enough
-    from 0 for the release to be seen, and each current once, within [0, rig.current_max_a];
-    ``named(key)`` is the option that set a key (``--current``), or the key."""
-    section = config["drop_test"]
-    theta0 = section["theta0_deg"]
-    if not (math.isfinite(theta0) and abs(theta0) <= THETA0_LIMIT_DEG):
-        raise ConfigError(
-            f"{named('drop_test.theta0_deg')}: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {theta0:g}"
-        )
-    check_theta0(config, theta0, named("drop_test.theta0_deg"))
-    currents = list(section["currents_a"])
-    where = named("drop_test.currents_a")
-    if not currents:
-        raise ConfigError(f"{where}: expected at least one current, got []")
-    i_max = config["rig"]["current_max_a"]
-    for value in currents:
-        if not (math.isfinite(value) and 0.0 <= value <= i_max):
-            raise ConfigError(f"{where}: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {value:g}")
-    if len(set(currents)) != len(currents):
-        raise ConfigError(f"{where}: each current once, got {currents}")
-
-
-def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-deg") -> None:
-    """Refuse a hold angle the release could not be detected from: the release is the arm moving
-    ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
-    threshold = config["drop_test"]["release_threshold_deg"]
-    if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
-        raise ConfigError(
-            f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "
-            f"(the release is detected when the arm moves that far from the hold), got {theta0_deg:g}"
-        )
 
 
 @dataclass

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from sashil.api import Run, load_run
+from sashil.calibrate.session import calibrate_rig
 from sashil.config.typed import RunConfig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -29,7 +30,6 @@ def calibrate(
     exists; a step that fails ends the plan with the runs so far kept and raises its error.
     Events: ``progress`` lines as the plan runs and the fit proceeds; ``output`` lines with the
     fit, the held-out NRMSE and the files written; the ``folder``."""
-    from sashil.calibrate.session import calibrate_rig
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("calibrate")

@@ -3,29 +3,30 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.typed import RunConfig
+from sashil.control.registry import make_stage
+from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
+from sashil.experiments.road_option import RoadStage, parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.recording.formats import can_formats
+from sashil.recording.plots import plot_run, plot_timing
+from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_progress import RunProgress, SessionHooks
+from sashil.runtime.clock import RealClock
+from sashil.runtime.loop import record_columns
+from sashil.runtime.loop_process import LoopProcess
+from sashil.runtime.session import run_loop_process, run_session
 from sashil.runtime.signals import StopFlag
+from sashil.runtime.timing import format_timing
+from sashil.runtime.warmup import warm_up
 
-__all__ = ["check_run", "closed_loop"]
-
-
-def check_run(config: RunConfig, named: Callable[[str], str]) -> None:
-    """The ``run`` keys a run can honour: the road parses (named as the option or key that gave it)."""
-    from sashil.experiments.road_option import parse_road
-
-    spec = config["run"]["road"]
-    try:
-        parse_road(spec, config)
-    except ConfigError as err:
-        where = named("run.road")
-        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
+__all__ = ["closed_loop"]
 
 
 def closed_loop(
@@ -49,19 +50,6 @@ def closed_loop(
     ``timing.cycles`` and ``timing.missed_deadlines`` the loop's counts. ``stop``: a flag another
     thread may set (:meth:`~sashil.runtime.signals.StopFlag.request`) to stop the run cleanly. Bad input (a port that cannot be opened) raises ConfigError
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
-    from sashil.control.registry import make_stage
-    from sashil.drivers import open_rig
-    from sashil.experiments.road_option import RoadStage, parse_road
-    from sashil.recording.formats import can_formats
-    from sashil.recording.plots import plot_run, plot_timing
-    from sashil.recording.run_folder import RunFolder
-    from sashil.recording.run_progress import RunProgress, SessionHooks
-    from sashil.runtime.clock import RealClock
-    from sashil.runtime.loop import record_columns
-    from sashil.runtime.loop_process import LoopProcess
-    from sashil.runtime.session import run_loop_process, run_session
-    from sashil.runtime.timing import format_timing
-    from sashil.runtime.warmup import warm_up
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])

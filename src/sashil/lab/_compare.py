@@ -13,19 +13,30 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.frozen import freeze, thaw
+from sashil.config.overrides import apply_overrides, parse_override
+from sashil.config.sections import CONTROLLER
 from sashil.config.typed import RunConfig
+from sashil.control.law_registry import find_law
+from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, SashilError
+from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.optimal_bound import optimal_bound
+from sashil.experiments.road_option import parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
+from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_set import ending
 
 __all__ = [
     "CompareLaw",
-    "check_compare",
     "compare",
     "folder_name",
     "law_parameters",
@@ -45,31 +56,9 @@ class CompareLaw:
     sets: Sequence[str] = ()
 
 
-def check_compare(config: RunConfig, named: Callable[[str], str]) -> None:
-    """The ``compare`` keys a run can honour: the road parses, and each law runs longer than the
-    start its metrics leave out (``compare.settle_s``); ``named(key)`` is the option that set a key
-    (``--road``, ``--duration``), or the key."""
-    from sashil.experiments.road_option import parse_road
-
-    section = config["compare"]
-    try:
-        parse_road(section["road"], config)
-    except ConfigError as err:
-        where = named("compare.road")
-        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
-    duration, settle = float(section["duration_s"]), float(section["settle_s"])
-    if duration <= settle:
-        raise ConfigError(
-            f"{named('compare.duration_s')}: expected more than compare.settle_s = {settle:g} s (the start of each "
-            f"law's run the metrics leave out), got {duration:g}"
-        )
-
-
 def split_sets(overrides: Sequence[str]) -> tuple[list[str], list[tuple[str, str]]]:
     """``--set`` items for the base config, and ``(param, item)`` for the laws' own parameters
     (``controller.<p>`` that is not a key of the controller section)."""
-    from sashil.config.overrides import parse_override
-    from sashil.config.sections import CONTROLLER
 
     base, law_sets = [], []
     for item in overrides:
@@ -86,7 +75,6 @@ def split_sets(overrides: Sequence[str]) -> tuple[list[str], list[tuple[str, str
 def laws_of(specs: Sequence[str], law_sets: Sequence[tuple[str, str]]) -> list[CompareLaw]:
     """The laws of repeated ``--controller``, each with the ``--set`` items (from :func:`split_sets`)
     of the parameters it declares; ConfigError for an unknown law, or an item no law declares."""
-    from sashil.control.law_registry import find_law
 
     laws, used = [], set()
     for spec in specs:
@@ -108,10 +96,6 @@ def _law_config(base: Mapping[str, Any], law: CompareLaw, extra: Sequence[str] =
     """``base`` running ``law`` with its parameters, checked (ConfigError naming --controller and
     the key) and read-only. Parameters of another law that ``base`` holds (a law's own config.yaml
     given back with --config) are left out."""
-    from sashil.config.frozen import freeze, thaw
-    from sashil.config.overrides import apply_overrides
-    from sashil.config.sections import CONTROLLER
-    from sashil.control.law_registry import find_law
 
     try:
         declared = find_law(law.law).cls.params()  # an unknown law named as such, before its parameters
@@ -140,8 +124,6 @@ def own_law(config: RunConfig) -> list[CompareLaw]:
 
 def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, duration: float) -> list[Any]:
     """The references (passive at 0 A and i_max) and each law, every config checked."""
-    from sashil.control.law_registry import find_law
-    from sashil.experiments.compare import LawJob
 
     i_max = float(base["rig"]["current_max_a"])
     jobs: dict[str, LawJob] = {}
@@ -160,7 +142,6 @@ def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
     """The parameters a law ran with: the law's own values as its run reported them
     (``controller_stats.law.parameters``), else those its config gives (each declared parameter,
     its default when unset); the passive stage's current."""
-    from sashil.control.law_registry import find_law
 
     stats = (result.summary or {}).get("controller_stats") or {}
     reported = (stats.get("law") or {}).get("parameters") if isinstance(stats, Mapping) else None
@@ -174,7 +155,6 @@ def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
 def _law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
     """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
     parameters) and its metrics (also as its one entry of ``runs``)."""
-    from sashil.control.law_registry import find_law
 
     entry = find_law(str(config["controller"]["law"]))
     common = dict(result.summary)
@@ -205,8 +185,6 @@ def _run_jobs(jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_
     the rig at rest for ``rest_s`` between them."""
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
-
-    from sashil.experiments.compare import run_job
 
     def done(result: Any) -> None:
         on_event(
@@ -252,8 +230,6 @@ def _accel_note(results: list[Any], bandwidth_hz: float) -> str:
 def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) -> Any:
     """The optimal bound on this road for the config's model (None without a road, or when the run
     is shorter than the settling time)."""
-    from sashil.experiments.optimal_bound import optimal_bound
-    from sashil.models.hysteresis import BoucWenParams
 
     settle = float(config["compare"]["settle_s"])
     if road is None or duration <= settle:
@@ -287,11 +263,6 @@ def compare(
     Bad input (an unknown law, a parameter its ``Param`` refuses) raises ConfigError before any
     folder exists. A law that fails or trips does not raise: its row says why, the summary ends
     ``error`` (exit code 1) naming it, and a ``warning`` event says so."""
-    from sashil.drivers import on_virtual_clock
-    from sashil.experiments.road_option import parse_road
-    from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
-    from sashil.recording.run_folder import RunFolder
-    from sashil.recording.run_set import ending
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])

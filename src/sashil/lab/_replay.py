@@ -12,9 +12,14 @@ import numpy as np
 
 from sashil.api import Run, load_run
 from sashil.config.typed import RunConfig
+from sashil.control.registry import make_controller
 from sashil.errors import DataFileError
+from sashil.experiments import replay as offline
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.recording.plots import has_values, pyplot, save_figure
+from sashil.recording.run_folder import RunFolder
+from sashil.runtime.session import EVENTS_FILE
 
 __all__ = ["recorded_config", "replay"]
 
@@ -52,10 +57,6 @@ def replay(
     (``replay``: the law, rows, the differences from the recorded commands, speed). Bad input (not
     a run folder, a data file without the columns a replay needs, a law's bad parameter) raises
     ConfigError before any folder exists."""
-    from sashil.control.registry import make_controller
-    from sashil.experiments import replay as offline
-    from sashil.recording.run_folder import RunFolder
-    from sashil.runtime.session import EVENTS_FILE
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("replay")
@@ -106,7 +107,6 @@ def replay(
 def _plot(path: Path, data: dict[str, np.ndarray], out: dict[str, np.ndarray], law: str) -> None:
     """``replay.png``: the recorded and the replayed current command (and torque command, when
     either has one) against time."""
-    from sashil.recording.plots import has_values, pyplot, save_figure
 
     plt = pyplot()
     torque = has_values(data, "torque_cmd_nm") or has_values(out, "replay_torque_cmd_nm")

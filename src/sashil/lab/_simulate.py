@@ -5,7 +5,7 @@ summary.json), with the fit to the recorded angle when there is one."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -13,43 +13,24 @@ import numpy as np
 
 from sashil.api import Run, load_run
 from sashil.config.typed import RunConfig
+from sashil.config.verb_checks import input_file
 from sashil.errors import ConfigError
+from sashil.experiments.metrics import drop_metrics
+from sashil.identify.simulate import drop_test_inputs, simulate_columns
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.data_file import read_data_csv
+from sashil.recording.plots import BESIDE, pyplot, save_figure
+from sashil.recording.run_folder import RunFolder
+from sashil.stats import nrmse
 
-__all__ = ["check_simulate", "drop_table", "input_file", "simulate"]
-
-
-def input_file(value: str, where: str = "--input") -> Path:
-    """The data file of ``simulate.input`` (``where``: the option or key that gave it): the file
-    itself, or a run folder's ``data.csv``; a folder of several runs is refused, naming them."""
-    path = Path(value)
-    if not path.is_dir():
-        return path
-    if (path / "data.csv").is_file():
-        return path / "data.csv"
-    runs = sorted(found.parent.name for found in path.glob("*/data.csv"))
-    if runs:
-        example = f"--input {path / runs[0]}" if where == "--input" else f"{where}: {path / runs[0]}"
-        raise ConfigError(
-            f"{where} {path}: a folder of {len(runs)} runs ({', '.join(runs[:4])}{', ...' if len(runs) > 4 else ''}); "
-            f"simulate takes one, e.g. {example}"
-        )
-    raise ConfigError(f"{where} {path}: a folder without data.csv (expected a data.csv or a run folder)")
-
-
-def check_simulate(config: RunConfig, named: Callable[[str], str]) -> None:
-    """The ``simulate`` keys a run can honour: an input that is a data file or one run's folder."""
-    value = config["simulate"]["input"]
-    if value:
-        input_file(value, named("simulate.input"))
+__all__ = ["drop_table", "simulate"]
 
 
 def _inputs(config: RunConfig) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
     """The model's inputs (time, current, road, torque and the initial angle), the recorded angle
     to compare with (None for a drop test) and a description of the source."""
-    from sashil.identify.simulate import drop_test_inputs
-    from sashil.recording.data_file import read_data_csv
 
     section = config["simulate"]
     if not section["input"]:
@@ -81,17 +62,12 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     drop-test metrics of both angles when the input is a drop). Bad input (an unreadable data file,
     one without a current column) raises ConfigError before any folder exists. Events: ``output``
     lines (the folder and the fit, the drop-test table), as ``sashil simulate`` prints them."""
-    from sashil.identify.simulate import simulate_columns
-    from sashil.recording.run_folder import RunFolder
-    from sashil.stats import nrmse
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("simulate")
     model = config["model"]["name"]
     params = dict(config["model"]["params"])
     if model == "bouc-wen":
-        from sashil.models.hysteresis import BoucWenParams
-
         params = {**BoucWenParams().as_dict(), **params}
     inputs, measured, source = _inputs(config)
     columns = simulate_columns(model, params, inputs, start_at_rest=config["simulate"]["start"] == "rest")
@@ -132,7 +108,6 @@ def _drop_metrics(
 ) -> dict[str, Any]:
     """Drop-test metrics (period, peaks, ζ) of the simulated angle and, when given, the recorded one,
     with the config's settling band and encoder resolution."""
-    from sashil.experiments.metrics import drop_metrics
 
     band = config["drop_test"]["settle_band_deg"]
     resolution = 2.0 * math.pi / config["rig"]["encoder_counts_per_rev"]
@@ -164,8 +139,6 @@ def _plot(path: Path, columns: Mapping[str, np.ndarray], model: str, source: str
     """``theta.png``: the simulated angle (and the recorded one when given, with the residual
     simulated − recorded below it); the title names the model, the input and the NRMSE."""
     from matplotlib.ticker import MaxNLocator
-
-    from sashil.recording.plots import BESIDE, pyplot, save_figure
 
     measured = columns.get("theta_measured_rad")
     rows = 2 if measured is not None else 1

@@ -10,18 +10,39 @@ through events.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.typed import RunConfig
+from sashil.control.law_registry import law_label
+from sashil.control.registry import make_controller
 from sashil.errors import ConfigError, SashilError
+from sashil.experiments.sweep import (
+    SWEEP_COLUMNS,
+    ac_rms,
+    chirp_profile,
+    default_rig,
+    frequencies,
+    run_sweep,
+    stepped_sine,
+)
+from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+from sashil.recording.formats import can_formats
+from sashil.recording.labels import controller_label
+from sashil.recording.plots import plot_chirp, plot_transmissibility
+from sashil.recording.rerun_log import feasible_band
+from sashil.recording.run_folder import RunFolder
+from sashil.recording.run_progress import SessionHooks
+from sashil.recording.run_set import RunSet
+from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
+from sashil.stats import nrmse
 
-__all__ = ["TRANSMISSIBILITY_COLUMNS", "check_sweep", "sweep"]
+__all__ = ["TRANSMISSIBILITY_COLUMNS", "sweep"]
 
 #: the columns of a stepped sine's ``transmissibility.csv``, one row per frequency
 TRANSMISSIBILITY_COLUMNS = (
@@ -34,30 +55,8 @@ TRANSMISSIBILITY_COLUMNS = (
 )
 
 
-def check_sweep(config: RunConfig, named: Callable[[str], str]) -> None:
-    """The ``sweep`` keys a run can honour: each frequency in (0, loop.rate_hz / 10], the stop at or
-    above the start, and above it for a stepped sine; ``named(key)`` is the option that set a key
-    (``--f-stop``), or the key."""
-    section = config["sweep"]
-    f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
-    start_name, stop_name = named("sweep.f_start_hz"), named("sweep.f_stop_hz")
-    top = config["loop"]["rate_hz"] / 10
-    for option, value in ((start_name, f_start), (stop_name, f_stop)):
-        if not (math.isfinite(value) and 0.0 < value <= top):
-            raise ConfigError(f"{option}: expected a frequency in (0, {top:g}] Hz, got {value:g}")
-    if f_stop < f_start:
-        raise ConfigError(
-            f"{stop_name}: expected a frequency at or above {start_name} ({f_start:g} Hz), got {f_stop:g}"
-        )
-    if section["stepped"] and f_stop == f_start:
-        raise ConfigError(
-            f"{stop_name}: a stepped sine needs a frequency above {start_name} ({f_start:g} Hz), got {f_stop:g}"
-        )
-
-
 def _label(config: RunConfig) -> str:
     """What commanded the damper: the law, or the passive current."""
-    from sashil.control.law_registry import law_label
 
     name = law_label(config["controller"]["law"])[0]
     return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
@@ -94,17 +93,11 @@ def sweep(
     Bad input (exit code 2: ConfigError; DriverError for a port that cannot be opened) is raised with
     no folder left; a run that fails after it started raises the error that ended it, after the
     folder is complete (the data up to the failure, the summary)."""
-    from sashil.control.registry import make_controller
-    from sashil.experiments.sweep import SWEEP_COLUMNS
-    from sashil.recording.run_folder import RunFolder
-    from sashil.recording.run_progress import SessionHooks
-    from sashil.recording.run_set import RunSet
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])
     make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
     stepped = bool(config["sweep"]["stepped"])
-    from sashil.recording.formats import can_formats
 
     # the config's law runs each frequency, so on the real clock a loop process runs it (unless the
     # CAN frames are traced: a sweep's one trace follows the rigs in this process)
@@ -121,7 +114,6 @@ def sweep(
     traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
 
     def rig_factory(cfg: Any, road: Any) -> Any:  # every rig of the sweep feeds the one trace
-        from sashil.experiments.sweep import default_rig
 
         rig = default_rig(cfg, road)
         if traces:
@@ -179,10 +171,6 @@ def _stepped(
 ) -> None:
     """The stepped sine: each frequency's run into ``runs`` and its sub-folder, the table and plot
     into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
-    from sashil.control.registry import make_controller
-    from sashil.experiments.sweep import frequencies, stepped_sine
-    from sashil.identify.progress import Progress
-    from sashil.runtime.runner import CYCLES_FILE
 
     section = config["sweep"]
     name = config["controller"]["law"]
@@ -250,8 +238,6 @@ def _stepped(
 
 def _plot(folder: Any, points: list[Any], label: str, config: RunConfig) -> None:
     """``transmissibility.png``, the curve named by the law, its parameters and current."""
-    from sashil.recording.labels import controller_label
-    from sashil.recording.plots import plot_transmissibility
 
     freq = [p.frequency_hz for p in points]
     curve = (controller_label({"controller": label}, config), freq, [p.transmissibility for p in points])
@@ -272,13 +258,6 @@ def _chirp(
 ) -> None:
     """The chirp: one run into ``folder`` (data.csv however it ends, chirp.png, the live view), the
     body's RMS and peak into ``extra``."""
-    from sashil.control.registry import make_controller
-    from sashil.experiments.sweep import ac_rms, chirp_profile, run_sweep
-    from sashil.recording.labels import controller_label
-    from sashil.recording.plots import plot_chirp
-    from sashil.recording.rerun_log import feasible_band
-    from sashil.runtime.runner import CYCLES_FILE
-    from sashil.stats import nrmse
 
     section = config["sweep"]
     f_start, f_stop, duration = section["f_start_hz"], section["f_stop_hz"], section["duration_s"]

@@ -1,0 +1,139 @@
+"""What each verb checks of its own keys beyond the schema, before anything runs.
+
+:func:`sashil.config.resolve.resolve` calls a verb's check (``VERB_CHECKS``) with the config it has
+just validated and ``named(key)``, the option that set a key (``--road``, ``--current``) or the key
+itself, so each refusal is one line naming what the user typed. These are cheap: nothing is opened,
+built or written.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from sashil.config.typed import RunConfig
+from sashil.errors import ConfigError
+
+__all__ = [
+    "THETA0_LIMIT_DEG",
+    "check_compare",
+    "check_drops",
+    "check_run",
+    "check_simulate",
+    "check_sweep",
+    "check_theta0",
+    "input_file",
+]
+
+#: the largest hold angle a drop test accepts [deg]
+THETA0_LIMIT_DEG = 30.0
+
+Named = Callable[[str], str]
+
+
+def check_drops(config: RunConfig, named: Named) -> None:
+    """The ``drop_test`` keys a run can honour: a hold angle within ±THETA0_LIMIT_DEG and far enough
+    from 0 for the release to be seen, and each current once, within [0, rig.current_max_a]."""
+    section = config["drop_test"]
+    theta0 = section["theta0_deg"]
+    if not (math.isfinite(theta0) and abs(theta0) <= THETA0_LIMIT_DEG):
+        raise ConfigError(
+            f"{named('drop_test.theta0_deg')}: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {theta0:g}"
+        )
+    check_theta0(config, theta0, named("drop_test.theta0_deg"))
+    currents = list(section["currents_a"])
+    where = named("drop_test.currents_a")
+    if not currents:
+        raise ConfigError(f"{where}: expected at least one current, got []")
+    i_max = config["rig"]["current_max_a"]
+    for value in currents:
+        if not (math.isfinite(value) and 0.0 <= value <= i_max):
+            raise ConfigError(f"{where}: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {value:g}")
+    if len(set(currents)) != len(currents):
+        raise ConfigError(f"{where}: each current once, got {currents}")
+
+
+def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-deg") -> None:
+    """Refuse a hold angle the release could not be detected from: the release is the arm moving
+    ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
+    threshold = config["drop_test"]["release_threshold_deg"]
+    if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
+        raise ConfigError(
+            f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "
+            f"(the release is detected when the arm moves that far from the hold), got {theta0_deg:g}"
+        )
+
+
+def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) -> None:
+    """ConfigError naming ``named(key)`` when the road ``text`` does not parse."""
+    from sashil.experiments.road_option import parse_road  # numpy and the road profiles: only for a road
+
+    try:
+        parse_road(text, config)
+    except ConfigError as err:
+        where = named(key)
+        raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None
+
+
+def check_run(config: RunConfig, named: Named) -> None:
+    """The ``run`` keys a run can honour: the road parses."""
+    _road_parses(config, config["run"]["road"], "run.road", named)
+
+
+def check_compare(config: RunConfig, named: Named) -> None:
+    """The ``compare`` keys a run can honour: the road parses, and each law runs longer than the
+    start its metrics leave out (``compare.settle_s``)."""
+    section = config["compare"]
+    _road_parses(config, section["road"], "compare.road", named)
+    duration, settle = float(section["duration_s"]), float(section["settle_s"])
+    if duration <= settle:
+        raise ConfigError(
+            f"{named('compare.duration_s')}: expected more than compare.settle_s = {settle:g} s (the start of each "
+            f"law's run the metrics leave out), got {duration:g}"
+        )
+
+
+def check_sweep(config: RunConfig, named: Named) -> None:
+    """The ``sweep`` keys a run can honour: each frequency in (0, loop.rate_hz / 10], the stop at or
+    above the start, and above it for a stepped sine."""
+    section = config["sweep"]
+    f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
+    start_name, stop_name = named("sweep.f_start_hz"), named("sweep.f_stop_hz")
+    top = config["loop"]["rate_hz"] / 10
+    for option, value in ((start_name, f_start), (stop_name, f_stop)):
+        if not (math.isfinite(value) and 0.0 < value <= top):
+            raise ConfigError(f"{option}: expected a frequency in (0, {top:g}] Hz, got {value:g}")
+    if f_stop < f_start:
+        raise ConfigError(
+            f"{stop_name}: expected a frequency at or above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+    if section["stepped"] and f_stop == f_start:
+        raise ConfigError(
+            f"{stop_name}: a stepped sine needs a frequency above {start_name} ({f_start:g} Hz), got {f_stop:g}"
+        )
+
+
+def input_file(value: str, where: str = "--input") -> Path:
+    """The data file of ``simulate.input`` (``where``: the option or key that gave it): the file
+    itself, or a run folder's ``data.csv``; a folder of several runs is refused, naming them."""
+    path = Path(value)
+    if not path.is_dir():
+        return path
+    if (path / "data.csv").is_file():
+        return path / "data.csv"
+    runs = sorted(found.parent.name for found in path.glob("*/data.csv"))
+    if runs:
+        example = f"--input {path / runs[0]}" if where == "--input" else f"{where}: {path / runs[0]}"
+        raise ConfigError(
+            f"{where} {path}: a folder of {len(runs)} runs ({', '.join(runs[:4])}{', ...' if len(runs) > 4 else ''}); "
+            f"simulate takes one, e.g. {example}"
+        )
+    raise ConfigError(f"{where} {path}: a folder without data.csv (expected a data.csv or a run folder)")
+
+
+def check_simulate(config: RunConfig, named: Named) -> None:
+    """The ``simulate`` keys a run can honour: an input that is a data file or one run's folder."""
+    value = config["simulate"]["input"]
+    if value:
+        input_file(value, named("simulate.input"))
