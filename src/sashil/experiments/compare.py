@@ -35,6 +35,15 @@ from typing import Any
 import numpy as np
 
 from sashil.config.typed import RunConfig
+from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
+from sashil.drivers.interface import capabilities_of
+from sashil.experiments.drop_test import default_clock
+from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.recording.run_folder import RunFolder
+from sashil.runtime.loop import stage_signals
+from sashil.runtime.runner import run_plan
+from sashil.runtime.stages import ConstantCurrent
 
 __all__ = ["LawJob", "LawResult", "MeasuredStage", "metrics_of", "run_job"]
 
@@ -91,8 +100,6 @@ class MeasuredStage:
     ``arm_accel_true_rad_s2`` (NaN on any other rig)."""
 
     def __init__(self, stage: Any, rig: Any):
-        from sashil.drivers.interface import capabilities_of
-        from sashil.runtime.loop import stage_signals
 
         self.stage = stage
         self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
@@ -186,8 +193,6 @@ def metrics_of(stream: dict[str, Any], config: RunConfig) -> tuple[dict[str, flo
 
 
 def _stage(config: RunConfig) -> Any:
-    from sashil.control.registry import make_controller
-    from sashil.runtime.stages import ConstantCurrent
 
     section = config["controller"]
     if section["law"] == "passive":
@@ -199,12 +204,6 @@ def run_job(job: LawJob) -> LawResult:
     """Run one law on the road (on the clock the config's backend runs on) and measure it; a law
     that fails, trips or stops gets a result saying why instead of metrics."""
     from scipy.signal import welch
-
-    from sashil.drivers import open_rig
-    from sashil.experiments.drop_test import default_clock
-    from sashil.experiments.road_option import RoadStage, parse_road
-    from sashil.recording.run_folder import RunFolder
-    from sashil.runtime.runner import run_plan
 
     config = job.config
     result = LawResult(job.label, metrics=dict.fromkeys(METRICS, math.nan))

@@ -42,8 +42,25 @@ from typing import Any
 from sashil import errors
 from sashil.config.frozen import thaw
 from sashil.config.typed import RunConfig
+from sashil.drivers import open_rig
+from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
+from sashil.runtime.mailbox import CALLER_STOP
+from sashil.runtime.runner import check_disk, losses
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
-from sashil.runtime.stream import MISSED_W, STOP_BY_CALLER, STOP_W, Stream, remove_stale
+from sashil.runtime.stream import (
+    FRAME_ERROR,
+    FRAME_EXTENDED,
+    FRAME_REMOTE,
+    FRAME_RX,
+    FRAMES_DROPPED_W,
+    MISSED_W,
+    STOP_BY_CALLER,
+    STOP_W,
+    Stream,
+    remove_stale,
+)
+from sashil.runtime.stream_recorder import StreamRecorder
+from sashil.runtime.tune_socket import TuneServer
 
 #: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
 REPLY_WAIT_S = 30.0
@@ -270,8 +287,6 @@ class LoopProcess:
         """The CAN frames the loop process sent and received since the last call, as ``can.Message``."""
         import can
 
-        from sashil.runtime.stream import FRAME_ERROR, FRAME_EXTENDED, FRAME_REMOTE, FRAME_RX
-
         if self.stream is None:
             return []
         return [
@@ -290,7 +305,6 @@ class LoopProcess:
 
     def frames_dropped(self) -> int:
         """CAN frames the loop process left out because the trace's ring was full."""
-        from sashil.runtime.stream import FRAMES_DROPPED_W
 
         return 0 if self.stream is None else int(self.stream.header[FRAMES_DROPPED_W])
 
@@ -416,8 +430,6 @@ def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str
     """After the loop process died: reopen the rig, command 0 A and read the coil current until it
     is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
     deactivated. Says what was found; a simulated rig ended with the process that held it."""
-    from sashil.drivers import open_rig
-    from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 
     found: dict[str, Any] = {"reopened": False}
     rig = open_rig(config)
@@ -486,10 +498,6 @@ def drive(
     If it died, keep its rows and reopen the rig to confirm 0 A (:func:`confirm_safe`). A run that
     lost more than the config allows ends ``lossy``. A failure before the go ends the loop process
     with nothing energised and raises."""
-    from sashil.runtime.mailbox import CALLER_STOP
-    from sashil.runtime.runner import check_disk, losses
-    from sashil.runtime.stream_recorder import StreamRecorder
-    from sashil.runtime.tune_socket import TuneServer
 
     stream = process.stream
     assert stream is not None
