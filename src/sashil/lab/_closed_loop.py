@@ -8,23 +8,17 @@ from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.typed import RunConfig
-from sashil.control.registry import make_stage
-from sashil.drivers import open_rig
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.road_option import RoadStage, parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
 from sashil.recording.formats import can_formats
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
-from sashil.runtime.clock import RealClock
-from sashil.runtime.loop import record_columns
 from sashil.runtime.loop_process import LoopProcess
-from sashil.runtime.session import run_loop_process, run_session
+from sashil.runtime.session import run_loop_process
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
-from sashil.runtime.warmup import warm_up
 
 __all__ = ["closed_loop"]
 
@@ -70,22 +64,7 @@ def closed_loop(
             raise
         label, road_text, columns = ready["label"], ready["road"], tuple(ready["columns"])
     else:
-        rig = open_rig(config)  # built, not opened
-        try:
-            label, stage = make_stage(config)
-            road, road_text = parse_road(config["run"]["road"], config)
-            if road is not None:
-                stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
-            # the kernels and the law warmed before the board is greeted: a board's timers start at the
-            # handshake, and the loop's first deadline follows it at once
-            warm_up(stage, lambda line: on_event(Event("progress", line)))
-            # open the port and greet the board now (configure is idempotent; the loop's own call finds
-            # it done): a port that cannot be opened is one line, before any set-up, output or folder
-            rig.configure()
-        except BaseException:
-            rig.close()
-            raise
-        columns = record_columns(stage)
+        rig, stage, label, road_text, columns = _in_this_process(config, on_event)
     try:
         folder = RunFolder.create(outputs.out, "run")
     except BaseException:
@@ -151,6 +130,9 @@ def closed_loop(
         if process is not None:
             outcome = run_loop_process(process, config, folder, duration, **hooks)
         else:
+            from sashil.runtime.clock import RealClock
+            from sashil.runtime.session import run_session
+
             clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
             outcome = run_session(config, rig, stage, folder, clock, duration, **hooks)
     finally:
@@ -172,3 +154,31 @@ def closed_loop(
             raise error
         raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
     return load_run(folder.path)
+
+
+def _in_this_process(config: RunConfig, on_event: Listener) -> tuple[Any, Any, str, str, tuple[str, ...]]:
+    """The rig (its port open, the board greeted), the stage, its label, the road's text and the
+    stage's columns, for a loop in this process (``loop.process: false``). The law, the estimator
+    and numba's kernels load here: a session whose loop runs in a loop process never loads them."""
+    from sashil.control.registry import make_stage
+    from sashil.drivers import open_rig
+    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.warmup import warm_up
+
+    rig = open_rig(config)  # built, not opened
+    try:
+        label, stage = make_stage(config)
+        road, road_text = parse_road(config["run"]["road"], config)
+        if road is not None:
+            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+        # the kernels and the law warmed before the board is greeted: a board's timers start at the
+        # handshake, and the loop's first deadline follows it at once
+        warm_up(stage, lambda line: on_event(Event("progress", line)))
+        # open the port and greet the board now (configure is idempotent; the loop's own call finds
+        # it done): a port that cannot be opened is one line, before any set-up, output or folder
+        rig.configure()
+    except BaseException:
+        rig.close()
+        raise
+    return rig, stage, label, road_text, tuple(record_columns(stage))

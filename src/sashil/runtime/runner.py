@@ -48,7 +48,6 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
-from sashil.runtime.warmup import warm_up
 from sashil.safety import SafetySupervisor
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
@@ -265,6 +264,10 @@ def run_plan(
         warn=say,
         tuning=tuning,
     )
+    # loaded here, not with the module: a session whose loop runs in a loop process imports this
+    # module for its summary and never loads numba's kernels itself
+    from sashil.runtime.warmup import warm_up
+
     warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error: BaseException | None = None
     with catch_stop_signals(stop) as flag:
