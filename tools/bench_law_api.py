@@ -29,7 +29,7 @@ from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.road_option import parse_road
-from sashil.models.hysteresis import compile_kernels
+from sashil.runtime.warmup import warm_kernels
 
 #: a plain-Python skyhook of about ten lines, as a lab would write it (no numba)
 PLAIN_LAW = '''
@@ -71,7 +71,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="2 000 cycles: the code path, not a measurement")
     args = parser.parse_args()
     cycles = 2_000 if args.quick else args.cycles
-    compile_kernels()
+    warm_kernels()
     samples = record_samples(cycles)
     with tempfile.TemporaryDirectory() as tmp:
         law_file = Path(tmp) / "plain_skyhook.py"

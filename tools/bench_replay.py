@@ -28,10 +28,10 @@ from sashil.control.registry import make_controller
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.replay import differences, replay
 from sashil.experiments.road_option import RoadStage, parse_road
-from sashil.models.hysteresis import compile_kernels
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.runner import run_plan
+from sashil.runtime.warmup import warm_kernels
 
 LAWS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("skyhook", {"c_sky": 2.0}),
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.quick:
         args.seconds, args.passes = 2.0, 1
-    compile_kernels()
+    warm_kernels()
     base = default_config()
     base["loop"]["rate_hz"] = 1000.0
     own = law_config(base, *LAWS[0])

@@ -38,9 +38,9 @@ from sashil.config.typed import RunConfig
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
-from sashil.experiments.drop_test import default_clock
 from sashil.experiments.road_option import RoadStage, parse_road
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime.clock import default_clock
 from sashil.runtime.loop import stage_signals
 from sashil.runtime.runner import run_plan
 from sashil.runtime.stages import ConstantCurrent

@@ -29,7 +29,7 @@ from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
-from sashil.runtime.clock import Clock, RealClock, VirtualClock
+from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
@@ -373,16 +373,6 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
     if "device_time_us" in stream:  # the device's clock at the release (between two samples)
         record.device_release_s = float(np.interp(release_ns, t_ns, stream["device_time_us"] * 1e-6))
     return record
-
-
-def default_clock(config: RunConfig) -> Clock:
-    """Simulated time for a simulated backend unless the config asks for the real clock
-    (:func:`sashil.drivers.on_virtual_clock`), else the real clock."""
-    from sashil.drivers import on_virtual_clock
-
-    if on_virtual_clock(config):
-        return VirtualClock()
-    return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
 
 
 #: ``run_drop_test(controller=CONFIG_LAW)``: the config's law takes over at the release, made where

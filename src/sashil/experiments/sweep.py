@@ -266,7 +266,7 @@ def run_sweep(
     ``law_of_config``: ``controller`` is the config's law, so on the real clock with
     ``loop.process`` a loop process can run the same stage of its own (:func:`sweep_stage`; the
     road a :class:`SweepRoad`); ``rig_factory`` then goes unused. Clock: ``clock``, else the
-    config's (:func:`~sashil.experiments.drop_test.default_clock`: the virtual one for the simulated
+    config's (:func:`~sashil.runtime.clock.default_clock`: the virtual one for the simulated
     rig, the real one for a link). ``keep`` gets the columns recorded so far however the run ends
     (a link fault, a safety trip, a stop), before the error propagates. ``data_path``: the runner
     streams every cycle there as it runs. ``live``: views of the stream (``start(stream, timing)``,
@@ -275,7 +275,7 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    from sashil.experiments.drop_test import default_clock
+    from sashil.runtime.clock import default_clock
     from sashil.runtime.plan_process import in_loop_process, run_plan_process
 
     clock = clock if clock is not None else default_clock(config)

@@ -199,11 +199,3 @@ class BoucWenZ:
             previous = angle
             out[index] = z
         return out
-
-
-def compile_kernels() -> None:
-    """Compile (or load from numba's cache) every kernel a loop cycle can call, so that the first
-    cycle of a run is on time (:func:`sashil.runtime.warmup.warm_kernels`)."""
-    from sashil.runtime.warmup import warm_kernels
-
-    warm_kernels()

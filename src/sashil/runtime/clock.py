@@ -9,6 +9,9 @@ from __future__ import annotations
 import time
 from typing import Protocol
 
+from sashil.config.typed import RunConfig
+from sashil.drivers import on_virtual_clock
+
 
 class Clock(Protocol):
     def now_ns(self) -> int: ...
@@ -64,3 +67,11 @@ class VirtualClock:
     def advance(self, ns: int) -> None:
         """Let simulated time pass (tests use it to model compute time or a stall)."""
         self._now += int(ns)
+
+
+def default_clock(config: RunConfig) -> Clock:
+    """Simulated time for a simulated backend unless the config asks for the real clock
+    (:func:`sashil.drivers.on_virtual_clock`), else the real clock."""
+    if on_virtual_clock(config):
+        return VirtualClock()
+    return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
