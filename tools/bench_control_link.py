@@ -65,6 +65,7 @@ ZETA = 0.07
 ROAD_HZ, ROAD_DEG = 1.2, 1.0
 KEEP_AFTER_S = 3.0  # bench_control's torque tracking keeps t >= 3 s
 STEPPED = {"f_start": 1.0, "f_stop": 3.0, "steps": 3, "spacing": "log", "settle_s": 4.0, "measure_s": 2.0}
+DROP_LAWS = (("target-damping", "target damping"), ("passive", "constant 0.5 A"))
 STEPPED_LAWS = (("passive 0 A", "passive", 0.0), ("passive 1 A", "passive", 1.0), ("skyhook c=10", "skyhook", None))
 
 
@@ -158,9 +159,6 @@ def drop_line(label: str, peaks: list[float], decrements: list[float], check: bo
     within = f" (within 10 % of {ZETA}: {all(abs(z / ZETA - 1) <= 0.10 for z in zetas)})" if check else ""
     print(f"    {label:9s} peaks [deg] " + " ".join(f"{p:.3f}" for p in peaks))
     print(f"    {'':9s} zeta        " + " ".join(f"{z:.4f}" for z in zetas) + within)
-
-
-DROP_LAWS = (("target-damping", "target damping"), ("passive", "constant 0.5 A"))
 
 
 def drop_tests(
@@ -318,15 +316,22 @@ def stepped(bench: Bench, config: dict, sim: dict, laws: tuple[str, ...] | None 
     )
 
 
-def simulated(config: dict, duration_s: float, drop_s: float = 8.0) -> dict:
-    """The same checks in-process on the simulated rig (virtual clock), for the side-by-side."""
+def simulated(
+    config: dict,
+    duration_s: float,
+    drop_s: float = 8.0,
+    drop_laws: tuple[tuple[str, str], ...] = DROP_LAWS,
+    inverses: tuple[str, ...] = ("full", "viscous"),
+) -> dict:
+    """The same checks in-process on the simulated rig (virtual clock), for the side-by-side: the drops
+    of ``drop_laws``, tracking with ``inverses``, the stepped sine under every law."""
     progress("in-process simulation of the same checks")
     out: dict = {}
-    for law in ("target-damping", "passive"):
+    for law, _ in drop_laws:
         cfg = copy.deepcopy(config)
         cfg["controller"]["law"] = law
         out[law] = drop(cfg, law if law != "passive" else None, 0.5, drop_s)[0]
-    for inverse in ("full", "viscous"):
+    for inverse in inverses:
         out[inverse] = torque_tracking(config, inverse, ROAD_HZ, ROAD_DEG, duration_s + 1.0)
     freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
     out["stepped"] = {}
@@ -360,14 +365,16 @@ def main() -> None:
         "plant mismatch: 10 % per parameter, pattern alternate; coil lag +10 %; 4096 counts/rev "
         "(bench_control.mismatched_config); host driver.sample_timeout_ms 20, link_lost_ms 500"
     )
+    drop_laws = DROP_LAWS[:1] if args.quick else DROP_LAWS
+    inverses = ("full",) if args.quick else ("full", "viscous")
     started = time.monotonic()
-    sim = simulated(config, duration, drop_s)
+    sim = simulated(config, duration, drop_s, drop_laws, inverses)
     transports = ("serial", "slcan") if chosen == "both" else (chosen,)
     with tempfile.TemporaryDirectory(prefix="bench_control_link-") as tmp:
         for transport in transports:
             bench = Bench(transport, Path(tmp))
-            drop_tests(bench, config, sim, drop_s, DROP_LAWS[:1] if args.quick else DROP_LAWS)
-            tracking(bench, config, duration, sim, ("full",) if args.quick else ("full", "viscous"))
+            drop_tests(bench, config, sim, drop_s, drop_laws)
+            tracking(bench, config, duration, sim, inverses)
             stepped(bench, config, sim["stepped"], ("skyhook c=10",) if args.quick else None)
     print(f"\nwall time {time.monotonic() - started:.0f} s")
 
