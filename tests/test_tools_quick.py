@@ -1,7 +1,8 @@
 """Every script in ``tools/`` runs end to end in its quick mode, so a benchmark that crashes fails here.
 
 Each script takes ``--quick``: the same code path on a tiny problem (seconds), printing its figures
-(meaningless at that size). A script that needs a tool this machine lacks (qemu-system-arm, a C
+(meaningless at that size). A script whose quick mode another test already runs and checks
+(:data:`RUN_ELSEWHERE`) is not run a second time here. A script that needs a tool this machine lacks (qemu-system-arm, a C
 compiler, make and ziglang) says so in one line and exits 0. A new script without ``--quick`` fails
 the first test.
 """
@@ -22,15 +23,31 @@ SCRIPTS = sorted((ROOT / "tools").glob("*.py"))
 #: the scripts that run on the wall clock against an emulated rig over ptys (or QEMU's serial socket)
 E2E = {"bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "qemu_smoke.py"}
 
+#: scripts whose quick mode a test elsewhere runs whole and checks the figures of (script: that test)
+RUN_ELSEWHERE = {"bench_drop_damping.py": ("test_drop_damping.py", "test_bench_quick_meets_the_goal")}
+
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda path: path.name)
 def test_every_tool_has_a_quick_mode(script: Path) -> None:
     assert "--quick" in script.read_text(encoding="utf-8"), f"tools/{script.name} has no --quick mode"
 
 
+@pytest.mark.parametrize("script", sorted(RUN_ELSEWHERE))
+def test_a_tool_left_out_here_runs_in_quick_mode_elsewhere(script: str) -> None:
+    module, test = RUN_ELSEWHERE[script]
+    source = (ROOT / "tests" / module).read_text(encoding="utf-8")
+    assert f"def {test}(" in source, f"tests/{module} has no {test}"
+    body = source.split(f"def {test}(", 1)[1].split("\ndef ", 1)[0]
+    assert script in body and '"--quick"' in body, f"tests/{module}::{test} does not run tools/{script} --quick"
+
+
 @pytest.mark.parametrize(
     "script",
-    [pytest.param(path, id=path.name, marks=[pytest.mark.e2e] if path.name in E2E else []) for path in SCRIPTS],
+    [
+        pytest.param(path, id=path.name, marks=[pytest.mark.e2e] if path.name in E2E else [])
+        for path in SCRIPTS
+        if path.name not in RUN_ELSEWHERE
+    ],
 )
 def test_tool_runs_in_quick_mode(script: Path) -> None:
     # in a session of its own: a tool that overruns is killed with what it started (an emulator at

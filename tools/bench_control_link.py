@@ -31,9 +31,10 @@ a run; the gaps ridden through are printed.
     .venv/bin/python tools/bench_control_link.py [--transport serial|slcan|both] [--quick]
 
 Wall time: about 4.5 min (both transports). ``--quick`` runs the same checks on a tiny problem over
-serial only unless --transport is given (1 s drops, 3.3 s of tracking with the full inverse only,
-the stepped sine at 2 frequencies with 0.2 s ramps, 0.5 s settle and measure): about half a minute;
-the figures mean little.
+serial only unless --transport is given, one emulated run per check: the target-damping drop (1 s),
+3.3 s of tracking with the full inverse, and the stepped sine under skyhook alone at 2 frequencies
+with 0.2 s ramps, 0.5 s settle and measure (the in-process side runs every law; the emulated
+columns it leaves out print nan): seconds; the figures mean little.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ ZETA = 0.07
 ROAD_HZ, ROAD_DEG = 1.2, 1.0
 KEEP_AFTER_S = 3.0  # bench_control's torque tracking keeps t >= 3 s
 STEPPED = {"f_start": 1.0, "f_stop": 3.0, "steps": 3, "spacing": "log", "settle_s": 4.0, "measure_s": 2.0}
+DROP_LAWS = (("target-damping", "target damping"), ("passive", "constant 0.5 A"))
 STEPPED_LAWS = (("passive 0 A", "passive", 0.0), ("passive 1 A", "passive", 1.0), ("skyhook c=10", "skyhook", None))
 
 
@@ -159,12 +161,14 @@ def drop_line(label: str, peaks: list[float], decrements: list[float], check: bo
     print(f"    {'':9s} zeta        " + " ".join(f"{z:.4f}" for z in zetas) + within)
 
 
-def drop_tests(bench: Bench, config: dict, sim: dict, drop_s: float = 8.0) -> None:
+def drop_tests(
+    bench: Bench, config: dict, sim: dict, drop_s: float = 8.0, laws: tuple[tuple[str, str], ...] = DROP_LAWS
+) -> None:
     print(
         f"\n[a] drop test from -5 deg over {bench.transport}: target damping zeta = {ZETA}, then constant 0.5 A "
         "(0.5 A flows before the release)"
     )
-    for law, label in (("target-damping", "target damping"), ("passive", "constant 0.5 A")):
+    for law, label in laws:
         cfg = copy.deepcopy(config)
         cfg["controller"]["law"] = law
         progress(f"{bench.transport}: drop test, {label} (about 12 s)")
@@ -265,7 +269,8 @@ def tracking(
         )
 
 
-def stepped(bench: Bench, config: dict, sim: dict) -> None:
+def stepped(bench: Bench, config: dict, sim: dict, laws: tuple[str, ...] | None = None) -> None:
+    """The stepped sine over the link for the labels ``laws`` of STEPPED_LAWS (None: all)."""
     freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
     print(
         f"\n[c] stepped sine over {bench.transport} at {', '.join(f'{f:.2f}' for f in freqs)} Hz "
@@ -275,6 +280,8 @@ def stepped(bench: Bench, config: dict, sim: dict) -> None:
     emulated: dict[str, list[float] | None] = {}
     per_law = len(freqs) * (config["sweep"]["ramp_s"] + STEPPED["settle_s"] + STEPPED["measure_s"]) + 4
     for label, name, current in STEPPED_LAWS:
+        if laws is not None and label not in laws:
+            continue
         progress(f"{bench.transport}: stepped sine, {label} (about {per_law:.0f} s)")
         args = ("--current", f"{current:g}") if current is not None else ("--controller", name)
         out, _ = bench.cli(
@@ -309,15 +316,22 @@ def stepped(bench: Bench, config: dict, sim: dict) -> None:
     )
 
 
-def simulated(config: dict, duration_s: float, drop_s: float = 8.0) -> dict:
-    """The same checks in-process on the simulated rig (virtual clock), for the side-by-side."""
+def simulated(
+    config: dict,
+    duration_s: float,
+    drop_s: float = 8.0,
+    drop_laws: tuple[tuple[str, str], ...] = DROP_LAWS,
+    inverses: tuple[str, ...] = ("full", "viscous"),
+) -> dict:
+    """The same checks in-process on the simulated rig (virtual clock), for the side-by-side: the drops
+    of ``drop_laws``, tracking with ``inverses``, the stepped sine under every law."""
     progress("in-process simulation of the same checks")
     out: dict = {}
-    for law in ("target-damping", "passive"):
+    for law, _ in drop_laws:
         cfg = copy.deepcopy(config)
         cfg["controller"]["law"] = law
         out[law] = drop(cfg, law if law != "passive" else None, 0.5, drop_s)[0]
-    for inverse in ("full", "viscous"):
+    for inverse in inverses:
         out[inverse] = torque_tracking(config, inverse, ROAD_HZ, ROAD_DEG, duration_s + 1.0)
     freqs = frequencies(STEPPED["f_start"], STEPPED["f_stop"], STEPPED["steps"], STEPPED["spacing"])
     out["stepped"] = {}
@@ -351,15 +365,17 @@ def main() -> None:
         "plant mismatch: 10 % per parameter, pattern alternate; coil lag +10 %; 4096 counts/rev "
         "(bench_control.mismatched_config); host driver.sample_timeout_ms 20, link_lost_ms 500"
     )
+    drop_laws = DROP_LAWS[:1] if args.quick else DROP_LAWS
+    inverses = ("full",) if args.quick else ("full", "viscous")
     started = time.monotonic()
-    sim = simulated(config, duration, drop_s)
+    sim = simulated(config, duration, drop_s, drop_laws, inverses)
     transports = ("serial", "slcan") if chosen == "both" else (chosen,)
     with tempfile.TemporaryDirectory(prefix="bench_control_link-") as tmp:
         for transport in transports:
             bench = Bench(transport, Path(tmp))
-            drop_tests(bench, config, sim, drop_s)
-            tracking(bench, config, duration, sim, ("full",) if args.quick else ("full", "viscous"))
-            stepped(bench, config, sim["stepped"])
+            drop_tests(bench, config, sim, drop_s, drop_laws)
+            tracking(bench, config, duration, sim, inverses)
+            stepped(bench, config, sim["stepped"], ("skyhook c=10",) if args.quick else None)
     print(f"\nwall time {time.monotonic() - started:.0f} s")
 
 

@@ -26,6 +26,9 @@ compiler rejects is listed apart and not counted.
     .venv/bin/python tools/mutate_safety.py --quiet    # the kill rate and the survivors (CI)
     .venv/bin/python tools/mutate_safety.py --quick    # three mutants: the supervisor's, the watchdog's, the C clamp's
 
+``--quick`` runs its three mutants against the test files of their code alone (:data:`QUICK_TESTS`,
+:data:`QUICK_C_TESTS`): seconds.
+
 Exit status 0 when every mutant is killed, 1 otherwise.
 """
 
@@ -55,6 +58,9 @@ TESTS = ["tests/test_safety.py", "tests/test_emulator_device.py", "tests/test_lo
 #: the C board's tests (unit tier), and the end-to-end ones on the C board for what those miss
 C_TESTS = ["tests/test_firmware_board.py", "tests/test_firmware_fuzz.py"]
 C_E2E_TESTS = ["tests/test_emulator_link.py", "-k", "not python"]
+#: --quick: the test files of its three mutants' code (the supervisor's, the device's, the C board's)
+QUICK_TESTS = TESTS[:2]
+QUICK_C_TESTS = C_TESTS[:1]
 
 NEGATE = {
     ast.Lt: ast.GtE,
@@ -171,25 +177,26 @@ def _child(spec: str) -> int:
     import pytest
 
     data = json.loads(spec)
-    if isinstance(data, dict) and "c" in data:
+    if "c" in data:
         return _c_child(data["c"])
-    if data is not None:
-        target = next(t for t in TARGETS if t.module == data["module"])
-        mutant = Mutant(target, data["index"], data["op"], data["new"], 0, "")
+    found = data["mutant"]
+    if found is not None:
+        target = next(t for t in TARGETS if t.module == found["module"])
+        mutant = Mutant(target, found["index"], found["op"], found["new"], 0, "")
         sys.meta_path.insert(0, _Finder(target.module, ROOT / target.path, mutated_code(mutant)))
     os.chdir(ROOT)
     # -n 0: the mutant is in this process's importer, so the tests run here, not in xdist workers
-    return int(pytest.main(["-x", "-q", "-n", "0", "-p", "no:cacheprovider", "-m", "not e2e", *TESTS]))
+    return int(pytest.main(["-x", "-q", "-n", "0", "-p", "no:cacheprovider", "-m", "not e2e", *data["tests"]]))
 
 
-def run(mutant: Mutant | None, timeout_s: float) -> tuple[bool, str]:
-    """(tests passed, the first failing test or why the run ended)."""
-    spec = (
+def run(mutant: Mutant | None, timeout_s: float, tests: list[str] = TESTS) -> tuple[bool, str]:
+    """(``tests`` passed, the first failing test or why the run ended)."""
+    found = (
         None
         if mutant is None
         else {"module": mutant.target.module, "index": mutant.index, "op": mutant.op, "new": mutant.new}
     )
-    argv = [sys.executable, str(Path(__file__).resolve()), "--child", json.dumps(spec)]
+    argv = [sys.executable, str(Path(__file__).resolve()), "--child", json.dumps({"mutant": found, "tests": tests})]
     try:
         done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout_s, cwd=ROOT)
     except subprocess.TimeoutExpired:
@@ -346,26 +353,28 @@ def _verdict(n: int, total: int, label: str, text: str, verdict: str, quiet: boo
         print(f"[{n:2}/{total}] {label:40} {text:60} {verdict}", flush=True)
 
 
-def _run_python(found: list[Mutant], timeout_s: float, quiet: bool) -> list[Mutant] | None:
-    """The survivors among ``found``, or None when the tests fail without a mutant."""
-    ok, why = run(None, timeout_s)
+def _run_python(found: list[Mutant], timeout_s: float, quiet: bool, tests: list[str] = TESTS) -> list[Mutant] | None:
+    """The survivors among ``found`` against ``tests``, or None when they fail without a mutant."""
+    ok, why = run(None, timeout_s, tests)
     if not ok:
         print(f"the Python tests fail without a mutant ({why}): fix them first", file=sys.stderr)
         return None
     survivors = []
     for n, m in enumerate(found, 1):
-        passed, why = run(m, timeout_s)
+        passed, why = run(m, timeout_s, tests)
         _verdict(n, len(found), m.label, m.text, "SURVIVED" if passed else f"killed by {why}", quiet)
         if passed:
             survivors.append(m)
     return survivors
 
 
-def _run_c(found: list[CMutant], timeout_s: float, quiet: bool) -> tuple[list[CMutant], list[CMutant]] | None:
-    """(survivors, mutants not counted: equivalent or not building) among ``found``, or None when the
-    tests fail without a mutant."""
+def _run_c(
+    found: list[CMutant], timeout_s: float, quiet: bool, tests: list[str] = C_TESTS
+) -> tuple[list[CMutant], list[CMutant]] | None:
+    """(survivors, mutants not counted: equivalent or not building) among ``found`` against ``tests``
+    (then C_E2E_TESTS for a survivor), or None when the tests fail without a mutant."""
     with tempfile.TemporaryDirectory(prefix="mutate-cache-") as cache:
-        ok, why = run_c(None, C_TESTS, cache, timeout_s)
+        ok, why = run_c(None, tests, cache, timeout_s)
         if not ok:
             print(f"the C tests fail without a mutant ({why}): fix them first", file=sys.stderr)
             return None
@@ -375,7 +384,7 @@ def _run_c(found: list[CMutant], timeout_s: float, quiet: bool) -> tuple[list[CM
                 stillborn.append(m)
                 _verdict(n, len(found), m.label, m.text, f"equivalent: {_equivalent(m)} (not counted)", quiet)
                 continue
-            passed, why = run_c(m, C_TESTS, cache, timeout_s)
+            passed, why = run_c(m, tests, cache, timeout_s)
             if passed and not e2e_checked:  # the end-to-end tests must pass without a mutant first
                 ok, e2e_why = run_c(None, C_E2E_TESTS, cache, timeout_s)
                 if not ok:
@@ -425,18 +434,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(found)} Python mutants, {len(c_found)} C mutants")
         return 0
     started = time.monotonic()
-    survivors = _run_python(found, args.timeout, args.quiet)
+    tests, c_tests = (QUICK_TESTS, QUICK_C_TESTS) if args.quick else (TESTS, C_TESTS)
+    survivors = _run_python(found, args.timeout, args.quiet, tests)
     if survivors is None:
         return 2
     python_s = time.monotonic() - started
-    c_result = _run_c(c_found, args.timeout, args.quiet)
+    c_result = _run_c(c_found, args.timeout, args.quiet, c_tests)
     if c_result is None:
         return 2
     c_survivors, stillborn = c_result
     counted = len(c_found) - len(stillborn)
-    print(_rate("Python", len(found), len(survivors), python_s, " ".join(TESTS)))
-    c_tests = f"{' '.join(C_TESTS)}, then {' '.join(C_E2E_TESTS)}"
-    print(_rate("C", counted, len(c_survivors), time.monotonic() - started - python_s, c_tests))
+    print(_rate("Python", len(found), len(survivors), python_s, " ".join(tests)))
+    c_named = f"{' '.join(c_tests)}, then {' '.join(C_E2E_TESTS)}"
+    print(_rate("C", counted, len(c_survivors), time.monotonic() - started - python_s, c_named))
     total, left = len(found) + counted, len(survivors) + len(c_survivors)
     print(f"kill rate {total - left}/{total} = {100 * (total - left) / max(total, 1):.0f} %")
     for m in [*survivors, *c_survivors]:

@@ -8,12 +8,15 @@
     .venv/bin/python tools/readme_figures.py
     .venv/bin/python tools/readme_figures.py --quick   # a 2 s drop, 2 frequencies, 0.5 s runs; PNGs to a temporary folder
 
-``--quick`` leaves ``docs/figures/`` alone: it runs the same commands on a tiny problem (seconds).
+``--quick`` leaves ``docs/figures/`` alone: it runs the same commands on a tiny problem, each by
+``sashil.cli.main`` in this process (one interpreter's start-up and imports instead of five; the full
+run starts each command as a user would): seconds.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import shutil
 import subprocess
 import sys
@@ -25,12 +28,21 @@ OUT = ROOT / "docs" / "figures"
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 
 
-def sashil(*args: str) -> None:
-    subprocess.run([*SASHIL, *args, "-q"], check=True)
+def sashil(*args: str, in_process: bool = False) -> None:
+    """``sashil ARGS -q`` in a child process, or by ``sashil.cli.main`` in this one; stops on an error."""
+    if not in_process:
+        subprocess.run([*SASHIL, *args, "-q"], check=True)
+        return
+    from sashil.cli import main
+
+    code = main([*args, "-q"])
+    if code:
+        raise SystemExit(f"sashil {' '.join(args)}: exit {code}")
 
 
 def figures(out: Path, quick: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
+    sashil = functools.partial(globals()["sashil"], in_process=quick)
     drop = ("--duration", "2") if quick else ()
     steps = ("--steps", "2") if quick else ()
     seconds = "0.5" if quick else "10"
