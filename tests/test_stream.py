@@ -145,14 +145,30 @@ def test_a_stalled_recorder_stops_the_loop_at_0_a_and_keeps_every_recorded_row(t
     shared.close()
 
 
+NO_SUCH_PID = 2**22 + 12345  # above pid_max: no such process
+
+
 def test_stale_streams_go_and_live_ones_stay(tmp_path):
     live = Stream.create(COLUMNS, capacity=4, window=4096, folder=tmp_path)
     dead = Stream.create(COLUMNS, capacity=4, window=4096, folder=tmp_path)
-    dead.header[SESSION_PID_W] = dead.header[LOOP_PID_W] = 2**22 + 12345  # above pid_max: no such process
-    assert remove_stale(tmp_path) == [dead.path]
-    assert live.path.exists() and not dead.path.exists()
+    dead.header[SESSION_PID_W] = dead.header[LOOP_PID_W] = NO_SUCH_PID
+    gone = tmp_path / f"sashil-{NO_SUCH_PID}-0a1b2c3d.stream"  # made by a process that is gone too
+    os.rename(dead.path, gone)
+    assert remove_stale(tmp_path) == [gone]
+    assert live.path.exists() and not gone.exists()
     live.close()
     dead.close()
+
+
+def test_a_stream_being_made_stays(tmp_path):
+    # its maker (the pid in its name) is alive and has not written the header's pids yet: all zero
+    making = tmp_path / f"sashil-{os.getpid()}-0a1b2c3d.stream"
+    making.write_bytes(bytes(8 * 4096))
+    assert remove_stale(tmp_path) == []
+    assert making.exists()
+    orphan = tmp_path / f"sashil-{NO_SUCH_PID}-0a1b2c3d.stream"
+    making.rename(orphan)  # the same file, its maker gone before it wrote the header
+    assert remove_stale(tmp_path) == [orphan]
 
 
 def test_the_mailbox_carries_one_request_and_its_answer(stream):

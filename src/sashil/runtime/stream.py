@@ -400,16 +400,18 @@ class FrameWriter:
 
 
 def remove_stale(folder: Path | None = None) -> list[Path]:
-    """Remove stream files whose session and loop processes are both gone; returns them."""
+    """Remove stream files whose processes are all gone: the one that created it (its name's pid,
+    alive while it fills the header) and the session and loop processes the header names; returns them."""
     folder = STREAM_DIR if folder is None else Path(folder)
     removed = []
     for path in folder.glob("sashil-*.stream"):
-        pids = []
+        creator = path.name.split("-")[1]
+        pids = [int(creator)] if creator.isdigit() else []
         try:
             with open(path, "rb") as handle:
                 words = np.frombuffer(handle.read(8 * HEADER_WORDS), dtype=np.int64)
             if words.size == HEADER_WORDS:
-                pids = [int(words[SESSION_PID_W]), int(words[LOOP_PID_W])]
+                pids += [int(words[SESSION_PID_W]), int(words[LOOP_PID_W])]
         except OSError:
             continue
         if not any(pid > 0 and _alive(pid) for pid in pids):
