@@ -78,6 +78,14 @@ def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
             )
 
 
+def check_port(config: dict[str, Any]) -> None:
+    """A link's port given as a device path (``/dev/ttyACM0``) must exist: refused in one line before
+    the operator is told to press the arm (the first prompt comes before the rig is opened)."""
+    port = config["driver"].get("port")
+    if isinstance(port, str) and port.startswith("/") and not Path(port).exists():
+        raise ConfigError(f"--port (driver.port): {port}: no such device (is the board plugged in?)")
+
+
 def min_blocks(model: str) -> int:
     """Jackknife blocks the plan must hold: MIN_BLOCKS_PER_PARAMETER per free parameter (the most
     of any model when ``model`` is all)."""
@@ -155,8 +163,8 @@ def calibrate_rig(
     for it, the operator's instruction: :func:`~sashil.experiments.operator_prompt.hold_prompt` of
     the step's angle (default: ``say``). A person at the bench reads it; so does the emulator's
     operator reading the host's console (``sashil emulate --prompts``).
-    Bad input (config, inertia, a plan at one current) raises ConfigError before anything is
-    energised or written. A step that fails on the link is repeated once, and one whose record a
+    Bad input (config, inertia, a plan at one current, a port path that does not exist) raises
+    ConfigError before anything is energised or written. A step that fails on the link is repeated once, and one whose record a
     link gap cut short (a host pause lost samples the fit needs) up to GAP_REPEATS times, keeping
     the longest record (the fit uses the angle each record starts from); a step that fails (a
     lost link, a stuck encoder, a safety trip) ends the plan: the runs so far and ``summary.json``
@@ -170,6 +178,7 @@ def calibrate_rig(
         config = {**config, "calibrate": {**config["calibrate"], "model": model}}
     plan = plan_from_config(config, source)
     check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
+    check_port(config)
     folder = RunFolder.create(out, "calibrate")
     folder.write_config(config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
