@@ -164,11 +164,11 @@ def calibrate_rig(
     the step's angle (default: ``say``). A person at the bench reads it; so does the emulator's
     operator reading the host's console (``sashil emulate --prompts``).
     Bad input (config, inertia, a plan at one current, a port path that does not exist) raises
-    ConfigError before anything is energised or written. A step that fails on the link is repeated once, and one whose record a
-    link gap cut short (a host pause lost samples the fit needs) up to GAP_REPEATS times, keeping
-    the longest record (the fit uses the angle each record starts from); a step that fails (a
-    lost link, a stuck encoder, a safety trip) ends the plan: the runs so far and ``summary.json``
-    are written and the step's error is raised.
+    ConfigError before anything is energised or written. A step that fails on the link is
+    repeated once, and one whose record a link gap cut short (a host pause lost samples the fit
+    needs) up to GAP_REPEATS times, keeping the longest record (the fit uses the angle each record
+    starts from); a step that fails (a lost link, a stuck encoder, a safety trip) ends the plan:
+    the runs so far and ``summary.json`` are written and the step's error is raised.
     Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
     """
     say = say or (lambda text: None)
