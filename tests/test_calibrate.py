@@ -313,6 +313,72 @@ def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tm
         assert len(data) == 3001  # the repeat's whole record, header included
 
 
+def _plan_on_an_emulated_board(tmp_path, monkeypatch, console: bool, gap_step: int) -> list[tuple[str, float]]:
+    """The default plan run by ``calibrate_rig`` against the emulated board's logic on simulated time:
+    each attempt of a step connects (Configure) and reads the angle the board's operator holds the
+    arm at; step ``gap_step``'s first attempt loses samples to a link gap, so it is repeated. With
+    ``console`` the operator reads the host's prompts from a file of its console, as ``sashil
+    emulate --prompts`` does; without, it plays the plan's angles in order (``--hold-deg``).
+    Returns (step name, held angle [deg]) per attempt."""
+    from sashil.calibrate import session
+    from sashil.drivers.emulator import HostConsole, Operator, build_device
+    from sashil.drivers.interface import FLAG_HELD
+    from sashil.drivers.messages import CMD_ENABLE, PACING_DEVICE, Command, Configure, Sample
+
+    config = default_config()
+    plan = plan_from_config(config)
+    screen = tmp_path / "console.txt"
+    angles = plan.operator_angles_deg()
+    operator = Operator(angles[0], 10.0, tuple(angles[1:]), console=HostConsole(screen) if console else None)
+    board = build_device(config, operator=operator)
+    held: list[tuple[str, float]] = []
+    ms = 1_000_000
+
+    def run_step(config, step, data_path=None):
+        start = (len(held) + 1) * 1000 * ms  # a new connection each attempt, a second apart
+        board.handle(Configure(1000, 1000, PACING_DEVICE), start)
+        out = []
+        for t in range(start, start + 20 * ms, ms):
+            out += board.handle(Command(step.current_a, CMD_ENABLE), t) + board.tick(t)
+        last = [m for _, m in out if isinstance(m, Sample) and m.flags & FLAG_HELD][-1]
+        held.append((step.name, last.arm_counts * 360 / 4096))
+        first_try = [name for name, _ in held].count(step.name) == 1
+        return _drop_result(step, 0.42 if first_try and step.name == plan.steps[gap_step].name else None)
+
+    class PlanDone(Exception):
+        pass
+
+    def analyse(*args, **kwargs):  # the plan ran to its end: stop before the fit
+        raise PlanDone
+
+    monkeypatch.setattr(session, "run_step", run_step)
+    monkeypatch.setattr(session, "analyse", analyse)
+
+    def to_console(line: str) -> None:  # the host's stderr in a file, one write per line as printer() does
+        with screen.open("a") as out:
+            out.write(f"  {line}\n")
+
+    with pytest.raises(PlanDone):
+        session.calibrate_rig(config, tmp_path / "c", say=to_console, prompt=to_console)
+    return held
+
+
+def test_an_emulated_operator_reading_the_prompts_holds_a_repeated_step_and_the_rest_at_their_angles(
+    tmp_path, monkeypatch
+):
+    plan = plan_from_config(default_config())
+    gap_step = 2  # the last -5 deg drop before the -2.5 deg ones: a shift would show at once
+    held = _plan_on_an_emulated_board(tmp_path / "prompts", monkeypatch, True, gap_step)
+    want = {s.name: s.theta0_deg for s in plan.steps}
+    assert [name for name, _ in held] == [s.name for s in plan.steps for _ in range(1 + (s is plan.steps[gap_step]))]
+    for name, angle in held:
+        assert angle == pytest.approx(want[name], abs=360 / 4096), name
+    # the operator that plays the plan's angles in order is one session ahead after the repeat
+    ordered = _plan_on_an_emulated_board(tmp_path / "ordered", monkeypatch, False, gap_step)
+    wrong = [name for name, angle in ordered if abs(angle - want[name]) > 360 / 4096]
+    assert wrong and wrong[0] == plan.steps[gap_step].name
+
+
 @pytest.mark.e2e  # a whole calibration, refitted (seconds)
 def test_extra_steps_run_the_suggested_step_and_refit(tmp_path, capsys):
     out = tmp_path / "c"

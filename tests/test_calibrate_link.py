@@ -48,6 +48,8 @@ def test_calibrate_an_emulated_damper_over_serial(tmp_path):
     summary = json.loads((tmp_path / "cal" / "summary.json").read_text())
     runs = summary["runs"]
     assert all(r["release_estimated"] for r in runs)  # found in the data: nobody told the host
+    # the emulator's operator read each attempt's prompt: every drop from its step's angle (a repeat too)
+    assert all(abs(r["hold_angle_deg"] - r["theta0_deg"]) < 0.1 for r in runs)
     # each step ran in a loop process of its own (one thread), the step's stage built there from its spec
     assert all(r["loop_process"]["threads"] == 1 and r["loop_process"]["pid"] != os.getpid() for r in runs)
     road = next(r for r in runs if r["kind"] == "road")
@@ -69,10 +71,11 @@ class Emulator:
         line = self.proc.stdout.readline()
         assert "rig on /dev/" in line, line + self.proc.stderr.read()
 
-    def stop(self) -> None:
+    def stop(self) -> str:
+        """Stop the emulator; returns what it said on stderr (once: empty the second time)."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
-        self.proc.communicate(timeout=30)
+        return self.proc.communicate(timeout=30)[1] or ""
 
 
 @pytest.fixture
@@ -121,3 +124,29 @@ def test_a_plan_cut_short_keeps_its_data_and_exits_1(tmp_path, emulator):
     first = out / "runs" / summary["runs"][0]["name"] / "data.csv"
     assert first.is_file() and len(first.read_text().splitlines()) > 500  # over a second of the drop kept
     assert not (out / "params.yaml").exists()
+
+
+def test_the_emulators_operator_holds_where_the_hosts_prompt_asks(tmp_path, emulator):
+    # started with --hold-deg -5, it reads the host's console: the plan's first drop asks for -3.5 deg
+    console = tmp_path / "console.txt"
+    console.touch()
+    emu = emulator("--prompts", str(console), "--disconnect-after", "2.5")  # the first drop, then cut short
+    config = tmp_path / "link.yaml"
+    plan = {**SMALL_PLAN, "theta0_deg": -3.5}
+    config.write_text(yaml.safe_dump({"driver": {"link_lost_ms": 500.0}, "calibrate": plan}))
+    out = tmp_path / "cal"
+    command = [*SASHIL, "calibrate", "--driver", "serial", "--port", emu.link, "--config", str(config), "-q"]
+    with console.open("w") as host_console:
+        done = subprocess.run(
+            [*command, "--out", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=host_console,
+            text=True,
+            timeout=300,
+        )
+    assert done.returncode == 1, console.read_text()
+    assert "press the arm to -3.5 deg" in console.read_text()  # the prompt is on the console, -q or not
+    first = json.loads((out / "summary.json").read_text())["runs"][0]
+    assert first["theta0_deg"] == -3.5 and abs(first["hold_angle_deg"] + 3.5) < 0.1
+    said = emu.stop()
+    assert "holds the arm at -3.5 deg" in said and "as the host's last prompt asks" in said

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from sashil.config import default_config
-from sashil.drivers.emulator import Faults, Operator, build_device
+from sashil.drivers.emulator import Faults, HostConsole, Operator, build_device
 from sashil.drivers.emulator.runner import Emulator
 from sashil.drivers.emulator.transports import DeviceTransport, corrupt_frame
 from sashil.drivers.interface import FLAG_HELD, FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand
@@ -160,6 +162,41 @@ def test_operator_holds_at_each_angle_in_turn_one_per_configure():
         counts.append(got[-1].arm_counts)
     per_deg = 4096 / 360
     assert counts == [round(-5.0 * per_deg), round(-2.5 * per_deg), round(-5.0 * per_deg)]
+
+
+def _held_deg(device, start_ns):
+    """Configure at ``start_ns`` and the angle [deg] the operator holds the arm at (50 ms of samples)."""
+    device.handle(Configure(1000, 1000, PACING_DEVICE), start_ns)
+    got = samples(run_ticks(device, start_ns, start_ns + 50 * MS, command=Command(0.0, CMD_ENABLE)))
+    assert got and all(s.flags & FLAG_HELD for s in got)
+    return got[-1].arm_counts * 360 / 4096
+
+
+def test_operator_with_the_hosts_console_holds_at_its_last_hold_prompt(tmp_path):
+    console = tmp_path / "console.txt"  # not there yet: no prompt, the --hold-deg angles in turn
+    device = build_device(default_config(), operator=Operator(-5.0, 10.0, (-2.5,), console=HostConsole(console)))
+    held = [_held_deg(device, 0)]
+    console.write_text("calibration plan: 9 runs\n  01-fit-drop: press the arm to -3.5 deg, hold it still\n")
+    held.append(_held_deg(device, 100 * MS))
+    held.append(_held_deg(device, 200 * MS))  # said nothing new (a repeat says it again): the same angle
+    with console.open("a") as out:
+        out.write("  02-fit-drop: press the arm to -2 deg, hold")  # a line still being written: not yet read
+    held.append(_held_deg(device, 300 * MS))
+    with console.open("a") as out:
+        out.write(" it still\n  a link gap; repeating it\n")
+    held.append(_held_deg(device, 400 * MS))
+    console.write_text("  01-fit-drop: press the arm to -4.25 deg, hold it still\n")  # a new host run's console
+    held.append(_held_deg(device, 500 * MS))
+    count = 360 / 4096
+    assert held == [pytest.approx(a, abs=count) for a in (-5.0, -3.5, -3.5, -3.5, -2.0, -4.25)]
+
+
+def test_emulate_prompts_without_hold_deg_is_one_line_exit_2(capsys):
+    from sashil.cli import main
+
+    assert main(["emulate", "--prompts", "console.txt", "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--prompts" in err[0] and "--hold-deg" in err[0]
 
 
 def test_stuck_sensor_freezes_both_encoders_and_flags_it():

@@ -3,8 +3,8 @@
 
 For each damper of :data:`DAMPERS` (not the seed alone: n 0.1-0.6, yield torque 0.2-2.5 N m at
 1 A, J 0.8-1.2, k and c varied too) it writes the plant config, starts ``sashil emulate`` behind a
-pty playing the operator at the plan's hold angles, runs ``sashil calibrate --driver serial
---inertia J`` against it (:func:`sashil.calibrate.calibrate_emulated`: real pyserial, real clock,
+pty playing the operator at the angle each of the host's hold prompts asks, runs ``sashil
+calibrate --driver serial --inertia J`` against it (:func:`sashil.calibrate.calibrate_emulated`: real pyserial, real clock,
 the default plan) and prints:
 
 * held-out NRMSE: the fitted model against the *true* plant's noiseless response to the same

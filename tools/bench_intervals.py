@@ -30,6 +30,8 @@ emulator's ground truth of every sample ``d<N>.truth.csv``).
 the commanded speeds, and from the road the board applied (the road encoder's edges,
 :mod:`sashil.identify.road`); per damper and per quantity it prints coverage, half-width, error and
 the held-out NRMSE against the true plant (the baseline and the figure from the same records).
+Both reports count the drops that started away from their step's angle (the hold the drop test
+found more than ``drop_test.hold_tolerance_deg`` from it).
 
 ``--cache DIR`` keeps each calibration (a pickle) so that a second run re-evaluates the intervals
 without refitting. ``--quick``: one damper, one seed, the short plan of tools/bench_calibrate.py
@@ -143,7 +145,13 @@ def serial_case(args: tuple[dict, int, dict | None, str, str, str, str | None]) 
     started = time.perf_counter()
     path = calibrate_emulated(config, folder, transport=transport, inertia=truth["J"], board=board, truth=truth_csv)
     doc = yaml.safe_load(Path(path).read_text())
-    return {"truth": truth, "noise_seed": noise_seed, "params_doc": doc, "wall_s": time.perf_counter() - started}
+    return {
+        "truth": truth,
+        "noise_seed": noise_seed,
+        "params_doc": doc,
+        "wall_s": time.perf_counter() - started,
+        "folder": Path(folder),
+    }
 
 
 def kept_results(folder: Path, road: str) -> tuple[dict, list[StepResult], list[StepResult]]:
@@ -261,6 +269,24 @@ def samples_lost(folder: Path) -> list[float]:
     return out
 
 
+def held_away(folder: Path) -> tuple[int, int]:
+    """(runs whose drop started away from its step's angle, runs) of a kept calibration: the hold
+    the drop test found more than ``drop_test.hold_tolerance_deg`` from the step's theta0."""
+    tolerance = float(load_config(folder / "config.yaml")["drop_test"]["hold_tolerance_deg"])
+    rows = json.loads((folder / "summary.json").read_text())["runs"]
+    away = [r for r in rows if abs(r["hold_angle_deg"] - r["theta0_deg"]) > tolerance]
+    return len(away), len(rows)
+
+
+def print_held_away(folders: list[Path]) -> None:
+    """How many drops started from another angle than their step's, per calibration and in all."""
+    counts = [held_away(f) for f in folders]
+    print(
+        f"drops started away from their step's angle: {sum(a for a, _ in counts)} of {sum(n for _, n in counts)} runs; "
+        + ", ".join(f"{f.name} {a}/{n}" for f, (a, n) in zip(folders, counts, strict=True))
+    )
+
+
 def report_reanalysis(base: Path, jobs: int) -> None:
     """The paired comparison of kept calibrations (``--reanalyse``)."""
     folders = sorted(p for p in base.glob("d*") if p.is_dir() and (p / "params.yaml").exists())
@@ -323,6 +349,7 @@ def report_reanalysis(base: Path, jobs: int) -> None:
                     else ""
                 )
             )
+    print_held_away(folders)
     lost = [samples_lost(f) for f in folders]
     every = [x for runs in lost for x in runs]
     if every:
@@ -366,6 +393,7 @@ def report_serial(rows: list[dict], transport: str) -> None:
         cal = case["params_doc"]["calibration"]
         suspect = " (fit suspect: no interval around a wrong optimum covers)" if cal["intervals"]["fit_suspect"] else ""
         print(f"  damper {d}: held-out NRMSE {100 * cal['held_out_nrmse_mean']:.2f} %{suspect}")
+    print_held_away([case["folder"] for case in rows])
     fits = [case["params_doc"]["calibration"]["fit_s"] for case in rows]
     print(
         f"{len(rows)} calibrations over {transport}; fit {np.median(fits):.1f} s median, {max(fits):.1f} s worst; "

@@ -4,9 +4,11 @@
 running the firmware's C code (``sashil emulate --board c``), ``transports`` their links (serial or
 SLCAN on a pty, python-can's virtual bus) carrying decoded messages or the raw wire (``wire``),
 ``runner`` the real-time loop that joins them (a process via ``sashil emulate``, or a thread in
-tests), ``truth`` the plant's true state per sample sent.
+tests), ``truth`` the plant's true state per sample sent, ``console`` the host's hold prompts as
+the emulated operator reads them.
 """
 
+from sashil.drivers.emulator.console import HostConsole
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.runner import Emulator, EmulatorThread, build_device
 from sashil.drivers.emulator.truth import TRUTH_COLUMNS, TruthLog, read_truth_csv
@@ -16,6 +18,7 @@ __all__ = [
     "Emulator",
     "EmulatorThread",
     "Faults",
+    "HostConsole",
     "Operator",
     "RigDevice",
     "TruthLog",

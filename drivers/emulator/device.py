@@ -7,8 +7,9 @@ streams samples (device pacing) or answers each Command with one (host pacing), 
 device watchdog: armed by the first Command, no valid Command for ``watchdog_ms`` -> drive 0 A and
 set FLAG_WATCHDOG until the next valid Command.
 
-A session starts at each Configure: the operator (``hold_deg``/``release_after_s``) presses the
-arm to the hold angle then, and the ``*_after_s`` fault times count from then.
+A session starts at each Configure: the operator (``hold_deg``/``release_after_s``, or the host's
+last hold prompt with a :class:`~sashil.drivers.emulator.console.HostConsole`) presses the arm to
+the hold angle then, and the ``*_after_s`` fault times count from then.
 
 With a :class:`~sashil.drivers.emulator.truth.TruthLog` in :attr:`RigDevice.truth` every sample
 taken also records the plant's true state (``sashil emulate --truth``).
@@ -21,6 +22,7 @@ import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from sashil.drivers.emulator.console import HostConsole
 from sashil.drivers.emulator.truth import TruthLog
 from sashil.drivers.emulator.wire import Payload
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, FLAG_WATCHDOG, RigCommand, RigSample, clamp_current
@@ -86,7 +88,10 @@ class Operator:
     """The person of a drop test: press the arm to ``hold_deg``, let go ``release_after_s`` later.
 
     With ``then_deg`` the hold angle of each later session is the next of ``hold_deg, *then_deg``,
-    round and round (a calibration's plan: drops from several angles, one session each)."""
+    round and round (a calibration's plan: drops from several angles, one session each). With
+    ``console`` the operator reads the host's prompts instead: each session holds at the angle of
+    the last hold prompt the host has said (it says it before it connects, for a repeated step as
+    for a new one), and only before the first prompt at the angles in turn."""
 
     hold_deg: float
     release_after_s: float
@@ -94,16 +99,25 @@ class Operator:
     sessions: int = 0
     #: told of each hold as it starts (the board cannot know whether the host runs a drop test)
     announce: Callable[[str], None] | None = None
+    #: the host's console, read at each session for its last hold prompt (``sashil emulate --prompts``)
+    console: HostConsole | None = None
 
     def next_hold_deg(self) -> float:
         """The hold angle of the next session."""
         angles = (self.hold_deg, *self.then_deg)
         angle = angles[self.sessions % len(angles)]
         self.sessions += 1
+        prompted = self.console.latest_hold_deg() if self.console is not None else None
+        if prompted is not None:
+            angle, why = prompted, "as the host's last prompt asks (--prompts)"
+        elif self.console is not None:
+            why = "no hold prompt from the host yet (--hold-deg)"
+        else:
+            why = "whatever the host runs (--hold-deg)"
         if self.announce is not None:
             self.announce(
                 f"host connected (session {self.sessions}): the operator holds the arm at {angle:g} deg and lets go "
-                f"{self.release_after_s:g} s later, whatever the host runs (--hold-deg)"
+                f"{self.release_after_s:g} s later, {why}"
             )
         return angle
 

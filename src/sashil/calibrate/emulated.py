@@ -1,9 +1,12 @@
 """Calibrating an emulated damper over a real link, as a lab user would (benchmarks, other tools).
 
 ``sashil emulate`` runs the plant of a config (after its ``mismatch`` section) behind a pty in its
-own process and plays the operator at each Configure, holding the arm at the plan's angles in
-order (``--hold-deg A B ...``); ``sashil calibrate`` then runs against it over pyserial
-(``transport="serial"``) or python-can's slcan interface (``transport="slcan"``).
+own process and plays the operator at each Configure; ``sashil calibrate`` then runs against it
+over pyserial (``transport="serial"``) or python-can's slcan interface (``transport="slcan"``).
+The host's console (its stderr) goes to a file that the emulator's operator reads
+(``--prompts``): each step's attempt, a repeat after a link gap too, is held at the angle the
+host's prompt for it asks, as a person at the bench would read it (``--hold-deg``: the plan's
+angles in order, only before the first prompt).
 """
 
 from __future__ import annotations
@@ -47,7 +50,8 @@ def calibrate_emulated(
     ``model``: ``--model``. ``truth``: also write the emulator's ground truth CSV (``--truth``).
     ``board``: the emulator's ``--board`` (c, python, or auto: c where a C compiler is found).
     A failed calibration raises :class:`~sashil.errors.DriverIOError` with its last error line;
-    the emulator process is always stopped.
+    the emulator process is always stopped. The host's prompts reach the emulator's operator
+    through a file of the host's console (see the module docstring); nothing new goes on the wire.
     """
     if transport not in TRANSPORTS:
         raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {transport!r}")
@@ -62,8 +66,11 @@ def calibrate_emulated(
         config_path = Path(tmp) / "plant.yaml"
         config_path.write_text(dump_config(config), encoding="utf-8")
         link = str(Path(tmp) / "rig")
+        console_path = Path(tmp) / "host-console.txt"  # the host's stderr: what a person at the bench reads
+        console_path.touch()
         emulate = [*SASHIL, "emulate", "--config", str(config_path), "--transport", transport, "--link", link]
         emulate += ["--hold-deg", *(f"{a:g}" for a in angles), "--release-after", "1"]
+        emulate += ["--prompts", str(console_path)]
         emulate += ["--priority", str(EMULATOR_PRIORITY), "--board", board]
         if truth is not None:
             emulate += ["--truth", str(truth)]
@@ -80,7 +87,9 @@ def calibrate_emulated(
                 command += ["--inertia", repr(float(inertia))]
             if model is not None:
                 command += ["--model", model]
-            done = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
+            with open(console_path, "w", encoding="utf-8") as console:
+                done = subprocess.run(command, stdout=subprocess.PIPE, stderr=console, text=True, timeout=timeout_s)
+            host_lines = console_path.read_text(encoding="utf-8").strip().splitlines()
         finally:
             if emulator.poll() is None:
                 emulator.send_signal(signal.SIGTERM)
@@ -91,6 +100,5 @@ def calibrate_emulated(
                 emulator.communicate()
             log.close()
     if done.returncode != 0:
-        lines = done.stderr.strip().splitlines()
-        raise DriverIOError(f"sashil calibrate exit {done.returncode}: {lines[-1] if lines else '?'}")
+        raise DriverIOError(f"sashil calibrate exit {done.returncode}: {host_lines[-1] if host_lines else '?'}")
     return Path(out) / "params.yaml"

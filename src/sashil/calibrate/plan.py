@@ -97,7 +97,8 @@ class Plan:
         return sum(step.duration_s + STEP_OVERHEAD_S for step in self.steps)
 
     def operator_angles_deg(self) -> list[float]:
-        """The hold angle of every step in order (``sashil emulate --hold-deg`` plays them)."""
+        """The hold angle of every step in order (``sashil emulate --hold-deg`` plays them until the
+        host's first prompt, with ``--prompts``)."""
         return [step.theta0_deg for step in self.steps]
 
     def fit_steps(self) -> list[Step]:

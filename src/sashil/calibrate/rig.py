@@ -1,11 +1,11 @@
 """Running one plan step on the rig: the one adapter between calibrate and the experiment code.
 
 A step is a drop test (:func:`sashil.experiments.drop_test.run_drop_test`: hold, release, record;
-on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does, on the
-bench a person) whose "controller" (:class:`StepStage`) commands the step's constant current and,
-from the release on, the road wheel's speed for a road step. Every backend's road wheel obeys
-those speed commands (the simulated rig's :class:`~sashil.drivers.sim.RoadWheel` as the
-emulator's and the bench's motor).
+on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does (with
+``--prompts``, at the angle the host's prompt asks), on the bench a person) whose "controller"
+(:class:`StepStage`) commands the step's constant current and, from the release on, the road
+wheel's speed for a road step. Every backend's road wheel obeys those speed commands (the
+simulated rig's :class:`~sashil.drivers.sim.RoadWheel` as the emulator's and the bench's motor).
 """
 
 from __future__ import annotations

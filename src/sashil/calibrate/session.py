@@ -22,6 +22,7 @@ from sashil.config.frozen import freeze_config, thaw
 from sashil.config.typed import RunConfig
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
+from sashil.experiments.operator_prompt import hold_prompt
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
@@ -77,6 +78,14 @@ def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
                 f"{source}: calibrate.drop_duration_s: the runs to fit ({fit_s:g} s in all) are too short to block "
                 f"for the intervals: {need} blocks of at least {MIN_BLOCK_S:g} s are needed; give at least {short:g} s"
             )
+
+
+def check_port(config: RunConfig) -> None:
+    """A link's port given as a device path (``/dev/ttyACM0``) must exist: refused in one line before
+    the operator is told to press the arm (the first prompt comes before the rig is opened)."""
+    port = config["driver"]["port"]
+    if isinstance(port, str) and port.startswith("/") and not Path(port).exists():
+        raise ConfigError(f"--port (driver.port): {port}: no such device (is the board plugged in?)")
 
 
 def min_blocks(model: str) -> int:
@@ -139,6 +148,7 @@ def calibrate_rig(
     say: Callable[[str], None] | None = None,
     source: str = "config",
     profile: bool = True,
+    prompt: Callable[[str], None] | None = None,
 ) -> Outcome:
     """Calibrate the rig of ``config`` (its ``driver`` section says which: sim, serial, can).
 
@@ -151,16 +161,20 @@ def calibrate_rig(
 
     ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
     ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
-    Bad input (config, inertia, a plan at one current) raises ConfigError before anything is
-    energised or written. A step that fails on the link is repeated once, and one whose record a
-    link gap cut short (a host pause lost samples the fit needs) up to GAP_REPEATS times, keeping
-    the longest record (on the emulator, whose operator cannot hear the prompt, a repeat shifts the
-    angles it holds at; the fit uses the angle each record starts from); a step that fails (a
-    lost link, a stuck encoder, a safety trip) ends the plan: the runs so far and ``summary.json``
-    are written and the step's error is raised.
+    ``prompt``: told, before every attempt of a step (a repeat too) and before the rig is opened
+    for it, the operator's instruction: :func:`~sashil.experiments.operator_prompt.hold_prompt` of
+    the step's angle (default: ``say``). A person at the bench reads it; so does the emulator's
+    operator reading the host's console (``sashil emulate --prompts``).
+    Bad input (config, inertia, a plan at one current, a port path that does not exist) raises
+    ConfigError before anything is energised or written. A step that fails on the link is
+    repeated once, and one whose record a link gap cut short (a host pause lost samples the fit
+    needs) up to GAP_REPEATS times, keeping the longest record (the fit uses the angle each record
+    starts from); a step that fails (a lost link, a stuck encoder, a safety trip) ends the plan:
+    the runs so far and ``summary.json`` are written and the step's error is raised.
     Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
     """
     say = say or (lambda text: None)
+    tell = prompt or say
     J = check_inertia(inertia)
     if model is not None:
         derived = thaw(config)
@@ -168,6 +182,7 @@ def calibrate_rig(
         config = freeze_config(derived)
     plan = plan_from_config(config, source)
     check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
+    check_port(config)
     folder = RunFolder.create(out, "calibrate")
     folder.write_config(config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
@@ -177,8 +192,14 @@ def calibrate_rig(
         f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
     counts_per_rev = config["rig"]["encoder_counts_per_rev"]
+    hold_s = float(config["drop_test"]["hold_time_s"])
     results: list[StepResult] = []
     started = time.perf_counter()
+
+    def run_once(step: Step, data_path: Path) -> StepResult:
+        """One run of ``step``, the operator told first which angle to hold."""
+        tell(f"{step.name}: {hold_prompt(step.theta0_deg)}, hold it still {hold_s:g} s and let go")
+        return run_step(config, step, data_path)
 
     def run_steps(steps: Sequence[Step], first: int, total: int) -> SashilError | None:
         """Run ``steps`` (numbered from ``first`` of ``total``) into ``results``; the error that
@@ -188,7 +209,7 @@ def calibrate_rig(
             target = runs.folder_for(step.name)
             attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
             try:
-                result = run_step(config, step, _stream(target, 1))
+                result = run_once(step, _stream(target, 1))
             except SashilError:
                 if not results:  # the rig could not be opened (a bad port): bad input, nothing written
                     shutil.rmtree(folder.path, ignore_errors=True)
@@ -196,7 +217,7 @@ def calibrate_rig(
             if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
                 say(f"  {step.name} failed on the link ({result.error}); repeating it once")
                 try:
-                    again = run_step(config, step, _stream(target, next(attempts)))
+                    again = run_once(step, _stream(target, next(attempts)))
                 except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
                     say(f"  the repeat failed too ({err})")
                 else:
@@ -211,7 +232,7 @@ def calibrate_rig(
                     f"repeating it ({attempt} of {GAP_REPEATS})"
                 )
                 try:
-                    again = run_step(config, step, _stream(target, next(attempts)))
+                    again = run_once(step, _stream(target, next(attempts)))
                 except SashilError as err:  # cannot even open the link again: keep the cut record
                     say(f"  the repeat failed ({err})")
                     break

@@ -55,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "round and round (a calibration plan's drop angles)",
     )
     op.add_argument("--release-after", type=float, default=1.0, metavar="S", help="let go S seconds later (default 1)")
+    op.add_argument(
+        "--prompts",
+        metavar="FILE",
+        help="the host's console (its stderr written to FILE, e.g. sashil calibrate ... 2> FILE): at each Configure "
+        "the operator holds at the angle of the last 'press the arm to DEG deg' prompt there, as a person at the "
+        "bench reads it (a repeated step gets its own angle); --hold-deg's angles before the first prompt",
+    )
     parser.add_argument(
         "--priority",
         type=int,
@@ -108,7 +115,7 @@ def _announce(line: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sashil.drivers import firmware
-    from sashil.drivers.emulator import Emulator, Faults, Operator, TruthLog, build_device
+    from sashil.drivers.emulator import Emulator, Faults, HostConsole, Operator, TruthLog, build_device
     from sashil.drivers.emulator.runner import open_transport
     from sashil.errors import DriverError
 
@@ -143,7 +150,10 @@ def run(args: argparse.Namespace) -> int:
             if not (math.isfinite(angle) and abs(angle) <= 90.0):
                 raise ConfigError(f"--hold-deg: expected angles within ±90 deg, got {angle:g}")
         release = _seconds_or_none("--release-after", args.release_after) or 0.0
-        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce)
+        console = HostConsole(args.prompts) if args.prompts is not None else None
+        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce, console=console)
+    elif args.prompts is not None:
+        raise ConfigError("--prompts: expected --hold-deg too (the angles held before the host's first prompt)")
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     truth = None
     if args.truth is not None:
@@ -173,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
             "--hold-deg: the arm is held at each host connection (Configure), also for a run or a sweep, "
             "which then start with the arm held; connect with drop-test or calibrate"
         )
+        if args.prompts is not None:
+            _announce(f"--prompts: the operator holds at the angle the host's last hold prompt in {args.prompts} asks")
     try:
         why = emulator.run(duration)
     finally:  # the caller's scheduling and signal handlers back (sashil emulate may run in-process)

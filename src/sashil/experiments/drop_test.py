@@ -29,6 +29,7 @@ from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
+from sashil.experiments.operator_prompt import hold_prompt
 from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
@@ -242,7 +243,7 @@ class DropTestPlan:
             self.start_ns = t_ns
             if self.notify is not None and self.s.known_release_after_s is None and self.s.pseudo_terminal is None:
                 self.notify(
-                    f"press the arm to {math.degrees(self.s.theta0_rad):g} deg (within "
+                    f"{hold_prompt(math.degrees(self.s.theta0_rad))} (within "
                     f"±{math.degrees(self.s.hold_tolerance_rad):g} deg) and hold it still; now at "
                     f"{math.degrees(theta):.2f} deg"
                 )

@@ -28,7 +28,8 @@ def calibrate(
     messages about the plan (its file, or ``config``). Bad input (a plan at one current, runs too
     short for the intervals, a port that cannot be opened) raises ConfigError before any folder
     exists; a step that fails ends the plan with the runs so far kept and raises its error.
-    Events: ``progress`` lines as the plan runs and the fit proceeds; ``output`` lines with the
+    Events: ``progress`` lines as the plan runs and the fit proceeds; a ``prompt`` before every
+    attempt of a step (the angle to press the arm to; shown even when quiet); ``output`` lines with the
     fit, the held-out NRMSE and the files written; the ``folder``."""
 
     outputs = outputs if outputs is not None else Outputs()
@@ -40,6 +41,7 @@ def calibrate(
         outputs.out,
         inertia=inertia,
         say=lambda text: on_event(Event("progress", text)),
+        prompt=lambda text: on_event(Event("prompt", text)),
         source=source,
         profile=section["profile_n"],
     )
