@@ -8,10 +8,14 @@ is asked for.
 
 from __future__ import annotations
 
-from sashil.config.typed import RunConfig
+from typing import TYPE_CHECKING
+
 from sashil.drivers.interface import SAFE_COMMAND, RigCapabilities, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverError
 from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: backend name -> "module:Class" (the installed ``sashil.backends`` entry points)
 BACKENDS: dict[str, str] = {name: plugin.target for name, plugin in entry_point_table(BACKENDS_GROUP).items()}

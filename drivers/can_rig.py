@@ -14,16 +14,18 @@ import os
 import select
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import can
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
 from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import PROTOCOL_VERSION, Hello, Message, Version
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 
 class BufferedPort:

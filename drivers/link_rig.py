@@ -31,9 +31,8 @@ import logging
 import time
 from abc import abstractmethod
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import (
     FLAG_HELD,
     FLAG_WATCHDOG,
@@ -63,6 +62,9 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 log = logging.getLogger(__name__)
 

@@ -11,16 +11,18 @@ from __future__ import annotations
 import errno
 import os
 import select
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import serial
 
-from sashil.config.typed import RunConfig
 from sashil.drivers import slcan_codec
 from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import Message
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: what opening a port that another process holds fails with: its lock (pyserial's ``exclusive=True``
 #: flock: EAGAIN/EWOULDBLOCK) or the device refusing a second opener (EBUSY)

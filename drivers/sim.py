@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import math
 import random
+from typing import TYPE_CHECKING
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.encoder_edges import hermite, last_crossing, quick_test
 from sashil.drivers.interface import (
     FLAG_HELD,
@@ -35,6 +35,9 @@ from sashil.drivers.interface import (
 from sashil.errors import DriverError
 from sashil.models.plant import RigPlant
 from sashil.models.registry import rig_params
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 
 class RoadWheel:

@@ -18,7 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.transports import (
     DeviceTransport,
@@ -34,6 +33,7 @@ from sashil.drivers.sim import SimulatedRig
 MAX_WAIT_S = 0.02  # upper bound of one wait (keeps stop requests responsive)
 
 if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
     from sashil.drivers.emulator.c_board import CBoardDevice
 
     Board = RigDevice | CBoardDevice

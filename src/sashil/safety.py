@@ -21,9 +21,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import (
     FLAG_FAULT,
     FLAG_OVERCURRENT,
@@ -33,6 +32,9 @@ from sashil.drivers.interface import (
     clamp_current,
 )
 from sashil.errors import SafetyTrip
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: the data.csv ``trip_code`` column: 0 = no trip, else the kind below
 TRIP_CODES = {"angle_interlock": 1, "sensor_timeout": 2, "device_fault": 3}

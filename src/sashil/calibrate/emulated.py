@@ -16,12 +16,15 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sashil.calibrate.plan import plan_from_config
 from sashil.config import dump_config
 from sashil.config.frozen import freeze_config, thaw
-from sashil.config.typed import RunConfig
 from sashil.errors import DriverIOError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
 HOST_PRIORITY, EMULATOR_PRIORITY = 65, 70  # above other real-time tests on a shared machine

@@ -14,11 +14,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.config.verb_checks import check_theta0
 from sashil.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: rig time a step costs beyond its record (connect, the operator's hold and release), an estimate
 STEP_OVERHEAD_S = 2.0

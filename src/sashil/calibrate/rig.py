@@ -14,16 +14,18 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sashil.calibrate.plan import RoadChirp, Step
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
 from sashil.identify.road import held_speed
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4

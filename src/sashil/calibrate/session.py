@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,7 +19,6 @@ from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.config.frozen import freeze_config, thaw
-from sashil.config.typed import RunConfig
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.experiments.operator_prompt import hold_prompt
@@ -31,6 +30,9 @@ from sashil.identify.rig_models import MODELS
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: times a step is repeated when a link gap (a host pause that lost samples) cuts its record short
 GAP_REPEATS = 2

@@ -15,16 +15,18 @@ import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.config import Config, apply_params, check_controller, load_config, verb_checks
 from sashil.config.frozen import freeze_config
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
-from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["ConfigSource", "Option", "resolve"]
 

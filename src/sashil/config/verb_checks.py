@@ -11,9 +11,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = [
     "THETA0_LIMIT_DEG",

@@ -11,9 +11,8 @@ clipped to the feasible band and counted, never an error.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.control.controller import Controller
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
@@ -22,6 +21,9 @@ from sashil.control.law_config import build_law, law_parameters
 from sashil.control.law_registry import find_law
 from sashil.control.observer import BoucWenObserver
 from sashil.models.registry import rig_params
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["controller_section", "law_reads_state", "make_controller", "make_estimator", "make_stage"]
 

@@ -8,12 +8,11 @@ trips the host goes quiet; the board's watchdog must trip and report it in a Sta
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sashil.config.frozen import freeze_config, thaw
-from sashil.config.typed import RunConfig
 from sashil.diagnostics import FAIL, OK, WARN, Check
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG
@@ -21,6 +20,9 @@ from sashil.drivers.link_rig import LinkRig
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
 from sashil.runtime.clock import RealClock
 from sashil.runtime.rt_setup import RealtimeSetup
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: how much longer than ``driver.watchdog_ms`` the host waits for the board to report a trip
 WATCHDOG_GRACE_S = 0.2

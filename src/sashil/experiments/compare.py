@@ -30,11 +30,10 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.typed import RunConfig
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
@@ -44,6 +43,9 @@ from sashil.runtime.clock import default_clock
 from sashil.runtime.loop import stage_signals
 from sashil.runtime.runner import run_plan
 from sashil.runtime.stages import ConstantCurrent
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["LawJob", "LawResult", "MeasuredStage", "metrics_of", "run_job"]
 

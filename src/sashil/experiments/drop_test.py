@@ -19,11 +19,10 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.typed import RunConfig
 from sashil.config.verb_checks import check_theta0
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
@@ -34,6 +33,9 @@ from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: columns of a drop test's data.csv (docs/architecture.md names)
 DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")

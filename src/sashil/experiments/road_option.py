@@ -18,17 +18,19 @@ motor, as ``sashil sweep`` does.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError
 from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD, SYNTAX
 from sashil.experiments.sweep import chirp_profile, sine_profile
 from sashil.models.plant import RoadProfile
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road"]
 

@@ -24,16 +24,18 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import run_plan
 from sashil.stats import nrmse
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: data.csv columns of a sweep (docs/architecture.md names; torque_true_nm only on the simulated rig), then ``seq``
 SWEEP_COLUMNS = (
@@ -206,7 +208,7 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: stream[name] for name in names} | {"seq": stream["seq"].astype(np.int64)}
 
 
-RigFactory = Callable[[RunConfig, RoadProfile], RigInterface]
+RigFactory = Callable[["RunConfig", RoadProfile], RigInterface]
 
 
 def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> SweepStage:

@@ -5,12 +5,15 @@ the damper model, validate it on the held-out runs, and write the calibration fo
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from sashil.api import Run, load_run
 from sashil.calibrate.session import calibrate_rig
-from sashil.config.typed import RunConfig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["calibrate"]
 

@@ -4,10 +4,9 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
-from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.outputs import Outputs
@@ -19,6 +18,9 @@ from sashil.runtime.loop_process import LoopProcess
 from sashil.runtime.session import run_loop_process
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["closed_loop"]
 

@@ -15,13 +15,12 @@ import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import apply_overrides, parse_override
 from sashil.config.sections import CONTROLLER
-from sashil.config.typed import RunConfig
 from sashil.control.law_registry import find_law
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, SashilError
@@ -34,6 +33,9 @@ from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = [
     "CompareLaw",

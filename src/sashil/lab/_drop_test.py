@@ -6,11 +6,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
-from sashil.config.typed import RunConfig
 from sashil.control.law_registry import law_label
 from sashil.drivers import on_virtual_clock
 from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, config_controller, controller_columns, run_drop_test
@@ -23,6 +22,9 @@ from sashil.recording.run_progress import SessionHooks
 from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["drop_test", "result_line"]
 

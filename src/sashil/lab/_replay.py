@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sashil.api import Run, load_run
-from sashil.config.typed import RunConfig
 from sashil.control.registry import make_controller
 from sashil.errors import DataFileError
 from sashil.experiments import replay as offline
@@ -20,6 +19,9 @@ from sashil.lab.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.session import EVENTS_FILE
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["recorded_config", "replay"]
 

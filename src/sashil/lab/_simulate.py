@@ -7,12 +7,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sashil.api import Run, load_run
-from sashil.config.typed import RunConfig
 from sashil.config.verb_checks import input_file
 from sashil.errors import ConfigError
 from sashil.experiments.metrics import drop_metrics
@@ -24,6 +23,9 @@ from sashil.recording.data_file import read_data_csv
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.stats import nrmse
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["drop_table", "simulate"]
 

@@ -12,10 +12,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
-from sashil.config.typed import RunConfig
 from sashil.control.law_registry import law_label
 from sashil.control.registry import make_controller
 from sashil.errors import ConfigError, SashilError
@@ -41,6 +40,9 @@ from sashil.recording.run_set import RunSet
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
 from sashil.stats import nrmse
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 __all__ = ["TRANSMISSIBILITY_COLUMNS", "sweep"]
 

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import random
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze_config, thaw
-from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 PARAMETER_ORDER = tuple(BoucWenParams.__dataclass_fields__)  # J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n
 

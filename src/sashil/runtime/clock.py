@@ -7,10 +7,12 @@ straight to the deadline, so simulated runs are deterministic and faster than re
 from __future__ import annotations
 
 import time
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-from sashil.config.typed import RunConfig
 from sashil.drivers import on_virtual_clock
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 
 class Clock(Protocol):

@@ -37,11 +37,10 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil import errors
 from sashil.config.frozen import thaw
-from sashil.config.typed import RunConfig
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.runtime.mailbox import CALLER_STOP
@@ -61,6 +60,9 @@ from sashil.runtime.stream import (
 )
 from sashil.runtime.stream_recorder import StreamRecorder
 from sashil.runtime.tune_socket import TuneServer
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
 REPLY_WAIT_S = 30.0

@@ -11,14 +11,16 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.errors import SashilError
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import loop_summary
 from sashil.runtime.stream import RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 
 def finish_alone(

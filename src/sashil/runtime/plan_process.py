@@ -16,14 +16,16 @@ import logging
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
 from sashil.runtime.signals import StopFlag
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 log = logging.getLogger("sashil")
 

@@ -36,9 +36,8 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.drivers.interface import capabilities_of
 from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
 from sashil.recording.data_file import read_data_csv
@@ -49,6 +48,9 @@ from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
 from sashil.safety import SafetySupervisor
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
 #: (drop-test, sweep, calibrate: columns as ``sashil run``'s data.csv, time from the loop's start)

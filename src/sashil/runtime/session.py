@@ -18,7 +18,6 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from sashil.config.typed import RunConfig
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import LoopResult
@@ -28,6 +27,7 @@ from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
 
 if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
     from sashil.runtime.loop_process import LoopProcess
 
 #: the run folder's record of live parameter changes (sashil tune)

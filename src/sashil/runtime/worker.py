@@ -35,11 +35,13 @@ import os
 import sys
 import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze_config
-from sashil.config.typed import RunConfig
 from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
 
 #: rows of the stream per second of the loop's rate: how far the recorder may fall behind
 STREAM_SECONDS = 30.0
