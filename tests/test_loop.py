@@ -458,10 +458,10 @@ def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tm
 
 
 def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monkeypatch):
-    from sashil.runtime import runner
+    from sashil.runtime import runner, warmup
 
     order: list[str] = []
-    monkeypatch.setattr(runner, "warm_up", lambda plan, say: order.append("compile"))
+    monkeypatch.setattr(warmup, "warm_up", lambda plan, say: order.append("compile"))  # the runner's, loaded on use
 
     class Watched(FaultyRig):
         def configure(self):
