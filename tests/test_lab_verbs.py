@@ -223,7 +223,10 @@ def test_calibrate_recovers_the_simulated_dampers_stiffness_with_the_given_inert
     assert run.config["calibrate"]["inertia_kg_m2"] == 1.1 and run.config["calibrate"]["profile_n"] is False
     kinds = [e.kind for e in events]
     assert kinds[0] == "progress" and events[0].text.startswith("calibration plan: 3 runs")
-    assert kinds[-4:] == ["output", "output", "output", "folder"] and set(kinds[:-4]) == {"progress"}
+    assert kinds[-4:] == ["output", "output", "output", "folder"] and set(kinds[:-4]) == {"progress", "prompt"}
+    prompts = [e.text for e in events if e.kind == "prompt"]  # each run's hold angle, told before it runs
+    assert [text.split(":")[0] for text in prompts] == names
+    assert all("press the arm to" in text and "let go" in text for text in prompts)
     assert not any("relative to J = 1" in e.text for e in events)
     assert events[-2].data == {
         "params": str(tmp_path / "c" / "params.yaml"),
