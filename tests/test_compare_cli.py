@@ -120,10 +120,10 @@ def test_arm_acceleration_is_the_plants_on_sim_else_the_encoders():
 @pytest.mark.e2e
 def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp_path):
     """The same laws on the same road over the serial stack and the emulated board: θ̈2 comes
-    from the encoders there (the plant's own on the sim), differentiated on the device's clock, so
-    comfort agrees within the encoder method's error (a few %, 10 % at 1 A on the sim's own
-    encoders) and the link's timing, travel closely, and the soft damper is the least comfortable
-    on both."""
+    from the encoders there (the plant's own on the sim), differentiated on the device's clock.
+    What compare ranks, each law against the passive 1 A reference run on the same rig, agrees
+    closely; the absolute figures within the host's timing (below); the soft damper is the least
+    comfortable on both."""
     from test_link_e2e import Emulator, relaxed_config
 
     common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q"]
@@ -139,13 +139,21 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
         emu.stop()
     sim, over = rows(tmp_path / "sim"), rows(tmp_path / "link")
     assert set(sim) == set(over) == {"passive 0 A", "passive 1 A", "skyhook-add"}
+
+    def figure(table: dict, law: str, key: str, against: str | None = None) -> float:
+        return float(table[law][key]) / (float(table[against][key]) if against else 1.0)
+
     for law in sim:
         assert over[law]["status"] == "ok", over[law]["status"]
-        a_sim, a_link = float(sim[law]["rms_accel_rad_s2"]), float(over[law]["rms_accel_rad_s2"])
-        # the encoders' θ̈2 reads up to 10 % high; a loaded host sends the road's speed commands
-        # late, which roughens the road itself (+15 % measured with two busy cores beside)
-        assert a_link == pytest.approx(a_sim, rel=0.35), law
-        assert float(over[law]["rms_theta_deg"]) == pytest.approx(float(sim[law]["rms_theta_deg"]), rel=0.1), law
+        # the host sends the road's speed commands, and a loaded host sends them late, which
+        # roughens the road itself: every law's comfort and travel alike (two busy cores beside:
+        # travel +5 to +13 %, comfort +13 to +25 %; the encoders' θ̈2 reads up to 10 % high besides)
+        assert figure(over, law, "rms_accel_rad_s2") == pytest.approx(figure(sim, law, "rms_accel_rad_s2"), rel=0.35)
+        assert figure(over, law, "rms_theta_deg") == pytest.approx(figure(sim, law, "rms_theta_deg"), rel=0.25)
+        # each law against the reference: travel within 4 %, comfort within 9 % with two busy cores beside
+        for key, rel in (("rms_theta_deg", 0.1), ("rms_accel_rad_s2", 0.15)):
+            relative = figure(over, law, key, "passive 1 A")
+            assert relative == pytest.approx(figure(sim, law, key, "passive 1 A"), rel=rel), (law, key)
     for table in (sim, over):  # the soft damper is the least comfortable on this road, by ~25 %
         assert max(table, key=lambda law: float(table[law]["rms_accel_rad_s2"])) == "passive 0 A"
 

@@ -170,6 +170,35 @@ def test_a_nan_target_is_a_law_error_naming_the_law():
         ctl.step(sample(2, 0, 0.3), 2_000_000, 1_000_000)
 
 
+def test_the_estimator_steps_over_the_samples_period_on_the_device_clock():
+    """A link's late cycle reads the newest of several samples: the estimator advances by the
+    device clock's period between the samples it took (4 ms), not the host's cycle (1 ms); the
+    host's finer period where the two agree within the device clock's 1 us, and where the device
+    clock did not advance (a sample read again)."""
+    ctl = make_controller("skyhook-add", default_config())
+    periods: list[float] = []
+
+    class Recorded:  # the controller's estimator, noting each period it is given
+        def __init__(self, inner):
+            self.inner = inner
+
+        def update(self, smp, dt, *rest):
+            periods.append(dt)
+            self.inner.update(smp, dt, *rest)
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+
+    ctl.estimator = Recorded(ctl.estimator)
+    device_us = [0, 1000, 5000, 5000, 6001]
+    host_dt_ns = [1_000_000, 1_000_000, 1_000_000, 1_000_000, 1_000_400]
+    t_ns = 0
+    for k, (dev, dt_ns) in enumerate(zip(device_us, host_dt_ns, strict=True)):
+        t_ns += dt_ns
+        ctl.step(RigSample(k, t_ns, dev, 0, 0, 0.0, 0, 4096), t_ns, dt_ns)
+    assert periods == pytest.approx([1e-3, 1e-3, 4e-3, 1e-3, 1.0004e-3], rel=1e-12)
+
+
 def mismatched(pattern="alternate"):
     config = default_config()
     config["mismatch"].update(fraction=0.1, coil_tau=0.1, pattern=pattern)

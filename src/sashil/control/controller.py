@@ -99,6 +99,7 @@ class Controller:
         #: set by an experiment while something outside the model holds the arm (drop-test hold)
         self.held = False
         self._t0_ns: int | None = None
+        self._device_us: int | None = None  # the device clock of the last sample taken
         self._accel = 0.0
         self._road_speed: float | None = None
         self._v_prev = 0.0
@@ -198,11 +199,28 @@ class Controller:
         """Cycles whose target torque lay outside the damper's feasible band (clipped)."""
         return self.inverse.clip_count
 
+    def _sample_period(self, device_us: int, dt_ns: int) -> float:
+        """The time [s] from the last sample to this one, on the clock that took them.
+
+        A link hands the host its samples late by a varying amount, and a late cycle reads the
+        newest of several, so the host's cycle period ``dt_ns`` is not the samples' spacing: the
+        device's clock is. The host's period is taken where the device clock did not advance (a
+        sample read again, or a rig without one) and where the two agree within the device clock's
+        1 us (a simulated rig's device clock is the host's, truncated to whole microseconds)."""
+        last, self._device_us = self._device_us, device_us
+        host_s = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
+        if last is None:
+            return host_s
+        step_us = device_us - last
+        if step_us <= 0 or abs(step_us * 1000 - host_s * 1e9) <= 1000.0:
+            return host_s
+        return step_us * 1e-6
+
     def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
         if self._t0_ns is None:
             self._t0_ns = t_ns
             self.law.reset()  # the first cycle of a run: the law starts from its own initial state
-        dt = dt_ns * 1e-9 if dt_ns > 0 else self.nominal_dt_s
+        dt = self._sample_period(sample.device_time_us, dt_ns)
         self.time_s = (t_ns - self._t0_ns) * 1e-9
         est = self.estimator
         # the road speed a plan put on last cycle's command (sweeps): its change is the road's
