@@ -4,6 +4,7 @@ a failing law's row saying why, parallel runs equal to sequential ones, and bad 
 from __future__ import annotations
 
 import csv
+import json
 import shlex
 import textwrap
 
@@ -139,23 +140,30 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
         emu.stop()
     sim, over = rows(tmp_path / "sim"), rows(tmp_path / "link")
     assert set(sim) == set(over) == {"passive 0 A", "passive 1 A", "skyhook-add"}
+    assert all(over[law]["status"] == "ok" for law in over), over
+    links = [json.loads(p.read_text())["link"] for p in (tmp_path / "link").glob("*/summary.json")]
+    assert len(links) == 3
+    if any(link["watchdog_samples"] for link in links):
+        # the host paused longer than the board's watchdog (measured once with two busy cores
+        # beside: 101 ms): the board cut the current, and the road profile, a function of the
+        # host's time, stepped when the host came back; the laws no longer ran the same road
+        pytest.skip("the host paused longer than the board's watchdog: the runs are not comparable")
 
     def figure(table: dict, law: str, key: str, against: str | None = None) -> float:
         return float(table[law][key]) / (float(table[against][key]) if against else 1.0)
 
+    for table in (sim, over):  # the soft damper is the least comfortable on this road, by ~25 %
+        assert max(table, key=lambda law: float(table[law]["rms_accel_rad_s2"])) == "passive 0 A"
     for law in sim:
-        assert over[law]["status"] == "ok", over[law]["status"]
         # the host sends the road's speed commands, and a loaded host sends them late, which
         # roughens the road itself: every law's comfort and travel alike (two busy cores beside:
         # travel +5 to +13 %, comfort +13 to +25 %; the encoders' θ̈2 reads up to 10 % high besides)
         assert figure(over, law, "rms_accel_rad_s2") == pytest.approx(figure(sim, law, "rms_accel_rad_s2"), rel=0.35)
         assert figure(over, law, "rms_theta_deg") == pytest.approx(figure(sim, law, "rms_theta_deg"), rel=0.25)
         # each law against the reference: travel within 4 %, comfort within 9 % with two busy cores beside
-        for key, rel in (("rms_theta_deg", 0.1), ("rms_accel_rad_s2", 0.15)):
+        for key, rel in (("rms_theta_deg", 0.12), ("rms_accel_rad_s2", 0.15)):
             relative = figure(over, law, key, "passive 1 A")
             assert relative == pytest.approx(figure(sim, law, key, "passive 1 A"), rel=rel), (law, key)
-    for table in (sim, over):  # the soft damper is the least comfortable on this road, by ~25 %
-        assert max(table, key=lambda law: float(table[law]["rms_accel_rad_s2"])) == "passive 0 A"
 
 
 def test_the_encoders_arm_acceleration_is_taken_on_the_devices_clock():
