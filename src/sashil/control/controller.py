@@ -16,6 +16,10 @@ horizon on a 10 ms coil).
 The estimator's model acceleration for the next cycle comes from the rig model
 (seed 001 eq. 13): ``theta2_ddot = (-k*theta - T_hat)/J`` (the relative channel subtracts theta1_ddot).
 
+The estimator and the observer advance by the period between the samples on the device's clock
+that took them (:meth:`Controller._sample_period`): over a link a late cycle reads the newest of
+several samples, so the host's cycle period is not the samples' spacing.
+
 Road feed-forward: a plan that drives the road sets ``road_speed_rad_s`` on the command this stage
 returns (the sweep does); the change of that speed from one cycle to the next is the road
 acceleration the estimator is given for the next period (:mod:`sashil.control.kalman`).

@@ -104,23 +104,43 @@ def run_session(
     result = outcome.result
     notes = tuning.notes() if tuning is not None else ()
     live_stats = live.close(result.trips, notes) if live is not None else None
-    if tuning is not None and tuning.events:
-        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, tuning.rows())
-    folder.write_timing(outcome.timing)
-    summary: dict[str, Any] = {
-        "verb": verb,
-        **outcome.summary,
-        "controller": controller,
-        "duration_s": duration_s,
-        "driver": config["driver"]["name"],
-        "live_view": live_stats,
-        "tuning": tuning.summary() if tuning is not None else None,
-    }
+    outcome.summary = _close_folder(
+        folder,
+        config,
+        outcome.timing,
+        tuning.rows() if tuning is not None else [],
+        {
+            "verb": verb,
+            **outcome.summary,
+            "controller": controller,
+            "duration_s": duration_s,
+            "live_view": live_stats,
+            "tuning": tuning.summary() if tuning is not None else None,
+        },
+        finish,
+    )
+    return outcome
+
+
+def _close_folder(
+    folder: RunFolder,
+    config: RunConfig,
+    timing: Any,
+    event_rows: list[list[Any]],
+    summary: dict[str, Any],
+    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None,
+) -> dict[str, Any]:
+    """A session's last writes into ``folder``, wherever its loop ran: the live changes
+    (``events.csv``, when there were any), the timing file, and ``summary.json`` once: ``summary``
+    with the config's driver and the keys the verb's ``finish`` hook adds, given the summary so far."""
+    if event_rows:
+        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, event_rows)
+    folder.write_timing(timing)
+    summary = {**summary, "driver": config["driver"]["name"]}
     if finish is not None:
         summary.update(finish(summary))
     folder.write_summary(summary)
-    outcome.summary = summary
-    return outcome
+    return summary
 
 
 def run_loop_process(
@@ -165,11 +185,15 @@ def run_loop_process(
     notes = end.get("tuning_notes") or []
     live_stats = live.close(end.get("trips", []), [tuple(note) for note in notes]) if live is not None else None
     events = (end.get("tuning") or {}).get("events") or []
-    if events:
-        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, [[event[name] for name in EVENT_COLUMNS] for event in events])
-    folder.write_timing(timing)
     session_affinity = {"session": process.session_affinity} if process.session_affinity else {}
-    summary: dict[str, Any] = {
+    loop_process = {
+        "pid": process.process.pid if process.process else None,
+        "threads": end.get("threads"),
+        "startup_s": None if process.startup_s is None else round(process.startup_s, 3),
+        "since_spawn_s": None if process.since_spawn_s is None else round(process.since_spawn_s, 3),
+        **({"died": end["loop_died"]} if "loop_died" in end else {}),
+    }
+    head: dict[str, Any] = {
         "verb": verb,
         **loop_summary(
             exit_status=status,
@@ -187,21 +211,12 @@ def run_loop_process(
         ),
         "controller": controller,
         "duration_s": duration_s,
-        "driver": config["driver"]["name"],
         "live_view": live_stats,
         "tuning": end.get("tuning"),
-        "loop_process": {
-            "pid": process.process.pid if process.process else None,
-            "threads": end.get("threads"),
-            "startup_s": None if process.startup_s is None else round(process.startup_s, 3),
-            "since_spawn_s": None if process.since_spawn_s is None else round(process.since_spawn_s, 3),
-        },
+        "loop_process": loop_process,
     }
-    if "loop_died" in end:
-        summary["loop_process"]["died"] = end["loop_died"]
-    if finish is not None:
-        summary.update(finish(summary))
-    folder.write_summary(summary)
+    rows = [[event[name] for name in EVENT_COLUMNS] for event in events]
+    summary = _close_folder(folder, config, timing, rows, head, finish)
     timing = timing.copy()  # the stream's shared rings end with the process
     process.close()
     result = LoopResult(
