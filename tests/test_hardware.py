@@ -38,7 +38,7 @@ def _exercise(config):
     probe = _Probe(cycles=int(config["loop"]["rate_hz"]))
     rate = config["loop"]["rate_hz"]
     outcome = run_plan(config, rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
-    assert outcome.result.exit_status == "ok" and outcome.error is None  # the safety supervisor ran beside it
+    assert outcome.exit_status == "ok" and outcome.error is None  # the safety supervisor ran beside it
     seqs = [s.seq for s in probe.samples]
     assert all((b - a) % 65536 >= 1 for a, b in itertools.pairwise(seqs)), "sequence numbers advance"
     assert abs(probe.samples[-1].current_a - 0.2) < 0.05, "the coil follows the command"

@@ -236,7 +236,7 @@ def _session(tmp_path, config, rig, stage=None, duration_s=0.1):
     )
     summary = json.loads((folder.path / "summary.json").read_text())
     assert (folder.path / "config.yaml").exists()
-    assert summary["exit_status"] == outcome.result.exit_status
+    assert summary["exit_status"] == outcome.exit_status
     assert rig.calls["deactivate"] == 1 and rig.calls["close"] == 1
     return outcome, summary, folder.path
 
@@ -329,7 +329,7 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
     outcome = run_session(config, rig, StopAt(), folder, clock, None, say=lambda line: None, realtime=False)
-    assert outcome.exit_code == 130 and outcome.result.stop_reason == "SIGTERM"
+    assert outcome.exit_code == 130 and outcome.stop_reason == "SIGTERM"
     # this rig's current never falls (0.1 A more per read): the loop reads on at 0 A for SETTLE_S, one
     # row per period, and says the safe state was not confirmed
     settled = outcome.summary["safe_state"]
@@ -421,7 +421,7 @@ def test_a_disk_full_under_the_session_is_exit_1_and_the_rows_so_far_kept(tmp_pa
     assert outcome.exit_code == 1 and summary["exit_status"] == "error"
     assert "No space left on device" in summary["error"]
     assert rig.currents[-1] == 0.0 and rig.calls["deactivate"] == 1
-    assert outcome.result.cycles < 60_000  # stopped when the writer failed, not at the end
+    assert outcome.timing.cycles < 60_000  # stopped when the writer failed, not at the end
     assert len(_rows(folder.path)["time_s"]) >= 1  # what reached the disk parses
 
 

@@ -93,10 +93,10 @@ def bench_speed(law: str, repeats: int, record_s: float) -> None:
         wall0, cpu0 = time.perf_counter(), time.process_time()
         record = one_drop(config, current, record_s)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-        simulated = record.loop.cycles / rate
+        simulated = record.run["timing"]["cycles"] / rate
         wall_ratios.append(simulated / wall)
         cpu_ratios.append(simulated / cpu)
-        bare_wall, bare_cpu = bare_plant(config, record.loop.cycles, current)
+        bare_wall, bare_cpu = bare_plant(config, record.run["timing"]["cycles"], current)
         plant_wall.append(simulated / bare_wall)
         plant_cpu.append(simulated / bare_cpu)
     what = "passive, constant current" if law == "passive" else f"under {law!r} after the release"
@@ -156,7 +156,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     def fresh() -> Any:
         return built.pop()
 
-    cycles = record.loop.cycles
+    cycles = record.run["timing"]["cycles"]
     whole = _cpu(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
     commands = commands[:cycles]
     steps = samples[:cycles]

@@ -139,6 +139,6 @@ def run_step(config: RunConfig, step: Step, data_path: str | Path | None = None)
     for key in ("link", "loop_process"):  # the link's statistics; the loop process that ran the step
         if key in record.extra:
             extra[key] = record.extra[key]
-    if record.loop is not None:
-        extra["trips"] = record.loop.trips
+    if record.run:
+        extra["trips"] = record.run["trips"]
     return StepResult(step, columns, math.degrees(record.hold_angle_rad), record.release_estimated, error, extra)

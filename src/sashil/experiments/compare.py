@@ -237,11 +237,10 @@ def run_job(job: LawJob) -> LawResult:
     result.summary = dict(outcome.summary)
     if folder is not None:
         folder.write_timing(outcome.timing)
-    loop = outcome.result
-    if outcome.error is not None or loop.exit_status != "ok":
-        trips = "; ".join(str(trip.get("reason", trip)) for trip in loop.trips)
-        why = trips or loop.error or loop.stop_reason or loop.exit_status
-        result.status = f"{loop.exit_status}: {why}"
+    if outcome.error is not None or outcome.exit_status != "ok":
+        trips = "; ".join(str(trip.get("reason", trip)) for trip in outcome.trips)
+        why = trips or outcome.summary["error"] or outcome.stop_reason or outcome.exit_status
+        result.status = f"{outcome.exit_status}: {why}"
         return result
     try:
         metrics, t, accel, result.accel_source = metrics_of(outcome.stream, config)

@@ -30,7 +30,6 @@ from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.experiments.operator_prompt import hold_prompt
 from sashil.runtime.clock import Clock, default_clock
-from sashil.runtime.loop import LoopResult
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
 
@@ -106,7 +105,9 @@ class DropRecord:
     release_time_ns: int
     release_estimated: bool
     hold_angle_rad: float
-    loop: LoopResult | None = None
+    #: the loop run's summary.json keys (:func:`~sashil.runtime.runner.loop_summary`): how it ended, its
+    #: timing, trips and safe state
+    run: dict[str, Any] = field(default_factory=dict)
     metrics: DropMetrics | None = None
     error: SashilError | None = None  # what ended the test early (the data up to it is kept)
     extra: dict[str, Any] = field(default_factory=dict)
@@ -498,13 +499,13 @@ def run_drop_test(
             trace_stats = trace.close() if trace is not None else None
         outcome.can_trace = trace_stats
     if live is not None:
-        live.close(outcome.result.trips, ())
+        live.close(outcome.trips, ())
     # whatever ended the test early, the rig is at 0 A, deactivated and closed
     error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
     record = drop_record(outcome.stream, plan, outcome.start_ns)
-    record.loop = outcome.result
+    record.run = outcome.summary
     record.error = error
     columns = record.columns
     if outcome.can_trace is not None:

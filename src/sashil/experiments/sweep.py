@@ -305,13 +305,13 @@ def run_sweep(
             stop=stop,
         )
     if live is not None:
-        live.close(outcome.result.trips, ())
+        live.close(outcome.trips, ())
     columns = sweep_columns(outcome.stream)
     if keep is not None:
         keep(columns)
     ended = outcome.error if outcome.error is not None else outcome.stop_error()
     if ended is not None:
-        ended.safe_state = outcome.result.safe_state  # type: ignore[attr-defined]  # the run's summary row shows it
+        ended.safe_state = outcome.safe_state  # type: ignore[attr-defined]  # the run's summary row shows it
         raise ended
     return columns, stage
 

@@ -148,8 +148,8 @@ def closed_loop(
     for trip in summary["trips"]:
         on_event(Event("warning", f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", trip))
     on_event(Event("folder", f"run folder: {folder.path}", {"folder": str(folder.path)}))
-    if outcome.result.exit_status == "stopped":
-        on_event(Event("warning", f"sashil run: stopped by {outcome.result.stop_reason}; damper at 0 A"))
+    if outcome.exit_status == "stopped":
+        on_event(Event("warning", f"sashil run: stopped by {outcome.stop_reason}; damper at 0 A"))
     error = outcome.error
     if error is not None and not isinstance(error, KeyboardInterrupt):
         if isinstance(error, SashilError):

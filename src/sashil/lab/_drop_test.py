@@ -116,7 +116,7 @@ def drop_test(
             own["drop_test"]["currents_a"] = [current]
             target.write_config(own)
         target.write_data(record.columns)
-        assert record.metrics is not None and record.loop is not None  # run_drop_test sets both
+        assert record.metrics is not None and record.run  # run_drop_test sets both
         outputs.write_formats(
             target.path,
             config,
@@ -142,9 +142,9 @@ def drop_test(
                 "hold_angle_deg": math.degrees(record.hold_angle_rad),
                 "release_estimated": record.release_estimated,
                 **record.metrics.as_dict(),
-                "timing": record.loop.timing.summary() if record.loop.timing is not None else None,
-                "trips": record.loop.trips,
-                "safe_state": record.loop.safe_state,
+                "timing": record.run["timing"],
+                "trips": record.run["trips"],
+                "safe_state": record.run.get("safe_state"),
                 "link": record.extra.get("link"),
                 "realtime": record.extra.get("realtime"),
                 "can_trace": record.extra.get("can_trace"),

@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
-from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
 from sashil.runtime.signals import StopFlag
 
@@ -104,29 +103,18 @@ def run_plan_process(
         scratch.cleanup()
     error = ended.error
     recording = ended.recording if data_path is not None else None  # a temporary stream file is no recording
-    result = LoopResult(
-        cycles=timing.cycles,
-        missed_deadlines=timing.missed_deadlines,
-        exit_status=ended.exit_status,
-        error=str(error) if error is not None else None,
-        trips=list(end.get("trips", [])),
-        timing=timing,
-        stop_reason=end.get("stop_reason"),
-        shutdown_errors=list(end.get("shutdown_errors", [])),
-        safe_state=end.get("safe_state"),
-    )
     summary = loop_summary(
         exit_status=ended.exit_status,
         timing=timing.summary(),
-        trips=result.trips,
+        trips=list(end.get("trips", [])),
         error=error,
-        stop_reason=result.stop_reason,
+        stop_reason=end.get("stop_reason"),
         controller_stats=end.get("controller_stats"),
         safety=end.get("safety"),
         realtime=end.get("realtime", {}),
         recording=recording,
         link=end.get("link"),
-        shutdown_errors=result.shutdown_errors,
+        shutdown_errors=list(end.get("shutdown_errors", [])),
         safe_state=end.get("safe_state"),
     )
     loop_process: dict[str, Any] = {
@@ -137,7 +125,6 @@ def run_plan_process(
     if "loop_died" in end:
         loop_process["died"] = end["loop_died"]
     return RunOutcome(
-        result,
         error,
         ended.stop,
         timing,

@@ -44,7 +44,7 @@ from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
 from sashil.runtime.clock import Clock
-from sashil.runtime.loop import ControlLoop, LoopResult, record_columns
+from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
 from sashil.safety import SafetySupervisor
@@ -148,10 +148,10 @@ def loop_summary(
 class RunOutcome:
     """What a loop run leaves, whether it ran in this process (:func:`run_plan`,
     :func:`~sashil.runtime.session.run_session`) or in its own (``run_plan_process``,
-    ``run_loop_process``): the loop's result, the error that ended the run (None: it ended normally
-    or by a signal), its timing and start, and its summary.json keys."""
+    ``run_loop_process``): the error that ended the run (None: it ended normally or by a signal), its
+    timing and start, and its summary.json keys, from which the properties read how it ended (one
+    record of it, wherever the loop ran)."""
 
-    result: LoopResult
     error: BaseException | None
     stop: StopFlag
     timing: Any
@@ -172,12 +172,32 @@ class RunOutcome:
     loop_process: dict[str, Any] | None = None
 
     @property
+    def exit_status(self) -> str:
+        """``ok``, ``stopped``, ``safety_trip``, ``lossy``, ``error`` (summary.json's ``exit_status``)."""
+        return str(self.summary["exit_status"])
+
+    @property
+    def trips(self) -> list[dict[str, Any]]:
+        """The safety supervisor's trips, in order."""
+        return list(self.summary["trips"])
+
+    @property
+    def stop_reason(self) -> str | None:
+        """What stopped the run (a signal's name, ``stop requested``), None when nothing did."""
+        return self.summary.get("stop_reason")
+
+    @property
+    def safe_state(self) -> dict[str, Any] | None:
+        """After a stop, how the coil's measured current settled at 0 A."""
+        return self.summary.get("safe_state")
+
+    @property
     def exit_code(self) -> int:
-        return exit_code_of(self.result.exit_status, self.error)
+        return exit_code_of(self.exit_status, self.error)
 
     def stop_error(self) -> Stopped | None:
         """:class:`~sashil.errors.Stopped` if a signal stopped the run cleanly (exit 130), else None."""
-        if self.result.exit_status == "stopped" and self.stop.requested:
+        if self.exit_status == "stopped" and self.stop.requested:
             return stopped_error(self.stop)
         return None
 
@@ -315,7 +335,6 @@ def run_plan(
     realtime_report = rt.report() if rt is not None else {}
     recording = recorder.summary() if recorder is not None and data_path is not None else None
     return RunOutcome(
-        result,
         error,
         flag,
         loop.timing,

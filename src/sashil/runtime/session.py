@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
-from sashil.runtime.loop import LoopResult
 from sashil.runtime.runner import RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
@@ -101,9 +100,8 @@ def run_session(
         if tuning is not None and server is not None:
             tuning.close()
             server.stop()
-    result = outcome.result
     notes = tuning.notes() if tuning is not None else ()
-    live_stats = live.close(result.trips, notes) if live is not None else None
+    live_stats = live.close(outcome.trips, notes) if live is not None else None
     outcome.summary = _close_folder(
         folder,
         config,
@@ -219,14 +217,4 @@ def run_loop_process(
     summary = _close_folder(folder, config, timing, rows, head, finish)
     timing = timing.copy()  # the stream's shared rings end with the process
     process.close()
-    result = LoopResult(
-        cycles=timing.cycles,
-        missed_deadlines=timing.missed_deadlines,
-        exit_status=status,
-        error=summary["error"],
-        trips=list(summary["trips"]),
-        timing=timing,
-        stop_reason=summary["stop_reason"],
-        safe_state=end.get("safe_state"),
-    )
-    return RunOutcome(result, error, ended.stop, timing, int(end.get("start_ns") or 0), summary)
+    return RunOutcome(error, ended.stop, timing, int(end.get("start_ns") or 0), summary)
