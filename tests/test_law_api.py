@@ -353,3 +353,30 @@ def test_a_refused_change_leaves_the_law_as_it_was():
     assert law.b == 2.0
     law.set_parameters({"a": 1.5})
     assert law.gap == 0.5
+
+
+def test_a_run_is_labelled_by_its_laws_own_label(tmp_path):
+    from sashil.control.registry import law_run_label, make_stage
+
+    passive = apply_overrides(default_config(), ["controller.law=passive", "controller.current_a=0.75"])
+    assert law_run_label(passive) == "passive 0.75 A" and make_stage(passive)[0] == "passive 0.75 A"
+    skyhook = apply_overrides(default_config(), ["controller.law=skyhook", "controller.c_sky=2"])
+    assert law_run_label(skyhook) == "skyhook" and make_stage(skyhook)[0] == "skyhook"
+    path = write_law(
+        tmp_path,
+        """
+        class Mine(Law):
+            name = "mine"
+            c = Param(2.0, low=0.0)
+
+            def label(self):
+                return f"mine c={self.c:g}"
+
+            def torque(self, state):
+                return self.c * state.theta_dot_rad_s
+        """,
+    )
+    mine = apply_overrides(default_config(), [f"controller.law={path}:Mine", "controller.c=3"])
+    # a law that reads the state runs in a controller, and is labelled as it says, not by its path
+    label, stage = make_stage(mine)
+    assert label == law_run_label(mine) == "mine c=3" and stage.law.c == 3.0

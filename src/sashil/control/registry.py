@@ -17,6 +17,7 @@ from sashil.control.controller import Controller
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
+from sashil.control.law_api import Law
 from sashil.control.law_config import build_law, law_parameters
 from sashil.control.law_registry import find_law
 from sashil.control.observer import BoucWenObserver
@@ -25,7 +26,7 @@ from sashil.models.registry import rig_params
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
-__all__ = ["controller_section", "law_reads_state", "make_controller", "make_estimator", "make_stage"]
+__all__ = ["controller_section", "law_reads_state", "law_run_label", "make_controller", "make_estimator", "make_stage"]
 
 
 def law_reads_state(config: RunConfig) -> bool:
@@ -33,18 +34,31 @@ def law_reads_state(config: RunConfig) -> bool:
     return bool(find_law(controller_section(config)["law"]).cls.reads_state)
 
 
-def make_stage(config: RunConfig) -> tuple[str, Any]:
-    """The loop stage of the config's law and its label (the law's ``name``, however ``controller.law``
-    names it: a file law is not labelled by its path): a :class:`Controller`, or for a law that
-    reads no state a constant-current stage that runs the law alone (no estimator or observer)."""
+def _config_law(config: RunConfig) -> Law:
+    """The config's law with the parameters it declares (the section's others belong to another law)."""
     section = controller_section(config)
     entry = find_law(section["law"])
-    if entry.cls.reads_state:
-        return entry.cls.name, make_controller(None, config)
+    declared = entry.cls.params()
+    return build_law(entry, config, {key: value for key, value in section.items() if key in declared})
+
+
+def law_run_label(config: RunConfig) -> str:
+    """What a run calls the config's law in its summary, sub-folders and plots: the law's own
+    :meth:`~sashil.control.law_api.Law.label` (``passive 1 A``; its ``name`` by default, however
+    ``controller.law`` names it: a file law is not labelled by its path)."""
+    return _config_law(config).label()
+
+
+def make_stage(config: RunConfig) -> tuple[str, Any]:
+    """The loop stage of the config's law and its label (:func:`law_run_label`): a
+    :class:`Controller`, or for a law that reads no state a constant-current stage that runs the law
+    alone (no estimator or observer)."""
+    if law_reads_state(config):
+        controller = make_controller(None, config)
+        return controller.law.label(), controller
     from sashil.runtime.stages import ConstantCurrent
 
-    declared = entry.cls.params()
-    law = build_law(entry, config, {key: value for key, value in section.items() if key in declared})
+    law = _config_law(config)
     return law.label(), ConstantCurrent(law=law)
 
 

@@ -1,9 +1,9 @@
 """``sashil compare``: each law on the same road through the one runner, and its metrics.
 
 A :class:`LawJob` is one law's run: its label, its checked config (``controller.law`` and its
-parameters), the road spec, the duration and its run folder. :func:`run_job` builds the stage (a
-constant current for ``passive``, else the controller of
-:func:`sashil.control.registry.make_controller`), wraps it in the road
+parameters), the road spec, the duration and its run folder. :func:`run_job` builds the law's stage
+(:func:`sashil.control.registry.make_stage`: the controller, or a constant-current stage for a law
+that reads no state, such as ``passive``), wraps it in the road
 (:class:`~sashil.experiments.road_option.RoadStage`: the road motor's speed each cycle), runs it with
 :func:`sashil.runtime.runner.run_plan`, streaming every cycle into the folder's ``data.csv`` (and
 its loop timing into ``timing.npz``), and derives the metrics from the stream. A job is picklable,
@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.control.registry import make_controller
+from sashil.control.registry import make_stage
 from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
 from sashil.experiments.road_option import RoadStage, parse_road
@@ -42,7 +42,6 @@ from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import default_clock
 from sashil.runtime.loop import stage_signals
 from sashil.runtime.runner import run_plan
-from sashil.runtime.stages import ConstantCurrent
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -195,11 +194,7 @@ def metrics_of(stream: dict[str, Any], config: RunConfig) -> tuple[dict[str, flo
 
 
 def _stage(config: RunConfig) -> Any:
-
-    section = config["controller"]
-    if section["law"] == "passive":
-        return ConstantCurrent(float(section["current_a"]))
-    return make_controller(None, config)
+    return make_stage(config)[1]
 
 
 def run_job(job: LawJob) -> LawResult:

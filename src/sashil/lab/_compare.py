@@ -22,6 +22,7 @@ from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import apply_overrides, parse_override
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_registry import find_law
+from sashil.control.registry import law_run_label
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.compare import LawJob, run_job
@@ -134,8 +135,7 @@ def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, durati
         jobs.setdefault(f"passive {current:g} A", LawJob(f"passive {current:g} A", config, road, duration))
     for law in laws:
         config = _law_config(base, law)
-        name = find_law(law.law).cls.name or law.law
-        label = f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
+        label = law_run_label(config)
         jobs.setdefault(label, LawJob(label, config, road, duration))
     return list(jobs.values())
 

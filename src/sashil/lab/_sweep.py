@@ -15,8 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
-from sashil.control.law_registry import law_label
-from sashil.control.registry import make_controller
+from sashil.control.registry import law_run_label, make_controller
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import (
     SWEEP_COLUMNS,
@@ -58,10 +57,8 @@ TRANSMISSIBILITY_COLUMNS = (
 
 
 def _label(config: RunConfig) -> str:
-    """What commanded the damper: the law, or the passive current."""
-
-    name = law_label(config["controller"]["law"])[0]
-    return f"passive {config['controller']['current_a']:g} A" if name == "passive" else name
+    """What commanded the damper: the law's label (``skyhook``; ``passive 1 A``)."""
+    return law_run_label(config)
 
 
 def _freq_label(f_hz: float) -> str:
