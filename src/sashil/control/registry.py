@@ -18,8 +18,8 @@ from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.law_api import Law
-from sashil.control.law_config import build_law, law_parameters
-from sashil.control.law_registry import find_law
+from sashil.control.law_config import build_law
+from sashil.control.law_registry import LawEntry, find_law
 from sashil.control.observer import BoucWenObserver
 from sashil.models.registry import rig_params
 
@@ -34,19 +34,22 @@ def law_reads_state(config: RunConfig) -> bool:
     return bool(find_law(controller_section(config)["law"]).cls.reads_state)
 
 
-def _config_law(config: RunConfig) -> Law:
-    """The config's law with the parameters it declares (the section's others belong to another law)."""
+def _config_law(config: RunConfig, name: str | None = None) -> tuple[LawEntry, Law]:
+    """Law ``name`` (None: ``controller.law``) and an instance of it with the parameters of the
+    config's ``controller`` section that it declares (the section's others belong to another law; a
+    loaded config has been checked against its own law by
+    :func:`~sashil.control.law_config.check_controller`)."""
     section = controller_section(config)
-    entry = find_law(section["law"])
+    entry = find_law(section["law"] if name is None else name)
     declared = entry.cls.params()
-    return build_law(entry, config, {key: value for key, value in section.items() if key in declared})
+    return entry, build_law(entry, config, {key: value for key, value in section.items() if key in declared})
 
 
 def law_run_label(config: RunConfig) -> str:
     """What a run calls the config's law in its summary, sub-folders and plots: the law's own
     :meth:`~sashil.control.law_api.Law.label` (``passive 1 A``; its ``name`` by default, however
     ``controller.law`` names it: a file law is not labelled by its path)."""
-    return _config_law(config).label()
+    return _config_law(config)[1].label()
 
 
 def make_stage(config: RunConfig) -> tuple[str, Any]:
@@ -58,7 +61,7 @@ def make_stage(config: RunConfig) -> tuple[str, Any]:
         return controller.law.label(), controller
     from sashil.runtime.stages import ConstantCurrent
 
-    law = _config_law(config)
+    law = _config_law(config)[1]
     return law.label(), ConstantCurrent(law=law)
 
 
@@ -103,23 +106,19 @@ def make_controller(
 
     The observer and inverse use ``config['model']`` (the model the controller believes); a
     simulated plant may differ from it (``mismatch`` section, :mod:`sashil.models.mismatch`).
-    The section's keys the law does not declare are left aside: they belong to another law
-    (a loaded config has been checked against its own law by :func:`~sashil.control.law_config.check_controller`). ``torque``: a T*(t) signal [N m] for a law with
-    a ``signal`` attribute (``torque-tracking``) instead of its random band fraction.
+    The law takes the section's parameters it declares (:func:`_config_law`). ``torque``: a T*(t)
+    signal [N m] for a law with a ``signal`` attribute (``torque-tracking``) instead of its random
+    band fraction.
     """
     section = controller_section(config)
-    name = section["law"] if name is None else name
-    entry = find_law(name)
+    entry, law = _config_law(config, name)
     params = rig_params(config["model"])
     rig = config["rig"]
     i_max = float(rig["current_max_a"])
     rate_hz = float(config["loop"]["rate_hz"])
-    declared = entry.cls.params()
-    foreign = set(law_parameters(section)) - set(declared)
-    law = build_law(entry, config, {key: value for key, value in section.items() if key not in foreign})
     if torque is not None:
         if not hasattr(law, "signal"):
-            raise TypeError(f"law {name!r} takes no torque signal")
+            raise TypeError(f"law {entry.cls.name!r} takes no torque signal")
         setattr(law, "signal", torque)  # noqa: B010 - a law's optional attribute
     tau = section.get("coil_tau_s")
     tau = float(rig["coil_tau_s"] if tau is None else tau)
