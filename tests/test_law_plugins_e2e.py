@@ -89,8 +89,12 @@ def test_a_law_slower_than_its_period_lets_the_device_watchdog_rest_the_coil(tmp
     last = int(np.flatnonzero(truth["seq"] == data["seq"][stall])[0])  # its sample in the device's truth
     assert current[last] > 0.9  # the law's 1 A was flowing
     rest = last + int(np.flatnonzero(current[last:] < 0.05)[0])
+    # the emulated board is a process on a shared machine: when the VM pauses it (a gap between its
+    # 1 ms ticks in the truth, up to 9 ms measured), its watchdog checks that much later on the
+    # device's clock, which a board on its own core never does; the longest such gap is allowed for
+    pause = max(0.0, float(np.max(np.diff(t_us[last : rest + 1]))) - 1_000)
     # at rest within the watchdog (50 ms) + one cycle + the coil's decay from 1 A to 0.05 A (3 tau, 30 ms)
-    assert t_us[rest] - t_us[last] <= 50_000 + 1_000 + 35_000, (t_us[rest] - t_us[last]) / 1e3
+    assert t_us[rest] - t_us[last] <= 50_000 + 1_000 + 35_000 + pause, ((t_us[rest] - t_us[last]) / 1e3, pause / 1e3)
 
 
 def test_the_tutorials_python_example_runs(tmp_path, monkeypatch):
