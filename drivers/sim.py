@@ -33,8 +33,8 @@ from sashil.drivers.interface import (
     clamp_current,
 )
 from sashil.errors import DriverError
+from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
-from sashil.models.registry import rig_params
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

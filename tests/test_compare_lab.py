@@ -10,7 +10,7 @@ import pytest
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
 from sashil.lab._compare import CompareLaw, compare, laws_of, split_sets
-from sashil.lab.outputs import Outputs
+from sashil.recording.outputs import Outputs
 
 #: a short comparison: 3 s per law, the first 1 s left out, a 10 s road
 SHORT = ("compare.settle_s=1", "road.period_s=10")

@@ -79,6 +79,21 @@ def test_partial_config_keeps_other_defaults(tmp_path):
     assert config["model"]["params"]["c1"] == 0.7
 
 
+def test_a_config_file_may_hold_another_model_with_its_own_parameters(tmp_path):
+    """The schema's defaults are the Bouc-Wen seed's: a Dahl section keeps the symbols it names,
+    and a Bouc-Wen symbol under it is refused by name."""
+    dahl = "model:\n  name: dahl\n  params: {J: 1, k: 2, c1: 3, c2: 4, kwa: 5, kwb: 6, rho: 7}\n"
+    config = load_config(_write(tmp_path, dahl))
+    assert config["model"] == {
+        "name": "dahl",
+        "params": {"J": 1.0, "k": 2.0, "c1": 3.0, "c2": 4.0, "kwa": 5.0, "kwb": 6.0, "rho": 7.0},
+    }
+    with pytest.raises(ConfigError, match=r"lab\.yaml: model\.params\.alpha1: not a dahl parameter"):
+        load_config(_write(tmp_path, dahl.replace("rho: 7", "rho: 7, alpha1: 1")))
+    with pytest.raises(ConfigError, match=r"lab\.yaml: model\.params: missing kwb, rho for model dahl"):
+        load_config(_write(tmp_path, dahl.replace(", kwb: 6, rho: 7", "")))
+
+
 def test_parameter_file_roundtrip_and_include(tmp_path):
     params = tmp_path / "damper.yaml"
     params.write_text(

@@ -33,8 +33,8 @@ from sashil.drivers.messages import (
 )
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.sim import SimulatedRig
+from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
-from sashil.models.registry import rig_params
 
 MS = 1_000_000
 COUNTS = 4096

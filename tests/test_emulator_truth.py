@@ -22,8 +22,8 @@ from sashil.drivers.emulator import TRUTH_COLUMNS, EmulatorThread, TruthLog, rea
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import TWO_PI, RigCommand
 from sashil.errors import DataFileError
+from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
-from sashil.models.registry import rig_params
 
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 

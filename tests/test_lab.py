@@ -19,7 +19,7 @@ from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
 from sashil.lab.events import Event
-from sashil.lab.outputs import Outputs
+from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import losses
 from sashil.runtime.timing import TimingStats

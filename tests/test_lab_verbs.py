@@ -18,8 +18,8 @@ from sashil.lab._calibrate import calibrate
 from sashil.lab._drop_test import drop_test
 from sashil.lab._replay import recorded_config, replay
 from sashil.lab._simulate import drop_table, simulate
-from sashil.lab.outputs import Outputs
 from sashil.models.registry import MODEL_PARAMS
+from sashil.recording.outputs import Outputs
 
 #: the seed damper of the default config
 J, K, C1, C2 = 1.0, 109.0, 0.7, 1.5

@@ -186,6 +186,10 @@ def test_law_parameters_are_config_keys_checked_like_any_other(tmp_path):
     assert "current_a" not in config["controller"]  # the previous law's parameter went with it
     with pytest.raises(ConfigError, match=r"^--set: controller.c_sky: expected a number > 0, got 0$"):
         apply_overrides(default_config(), ["controller.law=skyhook", "controller.c_sky=0"])
+    # a parameter both laws declare keeps its value across a switch; the old law's others go
+    onoff = apply_overrides(default_config(), ["controller.law=skyhook-add", "controller.onoff_current_a=0.4"])
+    switched = apply_overrides(onoff, ["controller.law=skyhook-onoff"])
+    assert switched["controller"]["onoff_current_a"] == 0.4 and "crossover_hz" not in switched["controller"]
     lab = tmp_path / "lab.yaml"
     lab.write_text("controller:\n  law: skyhook\n  c_sky: 2.0\n  c_ground: 1.0\n")
     with pytest.raises(ConfigError) as err:

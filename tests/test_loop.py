@@ -7,14 +7,14 @@ import math
 
 import pytest
 
+from sashil.control.stages import ConstantCurrent
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.errors import DeadlineMissedError, DriverIOError
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import ControlLoop, record_columns
-from sashil.runtime.session import run_session
-from sashil.runtime.stages import ConstantCurrent
+from sashil.runtime.session import InProcessLoop, run_session
 
 PERIOD = 1_000_000  # 1 kHz
 COUNTS = 4096
@@ -231,9 +231,8 @@ def _session(tmp_path, config, rig, stage=None, duration_s=0.1):
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
     lines: list[str] = []
-    outcome = run_session(
-        config, rig, stage or ConstantCurrent(0.5), folder, clock, duration_s, say=lines.append, realtime=False
-    )
+    loop = InProcessLoop(config, rig, stage or ConstantCurrent(0.5), clock, realtime=False)
+    outcome = run_session(loop, config, folder, duration_s, say=lines.append)
     summary = json.loads((folder.path / "summary.json").read_text())
     assert (folder.path / "config.yaml").exists()
     assert summary["exit_status"] == outcome.exit_status
@@ -328,7 +327,8 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     config["loop"]["rt"]["priority"] = 0
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
-    outcome = run_session(config, rig, StopAt(), folder, clock, None, say=lambda line: None, realtime=False)
+    loop = InProcessLoop(config, rig, StopAt(), clock, realtime=False)
+    outcome = run_session(loop, config, folder, None, say=lambda line: None)
     assert outcome.exit_code == 130 and outcome.stop_reason == "SIGTERM"
     # this rig's current never falls (0.1 A more per read): the loop reads on at 0 A for SETTLE_S, one
     # row per period, and says the safe state was not confirmed
@@ -414,9 +414,8 @@ def test_a_disk_full_under_the_session_is_exit_1_and_the_rows_so_far_kept(tmp_pa
     config["loop"]["rt"]["priority"] = 0
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
-    outcome = run_session(
-        config, rig, ConstantCurrent(0.5), folder, _SlowClock(), 60.0, say=lambda line: None, realtime=False
-    )
+    loop = InProcessLoop(config, rig, ConstantCurrent(0.5), _SlowClock(), realtime=False)
+    outcome = run_session(loop, config, folder, 60.0, say=lambda line: None)
     summary = json.loads((folder.path / "summary.json").read_text())
     assert outcome.exit_code == 1 and summary["exit_status"] == "error"
     assert "No space left on device" in summary["error"]

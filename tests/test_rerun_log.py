@@ -14,7 +14,7 @@ from sashil.recording.rerun_log import LiveTap, RerunLog, feasible_band, load_rr
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import record_columns
-from sashil.runtime.session import run_session
+from sashil.runtime.session import InProcessLoop, run_session
 
 
 def _series(doc, entity):
@@ -104,14 +104,11 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     tap = LiveTap(RerunLog.open((*columns, "lateness_us"), save=rrd), every=10, band=(params, 1.0))
     folder = RunFolder.create(tmp_path / "R", "run")
     outcome = run_session(
+        InProcessLoop(config, open_rig(config), stage, VirtualClock(), realtime=False),
         config,
-        open_rig(config),
-        stage,
         folder,
-        VirtualClock(),
         1.5,
         controller="t",
-        realtime=False,
         live=tap,
         say=lambda _: None,
     )

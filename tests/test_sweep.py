@@ -226,7 +226,7 @@ def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
     from sashil.config.resolve import Option
     from sashil.experiments.sweep import SWEEP_COLUMNS
     from sashil.lab._sweep import sweep
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
 
     config = _resolved(
         Option("--f-start", "sweep.f_start_hz", 1.5),
@@ -258,7 +258,7 @@ def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
 def test_the_sweep_function_runs_a_stepped_sine_a_sub_run_per_frequency(tmp_path):
     from sashil.config.resolve import Option
     from sashil.lab._sweep import TRANSMISSIBILITY_COLUMNS, sweep
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
 
     config = _resolved(
         Option("--stepped", "sweep.stepped", True),
@@ -286,7 +286,7 @@ def test_a_stepped_sines_views_see_each_frequency_and_a_stop_ends_the_sweep_at_0
     from sashil.config.resolve import Option
     from sashil.errors import Stopped
     from sashil.lab._sweep import sweep
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
     from sashil.runtime.signals import StopFlag
 
     config = _resolved(
@@ -348,7 +348,7 @@ def test_the_sweep_function_leaves_no_folder_on_bad_input(tmp_path):
     from sashil.config.frozen import freeze, thaw
     from sashil.errors import ConfigError, DriverError
     from sashil.lab._sweep import sweep
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
 
     port = tmp_path / "no-port"
     config = _resolved(driver="serial", port=str(port), sets=("sweep.f_start_hz=1", "sweep.f_stop_hz=1"))

@@ -97,10 +97,10 @@ def test_the_window_is_a_power_of_two_of_whole_folds():
 
 def test_the_loop_runs_past_the_ring_in_constant_memory():
     from sashil.config import default_config
+    from sashil.control.stages import ConstantCurrent
     from sashil.drivers import open_rig
     from sashil.runtime.clock import VirtualClock
     from sashil.runtime.loop import ControlLoop
-    from sashil.runtime.stages import ConstantCurrent
 
     loop = ControlLoop(open_rig(default_config()), ConstantCurrent(0.2), VirtualClock(), 5000.0, 30.0)
     loop.timing = TimingStats(5000.0, window=16384)  # a small ring: 150 000 cycles wrap it 9 times

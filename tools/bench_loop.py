@@ -54,15 +54,15 @@ from pathlib import Path
 from sashil.config import load_config
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.control.laws import Passive
+from sashil.control.stages import ConstantCurrent
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.lab import Outputs, closed_loop
-from sashil.lab.outputs import IN_RUN_FOLDER
+from sashil.recording.outputs import IN_RUN_FOLDER
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import ControlLoop
 from sashil.runtime.rt_setup import RealtimeSetup
-from sashil.runtime.stages import ConstantCurrent
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import LiveTuning
 

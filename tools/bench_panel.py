@@ -49,7 +49,7 @@ AHEAD_S = 3.0
 def bare_run(folder: Path, duration: float) -> dict[str, Any]:
     from sashil.config.resolve import ConfigSource, Option, resolve
     from sashil.lab import closed_loop
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
 
     source = ConfigSource(
         controller="skyhook",

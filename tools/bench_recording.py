@@ -41,7 +41,7 @@ from sashil.recording.rerun_log import LiveTap, RerunLog
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import record_columns
-from sashil.runtime.session import run_session
+from sashil.runtime.session import InProcessLoop, run_session
 
 
 def road_sine(amplitude_rad: float, freq_hz: float):
@@ -104,11 +104,9 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
         )
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
     outcome = run_session(
+        InProcessLoop(config, rig, stage, clock),
         config,
-        rig,
-        stage,
         RunFolder.create(folder, "run"),
-        clock,
         duration,
         controller="target-damping",
         live=live,

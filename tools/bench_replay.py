@@ -16,14 +16,13 @@ and controller on the virtual clock). Goal: >= 200x real time.
 from __future__ import annotations
 
 import argparse
-import copy
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 from sashil.config import default_config
-from sashil.control.law_config import switch_law
+from sashil.config.overrides import apply_values
 from sashil.control.registry import make_controller
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.replay import differences, replay
@@ -41,10 +40,8 @@ LAWS: tuple[tuple[str, dict[str, Any]], ...] = (
 
 
 def law_config(base: dict[str, Any], law: str, params: dict[str, Any]) -> dict[str, Any]:
-    config = copy.deepcopy(base)
-    switch_law(config["controller"], law)
-    config["controller"].update(params)
-    return config
+    values = [(["controller", "law"], law), *((["controller", key], value) for key, value in params.items())]
+    return apply_values(base, values, "bench_replay")
 
 
 def record(config: dict[str, Any], seconds: float, folder: Path) -> tuple[dict[str, Any], float]:

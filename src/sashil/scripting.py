@@ -25,8 +25,8 @@ from sashil.api import Run
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
 from sashil.lab.events import Listener, printer
-from sashil.lab.outputs import Outputs
 from sashil.plugins import check_not_importing
+from sashil.recording.outputs import Outputs
 
 __all__ = ["drop_test", "run"]
 

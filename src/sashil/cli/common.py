@@ -2,7 +2,7 @@
 
 Everything here at module level is argparse and the standard library only, so that ``sashil VERB
 --help`` loads no numerics: :func:`config_source` and :func:`outputs_of` turn parsed options into
-the :class:`~sashil.config.resolve.ConfigSource` and :class:`~sashil.lab.outputs.Outputs` the
+the :class:`~sashil.config.resolve.ConfigSource` and :class:`~sashil.recording.outputs.Outputs` the
 experiments take; the config itself is resolved by :func:`sashil.config.resolve.resolve`.
 """
 
@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
-from sashil.lab.outputs import IN_RUN_FOLDER, Outputs
 from sashil.recording.formats import FORMATS
 from sashil.recording.formats import HELP as FORMAT_HELP
+from sashil.recording.outputs import IN_RUN_FOLDER, Outputs
 
 if TYPE_CHECKING:
     from sashil.config.resolve import ConfigSource, Option
@@ -102,7 +102,7 @@ def add_recording_options(parser: argparse.ArgumentParser, formats: bool = True)
 
 
 def outputs_of(args: argparse.Namespace) -> Outputs:
-    """The :class:`~sashil.lab.outputs.Outputs` the options ask for (folder, formats, live view)."""
+    """The :class:`~sashil.recording.outputs.Outputs` the options ask for (folder, formats, live view)."""
     return Outputs(
         out=getattr(args, "out", None),
         formats=formats(args),

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
             if "parquet" in formats:
                 run = load_run_api(data.parent)
                 meta = {"verb": run.summary.get("verb"), "controller": run.summary.get("controller")}
-                for path in write_data_formats(data.parent, ["parquet"], None, run.config or None, meta):
+                for path in write_data_formats(data.parent, ["parquet"], None, meta):
                     progress(f"wrote {path}")
     for path in files:
         say(args, f"  {path}")

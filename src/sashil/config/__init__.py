@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +25,12 @@ def default_config() -> Config:
     return config
 
 
-def check_controller(config: Config, source: str) -> None:
-    """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`)."""
+def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
+    """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`;
+    ``replaced``: the parameters of a law that ``controller.law`` has just replaced)."""
     from sashil.control.law_config import check_controller as check
 
-    check(config, source)
+    check(config, source, replaced)
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -91,9 +92,6 @@ def load_config(path: str | Path | None = None) -> Config:
         if not isinstance(include, str):
             raise ConfigError(f"{path}: include_params: expected a file name, got {include!r}")
     config = validate(doc, SCHEMA, str(path))
-    from sashil.models.registry import check_model
-
-    check_model(config["model"], str(path), "model")
     if include is not None:
         config = apply_params(config, (path.parent / include))
     check_controller(config, str(path))

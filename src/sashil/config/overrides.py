@@ -3,7 +3,7 @@
 Each override is parsed as YAML (``500`` is a number, ``skyhook`` a string, ``null``, ``true``,
 ``[0.1, 0.9]`` a list, exactly as in a config file), set at its dotted key in a copy of the
 resolved config, and the whole config is validated again by the config file's own code path
-(:func:`sashil.config.schema.validate` and the model check). So a ``--set`` accepts exactly what a
+(:func:`sashil.config.schema.validate`, the model's section check with it). So a ``--set`` accepts exactly what a
 config file accepts, and a bad one fails with one line naming the key and what was expected,
 e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'``.
 """
@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 
 from sashil.config.schema import validate
-from sashil.config.sections import SCHEMA
+from sashil.config.sections import CONTROLLER, SCHEMA
 from sashil.errors import ConfigError
 
 #: the source named in error messages
@@ -66,22 +66,17 @@ def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], An
     if not values:
         return config  # type: ignore[return-value]
     doc: dict[str, Any] = copy.deepcopy(dict(config))
+    keep = {path[1] for path, _ in values if len(path) == 2 and path[0] == "controller"}
+    replaced: set[str] = set()
     for path, value in values:
-        if path == ["controller", "law"] and isinstance(doc.get("controller"), dict):
-            # the previous law's parameters go with it, unless set alongside the new law
-            from sashil.control.law_config import switch_law
-
-            keep = {p[1] for p, _ in values if len(p) == 2 and p[0] == "controller"}
-            switch_law(doc["controller"], value, keep)
-        else:
-            _set(doc, path, value)
+        section = doc.get("controller")
+        if path == ["controller", "law"] and isinstance(section, dict) and section.get("law") != value:
+            # the previous law's parameters (the checked section's keys beyond the controller's
+            # own) go with it, unless the new law declares them or they are set alongside it
+            replaced |= {key for key in section if key not in CONTROLLER.fields} - keep
+        _set(doc, path, value)
     out = validate(doc, SCHEMA, source)
-    if out["model"]["name"] != "bouc-wen" and isinstance(doc.get("model"), dict):
-        # the schema's default parameters are the Bouc-Wen seed's: another model keeps its own only
-        out["model"]["params"] = dict(doc["model"].get("params") or {})
     from sashil.config import check_controller
-    from sashil.models.registry import check_model
 
-    check_model(out["model"], source, "model")
-    check_controller(out, source)
+    check_controller(out, source, replaced)
     return out

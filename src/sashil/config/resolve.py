@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.config import Config, apply_params, check_controller, load_config, verb_checks
-from sashil.config.frozen import freeze_config
+from sashil.config.frozen import freeze_config, thaw
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
@@ -76,11 +76,7 @@ class ConfigSource:
 
 def _load(source: ConfigSource) -> Config:
     if isinstance(source.config, Mapping):
-        from sashil.config.frozen import thaw
-        from sashil.models.registry import check_model
-
         config = validate(thaw(source.config), SCHEMA, "config")
-        check_model(config["model"], "config", "model")
         check_controller(config, "config")
         return config
     return load_config(source.config)

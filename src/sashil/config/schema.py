@@ -7,7 +7,7 @@ Validation errors are one line that names the file, the dotted key and what was 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,13 +90,21 @@ class Field:
         return number
 
 
+#: a whole-section check: ``check(given, section, source, dotted)`` -> the section to keep, where
+#: ``given`` is the document's own value and ``section`` it merged over the defaults
+SectionCheck = Callable[[Any, dict[str, Any], str, str], dict[str, Any]]
+
+
 @dataclass
 class Section:
-    """A mapping of keys to Fields or nested Sections; ``open_keys`` allows free-form keys."""
+    """A mapping of keys to Fields or nested Sections; ``open_keys`` allows free-form keys;
+    ``check`` checks the section as a whole once its keys are (the model's parameters, whose
+    symbols depend on its name)."""
 
     fields: dict[str, Any] = field(default_factory=dict)
     open_keys: bool = False
     doc: str = ""
+    check: SectionCheck | None = None
 
 
 def defaults(schema: Mapping[str, Any]) -> dict[str, Any]:
@@ -171,6 +179,8 @@ def validate(doc: Any, schema: Mapping[str, Any], source: str, prefix: str = "")
                 out[key] = merged
             else:
                 out[key] = validate(value, spec.fields, source, dotted + ".")
+            if spec.check is not None:
+                out[key] = spec.check(value, out[key], source, dotted)
         else:
             out[key] = spec.check(value, f"{source}: {dotted}")
     return out

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from sashil.config.schema import Field, Section
 from sashil.drivers import BACKENDS
+from sashil.models.registry import check_model_section
 from sashil.models.seed import BOUC_WEN_SEED
 
 MODEL = Section(
@@ -20,6 +21,7 @@ MODEL = Section(
         "params": Section({}, open_keys=True),
     },
     doc="the rig and damper model (same shape as the parameter file `sashil identify` writes)",
+    check=check_model_section,
 )
 MODEL.fields["params"].fields.update({key: Field("float", value) for key, value in BOUC_WEN_SEED.items()})
 

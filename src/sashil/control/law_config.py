@@ -9,14 +9,14 @@ folder's ``config.yaml`` says which law ran with which parameters.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 from sashil.control.law_api import Law, LawContext
 from sashil.control.law_registry import LawEntry, find_law
 from sashil.errors import ConfigError
 
-__all__ = ["check_controller", "law_context", "law_parameters", "switch_law"]
+__all__ = ["check_controller", "law_context", "law_parameters"]
 
 
 def _core_keys() -> dict[str, Any]:
@@ -51,36 +51,21 @@ def build_law(entry: LawEntry, config: Mapping[str, Any], section: Mapping[str, 
     return entry.cls(law_context(config), **law_parameters(section))
 
 
-def check_controller(config: dict[str, Any], source: str) -> None:
+def check_controller(config: dict[str, Any], source: str, replaced: Collection[str] = ()) -> None:
     """Check ``controller.law`` and its parameters in place (a config being resolved, not yet
-    frozen); fill in every parameter's value.
+    frozen); fill in every parameter's value. ``replaced``: the parameters of a law that
+    ``controller.law`` has just replaced; those the new law does not declare go with the old law,
+    the rest keep their values.
 
     Errors are one line ``<source>: controller.<key>: <problem>``."""
     section = config.get("controller")
     if not isinstance(section, dict):
         raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
     try:
-        law = build_law(find_law(section["law"]), config, section)
+        entry = find_law(section["law"])
+        for key in set(replaced) - set(entry.cls.params()):
+            section.pop(key, None)
+        law = build_law(entry, config, section)
     except ConfigError as err:
         raise ConfigError(f"{source}: {err}") from None
     section.update(law.parameter_values())
-
-
-def switch_law(section: dict[str, Any], new_law: str, keep: Iterable[str] = ()) -> None:
-    """Set ``section['law']`` to ``new_law`` and drop the previous law's parameters that the new
-    one does not declare (they belonged to the law being replaced), except those in ``keep``
-    (set explicitly alongside the switch)."""
-    old = section.get("law")
-    section["law"] = new_law
-    if old == new_law or not isinstance(old, str):
-        return
-    try:
-        old_params = set(find_law(old).cls.params())
-    except ConfigError:
-        old_params = set(law_parameters(section))
-    try:
-        new_params = set(find_law(new_law).cls.params())
-    except ConfigError:  # an unknown law: check_controller names it
-        return
-    for key in old_params - new_params - set(keep):
-        section.pop(key, None)

@@ -74,40 +74,38 @@ def find_law(spec: str) -> LawEntry:
     """The law ``spec`` names: a registered name, ``package.module:Class`` or ``path/file.py:Class``."""
     if not isinstance(spec, str) or not spec:
         raise ConfigError(f"{WHERE}: expected a law name, package.module:Class or path/file.py:Class, got {spec!r}")
+    table = entry_point_table(LAWS_GROUP)
+    rival = None
     if is_class_spec(spec):
         cls = load_class(spec, WHERE)
+        # the registered law of the same name, loaded with it: a name a class given by its path
+        # may not claim
+        name = getattr(cls, "name", None)
+        registered = table.get(name) if isinstance(name, str) else None
+        if registered is not None and registered.target != spec:
+            rival = (registered, load_class(registered.target, WHERE))
         module_part = spec.rpartition(":")[0]
-        origin = f"file {module_part}" if module_part.endswith(".py") else f"module {module_part}"
-        entry = _checked(cls, spec, origin)
-        registered = entry_point_table(LAWS_GROUP).get(entry.cls.name)
-        if (
-            registered is not None
-            and registered.target != spec
-            and not _same_class(_load(registered.target), entry.cls)
-        ):
+        target, origin = spec, f"file {module_part}" if module_part.endswith(".py") else f"module {module_part}"
+    else:
+        plugin = table.get(spec)
+        if plugin is None:
+            known = ", ".join(table) or "none installed: reinstall sashil (pip install -e .)"
             raise ConfigError(
-                f"{WHERE}: {spec} claims the name {entry.cls.name!r}, which {registered.target} "
-                f"({registered.origin}) already has: rename one of them"
+                f"{WHERE}: unknown law {spec!r} (known: {known}; or give package.module:Class or path/file.py:Class)"
             )
-        return entry
-    table = entry_point_table(LAWS_GROUP)
-    plugin = table.get(spec)
-    if plugin is None:
-        known = ", ".join(table) or "none installed: reinstall sashil (pip install -e .)"
+        cls, target, origin = load_class(plugin.target, WHERE), plugin.target, plugin.origin
+    entry = _checked(cls, target, origin)
+    if rival is not None and not _same_class(rival[1], entry.cls):
         raise ConfigError(
-            f"{WHERE}: unknown law {spec!r} (known: {known}; or give package.module:Class or path/file.py:Class)"
+            f"{WHERE}: {spec} claims the name {entry.cls.name!r}, which {rival[0].target} "
+            f"({rival[0].origin}) already has: rename one of them"
         )
-    entry = _checked(_load(plugin.target), plugin.target, plugin.origin)
-    if entry.cls.name != spec:
+    if not is_class_spec(spec) and entry.cls.name != spec:
         raise ConfigError(
-            f"{WHERE}: the entry point {spec!r} ({plugin.origin}) loads {plugin.target}, whose name is "
+            f"{WHERE}: the entry point {spec!r} ({origin}) loads {target}, whose name is "
             f"{entry.cls.name!r}: the two must agree"
         )
     return entry
-
-
-def _load(target: str) -> type:
-    return load_class(target, WHERE)
 
 
 def _same_class(a: type, b: type) -> bool:

@@ -21,7 +21,8 @@ from sashil.control.law_api import Law
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import LawEntry, find_law
 from sashil.control.observer import BoucWenObserver
-from sashil.models.registry import rig_params
+from sashil.control.stages import ConstantCurrent
+from sashil.errors import ConfigError
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -59,8 +60,6 @@ def make_stage(config: RunConfig) -> tuple[str, Any]:
     if law_reads_state(config):
         controller = make_controller(None, config)
         return controller.law.label(), controller
-    from sashil.runtime.stages import ConstantCurrent
-
     law = _config_law(config)[1]
     return law.label(), ConstantCurrent(law=law)
 
@@ -112,7 +111,9 @@ def make_controller(
     """
     section = controller_section(config)
     entry, law = _config_law(config, name)
-    params = rig_params(config["model"])
+    if law.context is None:  # the law's context holds the model only when it is the rig's Bouc-Wen
+        raise ConfigError(f"model.name: the controller runs the bouc-wen model, got {config['model']['name']!r}")
+    params = law.context.model
     rig = config["rig"]
     i_max = float(rig["current_max_a"])
     rate_hz = float(config["loop"]["rate_hz"])

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from sashil.lab._simulate import simulate
     from sashil.lab._sweep import sweep
     from sashil.lab.events import Event
-    from sashil.lab.outputs import Outputs
+    from sashil.recording.outputs import Outputs
 
 _LAZY = {
     "ConfigSource": "sashil.config.resolve",
@@ -44,7 +44,7 @@ _LAZY = {
     "closed_loop": "sashil.lab._closed_loop",
     "drop_test": "sashil.lab._drop_test",
     "Event": "sashil.lab.events",
-    "Outputs": "sashil.lab.outputs",
+    "Outputs": "sashil.recording.outputs",
     "replay": "sashil.lab._replay",
     "simulate": "sashil.lab._simulate",
     "sweep": "sashil.lab._sweep",

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from sashil.api import Run, load_run
 from sashil.calibrate.session import calibrate_rig
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
+from sashil.recording.outputs import Outputs
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

@@ -9,13 +9,14 @@ from typing import TYPE_CHECKING, Any
 from sashil.api import Run, load_run
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
 from sashil.recording.formats import can_formats
+from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
+from sashil.runtime.clock import RealClock
 from sashil.runtime.loop_process import LoopProcess
-from sashil.runtime.session import run_loop_process
+from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
@@ -54,7 +55,7 @@ def closed_loop(
     backend = config["driver"]["name"]
     process = None
     rig: Any = None
-    stage: Any = None
+    loop: SessionLoop
     if config["loop"]["process"]:  # the loop in a process of its own
         process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
         try:
@@ -65,15 +66,14 @@ def closed_loop(
             process.close()
             raise
         label, road_text, columns = ready["label"], ready["road"], tuple(ready["columns"])
+        loop = process
     else:
         rig, stage, label, road_text, columns = _in_this_process(config, on_event)
+        loop = InProcessLoop(config, rig, stage, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
     try:
         folder = RunFolder.create(outputs.out, "run")
     except BaseException:
-        if process is not None:
-            process.abort()
-        else:
-            rig.close()
+        loop.abort()
         raise
     live = outputs.open_live_tap(config, columns, "sashil run", folder.path)
     if progress:  # a bar on a terminal, a line every 10 s otherwise
@@ -106,7 +106,6 @@ def closed_loop(
         if (folder.path / "data.csv").exists():
             outputs.write_formats(
                 folder.path,
-                config,
                 "run",
                 exit_status=summary.get("exit_status", "ok"),
                 controller=summary.get("controller"),
@@ -120,23 +119,10 @@ def closed_loop(
     def say(line: str) -> None:
         on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
 
-    hooks: dict[str, Any] = {
-        "controller": label,
-        "live": live,
-        "say": say,
-        "tune": tune,
-        "finish": finish,
-        "stop": stop,
-    }
     try:
-        if process is not None:
-            outcome = run_loop_process(process, config, folder, duration, **hooks)
-        else:
-            from sashil.runtime.clock import RealClock
-            from sashil.runtime.session import run_session
-
-            clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-            outcome = run_session(config, rig, stage, folder, clock, duration, **hooks)
+        outcome = run_session(
+            loop, config, folder, duration, controller=label, live=live, say=say, tune=tune, finish=finish, stop=stop
+        )
     finally:
         if trace is not None and trace_stats is None:
             trace.close()

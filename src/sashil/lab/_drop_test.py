@@ -15,7 +15,7 @@ from sashil.drivers import on_virtual_clock
 from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, config_controller, controller_columns, run_drop_test
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
+from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
@@ -119,7 +119,6 @@ def drop_test(
         assert record.metrics is not None and record.run  # run_drop_test sets both
         outputs.write_formats(
             target.path,
-            config,
             "drop-test",
             record.columns,
             exit_status=ending(record.error)["exit_status"],

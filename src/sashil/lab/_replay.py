@@ -15,7 +15,7 @@ from sashil.control.registry import make_controller
 from sashil.errors import DataFileError
 from sashil.experiments import replay as offline
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
+from sashil.recording.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.session import EVENTS_FILE

@@ -17,9 +17,9 @@ from sashil.errors import ConfigError
 from sashil.experiments.metrics import drop_metrics
 from sashil.identify.simulate import drop_test_inputs, simulate_columns
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
+from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.stats import nrmse

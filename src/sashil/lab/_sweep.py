@@ -28,9 +28,9 @@ from sashil.experiments.sweep import (
 )
 from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.outputs import Outputs
 from sashil.recording.formats import can_formats
 from sashil.recording.labels import controller_label
+from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_chirp, plot_transmissibility
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
@@ -188,7 +188,7 @@ def _stepped(
     def keep(f: float, cols: dict[str, Any]) -> None:
         sub = runs.folder_for(_freq_label(f))
         sub.write_data(cols)
-        outputs.write_formats(sub.path, config, "sweep", cols, exit_status="ok", controller=label, frequency_hz=f)
+        outputs.write_formats(sub.path, "sweep", cols, exit_status="ok", controller=label, frequency_hz=f)
 
     try:
         for k, f in enumerate(freqs):  # one frequency at a time, for the progress bar
@@ -282,7 +282,7 @@ def _chirp(
         if err.exit_code != ConfigError.exit_code:
             runs.add("chirp", {"safe_state": getattr(err, "safe_state", None)}, err)
         raise
-    outputs.write_formats(folder.path, config, "sweep", cols, exit_status="ok", controller=label)
+    outputs.write_formats(folder.path, "sweep", cols, exit_status="ok", controller=label)
     plot_chirp(
         folder.file("chirp.png"),
         cols,

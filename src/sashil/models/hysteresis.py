@@ -36,6 +36,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from sashil.errors import ConfigError
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.seed import BOUC_WEN_SEED
 
@@ -91,6 +92,13 @@ class BoucWenParams:
         inverse hysteresis solves this line for i, the feasible band is [T(0), T(i_max)].
         """
         return self.alpha1 * z + self.c1 * theta_dot, self.alpha2 * z + self.c2 * theta_dot
+
+
+def rig_params(model_section: Mapping[str, Any]) -> BoucWenParams:
+    """The Bouc-Wen parameters the simulated rig runs on (only Bouc-Wen drives the rig plant)."""
+    if model_section.get("name", "bouc-wen") != "bouc-wen":
+        raise ConfigError(f"model.name: the simulated rig runs the bouc-wen model, got {model_section['name']!r}")
+    return BoucWenParams.from_mapping(model_section["params"])
 
 
 @loop_kernel(lambda: (0.0, 1e-4, 1.0, 1.0, 2.0, 1.0, 1.0))

@@ -1,16 +1,19 @@
-"""Model names, their parameter symbols, and checks of a ``model`` section / parameter file."""
+"""Model names, their parameter symbols, and checks of a ``model`` section / parameter file.
+
+Plain data and the seed's floats: the config schema checks a ``model`` section with
+:func:`check_model_section` without loading a model's numerics.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 from sashil.errors import ConfigError
-from sashil.models.hysteresis import BoucWenParams
+from sashil.models.seed import BOUC_WEN_SEED
 
 #: model name -> its parameter symbols (seed 001 names; docs/architecture.md parameter-file shape)
 MODEL_PARAMS: dict[str, tuple[str, ...]] = {
-    "bouc-wen": tuple(BoucWenParams.__dataclass_fields__),
+    "bouc-wen": tuple(BOUC_WEN_SEED),
     "dahl": ("J", "k", "c1", "c2", "kwa", "kwb", "rho"),
     "lugre": ("J", "k", "sigma_a", "sigma_b", "sigma0", "sigma1", "sigma2", "a0"),
     "bingham": ("J", "k", "c0", "c0_i", "fc", "fc_i", "f0"),
@@ -47,7 +50,7 @@ def check_model(section: dict[str, Any], source: str, where: str, complete: bool
         if missing:
             raise ConfigError(f"{source}: {prefix}params: missing {', '.join(missing)} for model {name}")
     if name == "bouc-wen":
-        merged = {**BoucWenParams().as_dict(), **out}
+        merged = {**BOUC_WEN_SEED, **out}
         for key in ("J", "n", "delta"):
             if merged[key] <= 0:
                 raise ConfigError(f"{source}: {prefix}params.{key}: expected a number > 0, got {merged[key]:g}")
@@ -62,8 +65,11 @@ def check_model(section: dict[str, Any], source: str, where: str, complete: bool
     return {"name": name, "params": out}
 
 
-def rig_params(model_section: Mapping[str, Any]) -> BoucWenParams:
-    """The Bouc-Wen parameters the simulated rig runs on (only Bouc-Wen drives the rig plant)."""
-    if model_section.get("name", "bouc-wen") != "bouc-wen":
-        raise ConfigError(f"model.name: the simulated rig runs the bouc-wen model, got {model_section['name']!r}")
-    return BoucWenParams.from_mapping(model_section["params"])
+def check_model_section(given: Any, section: dict[str, Any], source: str, where: str) -> dict[str, Any]:
+    """The schema's check of a config's ``model`` section (:class:`~sashil.config.schema.Section`
+    ``check``): ``section`` is ``given`` merged over the defaults, whose parameters are the Bouc-Wen
+    seed's, so another model keeps only the parameters ``given`` names."""
+    if section.get("name") != "bouc-wen":
+        params = given.get("params") if isinstance(given, dict) else None
+        section = {**section, "params": dict(params or {})}
+    return check_model(section, source, where)

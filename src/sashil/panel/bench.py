@@ -329,7 +329,7 @@ class Bench:
                 raise ConfigError("the board checks (doctor) are running: start when they end")
             config = self.resolve(choice)
             experiment = str(choice.get("experiment") or "run")
-            from sashil.lab.outputs import Outputs
+            from sashil.recording.outputs import Outputs
             from sashil.recording.run_folder import utc_stamp
 
             base = self.runs_dir / f"{utc_stamp()}-{experiment}"

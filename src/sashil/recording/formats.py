@@ -59,11 +59,11 @@ def write_data_formats(
     folder: Path,
     formats: Iterable[str] | None,
     columns: Mapping[str, Any] | None,
-    config: Mapping[str, Any] | None,
     meta: Mapping[str, Any],
 ) -> list[Path]:
     """Write the data formats asked for into ``folder``, from ``columns`` (or, when None, from the
-    folder's ``data.csv``, e.g. after a loop run has closed it). Returns the files written."""
+    folder's ``data.csv``, e.g. after a loop run has closed it); a parquet file carries the folder's
+    ``config.yaml`` as written. Returns the files written."""
     wanted = [fmt for fmt in formats or () if fmt in ("mat", "parquet")]
     if not wanted:
         return []
@@ -80,5 +80,7 @@ def write_data_formats(
         else:
             from sashil.recording.parquet_sink import write_parquet
 
-            written.append(write_parquet(folder / "data.parquet", columns, config, meta))
+            config = folder / "config.yaml"
+            config_yaml = config.read_text(encoding="utf-8") if config.exists() else None
+            written.append(write_parquet(folder / "data.parquet", columns, config_yaml, meta))
     return written

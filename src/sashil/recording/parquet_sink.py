@@ -6,8 +6,8 @@ hand-write). Every column is float64 except the integer ones (``seq``, ``trip_co
 file carries its own description:
 
 * each field's metadata ``unit`` (``rad``, ``A``, ``N m``, ... from the column name);
-* the schema metadata ``sashil.units`` (JSON: column -> unit), ``sashil.config`` (the run's resolved
-  config as YAML, when known) and ``sashil.run`` (JSON: verb and what else the writer passes).
+* the schema metadata ``sashil.units`` (JSON: column -> unit), ``sashil.config`` (the run folder's
+  ``config.yaml`` as written, when there is one) and ``sashil.run`` (JSON: verb and what else the writer passes).
 
 In pandas: ``pd.read_parquet("data.parquet")``; the metadata:
 ``pyarrow.parquet.read_schema("data.parquet").metadata[b"sashil.config"]``.
@@ -51,10 +51,11 @@ def _array(pa: Any, name: str, values: Any) -> Any:
 def write_parquet(
     path: str | Path,
     columns: Mapping[str, Any],
-    config: Mapping[str, Any] | None = None,
+    config_yaml: str | None = None,
     meta: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write equal-length ``columns`` to ``path`` (a temporary name first, then renamed)."""
+    """Write equal-length ``columns`` to ``path`` (a temporary name first, then renamed), with
+    ``config_yaml`` (the run folder's ``config.yaml``, as written) in the metadata when given."""
     pa, pq = _pyarrow()
     path = Path(path)
     arrays = [_array(pa, name, values) for name, values in columns.items()]
@@ -64,10 +65,8 @@ def write_parquet(
     units = {name: column_unit(name) for name in columns}
     fields = [pa.field(name, a.type, metadata={"unit": units[name]}) for name, a in zip(columns, arrays, strict=True)]
     metadata = {"sashil.units": json.dumps(units), "sashil.run": json.dumps(dict(meta or {}))}
-    if config is not None:
-        from sashil.config import dump_config
-
-        metadata["sashil.config"] = dump_config(dict(config))
+    if config_yaml is not None:
+        metadata["sashil.config"] = config_yaml
     table = pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=metadata))
     tmp = path.with_name(path.name + ".part")
     pq.write_table(table, tmp, compression="zstd")

@@ -44,7 +44,7 @@ from sashil.config.frozen import thaw
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import check_disk, losses
+from sashil.runtime.runner import LoopHooks, LoopRan, RunOutcome, check_disk, loop_summary, losses
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -60,9 +60,11 @@ from sashil.runtime.stream import (
 )
 from sashil.runtime.stream_recorder import StreamRecorder
 from sashil.runtime.tune_socket import TuneServer
+from sashil.runtime.tuning import EVENT_COLUMNS
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
+    from sashil.recording.run_folder import RunFolder
 
 #: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
 REPLY_WAIT_S = 30.0
@@ -141,6 +143,7 @@ class LoopProcess:
             "log_level": _log_level(),
             "sys_path": list(sys.path),  # a law's module imports there as it does here
         }
+        self.config = config
         self.rate_hz = float(config["loop"]["rate_hz"])
         #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
         self.loop_cpu: int | None = config["loop"]["rt"].get("cpu") if realtime else None
@@ -259,6 +262,54 @@ class LoopProcess:
                 header[STOP_W] = _stop_code(stop)
             if self._messages < 0 and self.process.poll() is not None:
                 return end
+
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+        """The ready loop's run for a session (:func:`~sashil.runtime.session.run_session`): the
+        stream recorded into ``folder``'s ``data.csv`` (:func:`drive`), the tuning socket served
+        there with ``tune``, and the loop's end read into the keys of every loop run's summary."""
+        ended = drive(
+            self,
+            self.config,
+            folder.file("data.csv"),
+            duration_s,
+            say=lambda kind, text: hooks.say(text),
+            live=hooks.live,
+            tune_folder=folder.path if hooks.tune else None,
+            stop=hooks.stop,
+            verb=hooks.verb,
+        )
+        end = ended.end
+        affinity = {"session": self.session_affinity} if self.session_affinity else {}
+        summary = loop_summary(
+            exit_status=ended.exit_status,
+            timing=ended.timing.summary(),
+            trips=end.get("trips", []),
+            error=ended.error,
+            stop_reason=end.get("stop_reason"),
+            controller_stats=end.get("controller_stats"),
+            safety=end.get("safety"),
+            realtime={**end.get("realtime", {}), **affinity},
+            recording=ended.recording,
+            link=end.get("link"),
+            shutdown_errors=end.get("shutdown_errors", []),
+            safe_state=end.get("safe_state"),
+        )
+        events = (end.get("tuning") or {}).get("events") or []
+        facts = {
+            "pid": self.process.pid if self.process else None,
+            "threads": end.get("threads"),
+            "startup_s": None if self.startup_s is None else round(self.startup_s, 3),
+            "since_spawn_s": None if self.since_spawn_s is None else round(self.since_spawn_s, 3),
+            **({"died": end["loop_died"]} if "loop_died" in end else {}),
+        }
+        timing = ended.timing.copy()  # the stream's shared rings end with the process
+        return LoopRan(
+            RunOutcome(ended.error, ended.stop, timing, int(end.get("start_ns") or 0), summary),
+            end.get("tuning"),
+            [[event[name] for name in EVENT_COLUMNS] for event in events],
+            [(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+            facts,
+        )
 
     def pass_stop(self, stop: StopFlag) -> Callable[[], None]:
         """What passes a request of ``stop`` to the loop: its code into the stream's stop word."""

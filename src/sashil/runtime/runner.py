@@ -123,7 +123,7 @@ def loop_summary(
     safe_state: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The keys of summary.json every loop run has, in one place: the run in this process
-    (:meth:`RunOutcome.summary`), in a loop process (:func:`~sashil.runtime.session.run_loop_process`)
+    (:meth:`RunOutcome.summary`), in a loop process (:meth:`~sashil.runtime.loop_process.LoopProcess.run`)
     and a loop whose session died (:mod:`~sashil.runtime.orphan`). ``exit_code`` follows from the
     status and the error; ``error`` is ``error_text`` (default: the error's line) when there is one.
     ``safe_state``: after a stop, the coil's measured current at 0 A and how soon it got there."""
@@ -146,9 +146,8 @@ def loop_summary(
 
 @dataclass
 class RunOutcome:
-    """What a loop run leaves, whether it ran in this process (:func:`run_plan`,
-    :func:`~sashil.runtime.session.run_session`) or in its own (``run_plan_process``,
-    ``run_loop_process``): the error that ended the run (None: it ended normally or by a signal), its
+    """What a loop run leaves, whether it ran in this process (:func:`run_plan`) or in its own
+    (``run_plan_process``, :meth:`~sashil.runtime.loop_process.LoopProcess.run`): the error that ended the run (None: it ended normally or by a signal), its
     timing and start, and its summary.json keys, from which the properties read how it ended (one
     record of it, wherever the loop ran)."""
 
@@ -206,6 +205,33 @@ class RunOutcome:
         stopped = self.stop_error()
         if stopped is not None:
             raise stopped
+
+
+@dataclass(frozen=True)
+class LoopHooks:
+    """What a session hands its loop for a run: where the loop's lines go (``say``), the readers of
+    its stream (``live``: ``start(stream, timing)``), whether to serve live tuning on the folder's
+    socket, the caller's stop flag and the verb that runs it."""
+
+    say: Callable[[str], None]
+    live: Any = None
+    tune: bool = False
+    stop: StopFlag | None = None
+    verb: str = "run"
+
+
+@dataclass
+class LoopRan:
+    """A session's loop run, wherever the loop ran (:func:`~sashil.runtime.session.run_session`):
+    its outcome (the summary holds the keys every loop run has, :func:`loop_summary`), the tuning's
+    summary keys, the live changes made during it (``events.csv``'s rows and the live view's notes)
+    and, for a loop in a process of its own, that process's facts."""
+
+    outcome: RunOutcome
+    tuning: dict[str, Any] | None = None
+    event_rows: list[list[Any]] = field(default_factory=list)
+    notes: list[tuple[float, str]] = field(default_factory=list)
+    loop_process: dict[str, Any] | None = None
 
 
 def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[str], None]) -> BaseException | None:

@@ -1,9 +1,12 @@
-"""One closed-loop session into a run folder: RT set-up, signals, safety, recorder, loop, summary.
+"""One closed-loop session into a run folder, wherever its loop runs: config, stream, summary.
 
-``run_session`` is what ``sashil run`` (and ``tools/bench_loop.py``) call: it writes
-``config.yaml`` first, records ``data.csv`` through the threaded recorder while the loop runs, and
-always writes ``summary.json`` at the end, whatever ended the loop (a signal, a trip, an error).
-The rig is already in the safe state (0 A, deactivated, closed) when the summary is written.
+``run_session`` is what ``sashil run`` (and ``tools/bench_loop.py``) call. Its loop runs in this
+process (:class:`InProcessLoop`: the one runner, RT set-up, signals, safety and the threaded
+recorder) or in a process of its own (:class:`~sashil.runtime.loop_process.LoopProcess`: the
+session records the loop's stream); the session's own part is the same either way. It writes
+``config.yaml`` first and always writes ``summary.json`` at the end, once, whatever ended the loop
+(a signal, a trip, an error, the loop process's death). The rig is already in the safe state (0 A,
+deactivated, closed) when the summary is written.
 
 summary.json (docs/architecture.md fixed keys first): ``exit_status`` (ok | stopped | safety_trip |
 deadline_missed | error), ``timing`` ({rate_hz, cycles, missed_deadlines, lateness_us,
@@ -16,18 +19,17 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
-from sashil.runtime.runner import RunOutcome, run_plan
+from sashil.runtime.runner import LoopHooks, LoopRan, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
-    from sashil.runtime.loop_process import LoopProcess
 
 #: the run folder's record of live parameter changes (sashil tune)
 EVENTS_FILE = "events.csv"
@@ -55,68 +57,110 @@ def open_tuning(
     return tuning, server
 
 
+class SessionLoop(Protocol):
+    """The loop a session runs: in this process (:class:`InProcessLoop`) or in a process of its
+    own (:class:`~sashil.runtime.loop_process.LoopProcess`, ready)."""
+
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+        """Run the loop, streaming ``data.csv`` into ``folder``; never raises for what ends the loop."""
+        ...
+
+    def abort(self) -> None:
+        """Give up a loop that never ran (nothing was energised)."""
+        ...
+
+    def close(self) -> None:
+        """Let go of what the run held once its folder is complete."""
+        ...
+
+
+class InProcessLoop:
+    """A session's loop in this process: :func:`~sashil.runtime.runner.run_plan` of ``stage`` on
+    ``rig`` (built, its port open) on ``clock``, its live tuning served on the folder's socket.
+    ``realtime``: apply ``loop.rt`` on the real clock."""
+
+    def __init__(self, config: RunConfig, rig: Any, stage: Any, clock: Clock, *, realtime: bool = True):
+        self.config = config
+        self.rig = rig
+        self.stage = stage
+        self.clock = clock
+        self.realtime = realtime
+
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+        tuning, server = open_tuning(self.config, self.stage, folder, hooks.say) if hooks.tune else (None, None)
+        try:
+            outcome = run_plan(
+                self.config,
+                self.rig,
+                self.stage,
+                self.clock,
+                duration_s,
+                data_path=folder.file("data.csv"),
+                say=hooks.say,
+                realtime=self.realtime,
+                live=hooks.live,
+                tuning=tuning,
+                stop=hooks.stop,
+            )
+        finally:
+            if tuning is not None and server is not None:
+                tuning.close()
+                server.stop()
+        if tuning is None:
+            return LoopRan(outcome)
+        return LoopRan(outcome, tuning.summary(), tuning.rows(), tuning.notes())
+
+    def abort(self) -> None:
+        self.rig.close()
+
+    def close(self) -> None:
+        """Nothing to let go: the run's end closed the rig."""
+
+
 def run_session(
+    loop: SessionLoop,
     config: RunConfig,
-    rig: Any,
-    stage: Any,
     folder: RunFolder,
-    clock: Clock,
     duration_s: float | None,
     *,
     controller: str = "passive",
     verb: str = "run",
     say: Callable[[str], None] = _stderr,
-    realtime: bool = True,
     live: Any = None,
     tune: bool = False,
     finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
     stop: StopFlag | None = None,
 ) -> RunOutcome:
-    """Run ``stage`` on ``rig`` in closed loop through the one runner
-    (:func:`~sashil.runtime.runner.run_plan`), streaming ``data.csv`` into ``folder``; then the
-    timing file and ``summary.json`` (see module doc). ``tune``: serve live changes of the stage's
-    law on the folder's tuning socket while the loop runs (:mod:`sashil.runtime.tune_socket`),
-    recorded in ``events.csv`` and ``summary.json``'s ``tuning``. ``finish``: the verb's one hook,
-    called with the session's summary once the data and timing are on disk; the keys it returns are
-    added before ``summary.json`` is written, once. ``stop``: a flag another thread may set to stop
-    the run cleanly (signals are routed to it as well when the session runs on the main thread)."""
-    folder.write_config(config)
-    tuning, server = open_tuning(config, stage, folder, say) if tune else (None, None)
+    """Run ``loop`` (in this process or its own) streaming ``data.csv`` into ``folder``, with
+    ``config.yaml`` written first and the timing file and ``summary.json`` last (see module doc).
+    ``tune``: serve live changes of the law on the folder's tuning socket while the loop runs
+    (:mod:`sashil.runtime.tune_socket`), recorded in ``events.csv`` and ``summary.json``'s
+    ``tuning``. ``finish``: the verb's one hook, called with the session's summary once the data
+    and timing are on disk; the keys it returns are added before ``summary.json`` is written, once.
+    ``stop``: a flag another thread may set to stop the run cleanly (signals are routed to it as
+    well when the session runs on the main thread)."""
     try:
-        outcome = run_plan(
-            config,
-            rig,
-            stage,
-            clock,
-            duration_s,
-            data_path=folder.file("data.csv"),
-            say=say,
-            realtime=realtime,
-            live=live,
-            tuning=tuning,
-            stop=stop,
-        )
-    finally:
-        if tuning is not None and server is not None:
-            tuning.close()
-            server.stop()
-    notes = tuning.notes() if tuning is not None else ()
-    live_stats = live.close(outcome.trips, notes) if live is not None else None
-    outcome.summary = _close_folder(
-        folder,
-        config,
-        outcome.timing,
-        tuning.rows() if tuning is not None else [],
-        {
+        folder.write_config(config)
+    except BaseException:
+        loop.abort()
+        raise
+    try:
+        ran = loop.run(folder, duration_s, LoopHooks(say, live, tune, stop, verb))
+        outcome = ran.outcome
+        live_stats = live.close(outcome.trips, ran.notes) if live is not None else None
+        head = {
             "verb": verb,
             **outcome.summary,
             "controller": controller,
             "duration_s": duration_s,
             "live_view": live_stats,
-            "tuning": tuning.summary() if tuning is not None else None,
-        },
-        finish,
-    )
+            "tuning": ran.tuning,
+        }
+        if ran.loop_process is not None:
+            head["loop_process"] = ran.loop_process
+        outcome.summary = _close_folder(folder, config, outcome.timing, ran.event_rows, head, finish)
+    finally:
+        loop.close()
     return outcome
 
 
@@ -139,82 +183,3 @@ def _close_folder(
         summary.update(finish(summary))
     folder.write_summary(summary)
     return summary
-
-
-def run_loop_process(
-    process: LoopProcess,
-    config: RunConfig,
-    folder: RunFolder,
-    duration_s: float | None,
-    *,
-    controller: str,
-    verb: str = "run",
-    say: Callable[[str], None] = _stderr,
-    live: Any = None,
-    tune: bool = False,
-    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None,
-    stop: StopFlag | None = None,
-) -> RunOutcome:
-    """:func:`run_session` with the loop in its own process (:mod:`sashil.runtime.loop_process`):
-    ``process`` is ready (its rig open, its kernels warm, its stream made). The session writes
-    ``config.yaml``, checks the disk, records the stream into ``data.csv``, serves the views and the
-    tuning socket, tells the loop to go, and writes the timing file and ``summary.json`` once,
-    whatever ended the loop: a signal, a trip, an error, or the loop process's death."""
-    from sashil.runtime.loop_process import drive
-    from sashil.runtime.runner import loop_summary
-
-    try:
-        folder.write_config(config)
-    except BaseException:
-        process.abort()
-        raise
-    ended = drive(
-        process,
-        config,
-        folder.file("data.csv"),
-        duration_s,
-        say=lambda kind, text: say(text),
-        live=live,
-        tune_folder=folder.path if tune else None,
-        stop=stop,
-        verb=verb,
-    )
-    end, timing, error, status = ended.end, ended.timing, ended.error, ended.exit_status
-    notes = end.get("tuning_notes") or []
-    live_stats = live.close(end.get("trips", []), [tuple(note) for note in notes]) if live is not None else None
-    events = (end.get("tuning") or {}).get("events") or []
-    session_affinity = {"session": process.session_affinity} if process.session_affinity else {}
-    loop_process = {
-        "pid": process.process.pid if process.process else None,
-        "threads": end.get("threads"),
-        "startup_s": None if process.startup_s is None else round(process.startup_s, 3),
-        "since_spawn_s": None if process.since_spawn_s is None else round(process.since_spawn_s, 3),
-        **({"died": end["loop_died"]} if "loop_died" in end else {}),
-    }
-    head: dict[str, Any] = {
-        "verb": verb,
-        **loop_summary(
-            exit_status=status,
-            timing=timing.summary(),
-            trips=end.get("trips", []),
-            error=error,
-            stop_reason=end.get("stop_reason"),
-            controller_stats=end.get("controller_stats"),
-            safety=end.get("safety"),
-            realtime={**end.get("realtime", {}), **session_affinity},
-            recording=ended.recording,
-            link=end.get("link"),
-            shutdown_errors=end.get("shutdown_errors", []),
-            safe_state=end.get("safe_state"),
-        ),
-        "controller": controller,
-        "duration_s": duration_s,
-        "live_view": live_stats,
-        "tuning": end.get("tuning"),
-        "loop_process": loop_process,
-    }
-    rows = [[event[name] for name in EVENT_COLUMNS] for event in events]
-    summary = _close_folder(folder, config, timing, rows, head, finish)
-    timing = timing.copy()  # the stream's shared rings end with the process
-    process.close()
-    return RunOutcome(error, ended.stop, timing, int(end.get("start_ns") or 0), summary)

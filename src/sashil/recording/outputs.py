@@ -110,7 +110,6 @@ class Outputs:
     def write_formats(
         self,
         folder: Path,
-        config: RunConfig,
         verb: str,
         columns: Mapping[str, Any] | None = None,
         *,
@@ -122,4 +121,4 @@ class Outputs:
         from sashil.recording.formats import write_data_formats
 
         about = {"verb": verb, "exit_status": exit_status, "sashil_version": __version__, **meta}
-        return write_data_formats(folder, tuple(dict.fromkeys(self.formats)), columns, config, about)
+        return write_data_formats(folder, tuple(dict.fromkeys(self.formats)), columns, about)
