@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sashil import __version__
+from sashil._version import __version__
 from sashil.errors import ConfigError
 
 if TYPE_CHECKING:

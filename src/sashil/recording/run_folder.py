@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from sashil import __version__
+from sashil._version import __version__
 from sashil.config import dump_config
 from sashil.errors import ConfigError
 from sashil.recording.data_file import Columns, write_data_csv
