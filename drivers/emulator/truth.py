@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from sashil.errors import DataFileError
 from sashil.models.plant import RigPlant
+from sashil.recording.data_file import write_data_csv
 
 #: columns of the truth CSV, in order
 TRUTH_COLUMNS = (
@@ -75,16 +77,12 @@ class TruthLog:
 
     def write_csv(self, path: str | Path) -> Path:
         """Write the rows to ``path`` as CSV (header :data:`TRUTH_COLUMNS`; written whole, then renamed)."""
-        from sashil.recording.data_file import write_data_csv
-
         return write_data_csv(path, self.columns())
 
 
 def read_truth_csv(path: str | Path) -> dict[str, np.ndarray]:
     """The columns of a truth CSV written by :meth:`TruthLog.write_csv` (``seq`` and
     ``device_time_us`` as int64); a file of another shape is a one-line DataFileError naming it."""
-    from sashil.errors import DataFileError
-
     path = Path(path)
     try:
         with open(path, encoding="utf-8") as handle:

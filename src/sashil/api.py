@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 
 from sashil.errors import DataFileError
+from sashil.recording.data_file import read_data_csv
+from sashil.recording.units import column_unit
 
 __all__ = ["DATA_FILES", "Run", "load_run"]
 
@@ -69,7 +71,6 @@ def read_data_file(path: Path) -> dict[str, np.ndarray]:
             raise DataFileError(f"{path}: not a readable MATLAB file ({err})") from None
         names = [str(n) for n in np.atleast_1d(doc.get("columns", []))]
         return {name: np.atleast_1d(np.asarray(doc[name], dtype=float)) for name in names if name in doc}
-    from sashil.recording.data_file import read_data_csv
 
     return read_data_csv(path, required=(), min_rows=0)
 
@@ -151,8 +152,6 @@ class Run:
     @cached_property
     def tables(self) -> dict[str, dict[str, np.ndarray]]:
         """Other CSV tables in the folder by file stem (e.g. ``transmissibility``)."""
-        from sashil.recording.data_file import read_data_csv
-
         tables = {}
         for path in sorted(self.path.glob("*.csv")):
             if path.name == "data.csv":
@@ -178,8 +177,6 @@ class Run:
     @property
     def units(self) -> dict[str, str]:
         """Column -> unit, from the column names (``_rad`` -> rad, ``_s`` -> s, ...)."""
-        from sashil.recording.units import column_unit
-
         return {name: column_unit(name) for name in self.data}
 
 

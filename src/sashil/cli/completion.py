@@ -12,6 +12,8 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 from sashil.config.schema import Section
+from sashil.config.sections import SCHEMA
+from sashil.errors import ConfigError
 
 
 def config_keys(schema: Mapping[str, Any], prefix: str = "") -> Iterator[str]:
@@ -26,7 +28,6 @@ def config_keys(schema: Mapping[str, Any], prefix: str = "") -> Iterator[str]:
 def law_keys() -> Iterator[str]:
     """``controller.<param>`` of every registered law's parameters (each once)."""
     from sashil.control.law_registry import known_laws
-    from sashil.errors import ConfigError
 
     try:
         laws = known_laws()
@@ -38,8 +39,6 @@ def law_keys() -> Iterator[str]:
 def set_completer(prefix: str, **_: Any) -> list[str]:
     """argcomplete completer of ``--set``: the dotted keys that start with ``prefix``, each with ``=``
     (the schema's keys and the registered laws' parameters)."""
-    from sashil.config.sections import SCHEMA
-
     keys = [*config_keys(SCHEMA), *law_keys()]
     return [f"{key}=" for key in dict.fromkeys(keys) if key.startswith(prefix)]
 

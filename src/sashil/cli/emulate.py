@@ -8,7 +8,7 @@ import signal
 import sys
 
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
-from sashil.errors import ConfigError
+from sashil.errors import ConfigError, DriverError
 
 EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
 
@@ -117,7 +117,6 @@ def run(args: argparse.Namespace) -> int:
     from sashil.drivers import firmware
     from sashil.drivers.emulator import Emulator, Faults, HostConsole, Operator, TruthLog, build_device
     from sashil.drivers.emulator.runner import open_transport
-    from sashil.errors import DriverError
 
     config = resolve_config(args)
     board = args.board

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from sashil.errors import ConfigError
+
 EXAMPLE = "sashil panel --config configs/sim.yaml --port 8765"
 
 #: the default port (any free port may be given; 0 picks one)
@@ -53,7 +55,6 @@ def check_listen(host: str, allow_remote: bool, cert: str | None, key: str | Non
     line) for a non-loopback host without --allow-remote and TLS, or TLS files missing."""
     from pathlib import Path
 
-    from sashil.errors import ConfigError
     from sashil.panel.guard import is_loopback, is_wildcard
 
     if (cert is None) != (key is None):
@@ -83,7 +84,6 @@ def run(args: argparse.Namespace) -> int:
 
     import uvicorn
 
-    from sashil.errors import ConfigError
     from sashil.panel.app import WS_IMPL, Panel, make_app
     from sashil.panel.bench import Bench
     from sashil.panel.guard import host_names, is_loopback, new_token

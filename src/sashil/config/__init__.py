@@ -9,9 +9,11 @@ from typing import Any
 
 import yaml
 
+from sashil.config.frozen import thaw
 from sashil.config.schema import defaults, validate
 from sashil.config.sections import SCHEMA
 from sashil.errors import ConfigError
+from sashil.models.registry import check_model
 
 Config = dict[str, Any]
 
@@ -108,7 +110,6 @@ def load_params(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: params: missing (expected a mapping of model parameters)")
     name = doc.get("model", "bouc-wen")
     section = {"name": name, "params": doc["params"]}
-    from sashil.models.registry import check_model
 
     return check_model(section, str(path), "", complete=True)
 
@@ -122,6 +123,4 @@ def apply_params(config: Config, params_path: str | Path) -> Config:
 
 def dump_config(config: Mapping[str, Any]) -> str:
     """The resolved config as YAML text (what a run folder's ``config.yaml`` holds)."""
-    from sashil.config.frozen import thaw
-
     return yaml.safe_dump(thaw(config), sort_keys=False, default_flow_style=False)

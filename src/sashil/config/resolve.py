@@ -24,6 +24,7 @@ from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
 from sashil.errors import ConfigError
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
+from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -89,8 +90,6 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
     the verb cannot run (not in ``models``, default the rig models) is refused. The result is a
     :class:`~sashil.config.frozen.FrozenSection` typed as :class:`~sashil.config.typed.RunConfig`
     (the schema's sections, generated from it), so mypy checks every read of it."""
-    from sashil.models.registry import RIG_MODELS
-
     config = _load(source)
     if source.params is not None:
         config = apply_params(config, source.params)
@@ -166,8 +165,6 @@ def _named(source: ConfigSource, key: str) -> str:
 def _check_model(config: Config, source: ConfigSource, verb: str | None, models: Sequence[str]) -> None:
     """ConfigError, one line naming where the model came from (``--set model.name``, ``--params``
     or ``--config``), when the verb cannot run the config's model."""
-    from sashil.models.registry import MODEL_PARAMS
-
     name = config["model"]["name"]
     if name in models:
         return

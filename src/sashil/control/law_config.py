@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping
 from typing import Any
 
+from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law, LawContext
 from sashil.control.law_registry import LawEntry, find_law
 from sashil.errors import ConfigError
@@ -20,8 +21,6 @@ __all__ = ["check_controller", "law_context", "law_parameters"]
 
 
 def _core_keys() -> dict[str, Any]:
-    from sashil.config.sections import CONTROLLER
-
     return CONTROLLER.fields
 
 

@@ -15,6 +15,7 @@ import inspect
 from dataclasses import dataclass
 from pathlib import Path
 
+from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law
 from sashil.errors import ConfigError
 from sashil.plugins import LAWS_GROUP, entry_point_table, is_class_spec, load_class
@@ -57,7 +58,6 @@ def _checked(cls: type, spec: str, origin: str) -> LawEntry:
         )
     if not isinstance(cls.name, str) or not cls.name:
         raise ConfigError(f"{WHERE}: {spec} has no name (set the class attribute name = '...')")
-    from sashil.config.sections import CONTROLLER
 
     for key in cls.params():
         if key in CONTROLLER.fields:

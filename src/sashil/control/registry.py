@@ -13,6 +13,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from sashil.config.schema import defaults
+from sashil.config.sections import CONTROLLER
 from sashil.control.controller import Controller
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
@@ -66,9 +68,6 @@ def make_stage(config: RunConfig) -> tuple[str, Any]:
 
 def controller_section(config: RunConfig) -> dict[str, Any]:
     """The config's ``controller`` section (defaults when a config predates it)."""
-    from sashil.config.schema import defaults
-    from sashil.config.sections import CONTROLLER
-
     return {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
 
 

@@ -23,11 +23,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.drivers.interface import RigCommand, RigSample
-from sashil.errors import ConfigError
+from sashil.errors import ConfigError, DataFileError
 from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD, SYNTAX
 from sashil.experiments.sweep import chirp_profile, sine_profile
 from sashil.models.plant import RoadProfile
+from sashil.recording.data_file import read_data_csv
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -103,9 +104,6 @@ def iso8608_road(text: str, rest: str, config: RunConfig) -> tuple[RoadProfile, 
 
 def file_profile(path: str) -> tuple[RoadProfile, str]:
     """The road profile of a CSV file (``time_s``, ``theta_road_rad``), from its first sample on."""
-    from sashil.errors import DataFileError
-    from sashil.recording.data_file import read_data_csv
-
     try:
         cols = read_data_csv(path, required=("time_s", "theta_road_rad"), min_rows=2)
     except DataFileError as err:

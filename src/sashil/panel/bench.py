@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sashil.config.frozen import thaw
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event
 from sashil.panel.catalog import LawChoice, laws_catalog
@@ -544,8 +545,6 @@ class Bench:
     def saved_config(self) -> str:
         """The run's config as YAML with the law's current values: a file ``--config`` reads."""
         import yaml
-
-        from sashil.config.frozen import thaw
 
         if self._config is None:
             raise ConfigError("save: no run yet (start one, tune it, then save)")

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.errors import ConfigError, SashilError
 from sashil.panel.frames import PLOT_COLUMNS, encode_batch
 
 #: the files of a run a page may open, and their media types
@@ -93,7 +94,6 @@ def run_traces(runs_dir: str | Path, name: str) -> bytes | None:
     """The :data:`~sashil.panel.frames.PLOT_COLUMNS` of run ``name``'s data, evenly decimated to
     at most :data:`OVERLAY_ROWS` rows, as one binary batch; None when it has no data."""
     from sashil.api import load_run
-    from sashil.errors import SashilError
 
     folder = run_folder(runs_dir, name)
     if folder is None:
@@ -122,8 +122,6 @@ def report_runs(runs_dir: str | Path, names: list[str]) -> str:
     import subprocess
     import sys
     import tempfile
-
-    from sashil.errors import ConfigError
 
     folders = []
     for name in names:

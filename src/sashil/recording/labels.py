@@ -10,6 +10,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from sashil.config.schema import defaults
+from sashil.config.sections import CONTROLLER
+from sashil.errors import ConfigError
+
 
 def controller_section(config: Mapping[str, Any]) -> dict[str, Any]:
     """The ``controller:`` mapping of a resolved config ({} when absent or not a mapping)."""
@@ -23,24 +27,14 @@ def law_parameters(config: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def default_parameters() -> dict[str, Any]:
-    """The controller section's defaults from the config schema ({} when the schema has none)."""
-    try:
-        from sashil.config.schema import defaults
-        from sashil.config.sections import SCHEMA
-    except ImportError:
-        return {}
-    try:
-        section = defaults({"controller": SCHEMA["controller"]})["controller"]
-    except (KeyError, TypeError, AttributeError):
-        return {}
-    return section if isinstance(section, dict) else {}
+    """The controller section's defaults from the config schema."""
+    return defaults(CONTROLLER.fields)
 
 
 def law_defaults(law: Any) -> dict[str, Any] | None:
     """The declared parameters of law ``law`` with their defaults, or None when it cannot be found
     (a plug-in that is not installed here)."""
     from sashil.control.law_registry import find_law
-    from sashil.errors import ConfigError
 
     try:
         params = find_law(str(law)).cls.params()

@@ -9,6 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from sashil.recording.data_file import read_data_csv
+from sashil.recording.labels import controller_label
+
 
 class _Figures:
     """``subplots(...)`` as pyplot has it, for figures that are only ever written to a file: each a
@@ -135,7 +138,6 @@ def run_title(summary: dict | None, config: dict[str, Any] | None = None) -> str
     title = "sashil run"
     if not summary:
         return title
-    from sashil.recording.labels import controller_label
 
     parts = [controller_label(summary, config or {}), f"{summary.get('driver', '?')} backend"]
     if summary.get("road"):
@@ -177,8 +179,6 @@ def plot_run(path: str | Path, folder: str | Path, summary: dict | None = None) 
     coil current (measured and commanded) and damper torque (observer T̂, target T* when the law
     sets one, and the feasible band T(0)..T(i_max) at the observed state). Legends sit beside the
     panels, outside the traces."""
-    from sashil.recording.data_file import read_data_csv
-
     cols = read_data_csv(Path(folder) / "data.csv", required=("time_s",), min_rows=0)
     config = read_run_config(folder)
     has_torque = has_values(cols, "torque_hat_nm") or has_values(cols, "torque_cmd_nm")

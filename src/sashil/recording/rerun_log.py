@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.errors import ConfigError, DataFileError
 from sashil.models.hysteresis import BoucWenParams
 
 DEG = 180.0 / math.pi
@@ -168,8 +169,6 @@ class RerunLog:
         """Open a stream to ``save`` (``.rrd``), a spawned viewer (``viewer``), a viewer at
         ``connect`` (a ``rerun+http://…/proxy`` URL), or several of them; sends the blueprint."""
         import rerun as rr
-
-        from sashil.errors import ConfigError
 
         rec = rr.RecordingStream(APP_ID)
         if name:
@@ -435,8 +434,6 @@ def load_rrd(path: str | Path) -> dict[str, dict[str, list[Any]]]:
     from rerun.chunk import RrdReader
 
     if not Path(path).is_file():
-        from sashil.errors import DataFileError
-
         raise DataFileError(f"{path}: no such .rrd file")
     out: dict[str, dict[str, list[Any]]] = {}
     for chunk in RrdReader(str(path)).stream():

@@ -26,6 +26,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from sashil.config.sections import CONTROLLER
 from sashil.errors import ConfigError
 
 #: a caller waits this long for the loop to take its change: the socket opens before the loop's
@@ -40,8 +41,6 @@ EVENT_COLUMNS = ("time_s", "cycle", "key", "old", "new", "ramp_s", "status", "ar
 def check_ramp(value: Any) -> float:
     """``controller.tune_ramp_s`` given with a change, checked by its config field (the code a config
     file's value goes through); ConfigError in one line."""
-    from sashil.config.sections import CONTROLLER
-
     return float(CONTROLLER.fields[RAMP_KEY].check(value, f"controller.{RAMP_KEY}"))
 
 

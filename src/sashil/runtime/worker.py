@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze_config
 from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+from sashil.runtime.signals import catch_stop_signals
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -178,7 +179,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--messages", type=int, required=True, help="descriptor for the messages to the session")
     args = parser.parse_args(argv)
     messages = Messages(args.messages)
-    from sashil.runtime.signals import catch_stop_signals
 
     with catch_stop_signals() as flag:
         try:
