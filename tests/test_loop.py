@@ -456,6 +456,25 @@ def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tm
         runner.check_disk(tmp_path, 40, 5000.0, None)  # 264 MB for an open-ended run: refused
 
 
+def test_a_session_refused_for_its_disk_lets_the_rig_go(tmp_path, config, monkeypatch):
+    import shutil
+
+    from sashil.errors import DiskSpaceError
+    from sashil.runtime import runner
+
+    monkeypatch.setattr(
+        runner.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 5 * 10**6, 5 * 10**6)
+    )
+    rig = FaultyRig()
+    folder = RunFolder(tmp_path / "run")
+    folder.path.mkdir()
+    loop = InProcessLoop(config, rig, ConstantCurrent(0.5), VirtualClock(), realtime=False)
+    with pytest.raises(DiskSpaceError):
+        run_session(loop, config, folder, 3600.0, say=lambda line: None)
+    assert rig.calls["configure"] == 0 and rig.calls["close"] == 1  # never energised, its port let go
+    assert not (folder.path / "summary.json").exists()
+
+
 def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monkeypatch):
     from sashil.runtime import runner, warmup
 

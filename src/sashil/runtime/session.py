@@ -102,6 +102,9 @@ class InProcessLoop:
                 tuning=tuning,
                 stop=hooks.stop,
             )
+        except BaseException:
+            self.rig.close()  # run_plan raises before the loop touches the rig (a disk too full)
+            raise
         finally:
             if tuning is not None and server is not None:
                 tuning.close()
