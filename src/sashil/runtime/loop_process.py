@@ -44,7 +44,7 @@ from sashil.config.frozen import thaw
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import LoopHooks, LoopRan, RunOutcome, check_disk, loop_summary, losses
+from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, loop_summary, losses
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -263,7 +263,7 @@ class LoopProcess:
             if self._messages < 0 and self.process.poll() is not None:
                 return end
 
-    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> RunOutcome:
         """The ready loop's run for a session (:func:`~sashil.runtime.session.run_session`): the
         stream recorded into ``folder``'s ``data.csv`` (:func:`drive`), the tuning socket served
         there with ``tune``, and the loop's end read into the keys of every loop run's summary."""
@@ -303,12 +303,16 @@ class LoopProcess:
             **({"died": end["loop_died"]} if "loop_died" in end else {}),
         }
         timing = ended.timing.copy()  # the stream's shared rings end with the process
-        return LoopRan(
-            RunOutcome(ended.error, ended.stop, timing, int(end.get("start_ns") or 0), summary),
-            end.get("tuning"),
-            [[event[name] for name in EVENT_COLUMNS] for event in events],
-            [(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
-            facts,
+        return RunOutcome(
+            ended.error,
+            ended.stop,
+            timing,
+            int(end.get("start_ns") or 0),
+            summary,
+            loop_process=facts,
+            tuning=end.get("tuning"),
+            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
+            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
         )
 
     def pass_stop(self, stop: StopFlag) -> Callable[[], None]:

@@ -147,9 +147,10 @@ def loop_summary(
 @dataclass
 class RunOutcome:
     """What a loop run leaves, whether it ran in this process (:func:`run_plan`) or in its own
-    (``run_plan_process``, :meth:`~sashil.runtime.loop_process.LoopProcess.run`): the error that ended the run (None: it ended normally or by a signal), its
-    timing and start, and its summary.json keys, from which the properties read how it ended (one
-    record of it, wherever the loop ran)."""
+    (``run_plan_process``, :meth:`~sashil.runtime.loop_process.LoopProcess.run`): the error that
+    ended the run (None: it ended normally or by a signal), its timing and start, and its
+    summary.json keys, from which the properties read how it ended (one record of it, wherever the
+    loop ran)."""
 
     error: BaseException | None
     stop: StopFlag
@@ -169,6 +170,11 @@ class RunOutcome:
     can_trace: dict[str, Any] | None = None
     #: the loop process that ran the loop (pid, threads, start-up; ``died`` when it did), None: this one
     loop_process: dict[str, Any] | None = None
+    #: the live tuning's summary.json keys (None: the run was not tuned), its ``events.csv`` rows and
+    #: its notes on a view's time axis (``(time_s, text)``)
+    tuning: dict[str, Any] | None = None
+    tuning_rows: list[list[Any]] = field(default_factory=list)
+    tuning_notes: list[tuple[float, str]] = field(default_factory=list)
 
     @property
     def exit_status(self) -> str:
@@ -218,20 +224,6 @@ class LoopHooks:
     tune: bool = False
     stop: StopFlag | None = None
     verb: str = "run"
-
-
-@dataclass
-class LoopRan:
-    """A session's loop run, wherever the loop ran (:func:`~sashil.runtime.session.run_session`):
-    its outcome (the summary holds the keys every loop run has, :func:`loop_summary`), the tuning's
-    summary keys, the live changes made during it (``events.csv``'s rows and the live view's notes)
-    and, for a loop in a process of its own, that process's facts."""
-
-    outcome: RunOutcome
-    tuning: dict[str, Any] | None = None
-    event_rows: list[list[Any]] = field(default_factory=list)
-    notes: list[tuple[float, str]] = field(default_factory=list)
-    loop_process: dict[str, Any] | None = None
 
 
 def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[str], None]) -> BaseException | None:

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
-from sashil.runtime.runner import LoopHooks, LoopRan, RunOutcome, run_plan
+from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
@@ -61,7 +61,7 @@ class SessionLoop(Protocol):
     """The loop a session runs: in this process (:class:`InProcessLoop`) or in a process of its
     own (:class:`~sashil.runtime.loop_process.LoopProcess`, ready)."""
 
-    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> RunOutcome:
         """Run the loop, streaming ``data.csv`` into ``folder``; never raises for what ends the loop."""
         ...
 
@@ -86,7 +86,7 @@ class InProcessLoop:
         self.clock = clock
         self.realtime = realtime
 
-    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> LoopRan:
+    def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> RunOutcome:
         tuning, server = open_tuning(self.config, self.stage, folder, hooks.say) if hooks.tune else (None, None)
         try:
             outcome = run_plan(
@@ -109,9 +109,9 @@ class InProcessLoop:
             if tuning is not None and server is not None:
                 tuning.close()
                 server.stop()
-        if tuning is None:
-            return LoopRan(outcome)
-        return LoopRan(outcome, tuning.summary(), tuning.rows(), tuning.notes())
+        if tuning is not None:
+            outcome.tuning, outcome.tuning_rows, outcome.tuning_notes = tuning.summary(), tuning.rows(), tuning.notes()
+        return outcome
 
     def abort(self) -> None:
         self.rig.close()
@@ -148,20 +148,19 @@ def run_session(
         loop.abort()
         raise
     try:
-        ran = loop.run(folder, duration_s, LoopHooks(say, live, tune, stop, verb))
-        outcome = ran.outcome
-        live_stats = live.close(outcome.trips, ran.notes) if live is not None else None
+        outcome = loop.run(folder, duration_s, LoopHooks(say, live, tune, stop, verb))
+        live_stats = live.close(outcome.trips, outcome.tuning_notes) if live is not None else None
         head = {
             "verb": verb,
             **outcome.summary,
             "controller": controller,
             "duration_s": duration_s,
             "live_view": live_stats,
-            "tuning": ran.tuning,
+            "tuning": outcome.tuning,
         }
-        if ran.loop_process is not None:
-            head["loop_process"] = ran.loop_process
-        outcome.summary = _close_folder(folder, config, outcome.timing, ran.event_rows, head, finish)
+        if outcome.loop_process is not None:
+            head["loop_process"] = outcome.loop_process
+        outcome.summary = _close_folder(folder, config, outcome.timing, outcome.tuning_rows, head, finish)
     finally:
         loop.close()
     return outcome
