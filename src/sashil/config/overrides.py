@@ -3,9 +3,10 @@
 Each override is parsed as YAML (``500`` is a number, ``skyhook`` a string, ``null``, ``true``,
 ``[0.1, 0.9]`` a list, exactly as in a config file), set at its dotted key in a copy of the
 resolved config, and the whole config is validated again by the config file's own code path
-(:func:`sashil.config.schema.validate`, the model's section check with it). So a ``--set`` accepts exactly what a
-config file accepts, and a bad one fails with one line naming the key and what was expected,
-e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got 'fast'``.
+(:func:`sashil.config.schema.validate`, with the model section's own check, then the law's). So a
+``--set`` accepts exactly what a config file accepts, and a bad one fails with one line naming the
+key and what was expected, e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got
+'fast'``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import Any
 
 import yaml
 
+from sashil.config import check_controller
 from sashil.config.schema import validate
 from sashil.config.sections import CONTROLLER, SCHEMA
 from sashil.errors import ConfigError
@@ -76,7 +78,5 @@ def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], An
             replaced |= {key for key in section if key not in CONTROLLER.fields} - keep
         _set(doc, path, value)
     out = validate(doc, SCHEMA, source)
-    from sashil.config import check_controller
-
     check_controller(out, source, replaced)
     return out

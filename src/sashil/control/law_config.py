@@ -20,13 +20,9 @@ from sashil.errors import ConfigError
 __all__ = ["check_controller", "law_context", "law_parameters"]
 
 
-def _core_keys() -> dict[str, Any]:
-    return CONTROLLER.fields
-
-
 def law_parameters(section: Mapping[str, Any]) -> dict[str, Any]:
     """The section's keys that are law parameters (everything but the controller's own keys)."""
-    core = _core_keys()
+    core = CONTROLLER.fields
     return {key: value for key, value in section.items() if key not in core}
 
 

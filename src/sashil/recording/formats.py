@@ -80,7 +80,7 @@ def write_data_formats(
         else:
             from sashil.recording.parquet_sink import write_parquet
 
-            config = folder / "config.yaml"
-            config_yaml = config.read_text(encoding="utf-8") if config.exists() else None
+            config_file = folder / "config.yaml"
+            config_yaml = config_file.read_text(encoding="utf-8") if config_file.exists() else None
             written.append(write_parquet(folder / "data.parquet", columns, config_yaml, meta))
     return written
