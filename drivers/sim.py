@@ -34,6 +34,7 @@ from sashil.drivers.interface import (
 )
 from sashil.errors import DriverError
 from sashil.models.hysteresis import rig_params
+from sashil.models.mismatch import plant_config
 from sashil.models.plant import RigPlant
 
 if TYPE_CHECKING:
@@ -118,8 +119,6 @@ class SimulatedRig(RigInterface):
     @classmethod
     def from_config(cls, config: RunConfig) -> SimulatedRig:
         """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
-        from sashil.models.mismatch import plant_config
-
         config = plant_config(config)
         rig = config["rig"]
         plant = RigPlant(

@@ -23,6 +23,7 @@ import numpy as np
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
+from sashil.recording.parquet_sink import read_parquet
 from sashil.recording.units import column_unit
 
 __all__ = ["DATA_FILES", "Run", "load_run"]
@@ -59,8 +60,6 @@ def read_data_file(path: Path) -> dict[str, np.ndarray]:
     """Columns of one data file (``.csv``, ``.parquet`` or ``.mat``), column name -> 1-D array."""
     suffix = path.suffix
     if suffix == ".parquet":
-        from sashil.recording.parquet_sink import read_parquet
-
         return read_parquet(path)
     if suffix == ".mat":
         from scipy.io import loadmat

@@ -24,6 +24,8 @@ import yaml
 from sashil.api import Run
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
+from sashil.lab._closed_loop import closed_loop
+from sashil.lab._drop_test import drop_test as run_drops
 from sashil.lab.events import Listener, printer
 from sashil.plugins import check_not_importing
 from sashil.recording.outputs import Outputs
@@ -108,8 +110,6 @@ def run(
     """``sashil run`` from Python: ``controller`` (a law name, ``module:Class``, ``file.py:Class`` or a
     Law class), ``set`` as ``{"controller.c_sky": 2.0}`` or ``["controller.c_sky=2"]``. ``on_event``
     receives the run's :class:`~sashil.lab.events.Event` messages (default: printed unless ``quiet``)."""
-    from sashil.lab._closed_loop import closed_loop
-
     check_not_importing("sashil.run")
     if current_a is not None:
         if controller not in (None, "passive"):
@@ -142,8 +142,6 @@ def drop_test(
 ) -> Run:
     """``sashil drop-test`` from Python: one sub-run per current (``run.runs``); ``controller`` takes
     over at the release. ``on_event`` receives the operator's prompts and each drop's result."""
-    from sashil.lab._drop_test import drop_test as run_drops
-
     check_not_importing("sashil.drop_test")
     options = (
         Option("theta0_deg", "drop_test.theta0_deg", float(theta0_deg)),

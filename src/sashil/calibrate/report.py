@@ -22,6 +22,7 @@ from sashil.identify.data import Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
+from sashil.recording.plots import BESIDE, pyplot, save_figure
 
 #: a parameter whose 95 % interval is wider than +- this fraction of its value is "not pinned down"
 LOOSE = 0.25
@@ -130,8 +131,6 @@ def _overlay(
     below each (PNG)."""
     from matplotlib.ticker import MaxNLocator
 
-    from sashil.recording.plots import BESIDE, pyplot, save_figure
-
     plt = pyplot()
     rows = len(records)
     height = 2.9 * rows + 0.7
@@ -167,8 +166,6 @@ def _overlay(
 def _profile_plot(cal: Calibration, path: Path) -> Path:
     """``n_profile.png``: fit RMS above the best and held-out NRMSE with n held at each value."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
-
-    from sashil.recording.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.8))

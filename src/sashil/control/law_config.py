@@ -16,6 +16,7 @@ from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law, LawContext
 from sashil.control.law_registry import LawEntry, find_law
 from sashil.errors import ConfigError
+from sashil.models.hysteresis import BoucWenParams
 
 __all__ = ["check_controller", "law_context", "law_parameters"]
 
@@ -29,8 +30,6 @@ def law_parameters(section: Mapping[str, Any]) -> dict[str, Any]:
 def law_context(config: Mapping[str, Any]) -> LawContext | None:
     """What a law may know of the rig: the controller's Bouc-Wen model, current range and rate
     (None when the config's model is not the rig's Bouc-Wen model)."""
-    from sashil.models.hysteresis import BoucWenParams
-
     model = config.get("model") or {}
     if model.get("name", "bouc-wen") != "bouc-wen":
         return None

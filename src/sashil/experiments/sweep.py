@@ -28,9 +28,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.models.plant import RoadProfile
-from sashil.runtime.clock import Clock
+from sashil.runtime.clock import Clock, default_clock
+from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
 from sashil.stats import nrmse
 
@@ -213,16 +216,12 @@ RigFactory = Callable[["RunConfig", RoadProfile], RigInterface]
 
 def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> SweepStage:
     """A sweep run's stage built in a loop process: the config's law on the road of ``spec``."""
-    from sashil.control.registry import make_controller
-
     return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
 
 
 def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
-    from sashil.drivers import open_rig
-
     return open_rig(config)
 
 
@@ -277,9 +276,6 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    from sashil.runtime.clock import default_clock
-    from sashil.runtime.plan_process import in_loop_process, run_plan_process
-
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
     twin = SweepStage(controller, road)

@@ -12,6 +12,7 @@ from sashil.identify.data import Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import Intervals
 from sashil.identify.rig_models import bouc_wen_rescale
+from sashil.recording.plots import pyplot, save_figure
 
 OBJECTIVE = "output error: RMS of simulated minus recorded theta over all samples (seed 000 eq. 10)"
 
@@ -138,8 +139,6 @@ def comparison_table(results: Sequence[FitResult]) -> str:
 def overlay_plot(results: Sequence[FitResult], records: Sequence[Record], path: str | Path) -> Path:
     """Recorded angle and every model's simulation, one panel per run, each with a residual panel
     (simulated − recorded) below it, so a misfit reads as structure rather than a thick line (PNG)."""
-    from sashil.recording.plots import pyplot, save_figure
-
     plt = pyplot()
     n = len(records)
     fig, axes = plt.subplots(2 * n, 1, figsize=(9, 3.6 * n), squeeze=False, gridspec_kw={"height_ratios": [3, 1.3] * n})

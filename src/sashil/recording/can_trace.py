@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from sashil.drivers.interface import capabilities_of
 from sashil.errors import ConfigError
 
 #: how often the writer thread drains the queue [s]
@@ -73,8 +74,6 @@ class CanTrace:
 
     def attach(self, rig: Any) -> Any:
         """Give ``rig`` (a backend with CAN frames: ``frame_sink``) this trace; returns the rig."""
-        from sashil.drivers.interface import capabilities_of
-
         if not capabilities_of(rig).can_frames:
             raise ConfigError(
                 f"--format: the {getattr(rig, 'name', type(rig).__name__)} backend has no CAN frames to trace"

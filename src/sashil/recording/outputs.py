@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 from sashil._version import __version__
 from sashil.errors import ConfigError
+from sashil.recording.can_trace import CanTrace
+from sashil.recording.formats import can_formats, check_formats, write_data_formats
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -48,8 +50,6 @@ class Outputs:
 
     def check(self, driver: str) -> None:
         """ConfigError for a format the driver cannot write (before anything runs)."""
-        from sashil.recording.formats import check_formats
-
         check_formats(list(self.formats) or None, driver)
 
     def check_folder_only(self, verb: str) -> None:
@@ -88,9 +88,6 @@ class Outputs:
 
     def can_trace(self, folder: Path, port: str | None) -> Any:
         """The CAN frame trace the formats ask for, into ``folder``, not started, or None."""
-        from sashil.recording.can_trace import CanTrace
-        from sashil.recording.formats import can_formats
-
         return CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
 
     def start_can_trace(self, rig: Any, folder: Path) -> Any:
@@ -118,7 +115,5 @@ class Outputs:
     ) -> list[Path]:
         """The data files the formats ask for (from ``columns``, else from data.csv), with the run's
         verb, exit status, sashil version and ``meta`` (controller, current, ...) beside the rows."""
-        from sashil.recording.formats import write_data_formats
-
         about = {"verb": verb, "exit_status": exit_status, "sashil_version": __version__, **meta}
         return write_data_formats(folder, tuple(dict.fromkeys(self.formats)), columns, about)

@@ -29,6 +29,7 @@ import numpy as np
 
 from sashil.api import load_run
 from sashil.errors import DataFileError
+from sashil.recording import plots
 from sashil.recording.labels import (
     changed_parameters,
     controller_label,
@@ -251,8 +252,6 @@ def plot_hysteresis(path: Path, loops: Sequence[tuple[str, np.ndarray, np.ndarra
 
 def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
     """Transmissibility of every stepped sweep among ``runs``, log-log."""
-    from sashil.recording import plots
-
     curves = [
         (run.label, run.sweep["frequency_hz"], run.sweep["transmissibility"]) for run in runs if run.sweep is not None
     ]
@@ -261,8 +260,6 @@ def plot_transmissibility(path: Path, runs: Sequence[RunRecord]) -> Path:
 
 def plot_timing(path: Path, runs: Sequence[RunRecord]) -> Path:
     """Loop timing of every run with ``timing.npz`` as percentile curves (p50 ... max)."""
-    from sashil.recording import plots
-
     return plots.plot_timing(path, [(run.label, run.timing) for run in runs if run.timing is not None])
 
 

@@ -46,6 +46,7 @@ import numpy as np
 
 from sashil.errors import ConfigError, DataFileError
 from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.viewer import DEFAULT_PORT, reachable_host, spawn_viewer
 
 DEG = 180.0 / math.pi
 TIMELINE = "time"
@@ -182,7 +183,6 @@ class RerunLog:
                 raise ConfigError(
                     "--rerun: no rerun viewer executable (pip install rerun-sdk); use --rerun-save FILE.rrd"
                 )
-            from sashil.recording.viewer import DEFAULT_PORT, reachable_host, spawn_viewer
 
             spawn_viewer(executable, DEFAULT_PORT, bind)  # on the loopback interface unless asked
             connect = f"rerun+http://{reachable_host(bind)}:{DEFAULT_PORT}/proxy"

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
+from sashil.runtime.loop_process import LoopProcess, drive
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
 from sashil.runtime.signals import StopFlag
 
@@ -54,8 +55,6 @@ def run_plan_process(
     :class:`~sashil.recording.can_trace.CanTrace`, not started, fed the loop's CAN frames. Bad
     input found in the loop process before the run (a port that cannot be opened) raises, with
     nothing energised; what ends the run does not raise."""
-    from sashil.runtime.loop_process import LoopProcess, drive
-
     spec = plan.spec()
     if spec is None:
         raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")

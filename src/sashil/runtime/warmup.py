@@ -19,6 +19,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+from sashil.control.law_api import LawState
 from sashil.models._jit import JIT, LOOP_KERNELS
 
 #: the modules whose kernels a cycle can call (imported here so that each registers its kernels)
@@ -83,7 +84,6 @@ def warm_law(controller: Any) -> bool:
     state = getattr(controller, "state", None)
     if law is None or state is None:
         return False
-    from sashil.control.law_api import LawState
 
     probe = LawState()
     for name, value in REPRESENTATIVE_STATE.items():
