@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
-from sashil.runtime.loop_process import LoopProcess, drive
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
 from sashil.runtime.signals import StopFlag
 
@@ -55,6 +54,9 @@ def run_plan_process(
     :class:`~sashil.recording.can_trace.CanTrace`, not started, fed the loop's CAN frames. Bad
     input found in the loop process before the run (a port that cannot be opened) raises, with
     nothing energised; what ends the run does not raise."""
+    # the session's side of a loop process loads here: a run on simulated time never needs it
+    from sashil.runtime.loop_process import LoopProcess, drive
+
     spec = plan.spec()
     if spec is None:
         raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")
