@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 
 from sashil._version import __version__
 from sashil.errors import ConfigError
-from sashil.recording.can_trace import CanTrace
 from sashil.recording.formats import can_formats, check_formats, write_data_formats
 
 if TYPE_CHECKING:
@@ -88,6 +87,8 @@ class Outputs:
 
     def can_trace(self, folder: Path, port: str | None) -> Any:
         """The CAN frame trace the formats ask for, into ``folder``, not started, or None."""
+        from sashil.recording.can_trace import CanTrace  # the CAN backend's registry, loaded when traced
+
         return CanTrace.for_formats(folder, can_formats(tuple(self.formats)), port)
 
     def start_can_trace(self, rig: Any, folder: Path) -> Any:
