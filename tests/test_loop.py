@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import pytest
 
 from sashil.control.stages import ConstantCurrent
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
-from sashil.errors import DeadlineMissedError, DriverIOError
+from sashil.errors import DeadlineMissedError, DiskSpaceError, DriverIOError
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.run_folder import RunFolder
+from sashil.runtime import runner
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.session import InProcessLoop, run_session
@@ -434,15 +436,17 @@ class _SlowClock(VirtualClock):
         super().sleep_until(t_ns)
 
 
-def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tmp_path, config, monkeypatch):
-    import shutil
-
-    from sashil.errors import DiskSpaceError
-    from sashil.runtime import runner
-
+@pytest.fixture
+def disk_with_5_mb(monkeypatch):
+    """The run folder's disk has 5 MB free (an hour at 1 kHz needs about 550 MB)."""
     monkeypatch.setattr(
         runner.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 5 * 10**6, 5 * 10**6)
     )
+
+
+def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(
+    tmp_path, config, monkeypatch, disk_with_5_mb
+):
     rig = FaultyRig()
     with pytest.raises(DiskSpaceError) as err:
         runner.run_plan(config, rig, ConstantCurrent(0.5), VirtualClock(), 3600.0, data_path=tmp_path / "data.csv")
@@ -456,15 +460,7 @@ def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(tm
         runner.check_disk(tmp_path, 40, 5000.0, None)  # 264 MB for an open-ended run: refused
 
 
-def test_a_session_refused_for_its_disk_lets_the_rig_go(tmp_path, config, monkeypatch):
-    import shutil
-
-    from sashil.errors import DiskSpaceError
-    from sashil.runtime import runner
-
-    monkeypatch.setattr(
-        runner.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 5 * 10**6, 5 * 10**6)
-    )
+def test_a_session_refused_for_its_disk_lets_the_rig_go(tmp_path, config, disk_with_5_mb):
     rig = FaultyRig()
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
@@ -476,7 +472,7 @@ def test_a_session_refused_for_its_disk_lets_the_rig_go(tmp_path, config, monkey
 
 
 def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monkeypatch):
-    from sashil.runtime import runner, warmup
+    from sashil.runtime import warmup
 
     order: list[str] = []
     monkeypatch.setattr(warmup, "warm_up", lambda plan, say: order.append("compile"))  # the runner's, loaded on use
