@@ -1,4 +1,6 @@
-"""``sashil emulate``: the simulated rig behind a pseudo-terminal, speaking the serial or SLCAN protocol."""
+"""``sashil emulate``: the simulated rig behind a pseudo-terminal, speaking the serial or SLCAN protocol,
+or behind an emulated RT-DAC/USB2 on a Unix socket (``--transport rtdac``, for ``--driver rtdac --port
+emulated:PATH``)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import signal
 import sys
 
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
+from sashil.cli.emulate_rtdac import add_rtdac_arguments, run_rtdac
 from sashil.errors import ConfigError, DriverError
 
 EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
@@ -17,9 +20,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_options(parser)
     parser.add_argument(
         "--transport",
-        choices=("serial", "slcan"),
+        choices=("serial", "slcan", "rtdac"),
         default="serial",
-        help="sashil serial frames, or an SLCAN (LAWICEL) CAN adapter (default serial)",
+        help="sashil serial frames, an SLCAN (LAWICEL) CAN adapter, or INTECO's RT-DAC/USB2 at the USB layer "
+        "(a socket at --link; the host opens it with --driver rtdac --port emulated:PATH) (default serial)",
     )
     parser.add_argument(
         "--board",
@@ -81,6 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     faults.add_argument("--disconnect-after", type=float, metavar="S", help="close the link after S seconds and exit")
     faults.add_argument("--stuck-sensor-after", type=float, metavar="S", help="freeze both encoders after S seconds")
     faults.add_argument("--seed", type=int, default=0, help="seed of the fault injection (default 0)")
+    add_rtdac_arguments(parser)
 
 
 def _probability(option: str, value: float) -> float:
@@ -120,6 +125,10 @@ def run(args: argparse.Namespace) -> int:
 
     config = resolve_config(args)
     board = args.board
+    if args.transport == "rtdac":
+        if board == "c":
+            raise ConfigError("--board c: the emulated RT-DAC/USB2 is a Python board (--board python or auto)")
+        board = "python"
     if board == "auto":
         board = "c" if firmware.compiler() is not None else "python"
     if board == "c":
@@ -154,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.prompts is not None:
         raise ConfigError("--prompts: expected --hold-deg too (the angles held before the host's first prompt)")
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    if args.transport == "rtdac":
+        return run_rtdac(args, config, operator, duration, _announce)
     truth = None
     if args.truth is not None:
         truth = TruthLog()

@@ -9,6 +9,7 @@ Every section lives here so that a config file has one place that says what it a
 
 from __future__ import annotations
 
+from sashil.config.rtdac_section import RTDAC
 from sashil.config.schema import Field, Section
 from sashil.drivers import BACKENDS
 from sashil.models.registry import check_model_section
@@ -391,6 +392,7 @@ SCHEMA = {
     "model": MODEL,
     "rig": RIG,
     "driver": DRIVER,
+    "rtdac": RTDAC,
     "loop": LOOP,
     "safety": SAFETY,
     "drop_test": DROP_TEST,

@@ -27,6 +27,7 @@ __all__ = [
     "ModelSection",
     "RigSection",
     "RoadSection",
+    "RtdacSection",
     "RunConfig",
     "RunSection",
     "SafetySection",
@@ -71,6 +72,41 @@ class DriverSection(TypedDict):
     link_lost_ms: ReadOnly[float]
     connect_timeout_s: ReadOnly[float]
     max_lost_fraction: ReadOnly[float]
+
+
+class RtdacSection(TypedDict):
+    """``rtdac``: INTECO's RT-DAC/USB2 board (driver.name: rtdac): finding it, and the rig's wiring to it"""
+
+    manufacturer: ReadOnly[str]
+    serial: ReadOnly[str | None]
+    vendor_id: ReadOnly[int | None]
+    product_id: ReadOnly[int | None]
+    usb_backend: ReadOnly[str | None]
+    transfer_timeout_ms: ReadOnly[float]
+    application: ReadOnly[str | None]
+    map_dir: ReadOnly[str | None]
+    arm_encoder: ReadOnly[int]
+    arm_counts_per_rev: ReadOnly[int]
+    arm_reversed: ReadOnly[bool]
+    road_encoder: ReadOnly[int | None]
+    road_counts_per_rev: ReadOnly[int]
+    road_reversed: ReadOnly[bool]
+    coil_output: ReadOnly[Literal["pwm", "da"]]
+    coil_channel: ReadOnly[int]
+    coil_map_current_a: ReadOnly[tuple[float, ...]]
+    coil_map_output: ReadOnly[tuple[float, ...]]
+    coil_sense_ad: ReadOnly[int | None]
+    coil_sense_a_per_v: ReadOnly[float]
+    coil_sense_offset_v: ReadOnly[float]
+    coil_loop_ki_per_s: ReadOnly[float]
+    road_output: ReadOnly[Literal["none", "pwm", "da"]]
+    road_channel: ReadOnly[int]
+    road_direction_bit: ReadOnly[int | None]
+    road_output_per_rad_s: ReadOnly[float]
+    road_kp_per_rad: ReadOnly[float]
+    road_output_limit: ReadOnly[float]
+    pwm_prescaler: ReadOnly[int]
+    pwm_mode: ReadOnly[Literal["12-bit", "8-bit"]]
 
 
 class LoopRtSection(TypedDict):
@@ -217,6 +253,7 @@ class RunConfig(TypedDict):
     model: ReadOnly[ModelSection]
     rig: ReadOnly[RigSection]
     driver: ReadOnly[DriverSection]
+    rtdac: ReadOnly[RtdacSection]
     loop: ReadOnly[LoopSection]
     safety: ReadOnly[SafetySection]
     drop_test: ReadOnly[DropTestSection]

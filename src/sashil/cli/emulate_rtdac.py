@@ -1,0 +1,119 @@
+"""``sashil emulate --transport rtdac``: the emulated RT-DAC/USB2 served on a Unix socket.
+
+The host reaches it through pyusb with ``--driver rtdac --port emulated:PATH``
+(:mod:`sashil.drivers.emulator.rtdac_usb`). The board's wiring is the config's ``rtdac`` section
+(``--set rtdac.arm_encoder=3`` wires the emulated bench differently from a host's config).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from sashil.errors import ConfigError
+
+
+def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("RT-DAC/USB2 board (--transport rtdac; times count from the host's claim)")
+    group.add_argument(
+        "--logic",
+        choices=("0103", "0111"),
+        default="0103",
+        help="the register map the board is laid out by (default 0103)",
+    )
+    group.add_argument(
+        "--header-logic",
+        metavar="HEX",
+        help="the logic version the header says (default: --logic's; another: a board no map serves)",
+    )
+    group.add_argument(
+        "--application", default="SASHIL", metavar="NAME", help="the header's application name (default SASHIL)"
+    )
+    group.add_argument(
+        "--stage-gain",
+        type=float,
+        default=1.0,
+        metavar="G",
+        help="the power stage's true current is G times what rtdac.coil_map_* says (default 1)",
+    )
+    group.add_argument(
+        "--vanish-after", type=float, metavar="S", help="the board disappears from the bus after S seconds"
+    )
+    group.add_argument(
+        "--stuck-busy-after", type=float, metavar="S", help="the coil sense A/D's busy bit sticks after S seconds"
+    )
+    group.add_argument(
+        "--short-frame-after", type=float, metavar="S", help="read frames come two bytes short after S seconds"
+    )
+    group.add_argument("--timeout-after", type=float, metavar="S", help="reads go unanswered after S seconds")
+    group.add_argument("--permission-denied", action="store_true", help="opening the board is refused (no udev rule)")
+
+
+def _seconds(option: str, value: float | None) -> float | None:
+    if value is not None and not value >= 0.0:
+        raise ConfigError(f"{option}: expected seconds >= 0, got {value:g}")
+    return value
+
+
+def run_rtdac(
+    args: argparse.Namespace, config: Any, operator: Any, duration: float | None, announce: Callable[[str], None]
+) -> int:
+    from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, build_board
+    from sashil.drivers.emulator.rtdac_usb import BoardServer
+
+    if not args.link:
+        raise ConfigError("--link: expected the path of the board's socket (the host opens --port emulated:PATH)")
+    if not 0.0 < args.stage_gain <= 10.0:
+        raise ConfigError(f"--stage-gain: expected a gain in (0, 10], got {args.stage_gain:g}")
+    faults = BoardFaults(
+        vanish_after_s=_seconds("--vanish-after", args.vanish_after),
+        stuck_busy_after_s=_seconds("--stuck-busy-after", args.stuck_busy_after),
+        short_frame_after_s=_seconds("--short-frame-after", args.short_frame_after),
+        timeout_after_s=_seconds("--timeout-after", args.timeout_after),
+        permission_denied=args.permission_denied,
+    )
+    logic_word = int(args.logic, 16)
+    if args.header_logic is not None:
+        try:
+            logic_word = int(args.header_logic, 16)
+        except ValueError:
+            raise ConfigError(
+                f"--header-logic: expected a hex number such as 0200, got {args.header_logic!r}"
+            ) from None
+        if not 0 <= logic_word <= 0xFFFF:
+            raise ConfigError(f"--header-logic: expected 0000..FFFF, got {args.header_logic}")
+    if not args.application.isascii() or len(args.application) > 6:
+        raise ConfigError(f"--application: expected up to 6 ASCII characters, got {args.application!r}")
+    identity = BoardIdentity(logic_version=logic_word, application=args.application)
+    board = build_board(config, args.logic, identity, operator, faults, args.stage_gain)
+    try:
+        server = BoardServer(board, args.link)
+    except OSError as err:
+        raise ConfigError(f"--link {args.link}: cannot create the socket ({err.strerror})") from None
+
+    def _stop(signum: int, frame: object) -> None:
+        server.stop()
+
+    handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    print(
+        f"sashil emulate: rtdac board on {args.link} (logic {logic_word:04X} laid out as {args.logic}, "
+        f"application {args.application!r}); the host opens --driver rtdac --port emulated:{args.link}",
+        flush=True,
+    )
+    if operator is not None:
+        announce("--hold-deg: the arm is held at each host claim of the board; connect with drop-test or calibrate")
+    try:
+        why = server.run(duration)
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    state = "at rest" if board.at_rest() else "NOT at rest (the board keeps its last outputs)"
+    print(
+        f"sashil emulate: {why}; exchanges {board.exchanges}, bad frames from host {board.bad_frames}, outputs {state}",
+        file=sys.stderr,
+        flush=True,
+    )
+    return 0
