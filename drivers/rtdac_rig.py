@@ -115,7 +115,9 @@ class RtdacRig(RigInterface):
         coil_tau_s: float = 0.010,
         application: str | None = None,
         map_dir: str | None = None,
+        backend: Any = None,
     ):
+        """``backend``: a pyusb backend object to find the board through (default: the one ``usb`` names)."""
         super().__init__()
         self.usb = usb
         self.wiring = wiring
@@ -123,7 +125,7 @@ class RtdacRig(RigInterface):
         self.coil_tau_s = coil_tau_s
         self.application = application
         self.map_dir = map_dir
-        self.link = BoardLink(usb)
+        self.link = BoardLink(usb, backend)
         self.header: Header | None = None
         self.map: RegisterMap | None = None
         self.coil = CoilDrive(

@@ -91,11 +91,12 @@ def describe_device(dev: Any) -> str:
     return f"bus {dev.bus} device {dev.address} ({dev.idVendor:04x}:{dev.idProduct:04x})"
 
 
-def find_board(settings: UsbSettings) -> Any:
+def find_board(settings: UsbSettings, backend: Any = None) -> Any:
     """The board's pyusb device, or DriverError: no device (with what was seen), or permission denied
-    reading its strings (with the udev rule that fixes it)."""
+    reading its strings (with the udev rule that fixes it). ``backend``: a pyusb backend object
+    (default: the one the settings ask for)."""
     usb = _usb()
-    backend = pyusb_backend(settings)
+    backend = backend if backend is not None else pyusb_backend(settings)
     ids: dict[str, int] = {}
     if settings.vendor_id is not None:
         ids["idVendor"] = settings.vendor_id
@@ -141,15 +142,16 @@ def usb_reason(err: BaseException) -> str:
 class BoardLink:
     """One opened board: claim, exchanges, release. pyusb's errors become sashil's, in one line."""
 
-    def __init__(self, settings: UsbSettings):
+    def __init__(self, settings: UsbSettings, backend: Any = None):
         self.settings = settings
+        self.backend = backend
         self.dev: Any = None
         self.timeout_ms = int(max(1, round(settings.timeout_ms)))
         self.where = "rtdac"
 
     def open(self) -> None:
         usb = _usb()
-        dev = find_board(self.settings)
+        dev = find_board(self.settings, self.backend)
         self.where = f"rtdac {describe_device(dev)}"
         try:
             dev.set_configuration()

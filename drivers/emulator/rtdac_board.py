@@ -44,6 +44,8 @@ from sashil.drivers.rtdac_outputs import interp
 from sashil.drivers.sim import SimulatedRig
 
 TWO_PI = 2.0 * math.pi
+#: the road motor's dead band: below one D/A step [V] (or a duty as small) it stands still
+ROAD_DEAD_BAND = 20.0 / 16383
 
 
 @dataclass(frozen=True)
@@ -298,6 +300,8 @@ class RtdacBoard:
                 word = self.map.output + (1 if bit >= 15 else 0)
                 if (self.words[word] >> (bit % 15)) & 1:
                     road = -road
+        if abs(road) < ROAD_DEAD_BAND:
+            road = 0.0  # the D/A's 0 V word (8191) is 0.6 mV below zero: a motor does not turn on it
         self.road_target_rad_s = road * w.road_rad_s_per_output
         self.rig.write(RigCommand(self.drive_a, None), now_ns, 0)
 

@@ -1,0 +1,286 @@
+"""The rtdac backend through pyusb's own core, against the emulated board in this process.
+
+The board (:class:`RtdacBoard`) runs on a clock the test advances, so every figure is deterministic;
+the host side is the real pyusb core and sashil's backend, with only libusb replaced by the
+emulated board's pyusb backend.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sashil.config import default_config
+from sashil.config.frozen import freeze_config
+from sashil.drivers.emulator.device import Operator
+from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, RtdacBoard, build_board
+from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend
+from sashil.drivers.interface import RigCommand
+from sashil.drivers.rtdac_codec import DA_ZERO, READ_REQUEST, WRITE_MARK, decode_frame
+from sashil.drivers.rtdac_rig import RtdacRig
+from sashil.errors import ConfigError, DriverError, DriverIOError, DriverTimeoutError, ProtocolError
+
+PERIOD_NS = 1_000_000
+
+
+class Clock:
+    """The board's clock: the test moves it a period a cycle, and each transfer takes 20 us."""
+
+    def __init__(self) -> None:
+        self.now = 1_000_000_000
+        self.host = 0  # the host's loop clock
+
+    def __call__(self) -> int:
+        self.now += 20_000
+        return self.now
+
+
+class Tap(DirectPort):
+    """A direct port that keeps every transfer the host sent to the board."""
+
+    def __init__(self, board: RtdacBoard, clock: Clock):
+        super().__init__(board, clock)
+        self.sent: list[bytes] = []
+
+    def call(self, request: bytes, timeout_s: float) -> bytes | None:
+        if request[:1] == b"W":
+            self.sent.append(bytes(request[2:]))
+        return super().call(request, timeout_s)
+
+
+def make(
+    sets: dict | None = None,
+    faults: BoardFaults | None = None,
+    identity: BoardIdentity | None = None,
+    logic: str = "0103",
+    operator: Operator | None = None,
+    board_sets: dict | None = None,
+) -> tuple[RtdacRig, RtdacBoard, Clock, Tap]:
+    raw = default_config()
+    for key, value in (sets or {}).items():
+        section, name = key.split(".")
+        raw[section][name] = value
+    config = freeze_config(raw)
+    board_raw = default_config()
+    for key, value in {**(sets or {}), **(board_sets or {})}.items():
+        section, name = key.split(".")
+        board_raw[section][name] = value
+    clock = Clock()
+    board = build_board(freeze_config(board_raw), logic, identity, operator, faults)
+    port = Tap(board, clock)
+    rig = RtdacRig.from_config(config)
+    rig.link.backend = EmulatedUsbBackend(port)
+    return rig, board, clock, port
+
+
+def cycle(rig: RtdacRig, clock: Clock, cmd: RigCommand, n: int = 1):
+    sample = None
+    for _ in range(n):
+        clock.now += PERIOD_NS
+        clock.host += PERIOD_NS
+        sample = rig.read(clock.host, PERIOD_NS)
+        rig.write(cmd, clock.host, PERIOD_NS)
+    return sample
+
+
+def test_configure_reads_the_header_picks_the_map_and_writes_both_outputs_at_rest():
+    rig, board, clock, port = make()
+    board.words[board.map.pwm_width_word(0)] = 3000  # a previous host left the coil on
+    board.words[board.map.da_word(0)] = 12000
+    rig.configure()
+    assert rig.map is not None and rig.map.logic == "0103"
+    assert rig.header is not None and rig.header.application == "SASHIL"
+    # what crossed: one read request, then one write frame that rests both outputs
+    assert port.sent[0] == READ_REQUEST
+    frame = port.sent[1]
+    assert len(frame) == 504 and frame[:2] == WRITE_MARK
+    assert frame[2 * 22 : 2 * 22 + 2] == b"\x00\x00"  # PWM 0 width 0 (RTDACUSB2_0103.cs line 168)
+    assert frame[2 * 21 : 2 * 21 + 2] == b"\x02\x00"  # mode 12-bit << 1 (line 166)
+    assert frame[2 * 220 : 2 * 220 + 2] == DA_ZERO.to_bytes(2, "little")  # D/A 0 at 0 V (line 221)
+    assert board.at_rest()
+    rig.close()
+
+
+def test_the_0111_layout_is_read_with_its_own_map():
+    rig, board, clock, _ = make(logic="0111")
+    rig.configure()
+    assert rig.map is not None and rig.map.logic == "0111" and rig.map.da_word(0) == 210
+    rig.activate()
+    cycle(rig, clock, RigCommand(0.0, 1.0), 50)
+    assert board.words[210] != DA_ZERO  # the road motor's D/A is driven where 0111 puts it
+    rig.close()
+    assert board.at_rest()
+
+
+def test_a_commanded_current_becomes_a_duty_and_the_sensed_current_follows():
+    rig, board, clock, _ = make()
+    rig.configure()
+    rig.activate()
+    sample = cycle(rig, clock, RigCommand(0.5), 200)
+    # the map 0..1 A -> duty 0..1 (a 12-bit width), corrected by the loop on the sensed current
+    assert board.words[board.map.pwm_width_word(0)] == pytest.approx(0.5 * 4095, abs=40)
+    assert sample.current_a == pytest.approx(0.5, abs=0.01)  # A/D 0 at 5 V/A, 12 bits: 1 mA a count
+    assert rig.link_stats()["current_source"] == "sensed (A/D 0)"
+    rig.close()
+
+
+def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
+    raw = default_config()
+    clock = Clock()
+    board = build_board(freeze_config(raw), stage_gain=0.8)  # 20 % less current than the map says
+    rig = RtdacRig.from_config(freeze_config(default_config()))
+    rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
+    rig.configure()
+    rig.activate()
+    sample = cycle(rig, clock, RigCommand(0.6), 600)
+    assert sample.current_a == pytest.approx(0.6, abs=0.01)
+    rig.close()
+
+
+def test_without_a_current_sense_the_record_says_current_a_is_the_modelled_coil():
+    rig, board, clock, _ = make({"rtdac.coil_sense_ad": None})
+    rig.configure()
+    rig.activate()
+    sample = cycle(rig, clock, RigCommand(1.0), 10)
+    tau = 0.010
+    assert sample.current_a == pytest.approx(1.0 - math.exp(-9e-3 / tau), rel=1e-6)
+    assert rig.link_stats()["current_source"].startswith("commanded through the coil's lag")
+    rig.close()
+
+
+def test_the_host_closes_the_road_loop_on_the_road_encoder_and_reports_its_tracking():
+    rig, board, clock, _ = make()
+    rig.configure()
+    rig.activate()
+    start = cycle(rig, clock, RigCommand(0.0, None), 1).theta_road_rad
+    sample = cycle(rig, clock, RigCommand(0.0, 2.0), 2000)
+    assert sample.theta_road_rad - start == pytest.approx(4.0, abs=0.05)
+    tracking = rig.link_stats()
+    assert tracking["road_cycles"] == 2000
+    assert 0.0 < tracking["road_error_rms_rad"] < 0.05
+    rig.close()
+    assert board.at_rest() and board.road_target_rad_s == 0.0
+
+
+def test_the_encoders_wiring_signs_and_resolutions_come_from_config():
+    sets = {
+        "rtdac.arm_encoder": 5,
+        "rtdac.arm_reversed": True,
+        "rtdac.road_encoder": 2,
+        "rtdac.road_counts_per_rev": 1024,
+    }
+    rig, board, clock, _ = make(sets)
+    board.rig.plant.hold(math.radians(-5.0))
+    rig.configure()
+    sample = cycle(rig, clock, RigCommand(0.0), 1)
+    assert math.degrees(sample.theta_rad) == pytest.approx(-5.0, abs=0.1)
+    low, _ = board.map.counter_words(5)
+    assert board.words[low] == round(5.0 / 360 * 4096)  # the emulated bench counts the arm down
+    rig.close()
+
+
+def test_deactivate_rests_both_outputs_and_the_readback_confirms_it():
+    rig, board, clock, _ = make()
+    rig.configure()
+    rig.activate()
+    cycle(rig, clock, RigCommand(1.0, 3.0), 100)
+    assert not board.at_rest()
+    rig.deactivate()
+    assert board.at_rest()
+    assert rig.link_stats()["safe_state_confirmed"] is True
+    rig.close()
+
+
+def test_wiring_the_board_does_not_have_is_refused_before_anything_is_written():
+    rig, board, clock, port = make({"rtdac.arm_encoder": 12})
+    with pytest.raises(DriverError, match=r"rtdac.arm_encoder: the board has no encoder counter 12 \(logic 0103"):
+        rig.configure()
+    assert port.sent == [READ_REQUEST]  # only the header was read: no frame written
+    rig.close()
+
+
+def test_a_bad_wiring_key_is_refused_when_the_config_is_checked():
+    from sashil.config.schema import validate
+    from sashil.config.sections import SCHEMA
+
+    with pytest.raises(ConfigError, match=r"lab.yaml: rtdac.coil_channel: expected a D/A channel from 0 to 3, got 7"):
+        validate({"rtdac": {"coil_output": "da", "coil_channel": 7, "coil_map_output": [0, 5]}}, SCHEMA, "lab.yaml")
+    with pytest.raises(ConfigError, match=r"lab.yaml: rtdac.coil_map_output: expected as many points"):
+        validate({"rtdac": {"coil_map_output": [0, 0.5, 1]}}, SCHEMA, "lab.yaml")
+    with pytest.raises(ConfigError, match=r"lab.yaml: rtdac.road_encoder: the same counter as arm_encoder"):
+        validate({"rtdac": {"road_encoder": 0}}, SCHEMA, "lab.yaml")
+
+
+@pytest.mark.parametrize(
+    ("faults", "error", "text"),
+    [
+        (BoardFaults(vanish_after_s=0.05), DriverIOError, "the board is gone (No such device"),
+        (
+            BoardFaults(short_frame_after_s=0.05),
+            ProtocolError,
+            "a read frame of 502 bytes from endpoint 4, expected 504",
+        ),
+        (BoardFaults(timeout_after_s=0.05), DriverTimeoutError, "no answer within 20 ms (transfer timed out)"),
+        (BoardFaults(stuck_busy_after_s=0.05), DriverIOError, "A/D 0 (the coil current) has stayed busy for"),
+    ],
+)
+def test_a_fault_mid_run_is_one_line_and_the_board_ends_at_rest_where_it_can(faults, error, text):
+    rig, board, clock, _ = make(faults=faults)
+    rig.configure()
+    rig.activate()
+    with pytest.raises(error) as err:
+        cycle(rig, clock, RigCommand(0.8, 1.0), 500)
+    assert text in str(err.value) and "\n" not in str(err.value)
+    rig.close()
+    if faults.vanish_after_s is None and faults.timeout_after_s is None:
+        assert board.at_rest()  # reachable: both outputs rested on the way out
+
+
+def test_permission_denied_says_which_udev_rule_fixes_it():
+    rig, *_ = make(faults=BoardFaults(permission_denied=True))
+    with pytest.raises(DriverError) as err:
+        rig.configure()
+    text = str(err.value)
+    assert "permission denied" in text and 'ATTRS{manufacturer}=="InTeCo"' in text and "/etc/udev/rules.d/" in text
+    rig.close()
+
+
+def test_another_program_holding_the_board_is_named():
+    rig, board, clock, port = make()
+    port.state["holder"] = object()  # another host claimed it
+    with pytest.raises(DriverError, match="another program holds the board"):
+        rig.configure()
+    rig.close()
+
+
+def test_no_board_says_so_in_one_line():
+    class Nowhere(DirectPort):
+        def call(self, request: bytes, timeout_s: float) -> bytes | None:
+            return b"\x01\x13No such device"
+
+    rig, board, clock, _ = make()
+    rig.link.backend = EmulatedUsbBackend(Nowhere(board, clock))
+    with pytest.raises(DriverError, match=r"rtdac: no RT-DAC/USB2 found \(manufacturer 'InTeCo'; is it plugged in"):
+        rig.configure()
+
+
+def test_a_register_readback_through_pyusb_gives_what_was_written():
+    rig, board, clock, _ = make({"rtdac.coil_loop_ki_per_s": 0.0})
+    rig.configure()
+    rig.activate()
+    cycle(rig, clock, RigCommand(0.25), 1)
+    words = decode_frame(rig.link.read_frame())
+    assert words[22] == board.words[22] == round(0.25 * 4095)
+    rig.close()
+
+
+def test_the_board_keeps_its_outputs_when_the_host_goes_quiet():
+    rig, board, clock, _ = make()
+    rig.configure()
+    rig.activate()
+    cycle(rig, clock, RigCommand(0.7), 20)
+    rig.link.close()  # the host vanishes without a word: no watchdog on this board
+    clock.now += 5_000_000_000
+    board.bulk_write(0x02, READ_REQUEST, clock.now)
+    assert not board.at_rest() and board.drive_a > 0.6
