@@ -5,7 +5,8 @@ turns the current into that output through the power stage's calibration map (pi
 and, where an A/D senses the coil current, corrects it with an integral loop on the sensed current.
 :class:`RoadDrive` closes the road motor's loop on the road encoder, as sashil's own board does on
 its side: the commanded road speed integrates into a reference angle, and the output is the speed's
-feed-forward plus a gain on the angle's error; it keeps the tracking error's statistics.
+feed-forward (led by the motor's lag: a first-order motor's inverse) plus a gain on the angle's
+error; it keeps the tracking error's statistics.
 """
 
 from __future__ import annotations
@@ -56,9 +57,13 @@ class CoilDrive:
 class RoadDrive:
     """The road motor's loop on its encoder (module docstring)."""
 
-    def __init__(self, output_per_rad_s: float, kp_per_rad: float, limit: float, rest: float = 0.0):
+    def __init__(self, output_per_rad_s: float, kp_per_rad: float, limit: float, rest: float = 0.0, lag_s: float = 0.0):
         self.output_per_rad_s = output_per_rad_s
         self.kp_per_rad = kp_per_rad
+        #: the motor's time constant: its speed lags its output as a first-order system would, so the
+        #: feed-forward leads it by lag_s times the commanded speed's rate of change
+        self.lag_s = lag_s
+        self._last_speed: float | None = None
         self.limit = limit
         self.rest = rest
         self.speed_rad_s: float | None = None
@@ -76,6 +81,7 @@ class RoadDrive:
         """No road command: the motor's output at rest, the reference forgotten."""
         self.speed_rad_s = None
         self.reference_rad = None
+        self._last_speed = None
 
     def output(self, road_angle_rad: float, dt_s: float) -> float:
         """The motor's output (volts or a signed duty) at the measured road angle; rest when no road
@@ -83,15 +89,19 @@ class RoadDrive:
         speed = self.speed_rad_s
         if speed is None:
             return self.rest
+        accel = 0.0
         if self.reference_rad is None:
             self.reference_rad = road_angle_rad
         else:
             self.reference_rad += speed * dt_s
+            if self._last_speed is not None and dt_s > 0.0:
+                accel = (speed - self._last_speed) / dt_s
+        self._last_speed = speed
         error = self.reference_rad - road_angle_rad
         self.error_count += 1
         self.error_sq_sum += error * error
         self.error_max_rad = max(self.error_max_rad, abs(error))
-        out = speed * self.output_per_rad_s + self.kp_per_rad * error
+        out = (speed + self.lag_s * accel) * self.output_per_rad_s + self.kp_per_rad * error
         return min(max(out, -self.limit), self.limit)
 
     def tracking(self) -> dict[str, float | int]:

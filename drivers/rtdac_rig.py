@@ -88,7 +88,8 @@ class Wiring:
     road_channel: int = 0
     road_direction_bit: int | None = None
     road_output_per_rad_s: float = 0.5
-    road_kp_per_rad: float = 5.0
+    road_kp_per_rad: float = 20.0
+    road_lag_s: float = 0.02
     road_output_limit: float = 10.0
     pwm_prescaler: int = 0
     pwm_mode: str = "12-bit"
@@ -132,7 +133,9 @@ class RtdacRig(RigInterface):
             wiring.coil_map_current_a, wiring.coil_map_output, wiring.coil_loop_ki_per_s, current_max_a
         )
         road_rest = 0.0
-        self.road = RoadDrive(wiring.road_output_per_rad_s, wiring.road_kp_per_rad, wiring.road_output_limit, road_rest)
+        self.road = RoadDrive(
+            wiring.road_output_per_rad_s, wiring.road_kp_per_rad, wiring.road_output_limit, road_rest, wiring.road_lag_s
+        )
         self._frame = bytearray()
         self._coil_word = 0
         self._road_word = 0
@@ -187,6 +190,8 @@ class RtdacRig(RigInterface):
         both outputs at rest (the board keeps whatever a previous host left)."""
         if self.state is RigState.CLOSED:
             raise DriverError("rtdac: configure() after close()")
+        if self.state is not RigState.UNCONFIGURED:
+            return
         maps = known_maps(self.map_dir)
         self.link.open()
         try:
@@ -201,6 +206,11 @@ class RtdacRig(RigInterface):
             self._check_wiring(self.header, self.map)
             self._build_frame(words)
             self.link.write_frame(bytes(self._frame))
+        except DriverError as err:
+            self.link.close()
+            if type(err) is DriverError:
+                raise
+            raise DriverError(str(err)) from None  # a board that fails its greeting: nothing energised, exit 2
         except BaseException:
             self.link.close()
             raise
@@ -272,6 +282,25 @@ class RtdacRig(RigInterface):
     def _put(self, word: int, value: int) -> None:
         struct.pack_into("<H", self._frame, 2 * word, value & 0x7FFF)
 
+    # raw access for sashil doctor's walk: the outputs by channel, one exchange at a time ------------
+    def exchange(self) -> tuple[int, ...]:
+        """One exchange with the frame as it stands; the read frame's words."""
+        self.link.write_frame(bytes(self._frame))
+        return decode_frame(self.link.read_frame())
+
+    def set_output(self, kind: str, channel: int, value: float) -> None:
+        """Set PWM ``channel``'s duty or D/A ``channel``'s volts in the next frame (any channel: the walk
+        tries the wiring it is asked to)."""
+        reg = self.map
+        assert reg is not None
+        word = reg.pwm_width_word(channel) if kind == "pwm" else reg.da_word(channel)
+        self._put(word, self._output_word(kind, value))
+
+    def rest_outputs(self) -> None:
+        """The coil's and the road motor's outputs at rest in the next frame."""
+        for word, value in self._rest_words.items():
+            self._put(word, value)
+
     def activate(self) -> None:
         if self.state is not RigState.CONFIGURED:
             raise DriverError(f"{self.describe()}: activate() in state {self.state.value} (configure() first)")
@@ -290,8 +319,7 @@ class RtdacRig(RigInterface):
         start = time.monotonic()
         confirmed = False
         try:
-            for word, value in self._rest_words.items():
-                self._put(word, value)
+            self.rest_outputs()
             while True:
                 self.link.write_frame(bytes(self._frame))
                 words = decode_frame(self.link.read_frame())
@@ -306,9 +334,8 @@ class RtdacRig(RigInterface):
             log.warning(
                 "%s: deactivate: %s: the board keeps its last outputs (the E-stop is the answer)", self.describe(), err
             )
-        if was_active or not confirmed:
-            self.safe_state["safe_state_confirmed"] = confirmed
-            self.safe_state["safe_state_ms"] = round((time.monotonic() - start) * 1e3, 3)
+        self.safe_state["safe_state_confirmed"] = confirmed
+        self.safe_state["safe_state_ms"] = round((time.monotonic() - start) * 1e3, 3)
         if not confirmed:
             log.warning("%s: deactivate: the board's readback did not confirm both outputs at rest", self.describe())
 

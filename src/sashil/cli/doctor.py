@@ -10,7 +10,7 @@ from sashil.cli.common import add_config_options, add_driver_options, resolve_co
 from sashil.diagnostics import FAIL, WARN, Check, exit_code, table
 from sashil.errors import ConfigError
 
-EXAMPLE = "sashil doctor --driver serial --port /dev/ttyUSB0"
+EXAMPLE = "sashil doctor --driver serial --port /dev/ttyUSB0    (INTECO's board: sashil doctor --driver rtdac --walk)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,6 +31,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="host-paced round trips to the board at loop.rate_hz (default 1000)",
     )
+    walk = parser.add_argument_group("RT-DAC/USB2 (--driver rtdac)")
+    walk.add_argument(
+        "--walk",
+        action="store_true",
+        help="name the rig's channels with the operator at the terminal: move the arm, pulse the coil, run the "
+        "road motor (each step confirmed, each ended at rest), then write a config fragment to review",
+    )
+    walk.add_argument(
+        "--fragment",
+        default="rtdac-wiring.yaml",
+        metavar="FILE",
+        help="where --walk writes the wiring it found (default rtdac-wiring.yaml)",
+    )
     parser.add_argument("--sys-root", default="/sys", metavar="DIR", help=argparse.SUPPRESS)  # tests: a sysfs tree
 
 
@@ -39,12 +52,16 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ConfigError(f"--jitter-s: expected seconds in [0, 600], got {args.jitter_s:g}")
     if not 1 <= args.round_trips <= 1_000_000:
         raise ConfigError(f"--round-trips: expected a count in [1, 1000000], got {args.round_trips}")
+    if args.walk and args.json:
+        raise ConfigError("--walk: asks the operator at a terminal; it does not run with --json")
 
 
 def run(args: argparse.Namespace) -> int:
     _check_arguments(args)
     config = resolve_config(args)
     driver, loop = config["driver"], config["loop"]
+    if args.walk and driver["name"] != "rtdac":
+        raise ConfigError(f"--walk: names an RT-DAC/USB2's channels (--driver rtdac), not driver {driver['name']}'s")
     from sashil.diagnostics.machine import machine_checks, read_facts
 
     sys_root = Path(args.sys_root)
@@ -53,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
         from sashil.diagnostics.jitter import judge, measure
 
         checks.append(judge(measure(loop, args.jitter_s)))
-    if driver["port"] is None:
+    if driver["name"] == "rtdac":
+        from sashil.diagnostics.rtdac import rtdac_checks
+
+        checks += rtdac_checks(config, args.round_trips, args.walk, args.fragment)
+    elif driver["port"] is None:
         checks.append(Check("port", "port", "ok", f"driver {driver['name']}: no port (add --driver and --port)"))
     else:
         from sashil.diagnostics.board import board_checks

@@ -40,6 +40,13 @@ def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
         help="the power stage's true current is G times what rtdac.coil_map_* says (default 1)",
     )
     group.add_argument(
+        "--road-tau-ms",
+        type=float,
+        default=20.0,
+        metavar="MS",
+        help="the road motor's time constant: its speed follows its output with this first-order lag (default 20)",
+    )
+    group.add_argument(
         "--vanish-after", type=float, metavar="S", help="the board disappears from the bus after S seconds"
     )
     group.add_argument(
@@ -88,7 +95,11 @@ def run_rtdac(
     if not args.application.isascii() or len(args.application) > 6:
         raise ConfigError(f"--application: expected up to 6 ASCII characters, got {args.application!r}")
     identity = BoardIdentity(logic_version=logic_word, application=args.application)
-    board = build_board(config, args.logic, identity, operator, faults, args.stage_gain)
+    if not 0.0 < args.road_tau_ms <= 10_000.0:
+        raise ConfigError(f"--road-tau-ms: expected milliseconds in (0, 10000], got {args.road_tau_ms:g}")
+    board = build_board(
+        config, args.logic, identity, operator, faults, args.stage_gain, {"road_tau_s": args.road_tau_ms * 1e-3}
+    )
     try:
         server = BoardServer(board, args.link)
     except OSError as err:

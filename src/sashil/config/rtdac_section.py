@@ -151,10 +151,17 @@ RTDAC = Section(
         ),
         "road_kp_per_rad": Field(
             "float",
-            5.0,
+            20.0,
             low=0.0,
             high=10_000.0,
-            doc="gain on the road angle's error from its reference [V or duty per rad]",
+            doc="gain on the road angle's error from its reference [V or duty per rad] (a guess)",
+        ),
+        "road_lag_s": Field(
+            "float",
+            0.02,
+            low=0.0,
+            high=10.0,
+            doc="the road motor's time constant [s]: the feed-forward leads the speed by it (a guess: doctor --walk measures it)",
         ),
         "road_output_limit": Field(
             "float", 10.0, low=0.0, low_open=True, high=10.0, doc="largest road output magnitude [V, or duty]"

@@ -104,6 +104,7 @@ class RtdacSection(TypedDict):
     road_direction_bit: ReadOnly[int | None]
     road_output_per_rad_s: ReadOnly[float]
     road_kp_per_rad: ReadOnly[float]
+    road_lag_s: ReadOnly[float]
     road_output_limit: ReadOnly[float]
     pwm_prescaler: ReadOnly[int]
     pwm_mode: ReadOnly[Literal["12-bit", "8-bit"]]
