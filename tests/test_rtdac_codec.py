@@ -133,5 +133,5 @@ def test_a_bad_map_file_is_one_line_naming_file_and_key(tmp_path: Path):
     bad.write_text(text.replace("pwm:", "pwn:"))
     with pytest.raises(ConfigError, match=r"bad.yaml: pwn: unknown key"):
         load_map(bad)
-    with pytest.raises(ConfigError, match="rtdac.map_dir: .* is not a folder"):
+    with pytest.raises(ConfigError, match=r"rtdac.map_dir: .* is not a folder"):
         known_maps(str(tmp_path / "nowhere"))

@@ -85,7 +85,7 @@ def cycle(rig: RtdacRig, clock: Clock, cmd: RigCommand, n: int = 1):
 
 
 def test_configure_reads_the_header_picks_the_map_and_writes_both_outputs_at_rest():
-    rig, board, clock, port = make()
+    rig, board, _clock, port = make()
     board.words[board.map.pwm_width_word(0)] = 3000  # a previous host left the coil on
     board.words[board.map.da_word(0)] = 12000
     rig.configure()
@@ -139,7 +139,7 @@ def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
 
 
 def test_without_a_current_sense_the_record_says_current_a_is_the_modelled_coil():
-    rig, board, clock, _ = make({"rtdac.coil_sense_ad": None})
+    rig, _board, clock, _ = make({"rtdac.coil_sense_ad": None})
     rig.configure()
     rig.activate()
     sample = cycle(rig, clock, RigCommand(1.0), 10)
@@ -193,7 +193,7 @@ def test_deactivate_rests_both_outputs_and_the_readback_confirms_it():
 
 
 def test_wiring_the_board_does_not_have_is_refused_before_anything_is_written():
-    rig, board, clock, port = make({"rtdac.arm_encoder": 12})
+    rig, _board, _clock, port = make({"rtdac.arm_encoder": 12})
     with pytest.raises(DriverError, match=r"rtdac.arm_encoder: the board has no encoder counter 12 \(logic 0103"):
         rig.configure()
     assert port.sent == [READ_REQUEST]  # only the header was read: no frame written
@@ -247,7 +247,7 @@ def test_permission_denied_says_which_udev_rule_fixes_it():
 
 
 def test_another_program_holding_the_board_is_named():
-    rig, board, clock, port = make()
+    rig, _board, _clock, port = make()
     port.state["holder"] = object()  # another host claimed it
     with pytest.raises(DriverError, match="another program holds the board"):
         rig.configure()
