@@ -2,7 +2,8 @@
 
 ``sashil emulate`` runs the plant of a config (after its ``mismatch`` section) behind a pty in its
 own process and plays the operator at each Configure; ``sashil calibrate`` then runs against it
-over pyserial (``transport="serial"``) or python-can's slcan interface (``transport="slcan"``).
+over pyserial (``transport="serial"``), python-can's slcan interface (``transport="slcan"``), or
+pyusb to the emulated RT-DAC/USB2 (``transport="rtdac"``).
 The host's console (its stderr) goes to a file that the emulator's operator reads
 (``--prompts``): each step's attempt, a repeat after a link gap too, is held at the angle the
 host's prompt for it asks, as a person at the bench would read it (``--hold-deg``: the plan's
@@ -26,7 +27,7 @@ from sashil.errors import DriverIOError
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
-TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver
+TRANSPORTS = {"serial": "serial", "slcan": "can", "rtdac": "rtdac"}  # emulator transport -> host driver
 HOST_PRIORITY, EMULATOR_PRIORITY = 65, 70  # above other real-time tests on a shared machine
 SASHIL = [sys.executable, "-m", "sashil"]
 BOARDS = ("auto", "c", "python")  # sashil emulate --board
@@ -82,9 +83,10 @@ def calibrate_emulated(
         emulator = subprocess.Popen(emulate, stdout=subprocess.PIPE, stderr=log, text=True)
         try:
             line = emulator.stdout.readline() if emulator.stdout else ""
-            if "rig on" not in line:
+            if "rig on" not in line and "board on" not in line:
                 raise DriverIOError(f"sashil emulate did not start: {line.strip() or 'no output'}")
-            command = [*SASHIL, "calibrate", "--driver", TRANSPORTS[transport], "--port", link]
+            port = f"emulated:{link}" if transport == "rtdac" else link  # the RT-DAC's emulated USB
+            command = [*SASHIL, "calibrate", "--driver", TRANSPORTS[transport], "--port", port]
             command += ["--config", str(config_path), "--out", str(out), "-q"]
             if inertia is not None:
                 command += ["--inertia", repr(float(inertia))]

@@ -108,6 +108,11 @@ def run_rtdac(
     def _stop(signum: int, frame: object) -> None:
         server.stop()
 
+    # the board answers at once, as an FPGA does: best-effort SCHED_FIFO above the loop's 50
+    from sashil.runtime.rt_setup import RealtimeSetup
+
+    realtime = RealtimeSetup(priority=args.priority)
+    realtime.apply()
     handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     print(
         f"sashil emulate: rtdac board on {args.link} (logic {logic_word:04X} laid out as {args.logic}, "
@@ -121,6 +126,7 @@ def run_rtdac(
     finally:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
+        realtime.restore()
     state = "at rest" if board.at_rest() else "NOT at rest (the board keeps its last outputs)"
     print(
         f"sashil emulate: {why}; exchanges {board.exchanges}, bad frames from host {board.bad_frames}, outputs {state}",

@@ -486,7 +486,10 @@ class SessionSignals:
 def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str, Any]:
     """After the loop process died: reopen the rig, command 0 A and read the coil current until it
     is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
-    deactivated. Says what was found; a simulated rig ended with the process that held it."""
+    deactivated, with what its deactivation confirmed (``safe_state_confirmed``: a board that keeps
+    its last outputs reads them back at rest). Says what was found; a simulated rig ended with the
+    process that held it. Every backend that declares a link is reopened: sashil's board with its
+    watchdog, and the RT-DAC/USB2, which has none."""
 
     found: dict[str, Any] = {"reopened": False}
     rig = open_rig(config)
@@ -507,6 +510,8 @@ def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str
         found["safe"] = abs(float(sample.current_a)) <= SAFE_CURRENT_A
         rig.write(SAFE_COMMAND, time.monotonic_ns(), 0)
         rig.deactivate()
+        # a backend that reads back its outputs (a board with no watchdog of its own) says whether they rest
+        found.update(getattr(rig, "safe_state", {}))
     except Exception as err:
         found["error"] = f"{type(err).__name__}: {err}"
     finally:
