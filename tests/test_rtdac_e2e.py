@@ -96,7 +96,7 @@ def test_a_drop_test_over_the_rtdac_matches_the_simulated_rigs(tmp_path, board):
 
 def test_sashil_run_skyhook_on_a_road_and_every_stop_path_rests_the_board(tmp_path, board):
     emu = board()
-    done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "skyhook", "--road", "sine:1.5:1",
+    done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "skyhook", "--set", "controller.c_sky=2", "--road", "sine:1.5:1",
                   "--duration", "3", "--config", relaxed(tmp_path), "--out", str(tmp_path / "run"))  # fmt: skip
     assert done.returncode == 0, done.stderr
     summary = metrics(tmp_path / "run")
@@ -106,7 +106,7 @@ def test_sashil_run_skyhook_on_a_road_and_every_stop_path_rests_the_board(tmp_pa
     assert not summary["controller_stats"]["fallback"]
     data = np.genfromtxt(tmp_path / "run" / "data.csv", delimiter=",", names=True)
     assert np.max(data["current_cmd_a"]) > 0.2 and data["current_cmd_a"][-1] == 0.0
-    assert np.ptp(data["theta_road_rad"]) > 0.1  # the road wheel turned under the host's loop
+    assert np.ptp(data["theta_road_rad"]) > np.radians(1.8)  # the wheel swept its ±1 deg under the host's loop
     # a law that raises mid-run ends at rest too
     law = tmp_path / "boom.py"
     law.write_text(
@@ -180,6 +180,11 @@ def test_compare_over_the_rtdac_agrees_with_the_simulated_rig(tmp_path, board):
 
     sim, over = table(tmp_path / "sim"), table(tmp_path / "rtdac")
     assert all(over[law]["status"] == "ok" for law in over), over
+    late = [metrics(p.parent)["timing"]["lateness_us"]["max"] for p in (tmp_path / "rtdac").glob("*/summary.json")]
+    if max(late) > 50_000:
+        # the host paused longer than a road period's tenth: the host-closed road loop fell behind and
+        # caught up, and the laws no longer ran the same road (the serial test skips likewise)
+        pytest.skip(f"the host paused {max(late) / 1e3:.0f} ms: the runs are not comparable")
     for law in sim:
         travel = float(over[law]["rms_theta_deg"])
         assert travel == pytest.approx(float(sim[law]["rms_theta_deg"]), rel=0.25), law
@@ -191,7 +196,8 @@ def test_compare_over_the_rtdac_agrees_with_the_simulated_rig(tmp_path, board):
 def test_doctor_finds_the_board_times_the_exchange_and_walks_the_channels(tmp_path, board):
     """The emulated bench wired unlike the defaults (the arm on counter 3, counting down; the road on
     counter 6): the walk finds it from the operator's answers, each step ended at rest."""
-    emu = board("--hold-deg", "-5", "--release-after", "0.5", "--set", "rtdac.arm_encoder=3",
+    # the emulated damper heavier than the seed's (c1 5 N m s/rad): the arm settles within a second of the drop
+    emu = board("--hold-deg", "-5", "--release-after", "2", "--set", "model.params.c1=5", "--set", "rtdac.arm_encoder=3",
                 "--set", "rtdac.arm_reversed=true", "--set", "rtdac.road_encoder=6")  # fmt: skip
     fragment = tmp_path / "wiring.yaml"
     proc = subprocess.Popen(
@@ -200,16 +206,18 @@ def test_doctor_finds_the_board_times_the_exchange_and_walks_the_channels(tmp_pa
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        assert proc.stdin is not None
-        time.sleep(4.0)  # the operator's drop from -5 deg settles at 1 A... at 0 A: let it come to rest
+        assert proc.stdout is not None and proc.stdin is not None
+        prompt = proc.stdout.read(len("move the arm"))  # the walk's first prompt: the arm is held at -5 deg
+        assert prompt == "move the arm", prompt
+        time.sleep(5.0)  # the operator lets go 2 s after the claim; the arm comes to rest at 0 deg
         proc.stdin.write("5\n")
         proc.stdin.flush()
-        proc.stdin.write("\n\n")
-        proc.stdin.close()
-        out, err = proc.communicate(timeout=60)
+        out, err = proc.communicate(input="\n\n", timeout=60)
+        out = prompt + out
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.communicate()
     assert proc.returncode == 0, out + err
     assert "OK    board/header" in out and "logic 0103, application 'SASHIL'" in out
     assert "board/exchange" in out and "median" in out and "p99" in out
