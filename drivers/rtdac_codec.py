@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 #: bulk endpoint that carries frames to the FPGA (RTDACUSB2.cs lines 74-75)
 ENDPOINT_OUT = 0x02
@@ -53,8 +54,9 @@ PWM_MODE_CODE = {"8-bit": 0, "12-bit": 1}  # RTDACBoard.cs line 113
 _WORDS = struct.Struct(f"<{FRAME_WORDS}H")
 
 
-def decode_frame(data: bytes | bytearray | memoryview) -> tuple[int, ...]:
-    """The 252 words of a read frame (little-endian), or ValueError naming the wrong length."""
+def decode_frame(data: Any) -> tuple[int, ...]:
+    """The 252 words of a read frame (little-endian; any buffer: bytes, pyusb's array), or ValueError
+    naming the wrong length."""
     if len(data) != FRAME_BYTES:
         raise ValueError(f"a frame of {len(data)} bytes, expected {FRAME_BYTES}")
     return _WORDS.unpack(data)

@@ -153,8 +153,9 @@ class RtdacRig(RigInterface):
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
 
     @classmethod
-    def from_config(cls, config: RunConfig) -> RtdacRig:
-        """The backend the ``rtdac`` section, ``driver.port`` and the rig's coil describe (nothing opened)."""
+    def from_config(cls, config: RunConfig, backend: Any = None) -> RtdacRig:
+        """The backend the ``rtdac`` section, ``driver.port`` and the rig's coil describe (nothing
+        opened); ``backend``: a pyusb backend object to find the board through."""
         section = config["rtdac"]
         driver = config["driver"]
         usb = UsbSettings(
@@ -173,6 +174,7 @@ class RtdacRig(RigInterface):
             coil_tau_s=config["rig"]["coil_tau_s"],
             application=section["application"],
             map_dir=section["map_dir"],
+            backend=backend,
         )
         rig._busy_limit_ns = round(max(driver["link_lost_ms"], 1.0) * 1e6)
         return rig
@@ -205,7 +207,7 @@ class RtdacRig(RigInterface):
             self.map = choose_map(self.header, maps)
             self._check_wiring(self.header, self.map)
             self._build_frame(words)
-            self.link.write_frame(bytes(self._frame))
+            self.link.write_frame(self._frame)
         except DriverError as err:
             self.link.close()
             if type(err) is DriverError:
@@ -283,9 +285,13 @@ class RtdacRig(RigInterface):
         struct.pack_into("<H", self._frame, 2 * word, value & 0x7FFF)
 
     # raw access for sashil doctor's walk: the outputs by channel, one exchange at a time ------------
+    def exchange_frame(self) -> bytes:
+        """The write frame as it stands (the next exchange sends it)."""
+        return bytes(self._frame)
+
     def exchange(self) -> tuple[int, ...]:
         """One exchange with the frame as it stands; the read frame's words."""
-        self.link.write_frame(bytes(self._frame))
+        self.link.write_frame(self._frame)
         return decode_frame(self.link.read_frame())
 
     def set_output(self, kind: str, channel: int, value: float) -> None:
@@ -321,7 +327,7 @@ class RtdacRig(RigInterface):
         try:
             self.rest_outputs()
             while True:
-                self.link.write_frame(bytes(self._frame))
+                self.link.write_frame(self._frame)
                 words = decode_frame(self.link.read_frame())
                 at_rest = all(words[word] == value for word, value in self._rest_words.items())
                 sensed = self._sense(words)
@@ -422,7 +428,7 @@ class RtdacRig(RigInterface):
                 value = int.from_bytes(self._frame[offset : offset + 2], "little")
                 value = (value | self._dir_bit) if road < 0.0 else (value & ~self._dir_bit)
                 self._put(self._dir_word, value)
-        self.link.write_frame(bytes(self._frame))
+        self.link.write_frame(self._frame)
 
     # facts --------------------------------------------------------------------------------------
     def codec_counters(self) -> dict[str, int]:

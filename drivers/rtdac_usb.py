@@ -202,14 +202,14 @@ class BoardLink:
             return DriverIOError(f"{self.where}: the board is gone ({usb_reason(err)}) during {what}")
         return DriverIOError(f"{self.where}: {what}: {usb_reason(err)}")
 
-    def write_frame(self, frame: bytes) -> None:
+    def write_frame(self, frame: bytes | bytearray) -> None:
         """Send a write frame to endpoint 2."""
         try:
             self.dev.write(ENDPOINT_OUT, frame, self.timeout_ms)
         except Exception as err:
             raise self._fail(err, "the write frame") from None
 
-    def read_frame(self) -> bytes:
+    def read_frame(self) -> Any:
         """Ask for a read frame (``FF 8F 00 00`` to endpoint 2) and read it from endpoint 4: 504 bytes,
         else ProtocolError naming the length."""
         try:
@@ -221,4 +221,4 @@ class BoardLink:
             raise ProtocolError(
                 f"{self.where}: a read frame of {len(data)} bytes from endpoint 4, expected {FRAME_BYTES}"
             )
-        return data.tobytes() if hasattr(data, "tobytes") else bytes(data)
+        return data  # pyusb's array('B'): a buffer the codec unpacks as it is

@@ -21,6 +21,7 @@ arm to its hold angle then and lets go later, as with the serial emulator.
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +47,7 @@ from sashil.drivers.sim import SimulatedRig
 TWO_PI = 2.0 * math.pi
 #: the road motor's dead band: below one D/A step [V] (or a duty as small) it stands still
 ROAD_DEAD_BAND = 20.0 / 16383
+_FRAME = struct.Struct(f"<{FRAME_WORDS}H")
 
 
 @dataclass(frozen=True)
@@ -176,6 +178,7 @@ class RtdacBoard:
         for channel in range(4):
             self.words[register_map.da_word(channel)] = DA_ZERO  # the D/A's at 0 V from power-up
         self._latched: bytes | None = None
+        self._writable = self.writable()
         self._counter_zero: dict[int, int] = {}
         self._road_speed = 0.0
         self._last_ns: int | None = None
@@ -255,7 +258,7 @@ class RtdacBoard:
             volts = w.coil_sense_offset_v + state.current_a / w.coil_sense_a_per_v
             busy = self._since(now_ns, self.faults.stuck_busy_after_s)
             self.words[m.ad_value_word(w.coil_sense_ad)] = ad_word(volts, min(gain, 4), busy)
-        self._latched = b"".join(v.to_bytes(2, "little") for v in self.words)
+        self._latched = _FRAME.pack(*self.words)
 
     def _set_counter(self, channel: int, angle_rad: float, counts_per_rev: int, reversed_: bool) -> None:
         counts = round(angle_rad * counts_per_rev / TWO_PI) * (-1 if reversed_ else 1)
@@ -277,8 +280,10 @@ class RtdacBoard:
         return words
 
     def _apply(self, frame: bytes, now_ns: int) -> None:
-        for word in self.writable():
-            self.words[word] = int.from_bytes(frame[2 * word : 2 * word + 2], "little")
+        written = _FRAME.unpack(frame)
+        words = self.words
+        for word in self._writable:
+            words[word] = written[word]
         self._drive(now_ns)
 
     def output(self, kind: str, channel: int) -> float:
