@@ -290,6 +290,43 @@ def protocol_page() -> str:
     return HEADER + "<!-- the text of drivers/protocol.md -->\n\n" + text
 
 
+def rtdac_maps_page() -> str:
+    """The RT-DAC/USB2 register maps (drivers/rtdac_maps/*.yaml), one table a map."""
+    from sashil.drivers.rtdac_map import BUILTIN_DIR, known_maps
+
+    out = [HEADER, "# RT-DAC/USB2 register maps\n\n"]
+    out.append(
+        "INTECO's RT-DAC/USB2 exchanges its 252-word register file in one frame each way "
+        "(`--driver rtdac`, [your rig](../how-to/your-rig.md)). The board's header picks the map; these ship "
+        f"with sashil as data (`drivers/rtdac_maps/`, {len(list(BUILTIN_DIR.glob('*.yaml')))} files), each fact "
+        "cited in its file from the public source is-centre/rtdacusb2-bridge-app. A lab adds the map of "
+        "another logic as a file of the same shape in the folder `rtdac.map_dir` names; a board no map serves "
+        "is refused in one line naming its logic and application.\n\n"
+    )
+    out.append(
+        "Every map has the same header: word 0 the logic version, words 1-3 six characters of application "
+        "name (word 3's high byte first), words 4-5 the synthesis date, words 6-8 the 4-bit module counts. "
+        "A write frame begins `0F 8F` and masks each later word to 15 bits; a read is `FF 8F 00 00` to "
+        "endpoint 2, then 504 bytes from endpoint 4.\n\n"
+    )
+    for m in known_maps():
+        out.append(f"## Logic {m.logic}\n\n{m.describe()}. Evidence: {m.evidence}.\n\n")
+        rows = [
+            ["digital I/O", f"pin mode {m.pin_mode}-{m.pin_mode + 1}, direction {m.direction}-{m.direction + 1}, "
+             f"output {m.output}-{m.output + 1}, input {m.input}-{m.input + 1}", "two words, 15 + 11 bits"],
+            ["PWM", f"{m.pwm_count} channels from word {m.pwm_base}, {m.pwm_stride} words each",
+             "prescaler (15 bits); mode << 1 + prescaler bit 15; width (12 bits, or 8 in 8-bit mode)"],
+            ["encoder counters", f"{m.encoder_count} counters: reset bits {m.encoder_reset}, index active "
+             f"{m.encoder_index_active}, index invert {m.encoder_index_invert}; counter i at words "
+             f"{m.encoder_base}+{m.encoder_stride}i (low), +1 (high)", "32 bits, signed"],
+            ["A/D", f"{m.ad_count} channels: gains from word {m.ad_gain_base} (four 3-bit codes a word), "
+             f"values from word {m.ad_value_base}", "12-bit two's complement, ±10 V / gain; busy bit 12"],
+            ["D/A", f"{m.da_count} channels from word {m.da_base}", "14 bits, −10 V + 20 V · v / 16383; 0 V is 8191"],
+        ]  # fmt: skip
+        out.append(_table(["block", "words", "format"], rows) + "\n\n")
+    return "".join(out)
+
+
 def dbc_page() -> str:
     import cantools
 
@@ -445,6 +482,7 @@ PAGES: dict[str, Callable[[], str]] = {
     "laws.md": laws_page,
     "protocol.md": protocol_page,
     "dbc.md": dbc_page,
+    "rtdac-maps.md": rtdac_maps_page,
 }
 
 
