@@ -297,3 +297,34 @@ def test_calibrate_an_emulated_damper_over_the_rtdac(tmp_path):
     assert p["k"] == pytest.approx(100.0, rel=0.02)
     for i in (0.0, 1.0):
         assert p["c1"] + p["c2"] * i == pytest.approx(0.5 + 1.0 * i, rel=0.25)
+
+
+def test_a_panel_run_over_the_rtdac_streams_and_stops_at_rest(tmp_path, board):
+    from starlette.testclient import TestClient
+    from test_panel import BASE, CHANGES, ORIGIN, PORT, PROTOCOLS, TOKEN, WS, read_csv, until
+
+    from sashil.panel.app import Panel, make_app
+    from sashil.panel.bench import Bench
+
+    emu = board()
+    bench = Bench(relaxed(tmp_path), runs_dir=tmp_path / "runs")
+    panel = Panel(bench, TOKEN, PORT)
+    with (
+        TestClient(make_app(panel), base_url=BASE) as client,
+        client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws,
+    ):
+        headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
+        choice = {"law": "skyhook", "params": {"c_sky": "1.5"}, "driver": "rtdac", "port": emu.port}
+        started = client.post("/api/start", json=choice, headers=headers)
+        assert started.status_code == 200, started.text
+        batches: list = []
+        until(ws, "batch", lambda b: len(b["time_s"]) > 0, batches)
+        until(ws, "batch", lambda b: len(b["time_s"]) > 0, batches)
+        ws.send_text(json.dumps({"stop": True}))
+        end = until(ws, "status", lambda s: s["state"] == "idle", batches)
+    assert (end["exit_status"], end["stop_reason"]) == ("stopped", "STOP (panel)"), end
+    folder = Path(end["folder"])
+    summary = metrics(folder)
+    assert summary["driver"] == "rtdac" and summary["link"]["safe_state_confirmed"] is True
+    assert read_csv(folder / "data.csv")["current_cmd_a"][-1] == 0.0
+    assert "outputs at rest" in emu.stop().splitlines()[-1]
