@@ -7,7 +7,8 @@ USB vendor or product id. sashil matches on the manufacturer string (and the ser
 
 The pyusb backend is libusb 1.0: the library ``libusb-package`` ships in its wheel when installed
 (``pip install 'sashil[rtdac]'``), else the system's; or, with ``rtdac.usb_backend:
-module:callable``, the backend that callable returns for ``driver.port`` (an emulator's). The
+module:callable``, the backend that callable returns (given ``driver.port`` when it takes an
+argument: an emulator's, or a lab's own pyusb backend). The
 port ``emulated:PATH`` names sashil's own emulated board (``sashil emulate --transport rtdac``).
 """
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import errno
 import importlib
+import inspect
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,7 +64,11 @@ def pyusb_backend(settings: UsbSettings) -> Any:
             factory = getattr(importlib.import_module(module_name), attr)
         except (ImportError, AttributeError, ValueError) as err:
             raise ConfigError(f"rtdac.usb_backend: cannot load {target!r} ({err})") from None
-        return factory(settings.port or "")
+        try:
+            takes_port = bool(inspect.signature(factory).parameters)
+        except (TypeError, ValueError):  # a builtin without a signature: give it the port
+            takes_port = True
+        return factory(settings.port or "") if takes_port else factory()
     _usb()
     import usb.backend.libusb1
 

@@ -27,6 +27,8 @@ def _error_lines(capsys) -> list[str]:
         (b"loop:\n  rate_hz: .inf\n", "loop.rate_hz"),
         (b"model:\n  params: {k: 1e400}\n", "model.params.k"),
         (b"loop: [1, 2]\n", "loop"),
+        (b"rtdac:\n  coil_output: da\n  coil_channel: 7\n  coil_map_output: [0, 5]\n", "rtdac.coil_channel"),
+        (b"rtdac:\n  coil_map_current_a: [0.0, 1.0, 0.5]\n  coil_map_output: [0, 0.5, 1]\n", "rtdac.coil_map"),
     ],
 )
 def test_a_bad_config_file_is_one_line_exit_2_and_no_run_folder(tmp_path, capsys, text, message):
@@ -44,6 +46,17 @@ def test_a_port_without_a_driver_is_refused_not_simulated(tmp_path, capsys):
     assert main(["run", "--port", "/dev/ttyUSB0", "--duration", "0.1", "--out", str(out)]) == 2
     errors = _error_lines(capsys)
     assert len(errors) == 1 and "--port /dev/ttyUSB0" in errors[0] and "--driver serial" in errors[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("verb", [["run"], ["drop-test"], ["sweep", "--f-start", "1", "--f-stop", "1"]])
+def test_an_rtdac_that_is_not_there_leaves_no_run_folder(tmp_path, capsys, verb):
+    out = tmp_path / "run"
+    port = f"emulated:{tmp_path / 'no-board.sock'}"
+    code = main([*verb, "--driver", "rtdac", "--port", port, "--duration", "1", "--out", str(out)])
+    assert code == 2
+    errors = _error_lines(capsys)
+    assert len(errors) == 1 and "no RT-DAC/USB2 found" in errors[0], errors
     assert not out.exists()
 
 

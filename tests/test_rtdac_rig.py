@@ -284,3 +284,27 @@ def test_the_board_keeps_its_outputs_when_the_host_goes_quiet():
     clock.now += 5_000_000_000
     board.bulk_write(0x02, READ_REQUEST, clock.now)
     assert not board.at_rest() and board.drive_a > 0.6
+
+
+def test_a_pyusb_backend_named_in_config_is_called_with_the_port_or_with_nothing(tmp_path, monkeypatch):
+    """An emulator that is not ours plugs in as ``rtdac.usb_backend: module:callable``."""
+    import sys
+    import types
+
+    from sashil.drivers.rtdac_usb import UsbSettings, pyusb_backend
+
+    board = build_board(freeze_config(default_config()))
+    module = types.ModuleType("their_emulator")
+    module.with_port = lambda port: ("port", port)  # type: ignore[attr-defined]
+    module.without = lambda: EmulatedUsbBackend(DirectPort(board))  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "their_emulator", module)
+    assert pyusb_backend(UsbSettings(usb_backend="their_emulator:with_port", port="bus 3")) == ("port", "bus 3")
+    assert isinstance(pyusb_backend(UsbSettings(usb_backend="their_emulator:without")), EmulatedUsbBackend)
+    with pytest.raises(ConfigError, match="rtdac.usb_backend: cannot load 'their_emulator:nothing'"):
+        pyusb_backend(UsbSettings(usb_backend="their_emulator:nothing"))
+    raw = default_config()
+    raw["rtdac"]["usb_backend"] = "their_emulator:without"
+    rig = RtdacRig.from_config(freeze_config(raw))
+    rig.configure()
+    assert rig.header is not None and rig.header.logic == "0103"
+    rig.close()

@@ -79,7 +79,8 @@ RTDAC = Section(
             "str?",
             None,
             doc="pyusb backend: null for libusb 1.0 (the packaged one of libusb-package, else the system's); "
-            "'module:callable' for one the callable returns, given driver.port (an emulator's)",
+            "'module:callable' for the pyusb backend (usb.backend.IBackend) the callable returns, called with "
+            "driver.port when it takes an argument, else with none (an emulator's, e.g. a check's own)",
         ),
         "transfer_timeout_ms": Field("float", 20.0, low=0.1, high=10_000.0, doc="one bulk transfer's timeout [ms]"),
         "application": Field(
