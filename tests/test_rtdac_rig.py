@@ -300,7 +300,7 @@ def test_a_pyusb_backend_named_in_config_is_called_with_the_port_or_with_nothing
     monkeypatch.setitem(sys.modules, "their_emulator", module)
     assert pyusb_backend(UsbSettings(usb_backend="their_emulator:with_port", port="bus 3")) == ("port", "bus 3")
     assert isinstance(pyusb_backend(UsbSettings(usb_backend="their_emulator:without")), EmulatedUsbBackend)
-    with pytest.raises(ConfigError, match="rtdac.usb_backend: cannot load 'their_emulator:nothing'"):
+    with pytest.raises(ConfigError, match=r"rtdac\.usb_backend: cannot load 'their_emulator:nothing'"):
         pyusb_backend(UsbSettings(usb_backend="their_emulator:nothing"))
     raw = default_config()
     raw["rtdac"]["usb_backend"] = "their_emulator:without"
