@@ -43,6 +43,7 @@ from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
+from sashil.plugins import check_not_importing
 from sashil.testing.rig import DEFAULT_ROAD, SimRig, run_law
 
 __all__ = ["ContractReport", "assert_law_contract", "check_law"]
@@ -88,6 +89,7 @@ def check_law(
     ``rig`` (the default :class:`SimRig` when None) on ``road`` for ``duration_s`` per run (two runs);
     the first second of each run is left out of its metrics. ``timer``: the clock the compute budget
     is measured on (integer ns; a test may pass one the law advances)."""
+    check_not_importing("sashil.testing.check_law")  # a script's law file imported for its class runs nothing
     name = str(getattr(law, "name", "") or getattr(law, "__qualname__", repr(law)))
     faults = _declaration_faults(law)
     if faults:

@@ -23,6 +23,7 @@ from sashil.control.registry import law_run_label
 from sashil.experiments.compare import LawJob, run_job
 from sashil.experiments.road_option import parse_road
 from sashil.lab._compare import folder_name, law_summary
+from sashil.plugins import check_not_importing
 from sashil.recording.run_folder import RunFolder
 from sashil.scripting import law_spec, set_items
 
@@ -113,6 +114,7 @@ def run_law(
     A law that fails (raises, returns NaN or an infinity) does not raise here: the run ends at 0 A,
     as on the bench, and ``run.summary["exit_status"]`` and ``["error"]`` say why (the contract check,
     :func:`sashil.testing.check_law`, turns that into a fault line)."""
+    check_not_importing("sashil.testing.run_law")  # a script's law file imported for its class runs nothing
     rig = rig if rig is not None else SimRig()
     config = rig.config(law, road=road, duration_s=duration_s, params=params)  # bad input: ConfigError here
     label = law_run_label(config)
