@@ -1,6 +1,7 @@
 """The manual (docs/, built with mkdocs) cannot drift from the code, and its examples run.
 
-- The reference pages tools/gen_reference.py writes equal what it writes now from the code.
+- The reference pages tools/gen_reference.py writes equal what it writes now from the code, and the
+  home page (docs/index.md) what tools/gen_home.py writes from the README.
 - The CLI reference lists every verb and every option, the config reference every key, and
   nothing the code does not have.
 - Every code block of the tutorials and how-to guides is ``sh`` or ``python`` (run here, page by page,
@@ -26,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(ROOT / "tools"))
 
+import gen_home  # noqa: E402
 import gen_reference  # noqa: E402
 
 RUN = {"sh", "python"}
@@ -37,6 +39,14 @@ EXAMPLE_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + sorted((DOCS / "how-
 def test_generated_reference_is_current():
     stale = gen_reference.stale_pages(DOCS / "reference")
     assert not stale, f"docs/reference/{', '.join(stale)} differ from the code: run python tools/gen_reference.py"
+
+
+def test_home_page_is_the_readme():
+    """docs/index.md is tools/gen_home.py's copy of README.md (its links into docs/ made relative)."""
+    written = gen_home.home_page((ROOT / "README.md").read_text(encoding="utf-8"))
+    assert (DOCS / "index.md").read_text(encoding="utf-8") == written, (
+        "docs/index.md is stale: python tools/gen_home.py"
+    )
 
 
 def test_cli_reference_has_every_verb_and_option_and_no_other():
