@@ -49,6 +49,27 @@ def test_home_page_is_the_readme():
     )
 
 
+def test_every_config_key_has_a_meaning_and_every_choice_its_choices():
+    from sashil.config.schema import Field, Section
+    from sashil.config.sections import SCHEMA
+
+    rows = list(gen_reference._config_rows(SCHEMA, ""))
+    assert len(rows) > 100
+    no_meaning = [row[0] for row in rows if not row[4].strip()]
+    assert not no_meaning, f"config keys without a meaning (a doc= in sashil/config/sections.py): {no_meaning}"
+
+    def choices(fields, prefix=""):
+        for key, spec in fields.items():
+            if isinstance(spec, Section):
+                yield from choices(spec.fields, f"{prefix}{key}.")
+            elif isinstance(spec, Field) and spec.kind.startswith("choice"):
+                yield f"`{prefix}{key}`", spec.choices
+
+    shown = {row[0]: row[3] for row in rows}
+    for key, options in choices(SCHEMA):
+        assert options and all(f"`{option}`" in shown[key] for option in options), f"{key}: its choices"
+
+
 def test_cli_reference_has_every_verb_and_option_and_no_other():
     from sashil.cli import VERBS, build_parser
 

@@ -179,7 +179,7 @@ def _config_rows(fields: Mapping[str, Any], prefix: str) -> Iterator[list[Any]]:
             continue
         assert isinstance(spec, Field)
         bounds = ""
-        if spec.kind == "choice":
+        if spec.kind.startswith("choice"):  # "choice?" also takes null
             bounds = ", ".join(f"`{c}`" for c in spec.choices)
         else:
             low = f"{'>' if spec.low_open else '>='} {spec.low:g}" if spec.low is not None else ""
