@@ -156,3 +156,9 @@ def test_site_builds_strictly(tmp_path: Path):
     )
     fetched = [p for p in pages if loads.search(p.read_text(encoding="utf-8"))]
     assert not fetched, f"pages that load from the network: {fetched[:3]}"
+    # search from site/index.html opened as a file: Material's offline plugin inlines the index into a
+    # script, and the vendored iframe-worker shim runs the search worker where file:// forbids workers
+    index = (tmp_path / "site" / "search" / "search_index.js").read_text(encoding="utf-8")
+    assert index.startswith("var __index = {") and '"location":"how-to/test-your-law-in-ci.html"' in index
+    home = (tmp_path / "site" / "index.html").read_text(encoding="utf-8")
+    assert '<script src="assets/javascripts/iframe-worker/shim.js">' in home
