@@ -6,10 +6,12 @@ is otherwise copied as it is. tests/test_docs.py fails while docs/index.md diffe
 writes.
 
     python tools/gen_home.py
+    python tools/gen_home.py --quick   # print the page, write nothing
 """
 
 from __future__ import annotations
 
+import argparse
 import re
 from pathlib import Path
 
@@ -26,7 +28,13 @@ def home_page(readme: str) -> str:
 
 
 def main() -> None:
-    HOME.write_text(home_page(README.read_text(encoding="utf-8")), encoding="utf-8")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="print the page, write nothing")
+    page = home_page(README.read_text(encoding="utf-8"))
+    if parser.parse_args().quick:
+        print(page)
+        return
+    HOME.write_text(page, encoding="utf-8")
     print(f"wrote {HOME.relative_to(ROOT)}")
 
 
