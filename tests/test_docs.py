@@ -108,6 +108,19 @@ def test_every_block_runs_or_says_what_it_needs(page: Path):
             assert not block.needs, f"{page.name}:{block.line}: a shown block runs nothing, it needs nothing"
 
 
+@pytest.mark.parametrize("page", sorted((DOCS / "tutorials").glob("*.md")), ids=lambda p: p.name)
+def test_tutorials_say_how_to_use_the_quick_starts_environment(page: Path):
+    text = page.read_text(encoding="utf-8")
+    blocks = [block for block in fenced_blocks(text) if block.info == "sh"]
+    if not blocks:
+        return
+    first = text.splitlines()[: blocks[0].line]
+    assert any("source .venv/bin/activate" in line for line in first), (
+        f"{page.name}: activate .venv before its commands"
+    )
+    assert not any(".venv/bin/" in block.body for block in blocks), f"{page.name}: commands as in the active .venv"
+
+
 def _script(page: Path, folder: Path) -> str:
     """The page's runnable blocks as one bash script (python blocks written beside it and run)."""
     # a block that fails leaves nothing behind: what the page started in the background is stopped
