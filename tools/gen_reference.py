@@ -411,6 +411,13 @@ def python_api_page() -> str:
     out.append("# The experiments: `sashil.lab`\n\n" + _doc(lab) + "\n\n")
     for name in lab.__all__:
         out.append(_entry(f"sashil.lab.{name}", getattr(lab, name), members=False))
+    import sashil.testing as testing
+
+    out.append("# A lab's tests: `sashil.testing`\n\n" + _doc(testing) + "\n\n")
+    for name in testing.__all__:
+        value = getattr(testing, name)
+        if callable(value):
+            out.append(_entry(f"sashil.testing.{name}", value))
     return "".join(out)
 
 
