@@ -329,7 +329,10 @@ def _doc(obj: Any) -> str:
 
 def _signature(name: str, obj: Any) -> str:
     try:
-        sig = str(inspect.signature(obj))
+        signature = inspect.signature(obj)
+        # a private field (a dataclass's _sub_entries) is no part of the API the page documents
+        public = [param for param in signature.parameters.values() if not param.name.startswith("_")]
+        sig = str(signature.replace(parameters=public))
     except (TypeError, ValueError):
         sig = "(...)"
     sig = re.sub(r"(: |-> )'([^']*)'", r"\1\2", sig)  # postponed annotations read as written
