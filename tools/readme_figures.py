@@ -3,6 +3,9 @@
 * ``drop_test.png``: ``sashil drop-test --current 0 --current 1`` (peaks, envelope, ζ), and beside it
   ``drop_test.json``: the command and each drop's ζ, δ and period as the legend and the quick start
   show them (``tests/test_readme_figure.py`` fails when a fresh drop test no longer gives them);
+* ``hysteresis.png``: the seed's damper (seed 001 eqs. 9-17) under a 1.6 Hz, 2° sine of θ at 0, 0.5
+  and 1 A: torque against angle and against rate, from :class:`sashil.models.hysteresis.BoucWenZ`;
+* ``compare.png``: ``sashil compare`` as the compare guide runs it (ISO 8608 class C, 10 s, four laws);
 * ``transmissibility.png``: ``sashil sweep --stepped --current 0`` (24 log-spaced frequencies);
 * ``timing.png``: ``sashil report`` of two 10 s ``sashil run``s at 1 kHz (passive 0 A and skyhook),
   the percentile plot of their loop timing (on the machine this runs on).
@@ -29,7 +32,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "figures"
-FIGURES = ("drop_test", "transmissibility", "timing")
+FIGURES = ("drop_test", "hysteresis", "compare", "transmissibility", "timing")
+#: the compare guide's comparison (docs/how-to/compare-laws.md), which compare.png shows
+COMPARE_COMMAND = (
+    "compare", "--road", "iso8608:C", "--duration", "10", "--controller", "skyhook-add", "--controller",
+    "clipped-optimal", "--controller", "pdd", "--controller", "skyhook", "--set", "controller.c_sky=2",
+)  # fmt: skip
 #: the quick start's drop test, which drop_test.png shows
 DROP_COMMAND = ("drop-test", "--current", "0", "--current", "1")
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
@@ -63,6 +71,39 @@ def legend(summary: dict) -> dict:
     return {"command": "sashil " + " ".join(DROP_COMMAND), "drops": drops}
 
 
+def hysteresis_figure(path: Path, cycles: float = 3.0) -> Path:
+    """The damper torque T = α(i)·z + c(i)·θ̇ (seed 001 eqs. 9, 11-12) of the seed's parameters under
+    θ = 2°·sin(2π·1.6 Hz·t), z integrated over the angle (eq. 17), at 0, 0.5 and 1 A: against θ and θ̇,
+    the last cycle (the first leaves z's start behind)."""
+    import math
+
+    import numpy as np
+
+    from sashil.models.hysteresis import BoucWenParams, BoucWenZ
+    from sashil.recording.plots import pyplot, save_figure
+
+    params = BoucWenParams()
+    f_hz, amplitude = 1.6, math.radians(2.0)
+    t = np.arange(0.0, cycles / f_hz, 1e-4)
+    theta = amplitude * np.sin(2 * math.pi * f_hz * t)
+    rate = 2 * math.pi * f_hz * amplitude * np.cos(2 * math.pi * f_hz * t)
+    z = BoucWenZ.from_params(params).trajectory(theta)
+    last = t >= (cycles - 1.0) / f_hz
+    fig, (by_angle, by_rate) = pyplot().subplots(1, 2, figsize=(9, 3.8), dpi=110)
+    for current in (0.0, 0.5, 1.0):
+        torque = params.torque(z, rate, current)
+        label = f"{current:g} A"
+        by_angle.plot(np.degrees(theta[last]), torque[last], lw=1.2, label=label)
+        by_rate.plot(rate[last], torque[last], lw=1.2, label=label)
+    by_angle.set(xlabel="relative angle θ [deg]", ylabel="damper torque T [N m]", title="T against θ")
+    by_rate.set(xlabel="rate θ̇ [rad/s]", title="T against θ̇: the Bouc-Wen loop")
+    for ax in (by_angle, by_rate):
+        ax.grid(alpha=0.3)
+        ax.legend(title="coil current", fontsize=8)
+    fig.suptitle("The seed's MR damper under a 1.6 Hz, ±2° sine (Iskandarani & Karimi 2011, eqs. 9-17)", fontsize=10)
+    return save_figure(fig, path)
+
+
 def figures(out: Path, quick: bool, chosen: tuple[str, ...] = FIGURES) -> None:
     out.mkdir(parents=True, exist_ok=True)
     sashil = functools.partial(globals()["sashil"], in_process=quick)
@@ -76,6 +117,12 @@ def figures(out: Path, quick: bool, chosen: tuple[str, ...] = FIGURES) -> None:
             shutil.copy(tmp / "drop" / "drop_test.png", out / "drop_test.png")
             summary = json.loads((tmp / "drop" / "summary.json").read_text(encoding="utf-8"))
             (out / "drop_test.json").write_text(json.dumps(legend(summary), indent=2) + "\n", encoding="utf-8")
+        if "hysteresis" in chosen:
+            hysteresis_figure(out / "hysteresis.png", cycles=2.0 if quick else 3.0)
+        if "compare" in chosen:
+            duration = ("--duration", "3", "--set", "compare.settle_s=1") if quick else ()
+            sashil(*COMPARE_COMMAND, *duration, "--out", str(tmp / "compare"))
+            shutil.copy(tmp / "compare" / "compare.png", out / "compare.png")
         if "transmissibility" in chosen:
             sashil("sweep", "--stepped", "--current", "0", *steps, "--out", str(tmp / "sweep"))
             shutil.copy(tmp / "sweep" / "transmissibility.png", out / "transmissibility.png")
