@@ -155,13 +155,27 @@ def cli_page() -> str:
         example = (parser.epilog or "").removeprefix("example:").strip()
         if example:
             out.append(f"```text\n{example}\n```\n\n")
-        rows = [
-            [_option(a), _help(a, parser.prog)]
-            for a in parser._actions
-            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
-        ]
-        out.append(_table(["option", "meaning"], rows) if rows else "No options.\n")
+        out.append(f"```text\n{_usage(parser)}```\n\n")
+        shown = 0
+        for group in parser._action_groups:
+            rows = [
+                [_option(a), _help(a, parser.prog)]
+                for a in group._group_actions
+                if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
+            ]
+            if rows:
+                out.append(f"### {name}: {group.title}\n\n" + _table(["option", "meaning"], rows) + "\n")
+                shown += 1
+        if not shown:
+            out.append("No options.\n")
     return "".join(out)
+
+
+def _usage(parser: argparse.ArgumentParser) -> str:
+    """The usage line ``sashil VERB --help`` prints ([optional] in brackets), at a fixed width."""
+    formatter = argparse.HelpFormatter(parser.prog, width=100)
+    formatter.add_usage(parser.usage, parser._actions, parser._mutually_exclusive_groups)
+    return formatter.format_help()
 
 
 # ---------------------------------------------------------------- the config
