@@ -70,6 +70,12 @@ def test_every_config_key_has_a_meaning_and_every_choice_its_choices():
         assert options and all(f"`{option}`" in shown[key] for option in options), f"{key}: its choices"
 
 
+def test_the_api_reference_links_its_types_and_hides_private_fields():
+    page = (DOCS / "reference" / "python-api.md").read_text(encoding="utf-8")
+    assert "[`Run`](python-api.md#run)" in page and "[`RunConfig`](python-api.md#sashillabrunconfig)" in page
+    assert "_sub_entries" not in page
+
+
 def test_cli_reference_has_every_verb_and_option_and_no_other():
     from sashil.cli import VERBS, build_parser
 

@@ -83,9 +83,53 @@ def _doctest_block(match: re.Match[str]) -> str:
     return "```python\n" + "\n".join(lines) + "\n```\n"
 
 
+#: where the reference documents a name a docstring's role may give (page, heading), by the name's
+#: last dotted part and the module paths it is reached by: a role naming one becomes a link
+_DOCUMENTED: dict[str, tuple[str, str, tuple[str, ...]]] = {
+    "Run": ("python-api.md", "Run", ("sashil", "sashil.api")),
+    "load_run": ("python-api.md", "sashil.load_run", ("sashil", "sashil.api")),
+    "Law": ("law-api.md", "Law", ("sashil.control", "sashil.control.law_api")),
+    "Param": ("law-api.md", "Param", ("sashil.control", "sashil.control.law_api")),
+    "LawState": ("law-api.md", "LawState", ("sashil.control", "sashil.control.law_api")),
+    "LawContext": ("law-api.md", "LawContext", ("sashil.control", "sashil.control.law_api")),
+    "RunConfig": ("python-api.md", "sashil.lab.RunConfig", ("sashil.lab", "sashil.config.typed")),
+    "ConfigSource": ("python-api.md", "sashil.lab.ConfigSource", ("sashil.lab", "sashil.config.resolve")),
+    "Option": ("python-api.md", "sashil.lab.Option", ("sashil.lab", "sashil.config.resolve")),
+    "resolve": ("python-api.md", "sashil.lab.resolve", ("sashil.lab", "sashil.config.resolve")),
+    "Event": ("python-api.md", "sashil.lab.Event", ("sashil.lab", "sashil.lab.events")),
+    "Outputs": ("python-api.md", "sashil.lab.Outputs", ("sashil.lab", "sashil.recording.outputs")),
+    "SimRig": ("python-api.md", "sashil.testing.SimRig", ("sashil.testing", "sashil.testing.rig")),
+    "run_law": ("python-api.md", "sashil.testing.run_law", ("sashil.testing", "sashil.testing.rig")),
+    "check_law": ("python-api.md", "sashil.testing.check_law", ("sashil.testing", "sashil.testing.contract")),
+    "compare_with_passive": (
+        "python-api.md",
+        "sashil.testing.compare_with_passive",
+        ("sashil.testing", "sashil.testing.comparison"),
+    ),
+}
+
+
+def _slug(heading: str) -> str:
+    """The anchor Python-Markdown's toc gives a heading (its default slugify)."""
+    return re.sub(r"[-\s]+", "-", re.sub(r"[^\w\s-]", "", heading).strip().lower())
+
+
+def _role(match: re.Match[str]) -> str:
+    """A reST role as Markdown code, linked to where the reference documents the name."""
+    tilde, name = match.group(1), match.group(2)
+    shown = name.rpartition(".")[2] if tilde else name
+    module, _, last = name.rpartition(".")
+    target = _DOCUMENTED.get(last)
+    if target is not None and (not module or module in target[2]):
+        page, heading, _ = target
+        return f"[`{shown}`]({page}#{_slug(heading)})"
+    return f"`{shown if tilde else name}`"
+
+
 def _rst_to_md(text: str) -> str:
-    """A docstring's reST roles, literals and ``::`` literal blocks as Markdown code."""
-    text = re.sub(r":(?:class|func|meth|attr|data|mod|exc):`~?([^`]+)`", lambda m: f"`{m.group(1)}`", text)
+    """A docstring's reST roles (linked where the reference documents the name), literals and
+    ``::`` literal blocks as Markdown code."""
+    text = re.sub(r":(?:class|func|meth|attr|data|mod|exc):`(~?)([^`]+)`", _role, text)
     text = text.replace("``", "`") + "\n"
     text = re.sub(r"(^|\n)::\n\n((?:(?:    .*)?\n)+)", _literal_block, text)
     text = re.sub(r"((?:^>>> .*\n)+)", _doctest_block, text, flags=re.M)
