@@ -43,8 +43,8 @@ class SimRig:
     use it. ``seed`` seeds the encoders' angle noise (``angle_noise_rad``, Gaussian, on each encoder
     before it is counted) and the coil current sensor's (``current_noise_a``); the same seed gives
     the same run, row for row. ``sets``: any other config keys, as ``--set`` takes them
-    (``{"rig.coil_tau_s": 0.02}``). ``out``: the folder the runs' folders go in (a new temporary
-    folder when None)."""
+    (``{"rig.coil_tau_s": 0.02}``). ``out``: the folder the runs' folders go in (when None, a new
+    temporary folder per run, left for the caller to read)."""
 
     damper: Mapping[str, float] | str | Path | None = None
     seed: int = 0
