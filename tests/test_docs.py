@@ -1,6 +1,7 @@
 """The manual (docs/, built with mkdocs) cannot drift from the code, and its examples run.
 
-- The reference pages tools/gen_reference.py writes equal what it writes now from the code.
+- The reference pages tools/gen_reference.py writes equal what it writes now from the code, and the
+  home page (docs/index.md) what tools/gen_home.py writes from the README.
 - The CLI reference lists every verb and every option, the config reference every key, and
   nothing the code does not have.
 - Every code block of the tutorials and how-to guides is ``sh`` or ``python`` (run here, page by page,
@@ -26,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(ROOT / "tools"))
 
+import gen_home  # noqa: E402
 import gen_reference  # noqa: E402
 
 RUN = {"sh", "python"}
@@ -37,6 +39,41 @@ EXAMPLE_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + sorted((DOCS / "how-
 def test_generated_reference_is_current():
     stale = gen_reference.stale_pages(DOCS / "reference")
     assert not stale, f"docs/reference/{', '.join(stale)} differ from the code: run python tools/gen_reference.py"
+
+
+def test_home_page_is_the_readme():
+    """docs/index.md is tools/gen_home.py's copy of README.md (its links into docs/ made relative)."""
+    written = gen_home.home_page((ROOT / "README.md").read_text(encoding="utf-8"))
+    assert (DOCS / "index.md").read_text(encoding="utf-8") == written, (
+        "docs/index.md is stale: python tools/gen_home.py"
+    )
+
+
+def test_every_config_key_has_a_meaning_and_every_choice_its_choices():
+    from sashil.config.schema import Field, Section
+    from sashil.config.sections import SCHEMA
+
+    rows = list(gen_reference._config_rows(SCHEMA, ""))
+    assert len(rows) > 100
+    no_meaning = [row[0] for row in rows if not row[4].strip()]
+    assert not no_meaning, f"config keys without a meaning (a doc= in sashil/config/sections.py): {no_meaning}"
+
+    def choices(fields, prefix=""):
+        for key, spec in fields.items():
+            if isinstance(spec, Section):
+                yield from choices(spec.fields, f"{prefix}{key}.")
+            elif isinstance(spec, Field) and spec.kind.startswith("choice"):
+                yield f"`{prefix}{key}`", spec.choices
+
+    shown = {row[0]: row[3] for row in rows}
+    for key, options in choices(SCHEMA):
+        assert options and all(f"`{option}`" in shown[key] for option in options), f"{key}: its choices"
+
+
+def test_the_api_reference_links_its_types_and_hides_private_fields():
+    page = (DOCS / "reference" / "python-api.md").read_text(encoding="utf-8")
+    assert "[`Run`](python-api.md#run)" in page and "[`RunConfig`](python-api.md#sashillabrunconfig)" in page
+    assert "_sub_entries" not in page
 
 
 def test_cli_reference_has_every_verb_and_option_and_no_other():
@@ -75,6 +112,19 @@ def test_every_block_runs_or_says_what_it_needs(page: Path):
         assert block.info in RUN | SHOWN, f"{page.name}:{block.line}: a fence needs one of {sorted(RUN | SHOWN)}"
         if block.info in SHOWN:
             assert not block.needs, f"{page.name}:{block.line}: a shown block runs nothing, it needs nothing"
+
+
+@pytest.mark.parametrize("page", sorted((DOCS / "tutorials").glob("*.md")), ids=lambda p: p.name)
+def test_tutorials_say_how_to_use_the_quick_starts_environment(page: Path):
+    text = page.read_text(encoding="utf-8")
+    blocks = [block for block in fenced_blocks(text) if block.info == "sh"]
+    if not blocks:
+        return
+    first = text.splitlines()[: blocks[0].line]
+    assert any("source .venv/bin/activate" in line for line in first), (
+        f"{page.name}: activate .venv before its commands"
+    )
+    assert not any(".venv/bin/" in block.body for block in blocks), f"{page.name}: commands as in the active .venv"
 
 
 def _script(page: Path, folder: Path) -> str:
@@ -125,3 +175,9 @@ def test_site_builds_strictly(tmp_path: Path):
     )
     fetched = [p for p in pages if loads.search(p.read_text(encoding="utf-8"))]
     assert not fetched, f"pages that load from the network: {fetched[:3]}"
+    # search from site/index.html opened as a file: Material's offline plugin inlines the index into a
+    # script, and the vendored iframe-worker shim runs the search worker where file:// forbids workers
+    index = (tmp_path / "site" / "search" / "search_index.js").read_text(encoding="utf-8")
+    assert index.startswith("var __index = {") and '"location":"how-to/test-your-law-in-ci.html"' in index
+    home = (tmp_path / "site" / "index.html").read_text(encoding="utf-8")
+    assert '<script src="assets/javascripts/iframe-worker/shim.js">' in home

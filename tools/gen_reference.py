@@ -83,9 +83,53 @@ def _doctest_block(match: re.Match[str]) -> str:
     return "```python\n" + "\n".join(lines) + "\n```\n"
 
 
+#: where the reference documents a name a docstring's role may give (page, heading), by the name's
+#: last dotted part and the module paths it is reached by: a role naming one becomes a link
+_DOCUMENTED: dict[str, tuple[str, str, tuple[str, ...]]] = {
+    "Run": ("python-api.md", "Run", ("sashil", "sashil.api")),
+    "load_run": ("python-api.md", "sashil.load_run", ("sashil", "sashil.api")),
+    "Law": ("law-api.md", "Law", ("sashil.control", "sashil.control.law_api")),
+    "Param": ("law-api.md", "Param", ("sashil.control", "sashil.control.law_api")),
+    "LawState": ("law-api.md", "LawState", ("sashil.control", "sashil.control.law_api")),
+    "LawContext": ("law-api.md", "LawContext", ("sashil.control", "sashil.control.law_api")),
+    "RunConfig": ("python-api.md", "sashil.lab.RunConfig", ("sashil.lab", "sashil.config.typed")),
+    "ConfigSource": ("python-api.md", "sashil.lab.ConfigSource", ("sashil.lab", "sashil.config.resolve")),
+    "Option": ("python-api.md", "sashil.lab.Option", ("sashil.lab", "sashil.config.resolve")),
+    "resolve": ("python-api.md", "sashil.lab.resolve", ("sashil.lab", "sashil.config.resolve")),
+    "Event": ("python-api.md", "sashil.lab.Event", ("sashil.lab", "sashil.lab.events")),
+    "Outputs": ("python-api.md", "sashil.lab.Outputs", ("sashil.lab", "sashil.recording.outputs")),
+    "SimRig": ("python-api.md", "sashil.testing.SimRig", ("sashil.testing", "sashil.testing.rig")),
+    "run_law": ("python-api.md", "sashil.testing.run_law", ("sashil.testing", "sashil.testing.rig")),
+    "check_law": ("python-api.md", "sashil.testing.check_law", ("sashil.testing", "sashil.testing.contract")),
+    "compare_with_passive": (
+        "python-api.md",
+        "sashil.testing.compare_with_passive",
+        ("sashil.testing", "sashil.testing.comparison"),
+    ),
+}
+
+
+def _slug(heading: str) -> str:
+    """The anchor Python-Markdown's toc gives a heading (its default slugify)."""
+    return re.sub(r"[-\s]+", "-", re.sub(r"[^\w\s-]", "", heading).strip().lower())
+
+
+def _role(match: re.Match[str]) -> str:
+    """A reST role as Markdown code, linked to where the reference documents the name."""
+    tilde, name = match.group(1), match.group(2)
+    shown = name.rpartition(".")[2] if tilde else name
+    module, _, last = name.rpartition(".")
+    target = _DOCUMENTED.get(last)
+    if target is not None and (not module or module in target[2]):
+        page, heading, _ = target
+        return f"[`{shown}`]({page}#{_slug(heading)})"
+    return f"`{shown if tilde else name}`"
+
+
 def _rst_to_md(text: str) -> str:
-    """A docstring's reST roles, literals and ``::`` literal blocks as Markdown code."""
-    text = re.sub(r":(?:class|func|meth|attr|data|mod|exc):`~?([^`]+)`", lambda m: f"`{m.group(1)}`", text)
+    """A docstring's reST roles (linked where the reference documents the name), literals and
+    ``::`` literal blocks as Markdown code."""
+    text = re.sub(r":(?:class|func|meth|attr|data|mod|exc):`(~?)([^`]+)`", _role, text)
     text = text.replace("``", "`") + "\n"
     text = re.sub(r"(^|\n)::\n\n((?:(?:    .*)?\n)+)", _literal_block, text)
     text = re.sub(r"((?:^>>> .*\n)+)", _doctest_block, text, flags=re.M)
@@ -155,13 +199,27 @@ def cli_page() -> str:
         example = (parser.epilog or "").removeprefix("example:").strip()
         if example:
             out.append(f"```text\n{example}\n```\n\n")
-        rows = [
-            [_option(a), _help(a, parser.prog)]
-            for a in parser._actions
-            if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
-        ]
-        out.append(_table(["option", "meaning"], rows) if rows else "No options.\n")
+        out.append(f"```text\n{_usage(parser)}```\n\n")
+        shown = 0
+        for group in parser._action_groups:
+            rows = [
+                [_option(a), _help(a, parser.prog)]
+                for a in group._group_actions
+                if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
+            ]
+            if rows:
+                out.append(f"### {name}: {group.title}\n\n" + _table(["option", "meaning"], rows) + "\n")
+                shown += 1
+        if not shown:
+            out.append("No options.\n")
     return "".join(out)
+
+
+def _usage(parser: argparse.ArgumentParser) -> str:
+    """The usage line ``sashil VERB --help`` prints ([optional] in brackets), at a fixed width."""
+    formatter = argparse.HelpFormatter(parser.prog, width=100)
+    formatter.add_usage(parser.usage, parser._actions, parser._mutually_exclusive_groups)
+    return formatter.format_help()
 
 
 # ---------------------------------------------------------------- the config
@@ -179,7 +237,7 @@ def _config_rows(fields: Mapping[str, Any], prefix: str) -> Iterator[list[Any]]:
             continue
         assert isinstance(spec, Field)
         bounds = ""
-        if spec.kind == "choice":
+        if spec.kind.startswith("choice"):  # "choice?" also takes null
             bounds = ", ".join(f"`{c}`" for c in spec.choices)
         else:
             low = f"{'>' if spec.low_open else '>='} {spec.low:g}" if spec.low is not None else ""
@@ -366,7 +424,10 @@ def _doc(obj: Any) -> str:
 
 def _signature(name: str, obj: Any) -> str:
     try:
-        sig = str(inspect.signature(obj))
+        signature = inspect.signature(obj)
+        # a private field (a dataclass's _sub_entries) is no part of the API the page documents
+        public = [param for param in signature.parameters.values() if not param.name.startswith("_")]
+        sig = str(signature.replace(parameters=public))
     except (TypeError, ValueError):
         sig = "(...)"
     sig = re.sub(r"(: |-> )'([^']*)'", r"\1\2", sig)  # postponed annotations read as written
@@ -448,6 +509,13 @@ def python_api_page() -> str:
     out.append("# The experiments: `sashil.lab`\n\n" + _doc(lab) + "\n\n")
     for name in lab.__all__:
         out.append(_entry(f"sashil.lab.{name}", getattr(lab, name), members=False))
+    import sashil.testing as testing
+
+    out.append("# A lab's tests: `sashil.testing`\n\n" + _doc(testing) + "\n\n")
+    for name in testing.__all__:
+        value = getattr(testing, name)
+        if callable(value):
+            out.append(_entry(f"sashil.testing.{name}", value))
     return "".join(out)
 
 

@@ -209,7 +209,8 @@ def _has_pyarrow() -> bool:
 
 
 def load_run(folder: str | Path) -> Run:
-    """Open a run folder written by any sashil verb (see the module doc)."""
+    """Open a run folder written by any sashil verb as a :class:`Run` (its data, summary, config and
+    sub-runs, read when first asked for); DataFileError for a folder that is not a run folder."""
     path = Path(folder)
     if not path.is_dir():
         raise DataFileError(f"{path}: not a folder (expected a sashil run folder)")

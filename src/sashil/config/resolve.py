@@ -85,7 +85,7 @@ def _load(source: ConfigSource) -> Config:
 
 
 def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> RunConfig:
-    """The read-only config ``verb`` runs with (see the module doc). Order: the file (or defaults),
+    """The read-only config ``verb`` runs with, from ``source``. Order: the file (or defaults),
     ``params``, the law then each ``--set``, the verb's options, ``--driver``/``--port``; then the
     backend-dependent keys. Every step is checked before anything is opened or written; a model
     the verb cannot run (not in ``models``, default the rig models) is refused. The result is a

@@ -17,32 +17,90 @@ from sashil.models.seed import BOUC_WEN_SEED
 
 MODEL = Section(
     {
-        "name": Field("choice", "bouc-wen", choices=("bouc-wen", "dahl", "lugre", "bingham")),
+        "name": Field(
+            "choice",
+            "bouc-wen",
+            choices=("bouc-wen", "dahl", "lugre", "bingham"),
+            doc="the damper model; the rig plant and the controller's observer run bouc-wen only",
+        ),
         # Free-form parameter mapping: each model checks its own symbols (sashil.models.registry).
-        "params": Section({}, open_keys=True),
+        "params": Section(
+            {}, open_keys=True, doc="the model's parameters by symbol (each model checks its own; bouc-wen's below)"
+        ),
     },
     doc="the rig and damper model (same shape as the parameter file `sashil identify` writes)",
     check=check_model_section,
 )
-MODEL.fields["params"].fields.update({key: Field("float", value) for key, value in BOUC_WEN_SEED.items()})
+#: what each Bouc-Wen symbol means, with its unit (seed 001 eqs. 9-17; z is dimensionless, J = 1 normalises
+#: the others per unit of inertia)
+BOUC_WEN_DOCS = {
+    "J": "arm inertia J [kg m²] (redundant with the others: the seed's values are per unit inertia, J = 1)",
+    "k": "spring stiffness k [N m/rad] (eq. 13: −k·θ)",
+    "c1": "viscous damping at 0 A, c(i) = c1 + c2·i [N m s/rad] (eq. 11)",
+    "c2": "viscous damping per ampere [N m s/(rad A)] (eq. 11)",
+    "alpha1": "hysteretic torque gain at 0 A, α(i) = α1 + α2·i [N m] (eq. 12; T = α(i)·z + c(i)·θ̇)",
+    "alpha2": "hysteretic torque gain per ampere [N m/A] (eq. 12)",
+    "beta": "Bouc-Wen β [1/rad]: shape of the loop, the term −β·θ̇·|z|^n of ż (eq. 17)",
+    "gamma": "Bouc-Wen γ [1/rad]: shape of the loop, the term −γ·|θ̇|·z·|z|^(n−1) of ż (eq. 17)",
+    "delta": "Bouc-Wen δ [1/rad]: the slope δ·θ̇ of ż at z = 0 (eq. 17); z saturates at (δ/(β+γ))^(1/n)",
+    "n": "Bouc-Wen exponent n [1]: sharpness of the transition to the saturated z (eq. 17)",
+}
+MODEL.fields["params"].fields.update(
+    {key: Field("float", value, doc=BOUC_WEN_DOCS[key]) for key, value in BOUC_WEN_SEED.items()}
+)
 
 RIG = Section(
     {
         "coil_tau_s": Field("float", 0.010, low=0.0, high=1.0, doc="coil current first-order lag (assumption)"),
-        "current_max_a": Field("float", 1.0, low=0.0, low_open=True, high=10.0),
-        "encoder_counts_per_rev": Field("int", 4096, low=16, high=2**31 - 1, doc="(assumption)"),
-        "angle_noise_rad": Field("float", 0.0, low=0.0, high=1.0),
-        "current_noise_a": Field("float", 0.0, low=0.0, high=1.0),
-        "noise_seed": Field("int", 0, low=0),
-        "plant_max_step_s": Field("float", 0.001, low=1e-6, high=0.01),
-        "angle_limit_deg": Field("float", 30.0, low=0.0, low_open=True, high=90.0),
+        "current_max_a": Field(
+            "float",
+            1.0,
+            low=0.0,
+            low_open=True,
+            high=10.0,
+            doc="largest coil current: commands are clamped to [0, this] A",
+        ),
+        "encoder_counts_per_rev": Field(
+            "int", 4096, low=16, high=2**31 - 1, doc="counts per revolution of each encoder (assumption)"
+        ),
+        "angle_noise_rad": Field(
+            "float",
+            0.0,
+            low=0.0,
+            high=1.0,
+            doc="simulated rig: standard deviation of Gaussian noise on each encoder angle",
+        ),
+        "current_noise_a": Field(
+            "float",
+            0.0,
+            low=0.0,
+            high=1.0,
+            doc="simulated rig: standard deviation of Gaussian noise on the measured current",
+        ),
+        "noise_seed": Field("int", 0, low=0, doc="simulated rig: seed of the noise (the same seed, the same run)"),
+        "plant_max_step_s": Field(
+            "float", 0.001, low=1e-6, high=0.01, doc="simulated rig: longest integration step of the plant"
+        ),
+        "angle_limit_deg": Field(
+            "float",
+            30.0,
+            low=0.0,
+            low_open=True,
+            high=90.0,
+            doc="the arm's mechanical limit of |θ|: the safety interlock trips beyond it",
+        ),
     },
     doc="the physical rig around the damper",
 )
 
 DRIVER = Section(
     {
-        "name": Field("choice", "sim", choices=tuple(BACKENDS)),
+        "name": Field(
+            "choice",
+            "sim",
+            choices=tuple(BACKENDS),
+            doc="the backend (--driver): the simulated rig, a serial or a CAN board",
+        ),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
         "clock": Field(
             "choice?",
@@ -55,8 +113,8 @@ DRIVER = Section(
         "can_interface": Field(
             "str", "slcan", doc="python-can interface: socketcan, pcan, kvaser, slcan, virtual, ..."
         ),
-        "can_bitrate": Field("int", 1_000_000, low=10_000, high=1_000_000),
-        "can_options": Section({}, open_keys=True),  # extra keyword arguments for can.Bus
+        "can_bitrate": Field("int", 1_000_000, low=10_000, high=1_000_000, doc="CAN bus bit rate [bit/s]"),
+        "can_options": Section({}, open_keys=True, doc="extra keyword arguments for python-can's can.Bus"),
         "pacing": Field("choice", "device", choices=("device", "host"), doc="who times the samples"),
         "watchdog_ms": Field("int", 50, low=1, high=60_000, doc="device cuts to 0 A without a command this long"),
         "sample_timeout_ms": Field("float", 2.5, low=0.1, high=10_000.0, doc="0 A after this long without a sample"),
@@ -77,7 +135,14 @@ DRIVER = Section(
 
 LOOP = Section(
     {
-        "rate_hz": Field("float", 1000.0, low=0.0, low_open=True, high=20000.0),
+        "rate_hz": Field(
+            "float",
+            1000.0,
+            low=0.0,
+            low_open=True,
+            high=20000.0,
+            doc="control rate: one cycle (read, control, write) per period",
+        ),
         "spin_margin_us": Field(
             "float", 200.0, low=0.0, high=100000.0, doc="sleep to this before a deadline, then spin (0: no spin)"
         ),
@@ -132,11 +197,21 @@ SAFETY = Section(
 
 DROP_TEST = Section(
     {
-        "hold_tolerance_deg": Field("float", 0.5, low=0.0, low_open=True, high=10.0),
-        "hold_time_s": Field("float", 0.2, low=0.0, high=60.0),
-        "release_threshold_deg": Field("float", 0.5, low=0.0, low_open=True, high=10.0),
-        "hold_timeout_s": Field("float", 60.0, low=0.0, low_open=True),
-        "settle_band_deg": Field("float", 0.25, low=0.0, low_open=True, high=10.0),
+        "hold_tolerance_deg": Field(
+            "float", 0.5, low=0.0, low_open=True, high=10.0, doc="the arm counts as held within this of theta0_deg"
+        ),
+        "hold_time_s": Field(
+            "float", 0.2, low=0.0, high=60.0, doc="how long the arm must stay held before a release counts"
+        ),
+        "release_threshold_deg": Field(
+            "float", 0.5, low=0.0, low_open=True, high=10.0, doc="a move this far from the hold angle is the release"
+        ),
+        "hold_timeout_s": Field(
+            "float", 60.0, low=0.0, low_open=True, doc="the drop fails when the arm is not held (or released) in time"
+        ),
+        "settle_band_deg": Field(
+            "float", 0.25, low=0.0, low_open=True, high=10.0, doc="settling time: when |θ| stays within this band"
+        ),
         "theta0_deg": Field("float", -5.0, low=-30.0, high=30.0, doc="hold angle before the release (--theta0-deg)"),
         "currents_a": Field(
             "float_list", [0.0], doc="constant coil current of each drop, one sub-run each (--current)"
@@ -300,7 +375,9 @@ SWEEP = Section(
             "float", 4.0, low=0.0, low_open=True, high=600.0, doc="stepped sine: measuring time (whole periods)"
         ),
         "steps": Field("int", 24, low=2, high=1000, doc="stepped sine: number of frequencies"),
-        "spacing": Field("choice", "log", choices=("linear", "log")),
+        "spacing": Field(
+            "choice", "log", choices=("linear", "log"), doc="stepped sine: how the frequencies are spaced"
+        ),
         "f_start_hz": Field("float", 0.5, low=0.0, low_open=True, doc="start frequency (--f-start)"),
         "f_stop_hz": Field(
             "float", 5.0, low=0.0, low_open=True, doc="stop frequency (--f-stop; = f_start_hz: one sine)"
@@ -360,16 +437,27 @@ CALIBRATE = Section(
         "road_currents_a": Field(
             "float_list", [0.5, 1.0], doc="road excitation through the resonance: one per current"
         ),
-        "road_amplitude_deg": Field("float", 1.0, low=0.0, low_open=True, high=20.0),
-        "road_f_start_hz": Field("float", 0.8, low=0.0, low_open=True, high=100.0),
-        "road_f_stop_hz": Field("float", 3.0, low=0.0, low_open=True, high=100.0),
+        "road_amplitude_deg": Field(
+            "float", 1.0, low=0.0, low_open=True, high=20.0, doc="road runs: amplitude of the road-side chirp"
+        ),
+        "road_f_start_hz": Field(
+            "float", 0.8, low=0.0, low_open=True, high=100.0, doc="road runs: chirp start frequency"
+        ),
+        "road_f_stop_hz": Field(
+            "float", 3.0, low=0.0, low_open=True, high=100.0, doc="road runs: chirp stop frequency"
+        ),
         "road_duration_s": Field("float", 12.0, low=1.0, high=600.0, doc="record length of a road run, ramps included"),
         "road_ramp_s": Field("float", 1.0, low=0.0, high=60.0, doc="raised-cosine amplitude ramps at both ends"),
         "validate_theta0_deg": Field("float", -3.5, low=-30.0, high=30.0, doc="held-out drops: hold angle"),
         "validate_currents_a": Field("float_list", [0.25, 0.75], doc="held-out drops (the fit never sees them)"),
         "validate_road_currents_a": Field("float_list", [], doc="held-out road runs"),
         "max_rig_time_s": Field("float", 180.0, low=1.0, doc="a plan estimated to take longer is refused"),
-        "model": Field("choice", "bouc-wen", choices=("bouc-wen", "dahl", "lugre", "bingham", "all")),
+        "model": Field(
+            "choice",
+            "bouc-wen",
+            choices=("bouc-wen", "dahl", "lugre", "bingham", "all"),
+            doc="the model fitted (all: each, compared)",
+        ),
         "inertia_kg_m2": Field(
             "float?",
             None,

@@ -57,7 +57,7 @@ def periodic_profile(theta: np.ndarray, rate_hz: float, ramp_s: float) -> RoadPr
     spectrum = np.fft.rfft(theta)
     rate = np.fft.irfft(1j * omega * spectrum, n_samples)
     accel = np.fft.irfft(-(omega**2) * spectrum, n_samples)
-    table = [(float(a), float(b), float(c)) for a, b, c in zip(theta, rate, accel, strict=True)]
+    table = list(zip(theta.tolist(), rate.tolist(), accel.tolist(), strict=True))  # Python floats, read per cycle
 
     def road(time_s: float) -> tuple[float, float, float]:
         x = time_s * rate_hz

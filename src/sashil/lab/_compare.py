@@ -43,6 +43,7 @@ __all__ = [
     "compare",
     "folder_name",
     "law_parameters",
+    "law_summary",
     "laws_of",
     "own_law",
     "split_sets",
@@ -154,7 +155,7 @@ def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
     return {key: section.get(key, param.default) for key, param in declared.items()}
 
 
-def _law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
+def law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
     """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
     parameters) and its metrics (also as its one entry of ``runs``)."""
 
@@ -298,7 +299,7 @@ def compare(
     results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event)
     wall = time.perf_counter() - start
     configs = {job.label: job.config for job in jobs}
-    summaries = {r.label: _law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
+    summaries = {r.label: law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
     for label, summary in summaries.items():
         subs[label].write_summary(summary)
     bound = _bound(config, road_profile, duration, on_event)
