@@ -249,7 +249,7 @@ class SimulatedRig(RigInterface):
             decay = math.exp(-h / plant.coil_tau_s) if plant.coil_tau_s > 0.0 else 0.0
             self._split_s, self._split = seconds, (count, h, decay)
         count, h, decay = self._split
-        command = clamp_current(self._command, plant.current_max_a)
+        command = self._command  # clamped where it is set (write, set_initial_current)
         wheel = self.wheel
         t, theta, v, z, i, road, arm_j, arm_s, arm_dir, road_j, road_s, road_dir = advance(
             st.time_s,
