@@ -116,6 +116,8 @@ class LinkRig(RigInterface):
         self._link_up = False
         self._held_noted = False  # said once per link that the device's operator holds the arm
         self._drop_test = False  # a drop test asked for the operator (operator_hold): a hold is expected
+        #: messages decoded in the same read as a handshake's answer, after it: the next read takes them first
+        self._unread: list[tuple[int, Message]] = []
         #: what the link saw (summary.json material); codec counters come from the subclass
         self.stats = {
             "samples": 0,
@@ -264,9 +266,19 @@ class LinkRig(RigInterface):
                     f"{self.describe()}: no {what} within {self.settings.connect_timeout_s:g} s "
                     "(is a sashil rig on this port, and is it powered?)"
                 )
-            for _, msg in self._receive(remaining):
+            got = self._incoming(remaining)
+            for k, (_, msg) in enumerate(got):
                 if isinstance(msg, kind):
+                    self._unread = got[k + 1 :]  # what came with the answer, for the cycle's reads
                     return msg
+
+    def _incoming(self, timeout_s: float) -> list[tuple[int, Message]]:
+        """The messages not yet taken: those left after a handshake's answer, then what the link has
+        (without waiting when some were left)."""
+        if not self._unread:
+            return self._receive(timeout_s)
+        got, self._unread = self._unread, []
+        return got + self._receive(0.0)
 
     def wait_for_status(self, timeout_s: float) -> Status | None:
         """Listen without sending until the device sends a Status (a watchdog trip reports one) or
@@ -274,7 +286,7 @@ class LinkRig(RigInterface):
         deadline = time.monotonic() + timeout_s
         while (remaining := deadline - time.monotonic()) > 0:
             before = self.stats["status_frames"]
-            self._take_samples(self._receive(remaining))
+            self._take_samples(self._incoming(remaining))
             if self.stats["status_frames"] > before:
                 return self.last_status
         return None
@@ -354,6 +366,7 @@ class LinkRig(RigInterface):
 
     def _shutdown_link(self) -> None:
         self._link_up = False
+        self._unread = []
         try:
             self._close_link()
         except Exception:
@@ -365,7 +378,7 @@ class LinkRig(RigInterface):
             raise DriverError(f"{self.describe()}: read() in state {self.state.value}")
         if self.settings.pacing == PACING_HOST and self._pending == 0:
             self._send_command()  # nothing outstanding: poll with the current setpoint
-        newest = self._take_samples(self._receive(0.0))
+        newest = self._take_samples(self._incoming(0.0))
         if newest is None or self._pending:
             start = time.monotonic()
             newest = self._wait_for_sample(newest, start + self.settings.sample_timeout_s)
@@ -400,7 +413,7 @@ class LinkRig(RigInterface):
             remaining = deadline - now
             if remaining <= 0:
                 break
-            got = self._take_samples(self._receive(remaining))
+            got = self._take_samples(self._incoming(remaining))
             newest = got if got is not None else newest
             # A wait that came back much later than asked means this process was not running
             # (a scheduler or VM pause, which stops an emulator on the same machine too): that

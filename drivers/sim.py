@@ -19,7 +19,6 @@ import math
 import random
 from typing import TYPE_CHECKING
 
-from sashil.drivers.encoder_edges import hermite, last_crossing, quick_test
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
@@ -32,6 +31,7 @@ from sashil.drivers.interface import (
     RigState,
     clamp_current,
 )
+from sashil.drivers.sim_advance import advance
 from sashil.errors import DriverError
 from sashil.models.hysteresis import rig_params
 from sashil.models.mismatch import plant_config
@@ -74,7 +74,10 @@ class RoadWheel:
 
 
 class SimulatedRig(RigInterface):
-    """The SAS rig simulated in-process (seed 001 model + coil lag + encoder + noise)."""
+    """The SAS rig simulated in-process (seed 001 model + coil lag + encoder + noise).
+
+    Its plant's road is its own wheel (:class:`RoadWheel`) and the plant has no input torque: a read
+    steps the plant with :func:`sashil.drivers.sim_advance.advance`, which knows that road."""
 
     name = "sim"
     capabilities = RigCapabilities(
@@ -115,6 +118,8 @@ class SimulatedRig(RigInterface):
         self.road_edge: tuple[int, int] | None = None
         self._arm_end: float | None = None  # the angles at the end of the last step (a jump since: an edge)
         self._road_end: float | None = None
+        self._split_s = -1.0
+        self._split = (1, 0.0, 0.0)  # a read's sub-steps, their length and the coil's decay over one
 
     @classmethod
     def from_config(cls, config: RunConfig) -> SimulatedRig:
@@ -213,36 +218,6 @@ class SimulatedRig(RigInterface):
         )
 
     # encoder edges ---------------------------------------------------------------------------
-    def _crossings(
-        self,
-        t0: float,
-        h: float,
-        theta: tuple[float, float, float, float],
-        road_ends: tuple[float, float],
-        bulges: tuple[float, float],
-        q: float,
-    ) -> tuple[tuple[float, int] | None, tuple[float, int] | None]:
-        """The last count change of each encoder (arm, road) over one sub-step from plant time ``t0`` of
-        ``h`` s, each as (fraction of the sub-step, direction) or None. ``theta``: the relative angle's
-        Hermite ends (angle, slope per sub-step, at the start and the end); ``road_ends``: the road
-        angle at both ends; ``bulges``: how far the arm's and the road's curves may stray from their
-        chords (:meth:`_advance` computes them for its quick test)."""
-        y0, m0, y1, m1 = theta
-        r0, r1 = road_ends
-        arm_bulge, road_bulge = bulges
-        road = self.plant.road
-
-        def road_angle(s: float) -> float:
-            return r0 if road is None else road(t0 + s * h)[0]
-
-        def arm(s: float) -> float:
-            return hermite(y0, m0, y1, m1, s) + road_angle(s)
-
-        return (
-            last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, q),
-            last_crossing(road_angle, r0, r1, road_bulge, q),
-        )
-
     def _angles(self) -> tuple[float, float]:
         """(arm, road) angle of the plant now, noise-free."""
         st = self.plant.state
@@ -260,35 +235,50 @@ class SimulatedRig(RigInterface):
 
     def _advance(self, seconds: float, from_ns: float, to_ns: float) -> None:
         """Step the plant ``seconds`` (host time ``from_ns`` to ``to_ns``) in the sub-steps it would take
-        in one call, timing each encoder's last count change on the way (module docstring): the
-        curves between the sub-step's ends are searched only when the quick test
+        in one call, timing each encoder's last count change on the way (module docstring), in one
+        compiled call (:func:`sashil.drivers.sim_advance.advance`): the curves between the sub-step's
+        ends are searched only when the quick test
         (:func:`~sashil.drivers.encoder_edges.quick_test`) cannot rule a count change out."""
         plant = self.plant
         st = plant.state
-        count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
-        h = seconds / count
-        h_ns = (to_ns - from_ns) / count
-        q = self._count_rad
         if st.theta_rad + st.theta_road_rad != self._arm_end or st.theta_road_rad != self._road_end:
             self._jumps(from_ns)  # moved since the last step's end (an operator's hold)
-        step, command, smooth_road = plant.step, self._command, plant.road is not None
-        for j in range(count):
-            t0, y0, v0 = st.time_s, st.theta_rad, st.theta_dot_rad_s
-            r0, rv0 = st.theta_road_rad, st.theta_road_dot_rad_s
-            step(h, command)
-            y1, r1 = st.theta_rad, st.theta_road_rad
-            m0, m1 = h * v0, h * st.theta_dot_rad_s
-            # a smooth road strays from its chord by at most h^2/8 max|theta1''| ~ h/8 |change of rate|
-            road_bulge = 0.125 * h * abs(st.theta_road_dot_rad_s - rv0) if smooth_road else 0.0
-            arm_bulge = quick_test(y0, m0, y1, m1, r0, r1, road_bulge, q)
-            if arm_bulge < 0.0:
-                continue  # no count changed (the common case at 1 kHz)
-            found_arm, found_road = self._crossings(t0, h, (y0, m0, y1, m1), (r0, r1), (arm_bulge, road_bulge), q)
-            if found_arm is not None:
-                self.arm_edge = (math.ceil(from_ns + j * h_ns + found_arm[0] * h_ns), found_arm[1])
-            if found_road is not None:
-                self.road_edge = (math.ceil(from_ns + j * h_ns + found_road[0] * h_ns), found_road[1])
-        self._arm_end, self._road_end = st.theta_rad + st.theta_road_rad, st.theta_road_rad
+        if seconds != self._split_s:
+            count = max(1, math.ceil(seconds / plant.max_step_s - 1e-9))  # the plant's own split of the step
+            h = seconds / count
+            decay = math.exp(-h / plant.coil_tau_s) if plant.coil_tau_s > 0.0 else 0.0
+            self._split_s, self._split = seconds, (count, h, decay)
+        count, h, decay = self._split
+        command = self._command  # clamped where it is set (write, set_initial_current)
+        wheel = self.wheel
+        t, theta, v, z, i, road, arm_j, arm_s, arm_dir, road_j, road_s, road_dir = advance(
+            st.time_s,
+            st.theta_rad,
+            st.theta_dot_rad_s,
+            st.z,
+            st.current_a,
+            st.theta_road_rad,
+            st.theta_road_dot_rad_s,
+            wheel._theta0,
+            wheel.speed_rad_s,
+            wheel._t0,
+            count,
+            h,
+            command,
+            decay,
+            self._count_rad,
+            plant._held_at is not None,
+            *plant._coefficients,
+        )
+        st.time_s, st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a = t, theta, v, z, i
+        st.theta_road_rad, st.theta_road_dot_rad_s, st.torque_in_nm = road, wheel.speed_rad_s, 0.0
+        if arm_j >= 0 or road_j >= 0:
+            h_ns = (to_ns - from_ns) / count
+            if arm_j >= 0:
+                self.arm_edge = (math.ceil(from_ns + arm_j * h_ns + arm_s * h_ns), arm_dir)
+            if road_j >= 0:
+                self.road_edge = (math.ceil(from_ns + road_j * h_ns + road_s * h_ns), road_dir)
+        self._arm_end, self._road_end = theta + road, road
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         if self.state is not RigState.ACTIVE:

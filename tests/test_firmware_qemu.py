@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import serial
+from board_port import Port
 
 from sashil.drivers.firmware import qemu
 from sashil.drivers.interface import FLAG_WATCHDOG
@@ -31,50 +31,17 @@ from sashil.drivers.messages import (
     Command,
     Configure,
     Hello,
-    Message,
     RoadSpeed,
     Sample,
     Status,
     Version,
 )
-from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 
 pytestmark = pytest.mark.e2e
 
 ROOT = Path(__file__).resolve().parents[1]
 FIRMWARE = ROOT / "drivers" / "firmware"
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
-
-
-class Port:
-    """USART1's pty with the project's serial codec: send messages, wait for a kind of answer."""
-
-    def __init__(self, path: Path):
-        self.serial = serial.Serial(str(path), timeout=0.02)
-        self.decoder = StreamDecoder()
-        self.seq = 0
-        self.got: list[Message] = []
-
-    def send(self, *messages: Message) -> None:
-        for msg in messages:
-            self.seq += 1
-            self.serial.write(encode_frame(msg, self.seq))
-
-    def wait(self, kind: type, timeout_s: float, resend: tuple[Message, ...] = ()) -> Message:
-        """The first ``kind`` from now on; ``resend`` goes out again every 20 ms without an answer."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            data = self.serial.read(4096)
-            if not data and resend:
-                self.send(*resend)
-            for _, msg in self.decoder.feed(data):
-                self.got.append(msg)
-                if isinstance(msg, kind):
-                    return msg
-        raise AssertionError(f"no {kind.__name__} from the board within {timeout_s} s; got {self.got[-5:]}")
-
-    def close(self) -> None:
-        self.serial.close()
 
 
 @pytest.fixture(scope="module")

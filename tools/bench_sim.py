@@ -11,11 +11,14 @@ Prints:
 - the CPU cost of each part per cycle [us]: the drop run once whole, then each part alone over that
   run's own samples, times and commands (CPU time of the block, so a shared machine's preemptions
   do not count; no timer inside the cycle):
-  plant (``RigPlant.step``), sensor/encoder (the sim backend's ``read`` less the plant: encoder
-  counts, edge timing, the sample), the plan (and under a law the controller: estimator + observer
+  the sim backend's ``read`` (the plant's sub-steps, the encoder counts and edge times in one
+  compiled call, :func:`sashil.drivers.sim_advance.advance`; the sample), the plan (and under a law the controller: estimator + observer
   + law + inverse), safety (``check`` + ``limit``), recording (the loop's row into the stream and the
   stream's columns after the run), the backend's ``write``, and the loop's own overhead (the whole
   run less the parts: deadlines, timing rings, the runner's set-up and the record derived after the run);
+  the CPU other threads spent during the run is its own row (BLAS's worker threads spin for about
+  0.1 s once a matrix set-up wakes them);
+  for reference, the bare plant (``RigPlant.step``) over the same commands;
 - the damper model's real-time step (BoucWenZ.advance over one 1 kHz sample's angle increment of a
   recorded drop test, plus the torque), median / p99 / max per sample.
 
@@ -126,6 +129,17 @@ def _cpu(block: Callable[[], Any], repeats: int = 3) -> float:
     return best
 
 
+def _cpu_and_thread(block: Callable[[], Any], repeats: int = 3) -> tuple[float, float]:
+    """(process CPU, this thread's CPU) seconds of ``block()``, of the run with the least process CPU.
+    The difference is other threads' work during the run (BLAS's worker threads, when woken)."""
+    best = (math.inf, math.inf)
+    for _ in range(repeats):
+        cpu0, thread0 = time.process_time(), time.thread_time()
+        block()
+        best = min(best, (time.process_time() - cpu0, time.thread_time() - thread0))
+    return best
+
+
 def bench_breakdown(law: str, record_s: float) -> None:
     """Per-cycle cost of each part of one drop test: the run once whole, then each part alone over the
     run's own samples, times and commands (module docstring); the loop's share is the rest."""
@@ -157,7 +171,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
         return built.pop()
 
     cycles = record.run["timing"]["cycles"]
-    whole = _cpu(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
+    whole, loop_thread = _cpu_and_thread(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
     commands = commands[:cycles]
     steps = samples[:cycles]
     release_after = max(config["drop_test"]["hold_time_s"] + 0.1, 0.3)
@@ -229,14 +243,11 @@ def bench_breakdown(law: str, record_s: float) -> None:
         recorder.stream()
 
     plant = _cpu(plant_alone)
-    sensor = _cpu(backend(False)) - plant
-    write_only = _cpu(backend(True)) - plant - sensor
+    sim_read = _cpu(backend(False))
+    write_only = _cpu(backend(True)) - sim_read
     controller_s = _cpu(stage(False))
     plan = _cpu(stage(True)) - controller_s
-    rows = [
-        ("plant (RigPlant.step: coil, arm, Bouc-Wen z)", plant),
-        ("sensor/encoder (sim read less the plant: counts, edge times, sample)", sensor),
-    ]
+    rows = [("sim read (plant, encoder counts and edge times in one compiled call; the sample)", sim_read)]
     if controller is not None:
         rows.append(("estimator + observer + law + inverse (Controller.step)", controller_s))
     rows += [
@@ -244,6 +255,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
         ("safety (check + limit)", _cpu(safety_alone)),
         ("recording (the row into the stream, the stream's columns)", _cpu(recording_alone)),
         ("backend write", write_only),
+        ("other threads than the loop's (BLAS workers, when a set-up wakes them)", whole - loop_thread),
     ]
     rows.append(
         ("loop and runner (the rest: deadlines, timing rings, set-up, the record)", whole - sum(v for _, v in rows))
@@ -252,6 +264,9 @@ def bench_breakdown(law: str, record_s: float) -> None:
     print(f"CPU cost per cycle, drop test {what} ({cycles} cycles; each part alone over the run's samples):")
     for label, value in rows:
         print(f"  {label:<74s} {value / cycles * 1e6:6.2f} us  {100 * value / whole:5.1f} %")
+    print(
+        f"  {'for reference, the plant alone (RigPlant.step per cycle, not in the sum)':<74s} {plant / cycles * 1e6:6.2f} us"
+    )
     per_cycle = whole / cycles * 1e6
     print(f"  {'the whole run':<74s} {per_cycle:6.2f} us  (= {1e6 / per_cycle / rate:.0f}x real time in CPU time)")
 

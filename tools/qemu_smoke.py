@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import deque
 from pathlib import Path
 
 from sashil.drivers.messages import PACING_HOST, Command, Configure, Hello, Message, Sample, Status, Version
@@ -58,11 +59,25 @@ def _connect(path: Path, qemu: subprocess.Popen[bytes], deadline: float) -> sock
 
 
 def _answer(
-    sock: socket.socket, decoder: StreamDecoder, kind: type[Message], timeout_s: float, resend: bytes = b""
+    sock: socket.socket,
+    decoder: StreamDecoder,
+    unread: deque[Message],
+    kind: type[Message],
+    timeout_s: float,
+    resend: bytes = b"",
 ) -> Message:
-    """The first ``kind`` from the board; ``resend`` goes out again every 50 ms until it comes."""
+    """The next ``kind`` from the board; ``resend`` goes out again every 50 ms until it comes.
+
+    ``unread`` holds what earlier reads decoded and no answer consumed yet: one read can bring the
+    answer and the messages after it, which the next call finds there before it reads again."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
+    while True:
+        while unread:
+            msg = unread.popleft()
+            if isinstance(msg, kind):
+                return msg
+        if time.monotonic() >= deadline:
+            raise SmokeError(f"no {kind.__name__} within {timeout_s} s")
         sock.settimeout(min(0.05, max(0.001, deadline - time.monotonic())))
         try:
             data = sock.recv(4096)
@@ -72,10 +87,7 @@ def _answer(
             continue
         if not data:
             raise SmokeError("the serial socket closed")
-        for _seq, msg in decoder.feed(data):
-            if isinstance(msg, kind):
-                return msg
-    raise SmokeError(f"no {kind.__name__} within {timeout_s} s")
+        unread.extend(msg for _seq, msg in decoder.feed(data))
 
 
 def smoke(elf: Path, timeout_s: float = 1.0) -> list[str]:
@@ -93,23 +105,23 @@ def smoke(elf: Path, timeout_s: float = 1.0) -> list[str]:
         )
         try:
             with _connect(path, qemu, time.monotonic() + 10.0) as sock:
-                decoder, steps = StreamDecoder(), []
+                decoder, unread, steps = StreamDecoder(), deque[Message](), []
                 t0 = time.monotonic()
                 # QEMU's USART drops what arrives before the firmware has enabled it: the host
                 # says Hello again every 50 ms until the board answers (the first one may be lost)
                 hello = encode_frame(Command(0.0, flags=0), 1) + encode_frame(Hello(), 2)
                 sock.sendall(hello)
-                version = _answer(sock, decoder, Version, timeout_s, resend=hello)
+                version = _answer(sock, decoder, unread, Version, timeout_s, resend=hello)
                 if version != Version(protocol_version=2, counts_per_rev=4096, current_max_a=2.0):
                     raise SmokeError(f"unexpected {version}")
                 steps.append(f"Hello -> {version} in {1e3 * (time.monotonic() - t0):.0f} ms")
                 sock.sendall(encode_frame(Configure(rate_hz=1000, watchdog_ms=50, pacing=PACING_HOST), 3))
-                status = _answer(sock, decoder, Status, timeout_s)
+                status = _answer(sock, decoder, unread, Status, timeout_s)
                 if not isinstance(status, Status) or status.fault_code != 0:
                     raise SmokeError(f"Configure refused: {status}")
                 steps.append(f"Configure -> {status}")
                 sock.sendall(encode_frame(Command(0.5), 4))
-                steps.append(f"Command -> {_answer(sock, decoder, Sample, timeout_s)}")
+                steps.append(f"Command -> {_answer(sock, decoder, unread, Sample, timeout_s)}")
                 counters = decoder.counters.as_dict()
                 if any(counters[k] for k in ("crc", "cobs", "length", "unknown_type", "overflow")):
                     raise SmokeError(f"bad frames from the board: {counters}")

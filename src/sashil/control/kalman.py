@@ -64,6 +64,7 @@ let run, worse but stable).
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -102,6 +103,15 @@ EDGE_LIMIT_SHARE = 1.0 / 3.0
 #: bad events: once this many events were seen, a share of bad ones above EDGE_BAD_SHARE is a fault
 EDGE_BAD_MIN_EVENTS = 100
 EDGE_BAD_SHARE = 0.01
+
+
+def one_blas_thread() -> contextlib.AbstractContextManager[object]:
+    """BLAS on one thread within the block. The filter's matrices are 6 x 6 and 12 x 12, too small for
+    BLAS's worker threads to help; once woken they spin for about 0.1 s after the last call, beside
+    the loop's thread: a whole core the loop's first cycles compete with on a shared machine."""
+    from threadpoolctl import threadpool_limits  # loaded when a filter is built, as scipy is
+
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def discrete_model(dt: float, accel_psd: float, road_jerk_psd: float, bias_psd: float) -> tuple[np.ndarray, np.ndarray]:
@@ -244,6 +254,10 @@ class KalmanRigEstimator(EstimatorOutputs):
         self._set_resolution(int(counts_per_rev))
 
     def _set_resolution(self, counts_per_rev: int) -> None:
+        with one_blas_thread():
+            self._compute_gains(counts_per_rev)
+
+    def _compute_gains(self, counts_per_rev: int) -> None:
         q = TWO_PI / counts_per_rev
         var = q * q / 12.0 + self.angle_noise_rad**2
         cell = self.quantisation == "cell" or (self.quantisation == "auto" and counts_per_rev <= CELL_MODEL_MAX_COUNTS)

@@ -36,7 +36,14 @@ def loop_kernel(warm_arguments: Callable[[], tuple[Any, ...]]) -> Callable[[F], 
 _PACKAGE = Path(__file__).resolve().parent.parent
 #: sources whose compiled kernels call each other: numba's cache checks only a function's own file,
 #: so a change in one (e.g. advance_z) would leave a stale copy inlined in the others' caches
-_KERNEL_SOURCES = ("models/*.py", "identify/kernels.py", "identify/boucwen_benchmark.py", "identify/friction.py")
+_KERNEL_SOURCES = (
+    "models/*.py",
+    "identify/kernels.py",
+    "identify/boucwen_benchmark.py",
+    "identify/friction.py",
+    "drivers/encoder_edges.py",
+    "drivers/sim_advance.py",
+)
 
 
 def refresh_stale_cache(package: Path = _PACKAGE) -> bool:

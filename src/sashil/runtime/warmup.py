@@ -1,7 +1,7 @@
 """Warm-up before the loop's first deadline: what a first cycle would otherwise do late.
 
 * Every compiled kernel a cycle can call (:data:`sashil.models._jit.LOOP_KERNELS`: the Bouc-Wen
-  z-update, the plant's sub-step, the simulated encoders' quick test, the Kalman filter's edge
+  z-update, the plant's sub-step, the simulated rig's read (sub-steps and edge search), the Kalman filter's edge
   cycle and their helpers) is called once
   with the cycle's signature, so numba compiles it, or loads it from its cache, now. A cached
   kernel still loads lazily on its first call in each process (15-23 ms), and on an empty cache
@@ -28,6 +28,7 @@ KERNEL_MODULES = (
     "sashil.models.plant",
     "sashil.control.edge_kalman",
     "sashil.drivers.encoder_edges",
+    "sashil.drivers.sim_advance",
 )
 
 
