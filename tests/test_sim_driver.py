@@ -15,7 +15,7 @@ MS = 1_000_000
 
 
 def test_registry_is_lazy_and_names_unknown_backends(config):
-    assert set(BACKENDS) == {"sim", "serial", "can"}
+    assert set(BACKENDS) == {"sim", "serial", "can", "rtdac"}
     assert backend_class("sim") is SimulatedRig
     with pytest.raises(DriverError, match="unknown backend 'usb'"):
         backend_class("usb")
