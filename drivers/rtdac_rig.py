@@ -30,7 +30,6 @@ import logging
 import math
 import struct
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample, RigState
@@ -51,11 +50,10 @@ from sashil.drivers.rtdac_codec import (
 from sashil.drivers.rtdac_map import RegisterMap, choose_map, known_maps
 from sashil.drivers.rtdac_outputs import CoilDrive, RoadDrive
 from sashil.drivers.rtdac_usb import BoardLink, UsbSettings
+from sashil.drivers.rtdac_wiring import Wiring
 from sashil.errors import DriverError, DriverIOError
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
-
     from sashil.config.typed import RunConfig
 
 log = logging.getLogger("sashil")
@@ -64,43 +62,6 @@ log = logging.getLogger("sashil")
 SAFE_CURRENT_A = 0.02
 #: how long deactivate resends the rest frame for a readback (and a sensed current) that confirm it
 SAFE_CONFIRM_S = 0.3
-
-
-@dataclass(frozen=True)
-class Wiring:
-    """The rig's wiring to the board (the ``rtdac`` section's wiring keys), as plain values."""
-
-    arm_encoder: int = 0
-    arm_counts_per_rev: int = 4096
-    arm_reversed: bool = False
-    road_encoder: int | None = 1
-    road_counts_per_rev: int = 4096
-    road_reversed: bool = False
-    coil_output: str = "pwm"
-    coil_channel: int = 0
-    coil_map_current_a: tuple[float, ...] = (0.0, 1.0)
-    coil_map_output: tuple[float, ...] = (0.0, 1.0)
-    coil_sense_ad: int | None = 0
-    coil_sense_a_per_v: float = 0.2
-    coil_sense_offset_v: float = 0.0
-    coil_loop_ki_per_s: float = 20.0
-    road_output: str = "da"
-    road_channel: int = 0
-    road_direction_bit: int | None = None
-    road_output_per_rad_s: float = 0.5
-    road_kp_per_rad: float = 20.0
-    road_lag_s: float = 0.02
-    road_output_limit: float = 10.0
-    pwm_prescaler: int = 0
-    pwm_mode: str = "12-bit"
-
-    @classmethod
-    def from_section(cls, section: Mapping[str, Any]) -> Wiring:
-        return cls(**{name: _plain(section[name]) for name in cls.__dataclass_fields__})
-
-
-def _plain(value: Any) -> Any:
-    return tuple(value) if isinstance(value, (list, tuple)) else value
 
 
 class RtdacRig(RigInterface):

@@ -6,8 +6,9 @@ registers, which the next read of endpoint 4 returns as 504 bytes; a write frame
 251 words) sets the writable words the register map names (PWM, D/A, encoder resets, digital
 outputs, A/D gains). Every call takes the time ``now_ns``; the plant advances to it.
 
-Behind the registers, the emulated bench's own wiring (:class:`BenchWiring`; by default the one the
-config's ``rtdac`` section describes, so an emulator and a host on one config fit): two encoder
+Behind the registers, the emulated bench's own wiring (a :class:`~sashil.drivers.rtdac_wiring.Wiring`;
+by default the one the config's ``rtdac`` section describes, so an emulator and a host on one config
+fit): two encoder
 counters (the arm angle theta2 and the road wheel angle theta1), a power stage that drives the coil
 towards the current its calibration map gives for the duty or voltage (seed 001's coil lag in the
 simulated rig), an A/D channel that senses the coil current, and a road motor whose speed follows
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sashil.drivers.emulator.device import Operator
@@ -42,6 +43,7 @@ from sashil.drivers.rtdac_codec import (
 )
 from sashil.drivers.rtdac_map import RegisterMap
 from sashil.drivers.rtdac_outputs import interp
+from sashil.drivers.rtdac_wiring import Wiring
 from sashil.drivers.sim import SimulatedRig
 
 TWO_PI = 2.0 * math.pi
@@ -51,57 +53,17 @@ _FRAME = struct.Struct(f"<{FRAME_WORDS}H")
 
 
 @dataclass(frozen=True)
-class BenchWiring:
-    """What the emulated bench wires to which channel (the rig's side of the ``rtdac`` section)."""
+class RoadMotor:
+    """The emulated road motor: its speed per volt (or per unit duty) and its time constant."""
 
-    arm_encoder: int = 0
-    arm_counts_per_rev: int = 4096
-    arm_reversed: bool = False
-    road_encoder: int | None = 1
-    road_counts_per_rev: int = 4096
-    road_reversed: bool = False
-    coil_output: str = "pwm"
-    coil_channel: int = 0
-    #: the power stage's true calibration: current [A] at each output point (duty or volts)
-    coil_map_current_a: tuple[float, ...] = (0.0, 1.0)
-    coil_map_output: tuple[float, ...] = (0.0, 1.0)
-    coil_sense_ad: int | None = 0
-    coil_sense_a_per_v: float = 0.2
-    coil_sense_offset_v: float = 0.0
-    road_output: str = "da"
-    road_channel: int = 0
-    road_direction_bit: int | None = None
-    #: the road motor's true speed per volt (or per unit duty) [rad/s], and its time constant [s]
-    road_rad_s_per_output: float = 2.0
-    road_tau_s: float = 0.02
-    pwm_mode: str = "12-bit"
+    rad_s_per_output: float = 2.0
+    tau_s: float = 0.02
 
     @classmethod
-    def from_section(cls, section: Any, **changes: Any) -> BenchWiring:
-        """The wiring a config's ``rtdac`` section describes (the road motor's gain its feed-forward's inverse)."""
+    def from_section(cls, section: Any, tau_s: float = 0.02) -> RoadMotor:
+        """The motor a config's feed-forward describes (its gain the feed-forward's inverse)."""
         per = section["road_output_per_rad_s"]
-        values = {
-            "arm_encoder": section["arm_encoder"],
-            "arm_counts_per_rev": section["arm_counts_per_rev"],
-            "arm_reversed": section["arm_reversed"],
-            "road_encoder": section["road_encoder"],
-            "road_counts_per_rev": section["road_counts_per_rev"],
-            "road_reversed": section["road_reversed"],
-            "coil_output": section["coil_output"],
-            "coil_channel": section["coil_channel"],
-            "coil_map_current_a": tuple(section["coil_map_current_a"]),
-            "coil_map_output": tuple(section["coil_map_output"]),
-            "coil_sense_ad": section["coil_sense_ad"],
-            "coil_sense_a_per_v": section["coil_sense_a_per_v"],
-            "coil_sense_offset_v": section["coil_sense_offset_v"],
-            "road_output": section["road_output"],
-            "road_channel": section["road_channel"],
-            "road_direction_bit": section["road_direction_bit"],
-            "road_rad_s_per_output": 1.0 / per if per > 0.0 else 0.0,
-            "pwm_mode": section["pwm_mode"],
-        }
-        values.update(changes)
-        return cls(**values)
+        return cls(1.0 / per if per > 0.0 else 0.0, tau_s)
 
 
 @dataclass
@@ -157,14 +119,16 @@ class RtdacBoard:
         self,
         rig: SimulatedRig,
         register_map: RegisterMap,
-        wiring: BenchWiring | None = None,
+        wiring: Wiring | None = None,
         identity: BoardIdentity | None = None,
         operator: Operator | None = None,
         faults: BoardFaults | None = None,
+        motor: RoadMotor | None = None,
     ):
         self.rig = rig
+        self.motor = motor or RoadMotor()
         self.map = register_map
-        self.wiring = wiring or BenchWiring()
+        self.wiring = wiring or Wiring()
         self.identity = identity or BoardIdentity(logic_version=register_map.logic_version)
         self.operator = operator
         self.faults = faults or BoardFaults()
@@ -307,7 +271,7 @@ class RtdacBoard:
                     road = -road
         if abs(road) < ROAD_DEAD_BAND:
             road = 0.0  # the D/A's 0 V word (8191) is 0.6 mV below zero: a motor does not turn on it
-        self.road_target_rad_s = road * w.road_rad_s_per_output
+        self.road_target_rad_s = road * self.motor.rad_s_per_output
         self.rig.write(RigCommand(self.drive_a, None), now_ns, 0)
 
     def _advance(self, now_ns: int) -> None:
@@ -315,8 +279,7 @@ class RtdacBoard:
         last = self._last_ns
         self._last_ns = now_ns
         if last is not None and now_ns > last:
-            w = self.wiring
-            alpha = 1.0 - math.exp(-(now_ns - last) * 1e-9 / w.road_tau_s)
+            alpha = 1.0 - math.exp(-(now_ns - last) * 1e-9 / self.motor.tau_s)
             speed = self._road_speed + alpha * (self.road_target_rad_s - self._road_speed)
             if speed != self._road_speed:
                 self._road_speed = speed
@@ -348,21 +311,22 @@ def build_board(
     operator: Operator | None = None,
     faults: BoardFaults | None = None,
     stage_gain: float = 1.0,
+    road_tau_s: float = 0.02,
     wiring_changes: dict[str, Any] | None = None,
 ) -> RtdacBoard:
     """The emulated board around the simulated rig the config describes (model, rig and mismatch
     sections), laid out as FPGA logic ``logic`` (a built-in map), wired as its ``rtdac`` section says
-    (with ``wiring_changes``); ``stage_gain`` scales the power stage's true current against the map
-    the host is given (a stage the host's calibration does not match)."""
+    (with ``wiring_changes``), its road motor lagging by ``road_tau_s``; ``stage_gain`` scales the
+    power stage's true current against the map the host is given (a stage the host's calibration
+    does not match)."""
     from sashil.drivers.rtdac_map import known_maps
 
     layouts = {m.logic: m for m in known_maps()}
     if logic not in layouts:
         raise ValueError(f"logic: expected one of {', '.join(layouts)}, got {logic!r}")
-    wiring = BenchWiring.from_section(config["rtdac"], **(wiring_changes or {}))
+    wiring = Wiring.from_section(config["rtdac"], **(wiring_changes or {}))
     if stage_gain != 1.0:
-        wiring = BenchWiring(
-            **{**wiring.__dict__, "coil_map_current_a": tuple(stage_gain * a for a in wiring.coil_map_current_a)}
-        )
+        wiring = replace(wiring, coil_map_current_a=tuple(stage_gain * a for a in wiring.coil_map_current_a))
+    motor = RoadMotor.from_section(config["rtdac"], road_tau_s)
     ident = identity or BoardIdentity(logic_version=layouts[logic].logic_version)
-    return RtdacBoard(SimulatedRig.from_config(config), layouts[logic], wiring, ident, operator, faults)
+    return RtdacBoard(SimulatedRig.from_config(config), layouts[logic], wiring, ident, operator, faults, motor)

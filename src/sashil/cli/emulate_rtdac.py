@@ -97,9 +97,7 @@ def run_rtdac(
     identity = BoardIdentity(logic_version=logic_word, application=args.application)
     if not 0.0 < args.road_tau_ms <= 10_000.0:
         raise ConfigError(f"--road-tau-ms: expected milliseconds in (0, 10000], got {args.road_tau_ms:g}")
-    board = build_board(
-        config, args.logic, identity, operator, faults, args.stage_gain, {"road_tau_s": args.road_tau_ms * 1e-3}
-    )
+    board = build_board(config, args.logic, identity, operator, faults, args.stage_gain, args.road_tau_ms * 1e-3)
     try:
         server = BoardServer(board, args.link)
     except OSError as err:

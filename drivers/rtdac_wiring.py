@@ -1,0 +1,51 @@
+"""The rig's wiring to an RT-DAC/USB2, as plain values: the ``rtdac`` section's wiring keys.
+
+The host's backend reads its channels from it, and the emulated bench is wired by it (so an
+emulator and a host on one config fit). Nothing here is INTECO's: the public source says nothing of
+what the SAS rig wires where (the section's docs say which defaults guess).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Wiring:
+    """The rig's wiring to the board (the ``rtdac`` section's wiring keys), as plain values."""
+
+    arm_encoder: int = 0
+    arm_counts_per_rev: int = 4096
+    arm_reversed: bool = False
+    road_encoder: int | None = 1
+    road_counts_per_rev: int = 4096
+    road_reversed: bool = False
+    coil_output: str = "pwm"
+    coil_channel: int = 0
+    coil_map_current_a: tuple[float, ...] = (0.0, 1.0)
+    coil_map_output: tuple[float, ...] = (0.0, 1.0)
+    coil_sense_ad: int | None = 0
+    coil_sense_a_per_v: float = 0.2
+    coil_sense_offset_v: float = 0.0
+    coil_loop_ki_per_s: float = 20.0
+    road_output: str = "da"
+    road_channel: int = 0
+    road_direction_bit: int | None = None
+    road_output_per_rad_s: float = 0.5
+    road_kp_per_rad: float = 20.0
+    road_lag_s: float = 0.02
+    road_output_limit: float = 10.0
+    pwm_prescaler: int = 0
+    pwm_mode: str = "12-bit"
+
+    @classmethod
+    def from_section(cls, section: Mapping[str, Any], **changes: Any) -> Wiring:
+        """The section's wiring keys, with ``changes`` over them."""
+        values = {f.name: _plain(section[f.name]) for f in fields(cls)}
+        return replace(cls(**values), **changes)
+
+
+def _plain(value: Any) -> Any:
+    return tuple(value) if isinstance(value, (list, tuple)) else value
