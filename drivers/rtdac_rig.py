@@ -78,8 +78,10 @@ class RtdacRig(RigInterface):
         application: str | None = None,
         map_dir: str | None = None,
         backend: Any = None,
+        busy_limit_s: float = 0.025,
     ):
-        """``backend``: a pyusb backend object to find the board through (default: the one ``usb`` names)."""
+        """``backend``: a pyusb backend object to find the board through (default: the one ``usb``
+        names); ``busy_limit_s``: how long the coil sense A/D may stay busy before the run ends."""
         super().__init__()
         self.usb = usb
         self.wiring = wiring
@@ -93,9 +95,8 @@ class RtdacRig(RigInterface):
         self.coil = CoilDrive(
             wiring.coil_map_current_a, wiring.coil_map_output, wiring.coil_loop_ki_per_s, current_max_a
         )
-        road_rest = 0.0
         self.road = RoadDrive(
-            wiring.road_output_per_rad_s, wiring.road_kp_per_rad, wiring.road_output_limit, road_rest, wiring.road_lag_s
+            wiring.road_output_per_rad_s, wiring.road_kp_per_rad, wiring.road_output_limit, 0.0, wiring.road_lag_s
         )
         self._frame = bytearray()
         self._coil_word = 0
@@ -109,7 +110,7 @@ class RtdacRig(RigInterface):
         self._modelled_a = 0.0
         self._command_a = 0.0
         self._busy_since_ns: int | None = None
-        self._busy_limit_ns = 25_000_000
+        self._busy_limit_ns = round(busy_limit_s * 1e9)
         self.stats: dict[str, Any] = {"samples": 0, "samples_missed": 0, "timeouts": 0, "watchdog_samples": 0}
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
 
@@ -136,8 +137,8 @@ class RtdacRig(RigInterface):
             application=section["application"],
             map_dir=section["map_dir"],
             backend=backend,
+            busy_limit_s=max(driver["link_lost_ms"], 1.0) * 1e-3,
         )
-        rig._busy_limit_ns = round(max(driver["link_lost_ms"], 1.0) * 1e6)
         return rig
 
     @property
