@@ -20,8 +20,8 @@ from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.config.frozen import freeze_config, thaw
 from sashil.drivers import on_virtual_clock
+from sashil.drivers.operator_prompt import hold_prompt
 from sashil.errors import ConfigError, DriverIOError, SashilError
-from sashil.experiments.operator_prompt import hold_prompt
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
@@ -164,7 +164,7 @@ def calibrate_rig(
     ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
     ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
     ``prompt``: told, before every attempt of a step (a repeat too) and before the rig is opened
-    for it, the operator's instruction: :func:`~sashil.experiments.operator_prompt.hold_prompt` of
+    for it, the operator's instruction: :func:`~sashil.drivers.operator_prompt.hold_prompt` of
     the step's angle (default: ``say``). A person at the bench reads it; so does the emulator's
     operator reading the host's console (``sashil emulate --prompts``).
     Bad input (config, inertia, a plan at one current, a port path that does not exist) raises

@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     from sashil.drivers import firmware
     from sashil.drivers.emulator import Emulator, Faults, HostConsole, Operator, TruthLog, build_device
     from sashil.drivers.emulator.runner import open_transport
+    from sashil.recording.data_file import write_data_csv
 
     config = resolve_config(args)
     board = args.board
@@ -191,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
         realtime.restore()
         if truth is not None:  # stopped by SIGINT/SIGTERM, --duration, a disconnect or an error
-            truth.write_csv(args.truth)
+            write_data_csv(args.truth, truth.columns())
             print(f"sashil emulate: truth: {len(truth)} samples written to {args.truth}", file=sys.stderr, flush=True)
     print(
         f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {device.bad_frames}, "

@@ -10,9 +10,15 @@ Every section lives here so that a config file has one place that says what it a
 from __future__ import annotations
 
 from sashil.config.schema import Field, Section
-from sashil.drivers import BACKENDS
 from sashil.models.registry import check_model_section
 from sashil.models.seed import BOUC_WEN_SEED
+from sashil.plugins import BACKENDS_GROUP, entry_point_table
+
+#: backend name -> its entry point: the names ``driver.name`` accepts, read from the registry the
+#: driver layer loads backends from (the schema names them; it imports none)
+BACKENDS = entry_point_table(BACKENDS_GROUP)
+#: the excitation of ``sashil run`` on a simulated rig when no road is given (below resonance)
+DEFAULT_SIM_ROAD = "sine:1.0"
 
 MODEL = Section(
     {

@@ -26,9 +26,9 @@ import numpy as np
 from sashil.config.verb_checks import check_theta0
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.drivers.operator_prompt import hold_prompt
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
-from sashil.experiments.operator_prompt import hold_prompt
 from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan

@@ -26,11 +26,11 @@ from sashil.control.registry import law_run_label
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.experiments.optimal_bound import optimal_bound
 from sashil.experiments.road_option import parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.hysteresis import BoucWenParams
-from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
