@@ -29,6 +29,7 @@ from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
+from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
 from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
 from sashil.runtime.runner import run_plan
@@ -420,6 +421,29 @@ def plan_drop(
     )
     plan.from_config = from_config
     return plan
+
+
+def drop_in_loop(
+    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
+) -> tuple[DropTestPlan, str, str]:
+    """One drop built in a loop process (the ``drop-test`` plan of ``sashil.plans``), its operator
+    prompts handed to ``prompt`` as they come; the stage that takes over at the release is the
+    config's law, none, or a stage built from its spec (``kind``: a ``sashil.stages`` entry)."""
+    controller = spec.get("controller", CONFIG_LAW)
+    if isinstance(controller, dict):
+        kind = str(controller.get("kind"))
+        stage_class = load_class(_registered(STAGES_GROUP, kind, "stage"), f"stage {kind!r}")
+        controller = stage_class.from_spec(controller)  # type: ignore[attr-defined]  # the stage's own constructor
+    plan = plan_drop(config, spec, rig, prompt, controller)
+    return plan, str(config["controller"]["law"]), "none"
+
+
+def _registered(group: str, kind: str, what: str) -> str:
+    """The target registered as ``kind`` in ``group`` (a one-line ConfigError naming the known ones)."""
+    table = entry_point_table(group)
+    if kind not in table:
+        raise ConfigError(f"no {what} of kind {kind!r} is registered (known: {', '.join(table)})")
+    return table[kind].target
 
 
 def run_drop_test(

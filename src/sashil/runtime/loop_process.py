@@ -130,7 +130,7 @@ class LoopProcess:
     ):
         """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`).
         ``plan``: the plan's spec (``plan.spec()``: its ``kind`` and arguments, which the loop
-        process builds the plan from: :data:`sashil.runtime.worker.PLANS`); None: ``sashil run``'s
+        process builds the plan from: the ``sashil.plans`` entry points); None: ``sashil run``'s
         stage, the config's law on its road."""
         self.job = {
             "plan": dict(plan) if plan is not None else {"kind": "run"},

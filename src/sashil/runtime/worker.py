@@ -34,11 +34,13 @@ import logging
 import os
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze_config
 from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
 from sashil.runtime.signals import catch_stop_signals
 
 if TYPE_CHECKING:
@@ -82,54 +84,6 @@ def error_fields(err: BaseException) -> dict[str, Any]:
     return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
 
 
-def run_stage(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """``sashil run``'s stage: the config's law on its road (the rig's road motor gets the profile's
-    speed); its label and the road's text."""
-    from sashil.control.registry import make_stage
-    from sashil.experiments.road_option import RoadStage, parse_road
-
-    label, stage = make_stage(config)
-    road, road_text = parse_road(config["run"]["road"], config)
-    if road is not None:
-        stage = RoadStage(stage, road)
-    return stage, label, road_text
-
-
-def drop_test_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """One drop of a drop test (:func:`sashil.experiments.drop_test.plan_drop`), its operator
-    prompts sent to the session as they come; the stage that takes over at the release is the
-    config's law, none, or one of :data:`STAGES` built from its spec."""
-    from sashil.experiments.drop_test import CONFIG_LAW, plan_drop
-
-    controller = spec.get("controller", CONFIG_LAW)
-    if isinstance(controller, dict):
-        controller = STAGES[str(controller.get("kind"))](controller)
-    plan = plan_drop(config, spec, rig, lambda line: messages.send("prompt", text=line), controller)
-    return plan, str(config["controller"]["law"]), "none"
-
-
-def calibration_step(spec: dict[str, Any]) -> Any:
-    """A calibration step's stage (:class:`sashil.calibrate.rig.StepStage`) from its spec."""
-    from sashil.calibrate.rig import StepStage
-
-    return StepStage.from_spec(spec)
-
-
-#: the stages a drop's plan can hand over to at the release, by the ``kind`` of their spec
-STAGES = {"calibration-step": calibration_step}
-
-
-def sweep_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """One run of a sweep (a chirp, or one frequency of a stepped sine): the config's law on the road
-    of the spec (:func:`sashil.experiments.sweep.sweep_stage`)."""
-    from sashil.experiments.sweep import sweep_stage
-
-    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
-
-
-#: what a loop process can run: a plan's ``kind`` (its ``spec()``) and the function that builds it
-#: in the loop process from the config, the spec, the rig and the message channel
-PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 #: plans whose board is greeted when the loop starts, not before ``ready``: an operator (a person, or
 #: an emulator's ``--hold-deg``) holds the arm from the greeting and lets go a while after it, so a
 #: drop's hold must start with its loop (a port that cannot be opened then ends the run at once,
@@ -137,20 +91,27 @@ PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 GREET_AT_START = frozenset({"drop-test"})
 
 
+def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:
+    """The function that builds a plan of ``kind`` in this process: the ``sashil.plans`` entry
+    point of that name (``build(config, spec, rig, prompt) -> (stage, label, road_text)``), so the
+    runtime imports no experiment."""
+    plans = entry_point_table(PLANS_GROUP)
+    if kind not in plans:
+        raise ConfigError(f"the loop process cannot run a plan of kind {kind!r} (it runs {', '.join(plans)})")
+    return load_target(plans[kind].target, f"plan {kind!r}")  # type: ignore[return-value]  # a registered builder
+
+
 def build(config: RunConfig, spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
     """The rig (built, configured: its port open and the board greeted) and the warmed plan of
-    ``spec`` (:data:`PLANS`), its label and the road's text."""
+    ``spec`` (:func:`plan_builder`), its label and the road's text; the plan's operator prompts go
+    to the session as ``prompt`` messages."""
     from sashil.drivers import open_rig
     from sashil.runtime.warmup import warm_up
 
-    make = PLANS.get(str(spec.get("kind")))
-    if make is None:
-        raise ConfigError(
-            f"the loop process cannot run a plan of kind {spec.get('kind')!r} (it runs {', '.join(PLANS)})"
-        )
+    make = plan_builder(str(spec.get("kind")))
     rig = open_rig(config)
     try:
-        stage, label, road_text = make(config, spec, rig, messages)
+        stage, label, road_text = make(config, spec, rig, lambda line: messages.send("prompt", text=line))
         warm_up(stage, lambda line: messages.send("progress", text=line))
         if spec.get("kind") not in GREET_AT_START:
             rig.configure()
@@ -166,11 +127,11 @@ def prepare(messages: Messages) -> None:
     compiled or loaded from the cache, its progress sent on an empty cache."""
     import sashil.control.registry
     import sashil.drivers
-    import sashil.experiments.road_option
     import sashil.runtime.loop
     import sashil.safety  # noqa: F401 - imported now, used by run()
     from sashil.runtime.warmup import warm_kernels
 
+    plan_builder("run")  # sashil run's plan and its road profiles, the run a process is started ahead for
     warm_kernels(lambda line: messages.send("progress", text=line))
 
 
