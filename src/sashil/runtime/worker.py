@@ -155,24 +155,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     """The loop process's work (module doc); returns its exit code."""
-    from sashil.drivers.interface import capabilities_of
-    from sashil.runtime.clock import RealClock
-    from sashil.runtime.loop import ControlLoop, record_columns
     from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
     from sashil.runtime.runner import run_realtime
-    from sashil.runtime.stream import LOOP_PID_W, MISSED_W, STREAM_DIR, THREADS_W, FrameWriter, Stream, StreamWriter
+    from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
-    from sashil.safety import SafetySupervisor
 
-    if job.get("log_level") is not None:  # the session's command line set its logging up: the same here
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(message)s"))
-        logger = logging.getLogger("sashil")
-        logger.addHandler(handler)
-        logger.setLevel(int(job["log_level"]))
-    if job.get("sys_path"):  # the session's import path: a law named as module:Class imports as it did there
-        sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
+    _as_the_session(job)
     config = freeze_config(job["config"])  # read-only here too, as the session resolved it
     loop_cfg = config["loop"]
     rate = float(loop_cfg["rate_hz"])
@@ -183,18 +172,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
             "error", type="Stopped", text=f"stopped by {flag.signal_name} before the run started", exit_code=130
         )
         return 130
-    frames = FRAME_ROWS if job.get("can_trace") else 0
-    if frames and not capabilities_of(rig).can_frames:
-        rig.close()
-        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
-    try:
-        stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
-    except OSError as err:  # before anything is energised
-        rig.close()
-        raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
-    if frames:
-        rig.frame_sink = FrameWriter(stream).put
-    stream.header[LOOP_PID_W] = os.getpid()
+    stream = _create_stream(job, config, rig, stage, rate)
     stream.set_state("ready")
     law = getattr(stage, "law", None)
     tunable = bool(job.get("tune")) and law is not None and hasattr(law, "check_parameters")
@@ -215,21 +193,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     if tunable:
         tuning = MailboxTuning(law, rate, float(config["controller"].get(RAMP_KEY, 0.0)), stream)
     writer = StreamWriter(stream)
-    loop = ControlLoop(
-        rig,
-        stage,
-        RealClock.for_rate(loop_cfg["spin_margin_us"], rate),
-        rate,
-        job.get("duration_s"),
-        safety=SafetySupervisor.from_config(config),
-        recorder=writer,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
-        warn=lambda line: messages.send("warning", text=line),
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(rate),
-    )
+    loop = _control_loop(config, job, rig, stage, writer, tuning, stop, stream, messages)
     loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
     rt = RealtimeSetup.from_config(loop_cfg) if job.get("realtime", True) else None
     stream.set_state("running")
@@ -238,30 +202,9 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     if writer.error is not None and error is None:
         error = writer.error
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
-    result = loop.result
-    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
     if tuning is not None:
         tuning.close()
-    end = {
-        "exit_status": result.exit_status,
-        "error": error_fields(error) if error is not None else None,
-        "stop_reason": result.stop_reason,
-        "trips": result.trips,
-        "shutdown_errors": result.shutdown_errors,
-        "safe_state": result.safe_state,
-        "timing": loop.timing.counters(),
-        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-        "safety": loop.safety.summary() if loop.safety is not None else None,
-        "realtime": rt.report() if rt is not None else {},
-        "link": rig.link_stats() if capabilities_of(rig).link else None,
-        "clip_warning": clipped() if callable(clipped) else None,
-        "tuning": tuning.summary() if tuning is not None else None,
-        "tuning_notes": tuning.notes() if tuning is not None else [],
-        "threads": int(stream.header[THREADS_W]),
-        "start_ns": loop.start_ns,
-        "plan": stage.facts() if hasattr(stage, "facts") else None,
-    }
+    end = _end_message(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
     if stop.orphaned:
         from sashil.runtime.orphan import finish_alone
@@ -279,6 +222,108 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         messages.send("end", **end)
     writer.release()
     return 0
+
+
+def _control_loop(
+    config: RunConfig,
+    job: dict[str, Any],
+    rig: Any,
+    stage: Any,
+    writer: Any,
+    tuning: Any,
+    stop: Any,
+    stream: Any,
+    messages: Messages,
+) -> Any:
+    """The run's :class:`~sashil.runtime.loop.ControlLoop` on the real clock: its rows to the
+    stream's ``writer``, its timing in the stream, its warnings to the session."""
+    from sashil.runtime.clock import RealClock
+    from sashil.runtime.loop import ControlLoop
+    from sashil.safety import SafetySupervisor
+
+    loop_cfg = config["loop"]
+    rate = float(loop_cfg["rate_hz"])
+    return ControlLoop(
+        rig,
+        stage,
+        RealClock.for_rate(loop_cfg["spin_margin_us"], rate),
+        rate,
+        job.get("duration_s"),
+        safety=SafetySupervisor.from_config(config),
+        recorder=writer,
+        overrun_policy=loop_cfg["overrun_policy"],
+        warn_interval_s=loop_cfg["warn_interval_s"],
+        warn=lambda line: messages.send("warning", text=line),
+        tuning=tuning,
+        stop=stop,
+        timing=stream.timing(rate),
+    )
+
+
+def _as_the_session(job: dict[str, Any]) -> None:
+    """The session's logging and import path, here too: its command line set its logging up, and a
+    law named as ``module:Class`` imports as it did there."""
+    if job.get("log_level") is not None:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger = logging.getLogger("sashil")
+        logger.addHandler(handler)
+        logger.setLevel(int(job["log_level"]))
+    if job.get("sys_path"):
+        sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
+
+
+def _create_stream(job: dict[str, Any], config: RunConfig, rig: Any, stage: Any, rate: float) -> Any:
+    """The run's stream for the stage's columns (and a CAN frame ring when the job traces frames),
+    this process's pid in its header; the rig closed when it cannot be made (nothing energised)."""
+    from sashil.drivers.interface import capabilities_of
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.stream import LOOP_PID_W, STREAM_DIR, FrameWriter, Stream
+
+    frames = FRAME_ROWS if job.get("can_trace") else 0
+    if frames and not capabilities_of(rig).can_frames:
+        rig.close()
+        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
+    try:
+        stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
+    except OSError as err:  # before anything is energised
+        rig.close()
+        raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
+    if frames:
+        rig.frame_sink = FrameWriter(stream).put
+    stream.header[LOOP_PID_W] = os.getpid()
+    return stream
+
+
+def _end_message(
+    loop: Any, error: BaseException | None, stage: Any, rt: Any, rig: Any, tuning: Any, threads: int
+) -> dict[str, Any]:
+    """The ``end`` message's keys: how the loop ended, its timing counters, the stage's, the safety
+    supervisor's, the real-time set-up's and the rig's facts, the tuning's events."""
+    from sashil.drivers.interface import capabilities_of
+
+    result = loop.result
+    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
+    clipped = getattr(controller, "clip_warning", None)
+    return {
+        "exit_status": result.exit_status,
+        "error": error_fields(error) if error is not None else None,
+        "stop_reason": result.stop_reason,
+        "trips": result.trips,
+        "shutdown_errors": result.shutdown_errors,
+        "safe_state": result.safe_state,
+        "timing": loop.timing.counters(),
+        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
+        "safety": loop.safety.summary() if loop.safety is not None else None,
+        "realtime": rt.report() if rt is not None else {},
+        "link": rig.link_stats() if capabilities_of(rig).link else None,
+        "clip_warning": clipped() if callable(clipped) else None,
+        "tuning": tuning.summary() if tuning is not None else None,
+        "tuning_notes": tuning.notes() if tuning is not None else [],
+        "threads": threads,
+        "start_ns": loop.start_ns,
+        "plan": stage.facts() if hasattr(stage, "facts") else None,
+    }
 
 
 if __name__ == "__main__":
