@@ -6,9 +6,13 @@ import argparse
 import math
 import signal
 import sys
+from typing import TYPE_CHECKING
 
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
 from sashil.errors import ConfigError, DriverError
+
+if TYPE_CHECKING:
+    from sashil.drivers.emulator import Faults, Operator
 
 EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
 
@@ -113,14 +117,10 @@ def _announce(line: str) -> None:
     print(f"sashil emulate: {line}", file=sys.stderr, flush=True)
 
 
-def run(args: argparse.Namespace) -> int:
+def _board(board: str) -> str:
+    """``--board``: ``auto`` is the C board where this machine can build it, else the Python board."""
     from sashil.drivers import firmware
-    from sashil.drivers.emulator import Emulator, Faults, HostConsole, Operator, TruthLog, build_device
-    from sashil.drivers.emulator.runner import open_transport
-    from sashil.recording.data_file import write_data_csv
 
-    config = resolve_config(args)
-    board = args.board
     if board == "auto":
         board = "c" if firmware.compiler() is not None else "python"
     if board == "c":
@@ -128,14 +128,16 @@ def run(args: argparse.Namespace) -> int:
             firmware.library_path()  # built once per source hash; a machine that cannot build it is told why
         except DriverError as err:
             raise ConfigError(f"--board c: {err} (--board python runs the Python board)") from None
-    rate = None
-    if args.rate is not None:
-        rate = int(round(positive_seconds("--rate", args.rate)))
-        if not 1 <= rate <= 20_000:
-            raise ConfigError(f"--rate: expected 1..20000 Hz, got {args.rate:g}")
+    return board
+
+
+def _faults(args: argparse.Namespace) -> Faults:
+    """The link's faults the options ask for (drops, corruption, latency, a stall, a disconnect, a stuck sensor)."""
+    from sashil.drivers.emulator import Faults
+
     if args.latency_ms < 0:
         raise ConfigError(f"--latency-ms: expected >= 0, got {args.latency_ms:g}")
-    faults = Faults(
+    return Faults(
         drop_rate=_probability("--drop-rate", args.drop_rate),
         corrupt_rate=_probability("--corrupt-rate", args.corrupt_rate),
         latency_ms=args.latency_ms,
@@ -144,16 +146,38 @@ def run(args: argparse.Namespace) -> int:
         stuck_sensor_after_s=_seconds_or_none("--stuck-sensor-after", args.stuck_sensor_after),
         seed=args.seed,
     )
-    operator = None
+
+
+def _operator(args: argparse.Namespace) -> Operator | None:
+    """The emulated operator of ``--hold-deg`` (reading the host's console with ``--prompts``), or None."""
+    from sashil.drivers.emulator import HostConsole, Operator
+
     if args.hold_deg is not None:
         for angle in args.hold_deg:
             if not (math.isfinite(angle) and abs(angle) <= 90.0):
                 raise ConfigError(f"--hold-deg: expected angles within ±90 deg, got {angle:g}")
         release = _seconds_or_none("--release-after", args.release_after) or 0.0
         console = HostConsole(args.prompts) if args.prompts is not None else None
-        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce, console=console)
-    elif args.prompts is not None:
+        return Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce, console=console)
+    if args.prompts is not None:
         raise ConfigError("--prompts: expected --hold-deg too (the angles held before the host's first prompt)")
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from sashil.drivers.emulator import Emulator, TruthLog, build_device
+    from sashil.drivers.emulator.runner import open_transport
+    from sashil.recording.data_file import write_data_csv
+
+    config = resolve_config(args)
+    board = _board(args.board)
+    rate = None
+    if args.rate is not None:
+        rate = int(round(positive_seconds("--rate", args.rate)))
+        if not 1 <= rate <= 20_000:
+            raise ConfigError(f"--rate: expected 1..20000 Hz, got {args.rate:g}")
+    faults = _faults(args)
+    operator = _operator(args)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     truth = None
     if args.truth is not None:

@@ -559,9 +559,48 @@ def drive(
     stream = process.stream
     assert stream is not None
     rate = process.rate_hz
+    recorder, server = _before_go(process, data_path, duration_s, say, live, tune_folder)
+    flag = stop if stop is not None else StopFlag()
+    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
+    try:
+        with SessionSignals(flag, process):
+            process.go(data_path, verb)
+            end = process.wait_end(flag, say)
+    finally:
+        flag.on_request = None
+        if server is not None:
+            server.stop()
+    error: BaseException | None = None
+    try:
+        recorder.close()
+    except OSError as err:
+        error = err
+    timing = stream.timing(rate)
+    end, error, status = _ending(process, config, end, error, timing, flag, say)
+    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
+    if lost is not None:
+        error, status = lost, "lossy"
+        say("warning", str(lost))
+    return LoopEnd(end, error, status, timing, recorder.summary(), flag)
+
+
+def _before_go(
+    process: LoopProcess,
+    data_path: Path,
+    duration_s: float | None,
+    say: Callable[[str, str], None],
+    live: Any,
+    tune_folder: Path | None,
+) -> tuple[StreamRecorder, Any]:
+    """What runs before the loop is told to go: the disk checked, the recorder started, the tuning
+    socket served (with ``tune_folder``, when the law can be tuned), the views started. A failure
+    ends the loop process with nothing energised and raises."""
+    stream = process.stream
+    assert stream is not None
+    rate = process.rate_hz
     recorder: StreamRecorder | None = None
     server = None
-    try:  # until the loop is told to go, a failure ends the loop process with nothing energised
+    try:
         check_disk(data_path.parent, len(stream.columns), rate, duration_s)
         recorder = StreamRecorder(stream, data_path).start()
         if tune_folder is not None and process.ready.get("tunable"):
@@ -582,22 +621,22 @@ def drive(
             recorder.close()
         process.abort()
         raise
-    flag = stop if stop is not None else StopFlag()
-    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
-    try:
-        with SessionSignals(flag, process):
-            process.go(data_path, verb)
-            end = process.wait_end(flag, say)
-    finally:
-        flag.on_request = None
-        if server is not None:
-            server.stop()
-    error: BaseException | None = None
-    try:
-        recorder.close()
-    except OSError as err:
-        error = err
-    timing = stream.timing(rate)
+    return recorder, server
+
+
+def _ending(
+    process: LoopProcess,
+    config: RunConfig,
+    end: dict[str, Any] | None,
+    error: BaseException | None,
+    timing: Any,
+    flag: StopFlag,
+    say: Callable[[str, str], None],
+) -> tuple[dict[str, Any], BaseException | None, str]:
+    """How the loop ended, from its ``end`` message, or, when it died, from the rows it committed
+    and the rig reopened to confirm 0 A: the end's keys, the error and the exit status."""
+    stream = process.stream
+    assert stream is not None
     if end is not None:
         timing.restore(end["timing"])
         if end.get("clip_warning"):
@@ -619,8 +658,4 @@ def drive(
         status = "error"
     if error is not None and status == "ok":
         status = "error"
-    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
-    if lost is not None:
-        error, status = lost, "lossy"
-        say("warning", str(lost))
-    return LoopEnd(end, error, status, timing, recorder.summary(), flag)
+    return end, error, status

@@ -60,16 +60,7 @@ def run_plan_process(
     spec = plan.spec()
     if spec is None:
         raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")
-    notify = getattr(plan, "notify", None)
-
-    def forward(kind: str, text: str) -> None:
-        if kind == "prompt" and notify is not None:
-            notify(text)
-        elif kind == "progress" and text.startswith("realtime:"):
-            log.debug("%s", text)
-        else:
-            say(text)
-
+    forward = _forwarder(getattr(plan, "notify", None), say)
     process = LoopProcess(config, duration_s, tune=False, can_trace=trace is not None, plan=spec).start()
     try:
         process.wait_ready(forward)
@@ -102,8 +93,39 @@ def run_plan_process(
         stream = {}
     if scratch is not None:
         scratch.cleanup()
+    return _outcome(
+        ended, timing, stream, ended.recording if data_path is not None else None, pid, startup_s, trace_stats
+    )
+
+
+def _forwarder(notify: Callable[[str], None] | None, say: Callable[[str], None]) -> Callable[[str, str], None]:
+    """Where the loop process's messages go: the operator's prompts to the plan's ``notify``, the
+    real-time set-up's report to the debug log, the rest to ``say``."""
+
+    def forward(kind: str, text: str) -> None:
+        if kind == "prompt" and notify is not None:
+            notify(text)
+        elif kind == "progress" and text.startswith("realtime:"):
+            log.debug("%s", text)
+        else:
+            say(text)
+
+    return forward
+
+
+def _outcome(
+    ended: Any,
+    timing: Any,
+    stream: dict[str, Any],
+    recording: dict[str, Any] | None,
+    pid: int | None,
+    startup_s: float | None,
+    trace_stats: dict[str, Any] | None,
+) -> RunOutcome:
+    """The :class:`RunOutcome` of a loop run in a loop process, from its ``end`` message
+    (``recording``: None for a temporary stream file, which is no recording)."""
+    end = ended.end
     error = ended.error
-    recording = ended.recording if data_path is not None else None  # a temporary stream file is no recording
     summary = loop_summary(
         exit_status=ended.exit_status,
         timing=timing.summary(),
