@@ -44,7 +44,7 @@ from sashil.config.frozen import thaw
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, loop_summary, losses
+from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, end_summary, losses
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -278,41 +278,15 @@ class LoopProcess:
             stop=hooks.stop,
             verb=hooks.verb,
         )
-        end = ended.end
         affinity = {"session": self.session_affinity} if self.session_affinity else {}
-        summary = loop_summary(
-            exit_status=ended.exit_status,
-            timing=ended.timing.summary(),
-            trips=end.get("trips", []),
-            error=ended.error,
-            stop_reason=end.get("stop_reason"),
-            controller_stats=end.get("controller_stats"),
-            safety=end.get("safety"),
-            realtime={**end.get("realtime", {}), **affinity},
-            recording=ended.recording,
-            link=end.get("link"),
-            shutdown_errors=end.get("shutdown_errors", []),
-            safe_state=end.get("safe_state"),
-        )
-        events = (end.get("tuning") or {}).get("events") or []
-        facts = {
-            "pid": self.process.pid if self.process else None,
-            "threads": end.get("threads"),
-            "startup_s": None if self.startup_s is None else round(self.startup_s, 3),
-            "since_spawn_s": None if self.since_spawn_s is None else round(self.since_spawn_s, 3),
-            **({"died": end["loop_died"]} if "loop_died" in end else {}),
-        }
+        since_spawn_s = None if self.since_spawn_s is None else round(self.since_spawn_s, 3)
+        pid = self.process.pid if self.process else None
         timing = ended.timing.copy()  # the stream's shared rings end with the process
-        return RunOutcome(
-            ended.error,
-            ended.stop,
+        return ended.outcome(
             timing,
-            int(end.get("start_ns") or 0),
-            summary,
-            loop_process=facts,
-            tuning=end.get("tuning"),
-            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
-            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+            recording=ended.recording,
+            realtime={**ended.end.get("realtime", {}), **affinity},
+            facts=ended.facts(pid, self.startup_s, since_spawn_s=since_spawn_s),
         )
 
     def pass_stop(self, stop: StopFlag) -> Callable[[], None]:
@@ -534,6 +508,60 @@ class LoopEnd:
     #: the recorder's rows written and dropped
     recording: dict[str, Any]
     stop: StopFlag
+
+    def facts(self, pid: int | None, startup_s: float | None, **more: Any) -> dict[str, Any]:
+        """The loop process's facts for summary.json: its pid, threads and start-up (and ``more``);
+        ``died`` when it died."""
+        end = self.end
+        facts = {
+            "pid": pid,
+            "threads": end.get("threads"),
+            "startup_s": None if startup_s is None else round(startup_s, 3),
+            **more,
+        }
+        if "loop_died" in end:
+            facts["died"] = end["loop_died"]
+        return facts
+
+    def outcome(
+        self,
+        timing: Any,
+        *,
+        recording: dict[str, Any] | None,
+        realtime: dict[str, Any],
+        facts: dict[str, Any],
+        stream: dict[str, Any] | None = None,
+        can_trace: dict[str, Any] | None = None,
+    ) -> RunOutcome:
+        """The :class:`~sashil.runtime.runner.RunOutcome` of the run, wherever a session ran it in a
+        loop process (a session's run, a verb's plan): ``timing`` copied before the process closed,
+        ``recording`` None for a temporary stream file, which is no recording."""
+        end = self.end
+        events = (end.get("tuning") or {}).get("events") or []
+        summary = end_summary(
+            end,
+            exit_status=self.exit_status,
+            timing=timing.summary(),
+            error=self.error,
+            realtime=realtime,
+            recording=recording,
+        )
+        return RunOutcome(
+            self.error,
+            self.stop,
+            timing,
+            int(end.get("start_ns") or 0),
+            summary,
+            realtime=realtime,
+            recording=recording,
+            link=end.get("link"),
+            stream=stream if stream is not None else {},
+            can_trace=can_trace,
+            loop_process=facts,
+            tuning=end.get("tuning"),
+            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
+            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+        )
 
 
 def drive(

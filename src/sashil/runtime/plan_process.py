@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
-from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
+from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
 
 if TYPE_CHECKING:
@@ -93,8 +93,13 @@ def run_plan_process(
         stream = {}
     if scratch is not None:
         scratch.cleanup()
-    return _outcome(
-        ended, timing, stream, ended.recording if data_path is not None else None, pid, startup_s, trace_stats
+    return ended.outcome(
+        timing,
+        recording=ended.recording if data_path is not None else None,  # a temporary stream file is no recording
+        realtime=ended.end.get("realtime", {}),
+        facts=ended.facts(pid, startup_s),
+        stream=stream,
+        can_trace=trace_stats,
     )
 
 
@@ -111,52 +116,3 @@ def _forwarder(notify: Callable[[str], None] | None, say: Callable[[str], None])
             say(text)
 
     return forward
-
-
-def _outcome(
-    ended: Any,
-    timing: Any,
-    stream: dict[str, Any],
-    recording: dict[str, Any] | None,
-    pid: int | None,
-    startup_s: float | None,
-    trace_stats: dict[str, Any] | None,
-) -> RunOutcome:
-    """The :class:`RunOutcome` of a loop run in a loop process, from its ``end`` message
-    (``recording``: None for a temporary stream file, which is no recording)."""
-    end = ended.end
-    error = ended.error
-    summary = loop_summary(
-        exit_status=ended.exit_status,
-        timing=timing.summary(),
-        trips=list(end.get("trips", [])),
-        error=error,
-        stop_reason=end.get("stop_reason"),
-        controller_stats=end.get("controller_stats"),
-        safety=end.get("safety"),
-        realtime=end.get("realtime", {}),
-        recording=recording,
-        link=end.get("link"),
-        shutdown_errors=list(end.get("shutdown_errors", [])),
-        safe_state=end.get("safe_state"),
-    )
-    loop_process: dict[str, Any] = {
-        "pid": pid,
-        "threads": end.get("threads"),
-        "startup_s": None if startup_s is None else round(startup_s, 3),
-    }
-    if "loop_died" in end:
-        loop_process["died"] = end["loop_died"]
-    return RunOutcome(
-        error,
-        ended.stop,
-        timing,
-        int(end.get("start_ns") or 0),
-        summary,
-        realtime=end.get("realtime", {}),
-        recording=recording,
-        link=end.get("link"),
-        stream=stream,
-        can_trace=trace_stats,
-        loop_process=loop_process,
-    )

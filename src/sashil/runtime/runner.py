@@ -144,6 +144,34 @@ def loop_summary(
     }
 
 
+def end_summary(
+    end: dict[str, Any],
+    *,
+    exit_status: str,
+    timing: dict[str, Any],
+    error: BaseException | None,
+    realtime: dict[str, Any],
+    recording: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """:func:`loop_summary` of a loop that ran in a loop process, from its ``end`` message: the one
+    reading of that message, for the session (:class:`~sashil.runtime.loop_process.LoopEnd`) and for
+    a loop whose session died (:mod:`~sashil.runtime.orphan`)."""
+    return loop_summary(
+        exit_status=exit_status,
+        timing=timing,
+        trips=list(end.get("trips", [])),
+        error=error,
+        stop_reason=end.get("stop_reason"),
+        controller_stats=end.get("controller_stats"),
+        safety=end.get("safety"),
+        realtime=realtime,
+        recording=recording,
+        link=end.get("link"),
+        shutdown_errors=list(end.get("shutdown_errors", [])),
+        safe_state=end.get("safe_state"),
+    )
+
+
 @dataclass
 class RunOutcome:
     """What a loop run leaves, whether it ran in this process (:func:`run_plan`) or in its own
