@@ -21,9 +21,10 @@ from sashil.config import Config, apply_params, check_controller, load_config, v
 from sashil.config.frozen import freeze_config, thaw
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
-from sashil.config.sections import DEFAULT_SIM_ROAD, SCHEMA
+from sashil.config.sections import SCHEMA
 from sashil.drivers import declared_capabilities
 from sashil.errors import ConfigError
+from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
 from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
 
 if TYPE_CHECKING:

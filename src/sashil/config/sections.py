@@ -17,8 +17,6 @@ from sashil.plugins import BACKENDS_GROUP, entry_point_table
 #: backend name -> its entry point: the names ``driver.name`` accepts, read from the registry the
 #: driver layer loads backends from (the schema names them; it imports none)
 BACKENDS = entry_point_table(BACKENDS_GROUP)
-#: the excitation of ``sashil run`` on a simulated rig when no road is given (below resonance)
-DEFAULT_SIM_ROAD = "sine:1.0"
 
 MODEL = Section(
     {
