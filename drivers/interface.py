@@ -74,8 +74,9 @@ SAFE_COMMAND = RigCommand(0.0)
 def clamp_current(current_a: float, current_max_a: float) -> float:
     """The coil current a command may ask for: ``current_a`` clipped to [0, i_max], NaN -> 0 A.
 
-    The one clamp of the command (safety supervisor, backends, emulated device, plant): MR dampers
-    fail passive, so 0 A is both the floor and the safe state (docs/architecture.md).
+    The one clamp of the command (safety supervisor, backends, emulated device; the simulated plant's
+    coil driver saturates alike): MR dampers fail passive, so 0 A is both the floor and the safe
+    state (docs/architecture.md).
     """
     if current_a != current_a:  # NaN
         return 0.0

@@ -31,10 +31,10 @@ from sashil.drivers.interface import (
     RigState,
     clamp_current,
 )
+from sashil.drivers.mismatch import plant_config
 from sashil.drivers.sim_advance import advance
 from sashil.errors import DriverError
 from sashil.models.hysteresis import rig_params
-from sashil.models.mismatch import plant_config
 from sashil.models.plant import RigPlant
 
 if TYPE_CHECKING:

@@ -15,10 +15,10 @@ from sashil.control.observer import BoucWenObserver
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigSample
+from sashil.drivers.mismatch import mismatch_fractions, plant_config
 from sashil.errors import ConfigError, LawError
 from sashil.experiments.drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
-from sashil.models.mismatch import mismatch_fractions, plant_config
 from sashil.runtime.clock import VirtualClock
 
 SEED = BoucWenParams()

@@ -24,6 +24,7 @@ from sashil.drivers.interface import TWO_PI, RigCommand
 from sashil.errors import DataFileError
 from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
+from sashil.recording.data_file import write_data_csv
 
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
 
@@ -67,7 +68,7 @@ def test_truth_log_grows_by_blocks_and_round_trips_through_csv(tmp_path):
     assert list(cols) == list(TRUTH_COLUMNS) and cols["seq"].dtype == np.int64
     assert cols["seq"].tolist() == list(range(1, 11)) and cols["device_time_us"][-1] == 9000
     assert cols["torque_true_nm"][-1] == plant.damper_torque() and cols["current_true_a"][-1] == plant.state.current_a
-    back = read_truth_csv(log.write_csv(tmp_path / "truth.csv"))
+    back = read_truth_csv(write_data_csv(tmp_path / "truth.csv", log.columns()))
     for name in TRUTH_COLUMNS:
         assert np.array_equal(back[name], cols[name])  # repr-exact floats
 

@@ -15,8 +15,8 @@ import pytest
 
 from sashil.cli import main
 from sashil.config import default_config
+from sashil.lab.report import write_report
 from sashil.recording import plots
-from sashil.recording.report import write_report
 from sashil.recording.run_folder import RunFolder
 
 

@@ -9,8 +9,8 @@ import pytest
 
 from sashil.cli import main
 from sashil.errors import DataFileError
+from sashil.lab.report import RunRecord, drop_torque, markdown_summary, read_record
 from sashil.recording.data_file import write_data_csv
-from sashil.recording.report import RunRecord, drop_torque, markdown_summary, read_record
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

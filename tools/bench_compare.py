@@ -51,11 +51,11 @@ from sashil.config.overrides import apply_overrides
 from sashil.control.law_api import LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
+from sashil.drivers.mismatch import plant_config
 from sashil.experiments.compare import LawJob, run_job
 from sashil.experiments.optimal_bound import BoundResult, optimal_bound
 from sashil.experiments.road_option import parse_road
 from sashil.models.hysteresis import BoucWenParams
-from sashil.models.mismatch import plant_config
 
 #: the laws measured, with the --set parameters they need
 LAWS: dict[str, list[str]] = {

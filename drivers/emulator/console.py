@@ -1,7 +1,7 @@
 """The host's console as the emulated operator reads it: the hold prompts a person would read.
 
 ``sashil calibrate`` says before every attempt of a step, first or repeated, which angle to press
-the arm to (:func:`sashil.experiments.operator_prompt.hold_prompt`), and it says so before it
+the arm to (:func:`sashil.drivers.operator_prompt.hold_prompt`), and it says so before it
 connects. Where the host's console (its stderr) goes to a file, :class:`HostConsole` reads the
 lines added since its last look and keeps the angle of the last hold prompt among them: the
 emulated operator holds the arm where the host asked, whatever the board saw of the link. The board
@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from sashil.experiments.operator_prompt import prompted_hold_deg
+from sashil.drivers.operator_prompt import prompted_hold_deg
 
 
 class HostConsole:

@@ -11,7 +11,8 @@ road wheel applied. A host joins its data.csv
 the plant did.
 
 Off the real-time path: a row is a handful of float stores into a preallocated block (a new block
-every ``BLOCK_ROWS`` rows); the CSV is written once, when the emulator exits. A frame the fault
+every ``BLOCK_ROWS`` rows); the CSV is written once, when the emulator exits (``sashil emulate`` writes :meth:`TruthLog.columns` as a
+data file; the emulator itself writes no files). A frame the fault
 injection then drops or corrupts still has its row (the device took the sample; the host never
 got it, so the join leaves it out).
 """
@@ -25,7 +26,6 @@ import numpy as np
 
 from sashil.errors import DataFileError
 from sashil.models.plant import RigPlant
-from sashil.recording.data_file import write_data_csv
 
 #: columns of the truth CSV, in order
 TRUTH_COLUMNS = (
@@ -75,13 +75,9 @@ class TruthLog:
             for k, name in enumerate(TRUTH_COLUMNS)
         }
 
-    def write_csv(self, path: str | Path) -> Path:
-        """Write the rows to ``path`` as CSV (header :data:`TRUTH_COLUMNS`; written whole, then renamed)."""
-        return write_data_csv(path, self.columns())
-
 
 def read_truth_csv(path: str | Path) -> dict[str, np.ndarray]:
-    """The columns of a truth CSV written by :meth:`TruthLog.write_csv` (``seq`` and
+    """The columns of a truth CSV written by :meth:`TruthLog.columns` written as a data file (``seq`` and
     ``device_time_us`` as int64); a file of another shape is a one-line DataFileError naming it."""
     path = Path(path)
     try:

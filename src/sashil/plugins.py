@@ -1,7 +1,7 @@
-"""Finding plug-ins: the entry-point groups ``sashil.laws`` and ``sashil.backends``, and classes
-named as ``package.module:Class`` or ``path/to/file.py:Class``.
+"""Finding plug-ins: the entry-point groups ``sashil.laws``, ``sashil.backends``, ``sashil.plans``
+and ``sashil.stages``, and classes named as ``package.module:Class`` or ``path/to/file.py:Class``.
 
-Built-in laws and backends are registered through the same entry points (``pyproject.toml``) as a
+Built-in laws, backends and plans are registered through the same entry points (``pyproject.toml``) as a
 lab's own package, so there is one table per group. Two entry points claiming one name are an
 error that names both (a silent winner would run a different law than the one the user meant).
 Loading is lazy: the table holds entry points; a class is imported when it is asked for.
@@ -20,10 +20,25 @@ from pathlib import Path
 
 from sashil.errors import ConfigError
 
-__all__ = ["BACKENDS_GROUP", "LAWS_GROUP", "Plugin", "entry_point_table", "is_class_spec", "load_class"]
+__all__ = [
+    "BACKENDS_GROUP",
+    "LAWS_GROUP",
+    "PLANS_GROUP",
+    "STAGES_GROUP",
+    "Plugin",
+    "entry_point_table",
+    "is_class_spec",
+    "load_class",
+    "load_target",
+]
 
 LAWS_GROUP = "sashil.laws"
 BACKENDS_GROUP = "sashil.backends"
+#: plan kind -> the function that builds the plan of a ``plan.spec()`` in a loop process, as
+#: ``build(config, spec, rig, prompt) -> (stage, label, road_text)``: the runtime imports no experiment
+PLANS_GROUP = "sashil.plans"
+#: stage kind -> the class whose ``from_spec(spec)`` builds a stage a drop hands over to at its release
+STAGES_GROUP = "sashil.stages"
 
 
 @dataclass(frozen=True)
@@ -70,6 +85,17 @@ def load_class(spec: str, where: str) -> type:
 
     A module that does not import, or a missing class, is a one-line ConfigError naming ``where``
     (the config key or option) and the first line of the import error."""
+    module_part = spec.rpartition(":")[0]
+    target = load_target(spec, where)
+    if not isinstance(target, type):
+        raise ConfigError(f"{where}: {module_part} has no class {spec.rpartition(':')[2]}")
+    return target
+
+
+def load_target(spec: str, where: str) -> object:
+    """What ``spec`` (``package.module:name`` or ``path/to/file.py:name``) names: a class or a function.
+
+    A module that does not import, or a missing name, is a one-line ConfigError naming ``where``."""
     module_part, _, class_name = spec.rpartition(":")
     if not module_part or not class_name.isidentifier():
         raise ConfigError(f"{where}: expected package.module:Class or path/to/file.py:Class, got {spec!r}")
@@ -84,7 +110,7 @@ def load_class(spec: str, where: str) -> type:
         first = (str(err).splitlines() or [""])[0]
         raise ConfigError(f"{where}: {module_part} does not import: {type(err).__name__}: {first}") from None
     target = getattr(module, class_name, None)
-    if not isinstance(target, type):
+    if target is None:
         raise ConfigError(f"{where}: {module_part} has no class {class_name}")
     return target
 

@@ -248,6 +248,25 @@ def write_report(
 ) -> Path:
     """``report.md`` and its plots in ``folder``; returns the report's path."""
     best = cal.best
+    _write_plots(folder, cal, results)
+    lines = _heading(cal, inertia, inertia_given, rig_s, virtual)
+    lines += _runs_section(cal, results, counts_per_rev)
+    loose = _parameters_section(lines, cal, current_max_a)
+    lines += _suggestions_section(cal)
+    lines += _correlations_section(cal)
+    lines += _identifiability_section(cal, loose, inertia_given)
+    lines += _comparison_section(cal)
+    lines += ["", "## Fit stages", ""] + [f"- {s}" for s in best.stages]
+    path = folder / "report.md"
+    tmp = path.with_name("report.md.part")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def _write_plots(folder: Path, cal: Calibration, results: Sequence[StepResult]) -> None:
+    """The fit's overlay, the held-out runs' overlay and the n profile, as PNG files in ``folder``."""
+    best = cal.best
     fit_sims = simulate_fitted(best, cal.fit_records)
     roads = road_angles(results)
     _overlay(cal.fit_records, fit_sims, folder / "fit.png", f"{best.model} fit (the runs the fit saw)", roads)
@@ -262,6 +281,10 @@ def write_report(
     if cal.profile:
         _profile_plot(cal, folder / "n_profile.png")
 
+
+def _heading(cal: Calibration, inertia: float, inertia_given: bool, rig_s: float, virtual: bool) -> list[str]:
+    """The title (the inertia the torques are relative to) and the line of headline figures."""
+    best = cal.best
     lines: list[str] = []
     if inertia_given:
         lines.append(f"# Calibration: {best.model}, J = {inertia:g} kg m² (given with --inertia)")
@@ -282,6 +305,13 @@ def write_report(
         f"Convergence: {best.convergence.get('message', '?')} ({best.convergence.get('refinements_within_0_5pct', '?')} "
         f"of {best.convergence.get('refinements', '?')} refinements reached the best cost within 0.5 %)."
     )
+    return lines
+
+
+def _runs_section(cal: Calibration, results: Sequence[StepResult], counts_per_rev: int) -> list[str]:
+    """The table of the runs, what its columns mean, and the fit's plots."""
+    best = cal.best
+    lines: list[str] = []
     lines += [
         "",
         "## Runs",
@@ -344,12 +374,25 @@ def write_report(
     if cal.validations:
         lines += ["## Held-out validation", "", "![validation](validation.png)", ""]
 
+    return lines
+
+
+def _parameters_section(lines: list[str], cal: Calibration, current_max_a: float) -> list[str]:
+    """The parameters with their intervals and the derived quantities, appended to ``lines``; the
+    parameters whose intervals are loose."""
+    best = cal.best
     lines += ["## Parameters and 95 % intervals", ""]
     loose = interval_table(lines, cal, best)
     lines += ["", _row(["derived", "value", "unit"]), _row(["---"] * 3)]
     for name, value, unit in physical(best, current_max_a):
         lines.append(_row([name, f"{value:.5g}", unit]))
     lines += ["", f"Normalisation: {best.normalisation}.", ""]
+    return loose
+
+
+def _suggestions_section(cal: Calibration) -> list[str]:
+    """The extra steps that would shrink the widest interval most, when the analysis ranked some."""
+    lines: list[str] = []
     if cal.suggestions:
         first = cal.suggestions[0]
         lines += [
@@ -370,7 +413,13 @@ def write_report(
         if cal.extra_note:
             lines += [f"**--extra-steps: {cal.extra_note}.**", ""]
 
-    lines += ["## Correlations", ""]
+    return lines
+
+
+def _correlations_section(cal: Calibration) -> list[str]:
+    """The pairs of parameters that correlate above 0.9."""
+    best = cal.best
+    lines = ["## Correlations", ""]
     names = [n for n in best.params if n in best.correlations]
     pairs = sorted(
         ((a, b, best.correlations[a][b]) for i, a in enumerate(names) for b in names[i + 1 :]),
@@ -382,7 +431,13 @@ def write_report(
         lines += [_row([f"{a}–{b}", f"{c:+.3f}"]) for a, b, c in strong]
     else:
         lines.append("No pair of parameters correlates above 0.9.")
-    lines += ["", "## Identifiability", ""]
+    return lines
+
+
+def _identifiability_section(cal: Calibration, loose: list[str], inertia_given: bool) -> list[str]:
+    """What these runs pin down and what they do not: loose intervals, the z scale, n's profile, J."""
+    best = cal.best
+    lines = ["", "## Identifiability", ""]
     if loose:
         lines.append(
             f"- Not pinned down by these runs (95 % interval wider than ±{100 * LOOSE:.0f} % of the value): {', '.join(loose)}."
@@ -423,6 +478,12 @@ def write_report(
         "- J is not identifiable from angles (every torque scales with it): "
         + ("given with --inertia." if inertia_given else "assumed 1 (see the first line).")
     )
+    return lines
+
+
+def _comparison_section(cal: Calibration) -> list[str]:
+    """The models ranked by their output-error RMS, when more than one was fitted."""
+    lines: list[str] = []
     if len(cal.results) > 1:
         lines += [
             "",
@@ -437,9 +498,4 @@ def write_report(
             vals = validate(r, cal.validate_records)
             held_r = f"{100 * float(np.mean([v.nrmse for v in vals])):.2f} %" if vals else "-"
             lines.append(_row([rank, r.model, f"{math.degrees(r.rms_total):.4f}", held_r]))
-    lines += ["", "## Fit stages", ""] + [f"- {s}" for s in best.stages]
-    path = folder / "report.md"
-    tmp = path.with_name("report.md.part")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return lines

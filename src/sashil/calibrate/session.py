@@ -20,8 +20,8 @@ from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.config.frozen import freeze_config, thaw
 from sashil.drivers import on_virtual_clock
+from sashil.drivers.operator_prompt import hold_prompt
 from sashil.errors import ConfigError, DriverIOError, SashilError
-from sashil.experiments.operator_prompt import hold_prompt
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
@@ -164,7 +164,7 @@ def calibrate_rig(
     ``inertia``: the arm's J [kg m^2]; None fits with J = 1 and says so in the report's first line.
     ``model``: overrides ``calibrate.model`` (bouc-wen, dahl, lugre, bingham or all).
     ``prompt``: told, before every attempt of a step (a repeat too) and before the rig is opened
-    for it, the operator's instruction: :func:`~sashil.experiments.operator_prompt.hold_prompt` of
+    for it, the operator's instruction: :func:`~sashil.drivers.operator_prompt.hold_prompt` of
     the step's angle (default: ``say``). A person at the bench reads it; so does the emulator's
     operator reading the host's console (``sashil emulate --prompts``).
     Bad input (config, inertia, a plan at one current, a port path that does not exist) raises
@@ -176,7 +176,6 @@ def calibrate_rig(
     Returns an :class:`Outcome` (folder, params and report paths, the calibration, rig seconds).
     """
     say = say or (lambda text: None)
-    tell = prompt or say
     J = check_inertia(inertia)
     if model is not None:
         derived = thaw(config)
@@ -193,156 +192,191 @@ def calibrate_rig(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
         f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
-    counts_per_rev = config["rig"]["encoder_counts_per_rev"]
-    hold_s = float(config["drop_test"]["hold_time_s"])
-    results: list[StepResult] = []
-    started = time.perf_counter()
+    session = _Session(config, plan, folder, runs, say, prompt or say, J)
+    session.run_steps(plan.steps, 1, len(plan.steps))
+    say(f"rig time {session.rig_s:.0f} s; fitting ...")
+    extra = int(config["calibrate"]["extra_steps"])
+    cal = session.fit(profile and not extra)
+    if extra:
+        cal = session.run_extra_steps(cal, extra, profile)
+    return session.write(cal, inertia is not None)
 
-    def run_once(step: Step, data_path: Path) -> StepResult:
+
+@dataclass
+class _Session:
+    """One calibration under way: its config and plan, its folders, the runs so far, how it talks
+    to the user (``say``) and to the operator (``tell``)."""
+
+    config: RunConfig
+    plan: Plan
+    folder: RunFolder
+    runs: RunSet
+    say: Callable[[str], None]
+    tell: Callable[[str], None]
+    J: float
+    results: list[StepResult] = dataclasses.field(default_factory=list)
+    started: float = dataclasses.field(default_factory=time.perf_counter)
+    rig_s: float = 0.0
+
+    @property
+    def counts_per_rev(self) -> int:
+        return int(self.config["rig"]["encoder_counts_per_rev"])
+
+    def run_once(self, step: Step, data_path: Path) -> StepResult:
         """One run of ``step``, the operator told first which angle to hold."""
-        tell(f"{step.name}: {hold_prompt(step.theta0_deg)}, hold it still {hold_s:g} s and let go")
-        return run_step(config, step, data_path)
+        hold_s = float(self.config["drop_test"]["hold_time_s"])
+        self.tell(f"{step.name}: {hold_prompt(step.theta0_deg)}, hold it still {hold_s:g} s and let go")
+        return run_step(self.config, step, data_path)
 
-    def run_steps(steps: Sequence[Step], first: int, total: int) -> SashilError | None:
-        """Run ``steps`` (numbered from ``first`` of ``total``) into ``results``; the error that
-        stopped them, or None."""
+    def run_steps(self, steps: Sequence[Step], first: int, total: int) -> None:
+        """Run ``steps`` (numbered from ``first`` of ``total``) into :attr:`results`; the rig time so
+        far in :attr:`rig_s`. A step that fails ends the plan (:func:`_stopped` raises its error)."""
+        failure = None
         for number, step in enumerate(steps, start=first):
-            say(f"[{number}/{total}] {step.describe()} ...")
-            target = runs.folder_for(step.name)
-            attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
-            try:
-                result = run_once(step, _stream(target, 1))
-            except SashilError:
-                if not results:  # the rig could not be opened (a bad port): bad input, nothing written
-                    shutil.rmtree(folder.path, ignore_errors=True)
-                raise
-            if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
-                say(f"  {step.name} failed on the link ({result.error}); repeating it once")
-                try:
-                    again = run_once(step, _stream(target, next(attempts)))
-                except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
-                    say(f"  the repeat failed too ({err})")
-                else:
-                    if again.error is None:
-                        result = again
-            for attempt in range(1, GAP_REPEATS + 1):  # a host pause lost samples inside the record
-                cut_at = gap_cut(result, counts_per_rev) if result.error is None else None
-                if cut_at is None:
-                    break
-                say(
-                    f"  {step.name}: a link gap {cut_at:.2f} s after the release cut the record short; "
-                    f"repeating it ({attempt} of {GAP_REPEATS})"
-                )
-                try:
-                    again = run_once(step, _stream(target, next(attempts)))
-                except SashilError as err:  # cannot even open the link again: keep the cut record
-                    say(f"  the repeat failed ({err})")
-                    break
-                if again.error is not None:
-                    break  # keep the record cut short (the fit leaves it out if too short)
-                again_cut = gap_cut(again, counts_per_rev)
-                if again_cut is None or again_cut > cut_at:
-                    result = again
-                result.extra["gap_repeats"] = attempt
+            self.say(f"[{number}/{total}] {step.describe()} ...")
+            target = self.runs.folder_for(step.name)
+            result = self.attempts(step, target)
             error = result.error
             if (
-                not results
+                not self.results
                 and error is not None
                 and error.exit_code == 2
                 and not isinstance(error, StuckEncoderError)
                 and not result.columns.get("time_s", np.zeros(0)).size
             ):  # the rig could not be opened (a bad port, another device): bad input, nothing written
-                shutil.rmtree(folder.path, ignore_errors=True)
+                shutil.rmtree(self.folder.path, ignore_errors=True)
                 raise error
-            results.append(result)
+            self.results.append(result)
             if result.columns.get("time_s") is not None and result.columns["time_s"].size:
                 target.write_data(result.columns)
-            runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
+            self.runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
             if result.error is not None:
-                return result.error
-        return None
+                failure = result.error
+                break
+        self.rig_s = time.perf_counter() - self.started
+        if failure is not None:
+            _stopped(self.runs, self.results, self.rig_s, self.say)
 
-    failure = run_steps(plan.steps, 1, len(plan.steps))
-    rig_s = time.perf_counter() - started
-    rows = [_summary_row(r) for r in results]
-    if failure is not None:
-        _stopped(runs, results, rig_s, say)
-    say(f"rig time {rig_s:.0f} s; fitting ...")
-    extra = int(config["calibrate"]["extra_steps"])
-    current_max_a = float(config["rig"]["current_max_a"])
+    def attempts(self, step: Step, target: RunFolder) -> StepResult:
+        """The record of ``step``: once more after a transient link fault, and up to
+        :data:`GAP_REPEATS` more times while a link gap cuts it short (the longest kept)."""
+        attempts = iter(range(2, 100))  # a repeat streams beside the first attempt: cycles-2.csv, ...
+        try:
+            result = self.run_once(step, _stream(target, 1))
+        except SashilError:
+            if not self.results:  # the rig could not be opened (a bad port): bad input, nothing written
+                shutil.rmtree(self.folder.path, ignore_errors=True)
+            raise
+        if isinstance(result.error, DriverIOError):  # a transient link fault: the run once more
+            self.say(f"  {step.name} failed on the link ({result.error}); repeating it once")
+            try:
+                again = self.run_once(step, _stream(target, next(attempts)))
+            except SashilError as err:  # the link is gone (cannot even open it): the first failure stands
+                self.say(f"  the repeat failed too ({err})")
+            else:
+                if again.error is None:
+                    result = again
+        for attempt in range(1, GAP_REPEATS + 1):  # a host pause lost samples inside the record
+            cut_at = gap_cut(result, self.counts_per_rev) if result.error is None else None
+            if cut_at is None:
+                break
+            self.say(
+                f"  {step.name}: a link gap {cut_at:.2f} s after the release cut the record short; "
+                f"repeating it ({attempt} of {GAP_REPEATS})"
+            )
+            try:
+                again = self.run_once(step, _stream(target, next(attempts)))
+            except SashilError as err:  # cannot even open the link again: keep the cut record
+                self.say(f"  the repeat failed ({err})")
+                break
+            if again.error is not None:
+                break  # keep the record cut short (the fit leaves it out if too short)
+            again_cut = gap_cut(again, self.counts_per_rev)
+            if again_cut is None or again_cut > cut_at:
+                result = again
+            result.extra["gap_repeats"] = attempt
+        return result
 
-    def fit(profile_n: bool) -> Calibration:
+    def fit(self, profile_n: bool) -> Calibration:
+        """The model fitted to the fit runs, validated on the held-out ones, with the extra steps
+        that would shrink its widest interval ranked."""
+        section = self.config["calibrate"]
+        current_max_a = float(self.config["rig"]["current_max_a"])
         cal = analyse(
-            [r for r in results if r.step.role == "fit"],
-            [r for r in results if r.step.role == "validate"],
-            plan.model,
-            J,
-            counts_per_rev,
-            progress=say,
+            [r for r in self.results if r.step.role == "fit"],
+            [r for r in self.results if r.step.role == "validate"],
+            self.plan.model,
+            self.J,
+            self.counts_per_rev,
+            progress=self.say,
             profile=profile_n,
             current_max_a=current_max_a,
-            block_s=float(config["calibrate"]["interval_block_s"]),
+            block_s=float(section["interval_block_s"]),
         )
         if cal.intervals is not None:
-            road = road_chirp(config["calibrate"])
+            road = road_chirp(section)
             cal.suggestions = suggest(
                 cal.best,
                 cal.intervals,
-                candidates(config["calibrate"], current_max_a, road),
+                candidates(section, current_max_a, road),
                 current_max_a,
-                counts_per_rev,
+                self.counts_per_rev,
             )
         return cal
 
-    cal = fit(profile and not extra)
-    if extra:
+    def run_extra_steps(self, cal: Calibration, extra: int, profile: bool) -> Calibration:
+        """Run the ``extra`` steps ranked first and refit; the first fit stands when the refit fits
+        the plan's runs worse."""
+        count = len(self.plan.steps)
         chosen = [
             dataclasses.replace(
                 s.step, name=f"{n:02d}-fit-{s.step.kind}-{abs(s.step.theta0_deg):g}deg-{s.step.current_a:.2f}A-extra"
             )
-            for n, s in enumerate(cal.suggestions[:extra], start=len(plan.steps) + 1)
+            for n, s in enumerate(cal.suggestions[:extra], start=count + 1)
         ]
-        say(
+        self.say(
             f"{cal.suggestions[0].quantity} has the widest interval (±{100 * cal.suggestions[0].now:.2g} %); "
             f"running {len(chosen)} extra step(s) that shrink it most: {', '.join(c.describe() for c in chosen)}"
         )
-        failure = run_steps(chosen, len(plan.steps) + 1, len(plan.steps) + len(chosen))
-        rig_s = time.perf_counter() - started
-        rows = [_summary_row(r) for r in results]
-        if failure is not None:
-            _stopped(runs, results, rig_s, say)
-        say("refitting with the extra steps ...")
-        first, cal = cal, fit(profile)
+        self.run_steps(chosen, count + 1, count + len(chosen))
+        self.say("refitting with the extra steps ...")
+        first, cal = cal, self.fit(profile)
         before, after = first.best.rms_total, plan_rms(cal.best, first.fit_records)
         if after > EXTRA_WORSE * before:  # the refit lost the plan's runs: keep the fit without the extra steps
             note = (
                 f"the refit with the extra steps fit the plan's runs worse (RMS {math.degrees(after):.4f} deg against "
                 f"{math.degrees(before):.4f} deg): kept the fit without them"
             )
-            say(note)
+            self.say(note)
             first.extra_note = note
             cal = first
-    params_path = write_params(folder.file("params.yaml"), params_document(cal, inertia is not None, rig_s, rows))
-    report_path = write_report(
-        folder.path,
-        cal,
-        results,
-        J,
-        inertia is not None,
-        config["rig"]["encoder_counts_per_rev"],
-        config["rig"]["current_max_a"],
-        rig_s,
-        virtual=on_virtual_clock(config),
-    )
-    runs.finish(
-        model=cal.best.model,
-        inertia_given=inertia is not None,
-        held_out_nrmse={v.name: v.nrmse for v in cal.validations},
-        held_out_nrmse_mean=None if math.isnan(cal.validation_nrmse) else cal.validation_nrmse,
-        fit_nrmse=dict(zip(cal.best.record_names, cal.best.nrmse, strict=True)),
-        rig_time_s=round(rig_s, 2),
-        fit_s=round(cal.fit_s, 2),
-        identifiability_s=round(cal.analysis_s, 2),
-        convergence=cal.best.convergence,
-    )
-    return Outcome(folder.path, params_path, report_path, cal, rig_s)
+        return cal
+
+    def write(self, cal: Calibration, inertia_given: bool) -> Outcome:
+        """``params.yaml``, ``report.md`` with its plots, and the folder's ``summary.json``."""
+        config, rig_s = self.config, self.rig_s
+        rows = [_summary_row(r) for r in self.results]
+        params_path = write_params(self.folder.file("params.yaml"), params_document(cal, inertia_given, rig_s, rows))
+        report_path = write_report(
+            self.folder.path,
+            cal,
+            self.results,
+            self.J,
+            inertia_given,
+            config["rig"]["encoder_counts_per_rev"],
+            config["rig"]["current_max_a"],
+            rig_s,
+            virtual=on_virtual_clock(config),
+        )
+        self.runs.finish(
+            model=cal.best.model,
+            inertia_given=inertia_given,
+            held_out_nrmse={v.name: v.nrmse for v in cal.validations},
+            held_out_nrmse_mean=None if math.isnan(cal.validation_nrmse) else cal.validation_nrmse,
+            fit_nrmse=dict(zip(cal.best.record_names, cal.best.nrmse, strict=True)),
+            rig_time_s=round(rig_s, 2),
+            fit_s=round(cal.fit_s, 2),
+            identifiability_s=round(cal.analysis_s, 2),
+            convergence=cal.best.convergence,
+        )
+        return Outcome(self.folder.path, params_path, report_path, cal, rig_s)

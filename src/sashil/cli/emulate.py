@@ -8,10 +8,14 @@ import argparse
 import math
 import signal
 import sys
+from typing import TYPE_CHECKING
 
 from sashil.cli.common import add_config_options, positive_seconds, resolve_config
 from sashil.cli.emulate_rtdac import add_rtdac_arguments, run_rtdac
 from sashil.errors import ConfigError, DriverError
+
+if TYPE_CHECKING:
+    from sashil.drivers.emulator import Faults, Operator
 
 EXAMPLE = "sashil emulate --transport slcan --link /tmp/rig --hold-deg -5 --release-after 1"
 
@@ -118,17 +122,10 @@ def _announce(line: str) -> None:
     print(f"sashil emulate: {line}", file=sys.stderr, flush=True)
 
 
-def run(args: argparse.Namespace) -> int:
+def _board(board: str) -> str:
+    """``--board``: ``auto`` is the C board where this machine can build it, else the Python board."""
     from sashil.drivers import firmware
-    from sashil.drivers.emulator import Emulator, Faults, HostConsole, Operator, TruthLog, build_device
-    from sashil.drivers.emulator.runner import open_transport
 
-    config = resolve_config(args)
-    board = args.board
-    if args.transport == "rtdac":
-        if board == "c":
-            raise ConfigError("--board c: the emulated RT-DAC/USB2 is a Python board (--board python or auto)")
-        board = "python"
     if board == "auto":
         board = "c" if firmware.compiler() is not None else "python"
     if board == "c":
@@ -136,14 +133,16 @@ def run(args: argparse.Namespace) -> int:
             firmware.library_path()  # built once per source hash; a machine that cannot build it is told why
         except DriverError as err:
             raise ConfigError(f"--board c: {err} (--board python runs the Python board)") from None
-    rate = None
-    if args.rate is not None:
-        rate = int(round(positive_seconds("--rate", args.rate)))
-        if not 1 <= rate <= 20_000:
-            raise ConfigError(f"--rate: expected 1..20000 Hz, got {args.rate:g}")
+    return board
+
+
+def _faults(args: argparse.Namespace) -> Faults:
+    """The link's faults the options ask for (drops, corruption, latency, a stall, a disconnect, a stuck sensor)."""
+    from sashil.drivers.emulator import Faults
+
     if args.latency_ms < 0:
         raise ConfigError(f"--latency-ms: expected >= 0, got {args.latency_ms:g}")
-    faults = Faults(
+    return Faults(
         drop_rate=_probability("--drop-rate", args.drop_rate),
         corrupt_rate=_probability("--corrupt-rate", args.corrupt_rate),
         latency_ms=args.latency_ms,
@@ -152,16 +151,43 @@ def run(args: argparse.Namespace) -> int:
         stuck_sensor_after_s=_seconds_or_none("--stuck-sensor-after", args.stuck_sensor_after),
         seed=args.seed,
     )
-    operator = None
+
+
+def _operator(args: argparse.Namespace) -> Operator | None:
+    """The emulated operator of ``--hold-deg`` (reading the host's console with ``--prompts``), or None."""
+    from sashil.drivers.emulator import HostConsole, Operator
+
     if args.hold_deg is not None:
         for angle in args.hold_deg:
             if not (math.isfinite(angle) and abs(angle) <= 90.0):
                 raise ConfigError(f"--hold-deg: expected angles within ±90 deg, got {angle:g}")
         release = _seconds_or_none("--release-after", args.release_after) or 0.0
         console = HostConsole(args.prompts) if args.prompts is not None else None
-        operator = Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce, console=console)
-    elif args.prompts is not None:
+        return Operator(args.hold_deg[0], release, tuple(args.hold_deg[1:]), announce=_announce, console=console)
+    if args.prompts is not None:
         raise ConfigError("--prompts: expected --hold-deg too (the angles held before the host's first prompt)")
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from sashil.drivers.emulator import Emulator, TruthLog, build_device
+    from sashil.drivers.emulator.runner import open_transport
+    from sashil.recording.data_file import write_data_csv
+
+    config = resolve_config(args)
+    if args.transport == "rtdac":
+        if args.board == "c":
+            raise ConfigError("--board c: the emulated RT-DAC/USB2 is a Python board (--board python or auto)")
+        board = "python"
+    else:
+        board = _board(args.board)
+    rate = None
+    if args.rate is not None:
+        rate = int(round(positive_seconds("--rate", args.rate)))
+        if not 1 <= rate <= 20_000:
+            raise ConfigError(f"--rate: expected 1..20000 Hz, got {args.rate:g}")
+    faults = _faults(args)
+    operator = _operator(args)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
     if args.transport == "rtdac":
         return run_rtdac(args, config, operator, duration, _announce)
@@ -202,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
         realtime.restore()
         if truth is not None:  # stopped by SIGINT/SIGTERM, --duration, a disconnect or an error
-            truth.write_csv(args.truth)
+            write_data_csv(args.truth, truth.columns())
             print(f"sashil emulate: truth: {len(truth)} samples written to {args.truth}", file=sys.stderr, flush=True)
     print(
         f"sashil emulate: {why}; samples sent {device.samples_sent}, bad frames from host {device.bad_frames}, "

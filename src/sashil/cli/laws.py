@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from sashil.control.law_registry import LawEntry
+from typing import Any
 
 EXAMPLE = "sashil laws --law examples/soft_skyhook/soft_skyhook.py:SoftSkyhook"
 
@@ -21,34 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="also describe this law (package.module:Class or path/file.py:Class); repeatable",
     )
     parser.add_argument("--json", action="store_true", help="the same table as JSON, for scripts")
-
-
-def describe(entry: LawEntry) -> dict[str, Any]:
-    """One law as a plain mapping: name, output, origin, target and parameters."""
-    cls = entry.cls
-    paragraph = (cls.__doc__ or "").strip().split("\n\n")[0]
-    doc = [" ".join(line.strip() for line in paragraph.splitlines())] if paragraph else []
-    return {
-        "name": cls.name,
-        "output": cls.output_kind(),
-        "origin": entry.origin,
-        "class": entry.spec,
-        "doc": doc[0] if doc else "",
-        "parameters": [
-            {
-                "name": key,
-                "default": None if param.required else param.default,
-                "required": param.required,
-                "unit": param.unit,
-                "low": param.low,
-                "high": param.high,
-                "low_open": param.low_open,
-                "accepts": param.field.expected(),
-                "doc": param.doc,
-            }
-            for key, param in cls.params().items()
-        ],
-    }
 
 
 def _text(laws: list[dict[str, Any]]) -> str:
@@ -68,7 +37,7 @@ def _text(laws: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.control.law_registry import find_law, known_laws
+    from sashil.control.law_registry import describe, find_law, known_laws
 
     entries = known_laws() + [find_law(spec) for spec in args.law]
     laws = [describe(entry) for entry in entries]

@@ -27,14 +27,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sashil.api import load_run as load_run_api
+    from sashil.lab.report import write_report
     from sashil.recording.formats import check_formats, write_data_formats
     from sashil.recording.matlab import export_mat
-    from sashil.recording.report import write_report
     from sashil.recording.run_folder import RunFolder
 
     progress = lambda line: say(args, f"sashil report: {line}")  # noqa: E731
     # read everything before creating the output folder: bad input leaves nothing behind
-    from sashil.recording.report import read_record
+    from sashil.lab.report import read_record
 
     for run_dir in args.run_dirs:
         read_record(run_dir)

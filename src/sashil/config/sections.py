@@ -11,9 +11,13 @@ from __future__ import annotations
 
 from sashil.config.rtdac_section import RTDAC
 from sashil.config.schema import Field, Section
-from sashil.drivers import BACKENDS
 from sashil.models.registry import check_model_section
 from sashil.models.seed import BOUC_WEN_SEED
+from sashil.plugins import BACKENDS_GROUP, entry_point_table
+
+#: backend name -> its entry point: the names ``driver.name`` accepts, read from the registry the
+#: driver layer loads backends from (the schema names them; it imports none)
+BACKENDS = entry_point_table(BACKENDS_GROUP)
 
 MODEL = Section(
     {

@@ -14,13 +14,14 @@ from __future__ import annotations
 import inspect
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law
 from sashil.errors import ConfigError
 from sashil.plugins import LAWS_GROUP, entry_point_table, is_class_spec, load_class
 
-__all__ = ["LawEntry", "find_law", "known_laws", "law_label", "law_names"]
+__all__ = ["LawEntry", "describe", "find_law", "known_laws", "law_label", "law_names"]
 
 WHERE = "controller.law"
 
@@ -122,3 +123,32 @@ def _same_class(a: type, b: type) -> bool:
 def known_laws() -> list[LawEntry]:
     """Every registered law, loaded and checked (for ``sashil laws``)."""
     return [find_law(name) for name in law_names()]
+
+
+def describe(entry: LawEntry) -> dict[str, Any]:
+    """One law as a plain mapping: name, output, origin, target and parameters (``sashil laws``, the
+    panel's law list)."""
+    cls = entry.cls
+    paragraph = (cls.__doc__ or "").strip().split("\n\n")[0]
+    doc = [" ".join(line.strip() for line in paragraph.splitlines())] if paragraph else []
+    return {
+        "name": cls.name,
+        "output": cls.output_kind(),
+        "origin": entry.origin,
+        "class": entry.spec,
+        "doc": doc[0] if doc else "",
+        "parameters": [
+            {
+                "name": key,
+                "default": None if param.required else param.default,
+                "required": param.required,
+                "unit": param.unit,
+                "low": param.low,
+                "high": param.high,
+                "low_open": param.low_open,
+                "accepts": param.field.expected(),
+                "doc": param.doc,
+            }
+            for key, param in cls.params().items()
+        ],
+    }

@@ -103,7 +103,7 @@ def make_controller(
     """A :class:`Controller` running law ``name`` (None: ``controller.law``) on the config's model.
 
     The observer and inverse use ``config['model']`` (the model the controller believes); a
-    simulated plant may differ from it (``mismatch`` section, :mod:`sashil.models.mismatch`).
+    simulated plant may differ from it (``mismatch`` section, :mod:`sashil.drivers.mismatch`).
     The law takes the section's parameters it declares (:func:`_config_law`). ``torque``: a T*(t)
     signal [N m] for a law with a ``signal`` attribute (``torque-tracking``) instead of its random
     band fraction.

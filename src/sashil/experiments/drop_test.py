@@ -26,12 +26,13 @@ import numpy as np
 from sashil.config.verb_checks import check_theta0
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.drivers.operator_prompt import hold_prompt
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
-from sashil.experiments.operator_prompt import hold_prompt
+from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
 from sashil.runtime.clock import Clock, default_clock
 from sashil.runtime.plan_process import in_loop_process, run_plan_process
-from sashil.runtime.runner import run_plan
+from sashil.runtime.runner import RunOutcome, run_plan
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -422,6 +423,29 @@ def plan_drop(
     return plan
 
 
+def drop_in_loop(
+    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
+) -> tuple[DropTestPlan, str, str]:
+    """One drop built in a loop process (the ``drop-test`` plan of ``sashil.plans``), its operator
+    prompts handed to ``prompt`` as they come; the stage that takes over at the release is the
+    config's law, none, or a stage built from its spec (``kind``: a ``sashil.stages`` entry)."""
+    controller = spec.get("controller", CONFIG_LAW)
+    if isinstance(controller, dict):
+        kind = str(controller.get("kind"))
+        stage_class = load_class(_registered(STAGES_GROUP, kind, "stage"), f"stage {kind!r}")
+        controller = stage_class.from_spec(controller)  # type: ignore[attr-defined]  # the stage's own constructor
+    plan = plan_drop(config, spec, rig, prompt, controller)
+    return plan, str(config["controller"]["law"]), "none"
+
+
+def _registered(group: str, kind: str, what: str) -> str:
+    """The target registered as ``kind`` in ``group`` (a one-line ConfigError naming the known ones)."""
+    table = entry_point_table(group)
+    if kind not in table:
+        raise ConfigError(f"no {what} of kind {kind!r} is registered (known: {', '.join(table)})")
+    return table[kind].target
+
+
 def run_drop_test(
     config: RunConfig,
     theta0_deg: float = -5.0,
@@ -459,17 +483,7 @@ def run_drop_test(
     spec = {"kind": "drop-test", "theta0_deg": theta0_deg, "current_a": current_a, "duration_s": duration_s}
     clock = clock if clock is not None else default_clock(config)
     log = logging.getLogger("sashil")
-    twin = None
-    if in_loop_process(config, clock):
-        # the plan here is the loop process's twin: it takes the facts that one saw after the run
-        by_config = isinstance(controller, str) and controller == CONFIG_LAW
-        twin = DropTestPlan(
-            DropTestSettings.from_config(config, theta0_deg, current_a, duration_s),
-            config["rig"]["encoder_counts_per_rev"],
-            config_controller(config) if by_config else controller,
-            notify,
-        )
-        twin.from_config = by_config
+    twin = _twin(config, spec, controller, notify) if in_loop_process(config, clock) else None
     if twin is not None and twin.spec() is not None:
         plan = twin
         outcome = run_plan_process(
@@ -478,32 +492,70 @@ def run_drop_test(
     else:
         rig = rig if rig is not None else open_rig(config)
         plan = plan_drop(config, spec, rig, notify, controller)
-        if trace is not None:
-            trace.attach(rig)
-            trace.start()
-        try:
-            # the one runner: real-time set-up on the real clock, signals, safety, the stream of every cycle
-            outcome = run_plan(
-                config,
-                rig,
-                plan,
-                clock,
-                data_path=data_path,
-                say=log.warning,
-                note=log.debug,
-                read_stream=True,
-                live=live,
-                stop=stop,
-            )
-        finally:
-            trace_stats = trace.close() if trace is not None else None
-        outcome.can_trace = trace_stats
+        outcome = _run_here(config, rig, plan, clock, data_path, live, stop, trace)
     if live is not None:
         live.close(outcome.trips, ())
     # whatever ended the test early, the rig is at 0 A, deactivated and closed
     error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
+    return _record(config, outcome, plan, error)
+
+
+def _twin(
+    config: RunConfig, spec: dict[str, Any], controller: Any, notify: Callable[[str], None] | None
+) -> DropTestPlan:
+    """The plan in this process of a drop whose loop runs in a loop process: the loop process's
+    twin, which takes the facts that one saw after the run."""
+    by_config = isinstance(controller, str) and controller == CONFIG_LAW
+    twin = DropTestPlan(
+        DropTestSettings.from_config(config, spec["theta0_deg"], spec["current_a"], spec["duration_s"]),
+        config["rig"]["encoder_counts_per_rev"],
+        config_controller(config) if by_config else controller,
+        notify,
+    )
+    twin.from_config = by_config
+    return twin
+
+
+def _run_here(
+    config: RunConfig,
+    rig: RigInterface,
+    plan: DropTestPlan,
+    clock: Clock,
+    data_path: str | Path | None,
+    live: Any,
+    stop: Any,
+    trace: Any,
+) -> RunOutcome:
+    """A drop run through the one runner in this process (real-time set-up on the real clock,
+    signals, safety, the stream of every cycle), its CAN frames traced when asked."""
+    log = logging.getLogger("sashil")
+    if trace is not None:
+        trace.attach(rig)
+        trace.start()
+    try:
+        outcome = run_plan(
+            config,
+            rig,
+            plan,
+            clock,
+            data_path=data_path,
+            say=log.warning,
+            note=log.debug,
+            read_stream=True,
+            live=live,
+            stop=stop,
+        )
+    finally:
+        trace_stats = trace.close() if trace is not None else None
+    outcome.can_trace = trace_stats
+    return outcome
+
+
+def _record(config: RunConfig, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:
+    """The drop's record from the release on, from the run's stream: its columns, the run's summary
+    keys and facts, its metrics."""
     record = drop_record(outcome.stream, plan, outcome.start_ns)
     record.run = outcome.summary
     record.error = error

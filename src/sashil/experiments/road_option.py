@@ -18,11 +18,12 @@ motor, as ``sashil sweep`` does.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.drivers.interface import RigCommand, RigSample
+from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.errors import ConfigError, DataFileError
 from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD, SYNTAX
@@ -33,7 +34,21 @@ from sashil.recording.data_file import read_data_csv
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
-__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road"]
+__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road", "run_in_loop"]
+
+
+def run_in_loop(
+    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
+) -> tuple[Any, str, str]:
+    """``sashil run``'s stage built in a loop process (the ``run`` plan of ``sashil.plans``): the
+    config's law on its road (the rig's road motor gets the profile's speed); its label and the road's text."""
+    from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
+
+    label, stage = make_stage(config)
+    road, road_text = parse_road(config["run"]["road"], config)
+    if road is not None:
+        stage = RoadStage(stage, road)
+    return stage, label, road_text
 
 
 def parse_road(text: str | None, config: RunConfig) -> tuple[RoadProfile | None, str]:

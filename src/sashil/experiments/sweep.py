@@ -219,6 +219,14 @@ def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> S
     return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
 
 
+def sweep_in_loop(
+    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
+) -> tuple[SweepStage, str, str]:
+    """One run of a sweep built in a loop process (the ``sweep`` plan of ``sashil.plans``: a chirp,
+    or one frequency of a stepped sine): the config's law on the road of the spec."""
+    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
+
+
 def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""

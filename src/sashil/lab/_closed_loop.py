@@ -53,23 +53,7 @@ def closed_loop(
     duration = config["run"]["duration_s"]
     rate = float(config["loop"]["rate_hz"])
     backend = config["driver"]["name"]
-    process = None
-    rig: Any = None
-    loop: SessionLoop
-    if config["loop"]["process"]:  # the loop in a process of its own
-        process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
-        try:
-            ready = process.wait_ready(
-                lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
-            )
-        except BaseException:
-            process.close()
-            raise
-        label, road_text, columns = ready["label"], ready["road"], tuple(ready["columns"])
-        loop = process
-    else:
-        rig, stage, label, road_text, columns = _in_this_process(config, on_event)
-        loop = InProcessLoop(config, rig, stage, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
+    loop, process, rig, (label, road_text, columns) = _start_loop(config, outputs, on_event, tune)
     try:
         folder = RunFolder.create(outputs.out, "run")
     except BaseException:
@@ -92,19 +76,60 @@ def closed_loop(
         trace = outputs.start_can_trace(rig, folder.path)
     else:
         trace = outputs.follow_can_trace(folder.path, config["driver"]["port"], process.can_frames)
-    trace_stats: dict[str, Any] | None = None
+    finish = _Finish(outputs, folder, road_text, trace, process)
 
-    def finish(summary: dict[str, Any]) -> dict[str, Any]:
-        """The run's own keys, its --format files and plots, before the one summary.json is written."""
-        nonlocal trace_stats
-        trace_stats = trace.close() if trace is not None else None
-        if trace_stats is not None and process is not None:
-            trace_stats["frames_dropped"] += process.frames_dropped()
-        extra: dict[str, Any] = {"road": road_text}
+    def say(line: str) -> None:
+        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
+
+    try:
+        outcome = run_session(
+            loop, config, folder, duration, controller=label, live=live, say=say, tune=tune, finish=finish, stop=stop
+        )
+    finally:
+        if trace is not None and finish.trace_stats is None:
+            trace.close()
+    return _ended(outcome, folder, on_event)
+
+
+def _start_loop(
+    config: RunConfig, outputs: Outputs, on_event: Listener, tune: bool
+) -> tuple[SessionLoop, LoopProcess | None, Any, tuple[str, str, tuple[str, ...]]]:
+    """The run's loop, ready: in a loop process of its own (``loop.process``) or in this one; the
+    process (None in this one), the rig (None in a process) and the stage's label, road text and columns."""
+    duration = config["run"]["duration_s"]
+    if config["loop"]["process"]:  # the loop in a process of its own
+        process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
+        try:
+            ready = process.wait_ready(
+                lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
+            )
+        except BaseException:
+            process.close()
+            raise
+        return process, process, None, (ready["label"], ready["road"], tuple(ready["columns"]))
+    rig, stage, label, road_text, columns = _in_this_process(config, on_event)
+    clock = RealClock.for_rate(config["loop"]["spin_margin_us"], float(config["loop"]["rate_hz"]))
+    return InProcessLoop(config, rig, stage, clock), None, rig, (label, road_text, columns)
+
+
+class _Finish:
+    """What a run writes of its own before the one summary.json: the CAN trace's figures, its
+    --format files and plots; the run's own summary keys."""
+
+    def __init__(self, outputs: Outputs, folder: RunFolder, road_text: str, trace: Any, process: LoopProcess | None):
+        self.outputs, self.folder, self.road_text, self.trace, self.process = outputs, folder, road_text, trace, process
+        self.trace_stats: dict[str, Any] | None = None  # the trace's figures, once the finish closed it
+
+    def __call__(self, summary: dict[str, Any]) -> dict[str, Any]:
+        folder = self.folder
+        trace_stats = self.trace_stats = self.trace.close() if self.trace is not None else None
+        if trace_stats is not None and self.process is not None:
+            trace_stats["frames_dropped"] += self.process.frames_dropped()
+        extra: dict[str, Any] = {"road": self.road_text}
         if trace_stats is not None:
             extra["can_trace"] = trace_stats
         if (folder.path / "data.csv").exists():
-            outputs.write_formats(
+            self.outputs.write_formats(
                 folder.path,
                 "run",
                 exit_status=summary.get("exit_status", "ok"),
@@ -116,16 +141,10 @@ def closed_loop(
             plot_timing(folder.path / "timing.png", [(str(summary.get("controller") or "run"), timing)])
         return extra
 
-    def say(line: str) -> None:
-        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
 
-    try:
-        outcome = run_session(
-            loop, config, folder, duration, controller=label, live=live, say=say, tune=tune, finish=finish, stop=stop
-        )
-    finally:
-        if trace is not None and trace_stats is None:
-            trace.close()
+def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
+    """The run's folder, its figures and trips told as events; bad input (nothing ran) leaves no
+    folder, and an error during the run is raised after the folder is complete."""
     if isinstance(outcome.error, SashilError) and outcome.error.exit_code == ConfigError.exit_code:
         folder.discard()
         raise outcome.error  # bad input (a port that cannot be opened): nothing ran, no folder
@@ -148,18 +167,14 @@ def _in_this_process(config: RunConfig, on_event: Listener) -> tuple[Any, Any, s
     """The rig (its port open, the board greeted), the stage, its label, the road's text and the
     stage's columns, for a loop in this process (``loop.process: false``). The law, the estimator
     and numba's kernels load here: a session whose loop runs in a loop process never loads them."""
-    from sashil.control.registry import make_stage
     from sashil.drivers import open_rig
-    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.experiments.road_option import run_in_loop
     from sashil.runtime.loop import record_columns
     from sashil.runtime.warmup import warm_up
 
     rig = open_rig(config)  # built, not opened
     try:
-        label, stage = make_stage(config)
-        road, road_text = parse_road(config["run"]["road"], config)
-        if road is not None:
-            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+        stage, label, road_text = run_in_loop(config, {"kind": "run"}, rig, lambda line: None)
         # the kernels and the law warmed before the board is greeted: a board's timers start at the
         # handshake, and the loop's first deadline follows it at once
         warm_up(stage, lambda line: on_event(Event("progress", line)))

@@ -25,12 +25,12 @@ from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label
 from sashil.drivers import on_virtual_clock
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.compare import LawJob, LawResult, run_job
+from sashil.experiments.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.experiments.optimal_bound import optimal_bound
 from sashil.experiments.road_option import parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.hysteresis import BoucWenParams
-from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
@@ -276,18 +276,7 @@ def compare(
     virtual = on_virtual_clock(config)
     processes = int(section["jobs"]) if virtual else 1
     road_profile, road_text = parse_road(road, config)
-    folder = RunFolder.create(outputs.out, "compare")
-    note = (
-        "The config every law of this comparison started from: its controller section is not one of them.\n"
-        "Each law ran with the config.yaml of its own folder: "
-        + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
-    )
-    folder.write_config(config, note)
-    subs = {}
-    for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
-        sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
-        sub.write_config(job.config)
-        job.folder, subs[job.label] = str(sub.path), sub
+    folder, subs = _folders(outputs, config, jobs)
     on_event(
         Event(
             "progress",
@@ -303,30 +292,8 @@ def compare(
     for label, summary in summaries.items():
         subs[label].write_summary(summary)
     bound = _bound(config, road_profile, duration, on_event)
-    header = {
-        "road": f"`{road}`: {road_text}",
-        "duration": f"{duration:g} s per law, the first {section['settle_s']:g} s left out of the metrics",
-        "rig": f"{config['driver']['name']} ({'virtual clock' if virtual else 'real clock'}), {config['loop']['rate_hz']:g} Hz",
-        "wall time": f"{wall:.1f} s for {len(jobs)} laws in {processes} process(es)",
-    }
-    if bound is not None:
-        header["optimal bound"] = (
-            f"RMS θ̈2 {bound.rms_accel_bound:.4g} rad/s² against {bound.rms_accel_passive:.4g} for the best constant "
-            f"damping ({bound.c_passive:.3g} N m s/rad), {bound.gain_pct:.1f} % below it, in the model's viscous "
-            "envelope (the hysteretic term left out), knowing the road in advance"
-        )
-    notes = [
-        _accel_note(results, float(section["accel_bandwidth_hz"])),
-        f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
-        "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
-        "Share of the bound: the law's gain over the best passive run as a share of the optimal bound's gain over "
-        "the best constant damping (sashil.experiments.optimal_bound: direct transcription on the viscous "
-        "envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], L-BFGS-B on the exact "
-        "adjoint gradient; the best of two starts, not a certificate). 100 %: all the bound allows.",
-        "Each law's run is a run folder of its own (the folder column): its config.yaml (the law and its "
-        "parameters), data.csv (every cycle) and summary.json, for `sashil report`, `sashil replay` and "
-        "`sashil compare --config FOLDER/config.yaml` (that law against the references again).",
-    ]
+    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound)
+    notes = _notes(results, section)
     gain = bound.gain_pct if bound is not None else float("nan")
     params = {label: summary["parameters"] for label, summary in summaries.items()}
     folders = {label: sub.path.name for label, sub in subs.items()}
@@ -343,35 +310,113 @@ def compare(
         else None
     )
     folder.write_summary(
-        {
-            "verb": "compare",
-            "driver": config["driver"]["name"],
-            **ending(error),
-            "road": f"{road}: {road_text}",
-            "duration_s": duration,
-            "processes": processes,
-            "wall_s": wall,
-            "optimal_bound_gain_pct": gain,
-            "laws": [
-                {"law": r.label, "status": r.status, "accel_source": r.accel_source, "wall_s": r.wall_s, **r.metrics}
-                for r in results
-            ],
-            "runs": [
-                {
-                    "folder": folders[r.label],
-                    "controller": r.label,
-                    "controller_origin": summaries[r.label]["controller_origin"],
-                    "parameters": params[r.label],
-                    "exit_status": summaries[r.label]["exit_status"],
-                    "error": summaries[r.label].get("error"),
-                    **r.metrics,
-                }
-                for r in results
-            ],
-        }
+        _summary(config, error, f"{road}: {road_text}", duration, processes, wall, gain, results, summaries, folders)
     )
     on_event(Event("progress", f"sashil compare: {wall:.1f} s of wall time", {"wall_s": wall}))
     on_event(Event("folder", f"compare folder: {folder.path}", {"folder": str(folder.path)}))
     if error is not None:
         on_event(Event("warning", f"sashil compare: {error}", {"failed": [r.label for r in failed]}))
     return load_run(folder.path)
+
+
+def _folders(outputs: Outputs, config: RunConfig, jobs: Sequence[Any]) -> tuple[RunFolder, dict[str, RunFolder]]:
+    """The comparison's folder (its config.yaml says which laws' folders ran what) and each law's
+    run folder inside it, its config.yaml written now (``data.csv`` comes as it runs)."""
+    folder = RunFolder.create(outputs.out, "compare")
+    note = (
+        "The config every law of this comparison started from: its controller section is not one of them.\n"
+        "Each law ran with the config.yaml of its own folder: "
+        + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
+    )
+    folder.write_config(config, note)
+    subs = {}
+    for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
+        sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
+        sub.write_config(job.config)
+        job.folder, subs[job.label] = str(sub.path), sub
+    return folder, subs
+
+
+def _header(
+    config: RunConfig,
+    road: str,
+    road_text: str,
+    duration: float,
+    virtual: bool,
+    processes: int,
+    laws: int,
+    wall: float,
+    bound: Any,
+) -> dict[str, str]:
+    """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound."""
+    section = config["compare"]
+    header = {
+        "road": f"`{road}`: {road_text}",
+        "duration": f"{duration:g} s per law, the first {section['settle_s']:g} s left out of the metrics",
+        "rig": f"{config['driver']['name']} ({'virtual clock' if virtual else 'real clock'}), {config['loop']['rate_hz']:g} Hz",
+        "wall time": f"{wall:.1f} s for {laws} laws in {processes} process(es)",
+    }
+    if bound is not None:
+        header["optimal bound"] = (
+            f"RMS θ̈2 {bound.rms_accel_bound:.4g} rad/s² against {bound.rms_accel_passive:.4g} for the best constant "
+            f"damping ({bound.c_passive:.3g} N m s/rad), {bound.gain_pct:.1f} % below it, in the model's viscous "
+            "envelope (the hysteretic term left out), knowing the road in advance"
+        )
+    return header
+
+
+def _notes(results: list[LawResult], section: Mapping[str, Any]) -> list[str]:
+    """The notes under ``compare.md``'s table: what its columns mean and where each law's run is."""
+    return [
+        _accel_note(results, float(section["accel_bandwidth_hz"])),
+        f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
+        "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
+        "Share of the bound: the law's gain over the best passive run as a share of the optimal bound's gain over "
+        "the best constant damping (sashil.experiments.optimal_bound: direct transcription on the viscous "
+        "envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], L-BFGS-B on the exact "
+        "adjoint gradient; the best of two starts, not a certificate). 100 %: all the bound allows.",
+        "Each law's run is a run folder of its own (the folder column): its config.yaml (the law and its "
+        "parameters), data.csv (every cycle) and summary.json, for `sashil report`, `sashil replay` and "
+        "`sashil compare --config FOLDER/config.yaml` (that law against the references again).",
+    ]
+
+
+def _summary(
+    config: RunConfig,
+    error: SashilError | None,
+    road: str,
+    duration: float,
+    processes: int,
+    wall: float,
+    gain: float,
+    results: Sequence[LawResult],
+    summaries: Mapping[str, Mapping[str, Any]],
+    folders: Mapping[str, str],
+) -> dict[str, Any]:
+    """The comparison's ``summary.json``: how it ended, the road, each law's status and metrics, each law's run."""
+    return {
+        "verb": "compare",
+        "driver": config["driver"]["name"],
+        **ending(error),
+        "road": road,
+        "duration_s": duration,
+        "processes": processes,
+        "wall_s": wall,
+        "optimal_bound_gain_pct": gain,
+        "laws": [
+            {"law": r.label, "status": r.status, "accel_source": r.accel_source, "wall_s": r.wall_s, **r.metrics}
+            for r in results
+        ],
+        "runs": [
+            {
+                "folder": folders[r.label],
+                "controller": r.label,
+                "controller_origin": summaries[r.label]["controller_origin"],
+                "parameters": summaries[r.label]["parameters"],
+                "exit_status": summaries[r.label]["exit_status"],
+                "error": summaries[r.label].get("error"),
+                **r.metrics,
+            }
+            for r in results
+        ],
+    }

@@ -82,17 +82,7 @@ def drop_test(
     live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     folder.write_config(config)
-    runs = RunSet(
-        folder,
-        "drop-test",
-        {
-            "driver": config["driver"]["name"],
-            "controller": law if closed else f"{law} (constant current per run)",
-            "controller_origin": origin,
-            "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
-        },
-        several=len(currents) > 1,
-    )
+    runs = _run_set(config, folder, law if closed else f"{law} (constant current per run)", origin, len(currents) > 1)
     overlay = []
     prompt = lambda line: on_event(Event("prompt", line))  # noqa: E731
     for current in currents:
@@ -111,20 +101,8 @@ def drop_test(
             stop=stop,
             trace=outputs.can_trace(target.path, config["driver"]["port"]),
         )
-        if runs.several:  # the sub-folder's config reruns its one drop
-            own = thaw(config)
-            own["drop_test"]["currents_a"] = [current]
-            target.write_config(own)
-        target.write_data(record.columns)
+        _write_drop(config, outputs, target, record, current, label, sub_config=runs.several)
         assert record.metrics is not None and record.run  # run_drop_test sets both
-        outputs.write_formats(
-            target.path,
-            "drop-test",
-            record.columns,
-            exit_status=ending(record.error)["exit_status"],
-            current_a=current,
-            controller=label,
-        )
         if live is not None:
             live.note(
                 live_offset_s,
@@ -132,25 +110,7 @@ def drop_test(
             )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
-        entry = runs.add(
-            _label(current),
-            {
-                "current_a": current,
-                "controller": label,
-                "theta0_deg": theta0_deg,
-                "hold_angle_deg": math.degrees(record.hold_angle_rad),
-                "release_estimated": record.release_estimated,
-                **record.metrics.as_dict(),
-                "timing": record.run["timing"],
-                "trips": record.run["trips"],
-                "safe_state": record.run.get("safe_state"),
-                "link": record.extra.get("link"),
-                "realtime": record.extra.get("realtime"),
-                "can_trace": record.extra.get("can_trace"),
-                "loop_process": record.extra.get("loop_process"),
-            },
-            record.error,
-        )
+        entry = runs.add(_label(current), _drop_row(record, current, label, theta0_deg), record.error)
         if runs.failed:
             overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
             break
@@ -159,12 +119,22 @@ def drop_test(
         for note in result_warnings(record.metrics):
             on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
     under = f", under {law}" if closed else ""
-    plot = plot_drop_test(
-        folder.file("drop_test.png"),
-        overlay,
-        f"Drop test from {theta0_deg:g}°{under} ({config['driver']['name']} rig)",
-        band_deg=section["settle_band_deg"],
-    )
+    title = f"Drop test from {theta0_deg:g}°{under} ({config['driver']['name']} rig)"
+    return _finish(folder, runs, overlay, title, section["settle_band_deg"], live, on_event)
+
+
+def _finish(
+    folder: RunFolder,
+    runs: RunSet,
+    overlay: list[dict[str, Any]],
+    title: str,
+    band_deg: float,
+    live: Any,
+    on_event: Listener,
+) -> Run:
+    """The drop test's plot and summary; the folder discarded when bad input stopped the first drop
+    before it began, and the error that ended a drop raised after the folder is complete."""
+    plot = plot_drop_test(folder.file("drop_test.png"), overlay, title, band_deg=band_deg)
     if live is not None:
         live.close()
     if runs.error is not None and getattr(runs.error, "exit_code", 1) == 2:
@@ -177,3 +147,62 @@ def drop_test(
     if runs.error is not None:
         raise runs.error  # the data up to it is on disk
     return load_run(Path(folder.path))
+
+
+def _run_set(config: RunConfig, folder: RunFolder, controller: str, origin: str, several: bool) -> RunSet:
+    """The drop test's set of runs, one per current, with the keys its folder's summary shares."""
+    return RunSet(
+        folder,
+        "drop-test",
+        {
+            "driver": config["driver"]["name"],
+            "controller": controller,
+            "controller_origin": origin,
+            "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
+        },
+        several=several,
+    )
+
+
+def _write_drop(
+    config: RunConfig,
+    outputs: Outputs,
+    target: RunFolder,
+    record: Any,
+    current: float,
+    label: str,
+    sub_config: bool,
+) -> None:
+    """One drop's files in ``target``: its config when it is a sub-run, its data and the --format files."""
+    if sub_config:  # the sub-folder's config reruns its one drop
+        own = thaw(config)
+        own["drop_test"]["currents_a"] = [current]
+        target.write_config(own)
+    target.write_data(record.columns)
+    outputs.write_formats(
+        target.path,
+        "drop-test",
+        record.columns,
+        exit_status=ending(record.error)["exit_status"],
+        current_a=current,
+        controller=label,
+    )
+
+
+def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dict[str, Any]:
+    """One drop's row of the folder's summary: what ran, its figures, its timing and facts."""
+    return {
+        "current_a": current,
+        "controller": label,
+        "theta0_deg": theta0_deg,
+        "hold_angle_deg": math.degrees(record.hold_angle_rad),
+        "release_estimated": record.release_estimated,
+        **record.metrics.as_dict(),
+        "timing": record.run["timing"],
+        "trips": record.run["trips"],
+        "safe_state": record.run.get("safe_state"),
+        "link": record.extra.get("link"),
+        "realtime": record.extra.get("realtime"),
+        "can_trace": record.extra.get("can_trace"),
+        "loop_process": record.extra.get("loop_process"),
+    }

@@ -10,7 +10,7 @@ through events.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -111,18 +111,7 @@ def sweep(
     folder.write_config(config)
     label = _label(config)
     traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
-
-    def rig_factory(cfg: Any, road: Any) -> Any:  # every rig of the sweep feeds the one trace
-
-        rig = default_rig(cfg, road)
-        if traces:
-            traces[0].attach(rig)
-        else:
-            trace = outputs.start_can_trace(rig, folder.path)
-            if trace is not None:
-                traces.append(trace)
-        return rig
-
+    rig_factory = _traced_rigs(outputs, folder, traces)
     runs = RunSet(
         folder,
         "sweep",
@@ -140,11 +129,36 @@ def sweep(
         failure = err
     finally:
         trace_stats = traces[0].close() if traces else None
+    if traces:
+        extra["can_trace"] = trace_stats
+    return _ended(folder, runs, extra, failure, on_event)
+
+
+def _traced_rigs(outputs: Outputs, folder: RunFolder, traces: list[Any]) -> Callable[[Any, Any], Any]:
+    """The sweep's rig factory: every rig of the sweep feeds the one CAN trace (in ``traces``, once
+    the first rig started it)."""
+
+    def rig_factory(cfg: Any, road: Any) -> Any:
+        rig = default_rig(cfg, road)
+        if traces:
+            traces[0].attach(rig)
+        else:
+            trace = outputs.start_can_trace(rig, folder.path)
+            if trace is not None:
+                traces.append(trace)
+        return rig
+
+    return rig_factory
+
+
+def _ended(
+    folder: RunFolder, runs: RunSet, extra: dict[str, Any], failure: SashilError | None, on_event: Listener
+) -> Run:
+    """The sweep's summary, and its folder told as an event; bad input found on opening the rig
+    leaves no folder, and an error that ended the sweep early is raised after the folder is complete."""
     if failure is not None and failure.exit_code == ConfigError.exit_code and not folder.recorded():
         folder.discard()  # bad input found on opening the rig (a port that cannot be opened): no folder
         raise failure
-    if traces:
-        extra["can_trace"] = trace_stats
     runs.finish(**extra)
     if failure is not None:
         kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"

@@ -25,7 +25,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from sashil.drivers.interface import clamp_current
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ, advance_z
 
@@ -100,6 +99,15 @@ def rig_substep(
     theta_next = theta + 0.5 * h * (v + v_next)
     z_next = advance_z(z, theta_next - theta, beta, gamma, delta, n, z_u)
     return theta_next, v_next, z_next, i_next
+
+
+def _coil_drive(current_a: float, current_max_a: float) -> float:
+    """The current the coil's driver can drive towards: [0, i_max], NaN -> 0 A. The driver
+    saturates as the host's command clamp does (``sashil.drivers.interface.clamp_current``, which
+    the backends and the safety supervisor apply before a command reaches a plant)."""
+    if current_a != current_a:  # NaN
+        return 0.0
+    return min(max(current_a, 0.0), current_max_a)
 
 
 class RigPlant:
@@ -180,7 +188,7 @@ class RigPlant:
             self._split_dt, self._split = dt, (count, h, decay)
         count, h, decay = self._split
         # floats only: numba compiles one signature (an int here would compile another mid-run)
-        cmd = clamp_current(float(current_cmd_a), self.current_max_a)
+        cmd = _coil_drive(float(current_cmd_a), self.current_max_a)
         st = self.state
         theta, v, z, i, t = st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a, st.time_s
         road, torque_in = self.road, self.torque_in

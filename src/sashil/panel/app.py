@@ -164,21 +164,53 @@ class Panel:
 
 
 def make_app(panel: Panel) -> Starlette:
-    """The panel's ASGI app."""
+    """The panel's ASGI app: the page, what it reads, what changes the bench, and the socket."""
+    routes = [
+        *_page_routes(panel),
+        *_read_routes(panel),
+        *_run_routes(panel),
+        *_tool_routes(panel),
+        WebSocketRoute("/ws", _socket(panel)),
+    ]
+    return Starlette(routes=routes, lifespan=_lifespan(panel))
 
-    def guarded(changes: bool, control: bool = False) -> Callable[[Callable[..., Awaitable[Response]]], Any]:
-        def wrap(handler: Callable[[Request], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
-            async def checked(request: Request) -> Response:
-                refused = panel.refusal(request, changes=changes)
-                if refused is not None:
-                    return refused
-                if control and not panel.controls(request):
-                    return JSONResponse({"error": "this page watches: another page has control"}, status_code=409)
-                return await handler(request)
 
-            return checked
+Handler = Callable[[Request], Awaitable[Response]]
 
-        return wrap
+
+def _guarded(panel: Panel, changes: bool, control: bool = False) -> Callable[[Handler], Handler]:
+    """A handler behind the panel's checks (:meth:`Panel.refusal`); ``control``: only the page in
+    control may call it."""
+
+    def wrap(handler: Handler) -> Handler:
+        async def checked(request: Request) -> Response:
+            refused = panel.refusal(request, changes=changes)
+            if refused is not None:
+                return refused
+            if control and not panel.controls(request):
+                return JSONResponse({"error": "this page watches: another page has control"}, status_code=409)
+            return await handler(request)
+
+        return checked
+
+    return wrap
+
+
+async def _body(request: Request) -> dict[str, Any]:
+    """The request's JSON object, or an empty one."""
+    try:
+        data = await request.json()
+    except ValueError:
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _refused(err: SashilError) -> Response:
+    return JSONResponse({"error": str(err)}, status_code=400)
+
+
+def _page_routes(panel: Panel) -> list[Route]:
+    """The page (its token taken from the URL into a cookie) and its static files."""
 
     async def index(request: Request) -> Response:
         if not panel.host_ok(request.headers.get("host")):
@@ -202,22 +234,28 @@ def make_app(panel: Panel) -> Starlette:
         page = (STATIC / "index.html").read_text(encoding="utf-8").replace("{{TOKEN}}", panel.token)
         return HTMLResponse(page, headers={"Cache-Control": "no-store", "X-Frame-Options": "DENY"})
 
-    @guarded(changes=False)
+    @_guarded(panel, changes=False)
     async def static(request: Request) -> Response:
         name = request.path_params["name"]
         if name not in STATIC_FILES:  # a fixed list: no path from the request reaches the disk
             return PlainTextResponse("not found", status_code=404)
         return FileResponse(STATIC / name, media_type=STATIC_FILES[name])
 
-    @guarded(changes=False)
+    return [Route("/", index), Route("/static/{name}", static)]
+
+
+def _read_routes(panel: Panel) -> list[Route]:
+    """What a page reads: the laws, the bench's status, the run folders and their files."""
+
+    @_guarded(panel, changes=False)
     async def laws(request: Request) -> Response:
         return JSONResponse(panel.bench.law_table())
 
-    @guarded(changes=False)
+    @_guarded(panel, changes=False)
     async def runs(request: Request) -> Response:
         return JSONResponse(await run_in_threadpool(list_runs, panel.bench.runs_dir))
 
-    @guarded(changes=False)
+    @_guarded(panel, changes=False)
     async def run_item(request: Request) -> Response:
         name, item = request.path_params["name"], request.path_params["item"]
         if item == "traces":
@@ -230,89 +268,113 @@ def make_app(panel: Panel) -> Starlette:
             return PlainTextResponse("not found", status_code=404)
         return FileResponse(path, media_type=RUN_FILES[item], headers={"Cache-Control": "no-store"})
 
-    @guarded(changes=False)
+    @_guarded(panel, changes=False)
     async def status(request: Request) -> Response:
         return JSONResponse(panel.bench.status())
 
-    async def body(request: Request) -> dict[str, Any]:
-        try:
-            data = await request.json()
-        except ValueError:
-            return {}
-        return data if isinstance(data, dict) else {}
+    return [
+        Route("/api/laws", laws),
+        Route("/api/status", status),
+        Route("/api/runs", runs),
+        Route("/api/runs/{name}/{item}", run_item),
+    ]
 
-    def refused(err: SashilError) -> Response:
-        return JSONResponse({"error": str(err)}, status_code=400)
 
-    @guarded(changes=True, control=True)
+def _run_routes(panel: Panel) -> list[Route]:
+    """What changes the run: start, stop, tune and restore."""
+
+    @_guarded(panel, changes=True, control=True)
     async def start(request: Request) -> Response:
-        choice = await body(request)
+        choice = await _body(request)
         try:
             run = await run_in_threadpool(panel.bench.start, choice)
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
         return JSONResponse({"run_id": run.run_id, "folder": run.folder})
 
-    @guarded(changes=True)
+    @_guarded(panel, changes=True)
     async def stop(request: Request) -> Response:
         return JSONResponse({"stopping": panel.bench.stop("STOP (panel)")})
 
-    @guarded(changes=True, control=True)
+    @_guarded(panel, changes=True, control=True)
     async def tune(request: Request) -> Response:
-        data = await body(request)
+        data = await _body(request)
         values = data.get("set")
         if not isinstance(values, dict):
             return JSONResponse({"error": "expected {'set': {param: value}}"}, status_code=400)
         try:
             events = await run_in_threadpool(panel.bench.tune, values, data.get("ramp_s"))
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
         return JSONResponse({"events": events})
 
-    @guarded(changes=True, control=True)
+    @_guarded(panel, changes=True, control=True)
     async def restore(request: Request) -> Response:
         try:
             events = await run_in_threadpool(panel.bench.restore)
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
         return JSONResponse({"events": events})
 
-    @guarded(changes=True)
+    return [
+        Route("/api/start", start, methods=["POST"]),
+        Route("/api/stop", stop, methods=["POST"]),
+        Route("/api/tune", tune, methods=["POST"]),
+        Route("/api/restore", restore, methods=["POST"]),
+    ]
+
+
+def _tool_routes(panel: Panel) -> list[Route]:
+    """The bench's other actions: save the tuned config, hand control over, the doctor, a report."""
+
+    @_guarded(panel, changes=True)
     async def save(request: Request) -> Response:
         try:
             text = panel.bench.saved_config()
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
         name = f"{panel.bench.run.law or 'panel'}-tuned.yaml"
         return PlainTextResponse(
             text, media_type="application/x-yaml", headers={"Content-Disposition": f'attachment; filename="{name}"'}
         )
 
-    @guarded(changes=True, control=True)
+    @_guarded(panel, changes=True, control=True)
     async def doctor(request: Request) -> Response:
-        data = await body(request)
+        data = await _body(request)
         driver, port = data.get("driver") or None, data.get("port") or None
         if not all(value is None or isinstance(value, str) for value in (driver, port)):
             return JSONResponse({"error": "doctor: driver and port are strings"}, status_code=400)
         try:
             return JSONResponse(await run_in_threadpool(panel.bench.doctor, driver, port))
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
 
-    @guarded(changes=True)
+    @_guarded(panel, changes=True)
     async def report(request: Request) -> Response:
-        names = (await body(request)).get("runs")
+        names = (await _body(request)).get("runs")
         if panel.bench.busy:  # a report's plotting would compete with the loop for the CPU
             return JSONResponse({"error": "report: the rig is running: report when it is idle"}, status_code=400)
         try:
             text = await run_in_threadpool(report_runs, panel.bench.runs_dir, names if isinstance(names, list) else [])
         except SashilError as err:
-            return refused(err)
+            return _refused(err)
         return PlainTextResponse(text)
 
-    @guarded(changes=True)
+    @_guarded(panel, changes=True)
     async def hand_over(request: Request) -> Response:
         return JSONResponse({"handed_over": panel.hand_over(request.headers.get("x-sashil-client", ""))})
+
+    return [
+        Route("/api/save", save, methods=["POST"]),
+        Route("/api/hand-over", hand_over, methods=["POST"]),
+        Route("/api/doctor", doctor, methods=["POST"]),
+        Route("/api/report", report, methods=["POST"]),
+    ]
+
+
+def _socket(panel: Panel) -> Callable[[WebSocket], Awaitable[None]]:
+    """The page's websocket: its checks before anything is read, then the panel's messages out and
+    STOP words in."""
 
     async def socket(websocket: WebSocket) -> None:
         headers = websocket.headers
@@ -352,6 +414,13 @@ def make_app(panel: Panel) -> Starlette:
                 await sender
             panel.leave(client)
 
+    return socket
+
+
+def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncContextManager[None]]:
+    """The server's lifespan: the display ticks, a loop process started ahead, and at the end the
+    bench stopped and joined."""
+
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
         async def broadcaster() -> None:
@@ -373,21 +442,4 @@ def make_app(panel: Panel) -> Starlette:
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
 
-    routes = [
-        Route("/", index),
-        Route("/static/{name}", static),
-        Route("/api/laws", laws),
-        Route("/api/status", status),
-        Route("/api/runs", runs),
-        Route("/api/runs/{name}/{item}", run_item),
-        Route("/api/start", start, methods=["POST"]),
-        Route("/api/stop", stop, methods=["POST"]),
-        Route("/api/tune", tune, methods=["POST"]),
-        Route("/api/restore", restore, methods=["POST"]),
-        Route("/api/save", save, methods=["POST"]),
-        Route("/api/hand-over", hand_over, methods=["POST"]),
-        Route("/api/doctor", doctor, methods=["POST"]),
-        Route("/api/report", report, methods=["POST"]),
-        WebSocketRoute("/ws", socket),
-    ]
-    return Starlette(routes=routes, lifespan=lifespan)
+    return lifespan

@@ -45,8 +45,7 @@ def laws_catalog(laws_dir: str | Path | None = None) -> list[LawChoice]:
     """Every law the registry knows (built-in and installed), then those of ``laws_dir``; a file
     law whose name a registered law already has is refused by the registry (one line), unless it
     is that law's own file (an installed package's folder), which is offered once."""
-    from sashil.cli.laws import describe
-    from sashil.control.law_registry import find_law, known_laws
+    from sashil.control.law_registry import describe, find_law, known_laws
 
     entries = known_laws()
     if laws_dir is not None:

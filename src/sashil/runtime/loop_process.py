@@ -44,7 +44,7 @@ from sashil.config.frozen import thaw
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, loop_summary, losses
+from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, end_summary, losses
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -130,7 +130,7 @@ class LoopProcess:
     ):
         """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`).
         ``plan``: the plan's spec (``plan.spec()``: its ``kind`` and arguments, which the loop
-        process builds the plan from: :data:`sashil.runtime.worker.PLANS`); None: ``sashil run``'s
+        process builds the plan from: the ``sashil.plans`` entry points); None: ``sashil run``'s
         stage, the config's law on its road."""
         self.job = {
             "plan": dict(plan) if plan is not None else {"kind": "run"},
@@ -278,41 +278,15 @@ class LoopProcess:
             stop=hooks.stop,
             verb=hooks.verb,
         )
-        end = ended.end
         affinity = {"session": self.session_affinity} if self.session_affinity else {}
-        summary = loop_summary(
-            exit_status=ended.exit_status,
-            timing=ended.timing.summary(),
-            trips=end.get("trips", []),
-            error=ended.error,
-            stop_reason=end.get("stop_reason"),
-            controller_stats=end.get("controller_stats"),
-            safety=end.get("safety"),
-            realtime={**end.get("realtime", {}), **affinity},
-            recording=ended.recording,
-            link=end.get("link"),
-            shutdown_errors=end.get("shutdown_errors", []),
-            safe_state=end.get("safe_state"),
-        )
-        events = (end.get("tuning") or {}).get("events") or []
-        facts = {
-            "pid": self.process.pid if self.process else None,
-            "threads": end.get("threads"),
-            "startup_s": None if self.startup_s is None else round(self.startup_s, 3),
-            "since_spawn_s": None if self.since_spawn_s is None else round(self.since_spawn_s, 3),
-            **({"died": end["loop_died"]} if "loop_died" in end else {}),
-        }
+        since_spawn_s = None if self.since_spawn_s is None else round(self.since_spawn_s, 3)
+        pid = self.process.pid if self.process else None
         timing = ended.timing.copy()  # the stream's shared rings end with the process
-        return RunOutcome(
-            ended.error,
-            ended.stop,
+        return ended.outcome(
             timing,
-            int(end.get("start_ns") or 0),
-            summary,
-            loop_process=facts,
-            tuning=end.get("tuning"),
-            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
-            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+            recording=ended.recording,
+            realtime={**ended.end.get("realtime", {}), **affinity},
+            facts=ended.facts(pid, self.startup_s, since_spawn_s=since_spawn_s),
         )
 
     def pass_stop(self, stop: StopFlag) -> Callable[[], None]:
@@ -540,6 +514,60 @@ class LoopEnd:
     recording: dict[str, Any]
     stop: StopFlag
 
+    def facts(self, pid: int | None, startup_s: float | None, **more: Any) -> dict[str, Any]:
+        """The loop process's facts for summary.json: its pid, threads and start-up (and ``more``);
+        ``died`` when it died."""
+        end = self.end
+        facts = {
+            "pid": pid,
+            "threads": end.get("threads"),
+            "startup_s": None if startup_s is None else round(startup_s, 3),
+            **more,
+        }
+        if "loop_died" in end:
+            facts["died"] = end["loop_died"]
+        return facts
+
+    def outcome(
+        self,
+        timing: Any,
+        *,
+        recording: dict[str, Any] | None,
+        realtime: dict[str, Any],
+        facts: dict[str, Any],
+        stream: dict[str, Any] | None = None,
+        can_trace: dict[str, Any] | None = None,
+    ) -> RunOutcome:
+        """The :class:`~sashil.runtime.runner.RunOutcome` of the run, wherever a session ran it in a
+        loop process (a session's run, a verb's plan): ``timing`` copied before the process closed,
+        ``recording`` None for a temporary stream file, which is no recording."""
+        end = self.end
+        events = (end.get("tuning") or {}).get("events") or []
+        summary = end_summary(
+            end,
+            exit_status=self.exit_status,
+            timing=timing.summary(),
+            error=self.error,
+            realtime=realtime,
+            recording=recording,
+        )
+        return RunOutcome(
+            self.error,
+            self.stop,
+            timing,
+            int(end.get("start_ns") or 0),
+            summary,
+            realtime=realtime,
+            recording=recording,
+            link=end.get("link"),
+            stream=stream if stream is not None else {},
+            can_trace=can_trace,
+            loop_process=facts,
+            tuning=end.get("tuning"),
+            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
+            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+        )
+
 
 def drive(
     process: LoopProcess,
@@ -564,9 +592,48 @@ def drive(
     stream = process.stream
     assert stream is not None
     rate = process.rate_hz
+    recorder, server = _before_go(process, data_path, duration_s, say, live, tune_folder)
+    flag = stop if stop is not None else StopFlag()
+    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
+    try:
+        with SessionSignals(flag, process):
+            process.go(data_path, verb)
+            end = process.wait_end(flag, say)
+    finally:
+        flag.on_request = None
+        if server is not None:
+            server.stop()
+    error: BaseException | None = None
+    try:
+        recorder.close()
+    except OSError as err:
+        error = err
+    timing = stream.timing(rate)
+    end, error, status = _ending(process, config, end, error, timing, flag, say)
+    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
+    if lost is not None:
+        error, status = lost, "lossy"
+        say("warning", str(lost))
+    return LoopEnd(end, error, status, timing, recorder.summary(), flag)
+
+
+def _before_go(
+    process: LoopProcess,
+    data_path: Path,
+    duration_s: float | None,
+    say: Callable[[str, str], None],
+    live: Any,
+    tune_folder: Path | None,
+) -> tuple[StreamRecorder, Any]:
+    """What runs before the loop is told to go: the disk checked, the recorder started, the tuning
+    socket served (with ``tune_folder``, when the law can be tuned), the views started. A failure
+    ends the loop process with nothing energised and raises."""
+    stream = process.stream
+    assert stream is not None
+    rate = process.rate_hz
     recorder: StreamRecorder | None = None
     server = None
-    try:  # until the loop is told to go, a failure ends the loop process with nothing energised
+    try:
         check_disk(data_path.parent, len(stream.columns), rate, duration_s)
         recorder = StreamRecorder(stream, data_path).start()
         if tune_folder is not None and process.ready.get("tunable"):
@@ -587,22 +654,22 @@ def drive(
             recorder.close()
         process.abort()
         raise
-    flag = stop if stop is not None else StopFlag()
-    flag.on_request = process.pass_stop(flag)  # a stop reaches the loop's next cycle, not the next poll
-    try:
-        with SessionSignals(flag, process):
-            process.go(data_path, verb)
-            end = process.wait_end(flag, say)
-    finally:
-        flag.on_request = None
-        if server is not None:
-            server.stop()
-    error: BaseException | None = None
-    try:
-        recorder.close()
-    except OSError as err:
-        error = err
-    timing = stream.timing(rate)
+    return recorder, server
+
+
+def _ending(
+    process: LoopProcess,
+    config: RunConfig,
+    end: dict[str, Any] | None,
+    error: BaseException | None,
+    timing: Any,
+    flag: StopFlag,
+    say: Callable[[str, str], None],
+) -> tuple[dict[str, Any], BaseException | None, str]:
+    """How the loop ended, from its ``end`` message, or, when it died, from the rows it committed
+    and the rig reopened to confirm 0 A: the end's keys, the error and the exit status."""
+    stream = process.stream
+    assert stream is not None
     if end is not None:
         timing.restore(end["timing"])
         if end.get("clip_warning"):
@@ -624,8 +691,4 @@ def drive(
         status = "error"
     if error is not None and status == "ok":
         status = "error"
-    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
-    if lost is not None:
-        error, status = lost, "lossy"
-        say("warning", str(lost))
-    return LoopEnd(end, error, status, timing, recorder.summary(), flag)
+    return end, error, status

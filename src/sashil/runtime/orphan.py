@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import SashilError
 from sashil.recording.run_folder import RunFolder
-from sashil.runtime.runner import loop_summary
+from sashil.runtime.runner import end_summary
 from sashil.runtime.stream import RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
 
@@ -52,19 +52,13 @@ def finish_alone(
     run.write_summary(
         {
             "verb": verb,
-            **loop_summary(
+            **end_summary(
+                end,
                 exit_status="error",
                 timing=timing.summary(),
-                trips=end["trips"],
                 error=error,
-                stop_reason=end["stop_reason"],
-                controller_stats=end["controller_stats"],
-                safety=end["safety"],
                 realtime=end["realtime"],
                 recording={"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
-                link=end["link"],
-                shutdown_errors=end["shutdown_errors"],
-                safe_state=end.get("safe_state"),
             ),
             "controller": config["controller"]["law"],
             "driver": config["driver"]["name"],

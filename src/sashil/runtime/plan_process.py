@@ -2,7 +2,7 @@
 as :func:`~sashil.runtime.runner.run_plan` gives in this process.
 
 On the real clock, with ``loop.process`` (the default), a plan that says how to build it
-(``plan.spec()``: its ``kind`` and arguments, :data:`sashil.runtime.worker.PLANS`) runs in a loop
+(``plan.spec()``: its ``kind`` and arguments, the ``sashil.plans`` entry points) runs in a loop
 process (:mod:`sashil.runtime.loop_process`): the rig, the safety supervisor and the plan live
 there, and nothing else. This process keeps the plan's twin, which takes what the loop process's
 plan saw (``plan.absorb(facts)``) after the run, records the stream into the data file, feeds the
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import DataFileError
 from sashil.recording.data_file import read_data_csv
-from sashil.runtime.runner import CYCLES_FILE, RunOutcome, loop_summary
+from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
 
 if TYPE_CHECKING:
@@ -60,16 +60,7 @@ def run_plan_process(
     spec = plan.spec()
     if spec is None:
         raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")
-    notify = getattr(plan, "notify", None)
-
-    def forward(kind: str, text: str) -> None:
-        if kind == "prompt" and notify is not None:
-            notify(text)
-        elif kind == "progress" and text.startswith("realtime:"):
-            log.debug("%s", text)
-        else:
-            say(text)
-
+    forward = _forwarder(getattr(plan, "notify", None), say)
     process = LoopProcess(config, duration_s, tune=False, can_trace=trace is not None, plan=spec).start()
     try:
         process.wait_ready(forward)
@@ -102,39 +93,26 @@ def run_plan_process(
         stream = {}
     if scratch is not None:
         scratch.cleanup()
-    error = ended.error
-    recording = ended.recording if data_path is not None else None  # a temporary stream file is no recording
-    summary = loop_summary(
-        exit_status=ended.exit_status,
-        timing=timing.summary(),
-        trips=list(end.get("trips", [])),
-        error=error,
-        stop_reason=end.get("stop_reason"),
-        controller_stats=end.get("controller_stats"),
-        safety=end.get("safety"),
-        realtime=end.get("realtime", {}),
-        recording=recording,
-        link=end.get("link"),
-        shutdown_errors=list(end.get("shutdown_errors", [])),
-        safe_state=end.get("safe_state"),
-    )
-    loop_process: dict[str, Any] = {
-        "pid": pid,
-        "threads": end.get("threads"),
-        "startup_s": None if startup_s is None else round(startup_s, 3),
-    }
-    if "loop_died" in end:
-        loop_process["died"] = end["loop_died"]
-    return RunOutcome(
-        error,
-        ended.stop,
+    return ended.outcome(
         timing,
-        int(end.get("start_ns") or 0),
-        summary,
-        realtime=end.get("realtime", {}),
-        recording=recording,
-        link=end.get("link"),
+        recording=ended.recording if data_path is not None else None,  # a temporary stream file is no recording
+        realtime=ended.end.get("realtime", {}),
+        facts=ended.facts(pid, startup_s),
         stream=stream,
         can_trace=trace_stats,
-        loop_process=loop_process,
     )
+
+
+def _forwarder(notify: Callable[[str], None] | None, say: Callable[[str], None]) -> Callable[[str, str], None]:
+    """Where the loop process's messages go: the operator's prompts to the plan's ``notify``, the
+    real-time set-up's report to the debug log, the rest to ``say``."""
+
+    def forward(kind: str, text: str) -> None:
+        if kind == "prompt" and notify is not None:
+            notify(text)
+        elif kind == "progress" and text.startswith("realtime:"):
+            log.debug("%s", text)
+        else:
+            say(text)
+
+    return forward

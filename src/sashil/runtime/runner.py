@@ -144,6 +144,34 @@ def loop_summary(
     }
 
 
+def end_summary(
+    end: dict[str, Any],
+    *,
+    exit_status: str,
+    timing: dict[str, Any],
+    error: BaseException | None,
+    realtime: dict[str, Any],
+    recording: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """:func:`loop_summary` of a loop that ran in a loop process, from its ``end`` message: the one
+    reading of that message, for the session (:class:`~sashil.runtime.loop_process.LoopEnd`) and for
+    a loop whose session died (:mod:`~sashil.runtime.orphan`)."""
+    return loop_summary(
+        exit_status=exit_status,
+        timing=timing,
+        trips=list(end.get("trips", [])),
+        error=error,
+        stop_reason=end.get("stop_reason"),
+        controller_stats=end.get("controller_stats"),
+        safety=end.get("safety"),
+        realtime=realtime,
+        recording=recording,
+        link=end.get("link"),
+        shutdown_errors=list(end.get("shutdown_errors", [])),
+        safe_state=end.get("safe_state"),
+    )
+
+
 @dataclass
 class RunOutcome:
     """What a loop run leaves, whether it ran in this process (:func:`run_plan`) or in its own
@@ -276,13 +304,13 @@ def run_plan(
     loop_cfg = config["loop"]
     rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
     columns = record_columns(plan)
-    recorder = None
-    scratch = None
     real_clock = not getattr(clock, "virtual", False)
     keep = read_stream and not real_clock  # the stream in memory (module docstring)
+    scratch = None
     if data_path is None and read_stream and not keep:
         scratch = tempfile.TemporaryDirectory(prefix="sashil-stream-")
         data_path = Path(scratch.name) / CYCLES_FILE
+    recorder = None
     if data_path is not None:
         data_path = Path(data_path)
         check_disk(data_path.parent, len(columns), rate, duration_s)
@@ -309,37 +337,9 @@ def run_plan(
     from sashil.runtime.warmup import warm_up
 
     warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
-    error: BaseException | None = None
-    with catch_stop_signals(stop) as flag:
-        loop.stop = flag
-        if recorder is not None:
-            recorder.start()
-        if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
-            live.start(recorder, loop.timing)
-        try:
-            error = run_realtime(loop, rt, note or say)
-        finally:
-            if recorder is not None:
-                try:
-                    recorder.close()
-                except OSError as err:
-                    if error is None:
-                        error = err
-                        loop.result.exit_status = "error"
-                        loop.result.error = str(err)
-    controller = plan if hasattr(plan, "clip_warning") else getattr(plan, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
-    clip_line = clipped() if callable(clipped) else None
-    if clip_line is not None:
-        say(clip_line)
-    stream: dict[str, Any] = {}
-    if keep and recorder is not None:
-        stream = recorder.stream()
-    elif read_stream and data_path is not None:
-        try:
-            stream = read_data_csv(data_path, required=(), min_rows=0)
-        except DataFileError:  # a stream the disk lost: what ended the run says why
-            stream = {}
+    error, flag = _run_recorded(loop, recorder, live, rt, stop, note or say)
+    _say_clipped(plan, say)
+    stream = _read_back(recorder if keep else None, data_path if read_stream else None)
     if scratch is not None:
         scratch.cleanup()
     link = rig.link_stats() if capabilities_of(rig).link else None
@@ -349,9 +349,77 @@ def run_plan(
         loop.result.exit_status = "lossy"
         loop.result.error = str(lost)
         say(str(lost))
+    recording = recorder.summary() if recorder is not None and data_path is not None else None
+    return _outcome(loop, plan, error, flag, rt, recording, link, stream)
+
+
+def _run_recorded(
+    loop: ControlLoop,
+    recorder: Recorder | None,
+    live: Any,
+    rt: RealtimeSetup | None,
+    stop: StopFlag | None,
+    note: Callable[[str], None],
+) -> tuple[BaseException | None, StopFlag]:
+    """Run ``loop`` with the stop signals routed to ``stop`` (or a flag of its own), the recorder
+    and the live view started first and the recorder closed after; the error that ended the run
+    (a recorder that cannot close ends it in error) and the stop flag."""
+    error: BaseException | None = None
+    with catch_stop_signals(stop) as flag:
+        loop.stop = flag
+        if recorder is not None:
+            recorder.start()
+        if live is not None:  # the rerun live view (sashil.recording.rerun_log.LiveTap)
+            live.start(recorder, loop.timing)
+        try:
+            error = run_realtime(loop, rt, note)
+        finally:
+            if recorder is not None:
+                try:
+                    recorder.close()
+                except OSError as err:
+                    if error is None:
+                        error = err
+                        loop.result.exit_status = "error"
+                        loop.result.error = str(err)
+    return error, flag
+
+
+def _read_back(kept: Recorder | None, data_path: Path | None) -> dict[str, Any]:
+    """The run's stream: the columns the recorder ``kept`` in memory, else those read back from
+    ``data_path``, else none."""
+    if kept is not None:
+        return kept.stream()
+    if data_path is not None:
+        try:
+            return read_data_csv(data_path, required=(), min_rows=0)
+        except DataFileError:  # a stream the disk lost: what ended the run says why
+            return {}
+    return {}
+
+
+def _say_clipped(plan: Any, say: Callable[[str], None]) -> None:
+    """The controller's line on the cycles its command was clipped in, if it has one."""
+    controller = plan if hasattr(plan, "clip_warning") else getattr(plan, "controller", None)
+    clipped = getattr(controller, "clip_warning", None)
+    clip_line = clipped() if callable(clipped) else None
+    if clip_line is not None:
+        say(clip_line)
+
+
+def _outcome(
+    loop: ControlLoop,
+    plan: Any,
+    error: BaseException | None,
+    flag: StopFlag,
+    rt: RealtimeSetup | None,
+    recording: dict[str, Any] | None,
+    link: dict[str, Any] | None,
+    stream: dict[str, Any],
+) -> RunOutcome:
+    """The :class:`RunOutcome` of a loop run in this process, its summary keys from the loop's result."""
     result = loop.result
     realtime_report = rt.report() if rt is not None else {}
-    recording = recorder.summary() if recorder is not None and data_path is not None else None
     return RunOutcome(
         error,
         flag,

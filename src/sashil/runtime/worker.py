@@ -34,11 +34,13 @@ import logging
 import os
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze_config
 from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
 from sashil.runtime.signals import catch_stop_signals
 
 if TYPE_CHECKING:
@@ -82,54 +84,6 @@ def error_fields(err: BaseException) -> dict[str, Any]:
     return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
 
 
-def run_stage(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """``sashil run``'s stage: the config's law on its road (the rig's road motor gets the profile's
-    speed); its label and the road's text."""
-    from sashil.control.registry import make_stage
-    from sashil.experiments.road_option import RoadStage, parse_road
-
-    label, stage = make_stage(config)
-    road, road_text = parse_road(config["run"]["road"], config)
-    if road is not None:
-        stage = RoadStage(stage, road)
-    return stage, label, road_text
-
-
-def drop_test_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """One drop of a drop test (:func:`sashil.experiments.drop_test.plan_drop`), its operator
-    prompts sent to the session as they come; the stage that takes over at the release is the
-    config's law, none, or one of :data:`STAGES` built from its spec."""
-    from sashil.experiments.drop_test import CONFIG_LAW, plan_drop
-
-    controller = spec.get("controller", CONFIG_LAW)
-    if isinstance(controller, dict):
-        controller = STAGES[str(controller.get("kind"))](controller)
-    plan = plan_drop(config, spec, rig, lambda line: messages.send("prompt", text=line), controller)
-    return plan, str(config["controller"]["law"]), "none"
-
-
-def calibration_step(spec: dict[str, Any]) -> Any:
-    """A calibration step's stage (:class:`sashil.calibrate.rig.StepStage`) from its spec."""
-    from sashil.calibrate.rig import StepStage
-
-    return StepStage.from_spec(spec)
-
-
-#: the stages a drop's plan can hand over to at the release, by the ``kind`` of their spec
-STAGES = {"calibration-step": calibration_step}
-
-
-def sweep_plan(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messages) -> tuple[Any, str, str]:
-    """One run of a sweep (a chirp, or one frequency of a stepped sine): the config's law on the road
-    of the spec (:func:`sashil.experiments.sweep.sweep_stage`)."""
-    from sashil.experiments.sweep import sweep_stage
-
-    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
-
-
-#: what a loop process can run: a plan's ``kind`` (its ``spec()``) and the function that builds it
-#: in the loop process from the config, the spec, the rig and the message channel
-PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 #: plans whose board is greeted when the loop starts, not before ``ready``: an operator (a person, or
 #: an emulator's ``--hold-deg``) holds the arm from the greeting and lets go a while after it, so a
 #: drop's hold must start with its loop (a port that cannot be opened then ends the run at once,
@@ -137,20 +91,27 @@ PLANS = {"run": run_stage, "drop-test": drop_test_plan, "sweep": sweep_plan}
 GREET_AT_START = frozenset({"drop-test"})
 
 
+def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:
+    """The function that builds a plan of ``kind`` in this process: the ``sashil.plans`` entry
+    point of that name (``build(config, spec, rig, prompt) -> (stage, label, road_text)``), so the
+    runtime imports no experiment."""
+    plans = entry_point_table(PLANS_GROUP)
+    if kind not in plans:
+        raise ConfigError(f"the loop process cannot run a plan of kind {kind!r} (it runs {', '.join(plans)})")
+    return load_target(plans[kind].target, f"plan {kind!r}")  # type: ignore[return-value]  # a registered builder
+
+
 def build(config: RunConfig, spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
     """The rig (built, configured: its port open and the board greeted) and the warmed plan of
-    ``spec`` (:data:`PLANS`), its label and the road's text."""
+    ``spec`` (:func:`plan_builder`), its label and the road's text; the plan's operator prompts go
+    to the session as ``prompt`` messages."""
     from sashil.drivers import open_rig
     from sashil.runtime.warmup import warm_up
 
-    make = PLANS.get(str(spec.get("kind")))
-    if make is None:
-        raise ConfigError(
-            f"the loop process cannot run a plan of kind {spec.get('kind')!r} (it runs {', '.join(PLANS)})"
-        )
+    make = plan_builder(str(spec.get("kind")))
     rig = open_rig(config)
     try:
-        stage, label, road_text = make(config, spec, rig, messages)
+        stage, label, road_text = make(config, spec, rig, lambda line: messages.send("prompt", text=line))
         warm_up(stage, lambda line: messages.send("progress", text=line))
         if spec.get("kind") not in GREET_AT_START:
             rig.configure()
@@ -166,11 +127,11 @@ def prepare(messages: Messages) -> None:
     compiled or loaded from the cache, its progress sent on an empty cache."""
     import sashil.control.registry
     import sashil.drivers
-    import sashil.experiments.road_option
     import sashil.runtime.loop
     import sashil.safety  # noqa: F401 - imported now, used by run()
     from sashil.runtime.warmup import warm_kernels
 
+    plan_builder("run")  # sashil run's plan and its road profiles, the run a process is started ahead for
     warm_kernels(lambda line: messages.send("progress", text=line))
 
 
@@ -194,24 +155,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     """The loop process's work (module doc); returns its exit code."""
-    from sashil.drivers.interface import capabilities_of
-    from sashil.runtime.clock import RealClock
-    from sashil.runtime.loop import ControlLoop, record_columns
     from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
     from sashil.runtime.runner import run_realtime
-    from sashil.runtime.stream import LOOP_PID_W, MISSED_W, STREAM_DIR, THREADS_W, FrameWriter, Stream, StreamWriter
+    from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
-    from sashil.safety import SafetySupervisor
 
-    if job.get("log_level") is not None:  # the session's command line set its logging up: the same here
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(message)s"))
-        logger = logging.getLogger("sashil")
-        logger.addHandler(handler)
-        logger.setLevel(int(job["log_level"]))
-    if job.get("sys_path"):  # the session's import path: a law named as module:Class imports as it did there
-        sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
+    _as_the_session(job)
     config = freeze_config(job["config"])  # read-only here too, as the session resolved it
     loop_cfg = config["loop"]
     rate = float(loop_cfg["rate_hz"])
@@ -222,18 +172,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
             "error", type="Stopped", text=f"stopped by {flag.signal_name} before the run started", exit_code=130
         )
         return 130
-    frames = FRAME_ROWS if job.get("can_trace") else 0
-    if frames and not capabilities_of(rig).can_frames:
-        rig.close()
-        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
-    try:
-        stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
-    except OSError as err:  # before anything is energised
-        rig.close()
-        raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
-    if frames:
-        rig.frame_sink = FrameWriter(stream).put
-    stream.header[LOOP_PID_W] = os.getpid()
+    stream = _create_stream(job, config, rig, stage, rate)
     stream.set_state("ready")
     law = getattr(stage, "law", None)
     tunable = bool(job.get("tune")) and law is not None and hasattr(law, "check_parameters")
@@ -254,21 +193,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     if tunable:
         tuning = MailboxTuning(law, rate, float(config["controller"].get(RAMP_KEY, 0.0)), stream)
     writer = StreamWriter(stream)
-    loop = ControlLoop(
-        rig,
-        stage,
-        RealClock.for_rate(loop_cfg["spin_margin_us"], rate),
-        rate,
-        job.get("duration_s"),
-        safety=SafetySupervisor.from_config(config),
-        recorder=writer,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
-        warn=lambda line: messages.send("warning", text=line),
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(rate),
-    )
+    loop = _control_loop(config, job, rig, stage, writer, tuning, stop, stream, messages)
     loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
     rt = RealtimeSetup.from_config(loop_cfg) if job.get("realtime", True) else None
     stream.set_state("running")
@@ -277,30 +202,9 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     if writer.error is not None and error is None:
         error = writer.error
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
-    result = loop.result
-    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
     if tuning is not None:
         tuning.close()
-    end = {
-        "exit_status": result.exit_status,
-        "error": error_fields(error) if error is not None else None,
-        "stop_reason": result.stop_reason,
-        "trips": result.trips,
-        "shutdown_errors": result.shutdown_errors,
-        "safe_state": result.safe_state,
-        "timing": loop.timing.counters(),
-        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-        "safety": loop.safety.summary() if loop.safety is not None else None,
-        "realtime": rt.report() if rt is not None else {},
-        "link": rig.link_stats() if capabilities_of(rig).link else None,
-        "clip_warning": clipped() if callable(clipped) else None,
-        "tuning": tuning.summary() if tuning is not None else None,
-        "tuning_notes": tuning.notes() if tuning is not None else [],
-        "threads": int(stream.header[THREADS_W]),
-        "start_ns": loop.start_ns,
-        "plan": stage.facts() if hasattr(stage, "facts") else None,
-    }
+    end = _end_message(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
     if stop.orphaned:
         from sashil.runtime.orphan import finish_alone
@@ -318,6 +222,108 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         messages.send("end", **end)
     writer.release()
     return 0
+
+
+def _control_loop(
+    config: RunConfig,
+    job: dict[str, Any],
+    rig: Any,
+    stage: Any,
+    writer: Any,
+    tuning: Any,
+    stop: Any,
+    stream: Any,
+    messages: Messages,
+) -> Any:
+    """The run's :class:`~sashil.runtime.loop.ControlLoop` on the real clock: its rows to the
+    stream's ``writer``, its timing in the stream, its warnings to the session."""
+    from sashil.runtime.clock import RealClock
+    from sashil.runtime.loop import ControlLoop
+    from sashil.safety import SafetySupervisor
+
+    loop_cfg = config["loop"]
+    rate = float(loop_cfg["rate_hz"])
+    return ControlLoop(
+        rig,
+        stage,
+        RealClock.for_rate(loop_cfg["spin_margin_us"], rate),
+        rate,
+        job.get("duration_s"),
+        safety=SafetySupervisor.from_config(config),
+        recorder=writer,
+        overrun_policy=loop_cfg["overrun_policy"],
+        warn_interval_s=loop_cfg["warn_interval_s"],
+        warn=lambda line: messages.send("warning", text=line),
+        tuning=tuning,
+        stop=stop,
+        timing=stream.timing(rate),
+    )
+
+
+def _as_the_session(job: dict[str, Any]) -> None:
+    """The session's logging and import path, here too: its command line set its logging up, and a
+    law named as ``module:Class`` imports as it did there."""
+    if job.get("log_level") is not None:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger = logging.getLogger("sashil")
+        logger.addHandler(handler)
+        logger.setLevel(int(job["log_level"]))
+    if job.get("sys_path"):
+        sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
+
+
+def _create_stream(job: dict[str, Any], config: RunConfig, rig: Any, stage: Any, rate: float) -> Any:
+    """The run's stream for the stage's columns (and a CAN frame ring when the job traces frames),
+    this process's pid in its header; the rig closed when it cannot be made (nothing energised)."""
+    from sashil.drivers.interface import capabilities_of
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.stream import LOOP_PID_W, STREAM_DIR, FrameWriter, Stream
+
+    frames = FRAME_ROWS if job.get("can_trace") else 0
+    if frames and not capabilities_of(rig).can_frames:
+        rig.close()
+        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
+    try:
+        stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
+    except OSError as err:  # before anything is energised
+        rig.close()
+        raise DiskSpaceError(f"{STREAM_DIR}: cannot hold the run's stream: {err.strerror or err}") from None
+    if frames:
+        rig.frame_sink = FrameWriter(stream).put
+    stream.header[LOOP_PID_W] = os.getpid()
+    return stream
+
+
+def _end_message(
+    loop: Any, error: BaseException | None, stage: Any, rt: Any, rig: Any, tuning: Any, threads: int
+) -> dict[str, Any]:
+    """The ``end`` message's keys: how the loop ended, its timing counters, the stage's, the safety
+    supervisor's, the real-time set-up's and the rig's facts, the tuning's events."""
+    from sashil.drivers.interface import capabilities_of
+
+    result = loop.result
+    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
+    clipped = getattr(controller, "clip_warning", None)
+    return {
+        "exit_status": result.exit_status,
+        "error": error_fields(error) if error is not None else None,
+        "stop_reason": result.stop_reason,
+        "trips": result.trips,
+        "shutdown_errors": result.shutdown_errors,
+        "safe_state": result.safe_state,
+        "timing": loop.timing.counters(),
+        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
+        "safety": loop.safety.summary() if loop.safety is not None else None,
+        "realtime": rt.report() if rt is not None else {},
+        "link": rig.link_stats() if capabilities_of(rig).link else None,
+        "clip_warning": clipped() if callable(clipped) else None,
+        "tuning": tuning.summary() if tuning is not None else None,
+        "tuning_notes": tuning.notes() if tuning is not None else [],
+        "threads": threads,
+        "start_ns": loop.start_ns,
+        "plan": stage.facts() if hasattr(stage, "facts") else None,
+    }
 
 
 if __name__ == "__main__":

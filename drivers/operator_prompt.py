@@ -4,7 +4,8 @@ A drop starts from the arm pressed to a hold angle (seed 001 section 8). The hos
 prompt, :func:`hold_prompt` ("press the arm to -5 deg ..."), before it connects; the person reads
 it and presses. :func:`prompted_hold_deg` reads the angle back out of a line of text, as an
 emulated operator that reads the host's console does (``sashil emulate --prompts``): it learns only
-what the console says to a person.
+what the console says to a person. Both sides of the operator hold read this one phrase: the
+host's plans and the emulated operator, which stands beside the backends in ``sashil.drivers``.
 """
 
 from __future__ import annotations
