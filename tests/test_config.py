@@ -49,7 +49,7 @@ def _write(tmp_path, text: str) -> Path:
         ("rig:\n  coil_tau_s: -1\n", "lab.yaml: rig.coil_tau_s: expected a number >= 0"),
         ("rig:\n  encoder_counts_per_rev: 4096.5\n", "lab.yaml: rig.encoder_counts_per_rev: expected an integer"),
         ("loop:\n  rate_hz: 0\n", "lab.yaml: loop.rate_hz: expected a number > 0"),
-        ("driver:\n  name: usb\n", "lab.yaml: driver.name: expected one of 'can', 'serial', 'sim', got 'usb'"),
+        ("driver:\n  name: usb\n", "lab.yaml: driver.name: expected one of 'can', 'rtdac', 'serial', 'sim', got 'usb'"),
         ("model:\n  params:\n    kk: 1\n", "lab.yaml: model.params.kk: not a bouc-wen parameter"),
         ("model:\n  params:\n    n: -1\n", "lab.yaml: model.params.n: expected a number > 0"),
         ("model:\n  params:\n    k: true\n", "lab.yaml: model.params.k: expected a number, got True"),
