@@ -2,7 +2,8 @@
 ``sashil panel`` started as a user starts it, on the simulated rig.
 
 Set ``SASHIL_PANEL_SCREENSHOTS=DIR`` to keep the screenshots of the Bench and Runs views the test
-takes, as ``DIR/panel.png`` and ``DIR/panel-runs.png`` (the manual's how-to page shows them).
+takes, as ``DIR/panel.png`` and ``DIR/panel-runs.png``. The manual's figures of the panel come from
+``tools/panel_figures.py``, not from here (a clean runs folder, no overruns).
 """
 
 from __future__ import annotations

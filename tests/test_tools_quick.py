@@ -3,7 +3,7 @@
 Each script takes ``--quick``: the same code path on a tiny problem (seconds), printing its figures
 (meaningless at that size). A script whose quick mode another test already runs and checks
 (:data:`RUN_ELSEWHERE`) is not run a second time here. A script that needs a tool this machine lacks (qemu-system-arm, a C
-compiler, make and ziglang) says so in one line and exits 0. A new script without ``--quick`` fails
+compiler, make and ziglang, Chromium and Playwright) says so in one line and exits 0. A new script without ``--quick`` fails
 the first test.
 """
 
@@ -20,8 +20,12 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted((ROOT / "tools").glob("*.py"))
 
-#: the scripts that run on the wall clock against an emulated rig over ptys (or QEMU's serial socket)
-E2E = {"bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "qemu_smoke.py"}
+#: the scripts that run on the wall clock against an emulated rig over ptys (or QEMU's serial socket), or
+#: drive Chromium against the panel
+E2E = {
+    "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "panel_figures.py",
+    "qemu_smoke.py",
+}  # fmt: skip
 
 #: scripts whose quick mode a test elsewhere runs whole and checks the figures of (script: that test)
 RUN_ELSEWHERE = {"bench_drop_damping.py": ("test_drop_damping.py", "test_bench_quick_meets_the_goal")}
