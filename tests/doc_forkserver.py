@@ -1,0 +1,151 @@
+"""A warm interpreter for the manual's commands: each ``sashil`` a page's script runs is a fork of it.
+
+A fresh ``sashil`` process spends a second or more before its verb starts (numpy, numba and the
+compiled kernels from its cache, scipy, matplotlib, the lab's modules); the manual's pages run
+dozens of them. This server pays that once: it imports what a verb loads and loads every loop kernel,
+then forks one child per command. The child is the command: it takes the caller's standard streams,
+working folder and environment, runs ``sashil.cli.main`` on the caller's arguments and sends its
+exit code back. The caller is a small client (:data:`CLIENT`, the ``sashil`` first on the page's
+PATH) that passes on the signals it gets (``kill -INT "$emulator"``) and exits with the child's code.
+
+The server runs as its own process (``python tests/doc_forkserver.py SOCKET``), single-threaded, so a
+fork copies one thread; it ends when its standard input closes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import socket
+import sys
+from pathlib import Path
+
+#: the ``sashil`` a page's script runs: connect, hand over the streams, wait for the exit code
+CLIENT = r"""
+import json, os, signal, socket, sys
+sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+sock.connect(os.environ["SASHIL_DOC_FORKSERVER"])
+request = json.dumps({"argv": sys.argv[1:], "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
+socket.send_fds(sock, [len(request).to_bytes(8, "big") + request], [0, 1, 2])
+reply = b""
+while not reply.endswith(b"\n"):
+    reply += sock.recv(64)
+child = int(reply)
+
+
+def forward(signum):
+    try:
+        os.kill(child, signum)
+    except ProcessLookupError:
+        pass
+
+
+for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    signal.signal(number, lambda signum, frame: forward(signum))
+code = b""
+while True:
+    try:
+        chunk = sock.recv(64)
+    except InterruptedError:
+        continue
+    if not chunk:
+        break
+    code += chunk
+sys.exit(int(code) if code.strip() else 1)
+"""
+
+
+def _warm() -> None:
+    """Import what the verbs load and load every loop kernel (numba's cache) once, for every child."""
+    import matplotlib.backends.backend_agg
+    import matplotlib.figure  # noqa: F401
+
+    import sashil.cli
+    import sashil.lab
+    from sashil.runtime.warmup import warm_kernels
+
+    warm_kernels()
+    sashil.cli.build_parser()
+
+
+def _receive(conn: socket.socket) -> tuple[dict, list[int]]:
+    head, fds, _, _ = socket.recv_fds(conn, 8, 3)
+    while len(head) < 8:
+        head += conn.recv(8 - len(head))
+    size = int.from_bytes(head, "big")
+    body = b""
+    while len(body) < size:
+        body += conn.recv(size - len(body))
+    return json.loads(body), fds
+
+
+def _child(conn: socket.socket, request: dict, fds: list[int]) -> None:
+    """The command: the caller's streams, folder and environment, then ``sashil``; never returns."""
+    code = 1
+    try:
+        conn.sendall(f"{os.getpid()}\n".encode())  # first: the client passes its signals on to it
+        for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGCHLD):
+            signal.signal(number, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        for target, fd in enumerate(fds):
+            os.dup2(fd, target)
+            os.close(fd)
+        os.chdir(request["cwd"])
+        os.environ.clear()
+        os.environ.update(request["env"])
+        sys.argv = ["sashil", *request["argv"]]
+        from sashil.cli import main
+
+        code = main(request["argv"]) or 0
+    except SystemExit as stop:
+        code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
+    except KeyboardInterrupt:
+        code = 130
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()
+        code = 1
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        except Exception:
+            pass
+        try:
+            conn.sendall(f"{code}\n".encode())
+        finally:
+            os._exit(code if isinstance(code, int) else 1)
+
+
+def serve(path: Path) -> None:
+    _warm()
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped as they end
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind(str(path))
+    listener.listen(16)
+    sys.stdout.write("ready\n")
+    sys.stdout.flush()
+    stdin = sys.stdin.fileno()
+    while True:
+        ready, _, _ = select.select([listener, stdin], [], [])
+        if stdin in ready and not os.read(stdin, 1):
+            break  # the test ended
+        if listener not in ready:
+            continue
+        conn, _ = listener.accept()
+        request, fds = _receive(conn)
+        pid = os.fork()
+        if pid == 0:
+            listener.close()
+            _child(conn, request, fds)
+        for fd in fds:
+            os.close(fd)
+        conn.close()
+    listener.close()
+
+
+if __name__ == "__main__":
+    serve(Path(sys.argv[1]))
