@@ -17,12 +17,11 @@ import re
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
-import doc_forkserver
 import pytest
 from doc_blocks import fenced_blocks
+from warm_sashil import WarmSashil
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -95,43 +94,17 @@ def _script(page: Path, folder: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-@pytest.fixture(scope="module")
-def warm_sashil(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
-    """What a page's script runs as ``sashil``: a fork of one warm interpreter (tests/doc_forkserver.py),
-    so each command starts in milliseconds instead of a second; the environment that selects it."""
-    folder = tmp_path_factory.mktemp("warm-sashil")
-    client = folder / "bin" / "sashil"
-    client.parent.mkdir()
-    client.write_text(f"#!{sys.executable} -S\n{doc_forkserver.CLIENT}", encoding="utf-8")
-    client.chmod(0o755)
-    socket_path = folder / "server.sock"
-    server = subprocess.Popen(
-        [sys.executable, str(ROOT / "tests" / "doc_forkserver.py"), str(socket_path)],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert server.stdout is not None and server.stdout.readline() == "ready\n"
-        yield {"PATH": str(client.parent), "SASHIL_DOC_FORKSERVER": str(socket_path)}
-    finally:
-        assert server.stdin is not None
-        server.stdin.close()  # the server's end
-        server.wait(timeout=30)
-        if server.stdout is not None:
-            server.stdout.close()
-
-
 @pytest.mark.e2e
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
-def test_examples_run(page: Path, tmp_path: Path, warm_sashil: dict[str, str]):
+def test_examples_run(page: Path, tmp_path: Path, warm_sashil: WarmSashil):
     script = _script(page, tmp_path)
     if script.count("\n") <= 3:
         pytest.skip(f"{page.name}: no block runs here (none, or each needs hardware)")
     for name in ("configs", "examples", "drivers"):
         (tmp_path / name).symlink_to(ROOT / name)
-    path = os.pathsep.join((warm_sashil["PATH"], str(Path(sys.executable).parent), os.environ.get("PATH", "")))
-    env = {**os.environ, "PATH": path, "SASHIL_DOC_FORKSERVER": warm_sashil["SASHIL_DOC_FORKSERVER"]}
+    # the page's sashil: a fork of the warm interpreter (tests/warm_sashil.py)
+    path = os.pathsep.join((str(warm_sashil.bin), str(Path(sys.executable).parent), os.environ.get("PATH", "")))
+    env = {**os.environ, "PATH": path}
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, f"{page.name}: exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
 

@@ -1,38 +1,46 @@
-"""A warm interpreter for the manual's commands: each ``sashil`` a page's script runs is a fork of it.
+"""A warm interpreter for the tests' ``sashil`` commands: each one a fork of it, not a new interpreter.
 
 A fresh ``sashil`` process spends a second or more before its verb starts (numpy, numba and the
-compiled kernels from its cache, scipy, matplotlib, the lab's modules); the manual's pages run
-dozens of them. This server pays that once: it imports what a verb loads and loads every loop kernel,
-then forks one child per command. The child is the command: it takes the caller's standard streams,
-working folder and environment, runs ``sashil.cli.main`` on the caller's arguments and sends its
-exit code back. The caller is a small client (:data:`CLIENT`, the ``sashil`` first on the page's
-PATH) that passes on the signals it gets (``kill -INT "$emulator"``) and exits with the child's code.
+compiled kernels from its cache, scipy, matplotlib, the lab's modules); the manual's pages and the
+link tests run dozens of them. This server pays that once: it imports what a verb loads and loads
+every loop kernel, then forks one child per command. The child is the command: it takes the caller's
+standard streams, working folder and environment, runs ``sashil.cli.main`` on the caller's arguments
+and sends its exit code back. The caller is a small client (:func:`client_script`, an executable
+named ``sashil``) that passes on the signals it gets (SIGINT, SIGTERM, SIGHUP) and exits with the
+child's code. A test that signals the session itself with SIGKILL, or reads its pid, keeps a fresh
+interpreter.
 
-The server runs as its own process (``python tests/doc_forkserver.py SOCKET``), single-threaded, so a
-fork copies one thread; it ends when its standard input closes.
+The server runs as its own process (``python tests/warm_sashil.py SOCKET``), single-threaded, so a
+fork copies one thread; it ends when its standard input closes (:class:`WarmSashil`).
 """
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import select
 import signal
 import socket
+import subprocess
 import sys
 from pathlib import Path
 
-#: the ``sashil`` a page's script runs: connect, hand over the streams, wait for the exit code
+#: the client: connect, hand over the streams, wait for the exit code (``{socket!r}``: the server's)
 CLIENT = r"""
 import json, os, signal, socket, sys
 sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-sock.connect(os.environ["SASHIL_DOC_FORKSERVER"])
+sock.connect({socket!r})
 request = json.dumps({"argv": sys.argv[1:], "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
 socket.send_fds(sock, [len(request).to_bytes(8, "big") + request], [0, 1, 2])
 reply = b""
-while not reply.endswith(b"\n"):
-    reply += sock.recv(64)
-child = int(reply)
+while b"\n" not in reply:
+    chunk = sock.recv(64)
+    if not chunk:
+        sys.exit(1)
+    reply += chunk
+pid, code = reply.split(b"\n", 1)  # the child's pid first, then (once it ends) its exit code
+child = int(pid)
 
 
 def forward(signum):
@@ -44,7 +52,6 @@ def forward(signum):
 
 for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
     signal.signal(number, lambda signum, frame: forward(signum))
-code = b""
 while True:
     try:
         chunk = sock.recv(64)
@@ -122,6 +129,9 @@ def _child(conn: socket.socket, request: dict, fds: list[int]) -> None:
 
 def serve(path: Path) -> None:
     _warm()
+    # what the warm-up loaded is never freed: out of the collector's sight, a child's collections
+    # stay as short as a fresh interpreter's (and do not copy the shared pages)
+    gc.freeze()
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped as they end
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind(str(path))
@@ -145,6 +155,39 @@ def serve(path: Path) -> None:
             os.close(fd)
         conn.close()
     listener.close()
+
+
+def client_script(socket_path: Path) -> str:
+    """The client's source, an executable script for this interpreter (``-S``: no site-packages)."""
+    return f"#!{sys.executable} -S\n" + CLIENT.replace("{socket!r}", repr(str(socket_path)))
+
+
+class WarmSashil:
+    """The server started in ``folder``, and its client as ``folder/bin/sashil`` (:attr:`command`)."""
+
+    def __init__(self, folder: Path):
+        self.bin = folder / "bin"
+        self.bin.mkdir()
+        socket_path = folder / "server.sock"
+        client = self.bin / "sashil"
+        client.write_text(client_script(socket_path), encoding="utf-8")
+        client.chmod(0o755)
+        self.command = [str(client)]
+        self.server = subprocess.Popen(
+            [sys.executable, __file__, str(socket_path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+        assert self.server.stdout is not None
+        if self.server.stdout.readline() != "ready\n":
+            self.close()
+            raise RuntimeError("the warm sashil server did not start")
+
+    def close(self) -> None:
+        """End the server (its standard input closes); the commands it forked end on their own."""
+        if self.server.stdin is not None:
+            self.server.stdin.close()
+        self.server.wait(timeout=30)
+        if self.server.stdout is not None:
+            self.server.stdout.close()
 
 
 if __name__ == "__main__":
