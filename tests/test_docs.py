@@ -78,8 +78,9 @@ def test_every_block_runs_or_says_what_it_needs(page: Path):
             assert not block.needs, f"{page.name}:{block.line}: a shown block runs nothing, it needs nothing"
 
 
-def _script(page: Path, folder: Path) -> str:
-    """The page's runnable blocks as one bash script (python blocks written beside it and run)."""
+def _script(page: Path, folder: Path, python: str = f'"{sys.executable}"') -> str:
+    """The page's runnable blocks as one bash script (python blocks written beside it and run by
+    ``python``)."""
     # a block that fails leaves nothing behind: what the page started in the background is stopped
     lines = ["set -euo pipefail", "trap 'jobs -p | xargs -r kill -INT 2>/dev/null || true; wait' EXIT"]
     for n, block in enumerate(fenced_blocks(page.read_text(encoding="utf-8"))):
@@ -87,7 +88,7 @@ def _script(page: Path, folder: Path) -> str:
             continue
         if block.info == "python":
             (folder / f"block{n}.py").write_text(block.body, encoding="utf-8")
-            lines.append(f'"{sys.executable}" block{n}.py')
+            lines.append(f"{python} block{n}.py")
         else:
             lines.append(block.body)
     lines.append("wait")  # anything a block started in the background
@@ -97,7 +98,7 @@ def _script(page: Path, folder: Path) -> str:
 @pytest.mark.e2e
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_examples_run(page: Path, tmp_path: Path, warm_sashil: WarmSashil):
-    script = _script(page, tmp_path)
+    script = _script(page, tmp_path, python=warm_sashil.python[0])  # the blocks fork the warm interpreter too
     if script.count("\n") <= 3:
         pytest.skip(f"{page.name}: no block runs here (none, or each needs hardware)")
     for name in ("configs", "examples", "drivers"):

@@ -7,7 +7,7 @@ every loop kernel, then forks one child per command. The child is the command: i
 standard streams, working folder and environment, runs ``sashil.cli.main`` on the caller's arguments
 and sends its exit code back. The caller is a small client (:func:`client_script`, an executable
 named ``sashil``) that passes on the signals it gets (SIGINT, SIGTERM, SIGHUP) and exits with the
-child's code. A test that signals the session itself with SIGKILL, or reads its pid, keeps a fresh
+child's code; the client named ``sashil-python`` runs a Python script so. A test that signals the session itself with SIGKILL, or reads its pid, keeps a fresh
 interpreter.
 
 The server runs as its own process (``python tests/warm_sashil.py SOCKET``), single-threaded, so a
@@ -19,6 +19,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import runpy
 import select
 import signal
 import socket
@@ -26,12 +27,16 @@ import subprocess
 import sys
 from pathlib import Path
 
+#: the client named so runs a Python script (its first argument) instead of a sashil command
+PYTHON = "sashil-python"
+
 #: the client: connect, hand over the streams, wait for the exit code (``{socket!r}``: the server's)
 CLIENT = r"""
 import json, os, signal, socket, sys
 sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
 sock.connect({socket!r})
-request = json.dumps({"argv": sys.argv[1:], "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
+name = os.path.basename(sys.argv[0])
+request = json.dumps({"name": name, "argv": sys.argv[1:], "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
 socket.send_fds(sock, [len(request).to_bytes(8, "big") + request], [0, 1, 2])
 reply = b""
 while b"\n" not in reply:
@@ -102,10 +107,17 @@ def _child(conn: socket.socket, request: dict, fds: list[int]) -> None:
         os.chdir(request["cwd"])
         os.environ.clear()
         os.environ.update(request["env"])
-        sys.argv = ["sashil", *request["argv"]]
-        from sashil.cli import main
+        if request["name"] == PYTHON:  # a script, as ``python SCRIPT ARGS...`` runs it
+            script = request["argv"][0]
+            sys.argv = list(request["argv"])
+            sys.path.insert(0, os.path.dirname(os.path.abspath(script)))
+            runpy.run_path(script, run_name="__main__")
+            code = 0
+        else:
+            sys.argv = ["sashil", *request["argv"]]
+            from sashil.cli import main
 
-        code = main(request["argv"]) or 0
+            code = main(request["argv"]) or 0
     except SystemExit as stop:
         code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
     except KeyboardInterrupt:
@@ -163,16 +175,20 @@ def client_script(socket_path: Path) -> str:
 
 
 class WarmSashil:
-    """The server started in ``folder``, and its client as ``folder/bin/sashil`` (:attr:`command`)."""
+    """The server started in ``folder``, and its clients ``folder/bin/sashil`` (:attr:`command`) and
+    ``folder/bin/sashil-python`` (:attr:`python`)."""
 
     def __init__(self, folder: Path):
         self.bin = folder / "bin"
         self.bin.mkdir()
         socket_path = folder / "server.sock"
-        client = self.bin / "sashil"
-        client.write_text(client_script(socket_path), encoding="utf-8")
-        client.chmod(0o755)
-        self.command = [str(client)]
+        for name in ("sashil", PYTHON):
+            client = self.bin / name
+            client.write_text(client_script(socket_path), encoding="utf-8")
+            client.chmod(0o755)
+        self.command = [str(self.bin / "sashil")]
+        #: runs a Python script (``[*python, SCRIPT]``) in a fork of the warm interpreter
+        self.python = [str(self.bin / PYTHON)]
         self.server = subprocess.Popen(
             [sys.executable, __file__, str(socket_path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
         )
