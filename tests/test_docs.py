@@ -31,6 +31,8 @@ import gen_reference  # noqa: E402
 
 RUN = {"sh", "python"}
 SHOWN = {"text", "yaml"}
+#: the page whose commands run in fresh interpreters, the installed ``sashil`` script among them
+COLD_PAGE = "first-drop-test.md"
 #: the pages whose examples run as tests
 EXAMPLE_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + sorted((DOCS / "how-to").glob("*.md"))
 
@@ -70,6 +72,10 @@ def test_config_reference_has_every_key_and_no_other():
     assert re.findall(r"^\| `([\w.]+)` \|", page, flags=re.M) == list(keys(SCHEMA))
 
 
+def test_one_page_runs_the_installed_sashil_in_fresh_interpreters():
+    assert [p.name for p in EXAMPLE_PAGES].count(COLD_PAGE) == 1
+
+
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_every_block_runs_or_says_what_it_needs(page: Path):
     for block in fenced_blocks(page.read_text(encoding="utf-8")):
@@ -98,13 +104,17 @@ def _script(page: Path, folder: Path, python: str = f'"{sys.executable}"') -> st
 @pytest.mark.e2e
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_examples_run(page: Path, tmp_path: Path, warm_sashil: WarmSashil):
-    script = _script(page, tmp_path, python=warm_sashil.python[0])  # the blocks fork the warm interpreter too
+    # the first tutorial runs as a reader's shell runs it: the installed sashil console script and a
+    # fresh interpreter for each block; every other page's sashil and python blocks fork the warm
+    # interpreter (tests/warm_sashil.py)
+    cold = page.name == COLD_PAGE
+    script = _script(page, tmp_path) if cold else _script(page, tmp_path, python=warm_sashil.python[0])
     if script.count("\n") <= 3:
         pytest.skip(f"{page.name}: no block runs here (none, or each needs hardware)")
     for name in ("configs", "examples", "drivers"):
         (tmp_path / name).symlink_to(ROOT / name)
-    # the page's sashil: a fork of the warm interpreter (tests/warm_sashil.py)
-    path = os.pathsep.join((str(warm_sashil.bin), str(Path(sys.executable).parent), os.environ.get("PATH", "")))
+    first = [] if cold else [str(warm_sashil.bin)]
+    path = os.pathsep.join((*first, str(Path(sys.executable).parent), os.environ.get("PATH", "")))
     env = {**os.environ, "PATH": path}
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, f"{page.name}: exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
