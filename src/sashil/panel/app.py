@@ -369,9 +369,9 @@ def make_app(panel: Panel) -> Starlette:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-            stop_ahead()
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
+            stop_ahead()  # after the run's thread has ended: its last act starts the next run's process
 
     routes = [
         Route("/", index),
