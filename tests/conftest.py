@@ -25,6 +25,7 @@ from pathlib import Path
 
 import can
 import pytest
+from warm_sashil import WarmSashil
 
 from sashil.config import default_config
 
@@ -73,6 +74,17 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
             return module if _module_shares_a_fixture(str(config.rootpath / module)) else nodeid
 
     return ModuleWhenShared(config, log)
+
+
+@pytest.fixture(scope="session")
+def warm_sashil(tmp_path_factory: pytest.TempPathFactory) -> Iterator[WarmSashil]:
+    """A ``sashil`` whose commands fork one warm interpreter (tests/warm_sashil.py): for the tests that
+    run many commands and signal them only by SIGINT, SIGTERM or SIGHUP."""
+    warm = WarmSashil(tmp_path_factory.mktemp("warm-sashil"))
+    try:
+        yield warm
+    finally:
+        warm.close()
 
 
 @pytest.fixture

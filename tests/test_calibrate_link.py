@@ -20,7 +20,21 @@ from sashil.config import default_config, load_params
 
 pytestmark = pytest.mark.e2e  # the emulator in a child process over a pty, on the wall clock
 
-SASHIL = [sys.executable, "-m", "sashil"]
+#: a fresh interpreter per command; the module's tests fork a warm one instead (:func:`_warm_sashil`)
+COLD_SASHIL = [sys.executable, "-m", "sashil"]
+SASHIL = COLD_SASHIL
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _warm_sashil(warm_sashil):
+    """This module's ``sashil`` commands fork the warm interpreter (tests/warm_sashil.py): they are
+    signalled with SIGINT or SIGTERM only, which its client passes on."""
+    global SASHIL
+    SASHIL = warm_sashil.command
+    yield
+    SASHIL = COLD_SASHIL
+
+
 SMALL_PLAN = {
     "currents_a": [0.0, 1.0],
     "small_currents_a": [],

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 from doc_blocks import fenced_blocks
+from warm_sashil import WarmSashil
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -32,6 +33,8 @@ import gen_reference  # noqa: E402
 
 RUN = {"sh", "python"}
 SHOWN = {"text", "yaml"}
+#: the page whose commands run in fresh interpreters, the installed ``sashil`` script among them
+COLD_PAGE = "first-drop-test.md"
 #: the pages whose examples run as tests
 EXAMPLE_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + sorted((DOCS / "how-to").glob("*.md"))
 
@@ -106,6 +109,10 @@ def test_config_reference_has_every_key_and_no_other():
     assert re.findall(r"^\| `([\w.]+)` \|", page, flags=re.M) == list(keys(SCHEMA))
 
 
+def test_one_page_runs_the_installed_sashil_in_fresh_interpreters():
+    assert [p.name for p in EXAMPLE_PAGES].count(COLD_PAGE) == 1
+
+
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_every_block_runs_or_says_what_it_needs(page: Path):
     for block in fenced_blocks(page.read_text(encoding="utf-8")):
@@ -127,8 +134,9 @@ def test_tutorials_say_how_to_use_the_quick_starts_environment(page: Path):
     assert not any(".venv/bin/" in block.body for block in blocks), f"{page.name}: commands as in the active .venv"
 
 
-def _script(page: Path, folder: Path) -> str:
-    """The page's runnable blocks as one bash script (python blocks written beside it and run)."""
+def _script(page: Path, folder: Path, python: str = f'"{sys.executable}"') -> str:
+    """The page's runnable blocks as one bash script (python blocks written beside it and run by
+    ``python``)."""
     # a block that fails leaves nothing behind: what the page started in the background is stopped
     lines = ["set -euo pipefail", "trap 'jobs -p | xargs -r kill -INT 2>/dev/null || true; wait' EXIT"]
     for n, block in enumerate(fenced_blocks(page.read_text(encoding="utf-8"))):
@@ -136,7 +144,7 @@ def _script(page: Path, folder: Path) -> str:
             continue
         if block.info == "python":
             (folder / f"block{n}.py").write_text(block.body, encoding="utf-8")
-            lines.append(f'"{sys.executable}" block{n}.py')
+            lines.append(f"{python} block{n}.py")
         else:
             lines.append(block.body)
     lines.append("wait")  # anything a block started in the background
@@ -145,13 +153,19 @@ def _script(page: Path, folder: Path) -> str:
 
 @pytest.mark.e2e
 @pytest.mark.parametrize("page", EXAMPLE_PAGES, ids=lambda p: f"{p.parent.name}/{p.name}")
-def test_examples_run(page: Path, tmp_path: Path):
-    script = _script(page, tmp_path)
+def test_examples_run(page: Path, tmp_path: Path, warm_sashil: WarmSashil):
+    # the first tutorial runs as a reader's shell runs it: the installed sashil console script and a
+    # fresh interpreter for each block; every other page's sashil and python blocks fork the warm
+    # interpreter (tests/warm_sashil.py)
+    cold = page.name == COLD_PAGE
+    script = _script(page, tmp_path) if cold else _script(page, tmp_path, python=warm_sashil.python[0])
     if script.count("\n") <= 3:
         pytest.skip(f"{page.name}: no block runs here (none, or each needs hardware)")
     for name in ("configs", "examples", "drivers"):
         (tmp_path / name).symlink_to(ROOT / name)
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    first = [] if cold else [str(warm_sashil.bin)]
+    path = os.pathsep.join((*first, str(Path(sys.executable).parent), os.environ.get("PATH", "")))
+    env = {**os.environ, "PATH": path}
     done = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, f"{page.name}: exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
 

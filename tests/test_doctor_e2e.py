@@ -10,7 +10,7 @@ import pty
 
 import pytest
 
-from tests.test_link_e2e import DRIVERS, Emulator, sashil
+from tests.test_link_e2e import DRIVERS, Emulator, _warm_sashil, sashil  # noqa: F401 - the fixture
 
 pytestmark = pytest.mark.e2e
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from doc_blocks import example
-from test_link_e2e import Emulator, relaxed_config, sashil
+from test_link_e2e import Emulator, _warm_sashil, relaxed_config, sashil  # noqa: F401 - the fixture
 
 import sashil as sashil_api
 from sashil.control.law_registry import find_law

@@ -22,10 +22,22 @@ from sashil.drivers.firmware import compiler
 
 pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
 
-SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
+#: a fresh interpreter per command; the module's tests fork a warm one instead (:func:`_warm_sashil`)
+COLD_SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
+SASHIL = COLD_SASHIL
 COUNT_DEG = 360.0 / 4096  # encoder resolution (rig.encoder_counts_per_rev default)
 DRIVERS = [("serial", "serial"), ("slcan", "can")]
 BOARDS = ["python", pytest.param("c", marks=pytest.mark.skipif(compiler() is None, reason="no C compiler"))]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _warm_sashil(warm_sashil):
+    """This module's ``sashil`` commands (the emulator's too) fork the warm interpreter; they are
+    signalled with SIGTERM only, which its client passes on."""
+    global SASHIL
+    SASHIL = warm_sashil.command
+    yield
+    SASHIL = COLD_SASHIL
 
 
 class Emulator:

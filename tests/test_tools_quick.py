@@ -46,14 +46,20 @@ def test_a_tool_left_out_here_runs_in_quick_mode_elsewhere(script: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "script",
-    [
-        pytest.param(path, id=path.name, marks=[pytest.mark.e2e] if path.name in E2E else [])
-        for path in SCRIPTS
-        if path.name not in RUN_ELSEWHERE
-    ],
+    "script", [path for path in SCRIPTS if path.name not in RUN_ELSEWHERE.keys() | E2E], ids=lambda path: path.name
 )
 def test_tool_runs_in_quick_mode(script: Path) -> None:
+    _runs_in_quick_mode(script, {})
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("script", [path for path in SCRIPTS if path.name in E2E], ids=lambda path: path.name)
+def test_link_tool_runs_in_quick_mode(script: Path, warm_sashil) -> None:
+    # the sashil commands it starts fork the tests' warm interpreter (SASHIL_COMMAND, tests/warm_sashil.py)
+    _runs_in_quick_mode(script, {"SASHIL_COMMAND": " ".join(warm_sashil.command)})
+
+
+def _runs_in_quick_mode(script: Path, env: dict[str, str]) -> None:
     # in a session of its own: a tool that overruns is killed with what it started (an emulator at
     # real-time priority, a worker pool), which would otherwise spin on for the rest of the suite
     with subprocess.Popen(
@@ -63,6 +69,7 @@ def test_tool_runs_in_quick_mode(script: Path) -> None:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        env={**os.environ, **env},
     ) as tool:
         try:
             stdout, stderr = tool.communicate(timeout=120)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -24,7 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
+#: how the benchmark runs sashil: this interpreter, or the command in the environment variable
+#: SASHIL_COMMAND (words split at spaces: another install, or the tests' warm interpreter)
+SASHIL = os.environ.get("SASHIL_COMMAND", "").split() or [
+    sys.executable,
+    "-c",
+    "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))",
+]
 #: the benchmark reports the misses and losses it measures rather than failing on a loss budget
 CONFIG = "driver:\n  link_lost_ms: 500.0\n  max_lost_fraction: 1.0\nloop:\n  max_missed_fraction: 1.0\n"
 

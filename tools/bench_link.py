@@ -37,7 +37,13 @@ from sashil.drivers.interface import RigCommand
 from sashil.drivers.messages import Command, Sample
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 
-SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
+#: how the benchmark runs sashil: this interpreter, or the command in the environment variable
+#: SASHIL_COMMAND (words split at spaces: another install, or the tests' warm interpreter)
+SASHIL = os.environ.get("SASHIL_COMMAND", "").split() or [
+    sys.executable,
+    "-c",
+    "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))",
+]
 ECHO = """
 import os, select, sys, tty
 try:

@@ -438,8 +438,8 @@ def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncCon
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-            stop_ahead()
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
+            stop_ahead()  # after the run's thread has ended: its last act starts the next run's process
 
     return lifespan
