@@ -20,11 +20,12 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted((ROOT / "tools").glob("*.py"))
 
-#: the scripts that run on the wall clock against an emulated rig over ptys (or QEMU's serial socket), or
-#: drive Chromium against the panel
+#: the scripts that run on the wall clock against an emulated rig over ptys, a socket (the RT-DAC's) or
+#: QEMU's serial socket, drive Chromium against the panel, or run whole verbs on the real clock and fit
+#: (readme_figures: the timing figure's runs, a calibration and an identification)
 E2E = {
-    "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "panel_figures.py",
-    "qemu_smoke.py",
+    "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "bench_rtdac.py",
+    "panel_figures.py", "qemu_smoke.py", "readme_figures.py",
 }  # fmt: skip
 
 #: scripts whose quick mode a test elsewhere runs whole and checks the figures of (script: that test)

@@ -7,6 +7,11 @@
   and 1 A: torque against angle and against rate, from :class:`sashil.models.hysteresis.BoucWenZ`;
 * ``compare.png``: ``sashil compare`` as the compare guide runs it (ISO 8608 class C, 10 s, four laws);
 * ``transmissibility.png``: ``sashil sweep --stepped --current 0`` (24 log-spaced frequencies);
+* ``calibration.png``: the held-out validation plot (``validation.png``) of ``sashil calibrate`` on the
+  simulated rig with a small plan (drops at 0 and 1 A and a road run to fit, a 0.5 A drop held out),
+  as the calibration tutorial shows it;
+* ``identify.png``: ``sashil identify`` of the quick start's two drops (``params_fit.png``: the
+  recorded and the fitted θ, the residual beneath), as the identification guide shows it;
 * ``timing.png``: ``sashil report`` of two 10 s ``sashil run``s at 1 kHz (passive 0 A and skyhook),
   the percentile plot of their loop timing (on the machine this runs on).
 
@@ -32,7 +37,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "figures"
-FIGURES = ("drop_test", "hysteresis", "compare", "transmissibility", "timing")
+FIGURES = ("drop_test", "hysteresis", "compare", "transmissibility", "calibration", "identify", "timing")
+#: the calibration tutorial's small plan: calibration.png shows its held-out drop
+CALIBRATION_PLAN = (
+    "--set", "calibrate.currents_a=[0,1]", "--set", "calibrate.small_currents_a=[]",
+    "--set", "calibrate.validate_currents_a=[0.5]",
+)  # fmt: skip
 #: the compare guide's comparison (docs/how-to/compare-laws.md), which compare.png shows
 COMPARE_COMMAND = (
     "compare", "--road", "iso8608:C", "--duration", "10", "--controller", "skyhook-add", "--controller",
@@ -126,6 +136,16 @@ def figures(out: Path, quick: bool, chosen: tuple[str, ...] = FIGURES) -> None:
         if "transmissibility" in chosen:
             sashil("sweep", "--stepped", "--current", "0", *steps, "--out", str(tmp / "sweep"))
             shutil.copy(tmp / "sweep" / "transmissibility.png", out / "transmissibility.png")
+        if "calibration" in chosen:
+            road = ("--set", "calibrate.road_currents_a=[]", "--set", "calibrate.drop_duration_s=1.5") if quick else ()
+            sashil("calibrate", *CALIBRATION_PLAN, *road, "--out", str(tmp / "calibration"))
+            shutil.copy(tmp / "calibration" / "validation.png", out / "calibration.png")
+        if "identify" in chosen:
+            if not (tmp / "drop").is_dir():
+                sashil(*DROP_COMMAND, *drop, "--out", str(tmp / "drop"))
+            drops = sorted(str(path) for path in (tmp / "drop").glob("i*A"))
+            sashil("identify", *drops, "--out", str(tmp / "identify" / "params.yaml"))
+            shutil.copy(tmp / "identify" / "params_fit.png", out / "identify.png")
         if "timing" in chosen:
             shown = ("--set", "loop.max_missed_fraction=1")  # the timing figure shows the misses, whatever they are
             sashil("run", "--duration", seconds, "--current", "0", *shown, "--out", str(tmp / "passive"))
