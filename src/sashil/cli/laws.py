@@ -1,4 +1,5 @@
-"""``sashil laws``: every law sashil can run, with its parameters, output and origin."""
+"""``sashil laws``: every law sashil can run, with its parameters, output, whether it reads the road
+ahead, and origin."""
 
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ def describe(entry: LawEntry) -> dict[str, Any]:
     return {
         "name": cls.name,
         "output": cls.output_kind(),
+        "reads_road_ahead": bool(getattr(cls, "reads_road_ahead", False)),
         "origin": entry.origin,
         "class": entry.spec,
         "doc": doc[0] if doc else "",
@@ -54,7 +56,8 @@ def describe(entry: LawEntry) -> dict[str, Any]:
 def _text(laws: list[dict[str, Any]]) -> str:
     lines = []
     for law in laws:
-        lines.append(f"{law['name']}  ({law['output']}; {law['origin']}: {law['class']})")
+        ahead = "; reads the road ahead (a road plan only)" if law["reads_road_ahead"] else ""
+        lines.append(f"{law['name']}  ({law['output']}{ahead}; {law['origin']}: {law['class']})")
         if law["doc"]:
             lines.append(f"    {law['doc']}")
         for p in law["parameters"]:

@@ -159,7 +159,7 @@ def _in_this_process(config: RunConfig, on_event: Listener) -> tuple[Any, Any, s
         label, stage = make_stage(config)
         road, road_text = parse_road(config["run"]["road"], config)
         if road is not None:
-            stage = RoadStage(stage, road)  # the rig's road motor gets the profile's speed
+            stage = RoadStage(stage, road, config["run"]["duration_s"])  # the rig's road motor gets the profile's speed
         # the kernels and the law warmed before the board is greeted: a board's timers start at the
         # handshake, and the loop's first deadline follows it at once
         warm_up(stage, lambda line: on_event(Event("progress", line)))

@@ -21,6 +21,7 @@ from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import apply_overrides, parse_override
 from sashil.config.sections import CONTROLLER
+from sashil.config.verb_checks import check_road_ahead
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label
 from sashil.drivers import on_virtual_clock
@@ -271,6 +272,8 @@ def compare(
     section = config["compare"]
     road, duration = str(section["road"]), float(section["duration_s"])
     chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws] or own_law(config)
+    for law in chosen:  # a law that reads the road ahead needs the road: refused before anything is written
+        check_road_ahead(config, "compare", str, law.law)
     jobs = _jobs(config, chosen, road, duration)
     virtual = on_virtual_clock(config)
     processes = int(section["jobs"]) if virtual else 1

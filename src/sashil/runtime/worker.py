@@ -91,7 +91,7 @@ def run_stage(config: RunConfig, spec: dict[str, Any], rig: Any, messages: Messa
     label, stage = make_stage(config)
     road, road_text = parse_road(config["run"]["road"], config)
     if road is not None:
-        stage = RoadStage(stage, road)
+        stage = RoadStage(stage, road, config["run"]["duration_s"])
     return stage, label, road_text
 
 

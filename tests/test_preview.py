@@ -1,0 +1,170 @@
+"""The road ahead: a law that reads it gets the commanded road (before the run, and a window each
+cycle), only under a plan that commands a road; ``preview-optimal`` plans on it and tracks."""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+
+import numpy as np
+import pytest
+
+from sashil.cli import main
+from sashil.config import default_config
+from sashil.config.overrides import apply_overrides
+from sashil.control import LawContext, LawState
+from sashil.control.law_registry import find_law
+from sashil.control.laws_preview import PreviewOptimal
+from sashil.control.preview import RoadWindow, commanded_road
+from sashil.control.preview_plan import plan_damping, simulate_envelope
+from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
+from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.models.hysteresis import rig_params
+from sashil.runtime.clock import default_clock
+from sashil.runtime.runner import run_plan
+
+AHEAD_LAW = """
+from sashil.control import Law
+
+class Ahead(Law):
+    name = "ahead"
+    reads_road_ahead = True
+
+    def preview_cycles(self):
+        return 3
+
+    def torque(self, state):
+        return 0.0
+"""
+
+
+def test_the_commanded_road_and_its_window_are_the_speeds_to_come_and_the_measured_angle_plus_their_motion():
+    # speed(t) = t at dt = 0.5: speeds 0, 0.5, 1, 1.5, ... ; angles dt*sum of the speeds before: 0, 0, 0.25, 0.75, 1.5
+    road = commanded_road(lambda t: t, 0.5, 1.5, 2)
+    assert road.rate_rad_s.tolist() == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
+    assert road.theta_rad.tolist() == [0.0, 0.0, 0.25, 0.75, 1.5, 2.5]
+    window, state = RoadWindow(road, 2), LawState()
+    window.fill(state, 1, 10.0)  # cycle 1, the road encoder reads 10 rad (the motor's offset)
+    assert state.road_ahead_dot_rad_s.tolist() == [0.5, 1.0]
+    assert state.road_ahead_rad.tolist() == [10.25, 10.75]  # 10 + (0.25 - 0), 10 + (0.75 - 0)
+    window.fill(state, 5, 3.0)  # the last sampled cycle: then the road at rest, its angle held
+    assert state.road_ahead_dot_rad_s.tolist() == [2.5, 0.0]
+    assert state.road_ahead_rad.tolist() == [4.25, 4.25]  # 3 + (2.5 + 0.5*2.5 - 2.5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "where"),
+    [
+        (["run", "--road", "none", "--duration", "1"], "--road none: law"),
+        (["compare", "--road", "none", "--duration", "3"], "compare.road none: law"),
+        (["drop-test", "--duration", "1"], "controller.law"),
+    ],
+)
+def test_a_law_reading_the_road_ahead_under_a_plan_with_no_road_is_refused_in_one_line(tmp_path, capsys, argv, where):
+    path = tmp_path / "ahead.py"
+    path.write_text(textwrap.dedent(AHEAD_LAW))
+    out = tmp_path / "out"
+    spec = f"{path}:Ahead"
+    law = ["--controller", spec] if argv[0] != "drop-test" else ["--set", f"controller.law={spec}"]
+    code = main([*argv, *law, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and where in err and "reads the road ahead" in err, err
+    assert not out.exists()
+
+
+def test_sashil_laws_says_which_laws_read_the_road_ahead(capsys):
+    assert main(["laws", "--json"]) == 0
+    laws = {law["name"]: law for law in json.loads(capsys.readouterr().out)}
+    assert laws["preview-optimal"]["reads_road_ahead"] is True
+    assert laws["lqr-clipped"]["reads_road_ahead"] is False
+    assert main(["laws"]) == 0
+    text = capsys.readouterr().out
+    assert "preview-optimal  (torque; reads the road ahead" in text
+    assert "skyhook  (torque; built-in" in text
+
+
+RECORDER_LAW = """
+from sashil.control import Law
+
+class Recorder(Law):
+    name = "recorder"
+    reads_road_ahead = True
+    seen = []
+
+    def preview_cycles(self):
+        return 4
+
+    def torque(self, state):
+        self.seen.append((state.road_ahead_dot_rad_s.tolist(), state.road_rad, state.road_ahead_rad.tolist()))
+        return 0.0
+"""
+
+
+def test_a_run_on_a_road_gives_the_law_each_cycle_the_speeds_it_will_command(tmp_path):
+    path = tmp_path / "recorder.py"
+    path.write_text(textwrap.dedent(RECORDER_LAW))
+    spec = f"{path}:Recorder"
+    config = apply_overrides(default_config(), [f"controller.law={spec}"])
+    controller = make_controller(None, config)
+    road, _ = parse_road("sine:2:1", config)
+    stage = RoadStage(controller, road, 0.3)
+    outcome = run_plan(
+        config,
+        open_rig(config),
+        stage,
+        default_clock(config),
+        0.3,
+        read_stream=True,
+        realtime=False,
+        say=lambda _: None,
+    )
+    assert outcome.exit_status == "ok"
+    seen = [call for call in find_law(spec).cls.seen if call[0]]  # not the warm-up's call before the run
+    commanded = np.asarray(outcome.stream["road_speed_cmd_rad_s"], dtype=float)[:-1]  # the last row: the safe state
+    assert len(seen) == commanded.size
+    for k in range(commanded.size - 4):
+        rates, road_rad, angles = seen[k]
+        # the window's first speed is the one this cycle commands, the next three the cycles after it
+        assert rates == pytest.approx(commanded[k : k + 4].tolist(), abs=1e-12)
+        # the angles: the estimated road angle now plus the commanded motion, 1 ms per speed
+        assert angles == pytest.approx((road_rad + 1e-3 * np.cumsum(commanded[k : k + 4])).tolist(), abs=1e-12)
+
+
+def _seed_context() -> LawContext:
+    config = default_config()
+    return LawContext(rig_params(config["model"]), float(config["rig"]["current_max_a"]), 1000.0)
+
+
+def test_the_plan_of_a_road_at_rest_is_at_rest_and_any_plan_stays_in_the_band():
+    ctx = _seed_context()
+    p = ctx.model
+    rest = plan_damping(p, 1.0, np.zeros(500), 1e-3, block_s=0.2, tail_s=0.05)
+    assert np.all(rest.theta_rad == 0.0) and np.all(rest.accel_rad_s2 == 0.0)
+    rng = np.random.default_rng(3)
+    w = np.cumsum(rng.normal(0.0, 0.05, 3000))  # a rough road speed
+    plan = plan_damping(p, 1.0, w, 1e-3, block_s=1.0, tail_s=0.3, max_iterations=50)
+    assert np.all(plan.damping >= p.c1) and np.all(plan.damping <= p.c1 + p.c2)
+    # the plan is no worse than the best constant damping of the band on the same road
+    costs = [
+        np.mean(simulate_envelope(p, np.full(w.size, c), w, 1e-3).accel_rad_s2 ** 2)
+        for c in np.linspace(p.c1, p.c1 + p.c2, 9)
+    ]
+    assert np.mean(plan.accel_rad_s2**2) <= min(costs)
+
+
+def test_preview_optimal_tracks_the_planned_damping_and_feeds_back_the_state_error():
+    ctx = _seed_context()
+    law = PreviewOptimal(ctx, feedback_gain=1.0, block_s=0.1, tail_s=0.0, plan_iterations=5)
+    road = commanded_road(lambda t: 0.1 * math.sin(10.0 * t), 1e-3, 0.2, 0)
+    law.plan_road(road)
+    k = 50
+    s = LawState()
+    s.time_s, s.theta_dot_rad_s = k * 1e-3, 0.3
+    s.theta_rad, s.body_dot_rad_s = law._theta[k], law._body[k]  # on the plan: no feedback
+    assert law.torque(s) == pytest.approx(law._c[k] * 0.3)
+    s.theta_rad += 0.01  # off the plan by 0.01 rad: the LQR's k_theta times it comes off
+    assert law.torque(s) == pytest.approx(law._c[k] * 0.3 - law.k_theta * 0.01)
+    s.time_s = 10.0  # past the plan: its last damping
+    assert law.torque(s) == pytest.approx(law._c[-1] * 0.3)
