@@ -168,3 +168,20 @@ def test_preview_optimal_tracks_the_planned_damping_and_feeds_back_the_state_err
     assert law.torque(s) == pytest.approx(law._c[k] * 0.3 - law.k_theta * 0.01)
     s.time_s = 10.0  # past the plan: its last damping
     assert law.torque(s) == pytest.approx(law._c[-1] * 0.3)
+
+
+def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_one_scale():
+    from sashil.experiments.compare import LawResult
+    from sashil.recording.compare_report import share_of_bound, shares_of_bound
+
+    assert share_of_bound(2.0, 2.0, 1.5) == 0.0  # the best passive run itself
+    assert share_of_bound(1.5, 2.0, 1.5) == 100.0  # the bound reached
+    assert share_of_bound(1.75, 2.0, 1.5) == 50.0
+    assert share_of_bound(1.4, 2.0, 1.5) == pytest.approx(120.0)  # beyond the bound: said, not hidden
+    assert math.isnan(share_of_bound(1.0, 2.0, 2.5))  # a bound above the passive run gives no scale
+    runs = [
+        LawResult("passive 0 A", metrics={"rms_accel_rad_s2": 2.5}),
+        LawResult("passive 1 A", metrics={"rms_accel_rad_s2": 2.0}),
+        LawResult("law", metrics={"rms_accel_rad_s2": 1.8}),
+    ]
+    assert shares_of_bound(runs, 1.6) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})

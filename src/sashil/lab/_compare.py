@@ -31,7 +31,7 @@ from sashil.experiments.optimal_bound import optimal_bound
 from sashil.experiments.road_option import parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.hysteresis import BoucWenParams
-from sashil.recording.compare_report import plot_compare, write_compare_md, write_metrics_csv
+from sashil.recording.compare_report import plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
@@ -321,20 +321,23 @@ def compare(
         _accel_note(results, float(section["accel_bandwidth_hz"])),
         f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
         "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
-        "Share of the bound: the law's gain over the best passive run as a share of the optimal bound's gain over "
-        "the best constant damping (sashil.experiments.optimal_bound: direct transcription on the viscous "
-        "envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], L-BFGS-B on the exact "
-        "adjoint gradient; the best of two starts, not a certificate). 100 %: all the bound allows.",
+        "Share of the bound: where the law's RMS θ̈2 lies on one scale from the best passive run's (0 %) to the "
+        "optimal bound's (100 %), 100·(passive − law)/(passive − bound) (sashil.experiments.optimal_bound: direct "
+        "transcription on the viscous envelope, the damping of every millisecond free in [c1, c1 + c2·i_max], "
+        "L-BFGS-B on the exact adjoint gradient; the best of two starts, not a certificate). Above 100 %: the rig "
+        "beat the envelope's bound.",
         "Each law's run is a run folder of its own (the folder column): its config.yaml (the law and its "
         "parameters), data.csv (every cycle) and summary.json, for `sashil report`, `sashil replay` and "
         "`sashil compare --config FOLDER/config.yaml` (that law against the references again).",
     ]
     gain = bound.gain_pct if bound is not None else float("nan")
+    bound_rms = bound.rms_accel_bound if bound is not None else float("nan")
+    shares = shares_of_bound(results, bound_rms)
     params = {label: summary["parameters"] for label, summary in summaries.items()}
     folders = {label: sub.path.name for label, sub in subs.items()}
-    write_metrics_csv(folder.file("metrics.csv"), results, gain)
-    write_compare_md(folder.file("compare.md"), results, header, notes, gain, params, folders)
-    plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}")
+    write_metrics_csv(folder.file("metrics.csv"), results, bound_rms)
+    write_compare_md(folder.file("compare.md"), results, header, notes, bound_rms, params, folders)
+    plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}", bound_rms)
     failed = [r for r in results if not r.ok]
     error = (
         SashilError(
@@ -354,8 +357,16 @@ def compare(
             "processes": processes,
             "wall_s": wall,
             "optimal_bound_gain_pct": gain,
+            "optimal_bound_rms_accel_rad_s2": bound_rms,
             "laws": [
-                {"law": r.label, "status": r.status, "accel_source": r.accel_source, "wall_s": r.wall_s, **r.metrics}
+                {
+                    "law": r.label,
+                    "status": r.status,
+                    "accel_source": r.accel_source,
+                    "wall_s": r.wall_s,
+                    **r.metrics,
+                    "share_of_bound_pct": shares.get(r.label, float("nan")),
+                }
                 for r in results
             ],
             "runs": [
