@@ -17,7 +17,7 @@ from sashil.control import LawContext, LawState
 from sashil.control.law_registry import find_law
 from sashil.control.laws_preview import PreviewOptimal
 from sashil.control.preview import RoadWindow, commanded_road
-from sashil.control.preview_plan import plan_damping, simulate_envelope
+from sashil.control.preview_plan import PlanModel, plan_current, simulate_plan
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig
 from sashil.experiments.road_option import RoadStage, parse_road
@@ -81,7 +81,7 @@ def test_sashil_laws_says_which_laws_read_the_road_ahead(capsys):
     assert laws["lqr-clipped"]["reads_road_ahead"] is False
     assert main(["laws"]) == 0
     text = capsys.readouterr().out
-    assert "preview-optimal  (torque; reads the road ahead" in text
+    assert "preview-optimal  (current; reads the road ahead" in text
     assert "skyhook  (torque; built-in" in text
 
 
@@ -137,37 +137,60 @@ def _seed_context() -> LawContext:
     return LawContext(rig_params(config["model"]), float(config["rig"]["current_max_a"]), 1000.0)
 
 
-def test_the_plan_of_a_road_at_rest_is_at_rest_and_any_plan_stays_in_the_band():
-    ctx = _seed_context()
-    p = ctx.model
-    rest = plan_damping(p, 1.0, np.zeros(500), 1e-3, block_s=0.2, tail_s=0.05)
+def test_the_plan_of_a_road_at_rest_is_at_rest_and_any_plan_stays_in_the_coils_range():
+    p = _seed_context().model
+    model = PlanModel.of(p, hysteresis=True, coil_tau_s=0.01)
+    assert model.f1 == pytest.approx(p.alpha1 * (p.delta / (p.beta + p.gamma)) ** (1.0 / p.n))
+    assert model.rho == pytest.approx(1.0 - math.exp(-0.1))  # 1 ms steps of a 10 ms coil
+    rest = plan_current(model, 1.0, np.zeros(500), 1e-3, block_s=0.2, tail_s=0.05)
     assert np.all(rest.theta_rad == 0.0) and np.all(rest.accel_rad_s2 == 0.0)
     rng = np.random.default_rng(3)
     w = np.cumsum(rng.normal(0.0, 0.05, 3000))  # a rough road speed
-    plan = plan_damping(p, 1.0, w, 1e-3, block_s=1.0, tail_s=0.3, max_iterations=50)
-    assert np.all(plan.damping >= p.c1) and np.all(plan.damping <= p.c1 + p.c2)
-    # the plan is no worse than the best constant damping of the band on the same road
-    costs = [
-        np.mean(simulate_envelope(p, np.full(w.size, c), w, 1e-3).accel_rad_s2 ** 2)
-        for c in np.linspace(p.c1, p.c1 + p.c2, 9)
-    ]
-    assert np.mean(plan.accel_rad_s2**2) <= min(costs)
+    plan = plan_current(model, 1.0, w, 1e-3, block_s=1.0, tail_s=0.3, max_iterations=50)
+    assert np.all(plan.command_a >= 0.0) and np.all(plan.command_a <= 1.0)
+    # the plan is no worse than any constant current on the same road and model
+    costs = [simulate_plan(model, np.full(w.size, i), w, 1e-3).rms_accel for i in np.linspace(0.0, 1.0, 11)]
+    assert plan.rms_accel <= min(costs)
 
 
-def test_preview_optimal_tracks_the_planned_damping_and_feeds_back_the_state_error():
+def test_the_plans_gradient_is_the_cost_s_own_by_finite_differences():
+    from sashil.control.preview_plan import _adjoint, _forward, _vector
+
+    p = _seed_context().model
+    model = PlanModel.of(p, hysteresis=True, coil_tau_s=0.01)
+    rng = np.random.default_rng(5)
+    n = 300
+    w = np.cumsum(rng.normal(0.0, 0.05, n))
+    u = rng.uniform(0.0, 1.0, n)
+    m, x0 = _vector(model), np.array([0.001, -0.02, 0.3])
+    bufs = [np.empty(n) for _ in range(4)]
+    grad = np.empty(n)
+    _forward(u, w, m, 1e-3, x0, *bufs)
+    _adjoint(u, w, m, 1e-3, *bufs, grad)
+    for k in (0, 50, 150, 298):
+        step = np.zeros(n)
+        step[k] = 1e-6
+        up = _forward(u + step, w, m, 1e-3, x0, *[np.empty(n) for _ in range(4)])
+        down = _forward(u - step, w, m, 1e-3, x0, *[np.empty(n) for _ in range(4)])
+        assert grad[k] == pytest.approx((up - down) / 2e-6, rel=1e-4, abs=1e-12)
+    assert grad[n - 1] == 0.0  # the last command acts after the block's last step
+
+
+def test_preview_optimal_commands_the_plan_and_feeds_back_the_state_error_through_the_torques_slope():
     ctx = _seed_context()
     law = PreviewOptimal(ctx, feedback_gain=1.0, block_s=0.1, tail_s=0.0, plan_iterations=5)
     road = commanded_road(lambda t: 0.1 * math.sin(10.0 * t), 1e-3, 0.2, 0)
     law.plan_road(road)
     k = 50
     s = LawState()
-    s.time_s, s.theta_dot_rad_s = k * 1e-3, 0.3
-    s.theta_rad, s.body_dot_rad_s = law._theta[k], law._body[k]  # on the plan: no feedback
-    assert law.torque(s) == pytest.approx(law._c[k] * 0.3)
-    s.theta_rad += 0.01  # off the plan by 0.01 rad: the LQR's k_theta times it comes off
-    assert law.torque(s) == pytest.approx(law._c[k] * 0.3 - law.k_theta * 0.01)
-    s.time_s = 10.0  # past the plan: its last damping
-    assert law.torque(s) == pytest.approx(law._c[-1] * 0.3)
+    s.time_s, s.theta_dot_rad_s, s.z_hat = k * 1e-3, 0.3, 0.1
+    s.theta_rad, s.body_dot_rad_s = law._theta[k], law._body[k]  # on the plan: its command
+    assert law.current(s) == law._i[k]
+    s.theta_rad += 0.001  # off the plan: k_theta times the error, over dT/di = alpha2*z + c2*theta_dot
+    slope = ctx.model.alpha2 * 0.1 + ctx.model.c2 * 0.3
+    assert law.current(s) == pytest.approx(min(1.0, max(0.0, law._i[k] - law.k_theta * 0.001 / slope)))
+    s.time_s = 10.0  # past the plan: its last command
+    assert law.current(s) == law._i[-1]
 
 
 def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_one_scale():

@@ -130,11 +130,13 @@ class Param:
 @dataclass(frozen=True)
 class LawContext:
     """What a law may know of the rig it runs on: the controller's model (seed 001 eqs. 9-17),
-    the coil's current range [0, current_max_a] and the loop's rate."""
+    the coil's current range [0, current_max_a], the loop's rate and the coil's first-order lag
+    the controller assumes (``controller.coil_tau_s``, else ``rig.coil_tau_s``; 0: none known)."""
 
     model: BoucWenParams
     current_max_a: float
     rate_hz: float
+    coil_tau_s: float = 0.0
 
 
 @dataclass(frozen=True)

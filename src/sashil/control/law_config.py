@@ -37,7 +37,16 @@ def law_context(config: Mapping[str, Any]) -> LawContext | None:
         model=BoucWenParams.from_mapping(model.get("params") or {}),
         current_max_a=float(config["rig"]["current_max_a"]),
         rate_hz=float(config["loop"]["rate_hz"]),
+        coil_tau_s=_coil_tau(config),
     )
+
+
+def _coil_tau(config: Mapping[str, Any]) -> float:
+    """The coil lag the controller assumes: ``controller.coil_tau_s``, else ``rig.coil_tau_s`` [s]."""
+    tau = (config.get("controller") or {}).get("coil_tau_s")
+    if tau is None:
+        tau = (config.get("rig") or {}).get("coil_tau_s")
+    return float(tau or 0.0)
 
 
 def build_law(entry: LawEntry, config: Mapping[str, Any], section: Mapping[str, Any]) -> Law:

@@ -2,23 +2,28 @@
 and tracks it online.
 
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
-cycle go to :func:`sashil.control.preview_plan.plan_damping`, the optimal bound's own optimiser
+cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
 (direct transcription, the discrete adjoint, L-BFGS-B) over a receding horizon, on the law's model
-(the controller's: ``--params`` sets it) in its viscous envelope. The plan gives, for every cycle k,
-the damping c*_k in [c1, c1 + c2·i_max] and the envelope's state under it, θ*_k and θ̇2*_k. This is
-the "optimal predictive control, assuming full knowledge of the disturbance" of Savaresi et al.
-(mixed SH-ADD, ASME JDSMC) run as a law.
+(the controller's: ``--params`` sets it) with its hysteresis as a friction α(i)·z_u
+(``hysteresis: true``) or in its viscous envelope, and the coil's lag (``LawContext.coil_tau_s``).
+The plan gives, for every cycle k, the command u*_k in [0, i_max] and the model's state under it,
+the coil's current i*_k, θ*_k and θ̇2*_k. This is the "optimal predictive
+control, assuming full knowledge of the disturbance" of Savaresi et al. (mixed SH-ADD, ASME JDSMC)
+run as a law.
 
-Track (each cycle, two list reads and a few multiplications):
+Track (each cycle, a few list reads and multiplications): the law commands the current
 
-    T* = c*_k·θ̇ − g·(k_θ·(θ − θ*_k) + k_v·(θ̇2 − θ̇2*_k))
+    i = clip(u*_k + ΔT / D, 0, i_max),   ΔT = −g·(k_θ·(θ − θ*_k) + k_v·(θ̇2 − θ̇2*_k)),
+    D = ∂T/∂i = α2·ẑ + c2·θ̇ (seed 001 eq. 9)
 
-the planned damping on the measured rate, plus a feedback on the state error with the LQR gains of
-the rig's linear model (:mod:`sashil.control.lqr`, Dyke et al. 1996 eqs. 5-8, at 0 A, the default
-weights) scaled by ``feedback_gain`` g. T* goes through the inverse, which clips it to the feasible
-band (the clipping that makes the one-step case of the optimal semi-active law clipped LQR:
-Giorgetti, Bemporad et al., IJC 2006). The inverse also accounts for the hysteretic part α(i)·ẑ the
-plan left out. Past the planned road the law holds the plan's last damping.
+the planned command, plus a feedback on the error from the planned state with the LQR gains of the
+rig's linear model (:mod:`sashil.control.lqr`, Dyke et al. 1996 eqs. 5-8, at 0 A, the default
+weights) scaled by ``feedback_gain`` g, turned into amperes through the torque's slope in the
+current (left out where |D| < 10⁻³ N m/A: the current cannot move the torque) and clipped to the
+coil's range (the clipping that makes the one-step case of the optimal semi-active law clipped LQR:
+Giorgetti, Bemporad et al., IJC 2006). A current law: the plan already holds the coil's lag, so
+the coil-lag lead is not applied (``controller.lead_current_laws`` false). Past the planned road
+the law commands the plan's last current.
 
 The law reads the whole commanded road once, before the run; it reads no per-cycle window
 (:meth:`preview_cycles` is 0), since the plan already holds the road of every cycle.
@@ -28,16 +33,16 @@ from __future__ import annotations
 
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
-from sashil.control.preview_plan import plan_damping
+from sashil.control.preview_plan import PlanModel, plan_current
 from sashil.errors import ConfigError
 
 __all__ = ["PreviewOptimal"]
 
 
 class PreviewOptimal(Law):
-    """Plans the optimal damping over the commanded road before the run (the bound's optimiser over a
-    receding horizon, on the law's model) and tracks it: T* = c*_k·θ̇ plus an LQR feedback on the
-    error from the planned state (Savaresi et al.; Giorgetti, Bemporad et al. 2006)."""
+    """Plans the optimal current over the commanded road before the run (the bound's optimiser over a
+    receding horizon, on the law's model) and commands it, plus an LQR feedback on the error from the
+    planned state (Savaresi et al.; Giorgetti, Bemporad et al. 2006)."""
 
     name = "preview-optimal"
     reads_road_ahead = True
@@ -45,7 +50,11 @@ class PreviewOptimal(Law):
     block_s = Param(10.0, unit="s", low=0.05, high=600.0, doc="length of each planned block")
     tail_s = Param(2.0, unit="s", low=0.0, high=60.0, doc="road after a block that its optimisation also sees")
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
-    feedback_gain = Param(1.0, low=0.0, high=10.0, doc="gain of the LQR feedback on the error from the planned state")
+    feedback_gain = Param(0.0, low=0.0, high=10.0, doc="gain of the LQR feedback on the error from the planned state")
+    hysteresis = Param(True, doc="plan with the hysteresis as a friction α(i)·z_u (false: the viscous envelope)")
+    friction_eps = Param(
+        0.01, unit="rad/s", low=0.0, low_open=True, high=1.0, doc="rate over which the plan's friction turns"
+    )
 
     def parameters_changed(self) -> None:
         if self.context is None:
@@ -54,17 +63,21 @@ class PreviewOptimal(Law):
         design = scaled_lqr_gains(p.J, p.k, p.c1, 1.0, 0.5, 0.0, 0.0)
         self.k_theta = float(self.feedback_gain) * design.k_theta
         self.k_body = float(self.feedback_gain) * design.k_body
-        self._c: list[float] = []
+        self.c2, self.alpha2 = p.c2, p.alpha2
+        self.i_max = float(self.context.current_max_a)
+        self._i: list[float] = []
         self._theta: list[float] = []
         self._body: list[float] = []
         self._dt = 1.0 / float(self.context.rate_hz)
-        self._last = p.c1
+        self._last = 0.0
 
     def plan_road(self, road: CommandedRoad) -> None:
         """Plan the damping of every cycle of ``road`` (module docstring)."""
         assert self.context is not None
-        plan = plan_damping(
-            self.context.model,
+        ctx = self.context
+        model = PlanModel.of(ctx.model, bool(self.hysteresis), float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
+        plan = plan_current(
+            model,
             self.context.current_max_a,
             road.rate_rad_s,
             road.dt_s,
@@ -73,17 +86,20 @@ class PreviewOptimal(Law):
             max_iterations=int(self.plan_iterations),
         )
         self._dt = road.dt_s
-        self._c = plan.damping.tolist()
+        self._i = plan.command_a.tolist()
         self._theta = plan.theta_rad.tolist()
         self._body = plan.body_dot_rad_s.tolist()
-        self._last = self._c[-1] if self._c else self.context.model.c1
+        self._last = self._i[-1] if self._i else 0.0
 
-    def torque(self, state: LawState) -> float:
+    def current(self, state: LawState) -> float:
         k = int(state.time_s / self._dt + 0.5)
-        if k >= len(self._c):  # past the planned road (or none planned): the last damping, no feedback
-            return self._last * state.theta_dot_rad_s
-        return (
-            self._c[k] * state.theta_dot_rad_s
-            - self.k_theta * (state.theta_rad - self._theta[k])
-            - self.k_body * (state.body_dot_rad_s - self._body[k])
-        )
+        if k >= len(self._i):  # past the planned road (or none planned): the last current, no feedback
+            return self._last
+        u = self._i[k]
+        if self.k_theta == 0.0 and self.k_body == 0.0:
+            return u
+        error = self.k_theta * (state.theta_rad - self._theta[k]) + self.k_body * (state.body_dot_rad_s - self._body[k])
+        slope = self.alpha2 * state.z_hat + self.c2 * state.theta_dot_rad_s
+        if -1e-3 < slope < 1e-3:
+            return u
+        return min(self.i_max, max(0.0, u - error / slope))

@@ -1,28 +1,39 @@
-"""The damping plan of a preview law: the optimal semi-active damping over the road to come, on the
+"""The current plan of a preview law: the optimal semi-active current over the road to come, on the
 law's model, by the optimal bound's own method (:mod:`sashil.experiments.optimal_bound`) over a
 receding horizon.
 
-The model is the rig of seed 001 eq. 13 in its viscous envelope (the hysteretic term left out, as
-the bound leaves it out),
+The model is the rig of seed 001 eq. 13 with the damper torque of eq. 9 linear in the current i,
 
-    J θ̈2 = −k θ − c(t) θ̇,   θ = θ2 − θ1,   c(t) ∈ [c1, c1 + c2·i_max]   (seed 001 eq. 11)
+    J θ̈2 = −k θ − T,   T = c(i)·θ̇ + α(i)·z_u·tanh(θ̇/ε),   c(i) = c1 + c2·i,  α(i) = α1 + α2·i
 
-stepped by semi-implicit Euler at the loop's period h on the commanded road speed w_k:
-a_k = −(k/J)·θ_k − (c_k/J)·(v_k − w_k), v_{k+1} = v_k + h·a_k, θ_{k+1} = θ_k + h·(v_{k+1} − w_k).
-The cost of a block is the mean of a_k² (comfort alone, the bound's cost). Savaresi et al. (the
-mixed SH-ADD paper, ASME JDSMC) call the whole-road solution "optimal predictive control, assuming
-full knowledge of the disturbance"; Giorgetti, Bemporad et al. (IJC 2006) show it is piecewise affine
-in the state and that its one-step case is clipped LQR.
+(eqs. 11-12), θ = θ2 − θ1. The coil lags its command u ∈ [0, i_max] by τ (``rig.coil_tau_s``),
+i_{k+1} = i_k + ρ·(u_k − i_k), ρ = 1 − exp(−h/τ) (a command acts from the next sample on, as the
+loop's does). The Bouc-Wen state z is taken at its bound z_u =
+(δ/(β + γ))^(1/n) with the sign of θ̇: with the seed's parameters z crosses from −z_u to z_u within
+2·z_u/δ ≈ 3·10⁻⁴ rad of travel, so the hysteresis acts as a friction torque α(i)·z_u, smoothed over
+ε (``friction_eps``) so the cost has a gradient. With ``hysteresis=False`` the friction is left out:
+the viscous envelope the bound of ``sashil compare`` is computed on.
+
+It is stepped by semi-implicit Euler at the loop's period h on the commanded road speed w_k:
+a_k = −(k/J)·θ_k − T(i_k, v_k − w_k)/J, v_{k+1} = v_k + h·a_k, θ_{k+1} = θ_k + h·(v_{k+1} − w_k),
+and the cost of a block is the mean of a_k² (comfort alone, the bound's cost). Its exact gradient is
+the discrete adjoint: with g_k = ∂cost/∂a_k (direct and through the next state),
+λθ_k = −(k/J)·g_k + λθ_{k+1}, λv_k = −(∂T/∂θ̇)/J·g_k + λv_{k+1} + h·λθ_{k+1},
+λi_k = −(∂T/∂i)/J·g_k + (1 − ρ)·λi_{k+1}, and ∂cost/∂u_k = ρ·λi_{k+1}. Savaresi et al. (the mixed SH-ADD paper, ASME JDSMC) call the whole-road solution
+"optimal predictive control, assuming full knowledge of the disturbance"; Giorgetti, Bemporad et
+al. (IJC 2006) show the optimal semi-active law is piecewise affine in the state and that its
+one-step case is clipped LQR.
 
 Receding horizon, planned before the run: the road is cut into blocks of ``block_s``; each block is
 optimised over itself plus ``tail_s`` of the road after it (so the block's end is not planned as if
 the road ended there), from the state the previous block's plan reaches, and only the block is
-kept. L-BFGS-B (box bounds only) with the exact discrete adjoint gradient, from the best constant
-damping. The cost of planning grows with the road's length, not with its square.
+kept. L-BFGS-B (box bounds only) from the best constant current. The cost of planning grows with
+the road's length, not with its square.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,125 +41,191 @@ import numpy as np
 from sashil.models._jit import jit
 from sashil.models.hysteresis import BoucWenParams
 
-__all__ = ["DampingPlan", "plan_damping", "simulate_envelope"]
+__all__ = ["CurrentPlan", "PlanModel", "plan_current", "simulate_plan"]
+
+
+@dataclass(frozen=True)
+class PlanModel:
+    """The plan's model: k/J, 1/J, the damping c1 + c2·i, the friction (f1 + f2·i)·tanh(θ̇/ε) and
+    the coil's step ρ = 1 − exp(−h/τ) per cycle (1: no lag)."""
+
+    k_over_j: float
+    inv_j: float
+    c1: float
+    c2: float
+    f1: float
+    f2: float
+    eps: float
+    rho: float = 1.0
+
+    @classmethod
+    def of(
+        cls, params: BoucWenParams, hysteresis: bool = True, eps: float = 0.01, coil_tau_s: float = 0.0, h: float = 1e-3
+    ) -> PlanModel:
+        """The plan's model of ``params``; ``hysteresis``: the friction α(i)·z_u, else the viscous
+        envelope; ``coil_tau_s``: the coil's lag (0: none) at the step ``h``."""
+        z_u = params.z_bound if hysteresis else 0.0
+        rho = 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0
+        return cls(
+            params.k / params.J,
+            1.0 / params.J,
+            params.c1,
+            params.c2,
+            params.alpha1 * z_u,
+            params.alpha2 * z_u,
+            eps,
+            rho,
+        )
 
 
 @jit
-def _forward(c, w, k_over_j, inv_j, h, theta0, v0, thetas, vs, accel):
-    """Step the envelope from (theta0, v0) under ``c``: the states before each step into ``thetas``,
-    ``vs`` and θ̈2 into ``accel``; return the mean of accel²."""
-    theta = theta0
-    v = v0
+def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
+    """Step the model ``m`` (k/J, 1/J, c1, c2, f1, f2, ε, ρ) from ``x0`` (θ, θ̇2, i) under the
+    commands ``u``: the states before each step into ``thetas``, ``vs``, ``coil``, θ̈2 into ``accel``;
+    return the mean of accel²."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    theta = x0[0]
+    v = x0[1]
+    i = x0[2]
     total = 0.0
-    n = c.size
-    for i in range(n):
-        thetas[i] = theta
-        vs[i] = v
-        a = -k_over_j * theta - inv_j * c[i] * (v - w[i])
-        accel[i] = a
+    n = u.size
+    for k in range(n):
+        thetas[k] = theta
+        vs[k] = v
+        coil[k] = i
+        r = v - w[k]
+        torque = (c1 + c2 * i) * r + (f1 + f2 * i) * math.tanh(r / eps)
+        a = -k_over_j * theta - inv_j * torque
+        accel[k] = a
         total += a * a
         v = v + h * a
-        theta = theta + h * (v - w[i])
+        theta = theta + h * (v - w[k])
+        i = i + rho * (u[k] - i)
     return total / n
 
 
 @jit
-def _adjoint(c, w, k_over_j, inv_j, h, thetas, vs, accel, grad):
-    """The discrete adjoint of :func:`_forward`'s cost: d(cost)/d(c_k) into ``grad``."""
-    n = c.size
+def _adjoint(u, w, m, h, thetas, vs, coil, accel, grad):
+    """The discrete adjoint of :func:`_forward`'s cost: d(cost)/d(u_k) into ``grad``."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    n = u.size
     scale = 1.0 / n
     lam_theta = 0.0
     lam_v = 0.0
-    for i in range(n - 1, -1, -1):
-        g_a = 2.0 * accel[i] * scale + h * (lam_v + h * lam_theta)
-        grad[i] = -g_a * inv_j * (vs[i] - w[i])
+    lam_i = 0.0
+    for k in range(n - 1, -1, -1):
+        i = coil[k]
+        r = vs[k] - w[k]
+        s = math.tanh(r / eps)
+        f = f1 + f2 * i
+        d_rate = c1 + c2 * i + f * (1.0 - s * s) / eps  # dT/dθ̇
+        d_current = c2 * r + f2 * s  # dT/di
+        g_a = 2.0 * accel[k] * scale + h * (lam_v + h * lam_theta)
+        grad[k] = rho * lam_i  # u_k sets i_{k+1}
+        lam_i = -g_a * inv_j * d_current + (1.0 - rho) * lam_i
         new_theta = -g_a * k_over_j + lam_theta
-        lam_v = -g_a * inv_j * c[i] + lam_v + h * lam_theta
+        lam_v = -g_a * inv_j * d_rate + lam_v + h * lam_theta
         lam_theta = new_theta
     return 0
 
 
 @dataclass(frozen=True)
-class DampingPlan:
-    """The planned damping c_k [N m s/rad] of every cycle, and the envelope's state the plan gives
-    before each cycle: the relative angle θ_k [rad] and the arm's rate θ̇2_k [rad/s]."""
+class CurrentPlan:
+    """The planned command u_k [A] of every cycle, and the model's state under it before each cycle:
+    the coil's current i_k [A], the relative angle θ_k [rad], the arm's rate θ̇2_k [rad/s], its
+    acceleration θ̈2_k [rad/s²]."""
 
-    damping: np.ndarray
+    command_a: np.ndarray
+    current_a: np.ndarray
     theta_rad: np.ndarray
     body_dot_rad_s: np.ndarray
     accel_rad_s2: np.ndarray
 
+    @property
+    def rms_accel(self) -> float:
+        return float(np.sqrt(np.mean(self.accel_rad_s2**2))) if self.accel_rad_s2.size else 0.0
 
-def simulate_envelope(
-    params: BoucWenParams, damping: np.ndarray, road_rate: np.ndarray, h: float, theta0: float = 0.0, v0: float = 0.0
-) -> DampingPlan:
-    """The envelope's trajectory under ``damping`` on ``road_rate`` from (θ0, θ̇2_0)."""
-    n = damping.size
-    thetas, vs, accel = np.empty(n), np.empty(n), np.empty(n)
-    c = np.ascontiguousarray(damping, dtype=float)
+
+def _vector(model: PlanModel) -> np.ndarray:
+    return np.array([model.k_over_j, model.inv_j, model.c1, model.c2, model.f1, model.f2, model.eps, model.rho])
+
+
+def simulate_plan(
+    model: PlanModel,
+    command_a: np.ndarray,
+    road_rate: np.ndarray,
+    h: float,
+    x0: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> CurrentPlan:
+    """The model's trajectory under the commands ``command_a`` on ``road_rate`` from ``x0`` (θ, θ̇2, i)."""
+    n = command_a.size
+    thetas, vs, coil, accel = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    u = np.ascontiguousarray(command_a, dtype=float)
     w = np.ascontiguousarray(road_rate[:n], dtype=float)
-    _forward(c, w, params.k / params.J, 1.0 / params.J, h, theta0, v0, thetas, vs, accel)
-    return DampingPlan(c, thetas, vs, accel)
+    _forward(u, w, _vector(model), h, np.asarray(x0, dtype=float), thetas, vs, coil, accel)
+    return CurrentPlan(u, coil, thetas, vs, accel)
 
 
 def _plan_block(
-    params: BoucWenParams, lo: float, hi: float, w: np.ndarray, h: float, theta0: float, v0: float, max_iterations: int
+    model: PlanModel, i_max: float, w: np.ndarray, h: float, x0: tuple[float, float, float], max_iterations: int
 ) -> np.ndarray:
-    """The damping of one block of road speeds ``w`` from the state (θ0, θ̇2_0), from the best constant."""
+    """The commands of one block of road speeds ``w`` from the state ``x0``, from the best constant."""
     from scipy.optimize import minimize, minimize_scalar
 
-    m = w.size
-    k_over_j, inv_j = params.k / params.J, 1.0 / params.J
-    thetas, vs, accel, grad = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    n = w.size
+    m = _vector(model)
+    start = np.asarray(x0, dtype=float)
+    thetas, vs, coil, accel, grad = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
 
-    def constant(c: float) -> float:
-        return float(_forward(np.full(m, c), w, k_over_j, inv_j, h, theta0, v0, thetas, vs, accel))
+    def constant(i: float) -> float:
+        return float(_forward(np.full(n, i), w, m, h, start, thetas, vs, coil, accel))
 
-    best = minimize_scalar(constant, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo)})
+    best = minimize_scalar(constant, bounds=(0.0, i_max), method="bounded", options={"xatol": 1e-3 * i_max})
 
-    def cost(c: np.ndarray) -> tuple[float, np.ndarray]:
-        value = _forward(c, w, k_over_j, inv_j, h, theta0, v0, thetas, vs, accel)
-        _adjoint(c, w, k_over_j, inv_j, h, thetas, vs, accel, grad)
+    def cost(u: np.ndarray) -> tuple[float, np.ndarray]:
+        value = _forward(u, w, m, h, start, thetas, vs, coil, accel)
+        _adjoint(u, w, m, h, thetas, vs, coil, accel, grad)
         return float(value), grad.copy()
 
     res = minimize(
         cost,
-        np.full(m, float(best.x)),
+        np.full(n, float(best.x)),
         jac=True,
         method="L-BFGS-B",
-        bounds=[(lo, hi)] * m,
+        bounds=[(0.0, i_max)] * n,
         options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
     )
-    return np.clip(np.asarray(res.x, dtype=float), lo, hi)
+    return np.clip(np.asarray(res.x, dtype=float), 0.0, i_max)
 
 
-def plan_damping(
-    params: BoucWenParams,
+def plan_current(
+    model: PlanModel,
     current_max_a: float,
     road_rate: np.ndarray,
     h: float,
     block_s: float = 10.0,
     tail_s: float = 2.0,
     max_iterations: int = 400,
-) -> DampingPlan:
+) -> CurrentPlan:
     """The receding-horizon plan of the module docstring for the road speeds ``road_rate`` (one per
     cycle of ``h``), from rest."""
     n = road_rate.size
-    lo, hi = params.c1, params.c1 + params.c2 * current_max_a
     w_all = np.ascontiguousarray(road_rate, dtype=float)
-    plan = np.full(n, lo)
-    if not hi > lo or n == 0:  # no authority: the damper is passive
-        return simulate_envelope(params, plan, w_all, h)
+    plan = np.zeros(n)
+    if not (current_max_a > 0.0 and (model.c2 > 0.0 or model.f2 > 0.0)) or n == 0:  # no authority: passive
+        return simulate_plan(model, plan, w_all, h)
     block, tail = max(1, int(round(block_s / h))), max(0, int(round(tail_s / h)))
-    theta0 = v0 = 0.0
+    x0 = (0.0, 0.0, 0.0)
     for start in range(0, n, block):
         stop = min(n, start + block)
         w = w_all[start : min(n, stop + tail)]
-        c = _plan_block(params, lo, hi, w, h, theta0, v0, max_iterations)
+        u = _plan_block(model, current_max_a, w, h, x0, max_iterations)
         kept = stop - start
-        plan[start:stop] = c[:kept]
+        plan[start:stop] = u[:kept]
         # the state the kept block ends at: where the next block starts
-        seg = simulate_envelope(params, c[:kept], w[:kept], h, theta0, v0)
-        v0 = float(seg.body_dot_rad_s[-1] + h * seg.accel_rad_s2[-1])
-        theta0 = float(seg.theta_rad[-1] + h * (v0 - w[kept - 1]))
-    return simulate_envelope(params, plan, w_all, h)
+        seg = simulate_plan(model, u[:kept], w[:kept], h, x0)
+        v = float(seg.body_dot_rad_s[-1] + h * seg.accel_rad_s2[-1])
+        theta = float(seg.theta_rad[-1] + h * (v - w[kept - 1]))
+        i = float(seg.current_a[-1] + model.rho * (u[kept - 1] - seg.current_a[-1]))
+        x0 = (theta, v, i)
+    return simulate_plan(model, plan, w_all, h)
