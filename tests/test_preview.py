@@ -208,3 +208,21 @@ def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_o
         LawResult("law", metrics={"rms_accel_rad_s2": 1.8}),
     ]
     assert shares_of_bound(runs, 1.6) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})
+
+
+def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_and_with_them_lies_lower():
+    from dataclasses import replace
+
+    from sashil.experiments.hysteretic_bound import hysteretic_bound
+    from sashil.experiments.optimal_bound import optimal_bound
+
+    config = default_config()
+    config["road"]["period_s"] = 10.0
+    road, _ = parse_road("iso8608:C", config)
+    seed = _seed_context().model
+    viscous = replace(seed, alpha1=0.0, alpha2=0.0)
+    envelope = optimal_bound(viscous, 1.0, road, 4.0, 1.0).rms_accel_bound
+    # the same problem: the damping c1 + c2*i of every millisecond (the command acting one step later)
+    assert hysteretic_bound(viscous, 1.0, 0.0, road, 4.0, 1.0) == pytest.approx(envelope, rel=0.02)
+    # the seed's hysteresis: a friction of (alpha1 + alpha2*i)*z_u gives the rig a harder hard end
+    assert hysteretic_bound(seed, 1.0, 0.0, road, 4.0, 1.0) < optimal_bound(seed, 1.0, road, 4.0, 1.0).rms_accel_bound
