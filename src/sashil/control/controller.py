@@ -145,7 +145,8 @@ class Controller:
         cycles = int(law.preview_cycles())
         road = commanded_road(speed, self.nominal_dt_s, duration_s, cycles)
         law.plan_road(road)
-        self._road_window = RoadWindow(road, cycles)
+        # a law that planned on the whole road and reads no window costs the cycle nothing more
+        self._road_window = RoadWindow(road, cycles) if cycles > 0 else None
 
     def _fallback_step(self) -> RigCommand:
         """0 A (the safe state of an MR damper) once the estimator has failed; counted per cycle."""
