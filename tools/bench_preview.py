@@ -21,7 +21,7 @@ The preview law's compute per cycle: the controller stage's ``step`` (estimator,
 inverse) timed with ``perf_counter_ns`` over one run on the seed damper; p50 and p99 [µs]. The
 machine's load is printed with it (a shared machine inflates the tail).
 
-    .venv/bin/python tools/bench_preview.py [--quick] [--dampers N|all] [--duration S] [--jobs N] [--json PATH]
+    .venv/bin/python tools/bench_preview.py [--quick] [--dampers N|all] [--skip N] [--duration S] [--jobs N] [--json PATH]
 """
 
 from __future__ import annotations
@@ -243,6 +243,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one damper, one road, 4 s: seconds")
     parser.add_argument("--dampers", default="10", help="how many dampers (in ORDER), or all")
+    parser.add_argument("--skip", type=int, default=0, help="leave out the first N of those (a run in parts)")
     parser.add_argument("--roads", default=",".join(ROADS), help="comma-separated --road values")
     parser.add_argument("--duration", type=float, default=12.0, help="seconds per run (the first 2 s left out)")
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel processes")
@@ -252,7 +253,7 @@ def main() -> int:
         dampers, roads, duration = ["seed"], list(QUICK_ROADS), 4.0
     else:
         count = len(ORDER) if args.dampers == "all" else int(args.dampers)
-        dampers, roads, duration = list(ORDER[:count]), args.roads.split(","), args.duration
+        dampers, roads, duration = list(ORDER[args.skip : count]), args.roads.split(","), args.duration
     print(
         f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {len(dampers)} dampers x {len(roads)} roads, {duration:g} s each"
     )
