@@ -166,7 +166,7 @@ def test_the_plans_gradient_is_the_cost_s_own_by_finite_differences():
     bufs = [np.empty(n) for _ in range(4)]
     grad = np.empty(n)
     _forward(u, w, m, 1e-3, x0, *bufs)
-    _adjoint(u, w, m, 1e-3, *bufs, grad)
+    _adjoint(u, w, m, 1e-3, *bufs[:3], 2.0 * bufs[3] / n, grad)
     for k in (0, 50, 150, 298):
         step = np.zeros(n)
         step[k] = 1e-6
@@ -226,3 +226,33 @@ def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_an
     assert hysteretic_bound(viscous, 1.0, 0.0, road, 4.0, 1.0) == pytest.approx(envelope, rel=0.02)
     # the seed's hysteresis: a friction of (alpha1 + alpha2*i)*z_u gives the rig a harder hard end
     assert hysteretic_bound(seed, 1.0, 0.0, road, 4.0, 1.0) < optimal_bound(seed, 1.0, road, 4.0, 1.0).rms_accel_bound
+
+
+def test_the_comfort_low_pass_is_its_own_transpose_so_the_filtered_costs_gradient_is_exact():
+    from sashil.control.preview_plan import _adjoint, _forward, _vector, comfort_filter, lowpass
+
+    sos = comfort_filter(20.0, 1e-3)
+    rng = np.random.default_rng(7)
+    x, y = rng.normal(size=400), rng.normal(size=400)
+    assert float(y @ lowpass(x, sos)) == pytest.approx(float(x @ lowpass(y, sos)), rel=1e-9)
+    assert comfort_filter(0.0, 1e-3) is None and comfort_filter(600.0, 1e-3) is None
+    model = PlanModel.of(_seed_context().model, hysteresis=True, coil_tau_s=0.01)
+    n = 300
+    w = np.cumsum(rng.normal(0.0, 0.05, n))
+    u = rng.uniform(0.0, 1.0, n)
+    m, x0 = _vector(model), np.array([0.001, -0.02, 0.3])
+
+    def cost(commands):
+        bufs = [np.empty(n) for _ in range(4)]
+        _forward(commands, w, m, 1e-3, x0, *bufs)
+        filtered = lowpass(bufs[3], sos)
+        return float(np.mean(filtered**2)), bufs
+
+    _, bufs = cost(u)
+    grad = np.empty(n)
+    _adjoint(u, w, m, 1e-3, *bufs[:3], (2.0 / n) * lowpass(lowpass(bufs[3], sos), sos), grad)
+    for k in (0, 100, 250):
+        step = np.zeros(n)
+        step[k] = 1e-6
+        numeric = (cost(u + step)[0] - cost(u - step)[0]) / 2e-6
+        assert grad[k] == pytest.approx(numeric, rel=1e-4, abs=1e-12)

@@ -14,8 +14,9 @@ the bound's. Two bounds:
 
 - ``envelope``: compare's own (:mod:`sashil.experiments.optimal_bound`, the plant's viscous envelope);
 - ``hysteretic``: the same optimiser on the plant's hysteresis as a friction α(i)·z_u and the
-  coil's lag (:mod:`sashil.control.preview_plan`, one block over the whole road, 3000 iterations),
-  the model the preview law plans on. A share above 100 % means the law beat that bound.
+  coil's lag, θ̈2 low-passed as compare measures it (:mod:`sashil.experiments.hysteretic_bound`, one
+  block over the whole road, 3000 iterations), the model the preview law plans on. A share above
+  100 % means the law beat that bound.
 
 The preview law's compute per cycle: the controller stage's ``step`` (estimator, observer, law,
 inverse) timed with ``perf_counter_ns`` over one run on the seed damper; p50 and p99 [µs]. The
@@ -46,9 +47,8 @@ from bench_drop_damping import DAMPERS
 
 from sashil.config import default_config
 from sashil.config.overrides import apply_overrides
-from sashil.control.preview import commanded_road
-from sashil.control.preview_plan import PlanModel, plan_current
 from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.hysteretic_bound import hysteretic_bound as hysteretic_bound_of
 from sashil.experiments.optimal_bound import optimal_bound
 from sashil.experiments.road_option import parse_road
 from sashil.models.hysteresis import BoucWenParams
@@ -105,15 +105,19 @@ def config_of(params: dict[str, float], duration: float) -> dict[str, Any]:
 
 
 def hysteretic_bound(config: dict[str, Any], road: Any, duration: float) -> float:
-    """RMS θ̈2 after the settling of the plan on the plant's hysteresis and coil lag, the whole road at once."""
+    """RMS θ̈2 after the settling, low-passed as compare measures it, of the plan on the plant's
+    hysteresis and coil lag, the whole road at once (compare's own hysteretic bound)."""
     params = BoucWenParams.from_mapping(config["model"]["params"])
-    h = 1.0 / float(config["loop"]["rate_hz"])
-    rates = commanded_road(lambda t: road(t)[1], h, duration, 0).rate_rad_s[: int(round(duration / h))]
-    model = PlanModel.of(params, True, 0.01, float(config["rig"]["coil_tau_s"]), h)
-    plan = plan_current(model, float(config["rig"]["current_max_a"]), rates, h, block_s=duration, max_iterations=3000)
-    first = int(round(float(config["compare"]["settle_s"]) / h))
-    a = plan.accel_rad_s2[first:]
-    return float(np.sqrt(np.mean(a * a)))
+    bandwidth = float(config["compare"]["accel_bandwidth_hz"])
+    return hysteretic_bound_of(
+        params,
+        float(config["rig"]["current_max_a"]),
+        float(config["rig"]["coil_tau_s"]),
+        road,
+        duration,
+        float(config["compare"]["settle_s"]),
+        bandwidth_hz=bandwidth,
+    )
 
 
 def run_case(damper: str, road_text: str, duration: float) -> Case:

@@ -7,7 +7,9 @@ cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound'
 (the controller's: ``--params`` sets it) with its hysteresis as a friction α(i)·z_u
 (``hysteresis: true``) or in its viscous envelope, and the coil's lag (``LawContext.coil_tau_s``).
 The plan gives, for every cycle k, the command u*_k in [0, i_max] and the model's state under it,
-the coil's current i*_k, θ*_k and θ̇2*_k. This is the "optimal predictive
+the coil's current i*_k, θ*_k and θ̇2*_k. Its cost is the mean of θ̈2² low-passed at
+``comfort_bandwidth_hz`` (20 Hz, ``compare.accel_bandwidth_hz``'s default), as ``sashil compare``
+measures comfort. This is the "optimal predictive
 control, assuming full knowledge of the disturbance" of Savaresi et al. (mixed SH-ADD, ASME JDSMC)
 run as a law.
 
@@ -52,6 +54,13 @@ class PreviewOptimal(Law):
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
     feedback_gain = Param(0.0, low=0.0, high=10.0, doc="gain of the LQR feedback on the error from the planned state")
     hysteresis = Param(True, doc="plan with the hysteresis as a friction α(i)·z_u (false: the viscous envelope)")
+    comfort_bandwidth_hz = Param(
+        20.0,
+        unit="Hz",
+        low=0.0,
+        high=500.0,
+        doc="the plan's cost on θ̈2 low-passed here, as compare measures (0: unfiltered)",
+    )
     friction_eps = Param(
         0.01, unit="rad/s", low=0.0, low_open=True, high=1.0, doc="rate over which the plan's friction turns"
     )
@@ -84,6 +93,7 @@ class PreviewOptimal(Law):
             block_s=float(self.block_s),
             tail_s=float(self.tail_s),
             max_iterations=int(self.plan_iterations),
+            bandwidth_hz=float(self.comfort_bandwidth_hz) or None,
         )
         self._dt = road.dt_s
         self._i = plan.command_a.tolist()

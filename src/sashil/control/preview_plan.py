@@ -16,7 +16,10 @@ the viscous envelope the bound of ``sashil compare`` is computed on.
 
 It is stepped by semi-implicit Euler at the loop's period h on the commanded road speed w_k:
 a_k = −(k/J)·θ_k − T(i_k, v_k − w_k)/J, v_{k+1} = v_k + h·a_k, θ_{k+1} = θ_k + h·(v_{k+1} − w_k),
-and the cost of a block is the mean of a_k² (comfort alone, the bound's cost). Its exact gradient is
+and the cost of a block is the mean of a_k² (comfort alone, the bound's cost), or of a_k low-passed
+at the comfort metric's bandwidth (``bandwidth_hz``: what ``sashil compare`` measures; a friction's
+switching adds θ̈2 above it that the metric never sees), the filter F applied forward and back
+from rest, so that Fᵀ = F and the direct term of the gradient is 2·F(F a)/n. Its exact gradient is
 the discrete adjoint: with g_k = ∂cost/∂a_k (direct and through the next state),
 λθ_k = −(k/J)·g_k + λθ_{k+1}, λv_k = −(∂T/∂θ̇)/J·g_k + λv_{k+1} + h·λθ_{k+1},
 λi_k = −(∂T/∂i)/J·g_k + (1 − ρ)·λi_{k+1}, and ∂cost/∂u_k = ρ·λi_{k+1}. Savaresi et al. (the mixed SH-ADD paper, ASME JDSMC) call the whole-road solution
@@ -41,7 +44,7 @@ import numpy as np
 from sashil.models._jit import jit
 from sashil.models.hysteresis import BoucWenParams
 
-__all__ = ["CurrentPlan", "PlanModel", "plan_current", "simulate_plan"]
+__all__ = ["CurrentPlan", "PlanModel", "comfort_filter", "lowpass", "plan_current", "simulate_plan"]
 
 
 @dataclass(frozen=True)
@@ -105,11 +108,11 @@ def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
 
 
 @jit
-def _adjoint(u, w, m, h, thetas, vs, coil, accel, grad):
-    """The discrete adjoint of :func:`_forward`'s cost: d(cost)/d(u_k) into ``grad``."""
+def _adjoint(u, w, m, h, thetas, vs, coil, direct, grad):
+    """The discrete adjoint of a cost of the θ̈2 of :func:`_forward`: d(cost)/d(u_k) into ``grad``,
+    given ``direct``, d(cost)/d(a_k) holding the later states fixed (2·a_k/n for the mean of a²)."""
     k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
     n = u.size
-    scale = 1.0 / n
     lam_theta = 0.0
     lam_v = 0.0
     lam_i = 0.0
@@ -120,7 +123,7 @@ def _adjoint(u, w, m, h, thetas, vs, coil, accel, grad):
         f = f1 + f2 * i
         d_rate = c1 + c2 * i + f * (1.0 - s * s) / eps  # dT/dθ̇
         d_current = c2 * r + f2 * s  # dT/di
-        g_a = 2.0 * accel[k] * scale + h * (lam_v + h * lam_theta)
+        g_a = direct[k] + h * (lam_v + h * lam_theta)
         grad[k] = rho * lam_i  # u_k sets i_{k+1}
         lam_i = -g_a * inv_j * d_current + (1.0 - rho) * lam_i
         new_theta = -g_a * k_over_j + lam_theta
@@ -166,10 +169,39 @@ def simulate_plan(
     return CurrentPlan(u, coil, thetas, vs, accel)
 
 
+def comfort_filter(bandwidth_hz: float | None, h: float) -> np.ndarray | None:
+    """The low-pass of the comfort metric (4th-order Butterworth at ``bandwidth_hz``, second-order
+    sections), None for none (``bandwidth_hz`` None or 0, or at or above 0.45 of the rate)."""
+    from scipy.signal import butter
+
+    if not bandwidth_hz or bandwidth_hz >= 0.45 / h:
+        return None
+    return np.asarray(butter(4, bandwidth_hz, fs=1.0 / h, output="sos"))
+
+
+def lowpass(x: np.ndarray, sos: np.ndarray | None) -> np.ndarray:
+    """``x`` filtered forward and back from rest (zero phase): R·H·R·H x, with H the causal filter
+    and R the reversal. As a matrix it is its own transpose (Hᵀ = R·H·R), so the gradient of
+    mean((F a)²) is 2·F(F a)/n."""
+    if sos is None:
+        return x
+    from scipy.signal import sosfilt
+
+    once = np.asarray(sosfilt(sos, x))
+    return np.asarray(sosfilt(sos, once[::-1]))[::-1].copy()
+
+
 def _plan_block(
-    model: PlanModel, i_max: float, w: np.ndarray, h: float, x0: tuple[float, float, float], max_iterations: int
+    model: PlanModel,
+    i_max: float,
+    w: np.ndarray,
+    h: float,
+    x0: tuple[float, float, float],
+    max_iterations: int,
+    sos: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The commands of one block of road speeds ``w`` from the state ``x0``, from the best constant."""
+    """The commands of one block of road speeds ``w`` from the state ``x0``, from the best constant;
+    the cost the mean of θ̈2² low-passed by ``sos`` (:func:`lowpass`; None: unfiltered)."""
     from scipy.optimize import minimize, minimize_scalar
 
     n = w.size
@@ -177,15 +209,22 @@ def _plan_block(
     start = np.asarray(x0, dtype=float)
     thetas, vs, coil, accel, grad = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
 
+    def value_of(u: np.ndarray) -> float:
+        _forward(u, w, m, h, start, thetas, vs, coil, accel)
+        filtered = lowpass(accel, sos)
+        return float(np.mean(filtered * filtered))
+
     def constant(i: float) -> float:
-        return float(_forward(np.full(n, i), w, m, h, start, thetas, vs, coil, accel))
+        return value_of(np.full(n, i))
 
     best = minimize_scalar(constant, bounds=(0.0, i_max), method="bounded", options={"xatol": 1e-3 * i_max})
 
     def cost(u: np.ndarray) -> tuple[float, np.ndarray]:
-        value = _forward(u, w, m, h, start, thetas, vs, coil, accel)
-        _adjoint(u, w, m, h, thetas, vs, coil, accel, grad)
-        return float(value), grad.copy()
+        _forward(u, w, m, h, start, thetas, vs, coil, accel)
+        filtered = lowpass(accel, sos)
+        direct = (2.0 / n) * lowpass(filtered, sos)
+        _adjoint(u, w, m, h, thetas, vs, coil, direct, grad)
+        return float(np.mean(filtered * filtered)), grad.copy()
 
     res = minimize(
         cost,
@@ -206,9 +245,12 @@ def plan_current(
     block_s: float = 10.0,
     tail_s: float = 2.0,
     max_iterations: int = 400,
+    bandwidth_hz: float | None = None,
 ) -> CurrentPlan:
     """The receding-horizon plan of the module docstring for the road speeds ``road_rate`` (one per
-    cycle of ``h``), from rest."""
+    cycle of ``h``), from rest; ``bandwidth_hz``: the cost on θ̈2 low-passed there, as ``sashil
+    compare`` measures comfort (None: unfiltered)."""
+    sos = comfort_filter(bandwidth_hz, h)
     n = road_rate.size
     w_all = np.ascontiguousarray(road_rate, dtype=float)
     plan = np.zeros(n)
@@ -219,7 +261,7 @@ def plan_current(
     for start in range(0, n, block):
         stop = min(n, start + block)
         w = w_all[start : min(n, stop + tail)]
-        u = _plan_block(model, current_max_a, w, h, x0, max_iterations)
+        u = _plan_block(model, current_max_a, w, h, x0, max_iterations, sos)
         kept = stop - start
         plan[start:stop] = u[:kept]
         # the state the kept block ends at: where the next block starts

@@ -244,7 +244,9 @@ def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) ->
     bound = optimal_bound(params, i_max, road, duration, settle)
     # the hysteretic model's bound where it lies lower: a law on the rig can beat the envelope's
     tau = float(config["controller"].get("coil_tau_s") or config["rig"]["coil_tau_s"])
-    hysteretic = hysteretic_bound(params, i_max, tau, road, duration, settle)
+    hysteretic = hysteretic_bound(
+        params, i_max, tau, road, duration, settle, bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"])
+    )
     if hysteretic < bound.rms_accel_bound:
         bound = replace(bound, rms_accel_bound=hysteretic, model="hysteretic")
     on_event(
@@ -322,7 +324,8 @@ def compare(
         header["optimal bound"] = (
             f"RMS θ̈2 {bound.rms_accel_bound:.4g} rad/s² against {bound.rms_accel_passive:.4g} for the best constant "
             f"damping of the viscous envelope ({bound.c_passive:.3g} N m s/rad), knowing the road in advance; the lower "
-            f"of the viscous envelope's bound and the hysteretic model's (the hysteresis as a friction, the coil's lag): "
+            f"of the viscous envelope's bound and the hysteretic model's (the hysteresis as a friction, the coil's lag, "
+            f"θ̈2 low-passed as measured here): "
             f"here the {'hysteretic model' if bound.model == 'hysteretic' else 'viscous envelope'}"
         )
     notes = [
