@@ -99,7 +99,7 @@ def test_bad_input_is_one_line_exit_2_nothing_run(tmp_path, capsys, extra, key):
 
 
 def test_the_manuals_compare_example_runs(tmp_path):
-    argv = shlex.split(example("how-to/compare-laws.md", "sh", "sashil compare"))
+    argv = shlex.split(example("how-to/compare-laws.md", "sh", "--controller pdd"))
     assert argv[0] == "sashil"
     assert main([*argv[1:], "--out", str(tmp_path / "cmp"), "-q"]) == 0
     assert {"compare.md", "metrics.csv", "compare.png", "config.yaml"} <= {p.name for p in (tmp_path / "cmp").iterdir()}

@@ -42,6 +42,13 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
     assert {law["accel_source"] for law in summary["laws"]} == {"plant"}
     assert [law["rms_accel_rad_s2"] for law in summary["laws"]] == list(table["rms_accel_rad_s2"])
     assert math.isfinite(summary["optimal_bound_gain_pct"])
+    # the share of the bound on one scale: the best passive run's RMS θ̈2 is 0 %, the bound's 100 %
+    bound = summary["optimal_bound_rms_accel_rad_s2"]
+    passive = min(law["rms_accel_rad_s2"] for law in summary["laws"] if law["law"].startswith("passive"))
+    for law in summary["laws"]:
+        expected = 100.0 * (passive - law["rms_accel_rad_s2"]) / (passive - bound)
+        assert law["share_of_bound_pct"] == pytest.approx(expected)
+    assert list(table["share_of_bound_pct"]) == pytest.approx([law["share_of_bound_pct"] for law in summary["laws"]])
     assert run.config["compare"]["road"] == "iso8608:C" and run.config["controller"]["law"] == "passive"
     assert {"compare.md", "compare.png", "config.yaml", "metrics.csv", "summary.json"} <= {
         p.name for p in run.path.iterdir()

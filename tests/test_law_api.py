@@ -30,6 +30,7 @@ BUILT_INS = {
     "lqr-clipped",
     "pdd",
     "groundhook-hybrid",
+    "preview-optimal",
 }
 
 

@@ -1,4 +1,5 @@
-"""``sashil laws``: every law sashil can run, with its parameters, output and origin."""
+"""``sashil laws``: every law sashil can run, with its parameters, output, whether it reads the road
+ahead, and origin."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _text(laws: list[dict[str, Any]]) -> str:
     lines = []
     for law in laws:
-        lines.append(f"{law['name']}  ({law['output']}; {law['origin']}: {law['class']})")
+        ahead = "; reads the road ahead (a road plan only)" if law["reads_road_ahead"] else ""
+        lines.append(f"{law['name']}  ({law['output']}{ahead}; {law['origin']}: {law['class']})")
         if law["doc"]:
             lines.append(f"    {law['doc']}")
         for p in law["parameters"]:

@@ -35,6 +35,15 @@ def check_controller(config: Config, source: str, replaced: Collection[str] = ()
     check(config, source, replaced)
 
 
+def law_reads_road_ahead(spec: str) -> bool:
+    """Whether the law ``spec`` declares that it reads the road ahead
+    (:func:`sashil.control.law_config.reads_road_ahead`); False for one that cannot be found (its own
+    check says why)."""
+    from sashil.control.law_config import reads_road_ahead
+
+    return reads_road_ahead(spec)
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` that refuses a mapping with the same key twice (YAML says keys are
     unique; PyYAML silently keeps the last, so a doubled ``rate_hz:`` would change a run unseen)."""

@@ -122,6 +122,8 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
     check = VERB_CHECKS.get(verb or "")
     if check is not None:  # the verb's own checks of its keys, naming the option that set each
         check(resolved, lambda key: _named(source, key))
+    if verb not in RIGLESS_VERBS:  # a law that reads the road ahead needs a plan that commands one
+        verb_checks.check_road_ahead(resolved, verb, lambda key: _named(source, key))
     return resolved
 
 

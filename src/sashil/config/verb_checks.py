@@ -22,6 +22,7 @@ __all__ = [
     "THETA0_LIMIT_DEG",
     "check_compare",
     "check_drops",
+    "check_road_ahead",
     "check_run",
     "check_simulate",
     "check_sweep",
@@ -140,3 +141,44 @@ def check_simulate(config: RunConfig, named: Named) -> None:
     value = config["simulate"]["input"]
     if value:
         input_file(value, named("simulate.input"))
+
+
+#: the verbs whose plan commands a road, so the road ahead is known, and the key that names the road
+#: (None: the plan always commands one, a sweep's chirp or sine)
+ROAD_PLANS: dict[str, str | None] = {"run": "run.road", "compare": "compare.road", "sweep": None}
+
+
+def _road_of(config: RunConfig, key: str) -> str:
+    """The road a verb's key names (``run.road``, ``compare.road``), ``none`` when unset."""
+    road = config["run"]["road"] if key == "run.road" else config["compare"]["road"]
+    return str(road or "none").strip()
+
+
+def reads_road_ahead(spec: str) -> bool:
+    """Whether the law ``spec`` reads the road ahead: the law's own declaration, read through the one
+    way the config reaches a law (:func:`sashil.config.law_reads_road_ahead`)."""
+    from sashil.config import law_reads_road_ahead  # the laws' entry points: only for a law
+
+    return law_reads_road_ahead(spec)
+
+
+def check_road_ahead(config: RunConfig, verb: str | None, named: Named, law: str | None = None) -> None:
+    """Refuse a law that reads the road ahead (``law``, None: ``controller.law``) under a plan that
+    commands no road: a drop test, a replay, a calibration, ``--road none``."""
+    spec = law if law is not None else (config.get("controller") or {}).get("law")
+    if not spec or not reads_road_ahead(str(spec)):
+        return
+    if verb in ROAD_PLANS:
+        key = ROAD_PLANS[verb]
+        if key is None:
+            return
+        if _road_of(config, key) != "none":
+            return
+        raise ConfigError(
+            f"{named(key)} none: law {spec!r} reads the road ahead, which only a plan that commands a road "
+            "has: give a road (--road iso8608:C)"
+        )
+    raise ConfigError(
+        f"controller.law {spec}: law {spec!r} reads the road ahead, and {verb or 'this verb'} commands no road "
+        "(run it with sashil run --road, sashil compare or sashil sweep)"
+    )

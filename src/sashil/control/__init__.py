@@ -6,6 +6,6 @@ composes them into a loop stage and :func:`~sashil.control.registry.make_control
 the config's ``controller:`` section.
 """
 
-from sashil.control.law_api import REQUIRED, Law, LawContext, LawState, Param
+from sashil.control.law_api import REQUIRED, CommandedRoad, Law, LawContext, LawState, Param
 
-__all__ = ["REQUIRED", "Law", "LawContext", "LawState", "Param"]
+__all__ = ["REQUIRED", "CommandedRoad", "Law", "LawContext", "LawState", "Param"]

@@ -29,6 +29,11 @@ fills each cycle. Its output is checked: an exception, NaN, an infinity or a non
 with :class:`~sashil.errors.LawError`, naming the law and the first line of what went wrong; the
 loop then commands 0 A and deactivates the rig like any other error.
 
+The road ahead: a plan that commands the road calls :meth:`Controller.attach_road` before the run;
+for a law that reads the road ahead (``Law.reads_road_ahead``) the commanded road is sampled there
+and handed to the law once (``Law.plan_road``), and each cycle the law's state carries the window of
+the next cycles (:mod:`sashil.control.preview`), its angles corrected by the estimated road angle.
+
 Bad edge events: the Kalman estimator leaves out an edge time from the future or older than the
 encoder's last one and counts it (``edge_rejects``); when more than 1 % of the events were bad (after
 the first 100) the stage raises :class:`~sashil.errors.SafetyTrip`: the loop commands 0 A and the
@@ -50,6 +55,7 @@ from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.law_api import Law, LawState
 from sashil.control.observer import BoucWenObserver
+from sashil.control.preview import RoadWindow, commanded_road
 from sashil.drivers.interface import RigCommand, RigSample, clamp_current
 from sashil.errors import LawError, SafetyTrip
 
@@ -107,6 +113,7 @@ class Controller:
         self._accel = 0.0
         self._road_speed: float | None = None
         self._v_prev = 0.0
+        self._road_window: RoadWindow | None = None
         # per-cycle values (recorded by the caller)
         self.time_s = 0.0
         self.theta_rad = 0.0
@@ -127,6 +134,19 @@ class Controller:
         self.fallback = False  # latched when the estimator fails: 0 A for the rest of the run
         self.fallback_at_s: float | None = None
         self.fallback_cycles = 0
+
+    def attach_road(self, speed: Any, duration_s: float | None) -> None:
+        """The road speed ``speed(t)`` [rad/s] a plan will command from this stage's first cycle, for
+        ``duration_s`` (None: until stopped). A law that reads the road ahead gets it sampled at the
+        loop's period (``Law.plan_road``, now) and its window each cycle; any other law ignores it."""
+        law = self.law
+        if not law.reads_road_ahead:
+            return
+        cycles = int(law.preview_cycles())
+        road = commanded_road(speed, self.nominal_dt_s, duration_s, cycles)
+        law.plan_road(road)
+        # a law that planned on the whole road and reads no window costs the cycle nothing more
+        self._road_window = RoadWindow(road, cycles) if cycles > 0 else None
 
     def _fallback_step(self) -> RigCommand:
         """0 A (the safe state of an MR damper) once the estimator has failed; counted per cycle."""
@@ -275,6 +295,10 @@ class Controller:
         )
         state.torque_hat_nm, state.z_hat, state.band_lo_nm, state.band_hi_nm = torque_hat, z, lo, hi
         state.current_a = measured
+        road_rad = getattr(est, "theta_road_rad", 0.0)
+        state.road_rad = road_rad
+        if self._road_window is not None:
+            self._road_window.fill(state, round(self.time_s / self.nominal_dt_s), road_rad)
         try:
             out = self._law_output(state)
         except Exception as err:

@@ -27,6 +27,14 @@ raise :class:`~sashil.errors.ConfigError` naming ``controller.<param>``), ``rese
 ``self.context`` (a :class:`LawContext`: the controller's model, the current range, the loop rate)
 is set before ``parameters_changed()``.
 
+The road ahead: a law with ``reads_road_ahead = True`` reads, each cycle, the road angle and rate
+of the next :meth:`Law.preview_cycles` cycles (``state.road_ahead_rad``,
+``state.road_ahead_dot_rad_s``), which the plan that commands the road supplies (a run on a road
+profile, ``compare``, a sweep): the commanded speeds exactly, the angles as the measured road angle
+plus the commanded motion from now on. Before the run it is handed the whole commanded road once
+(:meth:`Law.plan_road`), so it may plan before the first cycle. Such a law under a plan with no road
+(a drop test, ``--road none``, a replay) is refused when the config is resolved.
+
 A law that raises, or returns NaN, an infinity or a non-number, ends the run at 0 A
 (:class:`~sashil.errors.LawError`); the controller checks every output.
 """
@@ -37,11 +45,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
+
 from sashil.config.schema import Field
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
-__all__ = ["REQUIRED", "Law", "LawContext", "LawState", "Param"]
+__all__ = ["REQUIRED", "CommandedRoad", "Law", "LawContext", "LawState", "Param"]
 
 
 class _Required:
@@ -120,11 +130,28 @@ class Param:
 @dataclass(frozen=True)
 class LawContext:
     """What a law may know of the rig it runs on: the controller's model (seed 001 eqs. 9-17),
-    the coil's current range [0, current_max_a] and the loop's rate."""
+    the coil's current range [0, current_max_a], the loop's rate and the coil's first-order lag
+    the controller assumes (``controller.coil_tau_s``, else ``rig.coil_tau_s``; 0: none known)."""
 
     model: BoucWenParams
     current_max_a: float
     rate_hz: float
+    coil_tau_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class CommandedRoad:
+    """The road a plan will command, sampled every loop period ``dt_s`` from the run's first cycle:
+    ``rate_rad_s[k]`` the road speed θ̇1 commanded at cycle k (held over that period, as the road
+    motor's speed loop holds it) and ``theta_rad[k]`` the road angle θ1 at cycle k that those speeds
+    give from 0 (``theta_rad[k] = dt_s * sum(rate_rad_s[:k])``)."""
+
+    dt_s: float
+    rate_rad_s: np.ndarray
+    theta_rad: np.ndarray
+
+
+_EMPTY = np.zeros(0)
 
 
 class LawState:
@@ -138,7 +165,10 @@ class LawState:
         "body_ddot_rad_s2",
         "body_dot_rad_s",
         "current_a",
+        "road_ahead_dot_rad_s",
+        "road_ahead_rad",
         "road_dot_rad_s",
+        "road_rad",
         "theta_dot_rad_s",
         "theta_rad",
         "time_s",
@@ -165,6 +195,13 @@ class LawState:
         self.band_hi_nm = 0.0
         #: the coil current measured this cycle [A]
         self.current_a = 0.0
+        #: the road (wheel) side's angle theta1 [rad] (the estimator's)
+        self.road_rad = 0.0
+        #: a law that reads the road ahead: the road angle theta1 at the next N cycles' samples
+        #: [rad] (the measured angle now plus the commanded motion) and the road speed commanded over
+        #: each of the next N periods, this one first [rad/s]; empty for any other law
+        self.road_ahead_rad: np.ndarray = _EMPTY
+        self.road_ahead_dot_rad_s: np.ndarray = _EMPTY
 
 
 class Law:
@@ -177,6 +214,10 @@ class Law:
     #: the state, such as a constant current): it runs as a constant-current stage without them,
     #: and a drop test records no controller columns for it.
     reads_state: ClassVar[bool] = True
+    #: whether the law reads the road ahead (``state.road_ahead_rad``, ``state.road_ahead_dot_rad_s``
+    #: over :meth:`preview_cycles`, and :meth:`plan_road` before the run): only a plan that commands
+    #: the road can run it
+    reads_road_ahead: ClassVar[bool] = False
 
     def label(self) -> str:
         """What a run calls the law in its summary and plots (``controller``): its name by default."""
@@ -258,6 +299,14 @@ class Law:
 
     def reset(self) -> None:
         """Called before a run: clear any state the law keeps between cycles."""
+
+    def preview_cycles(self) -> int:
+        """How many cycles of the road ahead the law reads each cycle (a law that reads the road ahead)."""
+        return 0
+
+    def plan_road(self, road: CommandedRoad) -> None:
+        """Called once before the run of a law that reads the road ahead, with the whole road the
+        plan will command: plan here, before the first cycle, not in one."""
 
     # -- outputs (a law implements exactly one) --------------------------------------------------
     def torque(self, state: LawState) -> float:

@@ -37,12 +37,30 @@ def law_context(config: Mapping[str, Any]) -> LawContext | None:
         model=BoucWenParams.from_mapping(model.get("params") or {}),
         current_max_a=float(config["rig"]["current_max_a"]),
         rate_hz=float(config["loop"]["rate_hz"]),
+        coil_tau_s=_coil_tau(config),
     )
+
+
+def _coil_tau(config: Mapping[str, Any]) -> float:
+    """The coil lag the controller assumes: ``controller.coil_tau_s``, else ``rig.coil_tau_s`` [s]."""
+    tau = (config.get("controller") or {}).get("coil_tau_s")
+    if tau is None:
+        tau = (config.get("rig") or {}).get("coil_tau_s")
+    return float(tau or 0.0)
 
 
 def build_law(entry: LawEntry, config: Mapping[str, Any], section: Mapping[str, Any]) -> Law:
     """An instance of ``entry``'s law with the section's parameters (ConfigError naming the key)."""
     return entry.cls(law_context(config), **law_parameters(section))
+
+
+def reads_road_ahead(spec: str) -> bool:
+    """Whether the law ``spec`` (a name, ``package.module:Class`` or ``file.py:Class``) reads the road
+    ahead (``Law.reads_road_ahead``); False for one that cannot be found (its own check says why)."""
+    try:
+        return bool(getattr(find_law(spec).cls, "reads_road_ahead", False))
+    except ConfigError:
+        return False
 
 
 def check_controller(config: dict[str, Any], source: str, replaced: Collection[str] = ()) -> None:

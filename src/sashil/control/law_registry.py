@@ -134,6 +134,7 @@ def describe(entry: LawEntry) -> dict[str, Any]:
     return {
         "name": cls.name,
         "output": cls.output_kind(),
+        "reads_road_ahead": bool(getattr(cls, "reads_road_ahead", False)),
         "origin": entry.origin,
         "class": entry.spec,
         "doc": doc[0] if doc else "",

@@ -210,7 +210,7 @@ def run_job(job: LawJob) -> LawResult:
         road, _ = parse_road(job.road, config)
         stage = _stage(config)
         if road is not None:
-            stage = RoadStage(stage, road)
+            stage = RoadStage(stage, road, job.duration_s)
         rig = open_rig(config)
         stage = MeasuredStage(stage, rig)
         outcome = run_plan(

@@ -14,7 +14,15 @@ from sashil.experiments.compare import METRICS, LawResult
 from sashil.recording.labels import format_parameters
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 
-__all__ = ["best_law", "best_passive", "plot_compare", "write_compare_md", "write_metrics_csv"]
+__all__ = [
+    "best_law",
+    "best_passive",
+    "plot_compare",
+    "share_of_bound",
+    "shares_of_bound",
+    "write_compare_md",
+    "write_metrics_csv",
+]
 
 COLUMNS = ("law", "status", *METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
 HEADINGS = {
@@ -39,17 +47,37 @@ def best_law(results: Sequence[LawResult]) -> LawResult | None:
     return min((r for r in results if r.ok), key=lambda r: r.metrics["rms_accel_rad_s2"], default=None)
 
 
-def _rows(results: Sequence[LawResult], bound_gain_pct: float) -> list[dict[str, Any]]:
-    """Each law's values; its gain over the best passive run [%], and that gain as a share of the
-    bound's gain over the best constant damping [%] (NaN without a bound above passive)."""
+def share_of_bound(rms_accel: float, passive_rms_accel: float, bound_rms_accel: float) -> float:
+    """Where a run's RMS θ̈2 lies on the one scale from the best passive run (0 %) to the optimal
+    bound (100 %), both ends absolute RMS θ̈2 of the same road: ``100·(p − r)/(p − b)`` [%]; NaN when
+    the bound is not below the best passive run (or a value is missing). Above 100 %: the run beat the
+    bound (the bound's model is not the rig's)."""
+    gap = passive_rms_accel - bound_rms_accel
+    if not (math.isfinite(rms_accel) and math.isfinite(gap) and gap > 0.0):
+        return math.nan
+    return 100.0 * (passive_rms_accel - rms_accel) / gap
+
+
+def shares_of_bound(results: Sequence[LawResult], bound_rms_accel: float) -> dict[str, float]:
+    """Each finished run's :func:`share_of_bound` by label (empty without a best passive run)."""
     best = best_passive(results)
+    if best is None:
+        return {}
+    p = best.metrics["rms_accel_rad_s2"]
+    return {r.label: share_of_bound(r.metrics["rms_accel_rad_s2"], p, bound_rms_accel) for r in results if r.ok}
+
+
+def _rows(results: Sequence[LawResult], bound_rms_accel: float) -> list[dict[str, Any]]:
+    """Each law's values; its gain over the best passive run [%], and its share of the way from the
+    best passive run to the optimal bound's RMS θ̈2 [%] (:func:`share_of_bound`)."""
+    best = best_passive(results)
+    shares = shares_of_bound(results, bound_rms_accel)
     rows = []
     for r in results:
-        gain = share = math.nan
+        gain = math.nan
+        share = shares.get(r.label, math.nan)
         if best is not None and r.ok:
             gain = 100.0 * (1.0 - r.metrics["rms_accel_rad_s2"] / best.metrics["rms_accel_rad_s2"])
-            if bound_gain_pct > 0.0:
-                share = 100.0 * gain / bound_gain_pct
         rows.append(
             {
                 "law": r.label,
@@ -63,14 +91,14 @@ def _rows(results: Sequence[LawResult], bound_gain_pct: float) -> list[dict[str,
     return rows
 
 
-def write_metrics_csv(path: Path, results: Sequence[LawResult], bound_gain_pct: float = math.nan) -> Path:
+def write_metrics_csv(path: Path, results: Sequence[LawResult], bound_rms_accel: float = math.nan) -> Path:
     """One row per law: its status, the metrics (empty when it did not finish), the comfort gain
-    over the best passive setting [%] (positive: better), that gain as a share of the optimal
-    bound's [%] and its wall time."""
+    over the best passive setting [%] (positive: better), its share of the way from the best
+    passive run to the optimal bound (``bound_rms_accel``, RMS θ̈2) [%] and its wall time."""
     with open(path, "w", newline="", encoding="utf-8") as out:
         writer = csv.writer(out)
         writer.writerow(COLUMNS)
-        for row in _rows(results, bound_gain_pct):
+        for row in _rows(results, bound_rms_accel):
             writer.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in (row[c] for c in COLUMNS)])
     return path
 
@@ -90,7 +118,7 @@ def write_compare_md(
     results: Sequence[LawResult],
     header: dict[str, str],
     notes: Sequence[str],
-    bound_gain_pct: float = math.nan,
+    bound_rms_accel: float = math.nan,
     parameters: Mapping[str, Mapping[str, Any]] | None = None,
     folders: Mapping[str, str] | None = None,
 ) -> Path:
@@ -103,7 +131,7 @@ def write_compare_md(
     keys = (*METRICS, "vs_best_passive_pct", "share_of_bound_pct", "wall_s")
     lines += ["", "| law | parameters | folder | " + " | ".join(HEADINGS[k] for k in keys) + " | status |"]
     lines.append("|---|---|---|" + "---:|" * len(keys) + "---|")
-    for row in _rows(results, bound_gain_pct):
+    for row in _rows(results, bound_rms_accel):
         label = row["law"]
         name = f"**{label}** (best)" if best is not None and label == best.label else label
         params = _parameter_text(parameters.get(label, {})) or "–"
@@ -132,9 +160,10 @@ def _colour(result: LawResult, best: LawResult | None, reference: LawResult | No
     return REFERENCE if result.label.startswith("passive") else OTHER
 
 
-def plot_compare(path: Path, results: Sequence[LawResult], road: str = "") -> Path:
+def plot_compare(path: Path, results: Sequence[LawResult], road: str = "", bound_rms_accel: float = math.nan) -> Path:
     """``compare.png``: RMS θ̈2 and RMS θ of every run side by side, best first, the best run and
-    the best passive reference marked; the PSD and the first seconds of θ̈2 of those two only (every
+    the best passive reference marked, and with a bound (``bound_rms_accel``) its RMS θ̈2 drawn and
+    each run's share of the way to it; the PSD and the first seconds of θ̈2 of those two only (every
     law's are in its own run folder)."""
     plt = pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(10, 10), height_ratios=(1.3, 1.0, 1.0), width_ratios=(1.6, 1.0))
@@ -155,6 +184,7 @@ def plot_compare(path: Path, results: Sequence[LawResult], road: str = "") -> Pa
     ax_accel.set_yticks(y, [r.label for r in order], fontsize=9)
     ax_travel.set_yticks(y, [""] * len(order))
     top = max(accel, default=1.0) or 1.0
+    shares = shares_of_bound(results, bound_rms_accel)
     for yi, r, value in zip(y, order, accel, strict=True):
         if not r.ok:
             ax_accel.text(0.0, yi, f" did not finish: {r.status[:40]}", va="center", fontsize=8, color="tab:red")
@@ -162,13 +192,20 @@ def plot_compare(path: Path, results: Sequence[LawResult], road: str = "") -> Pa
         text = f"{value:.3g}"
         if reference is not None:
             text += f"  ({100.0 * (1.0 - value / reference.metrics['rms_accel_rad_s2']):+.1f} %)"
+        share = shares.get(r.label, math.nan)
+        if math.isfinite(share):
+            text += f"  share {share:.0f} %"
         if best is not None and r.label == best.label:
             text += "  best"
         ax_accel.text(top * 1.02, yi, text, va="center", fontsize=8, fontweight="bold" if r is best else "normal")
     if reference is not None:
         ax_accel.axvline(reference.metrics["rms_accel_rad_s2"], color=PASSIVE, ls="--", lw=0.8)
-    ax_accel.set_xlim(0.0, top * 1.6)
-    ax_accel.set(xlabel="RMS θ̈2 [rad/s²]  (lower is more comfortable; % vs the best passive, dashed)")
+    xlabel = "RMS θ̈2 [rad/s²]  (lower is more comfortable; % vs the best passive, dashed)"
+    if math.isfinite(bound_rms_accel):
+        ax_accel.axvline(bound_rms_accel, color="tab:red", ls=":", lw=1.0)
+        xlabel += "\nshare: of the way from the best passive run (0 %) to the optimal bound (100 %, dotted red)"
+    ax_accel.set_xlim(0.0, top * 1.9)
+    ax_accel.set(xlabel=xlabel)
     ax_accel.set_title("comfort", fontsize=10, loc="left")
     if road:
         fig.suptitle(f"sashil compare on {road}", fontsize=10)

@@ -90,10 +90,13 @@ class BoundResult:
     rms_accel_passive: float
     rms_accel_bound: float
     iterations: int
+    #: the model the bound was found on: "envelope" (this module's) or "hysteretic"
+    #: (:mod:`sashil.experiments.hysteretic_bound`, where it lies lower)
+    model: str = "envelope"
 
     @property
     def gain_pct(self) -> float:
-        """How far the bound lies below the best constant damping [%]."""
+        """How far the bound lies below the envelope's best constant damping [%]."""
         return 100.0 * (1.0 - self.rms_accel_bound / self.rms_accel_passive)
 
 

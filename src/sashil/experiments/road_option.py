@@ -47,7 +47,7 @@ def run_in_loop(
     label, stage = make_stage(config)
     road, road_text = parse_road(config["run"]["road"], config)
     if road is not None:
-        stage = RoadStage(stage, road)
+        stage = RoadStage(stage, road, config["run"]["duration_s"])
     return stage, label, road_text
 
 
@@ -152,12 +152,19 @@ def _check(text: str, f_hz: float, amp_deg: float, nyquist: float) -> None:
 
 class RoadStage:
     """A loop stage that runs ``stage`` and adds the road speed θ̇1(t) to each of its commands
-    (for a rig whose road motor takes speed commands). Its recorded signals are ``stage``'s."""
+    (for a rig whose road motor takes speed commands). Its recorded signals are ``stage``'s.
 
-    def __init__(self, stage: Any, road: RoadProfile):
+    The road to come is known here, so a stage that takes it (a controller:
+    ``attach_road(speed, duration_s)``) is given it before the run, for a law that reads the road
+    ahead; ``duration_s``: how long the run will command it (None: until stopped)."""
+
+    def __init__(self, stage: Any, road: RoadProfile, duration_s: float | None = None):
         self.stage = stage
         self.road = road
         self._t0: int | None = None
+        attach = getattr(stage, "attach_road", None)
+        if attach is not None:
+            attach(lambda t: road(t)[1], duration_s)
 
     def __getattr__(self, name: str) -> Any:  # the inner stage's signals (theta_dot_rad_s, z_hat, ...)
         if name == "stage":

@@ -143,10 +143,17 @@ class SweepStage:
     """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
     road speed. It keeps no data: the runner's stream records every cycle, with the controller's
     signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
-    plant's, its capability ``true_torque``; NaN elsewhere)."""
+    plant's, its capability ``true_torque``; NaN elsewhere). The stage that runs (given its ``rig``)
+    hands the road to come to the controller, for a law that reads the road ahead (``duration_s``:
+    how long it will be commanded, None: until stopped)."""
 
-    def __init__(self, controller: Any, road: RoadProfile, rig: RigInterface | None = None):
+    def __init__(
+        self, controller: Any, road: RoadProfile, rig: RigInterface | None = None, duration_s: float | None = None
+    ):
         self.controller = controller
+        attach = getattr(controller, "attach_road", None)
+        if rig is not None and attach is not None:
+            attach(lambda t: road(t)[1], duration_s)
         #: the controller's signals (a current law's own output, current_law_a, too) and the true torque
         self.signal_names = (*getattr(controller, "signal_names", CONTROLLER_SIGNALS), "torque_true_nm")
         self.road = road
@@ -294,7 +301,7 @@ def run_sweep(
         )
     else:
         rig = (rig_factory or default_rig)(config, road)
-        stage = SweepStage(controller, road, rig)
+        stage = SweepStage(controller, road, rig, duration_s)
         outcome = run_plan(
             config,
             rig,

@@ -1,0 +1,273 @@
+"""The current plan of a preview law: the optimal semi-active current over the road to come, on the
+law's model, by the optimal bound's own method (:mod:`sashil.experiments.optimal_bound`) over a
+receding horizon.
+
+The model is the rig of seed 001 eq. 13 with the damper torque of eq. 9 linear in the current i,
+
+    J θ̈2 = −k θ − T,   T = c(i)·θ̇ + α(i)·z_u·tanh(θ̇/ε),   c(i) = c1 + c2·i,  α(i) = α1 + α2·i
+
+(eqs. 11-12), θ = θ2 − θ1. The coil lags its command u ∈ [0, i_max] by τ (``rig.coil_tau_s``),
+i_{k+1} = i_k + ρ·(u_k − i_k), ρ = 1 − exp(−h/τ) (a command acts from the next sample on, as the
+loop's does). The Bouc-Wen state z is taken at its bound z_u =
+(δ/(β + γ))^(1/n) with the sign of θ̇: with the seed's parameters z crosses from −z_u to z_u within
+2·z_u/δ ≈ 3·10⁻⁴ rad of travel, so the hysteresis acts as a friction torque α(i)·z_u, smoothed over
+ε (``friction_eps``) so the cost has a gradient. With ``hysteresis=False`` the friction is left out:
+the viscous envelope the bound of ``sashil compare`` is computed on.
+
+It is stepped by semi-implicit Euler at the loop's period h on the commanded road speed w_k:
+a_k = −(k/J)·θ_k − T(i_k, v_k − w_k)/J, v_{k+1} = v_k + h·a_k, θ_{k+1} = θ_k + h·(v_{k+1} − w_k),
+and the cost of a block is the mean of a_k² (comfort alone, the bound's cost), or of a_k low-passed
+at the comfort metric's bandwidth (``bandwidth_hz``: what ``sashil compare`` measures; a friction's
+switching adds θ̈2 above it that the metric never sees), the filter F applied forward and back
+from rest, so that Fᵀ = F and the direct term of the gradient is 2·F(F a)/n. Its exact gradient is
+the discrete adjoint: with g_k = ∂cost/∂a_k (direct and through the next state),
+λθ_k = −(k/J)·g_k + λθ_{k+1}, λv_k = −(∂T/∂θ̇)/J·g_k + λv_{k+1} + h·λθ_{k+1},
+λi_k = −(∂T/∂i)/J·g_k + (1 − ρ)·λi_{k+1}, and ∂cost/∂u_k = ρ·λi_{k+1}. Savaresi et al. (the mixed SH-ADD paper, ASME JDSMC) call the whole-road solution
+"optimal predictive control, assuming full knowledge of the disturbance"; Giorgetti, Bemporad et
+al. (IJC 2006) show the optimal semi-active law is piecewise affine in the state and that its
+one-step case is clipped LQR.
+
+Receding horizon, planned before the run: the road is cut into blocks of ``block_s``; each block is
+optimised over itself plus ``tail_s`` of the road after it (so the block's end is not planned as if
+the road ended there), from the state the previous block's plan reaches, and only the block is
+kept. L-BFGS-B (box bounds only) from the best constant current. The cost of planning grows with
+the road's length, not with its square.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sashil.models._jit import jit
+from sashil.models.hysteresis import BoucWenParams
+
+__all__ = ["CurrentPlan", "PlanModel", "comfort_filter", "lowpass", "plan_current", "simulate_plan"]
+
+
+@dataclass(frozen=True)
+class PlanModel:
+    """The plan's model: k/J, 1/J, the damping c1 + c2·i, the friction (f1 + f2·i)·tanh(θ̇/ε) and
+    the coil's step ρ = 1 − exp(−h/τ) per cycle (1: no lag)."""
+
+    k_over_j: float
+    inv_j: float
+    c1: float
+    c2: float
+    f1: float
+    f2: float
+    eps: float
+    rho: float = 1.0
+
+    @classmethod
+    def of(
+        cls, params: BoucWenParams, hysteresis: bool = True, eps: float = 0.01, coil_tau_s: float = 0.0, h: float = 1e-3
+    ) -> PlanModel:
+        """The plan's model of ``params``; ``hysteresis``: the friction α(i)·z_u, else the viscous
+        envelope; ``coil_tau_s``: the coil's lag (0: none) at the step ``h``."""
+        z_u = params.z_bound if hysteresis else 0.0
+        rho = 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0
+        return cls(
+            params.k / params.J,
+            1.0 / params.J,
+            params.c1,
+            params.c2,
+            params.alpha1 * z_u,
+            params.alpha2 * z_u,
+            eps,
+            rho,
+        )
+
+
+@jit
+def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
+    """Step the model ``m`` (k/J, 1/J, c1, c2, f1, f2, ε, ρ) from ``x0`` (θ, θ̇2, i) under the
+    commands ``u``: the states before each step into ``thetas``, ``vs``, ``coil``, θ̈2 into ``accel``;
+    return the mean of accel²."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    theta = x0[0]
+    v = x0[1]
+    i = x0[2]
+    total = 0.0
+    n = u.size
+    for k in range(n):
+        thetas[k] = theta
+        vs[k] = v
+        coil[k] = i
+        r = v - w[k]
+        torque = (c1 + c2 * i) * r + (f1 + f2 * i) * math.tanh(r / eps)
+        a = -k_over_j * theta - inv_j * torque
+        accel[k] = a
+        total += a * a
+        v = v + h * a
+        theta = theta + h * (v - w[k])
+        i = i + rho * (u[k] - i)
+    return total / n
+
+
+@jit
+def _adjoint(u, w, m, h, thetas, vs, coil, direct, grad):
+    """The discrete adjoint of a cost of the θ̈2 of :func:`_forward`: d(cost)/d(u_k) into ``grad``,
+    given ``direct``, d(cost)/d(a_k) holding the later states fixed (2·a_k/n for the mean of a²)."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    n = u.size
+    lam_theta = 0.0
+    lam_v = 0.0
+    lam_i = 0.0
+    for k in range(n - 1, -1, -1):
+        i = coil[k]
+        r = vs[k] - w[k]
+        s = math.tanh(r / eps)
+        f = f1 + f2 * i
+        d_rate = c1 + c2 * i + f * (1.0 - s * s) / eps  # dT/dθ̇
+        d_current = c2 * r + f2 * s  # dT/di
+        g_a = direct[k] + h * (lam_v + h * lam_theta)
+        grad[k] = rho * lam_i  # u_k sets i_{k+1}
+        lam_i = -g_a * inv_j * d_current + (1.0 - rho) * lam_i
+        new_theta = -g_a * k_over_j + lam_theta
+        lam_v = -g_a * inv_j * d_rate + lam_v + h * lam_theta
+        lam_theta = new_theta
+    return 0
+
+
+@dataclass(frozen=True)
+class CurrentPlan:
+    """The planned command u_k [A] of every cycle, and the model's state under it before each cycle:
+    the coil's current i_k [A], the relative angle θ_k [rad], the arm's rate θ̇2_k [rad/s], its
+    acceleration θ̈2_k [rad/s²]."""
+
+    command_a: np.ndarray
+    current_a: np.ndarray
+    theta_rad: np.ndarray
+    body_dot_rad_s: np.ndarray
+    accel_rad_s2: np.ndarray
+
+    @property
+    def rms_accel(self) -> float:
+        return float(np.sqrt(np.mean(self.accel_rad_s2**2))) if self.accel_rad_s2.size else 0.0
+
+
+def _vector(model: PlanModel) -> np.ndarray:
+    return np.array([model.k_over_j, model.inv_j, model.c1, model.c2, model.f1, model.f2, model.eps, model.rho])
+
+
+def simulate_plan(
+    model: PlanModel,
+    command_a: np.ndarray,
+    road_rate: np.ndarray,
+    h: float,
+    x0: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> CurrentPlan:
+    """The model's trajectory under the commands ``command_a`` on ``road_rate`` from ``x0`` (θ, θ̇2, i)."""
+    n = command_a.size
+    thetas, vs, coil, accel = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    u = np.ascontiguousarray(command_a, dtype=float)
+    w = np.ascontiguousarray(road_rate[:n], dtype=float)
+    _forward(u, w, _vector(model), h, np.asarray(x0, dtype=float), thetas, vs, coil, accel)
+    return CurrentPlan(u, coil, thetas, vs, accel)
+
+
+def comfort_filter(bandwidth_hz: float | None, h: float) -> np.ndarray | None:
+    """The low-pass of the comfort metric (4th-order Butterworth at ``bandwidth_hz``, second-order
+    sections), None for none (``bandwidth_hz`` None or 0, or at or above 0.45 of the rate)."""
+    from scipy.signal import butter
+
+    if not bandwidth_hz or bandwidth_hz >= 0.45 / h:
+        return None
+    return np.asarray(butter(4, bandwidth_hz, fs=1.0 / h, output="sos"))
+
+
+def lowpass(x: np.ndarray, sos: np.ndarray | None) -> np.ndarray:
+    """``x`` filtered forward and back from rest (zero phase): R·H·R·H x, with H the causal filter
+    and R the reversal. As a matrix it is its own transpose (Hᵀ = R·H·R), so the gradient of
+    mean((F a)²) is 2·F(F a)/n."""
+    if sos is None:
+        return x
+    from scipy.signal import sosfilt
+
+    once = np.asarray(sosfilt(sos, x))
+    return np.asarray(sosfilt(sos, once[::-1]))[::-1].copy()
+
+
+def _plan_block(
+    model: PlanModel,
+    i_max: float,
+    w: np.ndarray,
+    h: float,
+    x0: tuple[float, float, float],
+    max_iterations: int,
+    sos: np.ndarray | None = None,
+) -> np.ndarray:
+    """The commands of one block of road speeds ``w`` from the state ``x0``, from the best constant;
+    the cost the mean of θ̈2² low-passed by ``sos`` (:func:`lowpass`; None: unfiltered)."""
+    from scipy.optimize import minimize, minimize_scalar
+
+    n = w.size
+    m = _vector(model)
+    start = np.asarray(x0, dtype=float)
+    thetas, vs, coil, accel, grad = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+
+    def value_of(u: np.ndarray) -> float:
+        _forward(u, w, m, h, start, thetas, vs, coil, accel)
+        filtered = lowpass(accel, sos)
+        return float(np.mean(filtered * filtered))
+
+    def constant(i: float) -> float:
+        return value_of(np.full(n, i))
+
+    best = minimize_scalar(constant, bounds=(0.0, i_max), method="bounded", options={"xatol": 1e-3 * i_max})
+
+    def cost(u: np.ndarray) -> tuple[float, np.ndarray]:
+        _forward(u, w, m, h, start, thetas, vs, coil, accel)
+        filtered = lowpass(accel, sos)
+        direct = (2.0 / n) * lowpass(filtered, sos)
+        _adjoint(u, w, m, h, thetas, vs, coil, direct, grad)
+        return float(np.mean(filtered * filtered)), grad.copy()
+
+    res = minimize(
+        cost,
+        np.full(n, float(best.x)),
+        jac=True,
+        method="L-BFGS-B",
+        bounds=[(0.0, i_max)] * n,
+        options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
+    )
+    return np.clip(np.asarray(res.x, dtype=float), 0.0, i_max)
+
+
+def plan_current(
+    model: PlanModel,
+    current_max_a: float,
+    road_rate: np.ndarray,
+    h: float,
+    block_s: float = 10.0,
+    tail_s: float = 2.0,
+    max_iterations: int = 400,
+    bandwidth_hz: float | None = None,
+) -> CurrentPlan:
+    """The receding-horizon plan of the module docstring for the road speeds ``road_rate`` (one per
+    cycle of ``h``), from rest; ``bandwidth_hz``: the cost on θ̈2 low-passed there, as ``sashil
+    compare`` measures comfort (None: unfiltered)."""
+    sos = comfort_filter(bandwidth_hz, h)
+    n = road_rate.size
+    w_all = np.ascontiguousarray(road_rate, dtype=float)
+    plan = np.zeros(n)
+    if not (current_max_a > 0.0 and (model.c2 > 0.0 or model.f2 > 0.0)) or n == 0:  # no authority: passive
+        return simulate_plan(model, plan, w_all, h)
+    block, tail = max(1, int(round(block_s / h))), max(0, int(round(tail_s / h)))
+    x0 = (0.0, 0.0, 0.0)
+    for start in range(0, n, block):
+        stop = min(n, start + block)
+        w = w_all[start : min(n, stop + tail)]
+        u = _plan_block(model, current_max_a, w, h, x0, max_iterations, sos)
+        kept = stop - start
+        plan[start:stop] = u[:kept]
+        # the state the kept block ends at: where the next block starts
+        seg = simulate_plan(model, u[:kept], w[:kept], h, x0)
+        v = float(seg.body_dot_rad_s[-1] + h * seg.accel_rad_s2[-1])
+        theta = float(seg.theta_rad[-1] + h * (v - w[kept - 1]))
+        i = float(seg.current_a[-1] + model.rho * (u[kept - 1] - seg.current_a[-1]))
+        x0 = (theta, v, i)
+    return simulate_plan(model, plan, w_all, h)

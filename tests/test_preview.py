@@ -1,0 +1,258 @@
+"""The road ahead: a law that reads it gets the commanded road (before the run, and a window each
+cycle), only under a plan that commands a road; ``preview-optimal`` plans on it and tracks."""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+
+import numpy as np
+import pytest
+
+from sashil.cli import main
+from sashil.config import default_config
+from sashil.config.overrides import apply_overrides
+from sashil.control import LawContext, LawState
+from sashil.control.law_registry import find_law
+from sashil.control.laws_preview import PreviewOptimal
+from sashil.control.preview import RoadWindow, commanded_road
+from sashil.control.preview_plan import PlanModel, plan_current, simulate_plan
+from sashil.control.registry import make_controller
+from sashil.drivers import open_rig
+from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.models.hysteresis import rig_params
+from sashil.runtime.clock import default_clock
+from sashil.runtime.runner import run_plan
+
+AHEAD_LAW = """
+from sashil.control import Law
+
+class Ahead(Law):
+    name = "ahead"
+    reads_road_ahead = True
+
+    def preview_cycles(self):
+        return 3
+
+    def torque(self, state):
+        return 0.0
+"""
+
+
+def test_the_commanded_road_and_its_window_are_the_speeds_to_come_and_the_measured_angle_plus_their_motion():
+    # speed(t) = t at dt = 0.5: speeds 0, 0.5, 1, 1.5, ... ; angles dt*sum of the speeds before: 0, 0, 0.25, 0.75, 1.5
+    road = commanded_road(lambda t: t, 0.5, 1.5, 2)
+    assert road.rate_rad_s.tolist() == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
+    assert road.theta_rad.tolist() == [0.0, 0.0, 0.25, 0.75, 1.5, 2.5]
+    window, state = RoadWindow(road, 2), LawState()
+    window.fill(state, 1, 10.0)  # cycle 1, the road encoder reads 10 rad (the motor's offset)
+    assert state.road_ahead_dot_rad_s.tolist() == [0.5, 1.0]
+    assert state.road_ahead_rad.tolist() == [10.25, 10.75]  # 10 + (0.25 - 0), 10 + (0.75 - 0)
+    window.fill(state, 5, 3.0)  # the last sampled cycle: then the road at rest, its angle held
+    assert state.road_ahead_dot_rad_s.tolist() == [2.5, 0.0]
+    assert state.road_ahead_rad.tolist() == [4.25, 4.25]  # 3 + (2.5 + 0.5*2.5 - 2.5)
+
+
+@pytest.mark.parametrize(
+    ("argv", "where"),
+    [
+        (["run", "--road", "none", "--duration", "1"], "--road none: law"),
+        (["compare", "--road", "none", "--duration", "3"], "compare.road none: law"),
+        (["drop-test", "--duration", "1"], "controller.law"),
+    ],
+)
+def test_a_law_reading_the_road_ahead_under_a_plan_with_no_road_is_refused_in_one_line(tmp_path, capsys, argv, where):
+    path = tmp_path / "ahead.py"
+    path.write_text(textwrap.dedent(AHEAD_LAW))
+    out = tmp_path / "out"
+    spec = f"{path}:Ahead"
+    law = ["--controller", spec] if argv[0] != "drop-test" else ["--set", f"controller.law={spec}"]
+    code = main([*argv, *law, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and where in err and "reads the road ahead" in err, err
+    assert not out.exists()
+
+
+def test_sashil_laws_says_which_laws_read_the_road_ahead(capsys):
+    assert main(["laws", "--json"]) == 0
+    laws = {law["name"]: law for law in json.loads(capsys.readouterr().out)}
+    assert laws["preview-optimal"]["reads_road_ahead"] is True
+    assert laws["lqr-clipped"]["reads_road_ahead"] is False
+    assert main(["laws"]) == 0
+    text = capsys.readouterr().out
+    assert "preview-optimal  (current; reads the road ahead" in text
+    assert "skyhook  (torque; built-in" in text
+
+
+RECORDER_LAW = """
+from sashil.control import Law
+
+class Recorder(Law):
+    name = "recorder"
+    reads_road_ahead = True
+    seen = []
+
+    def preview_cycles(self):
+        return 4
+
+    def torque(self, state):
+        self.seen.append((state.road_ahead_dot_rad_s.tolist(), state.road_rad, state.road_ahead_rad.tolist()))
+        return 0.0
+"""
+
+
+def test_a_run_on_a_road_gives_the_law_each_cycle_the_speeds_it_will_command(tmp_path):
+    path = tmp_path / "recorder.py"
+    path.write_text(textwrap.dedent(RECORDER_LAW))
+    spec = f"{path}:Recorder"
+    config = apply_overrides(default_config(), [f"controller.law={spec}"])
+    controller = make_controller(None, config)
+    road, _ = parse_road("sine:2:1", config)
+    stage = RoadStage(controller, road, 0.3)
+    outcome = run_plan(
+        config,
+        open_rig(config),
+        stage,
+        default_clock(config),
+        0.3,
+        read_stream=True,
+        realtime=False,
+        say=lambda _: None,
+    )
+    assert outcome.exit_status == "ok"
+    seen = [call for call in find_law(spec).cls.seen if call[0]]  # not the warm-up's call before the run
+    commanded = np.asarray(outcome.stream["road_speed_cmd_rad_s"], dtype=float)[:-1]  # the last row: the safe state
+    assert len(seen) == commanded.size
+    for k in range(commanded.size - 4):
+        rates, road_rad, angles = seen[k]
+        # the window's first speed is the one this cycle commands, the next three the cycles after it
+        assert rates == pytest.approx(commanded[k : k + 4].tolist(), abs=1e-12)
+        # the angles: the estimated road angle now plus the commanded motion, 1 ms per speed
+        assert angles == pytest.approx((road_rad + 1e-3 * np.cumsum(commanded[k : k + 4])).tolist(), abs=1e-12)
+
+
+def _seed_context() -> LawContext:
+    config = default_config()
+    return LawContext(rig_params(config["model"]), float(config["rig"]["current_max_a"]), 1000.0)
+
+
+def test_the_plan_of_a_road_at_rest_is_at_rest_and_any_plan_stays_in_the_coils_range():
+    p = _seed_context().model
+    model = PlanModel.of(p, hysteresis=True, coil_tau_s=0.01)
+    assert model.f1 == pytest.approx(p.alpha1 * (p.delta / (p.beta + p.gamma)) ** (1.0 / p.n))
+    assert model.rho == pytest.approx(1.0 - math.exp(-0.1))  # 1 ms steps of a 10 ms coil
+    rest = plan_current(model, 1.0, np.zeros(500), 1e-3, block_s=0.2, tail_s=0.05)
+    assert np.all(rest.theta_rad == 0.0) and np.all(rest.accel_rad_s2 == 0.0)
+    rng = np.random.default_rng(3)
+    w = np.cumsum(rng.normal(0.0, 0.05, 3000))  # a rough road speed
+    plan = plan_current(model, 1.0, w, 1e-3, block_s=1.0, tail_s=0.3, max_iterations=50)
+    assert np.all(plan.command_a >= 0.0) and np.all(plan.command_a <= 1.0)
+    # the plan is no worse than any constant current on the same road and model
+    costs = [simulate_plan(model, np.full(w.size, i), w, 1e-3).rms_accel for i in np.linspace(0.0, 1.0, 11)]
+    assert plan.rms_accel <= min(costs)
+
+
+def test_the_plans_gradient_is_the_cost_s_own_by_finite_differences():
+    from sashil.control.preview_plan import _adjoint, _forward, _vector
+
+    p = _seed_context().model
+    model = PlanModel.of(p, hysteresis=True, coil_tau_s=0.01)
+    rng = np.random.default_rng(5)
+    n = 300
+    w = np.cumsum(rng.normal(0.0, 0.05, n))
+    u = rng.uniform(0.0, 1.0, n)
+    m, x0 = _vector(model), np.array([0.001, -0.02, 0.3])
+    bufs = [np.empty(n) for _ in range(4)]
+    grad = np.empty(n)
+    _forward(u, w, m, 1e-3, x0, *bufs)
+    _adjoint(u, w, m, 1e-3, *bufs[:3], 2.0 * bufs[3] / n, grad)
+    for k in (0, 50, 150, 298):
+        step = np.zeros(n)
+        step[k] = 1e-6
+        up = _forward(u + step, w, m, 1e-3, x0, *[np.empty(n) for _ in range(4)])
+        down = _forward(u - step, w, m, 1e-3, x0, *[np.empty(n) for _ in range(4)])
+        assert grad[k] == pytest.approx((up - down) / 2e-6, rel=1e-4, abs=1e-12)
+    assert grad[n - 1] == 0.0  # the last command acts after the block's last step
+
+
+def test_preview_optimal_commands_the_plan_and_feeds_back_the_state_error_through_the_torques_slope():
+    ctx = _seed_context()
+    law = PreviewOptimal(ctx, feedback_gain=1.0, block_s=0.1, tail_s=0.0, plan_iterations=5)
+    road = commanded_road(lambda t: 0.1 * math.sin(10.0 * t), 1e-3, 0.2, 0)
+    law.plan_road(road)
+    k = 50
+    s = LawState()
+    s.time_s, s.theta_dot_rad_s, s.z_hat = k * 1e-3, 0.3, 0.1
+    s.theta_rad, s.body_dot_rad_s = law._theta[k], law._body[k]  # on the plan: its command
+    assert law.current(s) == law._i[k]
+    s.theta_rad += 0.001  # off the plan: k_theta times the error, over dT/di = alpha2*z + c2*theta_dot
+    slope = ctx.model.alpha2 * 0.1 + ctx.model.c2 * 0.3
+    assert law.current(s) == pytest.approx(min(1.0, max(0.0, law._i[k] - law.k_theta * 0.001 / slope)))
+    s.time_s = 10.0  # past the plan: its last command
+    assert law.current(s) == law._i[-1]
+
+
+def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_one_scale():
+    from sashil.experiments.compare import LawResult
+    from sashil.experiments.compare_report import share_of_bound, shares_of_bound
+
+    assert share_of_bound(2.0, 2.0, 1.5) == 0.0  # the best passive run itself
+    assert share_of_bound(1.5, 2.0, 1.5) == 100.0  # the bound reached
+    assert share_of_bound(1.75, 2.0, 1.5) == 50.0
+    assert share_of_bound(1.4, 2.0, 1.5) == pytest.approx(120.0)  # beyond the bound: said, not hidden
+    assert math.isnan(share_of_bound(1.0, 2.0, 2.5))  # a bound above the passive run gives no scale
+    runs = [
+        LawResult("passive 0 A", metrics={"rms_accel_rad_s2": 2.5}),
+        LawResult("passive 1 A", metrics={"rms_accel_rad_s2": 2.0}),
+        LawResult("law", metrics={"rms_accel_rad_s2": 1.8}),
+    ]
+    assert shares_of_bound(runs, 1.6) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})
+
+
+def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_and_with_them_lies_lower():
+    from dataclasses import replace
+
+    from sashil.experiments.hysteretic_bound import hysteretic_bound
+    from sashil.experiments.optimal_bound import optimal_bound
+
+    config = default_config()
+    config["road"]["period_s"] = 10.0
+    road, _ = parse_road("iso8608:C", config)
+    seed = _seed_context().model
+    viscous = replace(seed, alpha1=0.0, alpha2=0.0)
+    envelope = optimal_bound(viscous, 1.0, road, 4.0, 1.0).rms_accel_bound
+    # the same problem: the damping c1 + c2*i of every millisecond (the command acting one step later)
+    assert hysteretic_bound(viscous, 1.0, 0.0, road, 4.0, 1.0) == pytest.approx(envelope, rel=0.02)
+    # the seed's hysteresis: a friction of (alpha1 + alpha2*i)*z_u gives the rig a harder hard end
+    assert hysteretic_bound(seed, 1.0, 0.0, road, 4.0, 1.0) < optimal_bound(seed, 1.0, road, 4.0, 1.0).rms_accel_bound
+
+
+def test_the_comfort_low_pass_is_its_own_transpose_so_the_filtered_costs_gradient_is_exact():
+    from sashil.control.preview_plan import _adjoint, _forward, _vector, comfort_filter, lowpass
+
+    sos = comfort_filter(20.0, 1e-3)
+    rng = np.random.default_rng(7)
+    x, y = rng.normal(size=400), rng.normal(size=400)
+    assert float(y @ lowpass(x, sos)) == pytest.approx(float(x @ lowpass(y, sos)), rel=1e-9)
+    assert comfort_filter(0.0, 1e-3) is None and comfort_filter(600.0, 1e-3) is None
+    model = PlanModel.of(_seed_context().model, hysteresis=True, coil_tau_s=0.01)
+    n = 300
+    w = np.cumsum(rng.normal(0.0, 0.05, n))
+    u = rng.uniform(0.0, 1.0, n)
+    m, x0 = _vector(model), np.array([0.001, -0.02, 0.3])
+
+    def cost(commands):
+        bufs = [np.empty(n) for _ in range(4)]
+        _forward(commands, w, m, 1e-3, x0, *bufs)
+        filtered = lowpass(bufs[3], sos)
+        return float(np.mean(filtered**2)), bufs
+
+    _, bufs = cost(u)
+    grad = np.empty(n)
+    _adjoint(u, w, m, 1e-3, *bufs[:3], (2.0 / n) * lowpass(lowpass(bufs[3], sos), sos), grad)
+    for k in (0, 100, 250):
+        step = np.zeros(n)
+        step[k] = 1e-6
+        numeric = (cost(u + step)[0] - cost(u - step)[0]) / 2e-6
+        assert grad[k] == pytest.approx(numeric, rel=1e-4, abs=1e-12)

@@ -1,0 +1,292 @@
+#!/usr/bin/env python3
+"""Benchmark: each law's share of the optimal bound, laws x dampers x roads, the median beside the
+worst; whether the bound bounds; the preview law's compute per cycle.
+
+For each damper of ``tools/bench_drop_damping.py`` (the Bouc-Wen exponent n, the yield torque through
+alpha1 and delta, the inertia J, c1 and k, varied around seed 001's set, and combinations: the
+team's 18) and each ISO 8608 road (class B and C, each at two speeds), on the simulated rig (virtual
+clock, the controller's model exact), each law runs as ``sashil compare`` runs it (the same job,
+the same metric: RMS θ̈2 after ``compare.settle_s``), beside the passive damper at 0 A and at i_max.
+
+Share of the bound, on the one scale of ``sashil compare``
+(:func:`sashil.experiments.compare_report.share_of_bound`): 0 % the best passive run's RMS θ̈2, 100 %
+the bound's. Two bounds:
+
+- ``envelope``: compare's own (:mod:`sashil.experiments.optimal_bound`, the plant's viscous envelope);
+- ``hysteretic``: the same optimiser on the plant's hysteresis as a friction α(i)·z_u and the
+  coil's lag, θ̈2 low-passed as compare measures it (:mod:`sashil.experiments.hysteretic_bound`, one
+  block over the whole road, 3000 iterations), the model the preview law plans on. A share above
+  100 % means the law beat that bound.
+
+The preview law's compute per cycle: the controller stage's ``step`` (estimator, observer, law,
+inverse) timed with ``perf_counter_ns`` over one run on the seed damper; p50 and p99 [µs]. The
+machine's load is printed with it (a shared machine inflates the tail).
+
+    .venv/bin/python tools/bench_preview.py [--quick] [--dampers N|all] [--skip N] [--duration S] [--jobs N] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_drop_damping import DAMPERS
+
+from sashil.config import default_config
+from sashil.config.overrides import apply_overrides
+from sashil.experiments.compare import LawJob, run_job
+from sashil.experiments.compare_report import share_of_bound
+from sashil.experiments.hysteretic_bound import hysteretic_bound as hysteretic_bound_of
+from sashil.experiments.optimal_bound import optimal_bound
+from sashil.experiments.road_option import parse_road
+from sashil.models.hysteresis import BoucWenParams
+
+#: the laws measured (the best causal laws of docs/benchmarks.md and the preview law)
+LAWS = ("lqr-clipped", "clipped-optimal", "skyhook-add", "preview-optimal")
+#: the roads: ISO 8608 class and speed [m/s]
+ROADS = ("iso8608:B:10", "iso8608:B:20", "iso8608:C:10", "iso8608:C:20")
+QUICK_ROADS = ("iso8608:C:10",)
+#: the order dampers are taken in when fewer than all are asked for: the seed, then one of each kind
+ORDER = (
+    "seed",
+    "n 1",
+    "alpha1 2",
+    "delta 300",
+    "J 2",
+    "c1 0.05",
+    "k 70",
+    "k 160",
+    "c1 0.05 alpha1 0.3",
+    "n 1 delta 300 alpha1 2",
+    "J 0.5",
+    "n 0.3",
+    "alpha1 0.3",
+    "delta 1500",
+    "J 1.5",
+    "c1 0.3",
+    "c1 2",
+    "J 2 k 70",
+)
+
+
+@dataclass
+class Case:
+    """One damper on one road: the RMS θ̈2 of each run and of both bounds, and each law's shares."""
+
+    damper: str
+    road: str
+    rms: dict[str, float] = field(default_factory=dict)
+    best_passive: float = math.nan
+    envelope: float = math.nan
+    hysteretic: float = math.nan
+    share_envelope: dict[str, float] = field(default_factory=dict)
+    share_hysteretic: dict[str, float] = field(default_factory=dict)
+    status: dict[str, str] = field(default_factory=dict)
+
+
+def config_of(params: dict[str, float], duration: float) -> dict[str, Any]:
+    config: dict[str, Any] = default_config()
+    config["model"]["params"].update(params)
+    config["road"]["period_s"] = max(10.0, duration)
+    return config
+
+
+def hysteretic_bound(config: dict[str, Any], road: Any, duration: float) -> float:
+    """RMS θ̈2 after the settling, low-passed as compare measures it, of the plan on the plant's
+    hysteresis and coil lag, the whole road at once (compare's own hysteretic bound)."""
+    params = BoucWenParams.from_mapping(config["model"]["params"])
+    bandwidth = float(config["compare"]["accel_bandwidth_hz"])
+    return hysteretic_bound_of(
+        params,
+        float(config["rig"]["current_max_a"]),
+        float(config["rig"]["coil_tau_s"]),
+        road,
+        duration,
+        float(config["compare"]["settle_s"]),
+        bandwidth_hz=bandwidth,
+    )
+
+
+def run_case(damper: str, road_text: str, duration: float) -> Case:
+    params = dict(DAMPERS)[damper]
+    config = config_of(params, duration)
+    case = Case(damper, road_text)
+    jobs = [
+        LawJob(
+            f"passive {i:g} A",
+            apply_overrides(config, ["controller.law=passive", f"controller.current_a={i}"]),
+            road_text,
+            duration,
+        )
+        for i in (0.0, float(config["rig"]["current_max_a"]))
+    ]
+    jobs += [LawJob(law, apply_overrides(config, [f"controller.law={law}"]), road_text, duration) for law in LAWS]
+    for job in jobs:
+        result = run_job(job)
+        case.status[job.label] = result.status
+        case.rms[job.label] = result.metrics["rms_accel_rad_s2"] if result.ok else math.nan
+    road, _ = parse_road(road_text, config)
+    settle = float(config["compare"]["settle_s"])
+    case.envelope = optimal_bound(
+        BoucWenParams.from_mapping(config["model"]["params"]),
+        float(config["rig"]["current_max_a"]),
+        road,
+        duration,
+        settle,
+    ).rms_accel_bound
+    case.hysteretic = hysteretic_bound(config, road, duration)
+    case.best_passive = min(v for k, v in case.rms.items() if k.startswith("passive"))
+    for law in LAWS:
+        case.share_envelope[law] = share_of_bound(case.rms[law], case.best_passive, case.envelope)
+        case.share_hysteretic[law] = share_of_bound(case.rms[law], case.best_passive, case.hysteretic)
+    return case
+
+
+def cycle_us(duration: float) -> tuple[float, float, float]:
+    """p50, p99 and max of the preview law's controller step [µs] over one run on the seed damper."""
+    from sashil.control.registry import make_controller
+    from sashil.drivers import open_rig
+    from sashil.experiments.road_option import RoadStage
+    from sashil.runtime.clock import default_clock
+    from sashil.runtime.runner import run_plan
+
+    config = apply_overrides(config_of({}, duration), ["controller.law=preview-optimal"])
+    controller = make_controller(None, config)
+    road, _ = parse_road("iso8608:C", config)
+    times: list[int] = []
+
+    class Timed:
+        def __init__(self, stage: Any):
+            self.stage = stage
+            self.signal_names = stage.signal_names
+
+        def __getattr__(self, name: str) -> Any:
+            if name == "stage":
+                raise AttributeError(name)
+            return getattr(self.stage, name)
+
+        def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
+            t0 = time.perf_counter_ns()
+            cmd = self.stage.step(sample, t_ns, dt_ns)
+            times.append(time.perf_counter_ns() - t0)
+            return cmd
+
+    stage = RoadStage(controller, road, duration)
+    run_plan(
+        config, open_rig(config), Timed(stage), default_clock(config), duration, realtime=False, say=lambda _: None
+    )
+    steps = np.asarray(times[10:], dtype=float) / 1e3  # after the first cycles (compile, caches)
+    return float(np.percentile(steps, 50)), float(np.percentile(steps, 99)), float(np.max(steps))
+
+
+def _fmt(values: list[float]) -> str:
+    known = [v for v in values if math.isfinite(v)]
+    if not known:
+        return f"{'–':>7s} {'–':>7s}"
+    return f"{statistics.median(known):6.1f}% {min(known):6.1f}%"
+
+
+def table(cases: list[Case]) -> None:
+    """Per law and road: the share's median beside its worst, on both bounds; then per damper."""
+    roads = sorted({c.road for c in cases})
+    print()
+    print(f"share of the bound (0 %: best passive run, 100 %: the bound), {len({c.damper for c in cases})} dampers")
+    print("                      " + "".join(f"{road:>17s}" for road in [*roads, "all"]))
+    print("  law (bound)         " + "   median   worst" * (len(roads) + 1))
+    for which in ("envelope", "hysteretic"):
+        for law in LAWS:
+            cells = []
+            for road in [*roads, None]:
+                chosen = [c for c in cases if road is None or c.road == road]
+                shares = [(c.share_envelope if which == "envelope" else c.share_hysteretic)[law] for c in chosen]
+                cells.append(_fmt(shares))
+            print(f"  {law:16s}{which[:4]:>4s}  " + "  ".join(f"{cell:>15s}" for cell in cells))
+    print()
+    print("per case: RMS θ̈2 [rad/s²] of the best passive run, the bounds, and the preview law; its shares")
+    for c in cases:
+        print(
+            f"  {c.damper:24s} {c.road:14s} passive {c.best_passive:6.3f}  envelope {c.envelope:6.3f}  "
+            f"hysteretic {c.hysteretic:6.3f}  preview {c.rms['preview-optimal']:6.3f}  "
+            f"share {c.share_envelope['preview-optimal']:6.1f}% / {c.share_hysteretic['preview-optimal']:6.1f}%"
+        )
+    over = [
+        (c, law, c.share_hysteretic[law])
+        for c in cases
+        for law in LAWS
+        if math.isfinite(c.share_hysteretic[law]) and c.share_hysteretic[law] > 100.0
+    ]
+    over_env = [
+        (c, law, c.share_envelope[law])
+        for c in cases
+        for law in LAWS
+        if math.isfinite(c.share_envelope[law]) and c.share_envelope[law] > 100.0
+    ]
+    print()
+    print(f"above 100 % of the envelope bound: {len(over_env)} of {len(cases) * len(LAWS)} runs")
+    for c, law, share in over_env:
+        print(f"  {law} on {c.damper}, {c.road}: {share:.1f} %")
+    print(f"above 100 % of the hysteretic bound: {len(over)} of {len(cases) * len(LAWS)} runs")
+    for c, law, share in over:
+        print(f"  {law} on {c.damper}, {c.road}: {share:.1f} %")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="one damper, one road, 4 s: seconds")
+    parser.add_argument("--dampers", default="10", help="how many dampers (in ORDER), or all")
+    parser.add_argument("--skip", type=int, default=0, help="leave out the first N of those (a run in parts)")
+    parser.add_argument("--roads", default=",".join(ROADS), help="comma-separated --road values")
+    parser.add_argument("--duration", type=float, default=12.0, help="seconds per run (the first 2 s left out)")
+    parser.add_argument("--jobs", type=int, default=1, help="cases in parallel processes")
+    parser.add_argument("--json", type=Path, help="write every case here")
+    args = parser.parse_args()
+    if args.quick:
+        dampers, roads, duration = ["seed"], list(QUICK_ROADS), 4.0
+    else:
+        count = len(ORDER) if args.dampers == "all" else int(args.dampers)
+        dampers, roads, duration = list(ORDER[args.skip : count]), args.roads.split(","), args.duration
+    print(
+        f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {len(dampers)} dampers x {len(roads)} roads, {duration:g} s each"
+    )
+    start = time.perf_counter()
+    pairs = [(d, r) for d in dampers for r in roads]
+    if args.jobs > 1:
+        with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(run_case, d, r, duration) for d, r in pairs]
+            cases = []
+            for future in futures:
+                cases.append(future.result())
+                print(f"  {cases[-1].damper}, {cases[-1].road}: done ({time.perf_counter() - start:.0f} s)", flush=True)
+    else:
+        cases = []
+        for d, r in pairs:
+            cases.append(run_case(d, r, duration))
+            print(f"  {d}, {r}: done ({time.perf_counter() - start:.0f} s)", flush=True)
+    table(cases)
+    p50, p99, worst = cycle_us(duration)
+    print()
+    print(
+        f"preview-optimal controller step (estimator, observer, law, inverse): p50 {p50:.1f} µs, p99 {p99:.1f} µs, "
+        f"max {worst:.1f} µs (load {os.getloadavg()[0]:.2f}); goal p99 <= 200 µs"
+    )
+    print(f"wall {time.perf_counter() - start:.0f} s")
+    if args.json is not None:
+        args.json.write_text(json.dumps([asdict(c) for c in cases], indent=1), encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
