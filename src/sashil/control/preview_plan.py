@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sashil.models._jit import jit
+from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams
 
 __all__ = ["CurrentPlan", "PlanModel", "comfort_filter", "lowpass", "plan_current", "simulate_plan"]
@@ -81,6 +81,20 @@ class PlanModel:
         )
 
 
+def _warm_forward() -> tuple[object, ...]:
+    """A call of :func:`_forward`'s signature (float64 C arrays, a float64 step) on a tiny plan."""
+    n = 4
+    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, np.zeros(3), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+
+
+def _warm_adjoint() -> tuple[object, ...]:
+    """A call of :func:`_adjoint`'s signature."""
+    n = 4
+    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+
+
+# the plan is made in the loop process before its first deadline: its kernels warm with the loop's
+@loop_kernel(_warm_forward)
 @jit
 def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
     """Step the model ``m`` (k/J, 1/J, c1, c2, f1, f2, ε, ρ) from ``x0`` (θ, θ̇2, i) under the
@@ -107,6 +121,7 @@ def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
     return total / n
 
 
+@loop_kernel(_warm_adjoint)
 @jit
 def _adjoint(u, w, m, h, thetas, vs, coil, direct, grad):
     """The discrete adjoint of a cost of the θ̈2 of :func:`_forward`: d(cost)/d(u_k) into ``grad``,

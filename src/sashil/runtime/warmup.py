@@ -2,7 +2,8 @@
 
 * Every compiled kernel a cycle can call (:data:`sashil.models._jit.LOOP_KERNELS`: the Bouc-Wen
   z-update, the plant's sub-step, the simulated rig's read (sub-steps and edge search), the Kalman filter's edge
-  cycle and their helpers) is called once
+  cycle and their helpers, and the preview plan's model and its adjoint, which a law reading the road
+  ahead runs before the first deadline) is called once
   with the cycle's signature, so numba compiles it, or loads it from its cache, now. A cached
   kernel still loads lazily on its first call in each process (15-23 ms), and on an empty cache
   (a fresh install) it compiles (seconds): then a progress line says so before it starts.
@@ -27,6 +28,7 @@ KERNEL_MODULES = (
     "sashil.models.hysteresis",
     "sashil.models.plant",
     "sashil.control.edge_kalman",
+    "sashil.control.preview_plan",
     "sashil.drivers.encoder_edges",
     "sashil.drivers.sim_advance",
 )
