@@ -292,6 +292,10 @@ def test_calibrate_an_emulated_damper_over_the_rtdac(tmp_path):
         drop_duration_s=3.0,
     )
     config["model"]["params"].update(k=100.0, c1=0.5, c2=1.0)
+    # the loss budget relaxed as for every run here that compares what it records (relaxed()): three
+    # socket round trips an exchange to the emulated board take 0.45 ms in the median on this VM, and a
+    # busy host's late cycles would end the run lossy (exit 5) with its data intact
+    config["loop"]["max_missed_fraction"] = 1.0
     params = calibrate_emulated(config, tmp_path / "cal", transport="rtdac")
     p = load_params(params)["params"]
     assert p["k"] == pytest.approx(100.0, rel=0.02)
