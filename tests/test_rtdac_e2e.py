@@ -158,8 +158,8 @@ def test_the_loop_process_killed_the_session_rests_the_board(tmp_path, board):
 
 
 def test_compare_over_the_rtdac_agrees_with_the_simulated_rig(tmp_path, board):
-    """As the serial link is held to (tests/test_compare_cli.py): each law against the passive 1 A
-    reference on the same rig within 12 % of travel; the absolute travel within 25 %."""
+    """Skyhook, as the serial link is held to (tests/test_compare_cli.py): each law against the passive
+    1 A reference on the same rig within 12 % of travel; the absolute travel within 25 %."""
     emu = board()
     common = [
         "--road",
@@ -170,7 +170,9 @@ def test_compare_over_the_rtdac_agrees_with_the_simulated_rig(tmp_path, board):
         "compare.rest_s=0.5",
         "-q",
         "--controller",
-        "skyhook-add",
+        "skyhook",
+        "--set",
+        "controller.c_sky=2",
     ]
     assert sashil("compare", *common, "--out", str(tmp_path / "sim")).returncode == 0
     done = sashil("compare", *common, "--driver", "rtdac", "--port", emu.port, "--config", relaxed(tmp_path),
