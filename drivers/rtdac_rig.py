@@ -36,7 +36,6 @@ from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInt
 from sashil.drivers.rtdac_codec import (
     AD_BUSY_BIT,
     DA_ZERO,
-    FRAME_WORDS,
     PWM_MODE_CODE,
     Header,
     ad_volts,
@@ -182,8 +181,10 @@ class RtdacRig(RigInterface):
 
     def _check_wiring(self, header: Header, reg: RegisterMap) -> None:
         w = self.wiring
-        pwm = header.modules.get("pwm", 0)
-        counters = header.modules.get("encoder_i", 0)
+        # the header's module counts where the board reports them, else the map's (a board or an
+        # emulator that leaves words 6-8 at 0 reports none)
+        pwm = header.modules.get("pwm") or reg.pwm_count
+        counters = header.modules.get("encoder_i") or reg.encoder_count
 
         def need(ok: bool, key: str, what: str) -> None:
             if not ok:
@@ -412,4 +413,4 @@ class RtdacRig(RigInterface):
         return {**facts, **self.safe_state}
 
 
-__all__ = ["FRAME_WORDS", "RtdacRig", "Wiring"]
+__all__ = ["RtdacRig", "Wiring"]

@@ -84,13 +84,27 @@ def pyusb_backend(settings: UsbSettings) -> Any:
     return backend
 
 
+class Unreadable(Exception):
+    """A device's string descriptor could not be read; ``denied``: for want of permission."""
+
+    def __init__(self, reason: str, denied: bool):
+        super().__init__(reason)
+        self.denied = denied
+
+
 def _string(dev: Any, index_name: str) -> str | None:
+    """A string descriptor of ``dev`` (None: the device names none); Unreadable when it cannot be read."""
     import usb.util
 
     try:
         return usb.util.get_string(dev, getattr(dev, index_name))
-    except (ValueError, usb.core.USBError, NotImplementedError):
-        return None
+    except usb.core.USBError as err:
+        raise Unreadable(usb_reason(err), getattr(err, "errno", None) == errno.EACCES) from None
+    except (ValueError, NotImplementedError) as err:
+        # pyusb reads no language list from a device it may not open, and says so in a ValueError
+        # that names the permission among its causes (libusb's EACCES does not reach it)
+        text = str(err) or type(err).__name__
+        raise Unreadable(text, "permission" in text) from None
 
 
 def describe_device(dev: Any) -> str:
@@ -113,15 +127,15 @@ def find_board(settings: UsbSettings, backend: Any = None) -> Any:
     except usb.core.NoBackendError:
         raise DriverError("rtdac: no libusb 1.0 found: pip install 'sashil[rtdac]' (it ships one)") from None
     denied: list[str] = []
+    unreadable: list[str] = []
     for dev in devices:
-        if not ids:
-            maker = _string(dev, "iManufacturer")
-            if maker is None:
-                denied.append(describe_device(dev))
+        try:
+            if not ids and _string(dev, "iManufacturer") != settings.manufacturer:
                 continue
-            if maker != settings.manufacturer:
+            if settings.serial is not None and _string(dev, "iSerialNumber") != settings.serial:
                 continue
-        if settings.serial is not None and _string(dev, "iSerialNumber") != settings.serial:
+        except Unreadable as err:
+            (denied if err.denied else unreadable).append(f"{describe_device(dev)}: {err}")
             continue
         return dev
     wanted = (
@@ -134,7 +148,13 @@ def find_board(settings: UsbSettings, backend: Any = None) -> Any:
     if denied:
         raise DriverError(
             f"rtdac: no RT-DAC/USB2 ({wanted}) among the devices this user may read; permission denied for "
-            f"{', '.join(denied)}: add the udev rule {UDEV_RULE} to {UDEV_FILE}, then replug the board"
+            f"{'; '.join(denied)}: add the udev rule {UDEV_RULE} to {UDEV_FILE}, then replug the board (a board "
+            "that names no manufacturer: match it by its USB ids, rtdac.vendor_id and rtdac.product_id)"
+        )
+    if unreadable:
+        raise DriverError(
+            f"rtdac: no RT-DAC/USB2 ({wanted}) among the devices whose strings could be read ({'; '.join(unreadable)}): "
+            "name the board by its USB ids instead (rtdac.vendor_id, rtdac.product_id: lsusb shows them)"
         )
     where = f" at {settings.port}" if settings.port else ""
     raise DriverError(f"rtdac: no RT-DAC/USB2 found{where} ({wanted}; is it plugged in and powered?)")

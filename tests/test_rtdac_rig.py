@@ -308,3 +308,36 @@ def test_a_pyusb_backend_named_in_config_is_called_with_the_port_or_with_nothing
     rig.configure()
     assert rig.header is not None and rig.header.logic == "0103"
     rig.close()
+
+
+def test_a_header_that_reports_no_module_counts_is_read_with_the_maps():
+    """A board (or another emulator) that leaves the header's count words at 0: the map's counts stand."""
+    rig, board, clock, _ = make(identity=BoardIdentity(logic_version=0x0103, modules={}))
+    rig.configure()
+    assert rig.header is not None and rig.header.modules["encoder_i"] == 0
+    rig.activate()
+    cycle(rig, clock, RigCommand(0.5), 5)
+    assert board.words[board.map.pwm_width_word(0)] > 0
+    rig.close()
+    assert board.at_rest()
+
+
+def test_a_board_that_names_no_manufacturer_is_found_by_its_usb_ids():
+    import errno as errnos
+
+    import usb.core
+
+    class Mute(EmulatedUsbBackend):
+        def ctrl_transfer(self, *args, **kwargs):
+            raise usb.core.USBError("Pipe error (request not supported)", -9, errnos.EPIPE)
+
+    rig, board, clock, port = make()
+    rig.link.backend = Mute(port)
+    with pytest.raises(DriverError, match=r"rtdac\.vendor_id and rtdac\.product_id"):
+        rig.configure()
+    rig.close()
+    rig, board, clock, port = make({"rtdac.vendor_id": 0x04B4, "rtdac.product_id": 0x8613})
+    rig.link.backend = Mute(port)
+    rig.configure()
+    assert rig.header is not None and rig.header.logic == "0103"
+    rig.close()

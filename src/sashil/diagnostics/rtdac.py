@@ -134,7 +134,7 @@ class Walk:
     def _counters(self, words: tuple[int, ...]) -> list[int]:
         reg = self.rig.map
         assert reg is not None
-        count = self.rig.header.modules.get("encoder_i", reg.encoder_count) if self.rig.header else reg.encoder_count
+        count = (self.rig.header.modules.get("encoder_i") if self.rig.header else None) or reg.encoder_count
         return [counter32(words[lo], words[hi]) for lo, hi in (reg.counter_words(i) for i in range(count))]
 
     def _ads(self, words: tuple[int, ...]) -> list[float]:
