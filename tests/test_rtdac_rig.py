@@ -331,12 +331,12 @@ def test_a_board_that_names_no_manufacturer_is_found_by_its_usb_ids():
         def ctrl_transfer(self, *args, **kwargs):
             raise usb.core.USBError("Pipe error (request not supported)", -9, errnos.EPIPE)
 
-    rig, board, clock, port = make()
+    rig, _, _, port = make()
     rig.link.backend = Mute(port)
     with pytest.raises(DriverError, match=r"rtdac\.vendor_id and rtdac\.product_id"):
         rig.configure()
     rig.close()
-    rig, _board, _clock, port = make({"rtdac.vendor_id": 0x04B4, "rtdac.product_id": 0x8613})
+    rig, _, _, port = make({"rtdac.vendor_id": 0x04B4, "rtdac.product_id": 0x8613})
     rig.link.backend = Mute(port)
     rig.configure()
     assert rig.header is not None and rig.header.logic == "0103"
