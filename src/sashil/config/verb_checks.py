@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sashil.errors import ConfigError
+from sashil.experiments.road_option import RoadParts
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -74,7 +75,7 @@ def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) ->
     from sashil.experiments.road_option import parse_road  # numpy and the road profiles: only for a road
 
     try:
-        parse_road(text, config)
+        parse_road(text, RoadParts.read(config))
     except ConfigError as err:
         where = named(key)
         raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None

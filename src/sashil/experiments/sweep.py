@@ -29,15 +29,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.engine import assemble, loop_in_process
 from sashil.models.plant import RoadProfile
 from sashil.runtime.clock import Clock, default_clock
-from sashil.runtime.plan_process import in_loop_process, run_plan_process
+from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import run_plan
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
 #: data.csv columns of a sweep (docs/architecture.md names; torque_true_nm only on the simulated rig), then ``seq``
@@ -221,23 +223,21 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 RigFactory = Callable[["RunConfig", RoadProfile], RigInterface]
 
 
-def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> SweepStage:
-    """A sweep run's stage built in a loop process: the config's law on the road of ``spec``."""
-    return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
+def sweep_stage(run: RunSpec, rig: RigInterface) -> SweepStage:
+    """A sweep run's stage built in a loop process: the run's law on the road of its plan."""
+    return SweepStage(make_controller(None, run.stage), road_of(run.plan["road"]), rig)
 
 
-def sweep_in_loop(
-    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
-) -> tuple[SweepStage, str, str]:
+def sweep_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[SweepStage, str, str]:
     """One run of a sweep built in a loop process (the ``sweep`` plan of ``sashil.plans``: a chirp,
-    or one frequency of a stepped sine): the config's law on the road of the spec."""
-    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
+    or one frequency of a stepped sine): the run's law on the road of its plan (``run.plan``)."""
+    return sweep_stage(run, rig), run.stage.law, str(run.plan["road"].get("shape"))
 
 
 def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
-    return open_rig(config)
+    return open_rig(rig_parts(config))
 
 
 def run_profile(
@@ -291,19 +291,18 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    clock = clock if clock is not None else default_clock(config)
+    run = assemble(config)
+    clock = clock if clock is not None else default_clock(run)
     log = logging.getLogger("sashil")
     twin = SweepStage(controller, road)
-    if law_of_config and in_loop_process(config, clock) and twin.spec() is not None:
+    if law_of_config and loop_in_process(run, clock, twin):
         stage = twin
-        outcome = run_plan_process(
-            config, stage, duration_s, data_path=data_path, say=log.warning, live=live, stop=stop
-        )
+        outcome = run_plan_process(run, stage, duration_s, data_path=data_path, say=log.warning, live=live, stop=stop)
     else:
         rig = (rig_factory or default_rig)(config, road)
         stage = SweepStage(controller, road, rig, duration_s)
         outcome = run_plan(
-            config,
+            run,
             rig,
             stage,
             clock,

@@ -50,7 +50,7 @@ from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
 from sashil.safety import SafetySupervisor
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import LoopParts, RunSpec
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
 #: (drop-test, sweep, calibrate: columns as ``sashil run``'s data.csv, time from the loop's start)
@@ -83,13 +83,13 @@ def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | N
     return need
 
 
-def losses(config: RunConfig, timing: Any, link: dict[str, Any] | None) -> LossError | None:
+def losses(loop: LoopParts, timing: Any, link: dict[str, Any] | None) -> LossError | None:
     """The :class:`~sashil.errors.LossError` of a run that missed more of its scheduled deadlines than
-    ``loop.max_missed_fraction`` or lost more of its samples than ``driver.max_lost_fraction``
-    allows, naming what was lost and the key; None when it stayed within both."""
+    the ``loop``'s ``max_missed_fraction`` (``loop.max_missed_fraction``) or lost more of its samples
+    than its ``max_lost_fraction`` (``driver.max_lost_fraction``) allows, naming what was lost and the key; None when it stayed within both."""
     problems = []
     scheduled = timing.cycles + timing.missed_deadlines
-    allowed = float(config["loop"]["max_missed_fraction"])
+    allowed = loop.max_missed_fraction
     if scheduled and timing.missed_deadlines > allowed * scheduled:
         problems.append(
             f"missed {timing.missed_deadlines} of {scheduled} deadlines ({100 * timing.missed_deadlines / scheduled:.2g} %; "
@@ -98,7 +98,7 @@ def losses(config: RunConfig, timing: Any, link: dict[str, Any] | None) -> LossE
     if link:
         lost = int(link.get("samples_missed", 0))
         expected = int(link.get("samples", 0)) + lost
-        allowed = float(config["driver"]["max_lost_fraction"])
+        allowed = loop.max_lost_fraction
         if expected and lost > allowed * expected:
             problems.append(
                 f"lost {lost} of {expected} samples ({100 * lost / expected:.2g} %; driver.max_lost_fraction allows {100 * allowed:g} %)"
@@ -274,7 +274,7 @@ def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[st
 
 
 def run_plan(
-    config: RunConfig,
+    spec: RunSpec,
     rig: Any,
     plan: Any,
     clock: Clock,
@@ -292,8 +292,8 @@ def run_plan(
 ) -> RunOutcome:
     """Run ``plan`` on ``rig`` (see the module docstring); never raises for what ends the loop.
 
-    ``data_path``: stream every cycle there (None: no stream). ``rate_hz``: the loop's rate (default
-    ``loop.rate_hz``). ``say``: the loop's warnings (overruns); ``note``: the real-time set-up's
+    ``spec``: the assembled run (its loop's rate and set-up, its safety limits). ``data_path``:
+    stream every cycle there (None: no stream). ``rate_hz``: the loop's rate (default ``spec.loop.rate_hz``). ``say``: the loop's warnings (overruns); ``note``: the real-time set-up's
     report, one line per step (default ``say``). ``realtime``: apply ``loop.rt`` on the real clock. ``live``: the rerun live
     view. ``stop``: a stop flag of the caller's (a calibration plan shares one across its runs); the
     signals are routed to it for the run. A disk too full for the run raises DiskSpaceError before
@@ -301,8 +301,8 @@ def run_plan(
     temporary file holds it when there is no ``data_path``). ``tuning``: live parameter changes
     for the plan's law (:class:`~sashil.runtime.tuning.LiveTuning`), applied between cycles.
     """
-    loop_cfg = config["loop"]
-    rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
+    loop_parts = spec.loop
+    rate = float(rate_hz if rate_hz is not None else loop_parts.rate_hz)
     columns = record_columns(plan)
     real_clock = not getattr(clock, "virtual", False)
     keep = read_stream and not real_clock  # the stream in memory (module docstring)
@@ -316,7 +316,7 @@ def run_plan(
         check_disk(data_path.parent, len(columns), rate, duration_s)
     if data_path is not None or keep:
         recorder = Recorder(data_path, columns, lossless=not real_clock, keep=keep)
-    rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
+    rt = RealtimeSetup.from_parts(loop_parts.rt) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
     loop = ControlLoop(
@@ -325,10 +325,10 @@ def run_plan(
         clock,
         rate,
         duration_s,
-        safety=SafetySupervisor.from_config(config),
+        safety=SafetySupervisor.from_parts(spec.safety),
         recorder=recorder,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
+        overrun_policy=loop_parts.overrun_policy,
+        warn_interval_s=loop_parts.warn_interval_s,
         warn=say,
         tuning=tuning,
     )
@@ -343,7 +343,7 @@ def run_plan(
     if scratch is not None:
         scratch.cleanup()
     link = rig.link_stats() if capabilities_of(rig).link else None
-    lost = losses(config, loop.timing, link) if error is None and loop.result.exit_status == "ok" else None
+    lost = losses(loop_parts, loop.timing, link) if error is None and loop.result.exit_status == "ok" else None
     if lost is not None:  # a run that lost what the config does not allow does not end ok
         error = lost
         loop.result.exit_status = "lossy"
