@@ -37,6 +37,7 @@ from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine import assemble
 from sashil.experiments.road_option import RoadStage
 from sashil.recording.recorder import Recorder
 from sashil.recording.rerun_log import LiveTap, RerunLog
@@ -44,7 +45,6 @@ from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import record_columns
 from sashil.runtime.session import InProcessLoop, run_session
-from sashil.engine import assemble
 
 
 def road_sine(amplitude_rad: float, freq_hz: float):

@@ -12,7 +12,11 @@ __all__ = ["loop_in_process"]
 def loop_in_process(spec: RunSpec, clock: Any, plan: Any = None) -> bool:
     """Whether the loop of ``plan`` in the run ``spec`` runs in a process of its own: on the real
     clock (``clock`` not simulated time) with ``loop.process`` true, for a plan a loop process can
-    build (its ``spec()`` is not None; ``plan`` None: a plan of the run's own kind, which can be)."""
+    build (it has a ``spec()`` and it is not None; ``plan`` None: a plan of the run's own kind, which
+    can be)."""
     if not spec.loop.process or getattr(clock, "virtual", False):
         return False
-    return plan is None or plan.spec() is not None
+    if plan is None:
+        return True
+    values = getattr(plan, "spec", None)
+    return values is not None and values() is not None

@@ -34,16 +34,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sashil import engine
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_stage
-from sashil.drivers import open_rig, rig_parts
+from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
 from sashil.engine import assemble
 from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
 from sashil.recording.run_folder import RunFolder
-from sashil.runtime.clock import default_clock
 from sashil.runtime.loop import stage_signals
-from sashil.runtime.runner import run_plan
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -213,16 +212,14 @@ def run_job(job: LawJob) -> LawResult:
         stage = _stage(config)
         if road is not None:
             stage = RoadStage(stage, road, job.duration_s)
-        rig = open_rig(rig_parts(config))
-        stage = MeasuredStage(stage, rig)
-        outcome = run_plan(
-            assemble(config),
-            rig,
-            stage,
-            default_clock(assemble(config)),
+        spec = assemble(config)
+        rig = open_rig(spec.rig)
+        outcome = engine.run(
+            spec,
+            MeasuredStage(stage, rig),
             job.duration_s,
+            rig=lambda: rig,
             data_path=folder.file("data.csv") if folder is not None else None,
-            read_stream=True,
             realtime=False,
             say=lambda _: None,
         )

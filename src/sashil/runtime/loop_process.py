@@ -42,8 +42,9 @@ from typing import TYPE_CHECKING, Any
 from sashil import errors
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
+from sashil.errors import error_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, end_summary, losses
+from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, losses, outcome_of
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -59,7 +60,6 @@ from sashil.runtime.stream import (
 )
 from sashil.runtime.stream_recorder import StreamRecorder
 from sashil.runtime.tune_socket import TuneServer
-from sashil.runtime.tuning import EVENT_COLUMNS
 
 if TYPE_CHECKING:
     from sashil.config.parts import RigParts, RunSpec
@@ -75,17 +75,6 @@ SAID = ("progress", "warning", "prompt")
 SAFE_CURRENT_A = 0.05
 #: how long a reopened rig's coil may take to reach it [s] (the watchdog's 50 ms and the coil's lag)
 CONFIRM_S = 1.0
-
-
-def error_of(fields: Mapping[str, Any]) -> BaseException:
-    """The error the loop process reported, as its sashil class when it has one."""
-    cls = getattr(errors, str(fields.get("type")), None)
-    text = str(fields.get("text"))
-    if isinstance(cls, type) and issubclass(cls, errors.SashilError):
-        return cls(text)
-    err = errors.SashilError(f"{fields.get('type')}: {text}")
-    err.exit_code = int(fields.get("exit_code") or 1)
-    return err
 
 
 def raise_error(fields: Mapping[str, Any]) -> None:
@@ -539,31 +528,17 @@ class LoopEnd:
         """The :class:`~sashil.runtime.runner.RunOutcome` of the run, wherever a session ran it in a
         loop process (a session's run, a verb's plan): ``timing`` copied before the process closed,
         ``recording`` None for a temporary stream file, which is no recording."""
-        end = self.end
-        events = (end.get("tuning") or {}).get("events") or []
-        summary = end_summary(
-            end,
-            exit_status=self.exit_status,
-            timing=timing.summary(),
+        return outcome_of(
+            self.end,
             error=self.error,
+            exit_status=self.exit_status,
+            stop=self.stop,
+            timing=timing,
             realtime=realtime,
             recording=recording,
-        )
-        return RunOutcome(
-            self.error,
-            self.stop,
-            timing,
-            int(end.get("start_ns") or 0),
-            summary,
-            realtime=realtime,
-            recording=recording,
-            link=end.get("link"),
-            stream=stream if stream is not None else {},
+            stream=stream,
             can_trace=can_trace,
             loop_process=facts,
-            tuning=end.get("tuning"),
-            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
-            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
         )
 
 

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from sashil.config.parts import RunSpec
-from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
 from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
 from sashil.runtime.signals import catch_stop_signals
 
@@ -75,11 +75,6 @@ class Messages:
                 view = view[os.write(self.fd, view) :]
         except OSError:
             self.gone = True
-
-
-def error_fields(err: BaseException) -> dict[str, Any]:
-    """An error as the session re-raises it: its class name, its line and its exit code."""
-    return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
 
 
 #: plans whose board is greeted when the loop starts, not before ``ready``: an operator (a person, or
@@ -154,9 +149,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     """The loop process's work (module doc); returns its exit code."""
+    from sashil.runtime.clock import RealClock
     from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
-    from sashil.runtime.runner import run_realtime
+    from sashil.runtime.runner import control_loop, loop_end, run_realtime
     from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
 
@@ -191,7 +187,18 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     if tunable:
         tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
     writer = StreamWriter(stream)
-    loop = _control_loop(spec, job, rig, stage, writer, tuning, stop, stream, messages)
+    loop = control_loop(
+        spec,
+        rig,
+        stage,
+        RealClock.for_rate(spec.loop.spin_margin_us, rate),
+        job.get("duration_s"),
+        warn=lambda line: messages.send("warning", text=line),
+        recorder=writer,
+        tuning=tuning,
+        stop=stop,
+        timing=stream.timing(rate),
+    )
     loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
     rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
     stream.set_state("running")
@@ -202,7 +209,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
     if tuning is not None:
         tuning.close()
-    end = _end_message(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
+    end = loop_end(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
     if stop.orphaned:
         from sashil.runtime.orphan import finish_alone
@@ -220,41 +227,6 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         messages.send("end", **end)
     writer.release()
     return 0
-
-
-def _control_loop(
-    spec: RunSpec,
-    job: dict[str, Any],
-    rig: Any,
-    stage: Any,
-    writer: Any,
-    tuning: Any,
-    stop: Any,
-    stream: Any,
-    messages: Messages,
-) -> Any:
-    """The run's :class:`~sashil.runtime.loop.ControlLoop` on the real clock: its rows to the
-    stream's ``writer``, its timing in the stream, its warnings to the session."""
-    from sashil.runtime.clock import RealClock
-    from sashil.runtime.loop import ControlLoop
-    from sashil.safety import SafetySupervisor
-
-    loop = spec.loop
-    return ControlLoop(
-        rig,
-        stage,
-        RealClock.for_rate(loop.spin_margin_us, loop.rate_hz),
-        loop.rate_hz,
-        job.get("duration_s"),
-        safety=SafetySupervisor.from_parts(spec.safety),
-        recorder=writer,
-        overrun_policy=loop.overrun_policy,
-        warn_interval_s=loop.warn_interval_s,
-        warn=lambda line: messages.send("warning", text=line),
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(loop.rate_hz),
-    )
 
 
 def _as_the_session(job: dict[str, Any]) -> None:
@@ -290,37 +262,6 @@ def _create_stream(job: dict[str, Any], backend: str, rig: Any, stage: Any, rate
         rig.frame_sink = FrameWriter(stream).put
     stream.header[LOOP_PID_W] = os.getpid()
     return stream
-
-
-def _end_message(
-    loop: Any, error: BaseException | None, stage: Any, rt: Any, rig: Any, tuning: Any, threads: int
-) -> dict[str, Any]:
-    """The ``end`` message's keys: how the loop ended, its timing counters, the stage's, the safety
-    supervisor's, the real-time set-up's and the rig's facts, the tuning's events."""
-    from sashil.drivers.interface import capabilities_of
-
-    result = loop.result
-    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
-    return {
-        "exit_status": result.exit_status,
-        "error": error_fields(error) if error is not None else None,
-        "stop_reason": result.stop_reason,
-        "trips": result.trips,
-        "shutdown_errors": result.shutdown_errors,
-        "safe_state": result.safe_state,
-        "timing": loop.timing.counters(),
-        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-        "safety": loop.safety.summary() if loop.safety is not None else None,
-        "realtime": rt.report() if rt is not None else {},
-        "link": rig.link_stats() if capabilities_of(rig).link else None,
-        "clip_warning": clipped() if callable(clipped) else None,
-        "tuning": tuning.summary() if tuning is not None else None,
-        "tuning_notes": tuning.notes() if tuning is not None else [],
-        "threads": threads,
-        "start_ns": loop.start_ns,
-        "plan": stage.facts() if hasattr(stage, "facts") else None,
-    }
 
 
 if __name__ == "__main__":
