@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sashil.errors import ConfigError
-from sashil.experiments.road_option import RoadParts
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -72,7 +71,7 @@ def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-d
 
 def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) -> None:
     """ConfigError naming ``named(key)`` when the road ``text`` does not parse."""
-    from sashil.experiments.road_option import parse_road  # numpy and the road profiles: only for a road
+    from sashil.experiments.road_option import RoadParts, parse_road  # numpy and the road profiles: only for a road
 
     try:
         parse_road(text, RoadParts.read(config))
