@@ -103,5 +103,5 @@ def test_a_loop_process_is_sent_the_assembled_run_and_no_config():
 
 
 def test_a_missing_key_is_named():
-    with pytest.raises(KeyError, match="driver.nope"):
+    with pytest.raises(KeyError, match=r"driver\.nope"):
         read_key(_config(), "driver.nope")
