@@ -4,8 +4,11 @@ and tracks it online.
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
 cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
 (direct transcription, the discrete adjoint, L-BFGS-B) over a receding horizon, on the law's model
-(the controller's: ``--params`` sets it) with its hysteresis as a friction α(i)·z_u
-(``hysteresis: true``) or in its viscous envelope, and the coil's lag (``LawContext.coil_tau_s``).
+(the controller's: ``--params`` sets it) and the coil's lag (``LawContext.coil_tau_s``). With
+``plan_model: bouc-wen`` (the default) the plan is first made with the hysteresis as a friction
+α(i)·z_u (smooth: found from the best constant current) and then refined from it on the model's own
+Bouc-Wen state (:mod:`sashil.control.plan_boucwen`: at small travel the damper is a spring, which a
+friction leaves out); ``friction`` stops after the first, ``envelope`` plans the viscous envelope.
 The plan gives, for every cycle k, the command u*_k in [0, i_max] and the model's state under it,
 the coil's current i*_k, θ*_k and θ̇2*_k. Its cost is the mean of θ̈2², or of θ̈2 low-passed at
 ``comfort_bandwidth_hz`` as ``sashil compare`` measures comfort (0, the default: unfiltered; over
@@ -36,7 +39,8 @@ from __future__ import annotations
 
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
-from sashil.control.preview_plan import PlanModel, plan_current
+from sashil.control.plan_boucwen import BoucWenPlanModel
+from sashil.control.preview_plan import Horizon, PlanModel, plan_current
 from sashil.errors import ConfigError
 
 __all__ = ["PreviewOptimal"]
@@ -54,7 +58,11 @@ class PreviewOptimal(Law):
     tail_s = Param(2.0, unit="s", low=0.0, high=60.0, doc="road after a block that its optimisation also sees")
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
     feedback_gain = Param(0.0, low=0.0, high=10.0, doc="gain of the LQR feedback on the error from the planned state")
-    hysteresis = Param(True, doc="plan with the hysteresis as a friction α(i)·z_u (false: the viscous envelope)")
+    plan_model = Param(
+        "bouc-wen",
+        choices=("bouc-wen", "friction", "envelope"),
+        doc="the plan's damper: its Bouc-Wen state, the hysteresis as a friction α(i)·z_u, or the viscous envelope",
+    )
     comfort_bandwidth_hz = Param(
         0.0,
         unit="Hz",
@@ -85,17 +93,23 @@ class PreviewOptimal(Law):
         """Plan the damping of every cycle of ``road`` (module docstring)."""
         assert self.context is not None
         ctx = self.context
-        model = PlanModel.of(ctx.model, bool(self.hysteresis), float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
-        plan = plan_current(
-            model,
-            self.context.current_max_a,
-            road.rate_rad_s,
-            road.dt_s,
-            block_s=float(self.block_s),
-            tail_s=float(self.tail_s),
-            max_iterations=int(self.plan_iterations),
-            bandwidth_hz=float(self.comfort_bandwidth_hz) or None,
+        kind = str(self.plan_model)
+        friction = PlanModel.of(ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
+        horizon = Horizon(
+            float(self.block_s), float(self.tail_s), int(self.plan_iterations), float(self.comfort_bandwidth_hz) or None
         )
+        plan = plan_current(friction, ctx.current_max_a, road.rate_rad_s, road.dt_s, horizon)
+        if kind == "bouc-wen":  # refined on the rig's own hysteresis, from the friction's plan
+            model = BoucWenPlanModel.of(ctx.model, ctx.coil_tau_s, road.dt_s)
+            plan = plan_current(
+                model,
+                ctx.current_max_a,
+                road.rate_rad_s,
+                road.dt_s,
+                horizon,
+                initial=plan.command_a,
+                from_constant=False,
+            )
         self._dt = road.dt_s
         self._i = plan.command_a.tolist()
         self._theta = plan.theta_rad.tolist()
