@@ -3,6 +3,7 @@ cycle), only under a plan that commands a road; ``preview-optimal`` plans on it 
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import textwrap
@@ -297,3 +298,43 @@ def test_the_comfort_low_pass_is_its_own_transpose_so_the_filtered_costs_gradien
         step[k] = 1e-6
         numeric = (cost(u + step)[0] - cost(u - step)[0]) / 2e-6
         assert grad[k] == pytest.approx(numeric, rel=2e-3, abs=1e-10)
+
+
+def test_the_re_planned_horizon_moves_on_by_whole_slots_and_takes_the_plans_next_slot_at_its_end():
+    from sashil.control.preview_mpc import RecedingPlan
+
+    model = PlanModel.of(_seed_context().model, hysteresis=True, coil_tau_s=0.01)
+    plan = np.repeat([0.1, 0.2, 0.3, 0.4, 0.5], 2)  # five slots of two cycles: their means 0.1 .. 0.5
+    receding = RecedingPlan(model, 1.0, plan, np.zeros(10), 1e-3, cycles=2, slots=3)
+    assert receding.u.tolist() == pytest.approx([0.1, 0.2, 0.3]) and receding.h == 2e-3
+    receding.u[:] = [0.9, 0.8, 0.7]  # as iterations left it
+    receding.move_to(1, 0.01, -0.1, 0.05, 0.3)
+    assert receding.u.tolist() == pytest.approx([0.8, 0.7, 0.4])  # shifted; slot 3's plan enters
+    assert receding.x0.tolist() == [0.01, -0.1, 0.05, 0.3]
+    assert receding.change() == pytest.approx(0.8 - 0.2)  # the horizon's first slot less the plan's
+    receding.move_to(4, 0.0, 0.0, 0.0, 0.0)  # past the road: the plan's last command held
+    assert receding.u.tolist() == pytest.approx([0.5, 0.5, 0.5])
+    receding.restart()
+    assert receding.u.tolist() == pytest.approx([0.1, 0.2, 0.3]) and receding.slot == 0
+
+
+def test_each_re_planning_step_keeps_the_horizon_in_the_coils_range_and_never_raises_its_cost():
+    from sashil.control.preview_mpc import RecedingPlan
+
+    model = BoucWenPlanModel.of(_seed_context().model, coil_tau_s=0.01)
+    rng = np.random.default_rng(11)
+    w = np.cumsum(rng.normal(0.0, 0.05, 1000))
+    receding = RecedingPlan(model, 1.0, np.full(1000, 0.5), w, 1e-3, cycles=5, slots=60)
+    receding.move_to(0, 0.02, 0.3, 0.05, 0.5)  # off the plan: a state the plan did not expect
+
+    def cost() -> float:
+        bufs = [np.empty(60) for _ in range(5)]
+        return model.forward(receding.u, receding.w, receding.m, receding.h, receding.x0, *bufs)
+
+    costs = [cost()]
+    for _ in range(30):
+        receding.iterate()
+        costs.append(cost())
+        assert np.all(receding.u >= 0.0) and np.all(receding.u <= 1.0)
+    assert all(b <= a for a, b in itertools.pairwise(costs))
+    assert costs[-1] < costs[0]
