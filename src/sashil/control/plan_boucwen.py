@@ -30,48 +30,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams, advance_z
 
 __all__ = ["BoucWenPlanModel"]
-
-Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class BoucWenPlanModel:
-    """The rig's parameters (:class:`BoucWenParams`) and the coil's step ρ = 1 − exp(−h/τ) (1: no lag)."""
-
-    params: BoucWenParams
-    rho: float = 1.0
-
-    @classmethod
-    def of(cls, params: BoucWenParams, coil_tau_s: float = 0.0, h: float = 1e-3) -> BoucWenPlanModel:
-        return cls(params, 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0)
-
-    @property
-    def authority(self) -> bool:
-        """Whether the current moves the torque at all (c2 or α2 non-zero)."""
-        return self.params.c2 != 0.0 or self.params.alpha2 != 0.0
-
-    def vector(self) -> np.ndarray:
-        """The kernels' parameters: k/J, 1/J, c1, c2, α1, α2, ρ, β, γ, δ, n, z_u."""
-        p = self.params
-        return np.array(
-            [p.k / p.J, 1.0 / p.J, p.c1, p.c2, p.alpha1, p.alpha2, self.rho, p.beta, p.gamma, p.delta, p.n, p.z_bound]
-        )
-
-    @staticmethod
-    def forward(u: Array, w: Array, m: Array, h: float, x0: Array, *trajectory: Array) -> float:
-        """:func:`_forward`."""
-        return float(_forward(u, w, m, h, x0, *trajectory))
-
-    @staticmethod
-    def adjoint(u: Array, w: Array, m: Array, h: float, *trajectory_direct_grad: Array) -> int:
-        """:func:`_adjoint`."""
-        return int(_adjoint(u, w, m, h, *trajectory_direct_grad))
 
 
 def _warm_forward() -> tuple[object, ...]:
@@ -155,3 +118,31 @@ def _adjoint(u, w, m, h, thetas, vs, zs, coil, direct, grad):
         lam_z = -g_a * inv_j * (a1 + a2 * i) + lam_z * dz_dz
         lam_theta, lam_v = new_theta, new_v
     return 0
+
+
+@dataclass(frozen=True)
+class BoucWenPlanModel:
+    """The rig's parameters (:class:`BoucWenParams`) and the coil's step ρ = 1 − exp(−h/τ) (1: no lag)."""
+
+    params: BoucWenParams
+    rho: float = 1.0
+
+    @classmethod
+    def of(cls, params: BoucWenParams, coil_tau_s: float = 0.0, h: float = 1e-3) -> BoucWenPlanModel:
+        return cls(params, 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0)
+
+    @property
+    def authority(self) -> bool:
+        """Whether the current moves the torque at all (c2 or α2 non-zero)."""
+        return self.params.c2 != 0.0 or self.params.alpha2 != 0.0
+
+    def vector(self) -> np.ndarray:
+        """The kernels' parameters: k/J, 1/J, c1, c2, α1, α2, ρ, β, γ, δ, n, z_u."""
+        p = self.params
+        return np.array(
+            [p.k / p.J, 1.0 / p.J, p.c1, p.c2, p.alpha1, p.alpha2, self.rho, p.beta, p.gamma, p.delta, p.n, p.z_bound]
+        )
+
+    #: the model's step and its adjoint (the kernels above)
+    forward = staticmethod(_forward)
+    adjoint = staticmethod(_adjoint)

@@ -37,16 +37,15 @@ the road's length, not with its square.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams
 
-Array = NDArray[np.float64]
 
 __all__ = [
     "REST",
@@ -59,57 +58,6 @@ __all__ = [
     "plan_current",
     "simulate_plan",
 ]
-
-
-@dataclass(frozen=True)
-class PlanModel:
-    """The plan's model: k/J, 1/J, the damping c1 + c2·i, the friction (f1 + f2·i)·tanh(θ̇/ε) and
-    the coil's step ρ = 1 − exp(−h/τ) per cycle (1: no lag)."""
-
-    k_over_j: float
-    inv_j: float
-    c1: float
-    c2: float
-    f1: float
-    f2: float
-    eps: float
-    rho: float = 1.0
-
-    @classmethod
-    def of(
-        cls, params: BoucWenParams, hysteresis: bool = True, eps: float = 0.01, coil_tau_s: float = 0.0, h: float = 1e-3
-    ) -> PlanModel:
-        """The plan's model of ``params``; ``hysteresis``: the friction α(i)·z_u, else the viscous
-        envelope; ``coil_tau_s``: the coil's lag (0: none) at the step ``h``."""
-        z_u = params.z_bound if hysteresis else 0.0
-        rho = 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0
-        return cls(
-            params.k / params.J,
-            1.0 / params.J,
-            params.c1,
-            params.c2,
-            params.alpha1 * z_u,
-            params.alpha2 * z_u,
-            eps,
-            rho,
-        )
-
-    @property
-    def authority(self) -> bool:
-        """Whether the current moves the torque at all (c2 or f2 non-zero)."""
-        return self.c2 != 0.0 or self.f2 != 0.0
-
-    def vector(self) -> np.ndarray:
-        """The kernels' parameters: k/J, 1/J, c1, c2, f1, f2, ε, ρ."""
-        return np.array([self.k_over_j, self.inv_j, self.c1, self.c2, self.f1, self.f2, self.eps, self.rho])
-
-    @staticmethod
-    def forward(u: Array, w: Array, m: Array, h: float, x0: Array, *trajectory: Array) -> float:
-        return float(_forward(u, w, m, h, x0, *trajectory))
-
-    @staticmethod
-    def adjoint(u: Array, w: Array, m: Array, h: float, *trajectory_direct_grad: Array) -> int:
-        return int(_adjoint(u, w, m, h, *trajectory_direct_grad))
 
 
 def _warm_forward() -> tuple[object, ...]:
@@ -179,6 +127,53 @@ def _adjoint(u, w, m, h, thetas, vs, zs, coil, direct, grad):
     return 0
 
 
+@dataclass(frozen=True)
+class PlanModel:
+    """The plan's model: k/J, 1/J, the damping c1 + c2·i, the friction (f1 + f2·i)·tanh(θ̇/ε) and
+    the coil's step ρ = 1 − exp(−h/τ) per cycle (1: no lag)."""
+
+    k_over_j: float
+    inv_j: float
+    c1: float
+    c2: float
+    f1: float
+    f2: float
+    eps: float
+    rho: float = 1.0
+
+    @classmethod
+    def of(
+        cls, params: BoucWenParams, hysteresis: bool = True, eps: float = 0.01, coil_tau_s: float = 0.0, h: float = 1e-3
+    ) -> PlanModel:
+        """The plan's model of ``params``; ``hysteresis``: the friction α(i)·z_u, else the viscous
+        envelope; ``coil_tau_s``: the coil's lag (0: none) at the step ``h``."""
+        z_u = params.z_bound if hysteresis else 0.0
+        rho = 1.0 - math.exp(-h / coil_tau_s) if coil_tau_s > 0.0 else 1.0
+        return cls(
+            params.k / params.J,
+            1.0 / params.J,
+            params.c1,
+            params.c2,
+            params.alpha1 * z_u,
+            params.alpha2 * z_u,
+            eps,
+            rho,
+        )
+
+    @property
+    def authority(self) -> bool:
+        """Whether the current moves the torque at all (c2 or f2 non-zero)."""
+        return self.c2 != 0.0 or self.f2 != 0.0
+
+    def vector(self) -> np.ndarray:
+        """The kernels' parameters: k/J, 1/J, c1, c2, f1, f2, ε, ρ."""
+        return np.array([self.k_over_j, self.inv_j, self.c1, self.c2, self.f1, self.f2, self.eps, self.rho])
+
+    #: the model's step and its adjoint (the kernels above)
+    forward = staticmethod(_forward)
+    adjoint = staticmethod(_adjoint)
+
+
 class Model(Protocol):
     """A plan's model: :class:`PlanModel` (the hysteresis as a friction, or none) or
     :class:`sashil.control.plan_boucwen.BoucWenPlanModel` (the Bouc-Wen state itself). Its kernels
@@ -189,15 +184,12 @@ class Model(Protocol):
 
     def vector(self) -> np.ndarray: ...
 
-    def forward(self, u: Array, w: Array, m: Array, h: float, x0: Array, *trajectory: Array) -> float:
-        """Step from ``x0`` (θ, θ̇2, z, i) under ``u`` on ``w``; the trajectory (θ, θ̇2, z, i before
-        each step, θ̈2) into the five arrays; the mean of θ̈2²."""
-        ...
-
-    def adjoint(self, u: Array, w: Array, m: Array, h: float, *trajectory_direct_grad: Array) -> int:
-        """d(cost)/d(u_k) into the last array, from the trajectory's four state arrays and
-        d(cost)/d(a_k) (``direct``)."""
-        ...
+    #: ``forward(u, w, m, h, x0, thetas, vs, zs, coil, accel)``: step from ``x0`` (θ, θ̇2, z, i)
+    #: under ``u`` on ``w``, the states before each step and θ̈2 into the five arrays; the mean of θ̈2²
+    forward: Callable[..., float]
+    #: ``adjoint(u, w, m, h, thetas, vs, zs, coil, direct, grad)``: d(cost)/d(u_k) into ``grad``
+    #: from the trajectory and d(cost)/d(a_k) (``direct``)
+    adjoint: Callable[..., int]
 
 
 #: the state a plan starts from: the arm at rest, z and the coil at 0
