@@ -46,7 +46,6 @@ import numpy as np
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams
 
-
 __all__ = [
     "REST",
     "CurrentPlan",
