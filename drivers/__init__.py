@@ -8,14 +8,13 @@ is asked for.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import Any
 
+from sashil.config.parts import RigParts
 from sashil.drivers.interface import SAFE_COMMAND, RigCapabilities, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverError
 from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 #: backend name -> "module:Class" (the installed ``sashil.backends`` entry points)
 BACKENDS: dict[str, str] = {name: plugin.target for name, plugin in entry_point_table(BACKENDS_GROUP).items()}
@@ -27,9 +26,11 @@ __all__ = [
     "RigInterface",
     "RigSample",
     "backend_class",
+    "backend_reads",
     "declared_capabilities",
     "on_virtual_clock",
     "open_rig",
+    "rig_parts",
 ]
 
 
@@ -45,20 +46,33 @@ def backend_class(name: str) -> type[RigInterface]:
         raise DriverError(f"{err} (the backend is not available)") from None
 
 
-def open_rig(config: RunConfig) -> RigInterface:
-    """Build (not yet configure) the rig backend the config's ``driver`` section names."""
-    return backend_class(config["driver"]["name"]).from_config(config)  # type: ignore[attr-defined]
+def backend_reads(name: str) -> Mapping[str, str]:
+    """The config keys backend ``name`` is built from: its class's ``reads`` table, ``{value name:
+    dotted config key}`` (a section's name alone hands it the whole section)."""
+    return dict(getattr(backend_class(name), "reads", {}))
 
 
-def declared_capabilities(config: RunConfig) -> RigCapabilities:
-    """What the config's backend declares (the rig object is built; nothing is opened or sent)."""
-    rig = open_rig(config)
+def rig_parts(config: Mapping[str, Any], backend: str | None = None) -> RigParts:
+    """The parts of a resolved config's backend (``driver.name``, or ``backend``): the values of
+    the config keys the backend declares (:func:`backend_reads`)."""
+    name = backend or str(config["driver"]["name"])
+    return RigParts.read(config, name, backend_reads(name))
+
+
+def open_rig(parts: RigParts) -> RigInterface:
+    """Build (not yet configure) the rig backend ``parts`` names from the values it declared."""
+    return backend_class(parts.backend).from_parts(parts.values)  # type: ignore[attr-defined]
+
+
+def declared_capabilities(parts: RigParts) -> RigCapabilities:
+    """What the backend of ``parts`` declares (the rig object is built; nothing is opened or sent)."""
+    rig = open_rig(parts)
     try:
         return capabilities_of(rig)
     finally:
         rig.close()
 
 
-def on_virtual_clock(config: RunConfig) -> bool:
-    """Whether runs of this config go on simulated time: a simulated backend whose ``driver.clock`` is not ``real``."""
-    return config["driver"]["clock"] != "real" and declared_capabilities(config).simulated
+def on_virtual_clock(parts: RigParts, clock: str | None) -> bool:
+    """Whether runs go on simulated time: a simulated backend whose ``driver.clock`` (``clock``) is not ``real``."""
+    return clock != "real" and declared_capabilities(parts).simulated

@@ -13,19 +13,16 @@ import fcntl
 import os
 import select
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 import can
 
 from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
-from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
+from sashil.drivers.link_rig import LINK_READS, PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import PROTOCOL_VERSION, Hello, Message, Version
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 
 class BufferedPort:
@@ -98,10 +95,17 @@ class CanRig(LinkRig):
         self._lock_fd: int | None = None  # the SLCAN tty, locked for this process (_lock_tty)
         self._fd: int | None = None
 
+    #: the config keys the backend is built from (:meth:`from_parts`)
+    reads: ClassVar[Mapping[str, str]] = {
+        **LINK_READS,
+        "can_interface": "driver.can_interface",
+        "can_bitrate": "driver.can_bitrate",
+        "can_options": "driver.can_options",
+    }
+
     @classmethod
-    def from_config(cls, config: RunConfig) -> CanRig:
-        driver = config["driver"]
-        return cls(LinkSettings(config), driver["can_interface"], driver["can_bitrate"], dict(driver["can_options"]))
+    def from_parts(cls, values: Mapping[str, Any]) -> CanRig:
+        return cls(LinkSettings(values), values["can_interface"], values["can_bitrate"], dict(values["can_options"]))
 
     def describe(self) -> str:
         return f"can {self.interface}:{self.settings.port}"

@@ -30,8 +30,8 @@ from __future__ import annotations
 import logging
 import time
 from abc import abstractmethod
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from sashil.drivers.interface import (
     FLAG_HELD,
@@ -63,9 +63,6 @@ from sashil.drivers.messages import (
 )
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
 
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
-
 log = logging.getLogger(__name__)
 
 #: a receive wait that overruns its timeout by more than this was a pause of the host process
@@ -78,20 +75,33 @@ SAFE_CURRENT_A = 0.02
 PROBE_S = 0.25
 
 
-class LinkSettings:
-    """The ``driver`` and ``loop`` keys a link backend needs, checked once."""
+#: the config keys every link backend is built from (:class:`LinkSettings`)
+LINK_READS: Mapping[str, str] = {
+    "port": "driver.port",
+    "rate_hz": "loop.rate_hz",
+    "pacing": "driver.pacing",
+    "watchdog_ms": "driver.watchdog_ms",
+    "sample_timeout_ms": "driver.sample_timeout_ms",
+    "link_lost_ms": "driver.link_lost_ms",
+    "connect_timeout_s": "driver.connect_timeout_s",
+    "counts_per_rev": "rig.encoder_counts_per_rev",
+    "current_max_a": "rig.current_max_a",
+}
 
-    def __init__(self, config: RunConfig):
-        driver = config["driver"]
-        self.port: str | None = driver["port"]
-        self.rate_hz = int(round(config["loop"]["rate_hz"]))
-        self.pacing = PACING_NAMES[driver["pacing"]]
-        self.watchdog_ms = int(round(driver["watchdog_ms"]))
-        self.sample_timeout_s = driver["sample_timeout_ms"] * 1e-3
-        self.link_lost_s = max(driver["link_lost_ms"] * 1e-3, self.sample_timeout_s)
-        self.connect_timeout_s = driver["connect_timeout_s"]
-        self.counts_per_rev = config["rig"]["encoder_counts_per_rev"]
-        self.current_max_a = config["rig"]["current_max_a"]
+
+class LinkSettings:
+    """The values a link backend needs (:data:`LINK_READS`), checked once."""
+
+    def __init__(self, values: Mapping[str, Any]):
+        self.port: str | None = values["port"]
+        self.rate_hz = int(round(values["rate_hz"]))
+        self.pacing = PACING_NAMES[values["pacing"]]
+        self.watchdog_ms = int(round(values["watchdog_ms"]))
+        self.sample_timeout_s = values["sample_timeout_ms"] * 1e-3
+        self.link_lost_s = max(values["link_lost_ms"] * 1e-3, self.sample_timeout_s)
+        self.connect_timeout_s = values["connect_timeout_s"]
+        self.counts_per_rev = values["counts_per_rev"]
+        self.current_max_a = values["current_max_a"]
 
 
 class LinkRig(RigInterface):

@@ -3,7 +3,7 @@
 The config's ``mismatch`` section offsets each Bouc-Wen parameter of the *plant* by a fraction
 (``fraction`` with a sign ``pattern``, or per parameter in ``params``), scales the coil lag, and
 may change the plant's encoder quantisation and sensor noise. The controller keeps using
-``config['model']`` and ``rig.coil_tau_s``; only the simulated rig sees the changed values, so
+the config's ``model`` and ``rig.coil_tau_s``; only the simulated rig sees the changed values, so
 every result can be shown with an imperfect model, as on a real rig.
 
 Note on this parametrisation: the hysteretic bound z_u = (delta/(beta+gamma))^(1/n) with n ~ 0.1
@@ -15,14 +15,11 @@ from __future__ import annotations
 
 import random
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from sashil.config.frozen import freeze_config, thaw
+from sashil.config.frozen import thaw
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 PARAMETER_ORDER = tuple(BoucWenParams.__dataclass_fields__)  # J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n
 
@@ -54,21 +51,22 @@ def mismatch_fractions(section: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
-def plant_config(config: RunConfig) -> RunConfig:
-    """A copy of ``config`` describing the simulated plant (model and rig after the mismatch)."""
-    section = config.get("mismatch") or {}
-    out: dict[str, Any] = thaw(config)
+def plant_sections(
+    model: Mapping[str, Any], rig: Mapping[str, Any], mismatch: Mapping[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The simulated plant's ``model`` and ``rig`` sections: copies of the given ones after the
+    ``mismatch`` section (None or empty: unchanged)."""
+    section: Mapping[str, Any] = mismatch or {}
+    model_out, rig_out = thaw(model), thaw(rig)
     fractions = mismatch_fractions(section)
-    params = out["model"]["params"]
+    params = model_out["params"]
     for key, frac in fractions.items():
         if key in params:
             params[key] = params[key] * (1.0 + frac)
     if params.get("beta", 1.0) + params.get("gamma", 0.0) <= 0:
         raise ConfigError("mismatch: the plant's beta + gamma must stay > 0 (bounded z)")
-    rig = out["rig"]
-    rig["coil_tau_s"] = rig["coil_tau_s"] * (1.0 + float(section.get("coil_tau", 0.0) or 0.0))
-    overrides: Mapping[str, Any] = section
+    rig_out["coil_tau_s"] = rig_out["coil_tau_s"] * (1.0 + float(section.get("coil_tau", 0.0) or 0.0))
     for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"):
-        if overrides.get(key) is not None:
-            rig[key] = overrides[key]
-    return freeze_config(out)
+        if section.get(key) is not None:
+            rig_out[key] = section[key]
+    return model_out, rig_out

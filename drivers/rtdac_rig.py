@@ -30,7 +30,8 @@ import logging
 import math
 import struct
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample, RigState
 from sashil.drivers.rtdac_codec import (
@@ -51,9 +52,6 @@ from sashil.drivers.rtdac_outputs import CoilDrive, RoadDrive
 from sashil.drivers.rtdac_usb import BoardLink, UsbSettings
 from sashil.drivers.rtdac_wiring import Wiring
 from sashil.errors import DriverError, DriverIOError
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 log = logging.getLogger("sashil")
 
@@ -113,32 +111,39 @@ class RtdacRig(RigInterface):
         self.stats: dict[str, Any] = {"samples": 0, "samples_missed": 0, "timeouts": 0, "watchdog_samples": 0}
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
 
+    #: the config keys the backend is built from (:meth:`from_parts`)
+    reads: ClassVar[Mapping[str, str]] = {
+        "rtdac": "rtdac",
+        "port": "driver.port",
+        "link_lost_ms": "driver.link_lost_ms",
+        "current_max_a": "rig.current_max_a",
+        "coil_tau_s": "rig.coil_tau_s",
+    }
+
     @classmethod
-    def from_config(cls, config: RunConfig, backend: Any = None) -> RtdacRig:
+    def from_parts(cls, values: Mapping[str, Any], backend: Any = None) -> RtdacRig:
         """The backend the ``rtdac`` section, ``driver.port`` and the rig's coil describe (nothing
         opened); ``backend``: a pyusb backend object to find the board through."""
-        section = config["rtdac"]
-        driver = config["driver"]
+        section = values["rtdac"]
         usb = UsbSettings(
             manufacturer=section["manufacturer"],
             serial=section["serial"],
             vendor_id=section["vendor_id"],
             product_id=section["product_id"],
             usb_backend=section["usb_backend"],
-            port=driver["port"],
+            port=values["port"],
             timeout_ms=section["transfer_timeout_ms"],
         )
-        rig = cls(
+        return cls(
             usb,
             Wiring.from_section(section),
-            current_max_a=config["rig"]["current_max_a"],
-            coil_tau_s=config["rig"]["coil_tau_s"],
+            current_max_a=values["current_max_a"],
+            coil_tau_s=values["coil_tau_s"],
             application=section["application"],
             map_dir=section["map_dir"],
             backend=backend,
-            busy_limit_s=max(driver["link_lost_ms"], 1.0) * 1e-3,
+            busy_limit_s=max(values["link_lost_ms"], 1.0) * 1e-3,
         )
-        return rig
 
     @property
     def capabilities(self) -> RigCapabilities:  # type: ignore[override]  # depends on the wiring

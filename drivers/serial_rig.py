@@ -11,18 +11,16 @@ from __future__ import annotations
 import errno
 import os
 import select
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import serial
 
 from sashil.drivers import slcan_codec
-from sashil.drivers.link_rig import PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
+from sashil.drivers.link_rig import LINK_READS, PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import Message
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 #: what opening a port that another process holds fails with: its lock (pyserial's ``exclusive=True``
 #: flock: EAGAIN/EWOULDBLOCK) or the device refusing a second opener (EBUSY)
@@ -74,9 +72,12 @@ class SerialRig(LinkRig):
         #: what asking the port for low-latency mode gave ("on", or why not), for the link summary
         self.low_latency = "not asked (port not open)"
 
+    #: the config keys the backend is built from (:meth:`from_parts`)
+    reads: ClassVar[Mapping[str, str]] = {**LINK_READS, "baud": "driver.baud"}
+
     @classmethod
-    def from_config(cls, config: RunConfig) -> SerialRig:
-        return cls(LinkSettings(config), baud=config["driver"]["baud"])
+    def from_parts(cls, values: Mapping[str, Any]) -> SerialRig:
+        return cls(LinkSettings(values), baud=values["baud"])
 
     def describe(self) -> str:
         return f"serial {self.port_name}"

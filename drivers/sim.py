@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import math
 import random
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 from sashil.drivers.interface import (
     FLAG_HELD,
@@ -31,14 +32,11 @@ from sashil.drivers.interface import (
     RigState,
     clamp_current,
 )
-from sashil.drivers.mismatch import plant_config
+from sashil.drivers.mismatch import plant_sections
 from sashil.drivers.sim_advance import advance
 from sashil.errors import DriverError
 from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 
 class RoadWheel:
@@ -121,13 +119,15 @@ class SimulatedRig(RigInterface):
         self._split_s = -1.0
         self._split = (1, 0.0, 0.0)  # a read's sub-steps, their length and the coil's decay over one
 
+    #: the config keys the simulated rig is built from (:meth:`from_parts`)
+    reads: ClassVar[Mapping[str, str]] = {"model": "model", "rig": "rig", "mismatch": "mismatch"}
+
     @classmethod
-    def from_config(cls, config: RunConfig) -> SimulatedRig:
-        """The rig the config describes, after its ``mismatch`` section (the plant, not the model)."""
-        config = plant_config(config)
-        rig = config["rig"]
+    def from_parts(cls, values: Mapping[str, Any]) -> SimulatedRig:
+        """The rig of the ``model`` and ``rig`` sections, after the ``mismatch`` section (the plant, not the model)."""
+        model, rig = plant_sections(values["model"], values["rig"], values.get("mismatch"))
         plant = RigPlant(
-            rig_params(config["model"]),
+            rig_params(model),
             coil_tau_s=rig["coil_tau_s"],
             current_max_a=rig["current_max_a"],
             max_step_s=rig["plant_max_step_s"],

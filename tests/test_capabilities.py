@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from sashil.config import default_config
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigCapabilities, capabilities_of
 
 
@@ -14,7 +14,7 @@ def _config(name: str, pacing: str = "device") -> dict:
 
 
 def test_each_backend_declares_its_capabilities():
-    sim = open_rig(default_config())
+    sim = open_rig(rig_parts(default_config()))
     assert sim.capabilities == RigCapabilities(
         operator_hold=True,
         initial_current=True,
@@ -23,10 +23,10 @@ def test_each_backend_declares_its_capabilities():
         simulated=True,
         true_torque=True,
     )
-    serial = open_rig(_config("serial"))  # nothing is opened before configure()
+    serial = open_rig(rig_parts(_config("serial")))  # nothing is opened before configure()
     assert serial.capabilities == RigCapabilities(road_actuator=True, device_paced=True, link=True)
-    assert open_rig(_config("serial", "host")).capabilities.device_paced is False
-    can = open_rig(_config("can"))
+    assert open_rig(rig_parts(_config("serial", "host"))).capabilities.device_paced is False
+    can = open_rig(rig_parts(_config("can")))
     assert can.capabilities.can_frames and can.capabilities.link and not can.capabilities.operator_hold
 
 
@@ -39,7 +39,7 @@ def test_the_simulated_rig_reports_its_plants_true_torque_and_a_link_does_not():
 
     config = default_config()
     config["controller"]["current_a"] = 0.5
-    sim = open_rig(config)
+    sim = open_rig(rig_parts(config))
     sim.configure()
     sim.activate()
     sim.write(RigCommand(0.5, road_speed_rad_s=2.0), 0, 0)
@@ -52,7 +52,7 @@ def test_the_simulated_rig_reports_its_plants_true_torque_and_a_link_does_not():
     assert truth.damper_torque_nm == pytest.approx(torque, rel=1e-12) and abs(torque) > 1e-3
     assert truth.arm_accel_rad_s2 == pytest.approx((-p.k * state.theta_rad - torque) / p.J, rel=1e-12)
     assert math.isfinite(truth.arm_accel_rad_s2)
-    serial = open_rig(_config("serial"))
+    serial = open_rig(rig_parts(_config("serial")))
     assert not serial.capabilities.true_torque
     with pytest.raises(NotImplementedError, match="serial: the backend does not report the plant's true torque"):
         serial.plant_truth()
@@ -74,4 +74,4 @@ def test_a_can_trace_on_a_backend_without_can_frames_is_refused_in_one_line(tmp_
     trace = CanTrace.for_formats(tmp_path, ["asc"])
     assert trace is not None
     with pytest.raises(ConfigError, match="the serial backend has no CAN frames to trace"):
-        trace.attach(open_rig(_config("serial")))
+        trace.attach(open_rig(rig_parts(_config("serial"))))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
+from sashil.drivers import rig_parts
 from sashil.recording.data_file import REQUIRED_COLUMNS, read_data_csv
 
 
@@ -137,7 +138,7 @@ def test_a_link_failure_mid_test_keeps_the_data_and_ends_at_zero_amps(config):
     from sashil.drivers import open_rig
     from sashil.experiments.drop_test import run_drop_test
 
-    rig = _FailingRig(open_rig(config), fail_on=1300)  # 0.3 s hold, then ~1 s of oscillation
+    rig = _FailingRig(open_rig(rig_parts(config)), fail_on=1300)  # 0.3 s hold, then ~1 s of oscillation
     record = run_drop_test(config, -5.0, 1.0, 10.0, rig=rig)
     assert record.error is not None and "device disconnected" in str(record.error)
     assert record.run["exit_status"] == "error"

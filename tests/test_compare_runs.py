@@ -13,6 +13,7 @@ import yaml
 
 import sashil
 from sashil.cli import main
+from sashil.config.parts import StageParts
 from sashil.recording.data_file import read_data_csv
 
 SHORT = ["--duration", "2", "--set", "compare.settle_s=1", "--set", "road.period_s=10", "-q"]
@@ -132,7 +133,7 @@ def test_a_file_law_is_labelled_by_its_name_with_its_origin_beside_it(tmp_path):
     from sashil.control.registry import make_stage
 
     config = resolve(ConfigSource(controller=spec), "run")
-    assert make_stage(config)[0] == "rate-bangbang"  # run.png's title and summary.json's controller
+    assert make_stage(StageParts.read(config))[0] == "rate-bangbang"  # run.png's title and summary.json's controller
     out = tmp_path / "cmp"
     assert main(["compare", *SHORT, "--controller", spec, "--out", str(out)]) == 0
     summary = sashil.load_run(out / "rate-bangbang").summary

@@ -8,14 +8,15 @@ import math
 import pytest
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.estimator import RigEstimator, TrackingFilter, rate_response
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.laws import SkyhookOnOff, band_limited_fraction
 from sashil.control.observer import BoucWenObserver
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigSample
-from sashil.drivers.mismatch import mismatch_fractions, plant_config
+from sashil.drivers.mismatch import mismatch_fractions, plant_sections
 from sashil.errors import ConfigError, LawError
 from sashil.experiments.drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
@@ -163,7 +164,9 @@ def test_band_limited_fraction_stays_in_its_range_and_band():
 
 def test_a_nan_target_is_a_law_error_naming_the_law():
     config = default_config()
-    ctl = make_controller("torque-tracking", config, torque=lambda t: float("nan") if t > 0.0015 else 1.0)
+    ctl = make_controller(
+        "torque-tracking", StageParts.read(config), torque=lambda t: float("nan") if t > 0.0015 else 1.0
+    )
     ctl.step(sample(0, 0, 0.3), 0, 1_000_000)
     ctl.step(sample(1, 0, 0.3), 1_000_000, 1_000_000)
     with pytest.raises(LawError, match=r"law 'torque-tracking' \(built-in\) failed at t = 0\.0020 s: returned nan"):
@@ -175,7 +178,7 @@ def test_the_estimator_steps_over_the_samples_period_on_the_device_clock():
     device clock's period between the samples it took (4 ms), not the host's cycle (1 ms); the
     host's finer period where the two agree within the device clock's 1 us, and where the device
     clock did not advance (a sample read again)."""
-    ctl = make_controller("skyhook-add", default_config())
+    ctl = make_controller("skyhook-add", StageParts.read(default_config()))
     periods: list[float] = []
 
     class Recorded:  # the controller's estimator, noting each period it is given
@@ -212,12 +215,16 @@ def zetas(metrics):
 
 def test_target_damping_drop_decays_exponentially_with_mismatch_and_constant_current_does_not():
     config = mismatched()
-    ctl = make_controller("target-damping", config)
-    record = run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(config), clock=VirtualClock(), controller=ctl)
+    ctl = make_controller("target-damping", StageParts.read(config))
+    record = run_drop_test(
+        config, -5.0, 0.5, 6.0, rig=open_rig(rig_parts(config)), clock=VirtualClock(), controller=ctl
+    )
     controlled = zetas(record.metrics)
     assert len(controlled) >= 4
     assert all(abs(z / 0.07 - 1.0) <= 0.10 for z in controlled), controlled
-    constant = zetas(run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(config), clock=VirtualClock()).metrics)
+    constant = zetas(
+        run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(rig_parts(config)), clock=VirtualClock()).metrics
+    )
     assert constant[-1] / constant[0] > 1.2, constant  # Coulomb-like hysteresis: decrement grows as it decays
     assert record.columns["current_cmd_a"].max() > record.columns["current_cmd_a"].min()  # the controller commanded
 
@@ -240,7 +247,7 @@ def test_bad_controller_input_is_one_line_naming_the_key(name, update, message):
     config = default_config()
     config["controller"].update(update)
     with pytest.raises(ConfigError) as err:
-        make_controller(name, config)
+        make_controller(name, StageParts.read(config))
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
@@ -250,10 +257,10 @@ def test_mismatch_patterns_and_overrides():
     assert fr["J"] == 0.1 and fr["c1"] == 0.1 and fr["c2"] == -0.1 and fr["k"] == 0.05
     config = default_config()
     config["mismatch"].update(fraction=0.1, pattern="plus", coil_tau=0.5, encoder_counts_per_rev=1024)
-    plant = plant_config(config)
-    assert plant["model"]["params"]["c1"] == pytest.approx(0.77)
-    assert plant["rig"]["coil_tau_s"] == pytest.approx(0.015)
-    assert plant["rig"]["encoder_counts_per_rev"] == 1024
+    model, rig = plant_sections(config["model"], config["rig"], config["mismatch"])
+    assert model["params"]["c1"] == pytest.approx(0.77)
+    assert rig["coil_tau_s"] == pytest.approx(0.015)
+    assert rig["encoder_counts_per_rev"] == 1024
     assert config["model"]["params"]["c1"] == 0.7  # the controller's model is untouched
     with pytest.raises(ConfigError, match=r"mismatch\.params\.q: not a bouc-wen parameter"):
         mismatch_fractions({"params": {"q": 0.1}})

@@ -13,8 +13,10 @@ import math
 import pytest
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.kalman import EDGE_BAD_MIN_EVENTS, KalmanRigEstimator
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.drivers.interface import NO_EDGE, TWO_PI, RigSample
 from sashil.errors import SafetyTrip
 
@@ -109,7 +111,7 @@ def test_an_event_from_the_future_or_older_than_the_last_is_counted_and_left_out
 def test_more_than_one_percent_bad_events_stop_the_run_as_a_safety_trip():
     config = default_config()
     config["model"]["name"] = "bouc-wen"
-    ctl = make_controller("passive", config)
+    ctl = make_controller("passive", StageParts.read(config))
     speed = 0.5
     stats = None
     with pytest.raises(SafetyTrip) as err:
@@ -126,9 +128,9 @@ def test_more_than_one_percent_bad_events_stop_the_run_as_a_safety_trip():
 
 def test_the_config_switch_turns_the_events_off():
     config = default_config()
-    assert make_controller("passive", config).estimator.edge_timing is True
+    assert make_controller("passive", StageParts.read(config)).estimator.edge_timing is True
     config["controller"]["edge_timing"] = False
-    ctl = make_controller("passive", config)
+    ctl = make_controller("passive", StageParts.read(config))
     assert ctl.estimator.edge_timing is False
     for k in range(50):
         ctl.step(moving_sample(k, 0.5), k * 10**6, 10**6)
@@ -156,9 +158,11 @@ def test_a_run_with_bad_edge_times_ends_at_zero_current_with_exit_3_and_the_coun
             super().write(RigCommand(cmd.current_a, 0.5), t_ns, dt_ns)
 
     config = default_config()
-    rig = BadEdges.from_config(config)
+    rig = BadEdges.from_parts(rig_parts(config, "sim").values)
     rig.currents = []
-    ctl = make_controller("passive", {**config, "controller": {**config["controller"], "current_a": 0.5}})
+    ctl = make_controller(
+        "passive", StageParts.read({**config, "controller": {**config["controller"], "current_a": 0.5}})
+    )
     loop = ControlLoop(rig, ctl, VirtualClock(), 1000.0, 5.0)
     with pytest.raises(SafetyTrip):
         loop.run()

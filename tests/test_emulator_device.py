@@ -7,6 +7,7 @@ import math
 import pytest
 
 from sashil.config import default_config
+from sashil.drivers import rig_parts
 from sashil.drivers.emulator import Faults, HostConsole, Operator, build_device
 from sashil.drivers.emulator.runner import Emulator
 from sashil.drivers.emulator.transports import DeviceTransport, corrupt_frame
@@ -75,7 +76,7 @@ def test_samples_are_the_simulated_rig_sensor_model():
     """The board adds no physics: same plant, same times -> the same encoder counts."""
     config = default_config()
     device = build_device(config)
-    reference = SimulatedRig.from_config(config)
+    reference = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     reference.configure(), reference.activate()
     device.handle(Configure(1000, 1000, PACING_DEVICE), 0)
     reference.read(0, 0)

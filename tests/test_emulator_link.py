@@ -10,7 +10,7 @@ import can
 import pytest
 
 from sashil.config import default_config
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.can_codec import database
 from sashil.drivers.emulator import EmulatorThread, Faults
 from sashil.drivers.emulator import device as device_module
@@ -49,7 +49,9 @@ def wait_for(rig, predicate, cycles=2000, current=0.0):
 def test_backend_session_drives_and_stops_the_coil(transport, driver, interface, pacing, board):
     config = default_config()
     with EmulatorThread(config, transport, channel=f"t-{transport}-{pacing}", board=board) as emu:
-        with open_rig(host_config(driver, emu.port, interface, pacing)) as rig:  # closed however the test ends
+        with open_rig(
+            rig_parts(host_config(driver, emu.port, interface, pacing))
+        ) as rig:  # closed however the test ends
             rig.configure()
             assert emu.device.configured and emu.device.drive_a == 0.0
             rig.write(RigCommand(0.7), 0, 0)  # before activate(): 0 A
@@ -76,7 +78,7 @@ def test_backend_session_drives_and_stops_the_coil(transport, driver, interface,
 def test_the_dbc_decodes_the_frames_the_can_backend_sends():
     with EmulatorThread(default_config(), "virtual", channel="t-dbc") as emu:
         with can.Bus(interface="virtual", channel="t-dbc") as listener:
-            with open_rig(host_config("can", emu.port, "virtual")) as rig:
+            with open_rig(rig_parts(host_config("can", emu.port, "virtual"))) as rig:
                 rig.configure()
                 rig.activate()
                 rig.read(0, 0)
@@ -100,7 +102,7 @@ def test_the_dbc_decodes_the_frames_the_can_backend_sends():
 def test_wrong_protocol_version_is_refused_and_nothing_energised(monkeypatch):
     monkeypatch.setattr(device_module, "PROTOCOL_VERSION", 1)  # a board of protocol 1 (no edge times)
     with EmulatorThread(default_config(), "serial") as emu:
-        with open_rig(host_config("serial", emu.port)) as rig:
+        with open_rig(rig_parts(host_config("serial", emu.port))) as rig:
             with pytest.raises(DriverError) as err:
                 rig.configure()
             assert type(err.value) is DriverError and err.value.exit_code == 2
@@ -111,20 +113,20 @@ def test_wrong_protocol_version_is_refused_and_nothing_energised(monkeypatch):
 
 def test_missing_port_busy_port_and_silent_port():
     with pytest.raises(DriverError) as err:
-        open_rig(host_config("serial", "/dev/does-not-exist")).configure()
+        open_rig(rig_parts(host_config("serial", "/dev/does-not-exist"))).configure()
     assert err.value.exit_code == 2 and "/dev/does-not-exist" in str(err.value)
     with EmulatorThread(default_config(), "serial") as emu:
-        with open_rig(host_config("serial", emu.port)) as first:
+        with open_rig(rig_parts(host_config("serial", emu.port))) as first:
             first.configure()
             with pytest.raises(DriverError) as err:
-                open_rig(host_config("serial", emu.port)).configure()
+                open_rig(rig_parts(host_config("serial", emu.port))).configure()
             assert err.value.exit_code == 2 and "cannot open" in str(err.value)
     pty = Pty.open()
     try:
         config = host_config("serial", pty.path)
         config["driver"]["connect_timeout_s"] = 0.1
         with pytest.raises(DriverError) as err:
-            open_rig(config).configure()
+            open_rig(rig_parts(config)).configure()
         assert err.value.exit_code == 2 and "no Version" in str(err.value)
     finally:
         pty.close()
@@ -132,11 +134,11 @@ def test_missing_port_busy_port_and_silent_port():
 
 def test_a_second_host_on_a_busy_slcan_port_is_refused_without_disturbing_the_first():
     with EmulatorThread(default_config(), "slcan", channel="t-busy") as emu:
-        with open_rig(host_config("can", emu.port)) as first:
+        with open_rig(rig_parts(host_config("can", emu.port))) as first:
             first.configure()
             first.activate()
             before = first.link_stats()["samples"]
-            second = open_rig(host_config("can", emu.port))
+            second = open_rig(rig_parts(host_config("can", emu.port)))
             with pytest.raises(DriverError) as err:
                 second.configure()
             second.close()
@@ -147,18 +149,18 @@ def test_a_second_host_on_a_busy_slcan_port_is_refused_without_disturbing_the_fi
                 first.write(RigCommand(0.2), 0, 0)
             stats = first.link_stats()
             assert stats["samples"] >= before + 50 and stats["timeouts"] == 0 and stats["bad_frames"] == 0
-        with open_rig(host_config("can", emu.port)) as again:  # released when the first closed
+        with open_rig(rig_parts(host_config("can", emu.port))) as again:  # released when the first closed
             again.configure()
 
 
 def test_unknown_can_interface_and_missing_port():
     with pytest.raises(DriverError) as err:
-        open_rig(host_config("can", "can0", interface="no-such-bus")).configure()
+        open_rig(rig_parts(host_config("can", "can0", interface="no-such-bus"))).configure()
     assert err.value.exit_code == 2 and "no-such-bus" in str(err.value)
     config = host_config("can", "x")
     config["driver"]["port"] = None
     with pytest.raises(DriverError):
-        open_rig(config)
+        open_rig(rig_parts(config))
 
 
 @pytest.mark.parametrize("board", BOARDS)
@@ -166,7 +168,7 @@ def test_unknown_can_interface_and_missing_port():
 def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, driver, board):
     emu = EmulatorThread(default_config(), transport, faults=Faults(disconnect_after_s=0.05), board=board)
     with emu:
-        with open_rig(host_config(driver, emu.port)) as rig:
+        with open_rig(rig_parts(host_config(driver, emu.port))) as rig:
             rig.configure()
             rig.activate()
             with pytest.raises(DriverIOError):
@@ -180,7 +182,7 @@ def test_disconnect_raises_driver_io_error_and_shutdown_stays_quiet(transport, d
 @pytest.mark.parametrize("board", BOARDS)
 def test_corrupt_frames_are_counted_and_the_run_goes_on(board):
     with EmulatorThread(default_config(), "serial", faults=Faults(corrupt_rate=0.05, seed=1), board=board) as emu:
-        with open_rig(host_config("serial", emu.port)) as rig:
+        with open_rig(rig_parts(host_config("serial", emu.port))) as rig:
             rig.configure()
             rig.activate()
             for _ in range(400):

@@ -17,7 +17,7 @@ import pytest
 
 from sashil.cli import main
 from sashil.config import default_config
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.emulator import TRUTH_COLUMNS, EmulatorThread, TruthLog, read_truth_csv
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import TWO_PI, RigCommand
@@ -48,7 +48,7 @@ def host_config(driver: str, port: str) -> dict:
 def host_session(driver: str, port: str, cycles: int) -> list:
     """Drive 0.8 A and read ``cycles`` samples; returns them (RigSample)."""
     samples = []
-    with open_rig(host_config(driver, port)) as rig:
+    with open_rig(rig_parts(host_config(driver, port))) as rig:
         rig.configure()
         rig.activate()
         for _ in range(cycles):

@@ -13,8 +13,9 @@ import os
 
 import pytest
 
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigCommand
+from sashil.engine import assemble
 from sashil.runtime.clock import RealClock
 from sashil.runtime.runner import run_plan
 
@@ -34,10 +35,10 @@ class _Probe:
 
 
 def _exercise(config):
-    rig = open_rig(config)
+    rig = open_rig(rig_parts(config))
     probe = _Probe(cycles=int(config["loop"]["rate_hz"]))
     rate = config["loop"]["rate_hz"]
-    outcome = run_plan(config, rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
+    outcome = run_plan(assemble(config), rig, probe, RealClock.for_rate(config["loop"]["spin_margin_us"], rate))
     assert outcome.exit_status == "ok" and outcome.error is None  # the safety supervisor ran beside it
     seqs = [s.seq for s in probe.samples]
     assert all((b - a) % 65536 >= 1 for a, b in itertools.pairwise(seqs)), "sequence numbers advance"

@@ -12,7 +12,7 @@ from scipy.signal import welch
 from sashil.config import default_config
 from sashil.errors import ConfigError
 from sashil.experiments.iso8608 import CLASSES, N_BAND, iso8608_height, spatial_psd
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 
 #: ISO 8608 Table 1: Gd(n0) geometric mean of each class [10^-6 m^3]
 TABLE = {"A": 16, "B": 64, "C": 256, "D": 1024, "E": 4096, "F": 16384, "G": 65536, "H": 262144}
@@ -48,7 +48,7 @@ def test_the_road_is_seeded():
 def test_road_option_maps_height_to_the_wheel_angle_through_the_lever():
     config = default_config()
     config["road"]["period_s"] = 20.0
-    road, text = parse_road("iso8608:c:5", config)
+    road, text = parse_road("iso8608:c:5", RoadParts.read(config))
     assert text.startswith("ISO 8608 class C at 5 m/s")
     h = iso8608_height("C", 5.0, 20.0, 1000.0, seed=0)
     # after the fade-in, theta1 = h / lever_m; its rate the derivative of the angle
@@ -61,7 +61,7 @@ def test_road_option_maps_height_to_the_wheel_angle_through_the_lever():
 
 
 def test_bump():
-    road, text = parse_road("bump:2", default_config())
+    road, text = parse_road("bump:2", RoadParts.read(default_config()))
     assert road(0.5) == (0.0, 0.0, 0.0)
     assert road(1.25)[0] == pytest.approx(math.radians(2.0))  # the top, half-way through 0.5 s from 1 s
     assert "bump 2 deg" in text
@@ -80,5 +80,5 @@ def test_bump():
 )
 def test_bad_road_is_one_line_naming_the_option(spec, words):
     with pytest.raises(ConfigError) as err:
-        parse_road(spec, default_config())
+        parse_road(spec, RoadParts.read(default_config()))
     assert str(err.value).startswith(f"--road {spec}: ") and words in str(err.value)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.kalman import KalmanRigEstimator, discrete_model, steady_state_gain
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import TWO_PI, RigCommand, RigSample
@@ -96,7 +97,7 @@ def _run(config: dict, true: BoucWenParams, seconds: float, road=None, command_r
     (the plan's command carries it) or not (the road moves unannounced)."""
     plant = RigPlant(true)
     rig = SimulatedRig(plant, counts_per_rev=config["rig"]["encoder_counts_per_rev"])
-    ctl = make_controller("torque-tracking", config)
+    ctl = make_controller("torque-tracking", StageParts.read(config))
     rig.configure()
     rig.activate()
     if drop:
@@ -163,5 +164,5 @@ def test_estimator_settings_are_checked_like_the_rest_of_the_config(tmp_path):
 
 def test_the_gains_are_ready_before_the_first_sample():
     # the first real-time cycle must not solve a Riccati equation (first cycle on time)
-    ctl = make_controller("torque-tracking", default_config())
+    ctl = make_controller("torque-tracking", StageParts.read(default_config()))
     assert ctl.estimator._counts_per_rev == 4096 and len(ctl.estimator._gain) == 6

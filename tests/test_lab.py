@@ -15,6 +15,7 @@ import yaml
 import sashil
 from sashil.config import default_config, dump_config
 from sashil.config.frozen import FrozenSection, thaw
+from sashil.config.parts import LoopParts, StageParts
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
@@ -140,15 +141,15 @@ def test_a_run_that_lost_more_than_the_config_allows_is_not_ok():
     config = default_config()
     timing = TimingStats(1000.0, window=4096)
     timing.cycles, timing.missed_deadlines = 4667, 5333  # the wrecked run: half its deadlines missed
-    lost = losses(config, timing, None)
+    lost = losses(LoopParts.read(config), timing, None)
     assert isinstance(lost, LossError) and "missed 5333 of 10000 deadlines" in str(lost)
     assert "loop.max_missed_fraction allows 25 %" in str(lost)
     assert status_of(lost) == "lossy" and exit_code_of("lossy", lost) == 5
     timing.missed_deadlines = 90  # a loaded VM over serial: 90 per 60 s is within the default
     timing.cycles = 60_000
-    assert losses(config, timing, None) is None
+    assert losses(LoopParts.read(config), timing, None) is None
     link = {"samples": 7_000, "samples_missed": 3_000}
-    lost = losses(config, timing, link)
+    lost = losses(LoopParts.read(config), timing, link)
     assert lost is not None and "lost 3000 of 10000 samples" in str(lost) and "driver.max_lost_fraction" in str(lost)
 
 
@@ -157,9 +158,11 @@ def test_the_passive_law_declares_it_reads_no_state():
     from sashil.control.registry import make_stage
 
     assert Passive.reads_state is False and Skyhook.reads_state is True
-    label, stage = make_stage(resolve(ConfigSource(sets=("controller.current_a=0.4",)), "run"))
+    label, stage = make_stage(StageParts.read(resolve(ConfigSource(sets=("controller.current_a=0.4",)), "run")))
     assert label == "passive 0.4 A" and stage.law.current_a == 0.4
-    label, stage = make_stage(resolve(ConfigSource(controller="skyhook", sets=("controller.c_sky=2",)), "run"))
+    label, stage = make_stage(
+        StageParts.read(resolve(ConfigSource(controller="skyhook", sets=("controller.c_sky=2",)), "run"))
+    )
     assert label == "skyhook" and stage.law.c_sky == 2.0
 
 

@@ -12,6 +12,7 @@ import pytest
 from sashil.cli import main
 from sashil.config import default_config, load_config
 from sashil.config.overrides import apply_overrides
+from sashil.config.parts import StageParts
 from sashil.control import Law, LawState, Param
 from sashil.control.law_registry import find_law, law_names
 from sashil.control.registry import make_controller
@@ -256,7 +257,7 @@ def test_a_bad_output_is_a_law_error_naming_the_law(tmp_path, value, what):
         """,
     )
     config = default_config()
-    ctl = make_controller(f"{path}:Bad", config)
+    ctl = make_controller(f"{path}:Bad", StageParts.read(config))
     for k in range(11):
         ctl.step(_sample(k), k * 1_000_000, 1_000_000)
     with pytest.raises(LawError) as err:
@@ -274,7 +275,7 @@ def test_numpy_numbers_are_numbers():
             return np.float64(0.5)
 
     ctl = make_controller(
-        "skyhook", {**default_config(), "controller": {**default_config()["controller"], "c_sky": 1.0}}
+        "skyhook", StageParts.read({**default_config(), "controller": {**default_config()["controller"], "c_sky": 1.0}})
     )
     ctl.law, ctl._law_output = Np(), Np().torque
     ctl.step(_sample(0), 0, 1_000_000)
@@ -364,9 +365,12 @@ def test_a_run_is_labelled_by_its_laws_own_label(tmp_path):
     from sashil.control.registry import law_run_label, make_stage
 
     passive = apply_overrides(default_config(), ["controller.law=passive", "controller.current_a=0.75"])
-    assert law_run_label(passive) == "passive 0.75 A" and make_stage(passive)[0] == "passive 0.75 A"
+    assert (
+        law_run_label(StageParts.read(passive)) == "passive 0.75 A"
+        and make_stage(StageParts.read(passive))[0] == "passive 0.75 A"
+    )
     skyhook = apply_overrides(default_config(), ["controller.law=skyhook", "controller.c_sky=2"])
-    assert law_run_label(skyhook) == "skyhook" and make_stage(skyhook)[0] == "skyhook"
+    assert law_run_label(StageParts.read(skyhook)) == "skyhook" and make_stage(StageParts.read(skyhook))[0] == "skyhook"
     path = write_law(
         tmp_path,
         """
@@ -383,5 +387,5 @@ def test_a_run_is_labelled_by_its_laws_own_label(tmp_path):
     )
     mine = apply_overrides(default_config(), [f"controller.law={path}:Mine", "controller.c=3"])
     # a law that reads the state runs in a controller, and is labelled as it says, not by its path
-    label, stage = make_stage(mine)
-    assert label == law_run_label(mine) == "mine c=3" and stage.law.c == 3.0
+    label, stage = make_stage(StageParts.read(mine))
+    assert label == law_run_label(StageParts.read(mine)) == "mine c=3" and stage.law.c == 3.0

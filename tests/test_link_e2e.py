@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sashil.drivers import rig_parts
 from sashil.drivers.firmware import compiler
 
 pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them
@@ -180,7 +181,7 @@ def test_host_silence_lets_the_device_watchdog_cut_the_current(emulator, tmp_pat
     emu = emulator("serial")
     config = default_config()
     config["driver"].update(name="serial", port=emu.link, sample_timeout_ms=100.0)
-    with open_rig(config) as rig:
+    with open_rig(rig_parts(config)) as rig:
         rig.configure()
         rig.activate()
         for _ in range(300):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import pytest
 
 from sashil.config import default_config
+from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.link_rig import LinkRig, LinkSettings
 from sashil.drivers.messages import CMD_ENABLE, Command, Sample
@@ -20,7 +21,7 @@ class ScriptedLink(LinkRig):
     """A device that streams samples until ``silent`` is set; ``answer_zero`` ends the silence when 0 A comes."""
 
     def __init__(self, config: dict, answer_zero: bool):
-        super().__init__(LinkSettings(config))
+        super().__init__(LinkSettings(rig_parts(config, "serial").values))
         self.answer_zero = answer_zero
         self.silent = False
         self.sent: list[Command] = []
@@ -123,7 +124,7 @@ def test_a_garbled_slcan_line_is_a_bad_frame_not_a_lost_link():
                 raise ValueError("non-hexadecimal number found in fromhex() arg at position 1")
             return item
 
-    rig = CanRig(LinkSettings(config(2.5, 25.0)), interface="virtual")
+    rig = CanRig(LinkSettings(rig_parts(config(2.5, 25.0), "can").values), interface="virtual")
     rig._bus = GarbledFirst()
     assert rig._receive(0.0) == []  # the garbled line: counted, nothing decoded, the link stays up
     got = rig._receive(0.0)

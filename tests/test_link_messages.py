@@ -14,7 +14,7 @@ import pytest
 
 from sashil.cli import main
 from sashil.config import default_config
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.emulator import EmulatorThread
 from sashil.drivers.firmware import compiler
 from sashil.drivers.messages import (
@@ -54,7 +54,7 @@ def _config(driver: str, port: str) -> dict:
 )
 def test_a_board_that_speaks_the_other_protocol_is_named(transport, driver, answer, board):
     with EmulatorThread(default_config(), transport, channel=f"wrong-{transport}", board=board) as emu:
-        with open_rig(_config(driver, emu.port)) as rig:
+        with open_rig(rig_parts(_config(driver, emu.port))) as rig:
             with pytest.raises(DriverError) as caught:
                 rig.configure()
     message = str(caught.value)
@@ -66,7 +66,7 @@ def test_a_silent_port_is_not_said_to_speak_another_protocol():
     controller, device = pty.openpty()
     try:
         for driver in ("serial", "can"):
-            with open_rig(_config(driver, os.ttyname(device))) as rig:
+            with open_rig(rig_parts(_config(driver, os.ttyname(device)))) as rig:
                 with pytest.raises(DriverError, match=r"is a sashil rig on this port, and is it powered\?"):
                     rig.configure()
     finally:
@@ -112,13 +112,13 @@ def test_the_emulators_hold_is_announced_and_a_host_that_runs_no_drop_test_warns
     operator = Operator(-5.0, 0.2, announce=notices.append)
     with EmulatorThread(default_config(), "serial", channel="held", board=board, operator=operator) as emu:
         with caplog.at_level("WARNING", logger="sashil"):
-            with open_rig(_config("serial", emu.port)) as rig:  # a run: nothing asked for a hold
+            with open_rig(rig_parts(_config("serial", emu.port))) as rig:  # a run: nothing asked for a hold
                 flags: list[bool] = []
                 _read_until_released(rig, flags)
             warned = [r.getMessage() for r in caplog.records if "held by its operator" in r.getMessage()]
             assert len(warned) == 1 and "this run starts with the arm held until the operator lets go" in warned[0]
             caplog.clear()
-            with open_rig(_config("serial", emu.port)) as rig:  # a drop test asks for the operator first
+            with open_rig(rig_parts(_config("serial", emu.port))) as rig:  # a drop test asks for the operator first
                 assert rig.operator_hold(-0.087, 0.2) is False
                 _read_until_released(rig, [])
             assert not [r for r in caplog.records if "held by its operator" in r.getMessage()]
@@ -156,7 +156,7 @@ def test_a_board_on_its_internal_oscillator_is_reported_and_one_without_can_name
     board = threading.Thread(target=_fake_board, args=(controller, status, stop), daemon=True)
     board.start()
     try:
-        with open_rig(_config("serial", os.ttyname(device))) as rig:
+        with open_rig(rig_parts(_config("serial", os.ttyname(device)))) as rig:
             if status.fault_code:
                 with pytest.raises(DriverError, match=said):
                     rig.configure()

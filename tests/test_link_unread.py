@@ -8,6 +8,7 @@ nothing, at once, so a message the rig dropped would show as a missing sample, n
 from __future__ import annotations
 
 from sashil.config import default_config
+from sashil.drivers import rig_parts
 from sashil.drivers.link_rig import LinkRig, LinkSettings
 from sashil.drivers.messages import PROTOCOL_VERSION, Message, Sample, Status, Version
 
@@ -18,7 +19,7 @@ class ChunkedLink(LinkRig):
     def __init__(self, chunks: list[list[Message]]):
         config = default_config()
         config["driver"].update(name="serial", port="scripted", sample_timeout_ms=1.0, link_lost_ms=1.0)
-        super().__init__(LinkSettings(config))
+        super().__init__(LinkSettings(rig_parts(config, "serial").values))
         self.chunks = chunks
         self._seq = 0
 

@@ -10,6 +10,7 @@ import pytest
 
 from sashil.control.stages import ConstantCurrent
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
+from sashil.engine import assemble
 from sashil.errors import DeadlineMissedError, DiskSpaceError, DriverIOError
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.run_folder import RunFolder
@@ -233,7 +234,7 @@ def _session(tmp_path, config, rig, stage=None, duration_s=0.1):
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
     lines: list[str] = []
-    loop = InProcessLoop(config, rig, stage or ConstantCurrent(0.5), clock, realtime=False)
+    loop = InProcessLoop(assemble(config), rig, stage or ConstantCurrent(0.5), clock, realtime=False)
     outcome = run_session(loop, config, folder, duration_s, say=lines.append)
     summary = json.loads((folder.path / "summary.json").read_text())
     assert (folder.path / "config.yaml").exists()
@@ -329,7 +330,7 @@ def test_stop_flag_ends_cleanly_with_exit_130(tmp_path, config):
     config["loop"]["rt"]["priority"] = 0
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
-    loop = InProcessLoop(config, rig, StopAt(), clock, realtime=False)
+    loop = InProcessLoop(assemble(config), rig, StopAt(), clock, realtime=False)
     outcome = run_session(loop, config, folder, None, say=lambda line: None)
     assert outcome.exit_code == 130 and outcome.stop_reason == "SIGTERM"
     # this rig's current never falls (0.1 A more per read): the loop reads on at 0 A for SETTLE_S, one
@@ -416,7 +417,7 @@ def test_a_disk_full_under_the_session_is_exit_1_and_the_rows_so_far_kept(tmp_pa
     config["loop"]["rt"]["priority"] = 0
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
-    loop = InProcessLoop(config, rig, ConstantCurrent(0.5), _SlowClock(), realtime=False)
+    loop = InProcessLoop(assemble(config), rig, ConstantCurrent(0.5), _SlowClock(), realtime=False)
     outcome = run_session(loop, config, folder, 60.0, say=lambda line: None)
     summary = json.loads((folder.path / "summary.json").read_text())
     assert outcome.exit_code == 1 and summary["exit_status"] == "error"
@@ -449,7 +450,9 @@ def test_a_disk_without_room_for_the_run_is_refused_before_the_rig_is_touched(
 ):
     rig = FaultyRig()
     with pytest.raises(DiskSpaceError) as err:
-        runner.run_plan(config, rig, ConstantCurrent(0.5), VirtualClock(), 3600.0, data_path=tmp_path / "data.csv")
+        runner.run_plan(
+            assemble(config), rig, ConstantCurrent(0.5), VirtualClock(), 3600.0, data_path=tmp_path / "data.csv"
+        )
     text = str(err.value)
     assert text.startswith(f"{tmp_path}: 5.0 MB free on its disk") and "3600 s at 1000 Hz" in text
     assert rig.calls["configure"] == 0 and not (tmp_path / "data.csv").exists()
@@ -464,7 +467,7 @@ def test_a_session_refused_for_its_disk_lets_the_rig_go(tmp_path, config, disk_w
     rig = FaultyRig()
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()
-    loop = InProcessLoop(config, rig, ConstantCurrent(0.5), VirtualClock(), realtime=False)
+    loop = InProcessLoop(assemble(config), rig, ConstantCurrent(0.5), VirtualClock(), realtime=False)
     with pytest.raises(DiskSpaceError):
         run_session(loop, config, folder, 3600.0, say=lambda line: None)
     assert rig.calls["configure"] == 0 and rig.calls["close"] == 1  # never energised, its port let go
@@ -482,7 +485,7 @@ def test_the_runner_compiles_the_kernels_before_the_rig_is_touched(config, monke
             order.append("configure")
             super().configure()
 
-    runner.run_plan(config, Watched(), ConstantCurrent(0.1), VirtualClock(), 0.01, realtime=False)
+    runner.run_plan(assemble(config), Watched(), ConstantCurrent(0.1), VirtualClock(), 0.01, realtime=False)
     assert order == ["compile", "configure"]
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from sashil.config import default_config
 from sashil.experiments.optimal_bound import _forward, _gradient, envelope_cost, optimal_bound
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.models.hysteresis import BoucWenParams
 
 H = 1e-3
@@ -19,7 +19,7 @@ H = 1e-3
 def road_rate(seconds: float) -> tuple[object, np.ndarray]:
     config = default_config()
     config["road"]["period_s"] = 10.0
-    road, _ = parse_road("iso8608:C", config)
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
     return road, np.array([road(i * H)[1] for i in range(int(seconds / H))])
 
 

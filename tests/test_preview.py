@@ -14,6 +14,7 @@ import pytest
 from sashil.cli import main
 from sashil.config import default_config
 from sashil.config.overrides import apply_overrides
+from sashil.config.parts import StageParts
 from sashil.control import LawContext, LawState
 from sashil.control.law_registry import find_law
 from sashil.control.laws_preview import PreviewOptimal
@@ -21,8 +22,9 @@ from sashil.control.plan_boucwen import BoucWenPlanModel
 from sashil.control.preview import RoadWindow, commanded_road
 from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current, simulate_plan
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
-from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.drivers import open_rig, rig_parts
+from sashil.engine import assemble
+from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
 from sashil.models.hysteresis import rig_params
 from sashil.runtime.clock import default_clock
 from sashil.runtime.runner import run_plan
@@ -109,14 +111,14 @@ def test_a_run_on_a_road_gives_the_law_each_cycle_the_speeds_it_will_command(tmp
     path.write_text(textwrap.dedent(RECORDER_LAW))
     spec = f"{path}:Recorder"
     config = apply_overrides(default_config(), [f"controller.law={spec}"])
-    controller = make_controller(None, config)
-    road, _ = parse_road("sine:2:1", config)
+    controller = make_controller(None, StageParts.read(config))
+    road, _ = parse_road("sine:2:1", RoadParts.read(config))
     stage = RoadStage(controller, road, 0.3)
     outcome = run_plan(
-        config,
-        open_rig(config),
+        assemble(config),
+        open_rig(rig_parts(config)),
         stage,
-        default_clock(config),
+        default_clock(assemble(config)),
         0.3,
         read_stream=True,
         realtime=False,
@@ -260,7 +262,7 @@ def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_an
 
     config = default_config()
     config["road"]["period_s"] = 10.0
-    road, _ = parse_road("iso8608:C", config)
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
     seed = _seed_context().model
     viscous = replace(seed, alpha1=0.0, alpha2=0.0)
     envelope = optimal_bound(viscous, 1.0, road, 4.0, 1.0).rms_accel_bound

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
+from sashil.engine import assemble
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.rerun_log import LiveTap, RerunLog, feasible_band, load_rrd
 from sashil.recording.run_folder import RunFolder
@@ -97,14 +99,14 @@ def test_rerun_save_without_a_file_records_into_the_run_folder(tmp_path):
 def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     config["controller"]["law"] = "target-damping"
     config["controller"]["zeta"] = 0.08
-    stage = make_controller("target-damping", config)
+    stage = make_controller("target-damping", StageParts.read(config))
     columns = record_columns(stage)
     rrd = tmp_path / "run.rrd"
     params = config["model"]["params"]
     tap = LiveTap(RerunLog.open((*columns, "lateness_us"), save=rrd), every=10, band=(params, 1.0))
     folder = RunFolder.create(tmp_path / "R", "run")
     outcome = run_session(
-        InProcessLoop(config, open_rig(config), stage, VirtualClock(), realtime=False),
+        InProcessLoop(assemble(config), open_rig(rig_parts(config)), stage, VirtualClock(), realtime=False),
         config,
         folder,
         1.5,

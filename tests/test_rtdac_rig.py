@@ -13,6 +13,7 @@ import pytest
 
 from sashil.config import default_config
 from sashil.config.frozen import freeze_config
+from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Operator
 from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, RtdacBoard, build_board
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend
@@ -69,7 +70,7 @@ def make(
     clock = Clock()
     board = build_board(freeze_config(board_raw), logic, identity, operator, faults)
     port = Tap(board, clock)
-    rig = RtdacRig.from_config(config)
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(port)
     return rig, board, clock, port
 
@@ -129,7 +130,7 @@ def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
     raw = default_config()
     clock = Clock()
     board = build_board(freeze_config(raw), stage_gain=0.8)  # 20 % less current than the map says
-    rig = RtdacRig.from_config(freeze_config(default_config()))
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.configure()
     rig.activate()
@@ -304,7 +305,7 @@ def test_a_pyusb_backend_named_in_config_is_called_with_the_port_or_with_nothing
         pyusb_backend(UsbSettings(usb_backend="their_emulator:nothing"))
     raw = default_config()
     raw["rtdac"]["usb_backend"] = "their_emulator:without"
-    rig = RtdacRig.from_config(freeze_config(raw))
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac").values)
     rig.configure()
     assert rig.header is not None and rig.header.logic == "0103"
     rig.close()

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from sashil.config.parts import SafetyParts
 from sashil.drivers.interface import FLAG_FAULT, FLAG_HELD, FLAG_OVERCURRENT, FLAG_STUCK_SENSOR, RigCommand, RigSample
 from sashil.errors import SafetyTrip
 from sashil.safety import SafetySupervisor
@@ -109,13 +110,13 @@ def test_a_stuck_sensor_trips_the_supervisor():
     assert s.trips[0].kind == "device_fault"
 
 
-def test_from_config(config):
+def test_the_supervisor_takes_the_configs_limits(config):
     config["safety"]["slew_a_per_s"] = 50.0
-    s = SafetySupervisor.from_config(config)
+    s = SafetySupervisor.from_parts(SafetyParts.read(config))
     assert s.angle_limit_rad == pytest.approx(math.radians(30.0))
     assert s.slew_a_per_s == 50.0 and s.sensor_timeout_cycles == 20
     config["safety"]["angle_interlock"] = False
-    assert SafetySupervisor.from_config(config).angle_limit_rad is None
+    assert SafetySupervisor.from_parts(SafetyParts.read(config)).angle_limit_rad is None
 
 
 # boundaries (each kills a mutant of tools/mutate_safety.py) ---------------------------------------

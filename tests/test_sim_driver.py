@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from sashil.drivers import BACKENDS, backend_class, open_rig
+from sashil.drivers import BACKENDS, backend_class, open_rig, rig_parts
 from sashil.drivers.interface import FLAG_HELD, RigCommand, RigState
 from sashil.drivers.sim import SimulatedRig
 from sashil.errors import DriverError
@@ -22,7 +22,7 @@ def test_registry_is_lazy_and_names_unknown_backends(config):
 
 
 def test_lifecycle_and_safe_state(config):
-    rig = open_rig(config)
+    rig = open_rig(rig_parts(config))
     with pytest.raises(DriverError):
         rig.read(0, 0)  # not configured
     rig.configure()
@@ -45,7 +45,7 @@ def test_lifecycle_and_safe_state(config):
 
 
 def test_commands_are_clamped_and_nan_never_reaches_the_coil(config):
-    with open_rig(config) as rig:
+    with open_rig(rig_parts(config)) as rig:
         rig.configure()
         rig.activate()
         rig.read(0, 0)
@@ -60,7 +60,7 @@ def test_commands_are_clamped_and_nan_never_reaches_the_coil(config):
 
 def test_encoder_quantisation(config):
     config["rig"]["encoder_counts_per_rev"] = 360
-    rig = open_rig(config)
+    rig = open_rig(rig_parts(config))
     rig.configure()
     rig.operator_hold(math.radians(-5.3), 10.0)
     sample = rig.read(0, 0)
@@ -75,7 +75,7 @@ def test_seeded_noise_is_reproducible(config):
 
     def samples(seed):
         config["rig"]["noise_seed"] = seed
-        rig = open_rig(config)
+        rig = open_rig(rig_parts(config))
         rig.configure()
         return [(s.arm_counts, s.current_a) for s in (rig.read(k * MS, MS) for k in range(50))]
 
@@ -84,7 +84,7 @@ def test_seeded_noise_is_reproducible(config):
 
 
 def test_sequence_numbers_and_device_time(config):
-    rig = open_rig(config)
+    rig = open_rig(rig_parts(config))
     rig.configure()
     first, second = rig.read(5 * MS, 0), rig.read(6 * MS, MS)
     assert second.seq == first.seq + 1

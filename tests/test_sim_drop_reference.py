@@ -14,6 +14,7 @@ import copy
 import pytest
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.experiments.drop_test import run_drop_test
 
@@ -47,7 +48,7 @@ def test_a_simulated_drop_keeps_its_recorded_period_peaks_and_damping(law, curre
     controller = None
     if law == "skyhook":
         config["controller"]["c_sky"] = 2.0
-        controller = make_controller(law, config)
+        controller = make_controller(law, StageParts.read(config))
     metrics = run_drop_test(config, -5.0, current, 10.0, controller=controller).metrics
     period, peaks, troughs, zeta = RECORDED[(law, current)]
     assert metrics.period_s == pytest.approx(period, rel=1e-3)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from sashil.control.law_api import Law, Param
+from sashil.drivers import rig_parts
 from sashil.errors import RecordingError
 from sashil.runtime.mailbox import SESSION_DIED, LoopStop, MailboxTuning
 from sashil.runtime.signals import StopFlag
@@ -131,7 +132,7 @@ def test_a_stalled_recorder_stops_the_loop_at_0_a_and_keeps_every_recorded_row(t
     from sashil.runtime.loop import ControlLoop, record_columns
 
     config = load_config(None)
-    rig = SimulatedRig.from_config(config)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     stage = ConstantCurrent(0.4)
     shared = Stream.create(record_columns(stage), capacity=64, window=4096, folder=tmp_path)
     shared.header[RECORDER_W] = 1  # a recorder that never drains

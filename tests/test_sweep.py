@@ -11,7 +11,9 @@ import pytest
 
 from sashil.cli import main
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
 
 
@@ -50,12 +52,12 @@ def test_chirp_is_a_sine_of_the_linear_frequency_ramp():
 def test_stepped_sine_transmissibility_is_one_below_and_small_above_resonance():
     config = default_config()
     config["sweep"].update(settle_s=3.0, measure_s=2.0, ramp_s=0.5)
-    soft = stepped_sine(config, lambda: make_controller("passive", config), [0.3, 1.66, 5.0])
+    soft = stepped_sine(config, lambda: make_controller("passive", StageParts.read(config)), [0.3, 1.66, 5.0])
     assert soft[0].transmissibility == pytest.approx(1.0, abs=0.05)
     assert soft[1].transmissibility > 3.0  # resonance sqrt(109)/(2 pi) = 1.66 Hz, light damping
     assert soft[2].transmissibility < 0.3
     config["controller"]["current_a"] = 1.0
-    hard = stepped_sine(config, lambda: make_controller("passive", config), [1.66])
+    hard = stepped_sine(config, lambda: make_controller("passive", StageParts.read(config)), [1.66])
     assert hard[0].transmissibility < 0.6 * soft[1].transmissibility
 
 
@@ -161,13 +163,13 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
     rigs, kept = [], []
 
     def factory(cfg, road):
-        rigs.append(open_rig(cfg))
+        rigs.append(open_rig(rig_parts(cfg)))
         return rigs[-1]
 
     with pytest.raises(SafetyTrip):
         run_profile(
             config,
-            make_controller("passive", {**config, "controller": {"current_a": 0.5}}),
+            make_controller("passive", StageParts.read({**config, "controller": {"current_a": 0.5}})),
             sine_profile(math.radians(1.0), 1.6, 1.0),
             20.0,
             factory,
@@ -207,7 +209,7 @@ def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch()
         cfg = copy.deepcopy(config)
         if current is not None:
             cfg["controller"]["current_a"] = current
-        return [p.body_rms_rad for p in stepped_sine(cfg, lambda: make_controller(name, cfg), freqs)]
+        return [p.body_rms_rad for p in stepped_sine(cfg, lambda: make_controller(name, StageParts.read(cfg)), freqs)]
 
     soft, hard, law = body("passive", 0.0), body("passive", 1.0), body("skyhook-add")
     ratios = [x / min(a, b) for x, a, b in zip(law, soft, hard, strict=True)]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sashil.drivers import rig_parts
 from sashil.runtime.timing import (
     BUCKETS_PER_OCTAVE,
     FOLD,
@@ -102,7 +103,7 @@ def test_the_loop_runs_past_the_ring_in_constant_memory():
     from sashil.runtime.clock import VirtualClock
     from sashil.runtime.loop import ControlLoop
 
-    loop = ControlLoop(open_rig(default_config()), ConstantCurrent(0.2), VirtualClock(), 5000.0, 30.0)
+    loop = ControlLoop(open_rig(rig_parts(default_config())), ConstantCurrent(0.2), VirtualClock(), 5000.0, 30.0)
     loop.timing = TimingStats(5000.0, window=16384)  # a small ring: 150 000 cycles wrap it 9 times
     loop.result.timing = loop.timing
     loop.run()

@@ -87,12 +87,13 @@ def test_a_run_after_the_warm_up_compiles_no_other_signature():
             warm_kernels()
             before = {name: [str(s) for s in k.signatures] for name, k in kernels.items()}
             from sashil.config import default_config
+            from sashil.config.parts import StageParts
             from sashil.control.registry import make_controller
             from sashil.experiments.drop_test import run_drop_test
             config = default_config()
             config["controller"].update(law="skyhook", c_sky=2.0)
             assert config["controller"]["edge_timing"]
-            record = run_drop_test(config, -5.0, 0.0, 0.3, controller=make_controller(None, config))
+            record = run_drop_test(config, -5.0, 0.0, 0.3, controller=make_controller(None, StageParts.read(config)))
             after = {name: [str(s) for s in k.signatures] for name, k in kernels.items()}
             calls = {name: sum(k.stats.cache_hits.values()) + sum(k.stats.cache_misses.values()) for name, k in kernels.items()}
             print(json.dumps({"before": before, "after": after, "cycles": record.run["timing"]["cycles"],

@@ -12,7 +12,9 @@ import sashil
 from sashil.cli import main
 from sashil.config import default_config
 from sashil.config.overrides import apply_overrides
+from sashil.drivers import rig_parts
 from sashil.errors import ConfigError, DataFileError
+from sashil.experiments.road_option import RoadParts
 from sashil.recording.summary_schema import SCHEMA_VERSION
 
 #: a real-clock run in-process without touching the scheduler or locking memory
@@ -228,7 +230,9 @@ def test_road_stage_sends_the_road_speed_and_keeps_the_signals():
     from sashil.drivers.interface import RigSample
     from sashil.experiments.road_option import RoadStage, parse_road
 
-    profile, text = parse_road("sine:2:1", {**default_config(), "sweep": {**default_config()["sweep"], "ramp_s": 0}})
+    profile, text = parse_road(
+        "sine:2:1", RoadParts.read({**default_config(), "sweep": {**default_config()["sweep"], "ramp_s": 0}})
+    )
     assert text == "sine 2 Hz, 1 deg"
 
     class Stage:
@@ -299,7 +303,7 @@ def test_a_held_drop_test_prompts_the_operator_and_shows_the_release(config):
     from sashil.experiments.drop_test import run_drop_test
 
     lines: list[str] = []
-    record = run_drop_test(config, -5.0, 0.0, 1.0, rig=_HandRig(open_rig(config)), notify=lines.append)
+    record = run_drop_test(config, -5.0, 0.0, 1.0, rig=_HandRig(open_rig(rig_parts(config))), notify=lines.append)
     assert record.error is None and record.release_estimated
     assert len(lines) == 3
     assert lines[0].startswith("press the arm to -5 deg (within ±0.5 deg) and hold it still")
@@ -349,14 +353,14 @@ def test_road_profile_file(tmp_path):
 
     path = tmp_path / "road.csv"
     path.write_text("time_s,theta_road_rad\n1.0,0.0\n2.0,0.01\n3.0,0.0\n")
-    road, text = parse_road(str(path), default_config())
+    road, text = parse_road(str(path), RoadParts.read(default_config()))
     assert text == f"profile {path} (2 s)"
     assert road(0.5)[0] == pytest.approx(0.005) and road(0.5)[1] > 0  # from the first sample on, interpolated
     assert road(5.0) == (0.0, 0.0, 0.0)  # held at the last angle
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,theta_rad\n0,0\n1,0\n")
     with pytest.raises(ConfigError, match=r"--road .*bad\.csv: missing column"):
-        parse_road(str(bad), default_config())
+        parse_road(str(bad), RoadParts.read(default_config()))
 
 
 def test_the_manuals_analysis_example_runs(drop_runs, capsys):

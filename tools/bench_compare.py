@@ -48,13 +48,14 @@ from bench_drop_damping import DAMPERS
 
 from sashil.config import default_config
 from sashil.config.overrides import apply_overrides
+from sashil.config.parts import StageParts
 from sashil.control.law_api import LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
-from sashil.drivers.mismatch import plant_config
+from sashil.drivers.mismatch import plant_sections
 from sashil.experiments.compare import LawJob, run_job
 from sashil.experiments.optimal_bound import BoundResult, optimal_bound
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.models.hysteresis import BoucWenParams
 
 #: the laws measured, with the --set parameters they need
@@ -114,9 +115,9 @@ def jobs_for(base: dict[str, Any], currents: list[float], duration: float) -> li
 
 def bound_of(config: dict[str, Any], duration: float) -> BoundResult:
     """The optimal bound on the simulated plant's envelope (the truth, mismatch applied) on the road."""
-    road, _ = parse_road("iso8608:C", config)
-    plant = plant_config(config)
-    params = BoucWenParams.from_mapping(plant["model"]["params"])
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
+    model, _ = plant_sections(config["model"], config["rig"], config["mismatch"])
+    params = BoucWenParams.from_mapping(model["params"])
     i_max = float(config["rig"]["current_max_a"])
     return optimal_bound(params, i_max, road, duration, float(config["compare"]["settle_s"]))
 
@@ -125,7 +126,7 @@ def law_cycle_us(law_name: str, sets: list[str], samples: int) -> tuple[float, f
     """Median and p99 of one call of the law's output on varied states [us]."""
     config = apply_overrides(default_config(), [f"controller.law={law_name}", *sets])
     entry = find_law(law_name)
-    law = build_law(entry, config, config["controller"])
+    law = build_law(entry, StageParts.read(config), config["controller"])
     output = law.current if entry.cls.output_kind() == "current" else law.torque
     rng = np.random.default_rng(0)
     states = []

@@ -25,8 +25,9 @@ import time
 import numpy as np
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.experiments.drop_test import run_drop_test
 from sashil.experiments.sweep import chirp_profile, frequencies, run_profile, sine_profile, stepped_sine
@@ -44,7 +45,7 @@ def torque_tracking(config: dict, inverse: str, f_hz: float, amplitude_deg: floa
     """Random T* inside the band while the road shakes the rig; T (true plant) vs T*."""
     cfg = copy.deepcopy(config)
     cfg["controller"]["inverse"] = inverse
-    ctl = make_controller("torque-tracking", cfg)
+    ctl = make_controller("torque-tracking", StageParts.read(cfg))
     cols = run_profile(cfg, ctl, sine_profile(math.radians(amplitude_deg), f_hz, 1.0), duration_s)
     keep = cols["time_s"] >= 3.0
     # the command of cycle k acts over the next period: compare T*_k with the true torque at k+1
@@ -61,8 +62,8 @@ def torque_tracking(config: dict, inverse: str, f_hz: float, amplitude_deg: floa
 
 
 def drop(config: dict, law: str | None, current_a: float, duration_s: float):
-    rig = open_rig(config)
-    ctl = make_controller(law, config) if law else None
+    rig = open_rig(rig_parts(config))
+    ctl = make_controller(law, StageParts.read(config)) if law else None
     probe_rows: list[tuple[float, float]] = []
     if ctl is not None:
         inner = ctl.step
@@ -170,7 +171,7 @@ def main() -> None:
         if current is not None:
             cfg["controller"]["current_a"] = current
         cfg["controller"].update(c_sky=10.0, crossover_hz=3.5)  # tuned on this simulation (see README)
-        table[label] = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, cfg), freqs)
+        table[label] = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, StageParts.read(cfg)), freqs)
     print("  f [Hz]  " + "".join(f"{label:>15s}" for label, _, _ in laws) + "   best/min(passive)")
     for index, f in enumerate(freqs):
         best_passive = min(table["passive 0 A"][index].body_rms_rad, table["passive 1 A"][index].body_rms_rad)
@@ -198,7 +199,7 @@ def main() -> None:
 
     # 4. observer on a chirp --------------------------------------------------------------------
     cfg = copy.deepcopy(config)
-    ctl = make_controller("skyhook-add", cfg)
+    ctl = make_controller("skyhook-add", StageParts.read(cfg))
     cols = run_profile(cfg, ctl, chirp_profile(math.radians(0.5), 0.5, 5.0, chirp_s), chirp_s)
     keep = cols["time_s"] >= 2.0
     print(
@@ -208,7 +209,7 @@ def main() -> None:
 
     # 5. cycle time -----------------------------------------------------------------------------
     print("\n[5] one controller cycle (estimator + observer + law + inverse + lead + safety clamp), wall clock")
-    rig = open_rig(config)
+    rig = open_rig(rig_parts(config))
     road = chirp_profile(math.radians(1.0), 0.5, 5.0, 10.0)
     rig.configure()
     rig.activate()
@@ -219,7 +220,7 @@ def main() -> None:
     for name in ("target-damping", "skyhook-add", "torque-tracking"):
         cfg = copy.deepcopy(config)
         cfg["controller"]["zeta"] = 0.07
-        ctl = make_controller(name, cfg)
+        ctl = make_controller(name, StageParts.read(cfg))
         times = []
         perf = time.perf_counter_ns
         for k, sample in enumerate(samples):

@@ -53,6 +53,7 @@ from bench_control import drop, mismatched_config, torque_tracking, zeta_of
 from bench_link import SASHIL, EmulatorProcess
 
 from sashil.config import dump_config
+from sashil.config.parts import StageParts
 from sashil.control.law_config import law_parameters
 from sashil.control.law_registry import find_law
 from sashil.control.registry import make_controller
@@ -339,7 +340,7 @@ def simulated(
         cfg = copy.deepcopy(config)
         if current is not None:
             cfg["controller"]["current_a"] = current
-        points = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, cfg), freqs)
+        points = stepped_sine(cfg, lambda cfg=cfg, name=name: make_controller(name, StageParts.read(cfg)), freqs)
         out["stepped"][label] = [p.body_rms_rad for p in points]
     return out
 

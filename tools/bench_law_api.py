@@ -25,10 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.runtime.warmup import warm_kernels
 
 #: a plain-Python skyhook of about ten lines, as a lab would write it (no numba)
@@ -50,9 +52,9 @@ class PlainSkyhook(Law):
 def record_samples(cycles: int) -> list:
     """The samples of ``cycles`` cycles of the simulated rig at 1 kHz under a 1.6 Hz road sine."""
     config = default_config()
-    road, _ = parse_road("sine:1.6:1.0", config)
+    road, _ = parse_road("sine:1.6:1.0", RoadParts.read(config))
     assert road is not None
-    rig = SimulatedRig.from_config(config)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     rig.configure()
     rig.activate()
     samples = []
@@ -78,8 +80,8 @@ def main() -> int:
         law_file.write_text(textwrap.dedent(PLAIN_LAW))
         config = default_config()
         config["controller"]["c_sky"] = 2.0
-        built_in = make_controller("skyhook", config)
-        plug_in = make_controller(f"{law_file}:PlainSkyhook", config)
+        built_in = make_controller("skyhook", StageParts.read(config))
+        plug_in = make_controller(f"{law_file}:PlainSkyhook", StageParts.read(config))
         t_built, t_plug = np.empty(cycles, np.int64), np.empty(cycles, np.int64)
         clock = time.perf_counter_ns
         gc.disable()

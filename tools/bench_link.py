@@ -32,7 +32,7 @@ import numpy as np
 import serial
 
 from sashil.config import default_config
-from sashil.drivers import can_codec, open_rig
+from sashil.drivers import can_codec, open_rig, rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.messages import Command, Sample
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
@@ -174,7 +174,7 @@ def link_config(driver: str, port: str, pacing: str, timeout_ms: float = 50.0) -
 
 
 def command_round_trip(driver: str, port: str, n: int) -> list[int]:
-    rig = open_rig(link_config(driver, port, "host"))
+    rig = open_rig(rig_parts(link_config(driver, port, "host")))
     rig.configure()
     rig.activate()
     rig.read(0, 0)

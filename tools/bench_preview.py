@@ -55,11 +55,14 @@ from bench_drop_damping import DAMPERS
 
 from sashil.config import default_config
 from sashil.config.overrides import apply_overrides
+from sashil.config.parts import StageParts
+from sashil.drivers import rig_parts
+from sashil.engine import assemble
 from sashil.experiments.compare import LawJob, run_job
 from sashil.experiments.compare_report import share_of_bound
 from sashil.experiments.hysteretic_bound import hysteretic_bound as hysteretic_bound_of
 from sashil.experiments.optimal_bound import optimal_bound
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.models.hysteresis import BoucWenParams
 
 #: the laws measured (the best causal laws of docs/benchmarks.md and the preview law)
@@ -153,7 +156,7 @@ def run_case(damper: str, road_text: str, duration: float, preview: list[str] | 
         result = run_job(job)
         case.status[job.label] = result.status
         case.rms[job.label] = result.metrics["rms_accel_rad_s2"] if result.ok else math.nan
-    road, _ = parse_road(road_text, config)
+    road, _ = parse_road(road_text, RoadParts.read(config))
     settle = float(config["compare"]["settle_s"])
     case.envelope = optimal_bound(
         BoucWenParams.from_mapping(config["model"]["params"]),
@@ -179,14 +182,14 @@ def mismatch_case(
 ) -> dict[str, float]:
     """Each of :data:`MISMATCH_LAWS` built on the true plant ("exact") and on a model off by
     ``fraction`` ("off"), run against the true plant: their shares of the true plant's bound."""
-    from sashil.drivers.mismatch import plant_config
+    from sashil.drivers.mismatch import plant_sections
 
     nominal = apply_overrides(
         config_of(dict(DAMPERS)[damper], duration), [f"mismatch.fraction={fraction}", f"mismatch.coil_tau={fraction}"]
     )
-    plant = plant_config(nominal)
-    exact = config_of(dict(plant["model"]["params"]), duration)
-    exact["rig"]["coil_tau_s"] = float(plant["rig"]["coil_tau_s"])
+    model, rig = plant_sections(nominal["model"], nominal["rig"], nominal["mismatch"])
+    exact = config_of(dict(model["params"]), duration)
+    exact["rig"]["coil_tau_s"] = float(rig["coil_tau_s"])
     i_max = float(exact["rig"]["current_max_a"])
     passive = [
         run_job(
@@ -200,7 +203,7 @@ def mismatch_case(
         for i in (0.0, i_max)
     ]
     best = min(r.metrics["rms_accel_rad_s2"] for r in passive)
-    road, _ = parse_road(road_text, exact)
+    road, _ = parse_road(road_text, RoadParts.read(exact))
     bound = hysteretic_bound(exact, road, duration)
     shares = {}
     for law in MISMATCH_LAWS:
@@ -236,8 +239,8 @@ def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, 
     from sashil.runtime.runner import run_plan
 
     config = apply_overrides(config_of({}, duration), law_overrides("preview-optimal", preview or []))
-    controller = make_controller(None, config)
-    road, _ = parse_road("iso8608:C", config)
+    controller = make_controller(None, StageParts.read(config))
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
     times: list[int] = []
 
     class Timed:
@@ -258,7 +261,13 @@ def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, 
 
     stage = RoadStage(controller, road, duration)
     run_plan(
-        config, open_rig(config), Timed(stage), default_clock(config), duration, realtime=False, say=lambda _: None
+        assemble(config),
+        open_rig(rig_parts(config)),
+        Timed(stage),
+        default_clock(assemble(config)),
+        duration,
+        realtime=False,
+        say=lambda _: None,
     )
     steps = np.asarray(times[10:], dtype=float) / 1e3  # after the first cycles (compile, caches)
     return float(np.percentile(steps, 50)), float(np.percentile(steps, 99)), float(np.max(steps))

@@ -33,8 +33,11 @@ import time
 from pathlib import Path
 
 from sashil.config import load_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine import assemble
 from sashil.experiments.road_option import RoadStage
 from sashil.recording.recorder import Recorder
 from sashil.recording.rerun_log import LiveTap, RerunLog
@@ -92,8 +95,8 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
     config = copy.deepcopy(config)
     config["controller"]["law"] = "target-damping"
     config["controller"]["zeta"] = 0.08
-    stage = RoadStage(make_controller("target-damping", config), road_sine(math.radians(2.0), 1.6))
-    rig = SimulatedRig.from_config(config)
+    stage = RoadStage(make_controller("target-damping", StageParts.read(config)), road_sine(math.radians(2.0), 1.6))
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     live = None
     if rrd is not None:
         columns = (*record_columns(stage), "lateness_us", "band_lo_nm", "band_hi_nm")
@@ -104,7 +107,7 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
         )
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
     outcome = run_session(
-        InProcessLoop(config, rig, stage, clock),
+        InProcessLoop(assemble(config), rig, stage, clock),
         config,
         RunFolder.create(folder, "run"),
         duration,

@@ -23,10 +23,13 @@ from typing import Any
 
 from sashil.config import default_config
 from sashil.config.overrides import apply_values
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine import assemble
 from sashil.experiments.replay import differences, replay
-from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.runner import run_plan
@@ -46,11 +49,13 @@ def law_config(base: dict[str, Any], law: str, params: dict[str, Any]) -> dict[s
 
 def record(config: dict[str, Any], seconds: float, folder: Path) -> tuple[dict[str, Any], float]:
     """The recorded stream of a skyhook run of ``seconds``, and the wall time the simulation took."""
-    road, _ = parse_road("sine:1.2:1.0", config)
-    stage = RoadStage(make_controller(None, config), road)
-    rig = SimulatedRig.from_config(config)
+    road, _ = parse_road("sine:1.2:1.0", RoadParts.read(config))
+    stage = RoadStage(make_controller(None, StageParts.read(config)), road)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     started = time.perf_counter()
-    outcome = run_plan(config, rig, stage, VirtualClock(), seconds, data_path=folder / "data.csv", realtime=False)
+    outcome = run_plan(
+        assemble(config), rig, stage, VirtualClock(), seconds, data_path=folder / "data.csv", realtime=False
+    )
     wall = time.perf_counter() - started
     if outcome.error is not None:
         raise SystemExit(f"bench_replay: the recording failed: {outcome.error}")
@@ -61,7 +66,7 @@ def best_replay(config: dict[str, Any], data: dict[str, Any], changes: dict, pas
     """The fastest of ``passes`` replays (a fresh controller each) and the last one's differences."""
     best, diff = float("inf"), {}
     for _ in range(passes):
-        controller = make_controller(None, config)
+        controller = make_controller(None, StageParts.read(config))
         started = time.perf_counter()
         out = replay(controller, data, int(config["rig"]["encoder_counts_per_rev"]), changes, rate_hz=1000.0)
         best = min(best, time.perf_counter() - started)

@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from sashil.config import default_config  # noqa: E402
 from sashil.config.frozen import freeze_config  # noqa: E402
+from sashil.drivers import rig_parts  # noqa: E402
 from sashil.drivers.emulator.rtdac_board import build_board  # noqa: E402
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend, SocketPort  # noqa: E402
 from sashil.drivers.interface import RigCommand  # noqa: E402
@@ -61,7 +62,7 @@ def bench_config() -> object:
 def measure(backend: object, cycles: int) -> tuple[list[float], list[float]]:
     """(bare exchanges, backend cycles) [s], interleaved in blocks of 100 so that both see the same load."""
     config = bench_config()
-    rig = RtdacRig.from_config(config, backend=backend)  # type: ignore[arg-type]
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values, backend=backend)  # type: ignore[arg-type]
     rig.configure()
     rig.activate()
     dev = rig.link.dev
@@ -112,7 +113,7 @@ class RecordedLink:
 
 def own_work(backend: object, cycles: int) -> list[float]:
     """The backend's cycle [s] over a :class:`RecordedLink`."""
-    rig = RtdacRig.from_config(bench_config(), backend=backend)  # type: ignore[arg-type]
+    rig = RtdacRig.from_parts(rig_parts(bench_config(), "rtdac").values, backend=backend)  # type: ignore[arg-type]
     rig.configure()
     rig.activate()
     real = rig.link

@@ -42,7 +42,9 @@ from collections.abc import Callable
 from typing import Any
 
 from sashil.config import default_config
+from sashil.config.parts import SafetyParts, StageParts
 from sashil.control.registry import make_controller
+from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
 from sashil.experiments.drop_test import DropTestPlan, DropTestSettings, run_drop_test
@@ -65,14 +67,14 @@ def drop_config(law: str) -> dict[str, Any]:
 
 def one_drop(config: dict[str, Any], current: float, record_s: float) -> Any:
     law = config["controller"]["law"]
-    controller = None if law == "passive" else make_controller(law, config)
+    controller = None if law == "passive" else make_controller(law, StageParts.read(config))
     return run_drop_test(config, -5.0, current, record_s, controller=controller)
 
 
 def bare_plant(config: dict[str, Any], cycles: int, current: float) -> tuple[float, float]:
     """(wall, CPU) seconds of ``cycles`` plant steps of one period (the drop's hold, then free)."""
     rate = config["loop"]["rate_hz"]
-    plant = SimulatedRig.from_config(config).plant
+    plant = SimulatedRig.from_parts(rig_parts(config, "sim").values).plant
     plant.hold(math.radians(-5.0))
     dt = 1.0 / rate
     held = round(0.3 * rate)
@@ -148,7 +150,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     current = 1.0
     samples: list[Any] = []
     commands: list[float] = []
-    rig = SimulatedRig.from_config(config)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     read, write = rig.read, rig.write
 
     def capture_read(t_ns: int, dt_ns: int) -> Any:
@@ -161,11 +163,11 @@ def bench_breakdown(law: str, record_s: float) -> None:
         write(cmd, t_ns, dt_ns)
 
     rig.read, rig.write = capture_read, capture_write  # type: ignore[method-assign]
-    controller = None if law == "passive" else make_controller(law, config)
+    controller = None if law == "passive" else make_controller(law, StageParts.read(config))
     record = run_drop_test(config, -5.0, current, record_s, rig=rig, controller=controller)
     # a fresh controller for each timed block, built beforehand: its construction (the filter's
     # gains, the law's set-up) is not a per-cycle cost
-    built = [None if law == "passive" else make_controller(law, config) for _ in range(16)]
+    built = [None if law == "passive" else make_controller(law, StageParts.read(config)) for _ in range(16)]
 
     def fresh() -> Any:
         return built.pop()
@@ -178,7 +180,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     rate = config["loop"]["rate_hz"]
 
     def plant_alone() -> None:
-        plant = SimulatedRig.from_config(config).plant
+        plant = SimulatedRig.from_parts(rig_parts(config, "sim").values).plant
         plant.hold(math.radians(-5.0))
         step, dt, held = plant.step, 1.0 / rate, round(release_after * rate)
         for k, command in enumerate(commands):
@@ -188,7 +190,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
 
     def backend(with_write: bool) -> Callable[[], None]:
         def run() -> None:
-            sim = SimulatedRig.from_config(config)
+            sim = SimulatedRig.from_parts(rig_parts(config, "sim").values)
             sim.operator_hold(math.radians(-5.0), release_after)
             sim.set_initial_current(current)
             sim.configure()
@@ -223,7 +225,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
         return run
 
     def safety_alone() -> None:
-        safety = SafetySupervisor.from_config(config)
+        safety = SafetySupervisor.from_parts(SafetyParts.read(config))
         safety.start(steps[0][1])
         check, limit, cmd = safety.check, safety.limit, RigCommand(0.0)
         for (sample, t_ns, dt_ns), command in zip(steps, commands, strict=True):

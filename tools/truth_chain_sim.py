@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from sashil.config import default_config
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
@@ -105,7 +106,7 @@ def run_condition(
         max_step_s=rig_cfg["plant_max_step_s"],
     )
     rig = SimulatedRig(plant, counts_per_rev=rig_cfg["encoder_counts_per_rev"])
-    ctl = make_controller(law, cfg)
+    ctl = make_controller(law, StageParts.read(cfg))
     rig.configure()
     rig.activate()
     dt_ns = int(round(1e9 / RATE_HZ))

@@ -26,6 +26,7 @@ import struct
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Operator
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.rtdac_codec import (
@@ -329,4 +330,6 @@ def build_board(
         wiring = replace(wiring, coil_map_current_a=tuple(stage_gain * a for a in wiring.coil_map_current_a))
     motor = RoadMotor.from_section(config["rtdac"], road_tau_s)
     ident = identity or BoardIdentity(logic_version=layouts[logic].logic_version)
-    return RtdacBoard(SimulatedRig.from_config(config), layouts[logic], wiring, ident, operator, faults, motor)
+    return RtdacBoard(
+        SimulatedRig.from_parts(rig_parts(config, "sim").values), layouts[logic], wiring, ident, operator, faults, motor
+    )

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Faults, Operator, RigDevice
 from sashil.drivers.emulator.transports import (
     DeviceTransport,
@@ -52,11 +53,11 @@ def build_device(
     link: str = "serial",
 ) -> Board:
     """The emulated board around the simulated rig the config describes (model, rig and mismatch
-    sections: ``SimulatedRig.from_config``); ``truth`` records the plant's state at each sample.
+    sections: ``SimulatedRig.from_parts``); ``truth`` records the plant's state at each sample.
     ``board``: ``python`` (:class:`RigDevice`) or ``c`` (the firmware's C logic,
     :class:`~sashil.drivers.emulator.c_board.CBoardDevice`, which needs a C compiler; DriverError
     if there is none); ``link``: ``serial`` or ``can``, the frames the C board speaks."""
-    rig = SimulatedRig.from_config(config)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
     if board == "c":
         from sashil.drivers.emulator.c_board import CBoardDevice
 

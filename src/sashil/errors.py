@@ -8,6 +8,9 @@ driver boundary with ``raise DriverIOError(...) from err``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 
 class SashilError(Exception):
     """Root of every error sashil raises on purpose."""
@@ -124,3 +127,20 @@ def exit_code_of(status: str, error: BaseException | None = None) -> int:
     if status == "error" and isinstance(error, SashilError):
         return error.exit_code
     return EXIT_STATUS_CODES.get(status, SashilError.exit_code)
+
+
+def error_fields(err: BaseException) -> dict[str, Any]:
+    """An error as it crosses to another process (a loop process's report): its class name, its
+    line and its exit code (:func:`error_of` reads it back)."""
+    return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
+
+
+def error_of(fields: Mapping[str, Any]) -> BaseException:
+    """The error another process reported (:func:`error_fields`), as its sashil class when it has one."""
+    cls = globals().get(str(fields.get("type")))
+    text = str(fields.get("text"))
+    if isinstance(cls, type) and issubclass(cls, SashilError):
+        return cls(text)
+    err = SashilError(f"{fields.get('type')}: {text}")
+    err.exit_code = int(fields.get("exit_code") or 1)
+    return err

@@ -34,7 +34,7 @@ from sashil.drivers.interface import (
 from sashil.errors import SafetyTrip
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import SafetyParts
 
 #: the data.csv ``trip_code`` column: 0 = no trip, else the kind below
 TRIP_CODES = {"angle_interlock": 1, "sensor_timeout": 2, "device_fault": 3}
@@ -90,14 +90,15 @@ class SafetySupervisor:
         self._out = RigCommand(0.0)
 
     @classmethod
-    def from_config(cls, config: RunConfig) -> SafetySupervisor:
-        safety, rig = config["safety"], config["rig"]
+    def from_parts(cls, limits: SafetyParts) -> SafetySupervisor:
+        """The supervisor of a run's limits (the angle interlock off when ``angle_limit_deg`` is None)."""
+        limit = limits.angle_limit_deg
         return cls(
-            current_max_a=rig["current_max_a"],
-            angle_limit_rad=math.radians(rig["angle_limit_deg"]) if safety["angle_interlock"] else None,
-            slew_a_per_s=safety["slew_a_per_s"],
-            sensor_timeout_cycles=safety["sensor_timeout_cycles"],
-            trip_on_device_fault=safety["trip_on_device_fault"],
+            current_max_a=limits.current_max_a,
+            angle_limit_rad=math.radians(limit) if limit is not None else None,
+            slew_a_per_s=limits.slew_a_per_s,
+            sensor_timeout_cycles=limits.sensor_timeout_cycles,
+            trip_on_device_fault=limits.trip_on_device_fault,
         )
 
     def start(self, t_ns: int) -> None:

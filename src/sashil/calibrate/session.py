@@ -19,8 +19,8 @@ from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
 from sashil.calibrate.report import params_document, write_report
 from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.config.frozen import freeze_config, thaw
-from sashil.drivers import on_virtual_clock
 from sashil.drivers.operator_prompt import hold_prompt
+from sashil.engine import assemble
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
 from sashil.identify.fit import FitResult, simulate_fitted
@@ -366,7 +366,7 @@ class _Session:
             config["rig"]["encoder_counts_per_rev"],
             config["rig"]["current_max_a"],
             rig_s,
-            virtual=on_virtual_clock(config),
+            virtual=assemble(config).virtual,
         )
         self.runs.finish(
             model=cal.best.model,

@@ -30,9 +30,13 @@ def default_config() -> Config:
 def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
     """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`;
     ``replaced``: the parameters of a law that ``controller.law`` has just replaced)."""
+    from sashil.config.parts import StageParts
     from sashil.control.law_config import check_controller as check
 
-    check(config, source, replaced)
+    section = config.get("controller")
+    if not isinstance(section, dict):
+        raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
+    check(section, StageParts.read(config), source, replaced)
 
 
 def law_reads_road_ahead(spec: str) -> bool:

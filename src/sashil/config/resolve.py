@@ -22,7 +22,7 @@ from sashil.config.frozen import freeze_config, thaw
 from sashil.config.overrides import apply_values, parse_override
 from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
-from sashil.drivers import declared_capabilities
+from sashil.drivers import declared_capabilities, rig_parts
 from sashil.errors import ConfigError
 from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
 from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
@@ -129,7 +129,7 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
 
 def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> None:
     """The keys that depend on the backend's declared capabilities, set in ``config`` before it is frozen."""
-    caps = declared_capabilities(freeze_config(config))
+    caps = declared_capabilities(rig_parts(freeze_config(config)))
     driver = config["driver"]
     if source.port is not None and not caps.link:
         raise ConfigError(

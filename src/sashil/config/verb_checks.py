@@ -71,10 +71,10 @@ def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-d
 
 def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) -> None:
     """ConfigError naming ``named(key)`` when the road ``text`` does not parse."""
-    from sashil.experiments.road_option import parse_road  # numpy and the road profiles: only for a road
+    from sashil.experiments.road_option import RoadParts, parse_road  # numpy and the road profiles: only for a road
 
     try:
-        parse_road(text, config)
+        parse_road(text, RoadParts.read(config))
     except ConfigError as err:
         where = named(key)
         raise ConfigError(str(err).replace("--road", where, 1) if where != "--road" else str(err)) from None

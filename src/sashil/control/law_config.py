@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping
 from typing import Any
 
+from sashil.config.parts import StageParts
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law, LawContext
 from sashil.control.law_registry import LawEntry, find_law
@@ -27,31 +28,23 @@ def law_parameters(section: Mapping[str, Any]) -> dict[str, Any]:
     return {key: value for key, value in section.items() if key not in core}
 
 
-def law_context(config: Mapping[str, Any]) -> LawContext | None:
-    """What a law may know of the rig: the controller's Bouc-Wen model, current range and rate
-    (None when the config's model is not the rig's Bouc-Wen model)."""
-    model = config.get("model") or {}
+def law_context(parts: StageParts) -> LawContext | None:
+    """What a law may know of the rig: the controller's Bouc-Wen model, current range, rate and coil
+    lag (None when the controller's model is not the rig's Bouc-Wen model)."""
+    model = parts.model
     if model.get("name", "bouc-wen") != "bouc-wen":
         return None
     return LawContext(
         model=BoucWenParams.from_mapping(model.get("params") or {}),
-        current_max_a=float(config["rig"]["current_max_a"]),
-        rate_hz=float(config["loop"]["rate_hz"]),
-        coil_tau_s=_coil_tau(config),
+        current_max_a=parts.current_max_a,
+        rate_hz=parts.rate_hz,
+        coil_tau_s=parts.coil_tau_s,
     )
 
 
-def _coil_tau(config: Mapping[str, Any]) -> float:
-    """The coil lag the controller assumes: ``controller.coil_tau_s``, else ``rig.coil_tau_s`` [s]."""
-    tau = (config.get("controller") or {}).get("coil_tau_s")
-    if tau is None:
-        tau = (config.get("rig") or {}).get("coil_tau_s")
-    return float(tau or 0.0)
-
-
-def build_law(entry: LawEntry, config: Mapping[str, Any], section: Mapping[str, Any]) -> Law:
+def build_law(entry: LawEntry, parts: StageParts, section: Mapping[str, Any]) -> Law:
     """An instance of ``entry``'s law with the section's parameters (ConfigError naming the key)."""
-    return entry.cls(law_context(config), **law_parameters(section))
+    return entry.cls(law_context(parts), **law_parameters(section))
 
 
 def reads_road_ahead(spec: str) -> bool:
@@ -63,21 +56,19 @@ def reads_road_ahead(spec: str) -> bool:
         return False
 
 
-def check_controller(config: dict[str, Any], source: str, replaced: Collection[str] = ()) -> None:
-    """Check ``controller.law`` and its parameters in place (a config being resolved, not yet
-    frozen); fill in every parameter's value. ``replaced``: the parameters of a law that
+def check_controller(section: dict[str, Any], parts: StageParts, source: str, replaced: Collection[str] = ()) -> None:
+    """Check the ``controller`` ``section`` of a config being resolved (not yet frozen): its law and
+    the law's parameters, in place, the law built on the stage's ``parts``; fill in every
+    parameter's value. ``replaced``: the parameters of a law that
     ``controller.law`` has just replaced; those the new law does not declare go with the old law,
     the rest keep their values.
 
     Errors are one line ``<source>: controller.<key>: <problem>``."""
-    section = config.get("controller")
-    if not isinstance(section, dict):
-        raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
     try:
         entry = find_law(section["law"])
         for key in set(replaced) - set(entry.cls.params()):
             section.pop(key, None)
-        law = build_law(entry, config, section)
+        law = build_law(entry, parts, section)
     except ConfigError as err:
         raise ConfigError(f"{source}: {err}") from None
     section.update(law.parameter_values())

@@ -14,7 +14,7 @@ import numpy as np
 
 from sashil.config.frozen import freeze_config, thaw
 from sashil.diagnostics import FAIL, OK, WARN, Check
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import FLAG_WATCHDOG
 from sashil.drivers.link_rig import LinkRig
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
@@ -36,7 +36,7 @@ def board_checks(config: RunConfig, rounds: int) -> list[Check]:
     """Hello/Version, ``rounds`` round trips at ``loop.rate_hz``, and the watchdog trip."""
     host_paced = thaw(config)
     host_paced["driver"]["pacing"] = "host"
-    rig = open_rig(freeze_config(host_paced))
+    rig = open_rig(rig_parts(freeze_config(host_paced)))
     if not isinstance(rig, LinkRig):
         rig.close()
         return [_check("hello", OK, f"driver {config['driver']['name']}: no link to check")]
@@ -47,7 +47,7 @@ def board_checks(config: RunConfig, rounds: int) -> list[Check]:
             return [_check("hello", FAIL, str(err), "is the board powered and on this port, with this --driver?")]
         checks = [hello(rig)]
         loop = config["loop"]
-        rt = RealtimeSetup.from_config(loop)
+        rt = RealtimeSetup.from_parts(loop["rt"])
         rt.apply()  # the round trips run as the loop would
         try:
             checks.append(round_trips(rig, rounds, float(loop["rate_hz"]), loop["spin_margin_us"]))

@@ -30,7 +30,7 @@ def measure(loop: Mapping[str, Any], seconds: float, rate_hz: float | None = Non
     cycles = max(1, round(seconds * rate))
     clock = RealClock.for_rate(loop["spin_margin_us"], rate)
     late = np.zeros(cycles, dtype=np.int64)
-    rt = RealtimeSetup.from_config(loop)
+    rt = RealtimeSetup.from_parts(loop["rt"])
     rt.apply()
     try:
         deadline = clock.now_ns() + period_ns

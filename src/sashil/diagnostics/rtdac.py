@@ -22,6 +22,7 @@ from typing import Any, TextIO
 import yaml
 
 from sashil.diagnostics import FAIL, OK, WARN, Check
+from sashil.drivers import rig_parts
 from sashil.drivers.rtdac_codec import ad_volts, counter32
 from sashil.drivers.rtdac_rig import RtdacRig
 from sashil.drivers.rtdac_usb import UDEV_FILE, UDEV_RULE, describe_device
@@ -84,7 +85,7 @@ def exchange_checks(rig: RtdacRig, n: int, rate_hz: float) -> list[Check]:
 def board_checks(config: Any, round_trips: int) -> tuple[list[Check], RtdacRig | None]:
     """Find and open the board, read its header and map, time the exchange; the rig is left open
     (outputs at rest) for the walk, or None when it could not be opened."""
-    rig = RtdacRig.from_config(config)
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
     checks: list[Check] = []
     try:
         rig.configure()

@@ -34,14 +34,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sashil import engine
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_stage
 from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
-from sashil.experiments.road_option import RoadStage, parse_road
+from sashil.engine import assemble
+from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
 from sashil.recording.run_folder import RunFolder
-from sashil.runtime.clock import default_clock
 from sashil.runtime.loop import stage_signals
-from sashil.runtime.runner import run_plan
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -194,7 +195,7 @@ def metrics_of(stream: dict[str, Any], config: RunConfig) -> tuple[dict[str, flo
 
 
 def _stage(config: RunConfig) -> Any:
-    return make_stage(config)[1]
+    return make_stage(StageParts.read(config))[1]
 
 
 def run_job(job: LawJob) -> LawResult:
@@ -207,20 +208,18 @@ def run_job(job: LawJob) -> LawResult:
     folder = RunFolder(Path(job.folder), "compare") if job.folder is not None else None
     start = time.perf_counter()
     try:
-        road, _ = parse_road(job.road, config)
+        road, _ = parse_road(job.road, RoadParts.read(config))
         stage = _stage(config)
         if road is not None:
             stage = RoadStage(stage, road, job.duration_s)
-        rig = open_rig(config)
-        stage = MeasuredStage(stage, rig)
-        outcome = run_plan(
-            config,
-            rig,
-            stage,
-            default_clock(config),
+        spec = assemble(config)
+        rig = open_rig(spec.rig)
+        outcome = engine.run(
+            spec,
+            MeasuredStage(stage, rig),
             job.duration_s,
+            rig=lambda: rig,
             data_path=folder.file("data.csv") if folder is not None else None,
-            read_stream=True,
             realtime=False,
             say=lambda _: None,
         )

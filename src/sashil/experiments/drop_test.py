@@ -23,18 +23,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sashil import engine
 from sashil.config.verb_checks import check_theta0
-from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.drivers.operator_prompt import hold_prompt
+from sashil.engine import assemble
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.experiments.metrics import DropMetrics, drop_metrics
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
-from sashil.runtime.clock import Clock, default_clock
-from sashil.runtime.plan_process import in_loop_process, run_plan_process
-from sashil.runtime.runner import RunOutcome, run_plan
+from sashil.runtime.clock import Clock
+from sashil.runtime.runner import RunOutcome
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec, StageParts
     from sashil.config.typed import RunConfig
 
 #: columns of a drop test's data.csv (docs/architecture.md names)
@@ -81,6 +82,14 @@ class DropTestSettings:
     known_release_after_s: float | None = None  # set when the backend plays the operator
     #: the rig's port when it is a pseudo-terminal (an emulator's link): no hand can hold that arm
     pseudo_terminal: str | None = None
+
+    def values(self) -> dict[str, Any]:
+        """The settings a loop process builds the same drop from (what the backend decides, the
+        operator's release and a pseudo-terminal's port, is decided there again)."""
+        return {name: value for name, value in vars(self).items() if name not in self.DECIDED}
+
+    #: the settings the rig decides (:meth:`DropTestPlan.attach_rig`), not the config
+    DECIDED = ("known_release_after_s", "pseudo_terminal")
 
     @classmethod
     def from_config(cls, config: RunConfig, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
@@ -189,7 +198,7 @@ class DropTestPlan:
     FACTS = ("start_ns", "detected_ns", "hold_angle", "held_elsewhere", "operator_seen", "phase")
 
     def spec(self) -> dict[str, Any] | None:
-        """What a loop process builds this drop from (:func:`plan_drop`), or None when it cannot: a
+        """What a loop process builds this drop from (:func:`drop_in_loop`), or None when it cannot: a
         controller that is neither the config's law (:data:`CONFIG_LAW`) nor one with a ``spec()``
         of its own (a calibration step's stage) stays in this process."""
         controller: Any = None
@@ -204,8 +213,22 @@ class DropTestPlan:
             "theta0_deg": math.degrees(self.s.theta0_rad),
             "current_a": self.s.current_a,
             "duration_s": self.s.duration_s,
+            "settings": self.s.values(),
             "controller": controller,
         }
+
+    def attach_rig(self, rig: RigInterface) -> None:
+        """Meet the rig the drop runs on, before its loop starts: a backend that plays the operator
+        holds the arm now and lets go after the hold time (with the coil already at the drop's
+        current when it can); a pseudo-terminal's port is noted (no hand can hold that arm)."""
+        settings = self.s
+        release_after = max(settings.hold_time_s + 0.1, 0.3)
+        if rig.operator_hold(settings.theta0_rad, release_after):
+            settings.known_release_after_s = release_after
+            if capabilities_of(rig).initial_current:
+                rig.set_initial_current(settings.current_a)  # type: ignore[attr-defined]  # declared by the backend
+        else:
+            settings.pseudo_terminal = pseudo_terminal(rig)
 
     def facts(self) -> dict[str, Any]:
         """What the plan saw during the run, which the record is derived from (:func:`drop_record`),
@@ -385,57 +408,48 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
 CONFIG_LAW = "config"
 
 
-def config_controller(config: RunConfig) -> Any:
-    """The config's controller, which takes over at the release, or None for a law that reads no
+def stage_controller(stage: StageParts) -> Any:
+    """The run's controller, which takes over at the release, or None for a law that reads no
     state (such as the passive law: the drop's constant current throughout)."""
     from sashil.control.registry import law_reads_state, make_controller
 
-    return make_controller(None, config) if law_reads_state(config) else None
+    return make_controller(None, stage) if law_reads_state(stage) else None
 
 
 def plan_drop(
-    config: RunConfig,
-    spec: dict[str, Any],
-    rig: RigInterface,
+    run: RunSpec,
+    settings: DropTestSettings,
     notify: Callable[[str], None] | None = None,
     controller: Any = CONFIG_LAW,
 ) -> DropTestPlan:
-    """The plan of one drop (``spec``: ``theta0_deg``, ``current_a``, ``duration_s``) on ``rig``:
-    a backend that plays the operator holds the arm now and lets go after the hold time (with the
-    coil already at the drop's current when it can). ``controller``: the stage that takes over at
-    the release (:data:`CONFIG_LAW`: the config's law, None: the constant current throughout)."""
-    settings = DropTestSettings.from_config(config, spec["theta0_deg"], spec["current_a"], spec["duration_s"])
-    release_after = max(settings.hold_time_s + 0.1, 0.3)
-    if rig.operator_hold(settings.theta0_rad, release_after):
-        settings.known_release_after_s = release_after
-        if capabilities_of(rig).initial_current:
-            rig.set_initial_current(settings.current_a)  # type: ignore[attr-defined]  # declared by the backend
-    else:
-        settings.pseudo_terminal = pseudo_terminal(rig)
+    """The plan of one drop of ``settings`` in the assembled ``run``, not yet given its rig
+    (:meth:`DropTestPlan.attach_rig`). ``controller``: the stage that takes over at the release
+    (:data:`CONFIG_LAW`: the run's law, None: the constant current throughout)."""
     from_config = isinstance(controller, str) and controller == CONFIG_LAW
     plan = DropTestPlan(
         settings,
-        config["rig"]["encoder_counts_per_rev"],
-        config_controller(config) if from_config else controller,
+        run.stage.counts_per_rev,
+        stage_controller(run.stage) if from_config else controller,
         notify,
     )
     plan.from_config = from_config
     return plan
 
 
-def drop_in_loop(
-    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
-) -> tuple[DropTestPlan, str, str]:
-    """One drop built in a loop process (the ``drop-test`` plan of ``sashil.plans``), its operator
-    prompts handed to ``prompt`` as they come; the stage that takes over at the release is the
-    config's law, none, or a stage built from its spec (``kind``: a ``sashil.stages`` entry)."""
+def drop_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[DropTestPlan, str, str]:
+    """One drop built in a loop process (the ``drop-test`` plan of ``sashil.plans``: ``run.plan``
+    as :meth:`DropTestPlan.spec` gives it), its operator prompts handed to ``prompt`` as they come;
+    the stage that takes over at the release is the run's law, none, or a stage built from its spec
+    (``kind``: a ``sashil.stages`` entry)."""
+    spec = run.plan
     controller = spec.get("controller", CONFIG_LAW)
     if isinstance(controller, dict):
         kind = str(controller.get("kind"))
         stage_class = load_class(_registered(STAGES_GROUP, kind, "stage"), f"stage {kind!r}")
         controller = stage_class.from_spec(controller)  # type: ignore[attr-defined]  # the stage's own constructor
-    plan = plan_drop(config, spec, rig, prompt, controller)
-    return plan, str(config["controller"]["law"]), "none"
+    plan = plan_drop(run, DropTestSettings(**spec["settings"]), prompt, controller)
+    plan.attach_rig(rig)
+    return plan, run.stage.law, "none"
 
 
 def _registered(group: str, kind: str, what: str) -> str:
@@ -480,19 +494,18 @@ def run_drop_test(
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
-    spec = {"kind": "drop-test", "theta0_deg": theta0_deg, "current_a": current_a, "duration_s": duration_s}
-    clock = clock if clock is not None else default_clock(config)
-    log = logging.getLogger("sashil")
-    twin = _twin(config, spec, controller, notify) if in_loop_process(config, clock) else None
-    if twin is not None and twin.spec() is not None:
-        plan = twin
-        outcome = run_plan_process(
-            config, plan, None, data_path=data_path, say=log.warning, live=live, stop=stop, trace=trace
-        )
-    else:
-        rig = rig if rig is not None else open_rig(config)
-        plan = plan_drop(config, spec, rig, notify, controller)
-        outcome = _run_here(config, rig, plan, clock, data_path, live, stop, trace)
+    run = assemble(config)
+    plan = plan_drop(run, DropTestSettings.from_config(config, theta0_deg, current_a, duration_s), notify, controller)
+    outcome = engine.run(
+        run,
+        plan,
+        clock=clock,
+        rig=(lambda: rig) if rig is not None else None,
+        data_path=data_path,
+        live=live,
+        stop=stop,
+        trace=trace,
+    )
     if live is not None:
         live.close(outcome.trips, ())
     # whatever ended the test early, the rig is at 0 A, deactivated and closed
@@ -500,57 +513,6 @@ def run_drop_test(
     if error is not None and not isinstance(error, SashilError):
         raise error
     return _record(config, outcome, plan, error)
-
-
-def _twin(
-    config: RunConfig, spec: dict[str, Any], controller: Any, notify: Callable[[str], None] | None
-) -> DropTestPlan:
-    """The plan in this process of a drop whose loop runs in a loop process: the loop process's
-    twin, which takes the facts that one saw after the run."""
-    by_config = isinstance(controller, str) and controller == CONFIG_LAW
-    twin = DropTestPlan(
-        DropTestSettings.from_config(config, spec["theta0_deg"], spec["current_a"], spec["duration_s"]),
-        config["rig"]["encoder_counts_per_rev"],
-        config_controller(config) if by_config else controller,
-        notify,
-    )
-    twin.from_config = by_config
-    return twin
-
-
-def _run_here(
-    config: RunConfig,
-    rig: RigInterface,
-    plan: DropTestPlan,
-    clock: Clock,
-    data_path: str | Path | None,
-    live: Any,
-    stop: Any,
-    trace: Any,
-) -> RunOutcome:
-    """A drop run through the one runner in this process (real-time set-up on the real clock,
-    signals, safety, the stream of every cycle), its CAN frames traced when asked."""
-    log = logging.getLogger("sashil")
-    if trace is not None:
-        trace.attach(rig)
-        trace.start()
-    try:
-        outcome = run_plan(
-            config,
-            rig,
-            plan,
-            clock,
-            data_path=data_path,
-            say=log.warning,
-            note=log.debug,
-            read_stream=True,
-            live=live,
-            stop=stop,
-        )
-    finally:
-        trace_stats = trace.close() if trace is not None else None
-    outcome.can_trace = trace_stats
-    return outcome
 
 
 def _record(config: RunConfig, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:

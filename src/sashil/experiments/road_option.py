@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -32,26 +33,69 @@ from sashil.models.plant import RoadProfile
 from sashil.recording.data_file import read_data_csv
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadStage", "parse_road", "run_in_loop"]
+__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadParts", "RoadStage", "parse_road", "run_in_loop", "run_plan"]
 
 
-def run_in_loop(
-    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
-) -> tuple[Any, str, str]:
-    """``sashil run``'s stage built in a loop process (the ``run`` plan of ``sashil.plans``): the
-    config's law on its road (the rig's road motor gets the profile's speed); its label and the road's text."""
+@dataclass(frozen=True)
+class RoadParts:
+    """What a ``--road`` value is made into a profile with: the loop's rate, the ``sweep`` section's
+    ramp and amplitude, and the ``road`` section's geometry and generator."""
+
+    rate_hz: float
+    ramp_s: float
+    amplitude_deg: float
+    lever_m: float
+    speed_m_s: float
+    seed: int
+    period_s: float
+    bump_width_s: float
+    bump_start_s: float
+
+    @classmethod
+    def read(cls, config: RunConfig) -> RoadParts:
+        road, sweep = config["road"], config["sweep"]
+        return cls(
+            rate_hz=float(config["loop"]["rate_hz"]),
+            ramp_s=float(sweep["ramp_s"]),
+            amplitude_deg=float(sweep["amplitude_deg"]),
+            lever_m=float(road["lever_m"]),
+            speed_m_s=float(road["speed_m_s"]),
+            seed=int(road["seed"]),
+            period_s=float(road["period_s"]),
+            bump_width_s=float(road["bump_width_s"]),
+            bump_start_s=float(road["bump_start_s"]),
+        )
+
+
+def run_plan(config: RunConfig) -> dict[str, Any]:
+    """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
+    text, what it is made with, and how long the run commands it."""
+    return {
+        "kind": "run",
+        "road": config["run"]["road"],
+        "road_parts": vars(RoadParts.read(config)),
+        "duration_s": config["run"]["duration_s"],
+    }
+
+
+def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
+    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``,
+    ``run.plan`` as :func:`run_plan` gives it): the law on its road (the rig's road motor gets the
+    profile's speed); its label and the road's text."""
     from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
 
-    label, stage = make_stage(config)
-    road, road_text = parse_road(config["run"]["road"], config)
+    plan = run.plan
+    label, stage = make_stage(run.stage)
+    road, road_text = parse_road(plan["road"], RoadParts(**plan["road_parts"]))
     if road is not None:
-        stage = RoadStage(stage, road, config["run"]["duration_s"])
+        stage = RoadStage(stage, road, plan["duration_s"])
     return stage, label, road_text
 
 
-def parse_road(text: str | None, config: RunConfig) -> tuple[RoadProfile | None, str]:
+def parse_road(text: str | None, parts: RoadParts) -> tuple[RoadProfile | None, str]:
     """``(profile, description)`` of a ``--road`` value (``(None, "none")`` for ``none``)."""
     if text is None or text.strip() == "none":
         return None, "none"
@@ -59,22 +103,22 @@ def parse_road(text: str | None, config: RunConfig) -> tuple[RoadProfile | None,
         return file_profile(text.strip())
     kind, _, rest = text.strip().partition(":")
     if kind == "iso8608":
-        return iso8608_road(text, rest, config)
+        return iso8608_road(text, rest, parts)
     try:
         values = [float(part) for part in rest.split(":")] if rest else []
     except ValueError:
         raise ConfigError(f"--road {text}: expected {SYNTAX}") from None
     if not all(math.isfinite(v) for v in values):
         raise ConfigError(f"--road {text}: expected finite numbers ({SYNTAX})")
-    nyquist = config["loop"]["rate_hz"] / 10
-    ramp = config["sweep"]["ramp_s"]
+    nyquist = parts.rate_hz / 10
+    ramp = parts.ramp_s
     if kind == "sine" and len(values) in (1, 2):
-        f_hz, amp_deg = values[0], values[1] if len(values) == 2 else config["sweep"]["amplitude_deg"]
+        f_hz, amp_deg = values[0], values[1] if len(values) == 2 else parts.amplitude_deg
         _check(text, f_hz, amp_deg, nyquist)
         return sine_profile(math.radians(amp_deg), f_hz, ramp), f"sine {f_hz:g} Hz, {amp_deg:g} deg"
     if kind == "chirp" and len(values) in (3, 4):
         f0, f1, seconds = values[:3]
-        amp_deg = values[3] if len(values) == 4 else config["sweep"]["amplitude_deg"]
+        amp_deg = values[3] if len(values) == 4 else parts.amplitude_deg
         _check(text, f0, amp_deg, nyquist)
         _check(text, f1, amp_deg, nyquist)
         if not seconds > 0:
@@ -87,13 +131,12 @@ def parse_road(text: str | None, config: RunConfig) -> tuple[RoadProfile | None,
         height = values[0]
         if not 0.0 < abs(height) <= 20.0:
             raise ConfigError(f"--road {text}: expected a bump height in [-20, 20] deg, not 0, got {height:g}")
-        section = config["road"]
-        width, start = float(section["bump_width_s"]), float(section["bump_start_s"])
+        width, start = parts.bump_width_s, parts.bump_start_s
         return bump_profile(math.radians(height), width, start), f"bump {height:g} deg over {width:g} s at {start:g} s"
     raise ConfigError(f"--road {text}: expected {SYNTAX}")
 
 
-def iso8608_road(text: str, rest: str, config: RunConfig) -> tuple[RoadProfile, str]:
+def iso8608_road(text: str, rest: str, parts: RoadParts) -> tuple[RoadProfile, str]:
     """``iso8608:CLASS[:SPEED_M_S]``: the class's road at the speed (default ``road.speed_m_s``)
     through ``road.lever_m``, one period of ``road.period_s`` at the loop's rate, faded in over
     ``sweep.ramp_s``."""
@@ -101,8 +144,7 @@ def iso8608_road(text: str, rest: str, config: RunConfig) -> tuple[RoadProfile, 
     road_class = road_class.strip().upper()
     if road_class not in CLASSES:
         raise ConfigError(f"--road {text}: expected an ISO 8608 road class A-H, got {road_class or 'none'!r}")
-    section = config["road"]
-    speed = float(section["speed_m_s"])
+    speed = parts.speed_m_s
     if speed_text:
         try:
             speed = float(speed_text)
@@ -110,11 +152,10 @@ def iso8608_road(text: str, rest: str, config: RunConfig) -> tuple[RoadProfile, 
             raise ConfigError(f"--road {text}: expected a speed in m/s after the class, got {speed_text!r}") from None
     if not (math.isfinite(speed) and 0.0 < speed <= 100.0):
         raise ConfigError(f"--road {text}: expected a speed in (0, 100] m/s, got {speed:g}")
-    rate = float(config["loop"]["rate_hz"])
-    height = iso8608_height(road_class, speed, float(section["period_s"]), rate, int(section["seed"]))
-    lever = float(section["lever_m"])
-    profile = periodic_profile(height / lever, rate, float(config["sweep"]["ramp_s"]))
-    return profile, f"ISO 8608 class {road_class} at {speed:g} m/s (lever {lever:g} m, seed {section['seed']})"
+    height = iso8608_height(road_class, speed, parts.period_s, parts.rate_hz, parts.seed)
+    lever = parts.lever_m
+    profile = periodic_profile(height / lever, parts.rate_hz, parts.ramp_s)
+    return profile, f"ISO 8608 class {road_class} at {speed:g} m/s (lever {lever:g} m, seed {parts.seed})"
 
 
 def file_profile(path: str) -> tuple[RoadProfile, str]:

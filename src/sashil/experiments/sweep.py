@@ -19,7 +19,6 @@ loop's real-time set-up, as a drop test does. Each row records the sample's sequ
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -28,16 +27,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sashil import engine
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig
+from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.engine import assemble
 from sashil.models.plant import RoadProfile
-from sashil.runtime.clock import Clock, default_clock
-from sashil.runtime.plan_process import in_loop_process, run_plan_process
-from sashil.runtime.runner import run_plan
+from sashil.runtime.clock import Clock
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
 #: data.csv columns of a sweep (docs/architecture.md names; torque_true_nm only on the simulated rig), then ``seq``
@@ -143,21 +143,19 @@ class SweepStage:
     """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
     road speed. It keeps no data: the runner's stream records every cycle, with the controller's
     signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
-    plant's, its capability ``true_torque``; NaN elsewhere). The stage that runs (given its ``rig``)
-    hands the road to come to the controller, for a law that reads the road ahead (``duration_s``:
-    how long it will be commanded, None: until stopped)."""
+    plant's, its capability ``true_torque``; NaN elsewhere). The stage that runs, given its rig
+    (:meth:`attach_rig`), hands the road to come to the controller, for a law that reads the road ahead
+    (``duration_s``: how long it will be commanded, None: until stopped)."""
 
-    def __init__(
-        self, controller: Any, road: RoadProfile, rig: RigInterface | None = None, duration_s: float | None = None
-    ):
+    def __init__(self, controller: Any, road: RoadProfile, duration_s: float | None = None):
         self.controller = controller
-        attach = getattr(controller, "attach_road", None)
-        if rig is not None and attach is not None:
-            attach(lambda t: road(t)[1], duration_s)
+        self.duration_s = duration_s
+        #: the controller is the config's law: a loop process can make its own (:meth:`spec`)
+        self.from_config = False
         #: the controller's signals (a current law's own output, current_law_a, too) and the true torque
         self.signal_names = (*getattr(controller, "signal_names", CONTROLLER_SIGNALS), "torque_true_nm")
         self.road = road
-        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
+        self._truth: RigInterface | None = None
         self.torque_true_nm = math.nan
         self._t0: int | None = None
         #: what the loop process's twin of this stage counted (:meth:`absorb`), None: it ran here
@@ -168,12 +166,22 @@ class SweepStage:
             return getattr(self.__dict__["controller"], name, math.nan)
         raise AttributeError(name)
 
+    def attach_rig(self, rig: RigInterface) -> None:
+        """Meet the rig this stage runs on, before its loop starts: its true damper torque recorded
+        when it reports one, and the road to come handed to the controller."""
+        self._truth = rig if capabilities_of(rig).true_torque else None
+        attach = getattr(self.controller, "attach_road", None)
+        if attach is not None:
+            road = self.road
+            attach(lambda t: road(t)[1], self.duration_s)
+
     def spec(self) -> dict[str, Any] | None:
         """What a loop process builds this run from (the config's law on the same road:
-        :func:`sweep_stage`), or None when it cannot (a road without a spec)."""
-        if not isinstance(self.road, SweepRoad):
+        :func:`sweep_stage`), or None when it cannot (a controller not the config's law, a road
+        without a spec)."""
+        if not self.from_config or not isinstance(self.road, SweepRoad):
             return None
-        return {"kind": "sweep", "road": self.road.spec}
+        return {"kind": "sweep", "road": self.road.spec, "duration_s": self.duration_s}
 
     def facts(self) -> dict[str, Any]:
         """The controller's counts after the run (its clipped cycles, its summary statistics)."""
@@ -221,23 +229,24 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 RigFactory = Callable[["RunConfig", RoadProfile], RigInterface]
 
 
-def sweep_stage(config: RunConfig, spec: dict[str, Any], rig: RigInterface) -> SweepStage:
-    """A sweep run's stage built in a loop process: the config's law on the road of ``spec``."""
-    return SweepStage(make_controller(config["controller"]["law"], config), road_of(spec["road"]), rig)
+def sweep_stage(run: RunSpec, rig: RigInterface) -> SweepStage:
+    """A sweep run's stage built in a loop process: the run's law on the road of its plan, for
+    ``duration_s`` of it."""
+    stage = SweepStage(make_controller(None, run.stage), road_of(run.plan["road"]), run.plan.get("duration_s"))
+    stage.attach_rig(rig)
+    return stage
 
 
-def sweep_in_loop(
-    config: RunConfig, spec: dict[str, Any], rig: RigInterface, prompt: Callable[[str], None]
-) -> tuple[SweepStage, str, str]:
+def sweep_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[SweepStage, str, str]:
     """One run of a sweep built in a loop process (the ``sweep`` plan of ``sashil.plans``: a chirp,
-    or one frequency of a stepped sine): the config's law on the road of the spec."""
-    return sweep_stage(config, spec, rig), str(config["controller"]["law"]), str(spec["road"].get("shape"))
+    or one frequency of a stepped sine): the run's law on the road of its plan (``run.plan``)."""
+    return sweep_stage(run, rig), run.stage.law, str(run.plan["road"].get("shape"))
 
 
 def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
     """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
-    return open_rig(config)
+    return open_rig(rig_parts(config))
 
 
 def run_profile(
@@ -291,30 +300,19 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    clock = clock if clock is not None else default_clock(config)
-    log = logging.getLogger("sashil")
-    twin = SweepStage(controller, road)
-    if law_of_config and in_loop_process(config, clock) and twin.spec() is not None:
-        stage = twin
-        outcome = run_plan_process(
-            config, stage, duration_s, data_path=data_path, say=log.warning, live=live, stop=stop
-        )
-    else:
-        rig = (rig_factory or default_rig)(config, road)
-        stage = SweepStage(controller, road, rig, duration_s)
-        outcome = run_plan(
-            config,
-            rig,
-            stage,
-            clock,
-            duration_s,
-            data_path=data_path,
-            say=log.warning,
-            note=log.debug,
-            read_stream=True,
-            live=live,
-            stop=stop,
-        )
+    run = assemble(config)
+    stage = SweepStage(controller, road, duration_s)
+    stage.from_config = law_of_config
+    outcome = engine.run(
+        run,
+        stage,
+        duration_s,
+        clock=clock,
+        rig=lambda: (rig_factory or default_rig)(config, road),
+        data_path=data_path,
+        live=live,
+        stop=stop,
+    )
     if live is not None:
         live.close(outcome.trips, ())
     columns = sweep_columns(outcome.stream)

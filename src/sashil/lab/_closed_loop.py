@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
+from sashil.engine import assemble, loop_in_process
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.formats import can_formats
@@ -21,6 +22,7 @@ from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
 __all__ = ["closed_loop"]
@@ -96,9 +98,13 @@ def _start_loop(
 ) -> tuple[SessionLoop, LoopProcess | None, Any, tuple[str, str, tuple[str, ...]]]:
     """The run's loop, ready: in a loop process of its own (``loop.process``) or in this one; the
     process (None in this one), the rig (None in a process) and the stage's label, road text and columns."""
+    from sashil.experiments.road_option import run_plan  # with the road's modules: only once a run starts
+
     duration = config["run"]["duration_s"]
-    if config["loop"]["process"]:  # the loop in a process of its own
-        process = LoopProcess(config, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
+    spec = assemble(config, run_plan(config))
+    clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)  # sashil run is on the real clock
+    if loop_in_process(spec, clock):
+        process = LoopProcess(spec, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
         try:
             ready = process.wait_ready(
                 lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
@@ -107,9 +113,8 @@ def _start_loop(
             process.close()
             raise
         return process, process, None, (ready["label"], ready["road"], tuple(ready["columns"]))
-    rig, stage, label, road_text, columns = _in_this_process(config, on_event)
-    clock = RealClock.for_rate(config["loop"]["spin_margin_us"], float(config["loop"]["rate_hz"]))
-    return InProcessLoop(config, rig, stage, clock), None, rig, (label, road_text, columns)
+    rig, stage, label, road_text, columns = _in_this_process(spec, on_event)
+    return InProcessLoop(spec, rig, stage, clock), None, rig, (label, road_text, columns)
 
 
 class _Finish:
@@ -163,7 +168,7 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
     return load_run(folder.path)
 
 
-def _in_this_process(config: RunConfig, on_event: Listener) -> tuple[Any, Any, str, str, tuple[str, ...]]:
+def _in_this_process(spec: RunSpec, on_event: Listener) -> tuple[Any, Any, str, str, tuple[str, ...]]:
     """The rig (its port open, the board greeted), the stage, its label, the road's text and the
     stage's columns, for a loop in this process (``loop.process: false``). The law, the estimator
     and numba's kernels load here: a session whose loop runs in a loop process never loads them."""
@@ -172,9 +177,9 @@ def _in_this_process(config: RunConfig, on_event: Listener) -> tuple[Any, Any, s
     from sashil.runtime.loop import record_columns
     from sashil.runtime.warmup import warm_up
 
-    rig = open_rig(config)  # built, not opened
+    rig = open_rig(spec.rig)  # built, not opened
     try:
-        stage, label, road_text = run_in_loop(config, {"kind": "run"}, rig, lambda line: None)
+        stage, label, road_text = run_in_loop(spec, rig, lambda line: None)
         # the kernels and the law warmed before the board is greeted: a board's timers start at the
         # handshake, and the loop's first deadline follows it at once
         warm_up(stage, lambda line: on_event(Event("progress", line)))

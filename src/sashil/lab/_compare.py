@@ -20,17 +20,18 @@ from typing import TYPE_CHECKING, Any
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import apply_overrides, parse_override
+from sashil.config.parts import StageParts
 from sashil.config.sections import CONTROLLER
 from sashil.config.verb_checks import check_road_ahead
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label
-from sashil.drivers import on_virtual_clock
+from sashil.engine import assemble
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.compare import LawJob, LawResult, run_job
 from sashil.experiments.compare_report import plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
 from sashil.experiments.hysteretic_bound import hysteretic_bound
 from sashil.experiments.optimal_bound import optimal_bound
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.outputs import Outputs
@@ -138,7 +139,7 @@ def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, durati
         jobs.setdefault(f"passive {current:g} A", LawJob(f"passive {current:g} A", config, road, duration))
     for law in laws:
         config = _law_config(base, law)
-        label = law_run_label(config)
+        label = law_run_label(StageParts.read(config))
         jobs.setdefault(label, LawJob(label, config, road, duration))
     return list(jobs.values())
 
@@ -285,9 +286,9 @@ def compare(
     for law in chosen:  # a law that reads the road ahead needs the road: refused before anything is written
         check_road_ahead(config, "compare", str, law.law)
     jobs = _jobs(config, chosen, road, duration)
-    virtual = on_virtual_clock(config)
+    virtual = assemble(config).virtual
     processes = int(section["jobs"]) if virtual else 1
-    road_profile, road_text = parse_road(road, config)
+    road_profile, road_text = parse_road(road, RoadParts.read(config))
     folder, subs = _folders(outputs, config, jobs)
     on_event(
         Event(

@@ -10,9 +10,10 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
+from sashil.config.parts import StageParts
 from sashil.control.law_registry import law_label
-from sashil.drivers import on_virtual_clock
-from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, config_controller, controller_columns, run_drop_test
+from sashil.engine import assemble
+from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, controller_columns, run_drop_test, stage_controller
 from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
@@ -74,7 +75,7 @@ def drop_test(
     theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
     currents = [float(value) for value in section["currents_a"]]
     outputs.check(config["driver"]["name"])
-    checked = config_controller(config)  # bad controller parameters fail here, before a folder exists
+    checked = stage_controller(StageParts.read(config))  # bad controller parameters fail here, before a folder exists
     closed = checked is not None
     folder = RunFolder.create(outputs.out, "drop-test")
     law, origin = law_label(config["controller"]["law"])
@@ -158,7 +159,7 @@ def _run_set(config: RunConfig, folder: RunFolder, controller: str, origin: str,
             "driver": config["driver"]["name"],
             "controller": controller,
             "controller_origin": origin,
-            "clock": "virtual" if on_virtual_clock(config) else "real",  # timing is simulated on the virtual clock
+            "clock": "virtual" if assemble(config).virtual else "real",  # timing is simulated on the virtual clock
         },
         several=several,
     )

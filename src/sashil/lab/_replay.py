@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.api import Run, load_run
+from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.errors import DataFileError
 from sashil.experiments import replay as offline
@@ -66,7 +67,7 @@ def replay(
     run = load_run(run_folder)
     data = run.data
     offline.check_columns(data, str(run.data_file))
-    controller = make_controller(None, config)
+    controller = make_controller(None, StageParts.read(config))
     folder = RunFolder.create(outputs.out, "replay")
     folder.write_config(config)
     started = time.perf_counter()

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
+from sashil.config.parts import StageParts
 from sashil.control.registry import law_run_label, make_controller
 from sashil.errors import ConfigError, SashilError
 from sashil.experiments.sweep import (
@@ -58,7 +59,7 @@ TRANSMISSIBILITY_COLUMNS = (
 
 def _label(config: RunConfig) -> str:
     """What commanded the damper: the law's label (``skyhook``; ``passive 1 A``)."""
-    return law_run_label(config)
+    return law_run_label(StageParts.read(config))
 
 
 def _freq_label(f_hz: float) -> str:
@@ -95,7 +96,9 @@ def sweep(
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check(config["driver"]["name"])
-    make_controller(config["controller"]["law"], config)  # bad law parameters fail here, before a folder exists
+    make_controller(
+        config["controller"]["law"], StageParts.read(config)
+    )  # bad law parameters fail here, before a folder exists
     stepped = bool(config["sweep"]["stepped"])
 
     # the config's law runs each frequency, so on the real clock a loop process runs it (unless the
@@ -186,7 +189,7 @@ def _stepped(
     into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
 
     section = config["sweep"]
-    name = config["controller"]["law"]
+    name, stage = config["controller"]["law"], StageParts.read(config)
     f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
     freqs = frequencies(f_start, f_stop, section["steps"], section["spacing"])
     bar = Progress(len(freqs), "stepped sine", enabled=progress)
@@ -210,7 +213,7 @@ def _stepped(
                 on_event(Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f}))
             try:
                 point = stepped_sine(
-                    config, lambda: make_controller(name, config), [f], rig_factory, keep, stream_to=stream_to, **watch
+                    config, lambda: make_controller(name, stage), [f], rig_factory, keep, stream_to, **watch
                 )[0]
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
@@ -275,7 +278,7 @@ def _chirp(
     section = config["sweep"]
     f_start, f_stop, duration = section["f_start_hz"], section["f_stop_hz"], section["duration_s"]
     amplitude = math.radians(section["amplitude_deg"])
-    controller = make_controller(config["controller"]["law"], config)
+    controller = make_controller(config["controller"]["law"], StageParts.read(config))
     on_event(
         Event(
             "progress", f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}) ...", {"duration_s": duration}

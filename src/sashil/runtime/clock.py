@@ -9,10 +9,8 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Protocol
 
-from sashil.drivers import on_virtual_clock
-
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 
 class Clock(Protocol):
@@ -71,9 +69,9 @@ class VirtualClock:
         self._now += int(ns)
 
 
-def default_clock(config: RunConfig) -> Clock:
-    """Simulated time for a simulated backend unless the config asks for the real clock
-    (:func:`sashil.drivers.on_virtual_clock`), else the real clock."""
-    if on_virtual_clock(config):
+def default_clock(spec: RunSpec) -> Clock:
+    """The clock of an assembled run: simulated time when its backend is simulated and the config
+    does not ask for the real clock (``spec.virtual``), else the real clock at the loop's rate."""
+    if spec.virtual:
         return VirtualClock()
-    return RealClock.for_rate(config["loop"]["spin_margin_us"], config["loop"]["rate_hz"])
+    return RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)

@@ -3,7 +3,7 @@
 The loop process (:mod:`sashil.runtime.worker`) is a fresh interpreter started with
 :func:`subprocess.Popen` (``sys.executable -m sashil.runtime.worker``): no fork of this process's
 threads and locks, no re-import of the caller's ``__main__`` (a script or notebook that calls
-``sashil.run(MyLaw)`` runs once), and the law crosses as its spec in the config, never pickled.
+``sashil.run(MyLaw)`` runs once), and the law crosses as its name in the run's assembled spec, never pickled.
 sashil's real-time loop is Linux-only (``SCHED_FIFO``, ``/dev/shm``, ``os.getppid``).
 
 The session process keeps everything that is not the cycle: the recorder
@@ -40,11 +40,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil import errors
-from sashil.config.frozen import thaw
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
+from sashil.errors import error_of
 from sashil.runtime.mailbox import CALLER_STOP
-from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, end_summary, losses
+from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, losses, outcome_of
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
     FRAME_ERROR,
@@ -60,10 +60,9 @@ from sashil.runtime.stream import (
 )
 from sashil.runtime.stream_recorder import StreamRecorder
 from sashil.runtime.tune_socket import TuneServer
-from sashil.runtime.tuning import EVENT_COLUMNS
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RigParts, RunSpec
     from sashil.recording.run_folder import RunFolder
 
 #: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
@@ -76,17 +75,6 @@ SAID = ("progress", "warning", "prompt")
 SAFE_CURRENT_A = 0.05
 #: how long a reopened rig's coil may take to reach it [s] (the watchdog's 50 ms and the coil's lag)
 CONFIRM_S = 1.0
-
-
-def error_of(fields: Mapping[str, Any]) -> BaseException:
-    """The error the loop process reported, as its sashil class when it has one."""
-    cls = getattr(errors, str(fields.get("type")), None)
-    text = str(fields.get("text"))
-    if isinstance(cls, type) and issubclass(cls, errors.SashilError):
-        return cls(text)
-    err = errors.SashilError(f"{fields.get('type')}: {text}")
-    err.exit_code = int(fields.get("exit_code") or 1)
-    return err
 
 
 def raise_error(fields: Mapping[str, Any]) -> None:
@@ -120,22 +108,22 @@ class LoopProcess:
 
     def __init__(
         self,
-        config: RunConfig,
+        spec: RunSpec,
         duration_s: float | None,
         *,
         realtime: bool = True,
         tune: bool = True,
         can_trace: bool = False,
-        plan: Mapping[str, Any] | None = None,
     ):
-        """``can_trace``: the loop process puts every CAN frame into the stream (:meth:`can_frames`).
-        ``plan``: the plan's spec (``plan.spec()``: its ``kind`` and arguments, which the loop
-        process builds the plan from: the ``sashil.plans`` entry points); None: ``sashil run``'s
-        stage, the config's law on its road."""
+        """``spec``: the assembled run, all the loop process is sent of it, with its ``plan`` (the
+        plan's ``kind`` and values, which the loop process builds the plan from: the
+        ``sashil.plans`` entry points). ``can_trace``: the loop process puts
+        every CAN frame into the stream (:meth:`can_frames`)."""
+        if not spec.plan:
+            raise ValueError("LoopProcess: the spec names no plan (assemble it with one)")
         self.job = {
-            "plan": dict(plan) if plan is not None else {"kind": "run"},
             "can_trace": can_trace,
-            "config": thaw(config),
+            "spec": spec.to_json(),
             "duration_s": duration_s,
             "realtime": realtime,
             "tune": tune,
@@ -143,10 +131,10 @@ class LoopProcess:
             "log_level": _log_level(),
             "sys_path": list(sys.path),  # a law's module imports there as it does here
         }
-        self.config = config
-        self.rate_hz = float(config["loop"]["rate_hz"])
+        self.spec = spec
+        self.rate_hz = spec.loop.rate_hz
         #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
-        self.loop_cpu: int | None = config["loop"]["rt"].get("cpu") if realtime else None
+        self.loop_cpu: int | None = spec.loop.rt.get("cpu") if realtime else None
         self.process: subprocess.Popen[bytes] | None = None
         self.stream: Stream | None = None
         self.ready: dict[str, Any] = {}
@@ -269,7 +257,6 @@ class LoopProcess:
         there with ``tune``, and the loop's end read into the keys of every loop run's summary."""
         ended = drive(
             self,
-            self.config,
             folder.file("data.csv"),
             duration_s,
             say=lambda kind, text: hooks.say(text),
@@ -457,7 +444,7 @@ class SessionSignals:
             signal.signal(sig, old)
 
 
-def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str, Any]:
+def confirm_safe(parts: RigParts, say: Callable[[str, str], None]) -> dict[str, Any]:
     """After the loop process died: reopen the rig, command 0 A and read the coil current until it
     is at most :data:`SAFE_CURRENT_A` (for up to :data:`CONFIRM_S`), then leave the rig
     deactivated, with what its deactivation confirmed (``safe_state_confirmed``: a board that keeps
@@ -466,7 +453,7 @@ def confirm_safe(config: RunConfig, say: Callable[[str, str], None]) -> dict[str
     watchdog, and the RT-DAC/USB2, which has none."""
 
     found: dict[str, Any] = {"reopened": False}
-    rig = open_rig(config)
+    rig = open_rig(parts)
     if not capabilities_of(rig).link:
         found["note"] = "the simulated rig ended with the loop process"
         return found
@@ -541,37 +528,22 @@ class LoopEnd:
         """The :class:`~sashil.runtime.runner.RunOutcome` of the run, wherever a session ran it in a
         loop process (a session's run, a verb's plan): ``timing`` copied before the process closed,
         ``recording`` None for a temporary stream file, which is no recording."""
-        end = self.end
-        events = (end.get("tuning") or {}).get("events") or []
-        summary = end_summary(
-            end,
-            exit_status=self.exit_status,
-            timing=timing.summary(),
+        return outcome_of(
+            self.end,
             error=self.error,
+            exit_status=self.exit_status,
+            stop=self.stop,
+            timing=timing,
             realtime=realtime,
             recording=recording,
-        )
-        return RunOutcome(
-            self.error,
-            self.stop,
-            timing,
-            int(end.get("start_ns") or 0),
-            summary,
-            realtime=realtime,
-            recording=recording,
-            link=end.get("link"),
-            stream=stream if stream is not None else {},
+            stream=stream,
             can_trace=can_trace,
             loop_process=facts,
-            tuning=end.get("tuning"),
-            tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
-            tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
         )
 
 
 def drive(
     process: LoopProcess,
-    config: RunConfig,
     data_path: Path,
     duration_s: float | None,
     *,
@@ -586,7 +558,7 @@ def drive(
     ``tune_folder``, the tuning socket there; tell the loop to go, pass stop requests and signals
     on, and pass its messages up (``say(kind, text)``: progress, warning, prompt) until it ends.
     If it died, keep its rows and reopen the rig to confirm 0 A (:func:`confirm_safe`). A run that
-    lost more than the config allows ends ``lossy``. A failure before the go ends the loop process
+    lost more than the run's loop parts allow ends ``lossy``. A failure before the go ends the loop process
     with nothing energised and raises."""
 
     stream = process.stream
@@ -609,8 +581,8 @@ def drive(
     except OSError as err:
         error = err
     timing = stream.timing(rate)
-    end, error, status = _ending(process, config, end, error, timing, flag, say)
-    lost = losses(config, timing, end.get("link")) if error is None and status == "ok" else None
+    end, error, status = _ending(process, end, error, timing, flag, say)
+    lost = losses(process.spec.loop, timing, end.get("link")) if error is None and status == "ok" else None
     if lost is not None:
         error, status = lost, "lossy"
         say("warning", str(lost))
@@ -659,7 +631,6 @@ def _before_go(
 
 def _ending(
     process: LoopProcess,
-    config: RunConfig,
     end: dict[str, Any] | None,
     error: BaseException | None,
     timing: Any,
@@ -683,7 +654,7 @@ def _ending(
         timing.cycles = stream.rows_committed
         code = process.process.returncode if process.process is not None else None
         end = {"exit_status": "error", "stop_reason": None, "trips": [], "shutdown_errors": []}
-        found = confirm_safe(config, say)
+        found = confirm_safe(process.spec.rig, say)
         error = errors.SashilError(
             f"the loop process died (exit status {code}); the data up to its last committed row are kept"
         )

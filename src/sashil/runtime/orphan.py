@@ -20,14 +20,14 @@ from sashil.runtime.stream import RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 
 def finish_alone(
     stream: Stream,
     writer: Any,
     data: Path,
-    config: RunConfig,
+    spec: RunSpec,
     end: dict[str, Any],
     timing: Any,
     verb: str = "run",
@@ -60,8 +60,8 @@ def finish_alone(
                 realtime=end["realtime"],
                 recording={"rows_written": stop, "rows_dropped": 0, "written_by": "the loop process"},
             ),
-            "controller": config["controller"]["law"],
-            "driver": config["driver"]["name"],
+            "controller": spec.stage.law,
+            "driver": spec.rig.backend,
             "tuning": end["tuning"],
             "loop_process": {"pid": os.getpid(), "threads": end["threads"], "session_died": True},
         }

@@ -7,7 +7,7 @@ process (:mod:`sashil.runtime.loop_process`): the rig, the safety supervisor and
 there, and nothing else. This process keeps the plan's twin, which takes what the loop process's
 plan saw (``plan.absorb(facts)``) after the run, records the stream into the data file, feeds the
 views and the CAN trace, passes stop requests on, and reads the stream back for the verb's record.
-A simulated run on the virtual clock stays in this process (:func:`in_loop_process`).
+Which plans run here is decided by the engine (:func:`sashil.engine.run`), from the assembled run.
 """
 
 from __future__ import annotations
@@ -24,19 +24,13 @@ from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 log = logging.getLogger("sashil")
 
 
-def in_loop_process(config: RunConfig, clock: Any) -> bool:
-    """Whether a run of ``config`` on ``clock`` runs its loop in a process of its own: on the real
-    clock with ``loop.process`` true."""
-    return not getattr(clock, "virtual", False) and bool(config["loop"].get("process", False))
-
-
 def run_plan_process(
-    config: RunConfig,
+    spec: RunSpec,
     plan: Any,
     duration_s: float | None,
     *,
@@ -46,7 +40,7 @@ def run_plan_process(
     stop: StopFlag | None = None,
     trace: Any = None,
 ) -> RunOutcome:
-    """Run ``plan`` (its :meth:`spec` built again in the loop process) for ``duration_s`` (None:
+    """Run ``plan`` of the assembled run ``spec`` (the plan's :meth:`spec` built again in the loop process) for ``duration_s`` (None:
     until the plan ends) and return what :func:`~sashil.runtime.runner.run_plan` would, with the
     stream read back from ``data_path`` (a temporary file when None). The plan's prompts to the
     operator reach its ``notify`` as they come; warnings reach ``say``. ``live``: views of the
@@ -57,11 +51,11 @@ def run_plan_process(
     # the session's side of a loop process loads here: a run on simulated time never needs it
     from sashil.runtime.loop_process import LoopProcess, drive
 
-    spec = plan.spec()
-    if spec is None:
+    values = plan.spec()
+    if values is None:
         raise ValueError(f"{type(plan).__name__}: this plan cannot be built in a loop process (no spec)")
     forward = _forwarder(getattr(plan, "notify", None), say)
-    process = LoopProcess(config, duration_s, tune=False, can_trace=trace is not None, plan=spec).start()
+    process = LoopProcess(spec.with_plan(values), duration_s, tune=False, can_trace=trace is not None).start()
     try:
         process.wait_ready(forward)
     except BaseException:
@@ -74,7 +68,7 @@ def run_plan_process(
         if trace is not None:
             trace.follow(process.can_frames).start()
         try:
-            ended = drive(process, config, path, duration_s, say=forward, live=live, stop=stop, verb=str(spec["kind"]))
+            ended = drive(process, path, duration_s, say=forward, live=live, stop=stop, verb=str(values["kind"]))
         finally:
             if trace is not None:
                 trace_stats = trace.close()

@@ -65,8 +65,8 @@ class RealtimeSetup:
     _saved: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def from_config(cls, loop_section: Mapping[str, Any]) -> RealtimeSetup:
-        rt = loop_section["rt"]
+    def from_parts(cls, rt: Mapping[str, Any]) -> RealtimeSetup:
+        """The set-up of the ``loop.rt`` values."""
         return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"], rt["gil_switch_us"])
 
     # the steps --------------------------------------------------------------------------------

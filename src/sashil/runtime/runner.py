@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.drivers.interface import capabilities_of
-from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, exit_code_of
+from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, error_fields, exit_code_of
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
 from sashil.recording.run_folder import DATA_FILES
@@ -47,10 +47,11 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
+from sashil.runtime.tuning import EVENT_COLUMNS
 from sashil.safety import SafetySupervisor
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import LoopParts, RunSpec
 
 #: the stream of every loop cycle in a verb's folder when its data.csv is derived after the run
 #: (drop-test, sweep, calibrate: columns as ``sashil run``'s data.csv, time from the loop's start)
@@ -83,13 +84,13 @@ def check_disk(folder: Path, columns: int, rate_hz: float, duration_s: float | N
     return need
 
 
-def losses(config: RunConfig, timing: Any, link: dict[str, Any] | None) -> LossError | None:
+def losses(loop: LoopParts, timing: Any, link: dict[str, Any] | None) -> LossError | None:
     """The :class:`~sashil.errors.LossError` of a run that missed more of its scheduled deadlines than
-    ``loop.max_missed_fraction`` or lost more of its samples than ``driver.max_lost_fraction``
-    allows, naming what was lost and the key; None when it stayed within both."""
+    the ``loop``'s ``max_missed_fraction`` (``loop.max_missed_fraction``) or lost more of its samples
+    than its ``max_lost_fraction`` (``driver.max_lost_fraction``) allows, naming what was lost and the key; None when it stayed within both."""
     problems = []
     scheduled = timing.cycles + timing.missed_deadlines
-    allowed = float(config["loop"]["max_missed_fraction"])
+    allowed = loop.max_missed_fraction
     if scheduled and timing.missed_deadlines > allowed * scheduled:
         problems.append(
             f"missed {timing.missed_deadlines} of {scheduled} deadlines ({100 * timing.missed_deadlines / scheduled:.2g} %; "
@@ -98,7 +99,7 @@ def losses(config: RunConfig, timing: Any, link: dict[str, Any] | None) -> LossE
     if link:
         lost = int(link.get("samples_missed", 0))
         expected = int(link.get("samples", 0)) + lost
-        allowed = float(config["driver"]["max_lost_fraction"])
+        allowed = loop.max_lost_fraction
         if expected and lost > allowed * expected:
             problems.append(
                 f"lost {lost} of {expected} samples ({100 * lost / expected:.2g} %; driver.max_lost_fraction allows {100 * allowed:g} %)"
@@ -168,6 +169,7 @@ def end_summary(
         recording=recording,
         link=end.get("link"),
         shutdown_errors=list(end.get("shutdown_errors", [])),
+        error_text=end.get("error_text"),
         safe_state=end.get("safe_state"),
     )
 
@@ -254,6 +256,116 @@ class LoopHooks:
     verb: str = "run"
 
 
+def control_loop(
+    spec: RunSpec,
+    rig: Any,
+    stage: Any,
+    clock: Clock,
+    duration_s: float | None,
+    *,
+    warn: Callable[[str], None],
+    rate_hz: float | None = None,
+    recorder: Any = None,
+    tuning: Any = None,
+    stop: Any = None,
+    timing: Any = None,
+) -> ControlLoop:
+    """The run's :class:`~sashil.runtime.loop.ControlLoop`, wherever it runs (this process, or a
+    loop process: :mod:`sashil.runtime.worker`): ``stage`` on ``rig`` at the spec's rate (or
+    ``rate_hz``) on ``clock``, under the spec's safety limits and overrun policy, its rows to
+    ``recorder``, its warnings to ``warn``."""
+    loop = spec.loop
+    return ControlLoop(
+        rig,
+        stage,
+        clock,
+        float(rate_hz if rate_hz is not None else loop.rate_hz),
+        duration_s,
+        safety=SafetySupervisor.from_parts(spec.safety),
+        recorder=recorder,
+        overrun_policy=loop.overrun_policy,
+        warn_interval_s=loop.warn_interval_s,
+        warn=warn,
+        tuning=tuning,
+        stop=stop,
+        timing=timing,
+    )
+
+
+def loop_end(
+    loop: ControlLoop,
+    error: BaseException | None,
+    stage: Any,
+    rt: RealtimeSetup | None,
+    rig: Any,
+    tuning: Any = None,
+    threads: int | None = None,
+) -> dict[str, Any]:
+    """How a loop run ended, wherever it ran (a loop process sends it as its ``end`` message): how
+    the loop ended, its timing counters, the stage's, the safety supervisor's, the real-time
+    set-up's and the rig's facts, the tuning's events."""
+    result = loop.result
+    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
+    clipped = getattr(controller, "clip_warning", None)
+    return {
+        "exit_status": result.exit_status,
+        "error": error_fields(error) if error is not None else None,
+        "error_text": result.error,
+        "stop_reason": result.stop_reason,
+        "trips": result.trips,
+        "shutdown_errors": result.shutdown_errors,
+        "safe_state": result.safe_state,
+        "timing": loop.timing.counters(),
+        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
+        "safety": loop.safety.summary() if loop.safety is not None else None,
+        "realtime": rt.report() if rt is not None else {},
+        "link": rig.link_stats() if capabilities_of(rig).link else None,
+        "clip_warning": clipped() if callable(clipped) else None,
+        "tuning": tuning.summary() if tuning is not None else None,
+        "tuning_notes": tuning.notes() if tuning is not None else [],
+        "threads": threads,
+        "start_ns": loop.start_ns,
+        "plan": stage.facts() if hasattr(stage, "facts") else None,
+    }
+
+
+def outcome_of(
+    end: dict[str, Any],
+    *,
+    error: BaseException | None,
+    exit_status: str,
+    stop: StopFlag,
+    timing: Any,
+    realtime: dict[str, Any],
+    recording: dict[str, Any] | None,
+    stream: dict[str, Any] | None = None,
+    can_trace: dict[str, Any] | None = None,
+    loop_process: dict[str, Any] | None = None,
+) -> RunOutcome:
+    """The :class:`RunOutcome` of a loop run from its end (:func:`loop_end`), wherever it ran: the
+    one place one is made. ``timing``: the loop's statistics; ``recording`` None for a run that
+    wrote no data file of its own."""
+    events = (end.get("tuning") or {}).get("events") or []
+    return RunOutcome(
+        error,
+        stop,
+        timing,
+        int(end.get("start_ns") or 0),
+        end_summary(
+            end, exit_status=exit_status, timing=timing.summary(), error=error, realtime=realtime, recording=recording
+        ),
+        realtime=realtime,
+        recording=recording,
+        link=end.get("link"),
+        stream=stream if stream is not None else {},
+        can_trace=can_trace,
+        loop_process=loop_process,
+        tuning=end.get("tuning"),
+        tuning_rows=[[event[name] for name in EVENT_COLUMNS] for event in events],
+        tuning_notes=[(float(time_s), str(text)) for time_s, text in end.get("tuning_notes") or []],
+    )
+
+
 def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[str], None]) -> BaseException | None:
     """Run ``loop`` under the real-time set-up ``rt`` (its steps reported through ``note``, undone
     afterwards); the error that ended the loop, if any (the rig is then already at 0 A, deactivated
@@ -274,7 +386,7 @@ def run_realtime(loop: ControlLoop, rt: RealtimeSetup | None, note: Callable[[st
 
 
 def run_plan(
-    config: RunConfig,
+    spec: RunSpec,
     rig: Any,
     plan: Any,
     clock: Clock,
@@ -292,8 +404,8 @@ def run_plan(
 ) -> RunOutcome:
     """Run ``plan`` on ``rig`` (see the module docstring); never raises for what ends the loop.
 
-    ``data_path``: stream every cycle there (None: no stream). ``rate_hz``: the loop's rate (default
-    ``loop.rate_hz``). ``say``: the loop's warnings (overruns); ``note``: the real-time set-up's
+    ``spec``: the assembled run (its loop's rate and set-up, its safety limits). ``data_path``:
+    stream every cycle there (None: no stream). ``rate_hz``: the loop's rate (default ``spec.loop.rate_hz``). ``say``: the loop's warnings (overruns); ``note``: the real-time set-up's
     report, one line per step (default ``say``). ``realtime``: apply ``loop.rt`` on the real clock. ``live``: the rerun live
     view. ``stop``: a stop flag of the caller's (a calibration plan shares one across its runs); the
     signals are routed to it for the run. A disk too full for the run raises DiskSpaceError before
@@ -301,8 +413,8 @@ def run_plan(
     temporary file holds it when there is no ``data_path``). ``tuning``: live parameter changes
     for the plan's law (:class:`~sashil.runtime.tuning.LiveTuning`), applied between cycles.
     """
-    loop_cfg = config["loop"]
-    rate = float(rate_hz if rate_hz is not None else loop_cfg["rate_hz"])
+    loop_parts = spec.loop
+    rate = float(rate_hz if rate_hz is not None else loop_parts.rate_hz)
     columns = record_columns(plan)
     real_clock = not getattr(clock, "virtual", False)
     keep = read_stream and not real_clock  # the stream in memory (module docstring)
@@ -316,41 +428,38 @@ def run_plan(
         check_disk(data_path.parent, len(columns), rate, duration_s)
     if data_path is not None or keep:
         recorder = Recorder(data_path, columns, lossless=not real_clock, keep=keep)
-    rt = RealtimeSetup.from_config(loop_cfg) if realtime and real_clock else None
+    rt = RealtimeSetup.from_parts(loop_parts.rt) if realtime and real_clock else None
     if rt is not None and live is not None:
         rt.current_only = True  # the live view allocates beside the loop (see RealtimeSetup._mlockall)
-    loop = ControlLoop(
-        rig,
-        plan,
-        clock,
-        rate,
-        duration_s,
-        safety=SafetySupervisor.from_config(config),
-        recorder=recorder,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
-        warn=say,
-        tuning=tuning,
-    )
+    loop = control_loop(spec, rig, plan, clock, duration_s, warn=say, rate_hz=rate, recorder=recorder, tuning=tuning)
     # loaded here, not with the module: a session whose loop runs in a loop process imports this
     # module for its summary and never loads numba's kernels itself
     from sashil.runtime.warmup import warm_up
 
     warm_up(plan, say)  # before the rig is touched: the first cycle is on time (overrun_policy: fail usable)
     error, flag = _run_recorded(loop, recorder, live, rt, stop, note or say)
-    _say_clipped(plan, say)
     stream = _read_back(recorder if keep else None, data_path if read_stream else None)
     if scratch is not None:
         scratch.cleanup()
-    link = rig.link_stats() if capabilities_of(rig).link else None
-    lost = losses(config, loop.timing, link) if error is None and loop.result.exit_status == "ok" else None
+    end = loop_end(loop, error, plan, rt, rig)
+    if end["clip_warning"] is not None:
+        say(end["clip_warning"])
+    lost = losses(loop_parts, loop.timing, end["link"]) if error is None and end["exit_status"] == "ok" else None
     if lost is not None:  # a run that lost what the config does not allow does not end ok
         error = lost
-        loop.result.exit_status = "lossy"
-        loop.result.error = str(lost)
+        end.update(exit_status="lossy", error_text=str(lost))
         say(str(lost))
     recording = recorder.summary() if recorder is not None and data_path is not None else None
-    return _outcome(loop, plan, error, flag, rt, recording, link, stream)
+    return outcome_of(
+        end,
+        error=error,
+        exit_status=end["exit_status"],
+        stop=flag,
+        timing=loop.timing,
+        realtime=end["realtime"],
+        recording=recording,
+        stream=stream,
+    )
 
 
 def _run_recorded(
@@ -396,52 +505,3 @@ def _read_back(kept: Recorder | None, data_path: Path | None) -> dict[str, Any]:
         except DataFileError:  # a stream the disk lost: what ended the run says why
             return {}
     return {}
-
-
-def _say_clipped(plan: Any, say: Callable[[str], None]) -> None:
-    """The controller's line on the cycles its command was clipped in, if it has one."""
-    controller = plan if hasattr(plan, "clip_warning") else getattr(plan, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
-    clip_line = clipped() if callable(clipped) else None
-    if clip_line is not None:
-        say(clip_line)
-
-
-def _outcome(
-    loop: ControlLoop,
-    plan: Any,
-    error: BaseException | None,
-    flag: StopFlag,
-    rt: RealtimeSetup | None,
-    recording: dict[str, Any] | None,
-    link: dict[str, Any] | None,
-    stream: dict[str, Any],
-) -> RunOutcome:
-    """The :class:`RunOutcome` of a loop run in this process, its summary keys from the loop's result."""
-    result = loop.result
-    realtime_report = rt.report() if rt is not None else {}
-    return RunOutcome(
-        error,
-        flag,
-        loop.timing,
-        loop.start_ns,
-        loop_summary(
-            exit_status=result.exit_status,
-            timing=loop.timing.summary(),
-            trips=result.trips,
-            error=error,
-            stop_reason=result.stop_reason,
-            controller_stats=plan.stats() if hasattr(plan, "stats") else None,
-            safety=loop.safety.summary() if loop.safety is not None else None,
-            realtime=realtime_report,
-            recording=recording,
-            link=link,
-            shutdown_errors=result.shutdown_errors,
-            error_text=result.error,
-            safe_state=result.safe_state,
-        ),
-        realtime=realtime_report,
-        recording=recording,
-        link=link,
-        stream=stream,
-    )

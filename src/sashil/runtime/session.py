@@ -29,7 +29,7 @@ from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 #: the run folder's record of live parameter changes (sashil tune)
 EVENTS_FILE = "events.csv"
@@ -40,14 +40,14 @@ def _stderr(line: str) -> None:
 
 
 def open_tuning(
-    config: RunConfig, stage: Any, folder: RunFolder, say: Callable[[str], None]
+    spec: RunSpec, stage: Any, folder: RunFolder, say: Callable[[str], None]
 ) -> tuple[LiveTuning | None, TuneServer | None]:
     """The live tuning of ``stage``'s law on ``folder``'s socket, started; (None, None) when the
     stage has no law or the socket cannot be made (said in one line: the run goes on untuned)."""
     law = getattr(stage, "law", None)
     if law is None or not hasattr(law, "check_parameters"):
         return None, None
-    tuning = LiveTuning(law, float(config["loop"]["rate_hz"]), float(config["controller"].get(RAMP_KEY, 0.0)))
+    tuning = LiveTuning(law, spec.loop.rate_hz, float(spec.stage.controller.get(RAMP_KEY, 0.0)))
     try:
         server = TuneServer(folder.path, tuning).start()
     except OSError as err:
@@ -59,7 +59,9 @@ def open_tuning(
 
 class SessionLoop(Protocol):
     """The loop a session runs: in this process (:class:`InProcessLoop`) or in a process of its
-    own (:class:`~sashil.runtime.loop_process.LoopProcess`, ready)."""
+    own (:class:`~sashil.runtime.loop_process.LoopProcess`, ready), and the run it was assembled for."""
+
+    spec: RunSpec
 
     def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> RunOutcome:
         """Run the loop, streaming ``data.csv`` into ``folder``; never raises for what ends the loop."""
@@ -79,18 +81,18 @@ class InProcessLoop:
     ``rig`` (built, its port open) on ``clock``, its live tuning served on the folder's socket.
     ``realtime``: apply ``loop.rt`` on the real clock."""
 
-    def __init__(self, config: RunConfig, rig: Any, stage: Any, clock: Clock, *, realtime: bool = True):
-        self.config = config
+    def __init__(self, spec: RunSpec, rig: Any, stage: Any, clock: Clock, *, realtime: bool = True):
+        self.spec = spec
         self.rig = rig
         self.stage = stage
         self.clock = clock
         self.realtime = realtime
 
     def run(self, folder: RunFolder, duration_s: float | None, hooks: LoopHooks) -> RunOutcome:
-        tuning, server = open_tuning(self.config, self.stage, folder, hooks.say) if hooks.tune else (None, None)
+        tuning, server = open_tuning(self.spec, self.stage, folder, hooks.say) if hooks.tune else (None, None)
         try:
             outcome = run_plan(
-                self.config,
+                self.spec,
                 self.rig,
                 self.stage,
                 self.clock,
@@ -122,7 +124,7 @@ class InProcessLoop:
 
 def run_session(
     loop: SessionLoop,
-    config: RunConfig,
+    config: Mapping[str, Any],
     folder: RunFolder,
     duration_s: float | None,
     *,
@@ -135,7 +137,7 @@ def run_session(
     stop: StopFlag | None = None,
 ) -> RunOutcome:
     """Run ``loop`` (in this process or its own) streaming ``data.csv`` into ``folder``, with
-    ``config.yaml`` written first and the timing file and ``summary.json`` last (see module doc).
+    ``config.yaml`` (the resolved ``config`` the loop's spec was assembled from) written first and the timing file and ``summary.json`` last (see module doc).
     ``tune``: serve live changes of the law on the folder's tuning socket while the loop runs
     (:mod:`sashil.runtime.tune_socket`), recorded in ``events.csv`` and ``summary.json``'s
     ``tuning``. ``finish``: the verb's one hook, called with the session's summary once the data
@@ -160,7 +162,9 @@ def run_session(
         }
         if outcome.loop_process is not None:
             head["loop_process"] = outcome.loop_process
-        outcome.summary = _close_folder(folder, config, outcome.timing, outcome.tuning_rows, head, finish)
+        outcome.summary = _close_folder(
+            folder, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
+        )
     finally:
         loop.close()
     return outcome
@@ -168,7 +172,7 @@ def run_session(
 
 def _close_folder(
     folder: RunFolder,
-    config: RunConfig,
+    driver: str,
     timing: Any,
     event_rows: list[list[Any]],
     summary: dict[str, Any],
@@ -176,11 +180,11 @@ def _close_folder(
 ) -> dict[str, Any]:
     """A session's last writes into ``folder``, wherever its loop ran: the live changes
     (``events.csv``, when there were any), the timing file, and ``summary.json`` once: ``summary``
-    with the config's driver and the keys the verb's ``finish`` hook adds, given the summary so far."""
+    with the run's ``driver`` and the keys the verb's ``finish`` hook adds, given the summary so far."""
     if event_rows:
         folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, event_rows)
     folder.write_timing(timing)
-    summary = {**summary, "driver": config["driver"]["name"]}
+    summary = {**summary, "driver": driver}
     if finish is not None:
         summary.update(finish(summary))
     folder.write_summary(summary)

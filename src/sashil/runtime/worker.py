@@ -7,8 +7,9 @@ No other Python thread runs in it. What it does, in order:
 0. imports the loop's modules and loads every numba kernel (:func:`prepare`), so a process
    started ahead of its run (:func:`sashil.runtime.loop_process.start_ahead`) has done it when
    the job arrives;
-1. reads its job from stdin, one JSON line: the resolved config (the law named by its spec in
-   ``controller.law``: a registered name, ``package.module:Class`` or ``file.py:Class``, imported
+1. reads its job from stdin, one JSON line: the assembled run (:class:`~sashil.config.parts.RunSpec`:
+   the rig's, the stage's, the safety supervisor's and the loop's parts and the plan's values; the
+   law named by its spec, a registered name, ``package.module:Class`` or ``file.py:Class``, imported
    here, never unpickled), the duration, and whether to apply ``loop.rt`` and serve live tuning;
 2. builds the rig and the stage, warms every numba kernel and the law
    (:func:`~sashil.runtime.warmup.warm_up`, its progress sent to the session), opens the port and
@@ -36,15 +37,12 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from sashil.config.frozen import freeze_config
-from sashil.errors import ConfigError, DiskSpaceError, exit_code_of
+from sashil.config.parts import RunSpec
+from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
 from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
 from sashil.runtime.signals import catch_stop_signals
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 #: rows of the stream per second of the loop's rate: how far the recorder may fall behind
 STREAM_SECONDS = 30.0
@@ -79,11 +77,6 @@ class Messages:
             self.gone = True
 
 
-def error_fields(err: BaseException) -> dict[str, Any]:
-    """An error as the session re-raises it: its class name, its line and its exit code."""
-    return {"type": type(err).__name__, "text": str(err) or type(err).__name__, "exit_code": exit_code_of("error", err)}
-
-
 #: plans whose board is greeted when the loop starts, not before ``ready``: an operator (a person, or
 #: an emulator's ``--hold-deg``) holds the arm from the greeting and lets go a while after it, so a
 #: drop's hold must start with its loop (a port that cannot be opened then ends the run at once,
@@ -93,27 +86,28 @@ GREET_AT_START = frozenset({"drop-test"})
 
 def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:
     """The function that builds a plan of ``kind`` in this process: the ``sashil.plans`` entry
-    point of that name (``build(config, spec, rig, prompt) -> (stage, label, road_text)``), so the
-    runtime imports no experiment."""
+    point of that name (``build(spec, rig, prompt) -> (stage, label, road_text)``, ``spec`` the
+    assembled run with the plan's values), so the runtime imports no experiment."""
     plans = entry_point_table(PLANS_GROUP)
     if kind not in plans:
         raise ConfigError(f"the loop process cannot run a plan of kind {kind!r} (it runs {', '.join(plans)})")
     return load_target(plans[kind].target, f"plan {kind!r}")  # type: ignore[return-value]  # a registered builder
 
 
-def build(config: RunConfig, spec: dict[str, Any], messages: Messages) -> tuple[Any, Any, str, str]:
-    """The rig (built, configured: its port open and the board greeted) and the warmed plan of
-    ``spec`` (:func:`plan_builder`), its label and the road's text; the plan's operator prompts go
-    to the session as ``prompt`` messages."""
+def build(spec: RunSpec, messages: Messages) -> tuple[Any, Any, str, str]:
+    """The rig (built, configured: its port open and the board greeted) and the warmed plan of the
+    run ``spec`` (:func:`plan_builder` of its plan's kind), its label and the road's text; the
+    plan's operator prompts go to the session as ``prompt`` messages."""
     from sashil.drivers import open_rig
     from sashil.runtime.warmup import warm_up
 
-    make = plan_builder(str(spec.get("kind")))
-    rig = open_rig(config)
+    kind = str(spec.plan.get("kind"))
+    make = plan_builder(kind)
+    rig = open_rig(spec.rig)
     try:
-        stage, label, road_text = make(config, spec, rig, lambda line: messages.send("prompt", text=line))
+        stage, label, road_text = make(spec, rig, lambda line: messages.send("prompt", text=line))
         warm_up(stage, lambda line: messages.send("progress", text=line))
-        if spec.get("kind") not in GREET_AT_START:
+        if kind not in GREET_AT_START:
             rig.configure()
     except BaseException:
         rig.close()
@@ -155,24 +149,24 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     """The loop process's work (module doc); returns its exit code."""
+    from sashil.runtime.clock import RealClock
     from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
-    from sashil.runtime.runner import run_realtime
+    from sashil.runtime.runner import control_loop, loop_end, run_realtime
     from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
     from sashil.runtime.tuning import RAMP_KEY
 
     _as_the_session(job)
-    config = freeze_config(job["config"])  # read-only here too, as the session resolved it
-    loop_cfg = config["loop"]
-    rate = float(loop_cfg["rate_hz"])
-    rig, stage, label, road_text = build(config, job.get("plan") or {"kind": "run"}, messages)
+    spec = RunSpec.from_json(job["spec"])  # read-only here too, as the session assembled it
+    rate = spec.loop.rate_hz
+    rig, stage, label, road_text = build(spec, messages)
     if flag.requested:  # a signal during the warm-up: nothing energised
         rig.close()
         messages.send(
             "error", type="Stopped", text=f"stopped by {flag.signal_name} before the run started", exit_code=130
         )
         return 130
-    stream = _create_stream(job, config, rig, stage, rate)
+    stream = _create_stream(job, spec.rig.backend, rig, stage, rate)
     stream.set_state("ready")
     law = getattr(stage, "law", None)
     tunable = bool(job.get("tune")) and law is not None and hasattr(law, "check_parameters")
@@ -191,11 +185,22 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     stop = LoopStop(flag, stream, session_pid, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
     tuning = None
     if tunable:
-        tuning = MailboxTuning(law, rate, float(config["controller"].get(RAMP_KEY, 0.0)), stream)
+        tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
     writer = StreamWriter(stream)
-    loop = _control_loop(config, job, rig, stage, writer, tuning, stop, stream, messages)
+    loop = control_loop(
+        spec,
+        rig,
+        stage,
+        RealClock.for_rate(spec.loop.spin_margin_us, rate),
+        job.get("duration_s"),
+        warn=lambda line: messages.send("warning", text=line),
+        recorder=writer,
+        tuning=tuning,
+        stop=stop,
+        timing=stream.timing(rate),
+    )
     loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
-    rt = RealtimeSetup.from_config(loop_cfg) if job.get("realtime", True) else None
+    rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
     stream.set_state("running")
     stream.header[THREADS_W] = threading.active_count()
     error = run_realtime(loop, rt, lambda line: messages.send("progress", text=line))
@@ -204,7 +209,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
     if tuning is not None:
         tuning.close()
-    end = _end_message(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
+    end = loop_end(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
     if stop.orphaned:
         from sashil.runtime.orphan import finish_alone
@@ -213,7 +218,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
             stream,
             writer,
             folder / started.get("data", "data.csv"),
-            config,
+            spec,
             end,
             loop.timing,
             started.get("verb", "run"),
@@ -222,42 +227,6 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         messages.send("end", **end)
     writer.release()
     return 0
-
-
-def _control_loop(
-    config: RunConfig,
-    job: dict[str, Any],
-    rig: Any,
-    stage: Any,
-    writer: Any,
-    tuning: Any,
-    stop: Any,
-    stream: Any,
-    messages: Messages,
-) -> Any:
-    """The run's :class:`~sashil.runtime.loop.ControlLoop` on the real clock: its rows to the
-    stream's ``writer``, its timing in the stream, its warnings to the session."""
-    from sashil.runtime.clock import RealClock
-    from sashil.runtime.loop import ControlLoop
-    from sashil.safety import SafetySupervisor
-
-    loop_cfg = config["loop"]
-    rate = float(loop_cfg["rate_hz"])
-    return ControlLoop(
-        rig,
-        stage,
-        RealClock.for_rate(loop_cfg["spin_margin_us"], rate),
-        rate,
-        job.get("duration_s"),
-        safety=SafetySupervisor.from_config(config),
-        recorder=writer,
-        overrun_policy=loop_cfg["overrun_policy"],
-        warn_interval_s=loop_cfg["warn_interval_s"],
-        warn=lambda line: messages.send("warning", text=line),
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(rate),
-    )
 
 
 def _as_the_session(job: dict[str, Any]) -> None:
@@ -273,7 +242,7 @@ def _as_the_session(job: dict[str, Any]) -> None:
         sys.path[:] = [entry for entry in job["sys_path"] if isinstance(entry, str)]
 
 
-def _create_stream(job: dict[str, Any], config: RunConfig, rig: Any, stage: Any, rate: float) -> Any:
+def _create_stream(job: dict[str, Any], backend: str, rig: Any, stage: Any, rate: float) -> Any:
     """The run's stream for the stage's columns (and a CAN frame ring when the job traces frames),
     this process's pid in its header; the rig closed when it cannot be made (nothing energised)."""
     from sashil.drivers.interface import capabilities_of
@@ -283,7 +252,7 @@ def _create_stream(job: dict[str, Any], config: RunConfig, rig: Any, stage: Any,
     frames = FRAME_ROWS if job.get("can_trace") else 0
     if frames and not capabilities_of(rig).can_frames:
         rig.close()
-        raise ConfigError(f"--format: the {config['driver']['name']} backend has no CAN frames to trace")
+        raise ConfigError(f"--format: the {backend} backend has no CAN frames to trace")
     try:
         stream = Stream.create(record_columns(stage), stream_rows(rate), folder=job.get("stream_dir"), frames=frames)
     except OSError as err:  # before anything is energised
@@ -293,37 +262,6 @@ def _create_stream(job: dict[str, Any], config: RunConfig, rig: Any, stage: Any,
         rig.frame_sink = FrameWriter(stream).put
     stream.header[LOOP_PID_W] = os.getpid()
     return stream
-
-
-def _end_message(
-    loop: Any, error: BaseException | None, stage: Any, rt: Any, rig: Any, tuning: Any, threads: int
-) -> dict[str, Any]:
-    """The ``end`` message's keys: how the loop ended, its timing counters, the stage's, the safety
-    supervisor's, the real-time set-up's and the rig's facts, the tuning's events."""
-    from sashil.drivers.interface import capabilities_of
-
-    result = loop.result
-    controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
-    clipped = getattr(controller, "clip_warning", None)
-    return {
-        "exit_status": result.exit_status,
-        "error": error_fields(error) if error is not None else None,
-        "stop_reason": result.stop_reason,
-        "trips": result.trips,
-        "shutdown_errors": result.shutdown_errors,
-        "safe_state": result.safe_state,
-        "timing": loop.timing.counters(),
-        "controller_stats": stage.stats() if hasattr(stage, "stats") else None,
-        "safety": loop.safety.summary() if loop.safety is not None else None,
-        "realtime": rt.report() if rt is not None else {},
-        "link": rig.link_stats() if capabilities_of(rig).link else None,
-        "clip_warning": clipped() if callable(clipped) else None,
-        "tuning": tuning.summary() if tuning is not None else None,
-        "tuning_notes": tuning.notes() if tuning is not None else [],
-        "threads": threads,
-        "start_ns": loop.start_ns,
-        "plan": stage.facts() if hasattr(stage, "facts") else None,
-    }
 
 
 if __name__ == "__main__":

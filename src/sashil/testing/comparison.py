@@ -27,7 +27,7 @@ from sashil.config.resolve import ConfigSource, resolve
 from sashil.config.typed import RunConfig
 from sashil.experiments.compare import LawJob, run_job
 from sashil.experiments.optimal_bound import BoundResult, optimal_bound
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.models.hysteresis import BoucWenParams
 
 __all__ = ["Comparison", "compare_with_passive"]
@@ -131,7 +131,7 @@ def _bound(config: dict[str, Any]) -> BoundResult:
     key = _key(config, "bound")
     if key not in _bound_cache:
         section = config["compare"]
-        road, _ = parse_road(str(section["road"]), cast(RunConfig, config))
+        road, _ = parse_road(str(section["road"]), RoadParts.read(cast(RunConfig, config)))
         if road is None:
             raise ValueError("compare.road: none: the optimal bound needs a road")
         _bound_cache[key] = optimal_bound(

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from sashil.api import Run
+from sashil.config.parts import StageParts
 from sashil.control.law_api import Law, LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
@@ -99,7 +100,7 @@ def check_law(
     params = dict(params or {})
     try:
         config = rig.config(law, road=road, duration_s=duration_s, params=params)
-        instance = build_law(find_law(str(config["controller"]["law"])), config, params)
+        instance = build_law(find_law(str(config["controller"]["law"])), StageParts.read(config), params)
     except ConfigError as err:
         return ContractReport(name, (f"{name}: parameters: {err}",))
     except Exception as err:  # the constructor or parameters_changed() of the law itself

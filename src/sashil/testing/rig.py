@@ -17,11 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from sashil.api import Run, load_run
+from sashil.config.parts import StageParts
 from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.config.typed import RunConfig
 from sashil.control.registry import law_run_label
 from sashil.experiments.compare import LawJob, run_job
-from sashil.experiments.road_option import parse_road
+from sashil.experiments.road_option import RoadParts, parse_road
 from sashil.lab._compare import folder_name, law_summary
 from sashil.plugins import check_not_importing
 from sashil.recording.run_folder import RunFolder
@@ -117,12 +118,12 @@ def run_law(
     check_not_importing("sashil.testing.run_law")  # a script's law file imported for its class runs nothing
     rig = rig if rig is not None else SimRig()
     config = rig.config(law, road=road, duration_s=duration_s, params=params)  # bad input: ConfigError here
-    label = law_run_label(config)
+    label = law_run_label(StageParts.read(config))
     root = Path(rig.out) if rig.out is not None else Path(tempfile.mkdtemp(prefix="sashil-testing-"))
     folder = RunFolder.create(_free(root / folder_name(label)), "compare")
     folder.write_config(config)
     result = run_job(LawJob(label, config, road, float(duration_s), str(folder.path)))
-    _, road_text = parse_road(road, config)
+    _, road_text = parse_road(road, RoadParts.read(config))
     folder.write_summary(law_summary(result, config, f"{road}: {road_text}", float(duration_s)))
     return load_run(folder.path)
 

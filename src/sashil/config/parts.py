@@ -1,0 +1,178 @@
+"""A run's parts as plain values: what the rig, the controller stage, the safety supervisor and the
+loop are each built from, read out of a resolved config once.
+
+The components never index a config. Each takes the part made for it here: a backend its declared
+keys (:class:`RigParts`, the keys named by the backend's ``reads`` table), the controller its law,
+model and rig facts (:class:`StageParts`), the safety supervisor its limits (:class:`SafetyParts`),
+the loop its rate and set-up (:class:`LoopParts`). :class:`RunSpec` gathers them with the plan's own
+values: it is frozen, turns into JSON and back, and is all a loop process is sent.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from sashil.config.frozen import freeze, thaw
+from sashil.config.schema import defaults
+from sashil.config.sections import CONTROLLER
+
+__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "controller_section", "read_key"]
+
+
+def read_key(config: Mapping[str, Any], path: str) -> Any:
+    """The value at a dotted ``path`` of a config (``rig.coil_tau_s``; a section's name alone gives
+    the whole section); KeyError naming the path when it is not there."""
+    value: Any = config
+    for part in path.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            raise KeyError(f"config key {path!r} is not in the resolved config")
+        value = value[part]
+    return value
+
+
+def controller_section(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A config's ``controller`` section, its defaults filled in where a config predates a key."""
+    return {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
+
+
+@dataclass(frozen=True)
+class RigParts:
+    """A backend's name and the values of the config keys its class declares in ``reads``
+    (``{value name: dotted config key}``), by value name."""
+
+    backend: str
+    values: Mapping[str, Any]
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any], backend: str, reads: Mapping[str, str]) -> RigParts:
+        return cls(backend, freeze({name: read_key(config, path) for name, path in reads.items()}, "rig parts"))
+
+
+@dataclass(frozen=True)
+class StageParts:
+    """What the controller stage is built from: the law, the ``controller`` section (the
+    controller's own keys and the law's parameters), the model the controller believes, and the
+    rig's facts a law and an estimator use."""
+
+    law: str
+    controller: Mapping[str, Any]
+    model: Mapping[str, Any]
+    current_max_a: float
+    #: the coil lag the controller assumes: ``controller.coil_tau_s``, else the rig's [s]
+    coil_tau_s: float
+    counts_per_rev: int
+    angle_noise_rad: float
+    rate_hz: float
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any]) -> StageParts:
+        """The parts of a config, resolved or being resolved (a section a config predates takes its defaults)."""
+        controller = controller_section(config)
+        rig = config.get("rig") or {}
+        tau = controller.get("coil_tau_s")
+        tau = rig.get("coil_tau_s") if tau is None else tau
+        return cls(
+            law=str(controller["law"]),
+            controller=freeze(controller, "controller"),
+            model=freeze(config.get("model") or {}, "model"),
+            current_max_a=float(rig.get("current_max_a", 0.0)),
+            coil_tau_s=float(tau or 0.0),
+            counts_per_rev=int(rig.get("encoder_counts_per_rev", 0)),
+            angle_noise_rad=float(rig.get("angle_noise_rad") or 0.0),
+            rate_hz=float((config.get("loop") or {}).get("rate_hz", 1000.0)),
+        )
+
+
+@dataclass(frozen=True)
+class SafetyParts:
+    """The safety supervisor's limits: the current range, the angle interlock (None: off), the
+    slew limit, the sensor timeout and whether a device fault trips."""
+
+    current_max_a: float
+    angle_limit_deg: float | None
+    slew_a_per_s: float
+    sensor_timeout_cycles: int
+    trip_on_device_fault: bool
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any]) -> SafetyParts:
+        safety, rig = config["safety"], config["rig"]
+        return cls(
+            current_max_a=float(rig["current_max_a"]),
+            angle_limit_deg=float(rig["angle_limit_deg"]) if safety["angle_interlock"] else None,
+            slew_a_per_s=float(safety["slew_a_per_s"]),
+            sensor_timeout_cycles=int(safety["sensor_timeout_cycles"]),
+            trip_on_device_fault=bool(safety["trip_on_device_fault"]),
+        )
+
+
+@dataclass(frozen=True)
+class LoopParts:
+    """The loop's rate and timing, its real-time set-up (``loop.rt``), what it may lose, and whether
+    it runs in a process of its own on the real clock."""
+
+    rate_hz: float
+    spin_margin_us: float
+    overrun_policy: str
+    warn_interval_s: float
+    rt: Mapping[str, Any]
+    max_missed_fraction: float
+    max_lost_fraction: float
+    process: bool
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any]) -> LoopParts:
+        loop = config["loop"]
+        return cls(
+            rate_hz=float(loop["rate_hz"]),
+            spin_margin_us=float(loop["spin_margin_us"]),
+            overrun_policy=str(loop["overrun_policy"]),
+            warn_interval_s=float(loop["warn_interval_s"]),
+            rt=freeze(loop["rt"], "loop.rt"),
+            max_missed_fraction=float(loop["max_missed_fraction"]),
+            max_lost_fraction=float(config["driver"]["max_lost_fraction"]),
+            process=bool(loop["process"]),
+        )
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run, assembled: its parts, the clock it runs on unless its verb chooses the real one
+    (``virtual``: simulated time) and the plan's own values (``plan``: its ``kind`` and
+    arguments). :meth:`to_json` and :meth:`from_json` carry it to a loop process."""
+
+    rig: RigParts
+    stage: StageParts
+    safety: SafetyParts
+    loop: LoopParts
+    virtual: bool
+    plan: Mapping[str, Any] = field(default_factory=dict)
+
+    def with_plan(self, plan: Mapping[str, Any]) -> RunSpec:
+        """This spec running another plan."""
+        return RunSpec(self.rig, self.stage, self.safety, self.loop, self.virtual, freeze(plan, "plan"))
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: each part a mapping of its fields."""
+        return thaw(
+            {key: vars(value) if hasattr(value, "__dataclass_fields__") else value for key, value in vars(self).items()}
+        )
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RunSpec:
+        return cls(
+            rig=RigParts(str(data["rig"]["backend"]), freeze(data["rig"]["values"], "rig parts")),
+            stage=StageParts(
+                **{
+                    **data["stage"],
+                    "controller": freeze(data["stage"]["controller"], "controller"),
+                    "model": freeze(data["stage"]["model"], "model"),
+                }
+            ),
+            safety=SafetyParts(**data["safety"]),
+            loop=LoopParts(**{**data["loop"], "rt": freeze(data["loop"]["rt"], "loop.rt")}),
+            virtual=bool(data["virtual"]),
+            plan=freeze(data.get("plan") or {}, "plan"),
+        )

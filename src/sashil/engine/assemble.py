@@ -1,0 +1,36 @@
+"""A run's config read once into its parts (:class:`~sashil.config.parts.RunSpec`).
+
+The rig's parts are the values of the keys its backend declares (``reads``), the stage's the
+``controller`` section with the model and the rig facts a law uses, the safety supervisor's its
+limits, the loop's its rate and set-up. Whether the run goes on simulated time follows from the
+backend (a simulated one) and ``driver.clock``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from sashil.config.frozen import freeze
+from sashil.config.parts import LoopParts, RunSpec, SafetyParts, StageParts
+from sashil.drivers import on_virtual_clock, rig_parts
+
+if TYPE_CHECKING:
+    from sashil.config.typed import RunConfig
+
+__all__ = ["assemble"]
+
+
+def assemble(config: RunConfig, plan: Mapping[str, Any] | None = None) -> RunSpec:
+    """The run of a resolved ``config`` (:func:`sashil.config.resolve.resolve`) under ``plan`` (its
+    ``kind`` and values, as the plan's ``spec()`` gives them; None: none yet)."""
+    rig = rig_parts(config)
+    virtual = on_virtual_clock(rig, config["driver"]["clock"])
+    return RunSpec(
+        rig=rig,
+        stage=StageParts.read(config),
+        safety=SafetyParts.read(config),
+        loop=LoopParts.read(config),
+        virtual=virtual,
+        plan=freeze(plan or {}, "plan"),
+    )
