@@ -4,8 +4,11 @@ and tracks it online.
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
 cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
 (direct transcription, the discrete adjoint, L-BFGS-B) over a receding horizon, on the law's model
-(the controller's: ``--params`` sets it) with its hysteresis as a friction α(i)·z_u
-(``hysteresis: true``) or in its viscous envelope, and the coil's lag (``LawContext.coil_tau_s``).
+(the controller's: ``--params`` sets it) and the coil's lag (``LawContext.coil_tau_s``). With
+``plan_model: bouc-wen`` (the default) the plan is first made with the hysteresis as a friction
+α(i)·z_u (smooth: found from the best constant current) and then refined from it on the model's own
+Bouc-Wen state (:mod:`sashil.control.plan_boucwen`: at small travel the damper is a spring, which a
+friction leaves out); ``friction`` stops after the first, ``envelope`` plans the viscous envelope.
 The plan gives, for every cycle k, the command u*_k in [0, i_max] and the model's state under it,
 the coil's current i*_k, θ*_k and θ̇2*_k. Its cost is the mean of θ̈2², or of θ̈2 low-passed at
 ``comfort_bandwidth_hz`` as ``sashil compare`` measures comfort (0, the default: unfiltered; over
@@ -28,15 +31,27 @@ Giorgetti, Bemporad et al., IJC 2006). A current law: the plan already holds the
 the coil-lag lead is not applied (``controller.lead_current_laws`` false). Past the planned road
 the law commands the plan's last current.
 
+Re-plan (``replan_horizon_s`` > 0; 0, the default, for none): each cycle one step of the real-time
+iteration of :mod:`sashil.control.preview_mpc` re-plans the next ``replan_horizon_s`` from the state
+measured at each slot of ``replan_slot_cycles`` cycles (θ, θ̇2, ẑ and the coil's current), on the
+plan's model at that coarser step, and the law adds the first slot's change to the planned
+command. The open-loop plan drifts from a rig its model is not (the arm's phase, after a few
+seconds on a spring and inertia 10 % off); the re-planned horizon starts from the rig's state. Its
+cost per cycle grows with the horizon's slots (the model stepped three times over them).
+
 The law reads the whole commanded road once, before the run; it reads no per-cycle window
 (:meth:`preview_cycles` is 0), since the plan already holds the road of every cycle.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
-from sashil.control.preview_plan import PlanModel, plan_current
+from sashil.control.plan_boucwen import BoucWenPlanModel
+from sashil.control.preview_mpc import RecedingPlan
+from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current
 from sashil.errors import ConfigError
 
 __all__ = ["PreviewOptimal"]
@@ -54,7 +69,11 @@ class PreviewOptimal(Law):
     tail_s = Param(2.0, unit="s", low=0.0, high=60.0, doc="road after a block that its optimisation also sees")
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
     feedback_gain = Param(0.0, low=0.0, high=10.0, doc="gain of the LQR feedback on the error from the planned state")
-    hysteresis = Param(True, doc="plan with the hysteresis as a friction α(i)·z_u (false: the viscous envelope)")
+    plan_model = Param(
+        "bouc-wen",
+        choices=("bouc-wen", "friction", "envelope"),
+        doc="the plan's damper: its Bouc-Wen state, the hysteresis as a friction α(i)·z_u, or the viscous envelope",
+    )
     comfort_bandwidth_hz = Param(
         0.0,
         unit="Hz",
@@ -62,6 +81,10 @@ class PreviewOptimal(Law):
         high=500.0,
         doc="the plan's cost on θ̈2 low-passed here, as compare measures (0: unfiltered)",
     )
+    replan_horizon_s = Param(
+        0.0, unit="s", low=0.0, high=5.0, doc="horizon re-planned from the measured state each cycle (0: none)"
+    )
+    replan_slot_cycles = Param(5, low=1, high=100, doc="cycles per step of the re-planned horizon's model")
     friction_eps = Param(
         0.01, unit="rad/s", low=0.0, low_open=True, high=1.0, doc="rate over which the plan's friction turns"
     )
@@ -80,33 +103,80 @@ class PreviewOptimal(Law):
         self._body: list[float] = []
         self._dt = 1.0 / float(self.context.rate_hz)
         self._last = 0.0
+        self._receding: RecedingPlan | None = None
 
     def plan_road(self, road: CommandedRoad) -> None:
         """Plan the damping of every cycle of ``road`` (module docstring)."""
         assert self.context is not None
         ctx = self.context
-        model = PlanModel.of(ctx.model, bool(self.hysteresis), float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
-        plan = plan_current(
-            model,
-            self.context.current_max_a,
-            road.rate_rad_s,
-            road.dt_s,
-            block_s=float(self.block_s),
-            tail_s=float(self.tail_s),
-            max_iterations=int(self.plan_iterations),
-            bandwidth_hz=float(self.comfort_bandwidth_hz) or None,
+        kind = str(self.plan_model)
+        friction = PlanModel.of(ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
+        horizon = Horizon(
+            float(self.block_s), float(self.tail_s), int(self.plan_iterations), float(self.comfort_bandwidth_hz) or None
         )
+        plan = plan_current(friction, ctx.current_max_a, road.rate_rad_s, road.dt_s, horizon)
+        if kind == "bouc-wen":  # refined on the rig's own hysteresis, from the friction's plan
+            model = BoucWenPlanModel.of(ctx.model, ctx.coil_tau_s, road.dt_s)
+            plan = plan_current(
+                model,
+                ctx.current_max_a,
+                road.rate_rad_s,
+                road.dt_s,
+                horizon,
+                initial=plan.command_a,
+                from_constant=False,
+            )
         self._dt = road.dt_s
+        self._receding = None
+        cycles = int(self.replan_slot_cycles)
+        slots = int(round(float(self.replan_horizon_s) / (cycles * road.dt_s)))
+        if slots > 0 and plan.command_a.size:
+            coarse = (
+                BoucWenPlanModel.of(ctx.model, ctx.coil_tau_s, cycles * road.dt_s)
+                if kind == "bouc-wen"
+                else PlanModel.of(
+                    ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, cycles * road.dt_s
+                )
+            )
+            self._receding = RecedingPlan(
+                coarse, ctx.current_max_a, plan.command_a, road.rate_rad_s, road.dt_s, cycles, slots
+            )
         self._i = plan.command_a.tolist()
         self._theta = plan.theta_rad.tolist()
         self._body = plan.body_dot_rad_s.tolist()
         self._last = self._i[-1] if self._i else 0.0
+
+    def _receding_of(self, plan_a: np.ndarray, road: CommandedRoad) -> RecedingPlan | None:
+        """The re-planned horizon over the plan ``plan_a`` (None: ``replan_horizon_s`` 0)."""
+        assert self.context is not None
+        ctx, kind, cycles = self.context, str(self.plan_model), int(self.replan_slot_cycles)
+        slots = int(round(float(self.replan_horizon_s) / (cycles * road.dt_s)))
+        if slots <= 0 or plan_a.size == 0:
+            return None
+        h = cycles * road.dt_s
+        coarse: Model = (
+            BoucWenPlanModel.of(ctx.model, ctx.coil_tau_s, h)
+            if kind == "bouc-wen"
+            else PlanModel.of(ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, h)
+        )
+        return RecedingPlan(coarse, ctx.current_max_a, plan_a, road.rate_rad_s, road.dt_s, cycles, slots)
+
+    def reset(self) -> None:
+        if self._receding is not None:
+            self._receding.restart()
 
     def current(self, state: LawState) -> float:
         k = int(state.time_s / self._dt + 0.5)
         if k >= len(self._i):  # past the planned road (or none planned): the last current, no feedback
             return self._last
         u = self._i[k]
+        receding = self._receding
+        if receding is not None:
+            if k % receding.cycles == 0:
+                slot = k // receding.cycles
+                receding.move_to(slot, state.theta_rad, state.body_dot_rad_s, state.z_hat, state.current_a)
+            receding.iterate()
+            u = min(self.i_max, max(0.0, u + receding.change()))
         if self.k_theta == 0.0 and self.k_body == 0.0:
             return u
         error = self.k_theta * (state.theta_rad - self._theta[k]) + self.k_body * (state.body_dot_rad_s - self._body[k])

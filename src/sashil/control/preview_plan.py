@@ -37,14 +37,93 @@ the road's length, not with its square.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.hysteresis import BoucWenParams
 
-__all__ = ["CurrentPlan", "PlanModel", "comfort_filter", "lowpass", "plan_current", "simulate_plan"]
+__all__ = [
+    "REST",
+    "CurrentPlan",
+    "Horizon",
+    "Model",
+    "PlanModel",
+    "comfort_filter",
+    "lowpass",
+    "plan_current",
+    "simulate_plan",
+]
+
+
+def _warm_forward() -> tuple[object, ...]:
+    """A call of :func:`_forward`'s signature (float64 C arrays, a float64 step) on a tiny plan."""
+    n = 4
+    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, np.zeros(4), *(np.zeros(n) for _ in range(5)))
+
+
+def _warm_adjoint() -> tuple[object, ...]:
+    """A call of :func:`_adjoint`'s signature."""
+    n = 4
+    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, *(np.zeros(n) for _ in range(6)))
+
+
+# the plan is made in the loop process before its first deadline: its kernels warm with the loop's
+@loop_kernel(_warm_forward)
+@jit
+def _forward(u, w, m, h, x0, thetas, vs, zs, coil, accel):
+    """Step the model ``m`` (k/J, 1/J, c1, c2, f1, f2, ε, ρ) from ``x0`` (θ, θ̇2, z, i; z unused)
+    under the commands ``u``: the states before each step into ``thetas``, ``vs``, ``zs`` (0),
+    ``coil``, θ̈2 into ``accel``; return the mean of accel²."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    theta = x0[0]
+    v = x0[1]
+    i = x0[3]
+    total = 0.0
+    n = u.size
+    for k in range(n):
+        thetas[k] = theta
+        vs[k] = v
+        zs[k] = 0.0
+        coil[k] = i
+        r = v - w[k]
+        torque = (c1 + c2 * i) * r + (f1 + f2 * i) * math.tanh(r / eps)
+        a = -k_over_j * theta - inv_j * torque
+        accel[k] = a
+        total += a * a
+        v = v + h * a
+        theta = theta + h * (v - w[k])
+        i = i + rho * (u[k] - i)
+    return total / n
+
+
+@loop_kernel(_warm_adjoint)
+@jit
+def _adjoint(u, w, m, h, thetas, vs, zs, coil, direct, grad):
+    """The discrete adjoint of a cost of the θ̈2 of :func:`_forward`: d(cost)/d(u_k) into ``grad``,
+    given ``direct``, d(cost)/d(a_k) holding the later states fixed (2·a_k/n for the mean of a²)."""
+    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    n = u.size
+    lam_theta = 0.0
+    lam_v = 0.0
+    lam_i = 0.0
+    for k in range(n - 1, -1, -1):
+        i = coil[k]
+        r = vs[k] - w[k]
+        s = math.tanh(r / eps)
+        f = f1 + f2 * i
+        d_rate = c1 + c2 * i + f * (1.0 - s * s) / eps  # dT/dθ̇
+        d_current = c2 * r + f2 * s  # dT/di
+        g_a = direct[k] + h * (lam_v + h * lam_theta)
+        grad[k] = rho * lam_i  # u_k sets i_{k+1}
+        lam_i = -g_a * inv_j * d_current + (1.0 - rho) * lam_i
+        new_theta = -g_a * k_over_j + lam_theta
+        lam_v = -g_a * inv_j * d_rate + lam_v + h * lam_theta
+        lam_theta = new_theta
+    return 0
 
 
 @dataclass(frozen=True)
@@ -80,108 +159,74 @@ class PlanModel:
             rho,
         )
 
+    @property
+    def authority(self) -> bool:
+        """Whether the current moves the torque at all (c2 or f2 non-zero)."""
+        return self.c2 != 0.0 or self.f2 != 0.0
 
-def _warm_forward() -> tuple[object, ...]:
-    """A call of :func:`_forward`'s signature (float64 C arrays, a float64 step) on a tiny plan."""
-    n = 4
-    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, np.zeros(3), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+    def vector(self) -> np.ndarray:
+        """The kernels' parameters: k/J, 1/J, c1, c2, f1, f2, ε, ρ."""
+        return np.array([self.k_over_j, self.inv_j, self.c1, self.c2, self.f1, self.f2, self.eps, self.rho])
 
-
-def _warm_adjoint() -> tuple[object, ...]:
-    """A call of :func:`_adjoint`'s signature."""
-    n = 4
-    return (np.zeros(n), np.zeros(n), np.ones(8), 1e-3, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
-
-
-# the plan is made in the loop process before its first deadline: its kernels warm with the loop's
-@loop_kernel(_warm_forward)
-@jit
-def _forward(u, w, m, h, x0, thetas, vs, coil, accel):
-    """Step the model ``m`` (k/J, 1/J, c1, c2, f1, f2, ε, ρ) from ``x0`` (θ, θ̇2, i) under the
-    commands ``u``: the states before each step into ``thetas``, ``vs``, ``coil``, θ̈2 into ``accel``;
-    return the mean of accel²."""
-    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
-    theta = x0[0]
-    v = x0[1]
-    i = x0[2]
-    total = 0.0
-    n = u.size
-    for k in range(n):
-        thetas[k] = theta
-        vs[k] = v
-        coil[k] = i
-        r = v - w[k]
-        torque = (c1 + c2 * i) * r + (f1 + f2 * i) * math.tanh(r / eps)
-        a = -k_over_j * theta - inv_j * torque
-        accel[k] = a
-        total += a * a
-        v = v + h * a
-        theta = theta + h * (v - w[k])
-        i = i + rho * (u[k] - i)
-    return total / n
+    #: the model's step and its adjoint (the kernels above)
+    forward = staticmethod(_forward)
+    adjoint = staticmethod(_adjoint)
 
 
-@loop_kernel(_warm_adjoint)
-@jit
-def _adjoint(u, w, m, h, thetas, vs, coil, direct, grad):
-    """The discrete adjoint of a cost of the θ̈2 of :func:`_forward`: d(cost)/d(u_k) into ``grad``,
-    given ``direct``, d(cost)/d(a_k) holding the later states fixed (2·a_k/n for the mean of a²)."""
-    k_over_j, inv_j, c1, c2, f1, f2, eps, rho = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
-    n = u.size
-    lam_theta = 0.0
-    lam_v = 0.0
-    lam_i = 0.0
-    for k in range(n - 1, -1, -1):
-        i = coil[k]
-        r = vs[k] - w[k]
-        s = math.tanh(r / eps)
-        f = f1 + f2 * i
-        d_rate = c1 + c2 * i + f * (1.0 - s * s) / eps  # dT/dθ̇
-        d_current = c2 * r + f2 * s  # dT/di
-        g_a = direct[k] + h * (lam_v + h * lam_theta)
-        grad[k] = rho * lam_i  # u_k sets i_{k+1}
-        lam_i = -g_a * inv_j * d_current + (1.0 - rho) * lam_i
-        new_theta = -g_a * k_over_j + lam_theta
-        lam_v = -g_a * inv_j * d_rate + lam_v + h * lam_theta
-        lam_theta = new_theta
-    return 0
+class Model(Protocol):
+    """A plan's model: :class:`PlanModel` (the hysteresis as a friction, or none) or
+    :class:`sashil.control.plan_boucwen.BoucWenPlanModel` (the Bouc-Wen state itself). Its kernels
+    step the state (θ, θ̇2, z, i) and take the adjoint of a cost of θ̈2 with one signature."""
+
+    @property
+    def authority(self) -> bool: ...
+
+    def vector(self) -> np.ndarray: ...
+
+    #: ``forward(u, w, m, h, x0, thetas, vs, zs, coil, accel)``: step from ``x0`` (θ, θ̇2, z, i)
+    #: under ``u`` on ``w``, the states before each step and θ̈2 into the five arrays; the mean of θ̈2²
+    forward: Callable[..., float]
+    #: ``adjoint(u, w, m, h, thetas, vs, zs, coil, direct, grad)``: d(cost)/d(u_k) into ``grad``
+    #: from the trajectory and d(cost)/d(a_k) (``direct``)
+    adjoint: Callable[..., int]
+
+
+#: the state a plan starts from: the arm at rest, z and the coil at 0
+REST = (0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
 class CurrentPlan:
     """The planned command u_k [A] of every cycle, and the model's state under it before each cycle:
-    the coil's current i_k [A], the relative angle θ_k [rad], the arm's rate θ̇2_k [rad/s], its
-    acceleration θ̈2_k [rad/s²]."""
+    the coil's current i_k [A], the relative angle θ_k [rad], the arm's rate θ̇2_k [rad/s], the
+    Bouc-Wen state z_k (0 in a model without it), its acceleration θ̈2_k [rad/s²]."""
 
     command_a: np.ndarray
     current_a: np.ndarray
     theta_rad: np.ndarray
     body_dot_rad_s: np.ndarray
     accel_rad_s2: np.ndarray
+    z: np.ndarray
 
     @property
     def rms_accel(self) -> float:
         return float(np.sqrt(np.mean(self.accel_rad_s2**2))) if self.accel_rad_s2.size else 0.0
 
 
-def _vector(model: PlanModel) -> np.ndarray:
-    return np.array([model.k_over_j, model.inv_j, model.c1, model.c2, model.f1, model.f2, model.eps, model.rho])
-
-
 def simulate_plan(
-    model: PlanModel,
+    model: Model,
     command_a: np.ndarray,
     road_rate: np.ndarray,
     h: float,
-    x0: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    x0: tuple[float, float, float, float] = REST,
 ) -> CurrentPlan:
-    """The model's trajectory under the commands ``command_a`` on ``road_rate`` from ``x0`` (θ, θ̇2, i)."""
+    """The model's trajectory under the commands ``command_a`` on ``road_rate`` from ``x0`` (θ, θ̇2, z, i)."""
     n = command_a.size
-    thetas, vs, coil, accel = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    thetas, vs, zs, coil, accel = (np.empty(n) for _ in range(5))
     u = np.ascontiguousarray(command_a, dtype=float)
     w = np.ascontiguousarray(road_rate[:n], dtype=float)
-    _forward(u, w, _vector(model), h, np.asarray(x0, dtype=float), thetas, vs, coil, accel)
-    return CurrentPlan(u, coil, thetas, vs, accel)
+    model.forward(u, w, model.vector(), h, np.asarray(x0, dtype=float), thetas, vs, zs, coil, accel)
+    return CurrentPlan(u, coil, thetas, vs, accel, zs)
 
 
 def comfort_filter(bandwidth_hz: float | None, h: float) -> np.ndarray | None:
@@ -207,82 +252,86 @@ def lowpass(x: np.ndarray, sos: np.ndarray | None) -> np.ndarray:
 
 
 def _plan_block(
-    model: PlanModel,
+    model: Model,
     i_max: float,
     w: np.ndarray,
     h: float,
-    x0: tuple[float, float, float],
+    x0: tuple[float, float, float, float],
     max_iterations: int,
     sos: np.ndarray | None = None,
+    initial: np.ndarray | None = None,
+    from_constant: bool = True,
 ) -> np.ndarray:
-    """The commands of one block of road speeds ``w`` from the state ``x0``, from the best constant;
-    the cost the mean of θ̈2² low-passed by ``sos`` (:func:`lowpass`; None: unfiltered)."""
+    """The commands of one block of road speeds ``w`` from the state ``x0``: the best of L-BFGS-B
+    from the best constant current (``from_constant``) and from ``initial``; the cost the mean of
+    θ̈2² low-passed by ``sos`` (:func:`lowpass`; None: unfiltered)."""
     from scipy.optimize import minimize, minimize_scalar
 
     n = w.size
-    m = _vector(model)
+    m = model.vector()
     start = np.asarray(x0, dtype=float)
-    thetas, vs, coil, accel, grad = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-
-    def value_of(u: np.ndarray) -> float:
-        _forward(u, w, m, h, start, thetas, vs, coil, accel)
-        filtered = lowpass(accel, sos)
-        return float(np.mean(filtered * filtered))
-
-    def constant(i: float) -> float:
-        return value_of(np.full(n, i))
-
-    best = minimize_scalar(constant, bounds=(0.0, i_max), method="bounded", options={"xatol": 1e-3 * i_max})
+    bufs = [np.empty(n) for _ in range(5)]
+    grad = np.empty(n)
 
     def cost(u: np.ndarray) -> tuple[float, np.ndarray]:
-        _forward(u, w, m, h, start, thetas, vs, coil, accel)
-        filtered = lowpass(accel, sos)
-        direct = (2.0 / n) * lowpass(filtered, sos)
-        _adjoint(u, w, m, h, thetas, vs, coil, direct, grad)
+        model.forward(u, w, m, h, start, *bufs)
+        filtered = lowpass(bufs[4], sos)
+        model.adjoint(u, w, m, h, *bufs[:4], (2.0 / n) * lowpass(filtered, sos), grad)
         return float(np.mean(filtered * filtered)), grad.copy()
 
-    res = minimize(
-        cost,
-        np.full(n, float(best.x)),
-        jac=True,
-        method="L-BFGS-B",
-        bounds=[(0.0, i_max)] * n,
-        options={"maxiter": max_iterations, "maxfun": 2 * max_iterations},
-    )
-    return np.clip(np.asarray(res.x, dtype=float), 0.0, i_max)
+    starts = [] if initial is None else [np.clip(np.asarray(initial[:n], dtype=float), 0.0, i_max)]
+    if from_constant or not starts:
+        best = minimize_scalar(
+            lambda i: cost(np.full(n, i))[0], bounds=(0.0, i_max), method="bounded", options={"xatol": 1e-3 * i_max}
+        )
+        starts.append(np.full(n, float(best.x)))
+    options = {"maxiter": max_iterations, "maxfun": 2 * max_iterations}
+    found = [
+        minimize(cost, u0, jac=True, method="L-BFGS-B", bounds=[(0.0, i_max)] * n, options=options) for u0 in starts
+    ]
+    return np.clip(np.asarray(min(found, key=lambda r: float(r.fun)).x, dtype=float), 0.0, i_max)
+
+
+@dataclass(frozen=True)
+class Horizon:
+    """How a road is planned: blocks of ``block_s`` [s], each optimised over ``tail_s`` [s] of road
+    after it too, by at most ``max_iterations`` of L-BFGS-B; the cost on θ̈2 low-passed at
+    ``bandwidth_hz`` as ``sashil compare`` measures comfort (None: unfiltered)."""
+
+    block_s: float = 10.0
+    tail_s: float = 2.0
+    max_iterations: int = 400
+    bandwidth_hz: float | None = None
 
 
 def plan_current(
-    model: PlanModel,
+    model: Model,
     current_max_a: float,
     road_rate: np.ndarray,
     h: float,
-    block_s: float = 10.0,
-    tail_s: float = 2.0,
-    max_iterations: int = 400,
-    bandwidth_hz: float | None = None,
+    horizon: Horizon = Horizon(),
+    initial: np.ndarray | None = None,
+    from_constant: bool = True,
 ) -> CurrentPlan:
     """The receding-horizon plan of the module docstring for the road speeds ``road_rate`` (one per
-    cycle of ``h``), from rest; ``bandwidth_hz``: the cost on θ̈2 low-passed there, as ``sashil
-    compare`` measures comfort (None: unfiltered)."""
-    sos = comfort_filter(bandwidth_hz, h)
+    cycle of ``h``), from rest, over ``horizon``; ``initial``: a plan of the whole road each block
+    also starts from (with ``from_constant`` false, the only start)."""
+    block_s, tail_s, max_iterations = horizon.block_s, horizon.tail_s, horizon.max_iterations
+    sos = comfort_filter(horizon.bandwidth_hz, h)
     n = road_rate.size
     w_all = np.ascontiguousarray(road_rate, dtype=float)
     plan = np.zeros(n)
-    if not (current_max_a > 0.0 and (model.c2 > 0.0 or model.f2 > 0.0)) or n == 0:  # no authority: passive
+    if not (current_max_a > 0.0 and model.authority) or n == 0:  # no authority: passive
         return simulate_plan(model, plan, w_all, h)
     block, tail = max(1, int(round(block_s / h))), max(0, int(round(tail_s / h)))
-    x0 = (0.0, 0.0, 0.0)
+    x0 = REST
     for start in range(0, n, block):
         stop = min(n, start + block)
-        w = w_all[start : min(n, stop + tail)]
-        u = _plan_block(model, current_max_a, w, h, x0, max_iterations, sos)
-        kept = stop - start
-        plan[start:stop] = u[:kept]
-        # the state the kept block ends at: where the next block starts
-        seg = simulate_plan(model, u[:kept], w[:kept], h, x0)
-        v = float(seg.body_dot_rad_s[-1] + h * seg.accel_rad_s2[-1])
-        theta = float(seg.theta_rad[-1] + h * (v - w[kept - 1]))
-        i = float(seg.current_a[-1] + model.rho * (u[kept - 1] - seg.current_a[-1]))
-        x0 = (theta, v, i)
+        end = min(n, stop + tail)
+        guess = None if initial is None else initial[start:end]
+        u = _plan_block(model, current_max_a, w_all[start:end], h, x0, max_iterations, sos, guess, from_constant)
+        plan[start:stop] = u[: stop - start]
+        if stop < n:  # the state the kept block ends at: where the next block starts
+            seg = simulate_plan(model, plan[start : stop + 1], w_all[start : stop + 1], h, x0)
+            x0 = (float(seg.theta_rad[-1]), float(seg.body_dot_rad_s[-1]), float(seg.z[-1]), float(seg.current_a[-1]))
     return simulate_plan(model, plan, w_all, h)
