@@ -5,18 +5,14 @@ crosses a boundary ``(n + 1/2) q``. Between two plant sub-steps the trajectory i
 Hermite curve through both ends' angle and rate (the plant's trapezoidal step is exact for it up to
 its own second order; seed 001 eqs. 13-17 give the ends), plus the road's own profile theta1(t).
 
-:func:`last_crossing` finds, over one sub-step, the last instant a count changed and its direction:
-a quick test first (the ends' counts equal and the curve provably inside their cell: no edge, the
-common case at 1 kHz), else the curve's counts at a few points locate the last change and a
-bracketed root finder (Illinois regula falsi) puts it on the boundary to well under a nanosecond.
-Pure functions of floats; the simulated rig (:mod:`sashil.drivers.sim`) calls them per sub-step, the
-quick test (:func:`quick_test`) compiled with numba, as its every cycle runs it.
+This module holds the quick test that rules an edge out (:func:`quick_test`: the ends' counts equal
+and the curve provably inside their cell, the common case at 1 kHz) and the search's constants. The
+search itself, where the quick test lets a sub-step through, is compiled with the plant's sub-steps
+in :mod:`sashil.drivers.sim_advance`: the curve's counts at a few points locate the last change, and
+a bracketed root finder (Illinois regula falsi) puts it on the boundary to well under a nanosecond.
 """
 
 from __future__ import annotations
-
-import math
-from collections.abc import Callable
 
 from sashil.models._jit import jit, loop_kernel
 
@@ -25,14 +21,6 @@ TOLERANCE = 1e-7
 #: points per sub-step that locate the last change, at least (more when many counts pass)
 MIN_POINTS = 4
 MAX_POINTS = 64
-
-
-def hermite(y0: float, m0: float, y1: float, m1: float, s: float) -> float:
-    """The cubic Hermite curve at ``s`` in [0, 1] through (0, y0) and (1, y1) with slopes ``m0``, ``m1``
-    per unit of ``s`` (the rate times the sub-step)."""
-    s2 = s * s
-    s3 = s2 * s
-    return (2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * m0 + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * m1
 
 
 @loop_kernel(lambda: (0.0, 1e-4, 2e-4, 1e-4))
@@ -74,54 +62,3 @@ def quick_test(y0: float, m0: float, y1: float, m1: float, r0: float, r1: float,
     if stays_in_cell(y0 + r0, y1 + r1, arm_bulge, q) and stays_in_cell(r0, r1, road_bulge, q):
         return -1.0
     return arm_bulge
-
-
-def last_crossing(
-    angle: Callable[[float], float], y0: float, y1: float, bulge: float, q: float
-) -> tuple[float, int] | None:
-    """The last count change of ``angle(s)``, s in [0, 1], as (s, direction +1/-1), or None.
-
-    ``y0``/``y1``: the angle at the ends; ``bulge``: a bound on how far it strays from the chord
-    between them (0 for a straight line); ``q``: radians per count.
-    """
-    if stays_in_cell(y0, y1, bulge, q):
-        return None
-    c0, c1 = round(y0 / q), round(y1 / q)
-    points = min(MAX_POINTS, MIN_POINTS + 2 * abs(c1 - c0))
-    prev_s, prev_c = 1.0, c1
-    for k in range(points - 1, -1, -1):
-        s = k / points
-        c = c0 if k == 0 else round(angle(s) / q)
-        if c != prev_c:
-            direction = 1 if prev_c > c else -1
-            boundary = (prev_c - 0.5 * direction) * q
-            return _root(angle, boundary, s, prev_s), direction
-        prev_s, prev_c = s, c
-    return None
-
-
-def _root(angle: Callable[[float], float], target: float, a: float, b: float) -> float:
-    """The crossing of ``angle(s) = target`` in [a, b] (the ends on either side; Illinois regula falsi),
-    the bracket's end on the far side of the boundary: at or just after the crossing."""
-    fa, fb = angle(a) - target, angle(b) - target
-    side = 0
-    for _ in range(100):
-        if b - a <= TOLERANCE:
-            break
-        s = b - fb * (b - a) / (fb - fa) if fb != fa else 0.5 * (a + b)
-        if not a < s < b:
-            s = 0.5 * (a + b)
-        fs = angle(s) - target
-        if fs == 0.0:
-            return s
-        if math.copysign(1.0, fs) == math.copysign(1.0, fb):
-            b, fb = s, fs
-            if side == 1:
-                fa *= 0.5
-            side = 1
-        else:
-            a, fa = s, fs
-            if side == -1:
-                fb *= 0.5
-            side = -1
-    return b

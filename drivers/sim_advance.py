@@ -2,8 +2,8 @@
 encoders' last count changes on the way (:mod:`sashil.drivers.sim`).
 
 The same arithmetic as :meth:`sashil.models.plant.RigPlant.step` (the released arm's
-:func:`~sashil.models.plant.rig_substep`, the held arm's coil alone) and as the edge search of
-:mod:`sashil.drivers.encoder_edges` (the quick test, then the last crossing on the sub-step's Hermite
+:func:`~sashil.models.plant.rig_substep`, the held arm's coil alone), then the encoders' edge search
+(:mod:`sashil.drivers.encoder_edges`' quick test, then here the last crossing on the sub-step's Hermite
 curve, a bracketed root on the boundary), for the road the simulated rig drives: its wheel, whose angle
 is ``road0 + speed * (t - road_t0)`` (no road force, no input torque). One call instead of a
 few per sub-step: each compiled call from Python costs about as much as the sub-step itself.
@@ -41,7 +41,9 @@ def _root(
     curve: tuple[float, float, float, float, float],
     road: tuple[float, ...],
 ) -> float:
-    """:func:`sashil.drivers.encoder_edges._root` on :func:`_angle`."""
+    """The crossing of ``_angle(arm, s) = target`` in [a, b] (the ends on either side; Illinois regula
+    falsi, to :data:`~sashil.drivers.encoder_edges.TOLERANCE` of the sub-step), the bracket's end on the
+    far side of the boundary: at or just after the crossing."""
     fa = _angle(arm, a, curve, road) - target
     fb = _angle(arm, b, curve, road) - target
     side = 0
@@ -77,8 +79,12 @@ def _last_crossing(
     curve: tuple[float, float, float, float, float],
     road: tuple[float, ...],
 ) -> tuple[float, int]:
-    """:func:`sashil.drivers.encoder_edges.last_crossing` on :func:`_angle`: (s, direction), direction 0
-    for none."""
+    """The last count change of the arm's (``arm``) or the road's :func:`_angle` over the sub-step, as
+    (s in [0, 1], direction +1/-1), or (0, 0) for none. ``y0``/``y1``: that angle at the ends;
+    ``bulge``: a bound on how far it strays from the chord between them (0 for a straight line);
+    ``q``: radians per count. Where the quick cell test cannot rule a change out, the counts at a few
+    points (more when many counts pass) locate the last change and :func:`_root` puts it on its
+    boundary."""
     if stays_in_cell(y0, y1, bulge, q):
         return 0.0, 0
     c0, c1 = round(y0 / q), round(y1 / q)

@@ -123,6 +123,7 @@ def test_run_over_slcan_traces_both_directions(tmp_path, slcan_rig):
 
 
 @pytest.mark.e2e  # the emulator in its own process, a drop test on the wall clock over a pty
+@pytest.mark.alone  # a drop test over slcan at the default sample timeout (2.5 ms) and link-lost time
 def test_a_single_current_can_drop_test_puts_its_trace_at_the_top_of_the_summary(tmp_path):
     link = str(tmp_path / "rig-slcan")
     emulator = subprocess.Popen(

@@ -18,7 +18,7 @@ from sashil.config import default_config
 from sashil.drivers import can_codec, firmware
 from sashil.drivers.emulator import Operator, build_device
 from sashil.drivers.emulator.wire import WireBytes, WireCan
-from sashil.drivers.encoder_edges import hermite, hermite_bulge, last_crossing, quick_test, stays_in_cell
+from sashil.drivers.encoder_edges import hermite_bulge, quick_test, stays_in_cell
 from sashil.drivers.interface import NO_EDGE, RigCommand
 from sashil.drivers.messages import (
     CMD_ENABLE,
@@ -33,6 +33,7 @@ from sashil.drivers.messages import (
 )
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.sim import SimulatedRig
+from sashil.drivers.sim_advance import _angle, _last_crossing
 from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
 
@@ -53,7 +54,29 @@ def expected_edge(count: int, offset_rad: float, speed: float) -> tuple[int, int
     return edge_us((count - 0.5 * direction) * Q, offset_rad, speed), direction
 
 
-# --- the pure edge finder -----------------------------------------------------------------------
+# --- the compiled edge finder -------------------------------------------------------------------
+# The simulated rig's search (sashil.drivers.sim_advance) takes a sub-step's curve as two tuples: the
+# relative angle's Hermite curve (y0, m0, y1, m1, t0) and the road wheel (h, road0, speed, road_t0),
+# whose angle at s of the sub-step is road0 + speed * (t0 + s * h - road_t0). With t0 = 0, h = 1 and
+# road_t0 = 0, s is the time: the road is the line road0 + speed * s.
+#: the road at rest at 0
+STILL = (1.0, 0.0, 0.0, 0.0)
+
+
+def hermite(y0: float, m0: float, y1: float, m1: float, s: float) -> float:
+    """The arm's angle the compiled search sees at ``s`` for the Hermite curve alone (the road still)."""
+    return _angle(True, s, (y0, m0, y1, m1, 0.0), STILL)
+
+
+def last_crossing(
+    arm: bool, y0: float, y1: float, bulge: float, curve: tuple[float, ...], road: tuple[float, ...]
+) -> tuple[float, int] | None:
+    """The compiled search's last count change of the arm (``arm``) or the road, as (s, direction),
+    or None."""
+    s, direction = _last_crossing(arm, y0, y1, bulge, Q, (*curve, 0.0), road)
+    return (s, direction) if direction else None
+
+
 def test_the_hermite_curve_has_its_ends_and_slopes_and_the_bulge_bounds_it():
     y0, m0, y1, m1 = 0.2, 1.5, -0.1, -0.7
     assert hermite(y0, m0, y1, m1, 0.0) == y0 and hermite(y0, m0, y1, m1, 1.0) == pytest.approx(y1)
@@ -62,6 +85,13 @@ def test_the_hermite_curve_has_its_ends_and_slopes_and_the_bulge_bounds_it():
     bulge = hermite_bulge(y0, m0, y1, m1)
     worst = max(abs(hermite(y0, m0, y1, m1, k / 1000) - (y0 + (y1 - y0) * k / 1000)) for k in range(1001))
     assert worst <= bulge
+
+
+def test_the_road_adds_its_line_to_the_arms_curve():
+    curve, road = (0.2, 1.5, -0.1, -0.7, 0.0), (1.0, 0.05, -0.3, 0.0)
+    for s in (0.0, 0.25, 0.6, 1.0):
+        assert _angle(False, s, curve, road) == pytest.approx(0.05 - 0.3 * s)
+        assert _angle(True, s, curve, road) == pytest.approx(hermite(*curve[:4], s) + 0.05 - 0.3 * s)
 
 
 def test_the_quick_test_rules_out_an_edge_only_where_the_search_finds_none():
@@ -86,11 +116,8 @@ def test_the_quick_test_rules_out_an_edge_only_where_the_search_finds_none():
         if keeps:
             ruled_out += 1
             assert result == -1.0
-
-            def arm(s: float, y0=y0, m0=m0, y1=y1, m1=m1, r0=r0, r1=r1) -> float:
-                return hermite(y0, m0, y1, m1, s) + r0 + s * (r1 - r0)
-
-            assert last_crossing(arm, y0 + r0, y1 + r1, arm_bulge, Q) is None
+            road = (1.0, r0, r1 - r0, 0.0)
+            assert last_crossing(True, y0 + r0, y1 + r1, arm_bulge, (y0, m0, y1, m1), road) is None
         else:
             searched += 1
             assert result == arm_bulge
@@ -99,23 +126,37 @@ def test_the_quick_test_rules_out_an_edge_only_where_the_search_finds_none():
     assert not stays_in_cell(0.5 * Q, 0.5 * Q, 0.0, Q) and stays_in_cell(0.4 * Q, 0.4 * Q, 0.0, Q)
 
 
-def test_last_crossing_of_a_straight_line_is_its_last_boundary():
+@pytest.mark.parametrize("arm", [True, False], ids=["arm", "road"])
+def test_last_crossing_of_a_straight_line_is_its_last_boundary(arm):
+    """The line as the arm's curve (a Hermite curve whose slopes are its chord's) over a still road,
+    or as the road under a still arm."""
+
+    def line(start: float, slope: float) -> dict:
+        if arm:
+            return {"curve": (start, slope, start + slope, slope), "road": STILL}
+        return {"curve": (0.0, 0.0, 0.0, 0.0), "road": (1.0, start, slope, 0.0)}
+
     # 0.3 q to 3.2 q: counts 0 -> 3, the last boundary 2.5 q at s = (2.5 - 0.3) / 2.9
-    s, direction = last_crossing(lambda s: (0.3 + 2.9 * s) * Q, 0.3 * Q, 3.2 * Q, 0.0, Q)
+    s, direction = last_crossing(arm, 0.3 * Q, 3.2 * Q, 0.0, **line(0.3 * Q, 2.9 * Q))
     assert direction == 1 and s == pytest.approx(2.2 / 2.9, abs=1e-7)
-    s, direction = last_crossing(lambda s: (0.3 - 1.0 * s) * Q, 0.3 * Q, -0.7 * Q, 0.0, Q)
+    s, direction = last_crossing(arm, 0.3 * Q, -0.7 * Q, 0.0, **line(0.3 * Q, -1.0 * Q))
     assert direction == -1 and s == pytest.approx(0.8, abs=1e-7)
-    assert last_crossing(lambda s: (0.1 + 0.2 * s) * Q, 0.1 * Q, 0.3 * Q, 0.0, Q) is None
+    assert last_crossing(arm, 0.1 * Q, 0.3 * Q, 0.0, **line(0.1 * Q, 0.2 * Q)) is None
 
 
 def test_a_motion_that_leaves_its_count_and_comes_back_has_its_return_edge():
-    # up through 0.5 q and back below it within the step: the last edge is the way down, at s = 0.75
+    # up through 0.5 q (at s = 0.22) and back below it within the step (at s = 0.68): the last edge is
+    # the way down, where 0.2 + 1.8 s - 2 s^2 = 0.5, s = (1.8 + sqrt(0.84)) / 4; at s = 0.5, one of the
+    # search's points, the angle is 0.6 q, inside the next count
     def angle(s: float) -> float:
-        return (0.2 + 1.6 * s * (1 - s) * 1.0) * Q - 0.2 * Q * s
+        return (0.2 + 2.0 * s * (1 - s)) * Q - 0.2 * Q * s
 
-    found = last_crossing(angle, angle(0.0), angle(1.0), 1.0 * Q, Q)
+    # the quadratic is its own Hermite curve through its ends and slopes (1.8 q and -2.2 q)
+    curve = (angle(0.0), 1.8 * Q, angle(1.0), -2.2 * Q)
+    found = last_crossing(True, angle(0.0), angle(1.0), 1.0 * Q, curve, STILL)
     assert found is not None and found[1] == -1
     assert angle(found[0]) == pytest.approx(0.5 * Q, abs=1e-9) and found[0] > 0.5
+    assert found[0] == pytest.approx((1.8 + math.sqrt(0.84)) / 4, abs=1e-7)
 
 
 # --- the simulated rig ----------------------------------------------------------------------------

@@ -37,7 +37,8 @@ from sashil.drivers.messages import (
     Version,
 )
 
-pytestmark = pytest.mark.e2e
+# the image's SysTick and the host's deadlines on the wall clock: by itself (pyproject's markers)
+pytestmark = [pytest.mark.e2e, pytest.mark.alone]
 
 ROOT = Path(__file__).resolve().parents[1]
 FIRMWARE = ROOT / "drivers" / "firmware"

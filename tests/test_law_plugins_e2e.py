@@ -55,6 +55,7 @@ def test_the_example_runs_over_the_emulated_serial_link_unchanged(tmp_path, law)
     assert run.config["controller"]["law"] == law and np.ptp(run.data["current_cmd_a"]) > 0.1
 
 
+@pytest.mark.alone  # the device watchdog timed to 50 ms + one cycle + the coil's decay
 def test_a_law_slower_than_its_period_lets_the_device_watchdog_rest_the_coil(tmp_path):
     """A law that blocks for 0.2 s: the host cannot command meanwhile, so the board's watchdog
     (driver.watchdog_ms, 50 ms) cuts the coil current; the loop counts the missed deadlines."""

@@ -142,6 +142,7 @@ def test_run_over_the_link_with_corrupt_frames_completes_and_counts_them(transpo
     assert (bad if driver == "serial" else missed) > 0
 
 
+@pytest.mark.alone  # the default 2.5 ms sample timeout, which a starved pty exceeds
 @pytest.mark.parametrize("fault", ["--stall-after", "--disconnect-after"])
 @pytest.mark.parametrize("transport, driver", DRIVERS)
 def test_link_fault_trips_to_zero_within_three_cycles(fault, transport, driver, emulator, tmp_path):
@@ -172,6 +173,7 @@ def test_link_fault_trips_to_zero_within_three_cycles(fault, transport, driver, 
         assert link["timeouts"] == 1 and 2.5 <= link["zero_current_after_ms"] < 25.0
 
 
+@pytest.mark.alone  # the device watchdog timed to 50 ms + one cycle
 def test_host_silence_lets_the_device_watchdog_cut_the_current(emulator, tmp_path):
     """A host that stops commanding: the device's current command is 0 within 50 ms + 1 cycle."""
     from sashil.config import default_config
@@ -199,6 +201,7 @@ def test_host_silence_lets_the_device_watchdog_cut_the_current(emulator, tmp_pat
 
 
 @pytest.mark.parametrize("transport, driver", DRIVERS)
+@pytest.mark.alone  # the host's estimate joined to the truth by the device's sample times, to 0.2 count
 def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transport, driver, emulator, tmp_path):
     from sashil.drivers.emulator import read_truth_csv
 

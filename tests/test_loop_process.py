@@ -343,6 +343,7 @@ def test_the_views_read_the_runs_health_while_it_runs(tmp_path):
     assert health[0]["samples_lost"] == health[0]["bad_frames"] == health[0]["watchdog"] == 0  # no link
 
 
+@pytest.mark.alone  # the transmissibility of periods on the wall clock, which a starved loop stretches
 def test_a_sweep_on_the_real_clock_runs_each_frequency_in_a_loop_process(tmp_path):
     """A stepped sine's frequencies each run in a loop process of their own: the views read the
     loop process's stream, and the transmissibility and clipping counts come back as in one process."""

@@ -12,7 +12,6 @@ import contextlib
 import csv
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -23,12 +22,13 @@ import numpy as np
 import pytest
 from test_panel import fake_run
 
+from sashil.testing.browser import chromium_path, launch_chromium
+
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')")
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = [
     pytest.mark.e2e,
-    pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (apt-get install chromium; .ci/run does)"),
+    pytest.mark.skipif(chromium_path() is None, reason="no system Chromium (apt-get install chromium; .ci/run does)"),
 ]
 #: a first run on a machine compiles the loop's kernels (cached after): the page waits for it
 FIRST_TRACE_MS = 90_000
@@ -84,7 +84,7 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
         frames["binary" if isinstance(payload, bytes) else "text"] += 1
 
     with sync_api.sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True)
+        browser = launch_chromium(playwright)
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.on("websocket", lambda ws: ws.on("framereceived", count))
@@ -238,7 +238,7 @@ def test_a_drop_test_from_the_page_in_chromium(tmp_path):
             serve_panel(tmp_path, "--config", relaxed_config(tmp_path)) as (url, runs),
             sync_api.sync_playwright() as playwright,
         ):
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True)
+            browser = launch_chromium(playwright)
             try:
                 page = browser.new_page(viewport={"width": 1400, "height": 1000})
                 page.goto(url)

@@ -9,6 +9,7 @@ the first test.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -49,22 +50,26 @@ def test_a_tool_left_out_here_runs_in_quick_mode_elsewhere(script: str) -> None:
 @pytest.mark.parametrize(
     "script", [path for path in SCRIPTS if path.name not in RUN_ELSEWHERE.keys() | E2E], ids=lambda path: path.name
 )
-def test_tool_runs_in_quick_mode(script: Path) -> None:
-    _runs_in_quick_mode(script, {})
+def test_tool_runs_in_quick_mode(script: Path, warm_sashil) -> None:
+    # a fork of the tests' warm interpreter runs the script as ``python tools/SCRIPT --quick`` would
+    # (tests/warm_sashil.py): the imports and kernels every tool loads are paid once per worker
+    _runs_in_quick_mode(script, {}, warm_sashil.python)
 
 
 @pytest.mark.e2e
 @pytest.mark.parametrize("script", [path for path in SCRIPTS if path.name in E2E], ids=lambda path: path.name)
 def test_link_tool_runs_in_quick_mode(script: Path, warm_sashil) -> None:
-    # the sashil commands it starts fork the tests' warm interpreter (SASHIL_COMMAND, tests/warm_sashil.py)
-    _runs_in_quick_mode(script, {"SASHIL_COMMAND": " ".join(warm_sashil.command)})
+    # a fresh interpreter, killed with what it started if it overruns (below); the sashil commands it
+    # starts fork the tests' warm interpreter (SASHIL_COMMAND, tests/warm_sashil.py)
+    _runs_in_quick_mode(script, {"SASHIL_COMMAND": " ".join(warm_sashil.command)}, [sys.executable])
 
 
-def _runs_in_quick_mode(script: Path, env: dict[str, str]) -> None:
+def _runs_in_quick_mode(script: Path, env: dict[str, str], python: list[str]) -> None:
     # in a session of its own: a tool that overruns is killed with what it started (an emulator at
-    # real-time priority, a worker pool), which would otherwise spin on for the rest of the suite
+    # real-time priority, a worker pool), which would otherwise spin on for the rest of the suite. A
+    # warm fork (the client's child) is first told SIGTERM, which the client passes on to it.
     with subprocess.Popen(
-        [sys.executable, f"tools/{script.name}", "--quick"],
+        [*python, f"tools/{script.name}", "--quick"],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -75,7 +80,12 @@ def _runs_in_quick_mode(script: Path, env: dict[str, str]) -> None:
         try:
             stdout, stderr = tool.communicate(timeout=120)
         except BaseException:
-            os.killpg(tool.pid, signal.SIGKILL)
+            if python != [sys.executable]:
+                tool.terminate()
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    tool.wait(timeout=10)
+            with contextlib.suppress(ProcessLookupError):  # a warm client that ended with its fork
+                os.killpg(tool.pid, signal.SIGKILL)
             tool.communicate()
             raise
     assert tool.returncode == 0, (

@@ -174,6 +174,7 @@ def readme_commands() -> list[list[str]]:
 
 
 @pytest.mark.e2e
+@pytest.mark.alone  # every tune within the run's 4 s on the wall clock
 def test_the_readme_tune_example_changes_a_running_sashil_run_and_replay_reproduces_it(tmp_path, capsys):
     out = str(tmp_path / "R")
     run, *tunes = [[out if arg == "runs/tuned" else arg for arg in argv] for argv in readme_commands()]

@@ -177,6 +177,7 @@ def test_load_run_of_a_multi_current_drop_test_lists_sub_runs(drop_runs):
 
 
 @pytest.mark.e2e  # sashil run is always on the wall clock
+@pytest.mark.alone  # the default share of missed deadlines, at normal priority
 def test_load_run_of_a_loop_run_with_road(tmp_path):
     out = tmp_path / "run"
     assert main(["run", "--duration", "0.5", "-q", *QUIET_RT, "--format", "parquet", "--out", str(out)]) == 0

@@ -25,8 +25,9 @@ are not the ones the committed figures were taken of: change the page, then run 
     .venv/bin/python tools/panel_figures.py
     .venv/bin/python tools/panel_figures.py --quick   # 0.5 s runs, no report; PNGs to a temporary folder
 
-Needs Playwright (the ``test`` extra) and Chromium at ``/usr/bin/chromium`` (``apt-get install
-chromium``); ``--quick`` says in one line which is missing and exits 0.
+Needs Playwright (the ``test`` extra) and the system's Chromium (``apt-get install chromium``), started
+as the browser tests start it (:mod:`sashil.testing.browser`); ``--quick`` says in one line which is
+missing and exits 0.
 """
 
 from __future__ import annotations
@@ -44,23 +45,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from sashil.testing.browser import chromium_path, launch_chromium
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "figures"
 STATIC = ROOT / "src" / "sashil" / "panel" / "static"
 FIGURES = ("panel.png", "panel-runs.png")
 RECORD = "panel.json"
-CHROMIUM = Path("/usr/bin/chromium")
-#: Debian's Chromium as a child of a test or a CI job: no sandbox (root in a container), no GPU, no
-#: network of its own (no component updates, sync or first-run calls)
-CHROMIUM_FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-)
 #: the figures' loop rate (see the module's docstring: no overruns on a loaded machine)
 RATE_HZ = 250.0
 #: shots taken again from a fresh folder when a run missed a deadline
@@ -82,8 +73,8 @@ def missing() -> str | None:
         import playwright.sync_api  # noqa: F401
     except ImportError:
         return "playwright is not installed (pip install -e '.[test]')"
-    if not CHROMIUM.is_file():
-        return f"no Chromium at {CHROMIUM} (apt-get install chromium)"
+    if chromium_path() is None:
+        return "no system Chromium (apt-get install chromium)"
     return None
 
 
@@ -154,9 +145,7 @@ def shoot(out: Path, quick: bool) -> list[str]:
     seconds = 0.5 if quick else 8.0
     with tempfile.TemporaryDirectory(prefix="sashil-panel-figures-") as tmp, serve_panel(Path(tmp)) as url:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(
-                executable_path=str(CHROMIUM), headless=True, args=list(CHROMIUM_FLAGS)
-            )
+            browser = launch_chromium(playwright)
             try:
                 page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
                 page.goto(url)
