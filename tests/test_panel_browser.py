@@ -11,10 +11,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import os
-import re
-import signal
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,7 +18,7 @@ import numpy as np
 import pytest
 from test_panel import fake_run
 
-from sashil.testing.browser import chromium_path, launch_chromium
+from sashil.testing.browser import chromium_path, launch_chromium, panel_server
 
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')")
 
@@ -40,27 +36,8 @@ def serve_panel(tmp_path: Path, *options: str) -> Iterator[tuple[str, Path]]:
     folder; its printed URL and runs folder; SIGINT at the end (the server stops any run at 0 A and
     exits)."""
     fake_run(tmp_path / "runs", "20261126T100000Z-run")
-    child = subprocess.Popen(
-        [sys.executable, "-m", "sashil", "panel", "--port", "0", "--runs", str(tmp_path / "runs"), *options],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        line = child.stdout.readline() if child.stdout else ""
-        match = re.search(r"(http://127\.0\.0\.1:\d+/\?token=[0-9a-f]+)", line)
-        assert match, f"no URL printed: {line!r} {child.stderr.read() if child.stderr else ''}"
-        yield match.group(1), tmp_path / "runs"
-    finally:
-        child.send_signal(signal.SIGINT)
-        try:
-            child.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-        for stream in (child.stdout, child.stderr):
-            if stream is not None:
-                stream.close()
+    with panel_server(["--runs", str(tmp_path / "runs"), *options]) as url:
+        yield url, tmp_path / "runs"
 
 
 @pytest.fixture

@@ -36,16 +36,12 @@ import argparse
 import contextlib
 import hashlib
 import json
-import re
-import signal
-import subprocess
-import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from sashil.testing.browser import chromium_path, launch_chromium
+from sashil.testing.browser import chromium_path, launch_chromium, panel_server
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "figures"
@@ -87,30 +83,8 @@ def serve_panel(lab: Path) -> Iterator[str]:
         f"# the manual's panel figures: a loop rate a loaded machine keeps\nloop:\n  rate_hz: {RATE_HZ:g}\n",
         encoding="utf-8",
     )
-    child = subprocess.Popen(
-        [sys.executable, "-m", "sashil", "panel", "--port", "0", "--config", "bench.yaml", "--runs", "runs"],
-        cwd=lab,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
-    )
-    try:
-        line = child.stdout.readline() if child.stdout else ""
-        match = re.search(r"(http://127\.0\.0\.1:\d+/\?token=[0-9a-f]+)", line)
-        if not match:
-            raise SystemExit(f"sashil panel printed no URL: {line!r} {child.stderr.read() if child.stderr else ''}")
-        yield match.group(1)
-    finally:
-        child.send_signal(signal.SIGINT)
-        try:
-            child.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-        for stream in (child.stdout, child.stderr):
-            if stream is not None:
-                stream.close()
+    with panel_server(["--config", "bench.yaml", "--runs", "runs"], cwd=lab) as url:
+        yield url
 
 
 def start(page: Any, law: str, params: dict[str, str], duration: str = "") -> None:
