@@ -18,7 +18,7 @@ from sashil.config.frozen import freeze, thaw
 from sashil.config.schema import defaults
 from sashil.config.sections import CONTROLLER
 
-__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "controller_section", "read_key"]
+__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key"]
 
 
 def read_key(config: Mapping[str, Any], path: str) -> Any:
@@ -30,11 +30,6 @@ def read_key(config: Mapping[str, Any], path: str) -> Any:
             raise KeyError(f"config key {path!r} is not in the resolved config")
         value = value[part]
     return value
-
-
-def controller_section(config: Mapping[str, Any]) -> dict[str, Any]:
-    """A config's ``controller`` section, its defaults filled in where a config predates a key."""
-    return {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
 
 
 @dataclass(frozen=True)
@@ -68,8 +63,9 @@ class StageParts:
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> StageParts:
-        """The parts of a config, resolved or being resolved (a section a config predates takes its defaults)."""
-        controller = controller_section(config)
+        """The parts of a config, resolved or being resolved (a ``controller`` key a config predates
+        takes its default)."""
+        controller = {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
         rig = config.get("rig") or {}
         tau = controller.get("coil_tau_s")
         tau = rig.get("coil_tau_s") if tau is None else tau
