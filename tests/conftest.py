@@ -27,7 +27,7 @@ import can
 import pytest
 from warm_sashil import WarmSashil
 
-from sashil.config import default_config
+from sashil.engine.resolve import default_config
 
 #: how long a thread or child that is on its way out may take to end after the test
 GRACE_S = 2.0

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from sashil.calibrate.analysis import APPLIED_ROAD, records_of, road_acceleration, with_applied_road
-from sashil.calibrate.plan import RoadChirp, Step
-from sashil.calibrate.rig import StepResult
-from sashil.config import default_config
+from sashil.engine.resolve import default_config
 from sashil.identify.data import Record, load_records
 from sashil.identify.rig_models import MODELS
 from sashil.identify.road import angle_acceleration, applied_road_angle, count_quantum, edge_boundaries
+from sashil.lab.calibration.analysis import APPLIED_ROAD, records_of, road_acceleration, with_applied_road
+from sashil.lab.calibration.plan import RoadChirp, Step
+from sashil.lab.calibration.rig import StepResult
 
 COUNTS = 4096
 Q = 2.0 * math.pi / COUNTS

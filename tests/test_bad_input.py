@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sashil.cli import main
-from sashil.config import load_config
 from sashil.config.sections import SCHEMA
+from sashil.engine.resolve import load_config
 from sashil.errors import ConfigError
 
 

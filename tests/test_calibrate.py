@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import yaml
 
-from sashil.calibrate.plan import RoadChirp, plan_from_config
 from sashil.cli import main
-from sashil.config import default_config, load_params
+from sashil.config import load_params
+from sashil.engine.resolve import default_config
+from sashil.lab.calibration.plan import RoadChirp, plan_from_config
 
 SMALL_PLAN = {
     "currents_a": [0.0, 1.0],
@@ -249,8 +250,8 @@ def _sample(seq: int, theta_deg: float, flags: int) -> object:
 @pytest.mark.parametrize("flags, held", [(0x02, True), (0x00, False)])
 def test_a_drop_test_takes_a_simulated_operators_flagged_hold_wherever_it_is(flags, held):
     # the emulator with one --hold-deg holds every drop at -5 deg; a plan step asks for -2.5 deg
-    from sashil.config import default_config
-    from sashil.experiments.drop_test import DropTestPlan, DropTestSettings
+    from sashil.engine.resolve import default_config
+    from sashil.lab._drop_test import DropTestPlan, DropTestSettings
 
     settings = DropTestSettings.from_config(default_config(), -2.5, 0.0, 1.0)
     plan = DropTestPlan(settings, 4096)
@@ -262,7 +263,7 @@ def test_a_drop_test_takes_a_simulated_operators_flagged_hold_wherever_it_is(fla
 
 
 def _drop_result(step, gap_at_s: float | None):
-    from sashil.calibrate.rig import StepResult
+    from sashil.lab.calibration.rig import StepResult
 
     t = np.arange(0.0, 3.0, 1e-3)
     theta = -0.087 * np.exp(-t) * np.cos(10 * t)  # a decaying swing: the fit would use all of it
@@ -274,7 +275,7 @@ def _drop_result(step, gap_at_s: float | None):
 
 
 def test_gap_cut_finds_a_host_pause_inside_the_record_and_ignores_one_after_it():
-    from sashil.calibrate.analysis import gap_cut
+    from sashil.lab.calibration.analysis import gap_cut
 
     step = plan_from_config(default_config()).fit_steps()[0]
     assert gap_cut(_drop_result(step, None), 4096) is None
@@ -282,7 +283,7 @@ def test_gap_cut_finds_a_host_pause_inside_the_record_and_ignores_one_after_it()
 
 
 def test_a_step_cut_short_by_a_link_gap_is_repeated_and_the_whole_record_kept(tmp_path, monkeypatch):
-    from sashil.calibrate import session
+    from sashil.lab.calibration import session
 
     calls: list[str] = []
 
@@ -320,10 +321,10 @@ def _plan_on_an_emulated_board(tmp_path, monkeypatch, console: bool, gap_step: i
     ``console`` the operator reads the host's prompts from a file of its console, as ``sashil
     emulate --prompts`` does; without, it plays the plan's angles in order (``--hold-deg``).
     Returns (step name, held angle [deg]) per attempt."""
-    from sashil.calibrate import session
     from sashil.drivers.emulator import HostConsole, Operator, build_device
     from sashil.drivers.interface import FLAG_HELD
     from sashil.drivers.messages import CMD_ENABLE, PACING_DEVICE, Command, Configure, Sample
+    from sashil.lab.calibration import session
 
     config = default_config()
     plan = plan_from_config(config)

@@ -131,7 +131,7 @@ def test_bootstrap_is_deterministic_and_brackets_the_estimate():
 
 
 def test_an_extra_step_never_widens_and_one_along_the_quantity_shrinks_it_most():
-    from sashil.calibrate.extra import predicted_ratio
+    from sashil.lab.calibration.extra import predicted_ratio
 
     rng = np.random.default_rng(11)
     J = rng.normal(size=(500, 3)) * np.array([1.0, 1.0, 0.01])  # the third direction barely pinned

@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from sashil.calibrate import calibrate_emulated
-from sashil.config import default_config, load_params
+from sashil.config import load_params
+from sashil.engine.resolve import default_config
+from sashil.lab.calibration import calibrate_emulated
 
 pytestmark = pytest.mark.e2e  # the emulator in a child process over a pty, on the wall clock
 

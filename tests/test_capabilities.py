@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from sashil.config import default_config
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigCapabilities, capabilities_of
+from sashil.engine.resolve import default_config
 
 
 def _config(name: str, pacing: str = "device") -> dict:

@@ -136,7 +136,7 @@ class _FailingRig:
 
 def test_a_link_failure_mid_test_keeps_the_data_and_ends_at_zero_amps(config):
     from sashil.drivers import open_rig
-    from sashil.experiments.drop_test import run_drop_test
+    from sashil.lab._drop_test import run_drop_test
 
     rig = _FailingRig(open_rig(rig_parts(config)), fail_on=1300)  # 0.3 s hold, then ~1 s of oscillation
     record = run_drop_test(config, -5.0, 1.0, 10.0, rig=rig)

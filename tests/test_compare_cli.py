@@ -13,7 +13,7 @@ import pytest
 from doc_blocks import example
 
 from sashil.cli import main
-from sashil.experiments.compare import arm_acceleration
+from sashil.lab.compare_metrics import arm_acceleration
 
 SHORT = ["--duration", "3", "--set", "compare.settle_s=1", "--set", "road.period_s=10"]
 

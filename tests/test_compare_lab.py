@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
 from sashil.lab._compare import CompareLaw, compare, laws_of, split_sets
 from sashil.recording.outputs import Outputs

@@ -129,8 +129,8 @@ def test_a_file_law_is_labelled_by_its_name_with_its_origin_beside_it(tmp_path):
         )
     )
     spec = f"{law}:RateBangBang"
-    from sashil.config.resolve import ConfigSource, resolve
     from sashil.control.registry import make_stage
+    from sashil.engine.resolve import ConfigSource, resolve
 
     config = resolve(ConfigSource(controller=spec), "run")
     assert make_stage(StageParts.read(config))[0] == "rate-bangbang"  # run.png's title and summary.json's controller

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from sashil.config import default_config, load_config, load_params
+from sashil.config import load_params
+from sashil.engine.resolve import default_config, load_config
 from sashil.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,9 +18,9 @@ from typing import Any
 import pytest
 
 from sashil.config import typed
-from sashil.config.resolve import ConfigSource, resolve
 from sashil.config.schema import Section
 from sashil.config.sections import SCHEMA
+from sashil.engine.resolve import ConfigSource, resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))

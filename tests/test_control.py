@@ -7,7 +7,6 @@ import math
 
 import pytest
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.estimator import RigEstimator, TrackingFilter, rate_response
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
@@ -17,8 +16,9 @@ from sashil.control.registry import make_controller
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigSample
 from sashil.drivers.mismatch import mismatch_fractions, plant_sections
+from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError, LawError
-from sashil.experiments.drop_test import run_drop_test
+from sashil.lab._drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 from sashil.runtime.clock import VirtualClock
 

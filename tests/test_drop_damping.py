@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
-from sashil.experiments.drop_test import run_drop_test
-from sashil.experiments.metrics import (
+from sashil.engine.resolve import default_config
+from sashil.lab._drop_test import run_drop_test
+from sashil.lab.metrics import (
     DAMPING_CYCLES,
     damping_ratio_of,
     drop_metrics,

@@ -12,12 +12,12 @@ import math
 
 import pytest
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.kalman import EDGE_BAD_MIN_EVENTS, KalmanRigEstimator
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.interface import NO_EDGE, TWO_PI, RigSample
+from sashil.engine.resolve import default_config
 from sashil.errors import SafetyTrip
 
 COUNTS = 4096

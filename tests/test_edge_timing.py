@@ -14,7 +14,6 @@ import math
 
 import pytest
 
-from sashil.config import default_config
 from sashil.drivers import can_codec, firmware
 from sashil.drivers.emulator import Operator, build_device
 from sashil.drivers.emulator.wire import WireBytes, WireCan
@@ -34,6 +33,7 @@ from sashil.drivers.messages import (
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.sim import SimulatedRig
 from sashil.drivers.sim_advance import _angle, _last_crossing
+from sashil.engine.resolve import default_config
 from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant
 

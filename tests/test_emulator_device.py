@@ -6,7 +6,6 @@ import math
 
 import pytest
 
-from sashil.config import default_config
 from sashil.drivers import rig_parts
 from sashil.drivers.emulator import Faults, HostConsole, Operator, build_device
 from sashil.drivers.emulator.runner import Emulator
@@ -28,6 +27,7 @@ from sashil.drivers.messages import (
 )
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine.resolve import default_config
 
 MS = 1_000_000
 

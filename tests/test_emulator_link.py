@@ -9,7 +9,6 @@ from __future__ import annotations
 import can
 import pytest
 
-from sashil.config import default_config
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.can_codec import database
 from sashil.drivers.emulator import EmulatorThread, Faults
@@ -17,6 +16,7 @@ from sashil.drivers.emulator import device as device_module
 from sashil.drivers.emulator.transports import Pty
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import RigCommand, RigState
+from sashil.engine.resolve import default_config
 from sashil.errors import DriverError, DriverIOError
 
 pytestmark = pytest.mark.e2e  # wall clock, real pty/link/processes: `pytest -m "not e2e"` skips them

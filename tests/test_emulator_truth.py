@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.emulator import TRUTH_COLUMNS, EmulatorThread, TruthLog, read_truth_csv
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import TWO_PI, RigCommand
+from sashil.engine.resolve import default_config
 from sashil.errors import DataFileError
 from sashil.models.hysteresis import rig_params
 from sashil.models.plant import RigPlant

@@ -6,11 +6,11 @@ import json
 
 import pytest
 
-from sashil.config import default_config
 from sashil.config.frozen import freeze_config
 from sashil.config.parts import RunSpec, read_key
 from sashil.drivers import backend_reads, open_rig
 from sashil.engine import assemble, loop_in_process
+from sashil.engine.resolve import default_config
 from sashil.runtime.clock import RealClock, VirtualClock, default_clock
 from sashil.runtime.loop_process import LoopProcess
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy.signal import welch
 
-from sashil.config import default_config
+from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError
-from sashil.experiments.iso8608 import CLASSES, N_BAND, iso8608_height, spatial_psd
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.roads.iso8608 import CLASSES, N_BAND, iso8608_height, spatial_psd
+from sashil.roads.option import RoadParts, parse_road
 
 #: ISO 8608 Table 1: Gd(n0) geometric mean of each class [10^-6 m^3]
 TABLE = {"A": 16, "B": 64, "C": 256, "D": 1024, "E": 4096, "F": 16384, "G": 65536, "H": 262144}

@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.kalman import KalmanRigEstimator, discrete_model, steady_state_gain
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import TWO_PI, RigCommand, RigSample
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError
-from sashil.experiments.sweep import sine_profile
+from sashil.lab._sweep import sine_profile
 from sashil.models.hysteresis import BoucWenParams
 from sashil.models.plant import RigPlant
 
@@ -151,7 +151,7 @@ def test_the_right_inertia_never_falls_back():
 
 
 def test_estimator_settings_are_checked_like_the_rest_of_the_config(tmp_path):
-    from sashil.config import load_config
+    from sashil.engine.resolve import load_config
 
     path = tmp_path / "bad.yaml"
     path.write_text("controller:\n  kalman_quantisation: dither\n")

@@ -13,10 +13,10 @@ import pytest
 import yaml
 
 import sashil
-from sashil.config import default_config, dump_config
+from sashil.config import dump_config
 from sashil.config.frozen import FrozenSection, thaw
 from sashil.config.parts import LoopParts, StageParts
-from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.engine.resolve import ConfigSource, Option, default_config, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
 from sashil.lab.events import Event

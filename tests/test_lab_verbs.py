@@ -11,13 +11,13 @@ import sys
 import numpy as np
 import pytest
 
-from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError, DataFileError, SashilError
-from sashil.experiments.metrics import drop_metrics
 from sashil.lab._calibrate import calibrate
 from sashil.lab._drop_test import drop_test
 from sashil.lab._replay import recorded_config, replay
 from sashil.lab._simulate import drop_table, simulate
+from sashil.lab.metrics import drop_metrics
 from sashil.models.registry import MODEL_PARAMS
 from sashil.recording.outputs import Outputs
 

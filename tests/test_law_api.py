@@ -10,13 +10,12 @@ import textwrap
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config, load_config
-from sashil.config.overrides import apply_overrides
 from sashil.config.parts import StageParts
 from sashil.control import Law, LawState, Param
 from sashil.control.law_registry import find_law, law_names
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigSample
+from sashil.engine.resolve import apply_overrides, default_config, load_config
 from sashil.errors import ConfigError, LawError
 
 BUILT_INS = {

@@ -176,9 +176,9 @@ def test_link_fault_trips_to_zero_within_three_cycles(fault, transport, driver, 
 @pytest.mark.alone  # the device watchdog timed to 50 ms + one cycle
 def test_host_silence_lets_the_device_watchdog_cut_the_current(emulator, tmp_path):
     """A host that stops commanding: the device's current command is 0 within 50 ms + 1 cycle."""
-    from sashil.config import default_config
     from sashil.drivers import open_rig
     from sashil.drivers.interface import FLAG_WATCHDOG, RigCommand
+    from sashil.engine.resolve import default_config
 
     emu = emulator("serial")
     config = default_config()
@@ -245,8 +245,8 @@ def test_sweep_over_the_link_shakes_the_road_and_joins_the_emulator_truth(transp
     # GAP_S (a loaded host's pause; a fit's record ends at the first one) hides the edges the road
     # crossed in it, and the commands after it reach the wheel with another delay, up to the next
     # edge. Over the whole run, gaps and all, the error is a twentieth of a count RMS.
-    from sashil.calibrate.analysis import GAP_S
     from sashil.identify.road import applied_road_angle, held_speed
+    from sashil.lab.calibration.analysis import GAP_S
 
     cycles = np.genfromtxt(out / "cycles.csv", delimiter=",", names=True)[:-1]  # less the shutdown's row
     rows = np.array([row_of[int(seq)] for seq in cycles["seq"]])

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import pytest
 
-from sashil.config import default_config
 from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.link_rig import LinkRig, LinkSettings
 from sashil.drivers.messages import CMD_ENABLE, Command, Sample
+from sashil.engine.resolve import default_config
 from sashil.errors import DriverTimeoutError
 
 

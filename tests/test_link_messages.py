@@ -13,7 +13,6 @@ import tty
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.emulator import EmulatorThread
 from sashil.drivers.firmware import compiler
@@ -27,6 +26,7 @@ from sashil.drivers.messages import (
     Version,
 )
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
+from sashil.engine.resolve import default_config
 from sashil.errors import DriverError
 
 pytestmark = pytest.mark.e2e  # real ptys (and the emulator in a thread)

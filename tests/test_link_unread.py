@@ -7,10 +7,10 @@ nothing, at once, so a message the rig dropped would show as a missing sample, n
 
 from __future__ import annotations
 
-from sashil.config import default_config
 from sashil.drivers import rig_parts
 from sashil.drivers.link_rig import LinkRig, LinkSettings
 from sashil.drivers.messages import PROTOCOL_VERSION, Message, Sample, Status, Version
+from sashil.engine.resolve import default_config
 
 
 class ChunkedLink(LinkRig):

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import sashil
-from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab import closed_loop
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.signals import StopFlag

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from sashil.config import default_config
-from sashil.experiments.optimal_bound import _forward, _gradient, envelope_cost, optimal_bound
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.engine.resolve import default_config
+from sashil.lab.optimal_bound import _forward, _gradient, envelope_cost, optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.roads.option import RoadParts, parse_road
 
 H = 1e-3
 

@@ -308,7 +308,7 @@ def test_a_run_streams_tunes_and_stops_at_0_a(panel):
     # the saved YAML is a config --config reads, with the tuned value
     path = folder.parent / "tuned.yaml"
     path.write_text(yaml.safe_dump(saved))
-    from sashil.config.resolve import ConfigSource, resolve
+    from sashil.engine.resolve import ConfigSource, resolve
 
     assert resolve(ConfigSource(config=path), "run")["controller"]["c_sky"] == 2.5
 
@@ -671,7 +671,7 @@ def test_a_page_value_that_is_no_number_is_argparses_line(tmp_path):
 
 
 def test_sub_runs_are_labelled_in_the_order_their_loops_run(tmp_path):
-    from sashil.experiments.sweep import frequencies
+    from sashil.lab._sweep import frequencies
     from sashil.panel.bench import sub_runs
 
     bench = Bench(runs_dir=tmp_path / "runs")

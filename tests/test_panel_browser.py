@@ -162,7 +162,7 @@ def test_bench_in_chromium_start_tune_space_bar_stop(panel_url, tmp_path):
     data = read_csv(folder / "data.csv")
     saved_config = tmp_path / "tuned.yaml"
     saved_config.write_text(saved_yaml)
-    from sashil.config.resolve import ConfigSource, resolve
+    from sashil.engine.resolve import ConfigSource, resolve
 
     assert resolve(ConfigSource(config=saved_config), "run")["controller"]["c_sky"] == pytest.approx(tuned)
     csv_path = tmp_path / "visible.csv"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sashil.experiments.drop_test import run_drop_test
+from sashil.lab._drop_test import run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 from sashil.models.plant import RigPlant
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
+from sashil.engine.resolve import default_config
 from sashil.lab.report import write_report
 from sashil.recording import plots
 from sashil.recording.run_folder import RunFolder
@@ -239,7 +239,7 @@ def _record(name: str, road: bool) -> Any:
 
 
 def test_calibrate_fit_png_titles_apart_residual_ticks_few_and_road_shown(tmp_path, figures):
-    from sashil.calibrate.report import _overlay, _profile_plot
+    from sashil.lab.calibration.report import _overlay, _profile_plot
 
     (drop, _), (road, cols) = _record("01-fit-drop", False), _record("02-fit-road", True)
     sims = [drop.theta + 1e-4, road.theta - 1e-4]

@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
-from sashil.config.overrides import apply_overrides
 from sashil.config.parts import StageParts
 from sashil.control import LawContext, LawState
 from sashil.control.law_registry import find_law
@@ -24,8 +22,9 @@ from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current,
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig, rig_parts
 from sashil.engine import assemble
-from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
+from sashil.engine.resolve import apply_overrides, default_config
 from sashil.models.hysteresis import rig_params
+from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.clock import default_clock
 from sashil.runtime.runner import run_plan
 
@@ -238,8 +237,8 @@ def test_preview_optimal_commands_the_plan_and_feeds_back_the_state_error_throug
 
 
 def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_one_scale():
-    from sashil.experiments.compare import LawResult
-    from sashil.experiments.compare_report import share_of_bound, shares_of_bound
+    from sashil.lab.compare_metrics import LawResult
+    from sashil.lab.compare_report import share_of_bound, shares_of_bound
 
     assert share_of_bound(2.0, 2.0, 1.5) == 0.0  # the best passive run itself
     assert share_of_bound(1.5, 2.0, 1.5) == 100.0  # the bound reached
@@ -257,8 +256,8 @@ def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_o
 def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_and_with_them_lies_lower():
     from dataclasses import replace
 
-    from sashil.experiments.hysteretic_bound import hysteretic_bound
-    from sashil.experiments.optimal_bound import optimal_bound
+    from sashil.lab.hysteretic_bound import hysteretic_bound
+    from sashil.lab.optimal_bound import optimal_bound
 
     config = default_config()
     config["road"]["period_s"] = 10.0

@@ -287,8 +287,9 @@ def test_each_fault_ends_in_one_line_at_rest_where_the_board_is_reachable(tmp_pa
 
 
 def test_calibrate_an_emulated_damper_over_the_rtdac(tmp_path):
-    from sashil.calibrate.emulated import calibrate_emulated
-    from sashil.config import default_config, load_params
+    from sashil.config import load_params
+    from sashil.engine.resolve import default_config
+    from sashil.lab.calibration.emulated import calibrate_emulated
 
     config = default_config()
     config["calibrate"].update(

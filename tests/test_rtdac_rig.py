@@ -11,7 +11,6 @@ import math
 
 import pytest
 
-from sashil.config import default_config
 from sashil.config.frozen import freeze_config
 from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Operator
@@ -20,6 +19,7 @@ from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.rtdac_codec import DA_ZERO, READ_REQUEST, WRITE_MARK, decode_frame
 from sashil.drivers.rtdac_rig import RtdacRig
+from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError, DriverError, DriverIOError, DriverTimeoutError, ProtocolError
 
 PERIOD_NS = 1_000_000

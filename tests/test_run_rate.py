@@ -7,8 +7,8 @@ import json
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
 from sashil.drivers.emulator import EmulatorThread
+from sashil.engine.resolve import default_config
 
 
 def test_an_impossible_rate_is_one_line_exit_2_and_no_folder(tmp_path, capsys):

@@ -13,10 +13,10 @@ import copy
 
 import pytest
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
-from sashil.experiments.drop_test import run_drop_test
+from sashil.engine.resolve import default_config
+from sashil.lab._drop_test import run_drop_test
 
 #: law, current [A] -> (period [s], first peaks [deg], first troughs [deg], damping ratio)
 RECORDED = {

@@ -125,9 +125,9 @@ def test_format_block_keeps_floats_exact_and_nan_readable():
 
 
 def test_a_stalled_recorder_stops_the_loop_at_0_a_and_keeps_every_recorded_row(tmp_path):
-    from sashil.config import load_config
     from sashil.control.stages import ConstantCurrent
     from sashil.drivers.sim import SimulatedRig
+    from sashil.engine.resolve import load_config
     from sashil.runtime.clock import VirtualClock
     from sashil.runtime.loop import ControlLoop, record_columns
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from sashil.cli import main
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
-from sashil.experiments.sweep import chirp_profile, sine_profile, stepped_sine
+from sashil.engine.resolve import default_config
+from sashil.lab._sweep import chirp_profile, sine_profile, stepped_sine
 
 
 @pytest.mark.parametrize(
@@ -156,7 +156,7 @@ def test_a_sweep_that_trips_the_angle_interlock_ends_at_zero_amps_and_keeps_its_
 def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
     from sashil.drivers import open_rig
     from sashil.errors import SafetyTrip
-    from sashil.experiments.sweep import run_profile
+    from sashil.lab._sweep import run_profile
 
     config = default_config()
     config["rig"]["angle_limit_deg"] = 3.0
@@ -219,15 +219,14 @@ def test_skyhook_add_is_no_worse_than_the_better_passive_setting_with_mismatch()
 
 # the library function, called from Python ------------------------------------------------------
 def _resolved(*options, **source):
-    from sashil.config.resolve import ConfigSource, resolve
+    from sashil.engine.resolve import ConfigSource, resolve
 
     return resolve(ConfigSource(options=options, **source), "sweep")
 
 
 def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
-    from sashil.config.resolve import Option
-    from sashil.experiments.sweep import SWEEP_COLUMNS
-    from sashil.lab._sweep import sweep
+    from sashil.engine.resolve import Option
+    from sashil.lab._sweep import SWEEP_COLUMNS, sweep
     from sashil.recording.outputs import Outputs
 
     config = _resolved(
@@ -258,7 +257,7 @@ def test_the_sweep_function_runs_a_chirp_into_the_run_it_returns(tmp_path):
 
 
 def test_the_sweep_function_runs_a_stepped_sine_a_sub_run_per_frequency(tmp_path):
-    from sashil.config.resolve import Option
+    from sashil.engine.resolve import Option
     from sashil.lab._sweep import TRANSMISSIBILITY_COLUMNS, sweep
     from sashil.recording.outputs import Outputs
 
@@ -285,7 +284,7 @@ def test_the_sweep_function_runs_a_stepped_sine_a_sub_run_per_frequency(tmp_path
 
 
 def test_a_stepped_sines_views_see_each_frequency_and_a_stop_ends_the_sweep_at_0_a(tmp_path):
-    from sashil.config.resolve import Option
+    from sashil.engine.resolve import Option
     from sashil.errors import Stopped
     from sashil.lab._sweep import sweep
     from sashil.recording.outputs import Outputs
@@ -336,7 +335,7 @@ def test_a_stepped_sines_views_see_each_frequency_and_a_stop_ends_the_sweep_at_0
     ],
 )  # fmt: skip
 def test_the_sweep_options_are_checked_when_the_config_is_resolved(options, sets, message):
-    from sashil.config.resolve import Option
+    from sashil.engine.resolve import Option
     from sashil.errors import ConfigError
 
     with pytest.raises(ConfigError) as err:

@@ -97,9 +97,9 @@ def test_the_window_is_a_power_of_two_of_whole_folds():
 
 
 def test_the_loop_runs_past_the_ring_in_constant_memory():
-    from sashil.config import default_config
     from sashil.control.stages import ConstantCurrent
     from sashil.drivers import open_rig
+    from sashil.engine.resolve import default_config
     from sashil.runtime.clock import VirtualClock
     from sashil.runtime.loop import ControlLoop
 

@@ -86,10 +86,10 @@ def test_a_run_after_the_warm_up_compiles_no_other_signature():
             from sashil.runtime.warmup import warm_kernels
             warm_kernels()
             before = {name: [str(s) for s in k.signatures] for name, k in kernels.items()}
-            from sashil.config import default_config
+            from sashil.engine.resolve import default_config
             from sashil.config.parts import StageParts
             from sashil.control.registry import make_controller
-            from sashil.experiments.drop_test import run_drop_test
+            from sashil.lab._drop_test import run_drop_test
             config = default_config()
             config["controller"].update(law="skyhook", c_sky=2.0)
             assert config["controller"]["edge_timing"]

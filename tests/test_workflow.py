@@ -10,12 +10,11 @@ import yaml
 
 import sashil
 from sashil.cli import main
-from sashil.config import default_config
-from sashil.config.overrides import apply_overrides
 from sashil.drivers import rig_parts
+from sashil.engine.resolve import apply_overrides, default_config
 from sashil.errors import ConfigError, DataFileError
-from sashil.experiments.road_option import RoadParts
 from sashil.recording.summary_schema import SCHEMA_VERSION
+from sashil.roads.option import RoadParts
 
 #: a real-clock run in-process without touching the scheduler or locking memory
 QUIET_RT = ["--set", "loop.rt.priority=0", "--set", "loop.rt.mlockall=false"]
@@ -229,7 +228,7 @@ def test_bad_road_is_exit_2(tmp_path, capsys, spec, message):
 
 def test_road_stage_sends_the_road_speed_and_keeps_the_signals():
     from sashil.drivers.interface import RigSample
-    from sashil.experiments.road_option import RoadStage, parse_road
+    from sashil.roads.option import RoadStage, parse_road
 
     profile, text = parse_road(
         "sine:2:1", RoadParts.read({**default_config(), "sweep": {**default_config()["sweep"], "ramp_s": 0}})
@@ -301,7 +300,7 @@ class _HandRig:
 
 def test_a_held_drop_test_prompts_the_operator_and_shows_the_release(config):
     from sashil.drivers import open_rig
-    from sashil.experiments.drop_test import run_drop_test
+    from sashil.lab._drop_test import run_drop_test
 
     lines: list[str] = []
     record = run_drop_test(config, -5.0, 0.0, 1.0, rig=_HandRig(open_rig(rig_parts(config))), notify=lines.append)
@@ -313,7 +312,7 @@ def test_a_held_drop_test_prompts_the_operator_and_shows_the_release(config):
 
 
 def test_the_simulated_operator_needs_no_prompt(config):
-    from sashil.experiments.drop_test import run_drop_test
+    from sashil.lab._drop_test import run_drop_test
 
     lines: list[str] = []
     run_drop_test(config, -5.0, 0.0, 0.5, notify=lines.append)
@@ -350,7 +349,7 @@ def test_timing_plot_of_percentiles(tmp_path):
 
 
 def test_road_profile_file(tmp_path):
-    from sashil.experiments.road_option import parse_road
+    from sashil.roads.option import parse_road
 
     path = tmp_path / "road.csv"
     path.write_text("time_s,theta_road_rad\n1.0,0.0\n2.0,0.01\n3.0,0.0\n")

@@ -4,7 +4,7 @@
 For each damper of :data:`DAMPERS` (not the seed alone: n 0.1-0.6, yield torque 0.2-2.5 N m at
 1 A, J 0.8-1.2, k and c varied too) it writes the plant config, starts ``sashil emulate`` behind a
 pty playing the operator at the angle each of the host's hold prompts asks, runs ``sashil
-calibrate --driver serial --inertia J`` against it (:func:`sashil.calibrate.calibrate_emulated`: real pyserial, real clock,
+calibrate --driver serial --inertia J`` against it (:func:`sashil.lab.calibration.calibrate_emulated`: real pyserial, real clock,
 the default plan) and prints:
 
 * held-out NRMSE: the fitted model against the *true* plant's noiseless response to the same
@@ -39,12 +39,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sashil.calibrate import calibrate_emulated, calibrate_rig
-from sashil.calibrate.analysis import records_of
-from sashil.calibrate.plan import plan_from_config
-from sashil.calibrate.rig import StepResult
-from sashil.config import default_config, load_params
+from sashil.config import load_params
+from sashil.engine.resolve import default_config
 from sashil.identify.rig_models import MODELS
+from sashil.lab.calibration import calibrate_emulated, calibrate_rig
+from sashil.lab.calibration.analysis import records_of
+from sashil.lab.calibration.plan import plan_from_config
+from sashil.lab.calibration.rig import StepResult
 from sashil.recording.data_file import read_data_csv
 from sashil.stats import nrmse
 

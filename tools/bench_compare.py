@@ -12,7 +12,7 @@ alternating signs, the coil lag 10 % slower), on ISO 8608 class C at the rig's s
   acceleration (the ``sashil compare`` metric);
 - each law's RMS arm acceleration as a gain over it (positive: better), worst and median over the
   dampers. Goal (clipped-optimal and skyhook-add): >= 10 % on every damper.
-- the optimal bound (:mod:`sashil.experiments.optimal_bound`, the simulated plant's viscous envelope,
+- the optimal bound (:mod:`sashil.lab.optimal_bound`, the simulated plant's viscous envelope,
   the road known in advance): how far it lies below the best constant damping, and each law's gain
   as a share of it.
 - the same figures on the training dampers (every other one of the list, from the first: the set the
@@ -46,17 +46,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drop_damping import DAMPERS
 
-from sashil.config import default_config
-from sashil.config.overrides import apply_overrides
 from sashil.config.parts import StageParts
 from sashil.control.law_api import LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
 from sashil.drivers.mismatch import plant_sections
-from sashil.experiments.compare import LawJob, run_job
-from sashil.experiments.optimal_bound import BoundResult, optimal_bound
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.engine.resolve import apply_overrides, default_config
+from sashil.lab._compare import LawJob, run_job
+from sashil.lab.optimal_bound import BoundResult, optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.roads.option import RoadParts, parse_road
 
 #: the laws measured, with the --set parameters they need
 LAWS: dict[str, list[str]] = {

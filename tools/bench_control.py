@@ -24,13 +24,13 @@ import time
 
 import numpy as np
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import open_rig, rig_parts
 from sashil.drivers.interface import RigCommand
-from sashil.experiments.drop_test import run_drop_test
-from sashil.experiments.sweep import chirp_profile, frequencies, run_profile, sine_profile, stepped_sine
+from sashil.engine.resolve import default_config
+from sashil.lab._drop_test import run_drop_test
+from sashil.lab._sweep import chirp_profile, frequencies, run_profile, sine_profile, stepped_sine
 from sashil.runtime.clock import VirtualClock
 from sashil.stats import nrmse
 

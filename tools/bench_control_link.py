@@ -58,7 +58,7 @@ from sashil.control.law_config import law_parameters
 from sashil.control.law_registry import find_law
 from sashil.control.registry import make_controller
 from sashil.drivers.emulator import read_truth_csv
-from sashil.experiments.sweep import frequencies, stepped_sine
+from sashil.lab._sweep import frequencies, stepped_sine
 from sashil.stats import nrmse
 
 TRANSPORTS = {"serial": "serial", "slcan": "can"}  # emulator transport -> host driver

@@ -26,9 +26,9 @@ import math
 import statistics
 from typing import Any
 
-from sashil.config import default_config
-from sashil.experiments.drop_test import run_drop_test
-from sashil.experiments.metrics import DropMetrics, damping_ratio_of
+from sashil.engine.resolve import default_config
+from sashil.lab._drop_test import run_drop_test
+from sashil.lab.metrics import DropMetrics, damping_ratio_of
 
 #: record lengths the damping ratio must not depend on [s]
 DURATIONS_S = (3.0, 4.0, 10.0)

@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from sashil.config import default_config
+from sashil.engine.resolve import default_config
 from sashil.runtime.clock import RealClock
 
 SASHIL = [sys.executable, "-m", "sashil"]

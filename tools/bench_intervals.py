@@ -55,12 +55,7 @@ import bench_calibrate  # the sibling script (tools/ is the script's folder on s
 import numpy as np
 import yaml
 
-from sashil.calibrate import calibrate_emulated, calibrate_rig
-from sashil.calibrate.analysis import APPLIED_ROAD, analyse, records_of, until_gap, with_applied_road
-from sashil.calibrate.emulated import BOARDS
-from sashil.calibrate.plan import plan_from_config
-from sashil.calibrate.rig import StepResult
-from sashil.config import default_config, load_config
+from sashil.engine.resolve import default_config, load_config
 from sashil.errors import SashilError
 from sashil.identify.intervals import (
     LAB,
@@ -74,6 +69,11 @@ from sashil.identify.intervals import (
 )
 from sashil.identify.rig_models import MODELS, bouc_wen_rescale
 from sashil.identify.road import held_speed
+from sashil.lab.calibration import calibrate_emulated, calibrate_rig
+from sashil.lab.calibration.analysis import APPLIED_ROAD, analyse, records_of, until_gap, with_applied_road
+from sashil.lab.calibration.emulated import BOARDS
+from sashil.lab.calibration.plan import plan_from_config
+from sashil.lab.calibration.rig import StepResult
 from sashil.recording.data_file import read_data_csv
 from sashil.stats import nrmse
 

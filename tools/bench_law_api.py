@@ -24,13 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.engine.resolve import default_config
+from sashil.roads.option import RoadParts, parse_road
 from sashil.runtime.warmup import warm_kernels
 
 #: a plain-Python skyhook of about ten lines, as a lab would write it (no numba)

@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 import serial
 
-from sashil.config import default_config
 from sashil.drivers import can_codec, open_rig, rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.messages import Command, Sample
 from sashil.drivers.serial_codec import StreamDecoder, encode_frame
+from sashil.engine.resolve import default_config
 
 #: how the benchmark runs sashil: this interpreter, or the command in the environment variable
 #: SASHIL_COMMAND (words split at spaces: another install, or the tests' warm interpreter)

@@ -51,12 +51,11 @@ import tempfile
 import threading
 from pathlib import Path
 
-from sashil.config import load_config
-from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.control.laws import Passive
 from sashil.control.stages import ConstantCurrent
 from sashil.drivers.firmware import compiler
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample
+from sashil.engine.resolve import ConfigSource, Option, load_config, resolve
 from sashil.lab import Outputs, closed_loop
 from sashil.recording.outputs import IN_RUN_FOLDER
 from sashil.recording.run_folder import RunFolder

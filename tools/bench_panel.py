@@ -47,7 +47,7 @@ AHEAD_S = 3.0
 
 
 def bare_run(folder: Path, duration: float) -> dict[str, Any]:
-    from sashil.config.resolve import ConfigSource, Option, resolve
+    from sashil.engine.resolve import ConfigSource, Option, resolve
     from sashil.lab import closed_loop
     from sashil.recording.outputs import Outputs
 

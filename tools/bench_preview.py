@@ -9,14 +9,14 @@ clock, the controller's model exact), each law runs as ``sashil compare`` runs i
 the same metric: RMS θ̈2 after ``compare.settle_s``), beside the passive damper at 0 A and at i_max.
 
 Share of the bound, on the one scale of ``sashil compare``
-(:func:`sashil.experiments.compare_report.share_of_bound`): 0 % the best passive run's RMS θ̈2, 100 %
+(:func:`sashil.lab.compare_report.share_of_bound`): 0 % the best passive run's RMS θ̈2, 100 %
 the bound's. Two bounds:
 
-- ``hysteretic``: compare's own (:mod:`sashil.experiments.hysteretic_bound`): the optimiser on the
+- ``hysteretic``: compare's own (:mod:`sashil.lab.hysteretic_bound`): the optimiser on the
   plant's Bouc-Wen model and the coil's lag, θ̈2 low-passed as compare measures it, one block over
   the whole road, the best of three starts; the model the preview law plans on. A share above
   100 % means the law beat it;
-- ``envelope``: the plant's viscous envelope (:mod:`sashil.experiments.optimal_bound`), for reference:
+- ``envelope``: the plant's viscous envelope (:mod:`sashil.lab.optimal_bound`), for reference:
   it leaves the hysteresis out, so laws beat it where the rig's hard end is harder, and it lies out
   of reach where the hysteresis stiffens the damper.
 
@@ -53,17 +53,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drop_damping import DAMPERS
 
-from sashil.config import default_config
-from sashil.config.overrides import apply_overrides
 from sashil.config.parts import StageParts
 from sashil.drivers import rig_parts
 from sashil.engine import assemble
-from sashil.experiments.compare import LawJob, run_job
-from sashil.experiments.compare_report import share_of_bound
-from sashil.experiments.hysteretic_bound import hysteretic_bound as hysteretic_bound_of
-from sashil.experiments.optimal_bound import optimal_bound
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.engine.resolve import apply_overrides, default_config
+from sashil.lab._compare import LawJob, run_job
+from sashil.lab.compare_report import share_of_bound
+from sashil.lab.hysteretic_bound import hysteretic_bound as hysteretic_bound_of
+from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.roads.option import RoadParts, parse_road
 
 #: the laws measured (the best causal laws of docs/benchmarks.md and the preview law)
 LAWS = ("lqr-clipped", "clipped-optimal", "skyhook-add", "preview-optimal")
@@ -234,7 +233,7 @@ def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, 
     """p50, p99 and max of the preview law's controller step [µs] over one run on the seed damper."""
     from sashil.control.registry import make_controller
     from sashil.drivers import open_rig
-    from sashil.experiments.road_option import RoadStage
+    from sashil.roads.option import RoadStage
     from sashil.runtime.clock import default_clock
     from sashil.runtime.runner import run_plan
 

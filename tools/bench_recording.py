@@ -32,16 +32,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from sashil.config import load_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.sim import SimulatedRig
 from sashil.engine import assemble
-from sashil.experiments.road_option import RoadStage
+from sashil.engine.resolve import load_config
 from sashil.recording.recorder import Recorder
 from sashil.recording.rerun_log import LiveTap, RerunLog
 from sashil.recording.run_folder import RunFolder
+from sashil.roads.option import RoadStage
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import record_columns
 from sashil.runtime.session import InProcessLoop, run_session

@@ -3,7 +3,7 @@
 
 One run is recorded on the simulated rig on the virtual clock (the skyhook law under a 1.2 Hz
 road sine, through the one runner, as ``sashil run`` streams it), then replayed offline by
-:func:`sashil.experiments.replay.replay` with each law: its own (skyhook), passive (no inverse),
+:func:`sashil.lab._replay.replay_rows` with each law: its own (skyhook), passive (no inverse),
 clipped-optimal (an LQR law), and skyhook again with a live change re-applied halfway (a tuned
 run's ``events.csv``). The figure is the replay's speed as a multiple of real time (best of three
 passes); the baseline is the closed-loop simulation of the same run in the same process (plant
@@ -21,16 +21,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sashil.config import default_config
-from sashil.config.overrides import apply_values
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.sim import SimulatedRig
 from sashil.engine import assemble
-from sashil.experiments.replay import differences, replay
-from sashil.experiments.road_option import RoadParts, RoadStage, parse_road
+from sashil.engine.resolve import apply_values, default_config
+from sashil.lab._replay import differences, replay_rows
 from sashil.recording.data_file import read_data_csv
+from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.runner import run_plan
 from sashil.runtime.warmup import warm_kernels
@@ -68,7 +67,7 @@ def best_replay(config: dict[str, Any], data: dict[str, Any], changes: dict, pas
     for _ in range(passes):
         controller = make_controller(None, StageParts.read(config))
         started = time.perf_counter()
-        out = replay(controller, data, int(config["rig"]["encoder_counts_per_rev"]), changes, rate_hz=1000.0)
+        out = replay_rows(controller, data, int(config["rig"]["encoder_counts_per_rev"]), changes, rate_hz=1000.0)
         best = min(best, time.perf_counter() - started)
         diff = differences(data, out)
     return best, diff

@@ -33,7 +33,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from sashil.config import default_config  # noqa: E402
 from sashil.config.frozen import freeze_config  # noqa: E402
 from sashil.drivers import rig_parts  # noqa: E402
 from sashil.drivers.emulator.rtdac_board import build_board  # noqa: E402
@@ -41,6 +40,7 @@ from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend, So
 from sashil.drivers.interface import RigCommand  # noqa: E402
 from sashil.drivers.rtdac_codec import ENDPOINT_IN, ENDPOINT_OUT, FRAME_BYTES, READ_REQUEST  # noqa: E402
 from sashil.drivers.rtdac_rig import RtdacRig  # noqa: E402
+from sashil.engine.resolve import default_config  # noqa: E402
 
 
 def quantiles_us(times: list[float]) -> tuple[float, float, float]:

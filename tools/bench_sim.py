@@ -41,13 +41,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from sashil.config import default_config
 from sashil.config.parts import SafetyParts, StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
-from sashil.experiments.drop_test import DropTestPlan, DropTestSettings, run_drop_test
+from sashil.engine.resolve import default_config
+from sashil.lab._drop_test import DropTestPlan, DropTestSettings, run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
 from sashil.recording.recorder import Recorder
 from sashil.runtime.clock import VirtualClock

@@ -99,7 +99,7 @@ def calibrate_over_serial(name: str, true: dict[str, float], tmp: Path) -> tuple
     """``sashil calibrate`` against ``sashil emulate`` with the damper ``true`` over serial (J given)."""
     import yaml
 
-    from sashil.calibrate.emulated import calibrate_emulated
+    from sashil.lab.calibration.emulated import calibrate_emulated
 
     started = time.perf_counter()
     for attempt in (1, 2):  # a shared machine's stall can end a link run: one retry, reported

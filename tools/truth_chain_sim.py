@@ -31,12 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from sashil.config import default_config
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
-from sashil.experiments.sweep import chirp_profile, sine_profile
+from sashil.engine.resolve import default_config
+from sashil.lab._sweep import chirp_profile, sine_profile
 from sashil.models.hysteresis import BoucWenParams
 from sashil.models.plant import RigPlant
 

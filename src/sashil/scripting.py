@@ -1,6 +1,6 @@
 """Experiments from a script or notebook: ``sashil.run(...)`` and ``sashil.drop_test(...)``.
 
-Each call resolves its config (:func:`sashil.config.resolve.resolve`) and calls the experiment's
+Each call resolves its config (:func:`sashil.engine.resolve.resolve`) and calls the experiment's
 library function (:mod:`sashil.lab`), as the command line does (one runner, the safety supervisor,
 the same run folder), and returns the folder as the :class:`~sashil.api.Run` that
 :func:`sashil.load_run` gives::
@@ -22,7 +22,7 @@ from typing import Any
 import yaml
 
 from sashil.api import Run
-from sashil.config.resolve import ConfigSource, Option, resolve
+from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.errors import ConfigError
 from sashil.lab._closed_loop import closed_loop
 from sashil.lab._drop_test import drop_test as run_drops

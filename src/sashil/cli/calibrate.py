@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
+    from sashil.engine.resolve import Option, resolve
     from sashil.lab._calibrate import calibrate
     from sashil.lab.events import printer
 

@@ -2,8 +2,8 @@
 
 Everything here at module level is argparse and the standard library only, so that ``sashil VERB
 --help`` loads no numerics: :func:`config_source` and :func:`outputs_of` turn parsed options into
-the :class:`~sashil.config.resolve.ConfigSource` and :class:`~sashil.recording.outputs.Outputs` the
-experiments take; the config itself is resolved by :func:`sashil.config.resolve.resolve`.
+the :class:`~sashil.engine.resolve.ConfigSource` and :class:`~sashil.recording.outputs.Outputs` the
+experiments take; the config itself is resolved by :func:`sashil.engine.resolve.resolve`.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from sashil.recording.formats import HELP as FORMAT_HELP
 from sashil.recording.outputs import IN_RUN_FOLDER, Outputs
 
 if TYPE_CHECKING:
-    from sashil.config.resolve import ConfigSource, Option
     from sashil.config.typed import RunConfig
+    from sashil.engine.resolve import ConfigSource, Option
 
 Config = dict[str, Any]
 
@@ -36,7 +36,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_set_option(parser: argparse.ArgumentParser) -> None:
-    """``--set section.key=value`` (repeatable), applied by :func:`sashil.config.resolve.resolve`."""
+    """``--set section.key=value`` (repeatable), applied by :func:`sashil.engine.resolve.resolve`."""
     parser.add_argument(
         "--set",
         action="append",
@@ -155,9 +155,9 @@ def say(args: argparse.Namespace, message: str) -> None:
 
 
 def config_source(args: argparse.Namespace, options: Sequence[Option] = ()) -> ConfigSource:
-    """The :class:`~sashil.config.resolve.ConfigSource` of the common options (``--config``,
+    """The :class:`~sashil.engine.resolve.ConfigSource` of the common options (``--config``,
     ``--params``, ``--controller``, ``--set``, ``--driver``, ``--port``) and the verb's own ``options``."""
-    from sashil.config.resolve import ConfigSource
+    from sashil.engine.resolve import ConfigSource
 
     return ConfigSource(
         config=getattr(args, "config", None),
@@ -171,10 +171,10 @@ def config_source(args: argparse.Namespace, options: Sequence[Option] = ()) -> C
 
 
 def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None) -> RunConfig:
-    """The config of the common options, resolved and checked (:func:`~sashil.config.resolve.resolve`,
+    """The config of the common options, resolved and checked (:func:`~sashil.engine.resolve.resolve`,
     read-only), and the ``--format`` values checked against its driver: for the verbs whose own
     options set no config key (``doctor``, ``emulate``)."""
-    from sashil.config.resolve import resolve
+    from sashil.engine.resolve import resolve
 
     if getattr(args, "current", None) is not None and getattr(args, "controller", None) not in (None, "passive"):
         raise ConfigError(f"--current: only for --controller passive (got --controller {args.controller})")

@@ -21,7 +21,7 @@ from sashil.cli.common import (
     outputs_of,
     setup_logging,
 )
-from sashil.experiments.road_syntax import SYNTAX as ROAD_SYNTAX
+from sashil.roads.syntax import SYNTAX as ROAD_SYNTAX
 
 EXAMPLE = "sashil compare --road iso8608:C --duration 30 --controller skyhook-add --controller clipped-optimal"
 
@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
+    from sashil.engine.resolve import Option, resolve
     from sashil.lab._compare import compare, laws_of, split_sets
     from sashil.lab.events import printer
 

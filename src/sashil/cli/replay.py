@@ -20,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from sashil.config.resolve import resolve
+    from sashil.engine.resolve import resolve
     from sashil.lab._replay import recorded_config, replay
     from sashil.lab.events import printer
 

@@ -16,8 +16,8 @@ from sashil.cli.common import (
     setup_logging,
 )
 from sashil.errors import ConfigError
-from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
-from sashil.experiments.road_syntax import SYNTAX as ROAD_SYNTAX
+from sashil.roads.syntax import DEFAULT_SIM_ROAD
+from sashil.roads.syntax import SYNTAX as ROAD_SYNTAX
 
 EXAMPLE = "sashil run --duration 10 --controller passive --current 0.5 --out runs/passive-0.5A"
 
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
+    from sashil.engine.resolve import Option, resolve
     from sashil.lab._closed_loop import closed_loop
     from sashil.lab.events import printer
 

@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
+    from sashil.engine.resolve import Option, resolve
     from sashil.lab._simulate import simulate
     from sashil.lab.events import printer
     from sashil.models.registry import MODEL_PARAMS

@@ -54,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.config.resolve import Option, resolve
+    from sashil.engine.resolve import Option, resolve
     from sashil.lab._sweep import sweep
     from sashil.lab.events import printer
 

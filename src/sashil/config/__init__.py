@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Collection, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,35 +17,7 @@ from sashil.models.registry import check_model
 
 Config = dict[str, Any]
 
-__all__ = ["Config", "apply_params", "default_config", "dump_config", "load_config", "load_params"]
-
-
-def default_config() -> Config:
-    """The default config: simulated rig, seed parameters, 1 kHz, the passive law at 0 A."""
-    config = defaults(SCHEMA)
-    check_controller(config, "defaults")
-    return config
-
-
-def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
-    """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`;
-    ``replaced``: the parameters of a law that ``controller.law`` has just replaced)."""
-    from sashil.config.parts import StageParts
-    from sashil.control.law_config import check_controller as check
-
-    section = config.get("controller")
-    if not isinstance(section, dict):
-        raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
-    check(section, StageParts.read(config), source, replaced)
-
-
-def law_reads_road_ahead(spec: str) -> bool:
-    """Whether the law ``spec`` declares that it reads the road ahead
-    (:func:`sashil.control.law_config.reads_road_ahead`); False for one that cannot be found (its own
-    check says why)."""
-    from sashil.control.law_config import reads_road_ahead
-
-    return reads_road_ahead(spec)
+__all__ = ["Config", "apply_params", "dump_config", "load_params", "read_config"]
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -90,14 +62,16 @@ def text_line_of(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
-def load_config(path: str | Path | None = None) -> Config:
-    """Load and validate a config file; ``None`` gives the default config.
+def read_config(path: str | Path | None = None) -> Config:
+    """Read a config file, validated against the schema; ``None`` gives the default config. The law
+    in it and its parameters are checked where the config is resolved
+    (:func:`sashil.engine.resolve.load_config`), by the laws' own declarations.
 
     A config may name a parameter file with ``include_params: FILE`` (relative to the config),
     which replaces its ``model`` section, as ``--params`` does on the command line.
     """
     if path is None:
-        return default_config()
+        return defaults(SCHEMA)
     path = Path(path)
     doc = _read_yaml(path)
     include = None
@@ -109,7 +83,6 @@ def load_config(path: str | Path | None = None) -> Config:
     config = validate(doc, SCHEMA, str(path))
     if include is not None:
         config = apply_params(config, (path.parent / include))
-    check_controller(config, str(path))
     return config
 
 

@@ -28,7 +28,7 @@ class FrozenSection(dict[str, Any]):
     def _refuse(self, *_: Any, **__: Any) -> NoReturn:
         raise TypeError(
             f"the resolved config is read-only ({getattr(self, '_where', '') or 'top level'}): "
-            "resolve a new config (sashil.config.resolve) or copy it with sashil.config.frozen.thaw"
+            "resolve a new config (sashil.engine.resolve) or copy it with sashil.config.frozen.thaw"
         )
 
     __setitem__ = __delitem__ = _refuse
@@ -55,7 +55,7 @@ def freeze(config: Mapping[str, Any], where: str = "") -> FrozenSection:
 
 
 def freeze_config(config: Mapping[str, Any]) -> RunConfig:
-    """A whole config (one :func:`~sashil.config.resolve.resolve` checked, or a copy derived from
+    """A whole config (one :func:`~sashil.engine.resolve.resolve` checked, or a copy derived from
     such a one: a sub-run's, the simulated plant's) frozen and typed as the resolved config it is."""
     return cast("RunConfig", freeze(config))
 

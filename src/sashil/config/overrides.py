@@ -3,7 +3,8 @@
 Each override is parsed as YAML (``500`` is a number, ``skyhook`` a string, ``null``, ``true``,
 ``[0.1, 0.9]`` a list, exactly as in a config file), set at its dotted key in a copy of the
 resolved config, and the whole config is validated again by the config file's own code path
-(:func:`sashil.config.schema.validate`, with the model section's own check, then the law's). So a
+(:func:`sashil.config.schema.validate`, with the model section's own check; the law's own check
+follows where the config is resolved, :func:`sashil.engine.resolve.apply_values`). So a
 ``--set`` accepts exactly what a config file accepts, and a bad one fails with one line naming the
 key and what was expected, e.g. ``--set: loop.rate_hz: expected a number > 0 and <= 20000, got
 'fast'``.
@@ -12,12 +13,11 @@ key and what was expected, e.g. ``--set: loop.rate_hz: expected a number > 0 and
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import yaml
 
-from sashil.config import check_controller
 from sashil.config.schema import validate
 from sashil.config.sections import CONTROLLER, SCHEMA
 from sashil.errors import ConfigError
@@ -55,18 +55,15 @@ def _set(doc: dict[str, Any], path: list[str], value: Any) -> None:
     node[path[-1]] = value
 
 
-def apply_overrides(config: dict[str, Any], overrides: Iterable[str], source: str = SOURCE) -> dict[str, Any]:
-    """A validated copy of ``config`` with each ``section.key=value`` override applied in order
-    (``source``: the option named in error messages)."""
-    return apply_values(config, [parse_override(text) for text in overrides], source)
-
-
-def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], Any]], source: str) -> dict[str, Any]:
-    """A validated copy of ``config`` with each ``(dotted path, value)`` set in order, checked as a
-    config file is (``source``: the option named in error messages); ``config`` itself when there is
-    nothing to set."""
+def set_values(
+    config: Mapping[str, Any], values: Sequence[tuple[list[str], Any]], source: str
+) -> tuple[dict[str, Any], set[str]]:
+    """A copy of ``config`` with each ``(dotted path, value)`` set in order, validated against the
+    schema as a config file is (``source``: the option named in error messages; ``config`` itself
+    when there is nothing to set), and the parameters of a law that a new ``controller.law``
+    replaced (the law's own check drops them)."""
     if not values:
-        return config  # type: ignore[return-value]
+        return config, set()  # type: ignore[return-value]
     doc: dict[str, Any] = copy.deepcopy(dict(config))
     keep = {path[1] for path, _ in values if len(path) == 2 and path[0] == "controller"}
     replaced: set[str] = set()
@@ -77,6 +74,4 @@ def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], An
             # own) go with it, unless the new law declares them or they are set alongside it
             replaced |= {key for key in section if key not in CONTROLLER.fields} - keep
         _set(doc, path, value)
-    out = validate(doc, SCHEMA, source)
-    check_controller(out, source, replaced)
-    return out
+    return validate(doc, SCHEMA, source), replaced

@@ -1,5 +1,5 @@
 """The current plan of a preview law: the optimal semi-active current over the road to come, on the
-law's model, by the optimal bound's own method (:mod:`sashil.experiments.optimal_bound`) over a
+law's model, by the optimal bound's own method (:mod:`sashil.lab.optimal_bound`) over a
 receding horizon.
 
 The model is the rig of seed 001 eq. 13 with the damper torque of eq. 9 linear in the current i,

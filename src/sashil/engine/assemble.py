@@ -22,7 +22,7 @@ __all__ = ["assemble"]
 
 
 def assemble(config: RunConfig, plan: Mapping[str, Any] | None = None) -> RunSpec:
-    """The run of a resolved ``config`` (:func:`sashil.config.resolve.resolve`) under ``plan`` (its
+    """The run of a resolved ``config`` (:func:`sashil.engine.resolve.resolve`) under ``plan`` (its
     ``kind`` and values, as the plan's ``spec()`` gives them; None: none yet)."""
     rig = rig_parts(config)
     virtual = on_virtual_clock(rig, config["driver"]["clock"])

@@ -167,7 +167,7 @@ def angle_quantum(records: Sequence[Record]) -> float:
     """The encoder count of the records' angles [rad]: the smallest step between consecutive samples
     when every step is a whole number of it (encoder records), else 0 (angles that are not counts).
     Each record's first sample is left out: it may be an estimate between counts (a turning point's
-    vertex, :func:`sashil.calibrate.analysis.from_turning_point`)."""
+    vertex, :func:`sashil.lab.calibration.analysis.from_turning_point`)."""
     steps = np.concatenate([np.abs(np.diff(r.theta[1:])) for r in records])
     moved = steps[steps > 0.0]
     if moved.size == 0:

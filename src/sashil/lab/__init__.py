@@ -23,8 +23,8 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from sashil.config.resolve import ConfigSource, Option, resolve
     from sashil.config.typed import RunConfig
+    from sashil.engine.resolve import ConfigSource, Option, resolve
     from sashil.lab._calibrate import calibrate
     from sashil.lab._closed_loop import closed_loop
     from sashil.lab._compare import CompareLaw, compare
@@ -36,9 +36,9 @@ if TYPE_CHECKING:
     from sashil.recording.outputs import Outputs
 
 _LAZY = {
-    "ConfigSource": "sashil.config.resolve",
-    "Option": "sashil.config.resolve",
-    "resolve": "sashil.config.resolve",
+    "ConfigSource": "sashil.engine.resolve",
+    "Option": "sashil.engine.resolve",
+    "resolve": "sashil.engine.resolve",
     "RunConfig": "sashil.config.typed",
     "calibrate": "sashil.lab._calibrate",
     "closed_loop": "sashil.lab._closed_loop",

@@ -1,6 +1,6 @@
 """``sashil calibrate`` as a library function: run the plan of drops and road runs on the rig, fit
 the damper model, validate it on the held-out runs, and write the calibration folder
-(:func:`sashil.calibrate.session.calibrate_rig` does the work)."""
+(:func:`sashil.lab.calibration.session.calibrate_rig` does the work)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 from typing import TYPE_CHECKING
 
 from sashil.api import Run, load_run
-from sashil.calibrate.session import calibrate_rig
+from sashil.lab.calibration.session import calibrate_rig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
 
@@ -21,7 +21,7 @@ __all__ = ["calibrate"]
 def calibrate(
     config: RunConfig, outputs: Outputs | None = None, on_event: Listener = ignore, *, source: str = "config"
 ) -> Run:
-    """Calibrate the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    """Calibrate the rig of a resolved ``config`` (:func:`sashil.engine.resolve.resolve` with verb
     ``calibrate``): the plan, model, arm inertia J, exponent profile and extra steps are its
     ``calibrate`` section (``inertia_kg_m2`` None: every torque relative to J = 1).
 

@@ -3,10 +3,11 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from sashil.api import Run, load_run
+from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble, loop_in_process
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
@@ -15,6 +16,7 @@ from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
+from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop_process import LoopProcess
 from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
@@ -25,7 +27,7 @@ if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["closed_loop"]
+__all__ = ["closed_loop", "run_in_loop", "run_plan"]
 
 
 def closed_loop(
@@ -38,7 +40,7 @@ def closed_loop(
     views: Sequence[Any] = (),
     stop: StopFlag | None = None,
 ) -> Run:
-    """Run the rig of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    """Run the rig of a resolved ``config`` (:func:`sashil.engine.resolve.resolve` with verb
     ``run``) in closed loop for ``run.duration_s`` (None: until stopped by a signal) and return its
     folder as a :class:`~sashil.api.Run`.
 
@@ -98,8 +100,6 @@ def _start_loop(
 ) -> tuple[SessionLoop, LoopProcess | None, Any, tuple[str, str, tuple[str, ...]]]:
     """The run's loop, ready: in a loop process of its own (``loop.process``) or in this one; the
     process (None in this one), the rig (None in a process) and the stage's label, road text and columns."""
-    from sashil.experiments.road_option import run_plan  # with the road's modules: only once a run starts
-
     duration = config["run"]["duration_s"]
     spec = assemble(config, run_plan(config))
     clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)  # sashil run is on the real clock
@@ -173,7 +173,6 @@ def _in_this_process(spec: RunSpec, on_event: Listener) -> tuple[Any, Any, str, 
     stage's columns, for a loop in this process (``loop.process: false``). The law, the estimator
     and numba's kernels load here: a session whose loop runs in a loop process never loads them."""
     from sashil.drivers import open_rig
-    from sashil.experiments.road_option import run_in_loop
     from sashil.runtime.loop import record_columns
     from sashil.runtime.warmup import warm_up
 
@@ -190,3 +189,28 @@ def _in_this_process(spec: RunSpec, on_event: Listener) -> tuple[Any, Any, str, 
         rig.close()
         raise
     return rig, stage, label, road_text, tuple(record_columns(stage))
+
+
+def run_plan(config: RunConfig) -> dict[str, Any]:
+    """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
+    text, what it is made with, and how long the run commands it."""
+    return {
+        "kind": "run",
+        "road": config["run"]["road"],
+        "road_parts": vars(RoadParts.read(config)),
+        "duration_s": config["run"]["duration_s"],
+    }
+
+
+def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
+    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``,
+    ``run.plan`` as :func:`run_plan` gives it): the law on its road (the rig's road motor gets the
+    profile's speed); its label and the road's text."""
+    from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
+
+    plan = run.plan
+    label, stage = make_stage(run.stage)
+    road, road_text = parse_road(plan["road"], RoadParts(**plan["road_parts"]))
+    if road is not None:
+        stage = RoadStage(stage, road, plan["duration_s"])
+    return stage, label, road_text

@@ -1,54 +1,88 @@
 """``sashil compare`` as a library function: several laws on the same road, one table
 (``compare.md``, ``metrics.csv``, ``compare.png``).
 
-Each law runs on the road ``compare.road`` for ``compare.duration_s`` through the one runner
-(:mod:`sashil.experiments.compare`), beside the passive damper at 0 A and at i_max, which are always
+Each law runs on the road ``compare.road`` for ``compare.duration_s`` through the one runner, beside the passive damper at 0 A and at i_max, which are always
 included. Every law is checked before anything runs. On the simulated rig on the virtual clock the
 laws may run in ``compare.jobs`` parallel processes; on any other rig they run one after another,
 the rig at rest (0 A, the road stopped) for ``compare.rest_s`` in between. A law that fails or trips
 gets its row saying why; the others still run.
+
+A :class:`LawJob` is one law's run: its label, its checked config (``controller.law`` and its
+parameters), the road spec, the duration and its run folder. :func:`run_job` builds the law's stage
+(:func:`sashil.control.registry.make_stage`: the controller, or a constant-current stage for a law
+that reads no state, such as ``passive``), wraps it in the road
+(:class:`~sashil.roads.option.RoadStage`: the road motor's speed each cycle), runs it with
+:func:`sashil.runtime.runner.run_plan`, streaming every cycle into the folder's ``data.csv`` (and
+its loop timing into ``timing.npz``), and derives the metrics from the stream. A job is picklable,
+so on the simulated rig jobs may run in parallel processes; the caller writes each folder's
+``config.yaml`` before and its ``summary.json`` after (:attr:`LawResult.summary`).
+
+Metrics, after ``compare.settle_s``:
+
+* comfort: RMS of the arm's angular acceleration θ̈2 low-passed at ``compare.accel_bandwidth_hz``
+  (4th-order Butterworth, forward and back). On a simulated rig θ̈2 is the plant's own,
+  (−k·θ − T)/J of its true state (seed 001 eq. 13), recorded every cycle as
+  ``arm_accel_true_rad_s2``; on any other rig it is the arm angle θ2 = θ + θ1 of the encoders,
+  differentiated twice after the low-pass, on a uniform grid of the samples' own device time (a
+  link loses samples and repeats one when a cycle reads nothing new; a grid of the rows would read
+  those as jumps) (a 4096-count encoder adds a floor of about 0.9 rad/s² RMS in quadrature at
+  20 Hz, the same for every law);
+* travel: RMS of the relative angle θ;
+* peak measured current, and the energy to the coil R·∫i² dt (R = ``compare.coil_resistance_ohm``).
 """
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
-from sashil.config.overrides import apply_overrides, parse_override
+from sashil.config.overrides import parse_override
 from sashil.config.parts import StageParts
 from sashil.config.sections import CONTROLLER
-from sashil.config.verb_checks import check_road_ahead
 from sashil.control.law_registry import find_law
-from sashil.control.registry import law_run_label
+from sashil.control.registry import law_run_label, make_stage
+from sashil.drivers import open_rig
+from sashil.drivers.interface import capabilities_of
 from sashil.engine import assemble
+from sashil.engine.checks import check_road_ahead
+from sashil.engine.resolve import apply_overrides
 from sashil.errors import ConfigError, SashilError
-from sashil.experiments.compare import LawJob, LawResult, run_job
-from sashil.experiments.compare_report import plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
-from sashil.experiments.hysteretic_bound import hysteretic_bound
-from sashil.experiments.optimal_bound import optimal_bound
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.lab.compare_metrics import METRICS, LawResult, metrics_of
+from sashil.lab.compare_report import plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
 from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.hysteretic_bound import hysteretic_bound
+from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
+from sashil.roads.option import RoadParts, RoadStage, parse_road
+from sashil.runtime.loop import stage_signals
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
 __all__ = [
     "CompareLaw",
+    "LawJob",
+    "LawResult",
+    "MeasuredStage",
     "compare",
     "folder_name",
     "law_parameters",
     "law_summary",
     "laws_of",
+    "metrics_of",
     "own_law",
+    "run_job",
     "split_sets",
 ]
 
@@ -265,7 +299,7 @@ def compare(
     config: RunConfig, laws: Sequence[CompareLaw | str], outputs: Outputs | None = None, on_event: Listener = ignore
 ) -> Run:
     """Compare ``laws`` (each a :class:`CompareLaw`, or a law spec without parameters) on the road
-    of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb ``compare``: the
+    of a resolved ``config`` (:func:`sashil.engine.resolve.resolve` with verb ``compare``: the
     ``compare`` section) into a new folder, beside the passive references, and return it as a
     :class:`~sashil.api.Run`: ``metrics.csv`` (:attr:`~sashil.api.Run.tables` ``["metrics"]``),
     ``compare.md``, ``compare.png``, and ``summary.json`` with each law's status and metrics under
@@ -402,7 +436,7 @@ def _notes(results: list[LawResult], section: Mapping[str, Any]) -> list[str]:
         f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
         "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
         "Share of the bound: where the law's RMS θ̈2 lies on one scale from the best passive run's (0 %) to the "
-        "optimal bound's (100 %), 100·(passive − law)/(passive − bound) (sashil.experiments.optimal_bound and "
+        "optimal bound's (100 %), 100·(passive − law)/(passive − bound) (sashil.lab.optimal_bound and "
         "hysteretic_bound: direct transcription, the damping or current of every millisecond free in its range, "
         "L-BFGS-B on the exact adjoint gradient, on the rig's Bouc-Wen model; the best found, not a "
         "certificate). Above 100 %: the rig beat the bound.",
@@ -464,3 +498,101 @@ def _summary(
             for r in results
         ],
     }
+
+
+#: seconds of arm acceleration kept for the time-trace plot, and its decimation
+TRACE_S = 5.0
+TRACE_DECIMATE = 5
+
+
+@dataclass
+class LawJob:
+    """One law's run (picklable: a process runs it on the simulated rig)."""
+
+    label: str
+    config: RunConfig
+    road: str
+    duration_s: float
+    #: the law's run folder (created, its config.yaml written): data.csv and timing.npz go there
+    folder: str | None = None
+
+
+class MeasuredStage:
+    """A loop stage that runs ``stage`` and records the true arm acceleration θ̈2 = (−k·θ − T)/J
+    (seed 001 eq. 13) of a rig that reports it (its capability ``true_torque``: a simulated plant) as
+    ``arm_accel_true_rad_s2`` (NaN on any other rig)."""
+
+    def __init__(self, stage: Any, rig: Any):
+
+        self.stage = stage
+        self._truth = rig if rig is not None and capabilities_of(rig).true_torque else None
+        self.signal_names = (*stage_signals(stage), "arm_accel_true_rad_s2")
+        self.arm_accel_true_rad_s2 = math.nan
+
+    def __getattr__(self, name: str) -> Any:  # the inner stage's signals
+        if name == "stage":
+            raise AttributeError(name)
+        return getattr(self.stage, name)
+
+    def step(self, sample: Any, t_ns: int, dt_ns: int) -> Any:
+        if self._truth is not None:
+            self.arm_accel_true_rad_s2 = self._truth.plant_truth().arm_accel_rad_s2
+        return self.stage.step(sample, t_ns, dt_ns)
+
+
+def _stage(config: RunConfig) -> Any:
+    return make_stage(StageParts.read(config))[1]
+
+
+def run_job(job: LawJob) -> LawResult:
+    """Run one law on the road (on the clock the config's backend runs on) and measure it; a law
+    that fails, trips or stops gets a result saying why instead of metrics."""
+    from scipy.signal import welch
+
+    config = job.config
+    result = LawResult(job.label, metrics=dict.fromkeys(METRICS, math.nan))
+    folder = RunFolder(Path(job.folder), "compare") if job.folder is not None else None
+    start = time.perf_counter()
+    try:
+        road, _ = parse_road(job.road, RoadParts.read(config))
+        stage = _stage(config)
+        if road is not None:
+            stage = RoadStage(stage, road, job.duration_s)
+        spec = assemble(config)
+        rig = open_rig(spec.rig)
+        outcome = engine.run(
+            spec,
+            MeasuredStage(stage, rig),
+            job.duration_s,
+            rig=lambda: rig,
+            data_path=folder.file("data.csv") if folder is not None else None,
+            realtime=False,
+            say=lambda _: None,
+        )
+    except Exception as err:  # a law that cannot even start: its row says why
+        result.status = f"failed: {type(err).__name__}: {(str(err).splitlines() or [''])[0]}"
+        result.wall_s = time.perf_counter() - start
+        return result
+    result.wall_s = time.perf_counter() - start
+    result.summary = dict(outcome.summary)
+    if folder is not None:
+        folder.write_timing(outcome.timing)
+    if outcome.error is not None or outcome.exit_status != "ok":
+        trips = "; ".join(str(trip.get("reason", trip)) for trip in outcome.trips)
+        why = trips or outcome.summary["error"] or outcome.stop_reason or outcome.exit_status
+        result.status = f"{outcome.exit_status}: {why}"
+        return result
+    try:
+        metrics, t, accel, result.accel_source = metrics_of(outcome.stream, config)
+    except (KeyError, ValueError) as err:
+        result.status = f"no metrics: {err}"
+        return result
+    result.metrics = metrics
+    rate = float(config["loop"]["rate_hz"])
+    f, pxx = welch(accel, fs=rate, nperseg=min(accel.size, int(8 * rate)))
+    band = f <= 4.0 * float(config["compare"]["accel_bandwidth_hz"])
+    result.psd_f, result.psd = f[band].tolist(), pxx[band].tolist()
+    window = t <= t[0] + TRACE_S
+    result.trace_t = t[window][::TRACE_DECIMATE].tolist()
+    result.trace = accel[window][::TRACE_DECIMATE].tolist()
+    return result

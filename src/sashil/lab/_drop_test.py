@@ -1,30 +1,53 @@
-"""The drop test as a library function: hold the arm at θ0, release, record the free oscillation
-at each constant current (seed 001 section 8), one sub-run per current."""
+"""The drop test of seed 001 section 8, as a library function: hold the arm at θ0 (−5°), release,
+record the free oscillation at each constant current, one sub-run per current.
+
+The plan (:class:`DropTestPlan`) is a loop stage: it commands a constant current from the start
+(so the current already flows at release), waits for a steady hold near theta0, detects the
+release and records the free oscillation for the requested duration. The same plan runs on the
+simulated rig (which plays the operator), the emulator and the bench (where a person does).
+
+Release time. When the backend plays the operator it knows the instant it lets go. Otherwise the
+plan estimates it from the departure: just after release the arm leaves the hold angle with
+constant acceleration, ``|theta - theta_hold| = a/2 * (t - t_r)^2``, so ``sqrt|dtheta|`` is linear
+in t and its zero is t_r (a least-squares line through the departure samples between two encoder
+counts and the release threshold).
+"""
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
 from sashil.config.parts import StageParts
 from sashil.control.law_registry import law_label
+from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble
-from sashil.experiments.drop_test import CONFIG_LAW, DROP_COLUMNS, controller_columns, run_drop_test, stage_controller
-from sashil.experiments.metrics import DropMetrics, damping_text, settling_text
+from sashil.engine.checks import check_theta0
+from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
+from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
 from sashil.recording.run_set import RunSet, ending
-from sashil.runtime.runner import CYCLES_FILE
+from sashil.runtime.clock import Clock
+from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec, StageParts
     from sashil.config.typed import RunConfig
 
 __all__ = ["drop_test", "result_line"]
@@ -58,7 +81,7 @@ def drop_test(
     views: Sequence[Any] = (),
     stop: StopFlag | None = None,
 ) -> Run:
-    """Run the drop tests of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    """Run the drop tests of a resolved ``config`` (:func:`sashil.engine.resolve.resolve` with verb
     ``drop-test``: ``drop_test.theta0_deg``, ``currents_a``, ``duration_s``) into a new run folder.
 
     Each current is a sub-run (``i0.000A/``, ...) when there are several. The law in
@@ -207,3 +230,506 @@ def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dic
         "can_trace": record.extra.get("can_trace"),
         "loop_process": record.extra.get("loop_process"),
     }
+
+
+#: columns of a drop test's data.csv (docs/architecture.md names)
+DROP_COLUMNS = ("time_s", "theta_rad", "theta_road_rad", "current_a", "current_cmd_a")
+#: added when a controller acts after the release (its per-cycle values, docs/architecture.md names)
+CONTROLLER_COLUMNS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
+
+
+def controller_columns(controller: Any) -> tuple[str, ...]:
+    """The columns a drop test records of its controller: what the controller says it records
+    (``signal_names``: a current law's own output, ``current_law_a``, too), else
+    :data:`CONTROLLER_COLUMNS`; none without a controller."""
+    if controller is None:
+        return ()
+    return tuple(getattr(controller, "signal_names", CONTROLLER_COLUMNS))
+
+
+#: how long a drop test on a pseudo-terminal (an emulated rig) waits for its operator's hold [s]:
+#: an emulator started with --hold-deg holds the arm from its first sample on
+EMULATED_HOLD_WAIT_S = 1.0
+
+
+def pseudo_terminal(rig: Any) -> str | None:
+    """The rig's port when it is a pseudo-terminal (``/dev/pts/N``, or a link to one: an emulator's),
+    else None (a device, a socket, the simulated rig)."""
+    import os
+
+    port = getattr(getattr(rig, "settings", None), "port", None)
+    if not isinstance(port, str) or not port.startswith("/"):
+        return None
+    return port if os.path.realpath(port).startswith("/dev/pts/") else None
+
+
+@dataclass
+class DropTestSettings:
+    theta0_rad: float
+    current_a: float
+    duration_s: float
+    rate_hz: float
+    hold_tolerance_rad: float
+    hold_time_s: float
+    release_threshold_rad: float
+    hold_timeout_s: float
+    known_release_after_s: float | None = None  # set when the backend plays the operator
+    #: the rig's port when it is a pseudo-terminal (an emulator's link): no hand can hold that arm
+    pseudo_terminal: str | None = None
+
+    def values(self) -> dict[str, Any]:
+        """The settings a loop process builds the same drop from (what the backend decides, the
+        operator's release and a pseudo-terminal's port, is decided there again)."""
+        return {name: value for name, value in vars(self).items() if name not in self.DECIDED}
+
+    #: the settings the rig decides (:meth:`DropTestPlan.attach_rig`), not the config
+    DECIDED = ("known_release_after_s", "pseudo_terminal")
+
+    @classmethod
+    def from_config(cls, config: RunConfig, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
+        drop = config["drop_test"]
+        check_theta0(config, theta0_deg, "theta0_deg")
+        return cls(
+            theta0_rad=math.radians(theta0_deg),
+            current_a=current_a,
+            duration_s=duration_s,
+            rate_hz=config["loop"]["rate_hz"],
+            hold_tolerance_rad=math.radians(drop["hold_tolerance_deg"]),
+            hold_time_s=drop["hold_time_s"],
+            release_threshold_rad=math.radians(drop["release_threshold_deg"]),
+            hold_timeout_s=drop["hold_timeout_s"],
+        )
+
+
+@dataclass
+class DropRecord:
+    """The recorded free oscillation, time zero at the release."""
+
+    columns: dict[str, np.ndarray]
+    release_time_ns: int
+    release_estimated: bool
+    hold_angle_rad: float
+    #: the loop run's summary.json keys (:func:`~sashil.runtime.runner.loop_summary`): how it ended, its
+    #: timing, trips and safe state
+    run: dict[str, Any] = field(default_factory=dict)
+    metrics: DropMetrics | None = None
+    error: SashilError | None = None  # what ended the test early (the data up to it is kept)
+    extra: dict[str, Any] = field(default_factory=dict)
+    #: every stream column of the record's rows (time zero at the release)
+    stream: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the device's clock at the release [s] (between the samples around it)
+    device_release_s: float | None = None
+
+
+def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
+    """Release instant from departure samples: zero of the line through ``sqrt|theta - hold|``."""
+    ts, roots = [], []
+    for t, angle in zip(times_ns, angles, strict=True):
+        moved = abs(angle - hold_angle)
+        if moved >= 1.5 * resolution:
+            ts.append(t)
+            roots.append(math.sqrt(moved))
+    if len(ts) >= 2:
+        t_rel = np.asarray(ts, dtype=float) - ts[0]
+        slope, intercept = np.polyfit(t_rel, np.asarray(roots), 1)
+        if slope > 0:
+            estimate = ts[0] + int(round(-intercept / slope))
+            last_still = max(
+                (t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < 0.5 * resolution),
+                default=None,
+            )
+            if last_still is None or estimate >= last_still:
+                return min(estimate, ts[0])
+            return last_still
+    still = [t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < resolution]
+    return still[-1] if still else times_ns[0]
+
+
+class DropTestPlan:
+    """Loop stage: constant current; wait for the hold; detect the release; run ``duration_s`` on.
+
+    The plan commands and decides; it keeps no copy of the data. Its :attr:`phase_code` (an index
+    of :data:`PHASES`) goes into every row of the runner's stream, and :func:`drop_record` derives
+    the record from that stream after the run (the release dated from the departure samples)."""
+
+    PHASES = ("wait-hold", "held", "record", "done")
+
+    def __init__(
+        self,
+        settings: DropTestSettings,
+        counts_per_rev: int,
+        controller: Any = None,
+        notify: Callable[[str], None] | None = None,
+    ):
+        self.s = settings
+        # operator prompts and what the plan detected (one line at each phase change, never per cycle)
+        self.notify = notify
+        # optional loop stage (sashil.control) that commands the damper after the release
+        self.controller = controller
+        #: the controller is the config's law (made by :func:`config_controller`): a loop process
+        #: can make its own
+        self.from_config = False
+        #: the controller's per-cycle values go into the stream (the loop reads them after each step,
+        #: from the controller itself: the attributes below forward them too, but slower)
+        self.signal_names = controller_columns(controller)
+        self.signal_source = controller if controller is not None else self
+        self.command = RigCommand(settings.current_a)
+        self.resolution = TWO_PI / counts_per_rev
+        self.phase = "wait-hold"
+        self.phase_code = 0
+        self.start_ns: int | None = None
+        self._still_since: int | None = None
+        self._hold_sum = 0.0
+        self._hold_count = 0
+        self.hold_angle = settings.theta0_rad
+        self.held_elsewhere = False  # a simulated operator held the arm away from theta0
+        self.operator_seen = False  # a sample said a simulated operator holds the arm (FLAG_HELD)
+        #: when the plan saw the arm leave the hold (host ns); the release itself is dated after the run
+        self.detected_ns: int | None = None
+        self._end_ns: int | None = None
+
+    #: what the loop process sends back after the run (:meth:`facts`): what the plan saw
+    FACTS = ("start_ns", "detected_ns", "hold_angle", "held_elsewhere", "operator_seen", "phase")
+
+    def spec(self) -> dict[str, Any] | None:
+        """What a loop process builds this drop from (:func:`drop_in_loop`), or None when it cannot: a
+        controller that is neither the config's law (:data:`CONFIG_LAW`) nor one with a ``spec()``
+        of its own (a calibration step's stage) stays in this process."""
+        controller: Any = None
+        if self.from_config:
+            controller = CONFIG_LAW
+        elif self.controller is not None:
+            controller = self.controller.spec() if hasattr(self.controller, "spec") else None
+            if controller is None:
+                return None
+        return {
+            "kind": "drop-test",
+            "theta0_deg": math.degrees(self.s.theta0_rad),
+            "current_a": self.s.current_a,
+            "duration_s": self.s.duration_s,
+            "settings": self.s.values(),
+            "controller": controller,
+        }
+
+    def attach_rig(self, rig: RigInterface) -> None:
+        """Meet the rig the drop runs on, before its loop starts: a backend that plays the operator
+        holds the arm now and lets go after the hold time (with the coil already at the drop's
+        current when it can); a pseudo-terminal's port is noted (no hand can hold that arm)."""
+        settings = self.s
+        release_after = max(settings.hold_time_s + 0.1, 0.3)
+        if rig.operator_hold(settings.theta0_rad, release_after):
+            settings.known_release_after_s = release_after
+            if capabilities_of(rig).initial_current:
+                rig.set_initial_current(settings.current_a)  # type: ignore[attr-defined]  # declared by the backend
+        else:
+            settings.pseudo_terminal = pseudo_terminal(rig)
+
+    def facts(self) -> dict[str, Any]:
+        """What the plan saw during the run, which the record is derived from (:func:`drop_record`),
+        with the settings the backend decided (it plays the operator; a pseudo-terminal's port)."""
+        return {
+            **{name: getattr(self, name) for name in self.FACTS},
+            "known_release_after_s": self.s.known_release_after_s,
+            "pseudo_terminal": self.s.pseudo_terminal,
+        }
+
+    def absorb(self, facts: dict[str, Any]) -> None:
+        """Take the :meth:`facts` of the same plan run in the loop process."""
+        for name in self.FACTS:
+            setattr(self, name, facts[name])
+        self.phase_code = self.PHASES.index(self.phase)
+        self.s.known_release_after_s = facts["known_release_after_s"]
+        self.s.pseudo_terminal = facts["pseudo_terminal"]
+
+    def __getattr__(self, name: str) -> Any:  # the controller's per-cycle signals (signal_names)
+        if name in self.__dict__.get("signal_names", ()) and self.__dict__.get("controller") is not None:
+            return getattr(self.controller, name)
+        raise AttributeError(name)
+
+    def _enter(self, phase: str) -> None:
+        self.phase = phase
+        self.phase_code = self.PHASES.index(phase)
+
+    @property
+    def known_release_ns(self) -> int | None:
+        """The release instant when the backend plays the operator (it knows when it lets go)."""
+        if self.s.known_release_after_s is None or self.start_ns is None:
+            return None
+        return self.start_ns + round(self.s.known_release_after_s * 1e9)
+
+    # the cycle -------------------------------------------------------------------------------
+    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
+        theta = sample.theta_rad
+        if self.start_ns is None:
+            self.start_ns = t_ns
+            if self.notify is not None and self.s.known_release_after_s is None and self.s.pseudo_terminal is None:
+                self.notify(
+                    f"{hold_prompt(math.degrees(self.s.theta0_rad))} (within "
+                    f"±{math.degrees(self.s.hold_tolerance_rad):g} deg) and hold it still; now at "
+                    f"{math.degrees(theta):.2f} deg"
+                )
+        ctl = None
+        if self.controller is not None:
+            self.controller.held = self.phase != "record"  # the operator's hand is outside the model
+            ctl = self.controller.step(sample, t_ns, dt_ns)
+        if self.phase == "record":
+            assert self._end_ns is not None  # set at the release
+            if t_ns > self._end_ns:
+                self._enter("done")
+                return None
+            return self.command if ctl is None else ctl
+        if self.phase == "wait-hold":
+            self._wait_hold(t_ns, theta, sample.flags)
+        elif self.phase == "held":
+            if abs(theta - self.hold_angle) > self.s.release_threshold_rad:
+                self._released(t_ns)
+            elif (t_ns - self.start_ns) * 1e-9 > 2 * self.s.hold_timeout_s:
+                raise DriverTimeoutError(
+                    f"drop test: the arm was held at {math.degrees(self.hold_angle):.2f} deg but not released "
+                    f"within {2 * self.s.hold_timeout_s:g} s"
+                )
+        if ctl is not None and self.phase == "record":
+            return ctl
+        return self.command
+
+    def _wait_hold(self, t_ns: int, theta: float, flags: int = 0) -> None:
+        target = self.s.theta0_rad
+        if flags & FLAG_HELD:
+            self.operator_seen = True
+        port = self.s.pseudo_terminal
+        assert self.start_ns is not None  # step() sets it on the first cycle
+        if port is not None and not self.operator_seen and (t_ns - self.start_ns) * 1e-9 > EMULATED_HOLD_WAIT_S:
+            raise ConfigError(
+                f"drop test: {port} is a pseudo-terminal (an emulated rig) whose operator does not hold the arm, "
+                f"and no hand can: start the emulator with --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                f"(e.g. sashil emulate --link {port} --hold-deg {math.degrees(self.s.theta0_rad):g} "
+                "--release-after 1) to hold it at each connection and let go"
+            )
+        if flags & FLAG_HELD and abs(theta - target) > self.s.hold_tolerance_rad:
+            # a simulated operator (the emulator's --hold-deg) says it holds the arm: take the hold
+            # where it is rather than wait for an angle it will never press to
+            if not self.held_elsewhere:
+                logging.getLogger("sashil").warning(
+                    "drop test: the rig's operator holds the arm at %.2f deg, not at theta0 = %.2f deg; "
+                    "the drop starts from there",
+                    math.degrees(theta),
+                    math.degrees(target),
+                )
+            self.held_elsewhere = True
+            target = theta
+        if abs(theta - target) <= self.s.hold_tolerance_rad:
+            if (
+                self._still_since is None
+                or abs(theta - self._hold_sum / max(self._hold_count, 1)) > 2 * self.resolution
+            ):
+                self._still_since, self._hold_sum, self._hold_count = t_ns, 0.0, 0
+            self._hold_sum += theta
+            self._hold_count += 1
+            if (t_ns - self._still_since) * 1e-9 >= self.s.hold_time_s:
+                self._enter("held")
+                self.hold_angle = self._hold_sum / self._hold_count
+                if self.notify is not None and self.s.known_release_after_s is None:
+                    self.notify(
+                        f"hold detected at {math.degrees(self.hold_angle):.2f} deg: release the arm when ready "
+                        f"(detected when it moves {math.degrees(self.s.release_threshold_rad):g} deg)"
+                    )
+        else:
+            self._still_since = None
+        assert self.start_ns is not None  # step() sets it on the first cycle
+        if self.phase == "wait-hold" and (t_ns - self.start_ns) * 1e-9 > self.s.hold_timeout_s:
+            raise DriverTimeoutError(
+                f"drop test: no steady hold within ±{math.degrees(self.s.hold_tolerance_rad):g} deg of "
+                f"{math.degrees(self.s.theta0_rad):g} deg for {self.s.hold_time_s:g} s within "
+                f"{self.s.hold_timeout_s:g} s (press the arm to theta0 and hold it still)"
+            )
+
+    def _released(self, t_ns: int) -> None:
+        """The arm left the hold: record ``duration_s`` from the release (known, or at the latest now)."""
+        self.detected_ns = t_ns
+        known = self.known_release_ns
+        self._end_ns = (t_ns if known is None else known) + round(self.s.duration_s * 1e9)
+        self._enter("record")
+        if self.notify is not None and known is None:  # a person let go (the backend knows when it did)
+            self.notify(
+                f"release detected: the arm left {math.degrees(self.hold_angle):.2f} deg; "
+                f"recording {self.s.duration_s:g} s"
+            )
+
+
+#: how far before its detection the release is looked for in the stream (the departure samples)
+RELEASE_WINDOW_S = 1.0
+
+
+def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns: int) -> DropRecord:
+    """The record from the release on, derived from the runner's stream of every cycle.
+
+    The release is the backend's known instant, else the zero of the departure (see the module
+    docstring) in the stream's rows of the last :data:`RELEASE_WINDOW_S` before the detection.
+    Columns: :data:`DROP_COLUMNS` (+ :func:`controller_columns` under a controller) and ``seq``,
+    time zero at the release; rows up to ``duration_s`` after it (the shutdown's 0 A row included
+    when the run ended earlier). ``stream`` keeps every stream column of those rows (device time,
+    road speed commanded) for a caller that needs them."""
+    names = DROP_COLUMNS + controller_columns(plan.controller) + ("seq",)
+    empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
+    if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
+        return DropRecord(empty, 0, False, plan.hold_angle)
+    t_ns = loop_start_ns + np.round(stream["time_s"] * 1e9).astype(np.int64)
+    release_ns = plan.known_release_ns
+    estimated = release_ns is None
+    if release_ns is None:
+        window = (t_ns >= plan.detected_ns - round(RELEASE_WINDOW_S * 1e9)) & (t_ns < plan.detected_ns)
+        release_ns = (
+            estimate_release_ns(
+                t_ns[window].tolist(), stream["theta_rad"][window].tolist(), plan.hold_angle, plan.resolution
+            )
+            if window.any()
+            else plan.detected_ns
+        )
+    rows = (t_ns >= release_ns) & (t_ns - release_ns <= round(plan.s.duration_s * 1e9))
+    columns = {name: stream[name][rows] for name in names}
+    columns["time_s"] = (t_ns[rows] - release_ns) * 1e-9
+    columns["seq"] = columns["seq"].astype(np.int64)
+    record = DropRecord(columns, release_ns, estimated, plan.hold_angle)
+    record.stream = {name: values[rows] for name, values in stream.items()}
+    record.stream["time_s"] = columns["time_s"]
+    if "device_time_us" in stream:  # the device's clock at the release (between two samples)
+        record.device_release_s = float(np.interp(release_ns, t_ns, stream["device_time_us"] * 1e-6))
+    return record
+
+
+#: ``run_drop_test(controller=CONFIG_LAW)``: the config's law takes over at the release, made where
+#: the loop runs (in the loop process too)
+CONFIG_LAW = "config"
+
+
+def stage_controller(stage: StageParts) -> Any:
+    """The run's controller, which takes over at the release, or None for a law that reads no
+    state (such as the passive law: the drop's constant current throughout)."""
+    from sashil.control.registry import law_reads_state, make_controller
+
+    return make_controller(None, stage) if law_reads_state(stage) else None
+
+
+def plan_drop(
+    run: RunSpec,
+    settings: DropTestSettings,
+    notify: Callable[[str], None] | None = None,
+    controller: Any = CONFIG_LAW,
+) -> DropTestPlan:
+    """The plan of one drop of ``settings`` in the assembled ``run``, not yet given its rig
+    (:meth:`DropTestPlan.attach_rig`). ``controller``: the stage that takes over at the release
+    (:data:`CONFIG_LAW`: the run's law, None: the constant current throughout)."""
+    from_config = isinstance(controller, str) and controller == CONFIG_LAW
+    plan = DropTestPlan(
+        settings,
+        run.stage.counts_per_rev,
+        stage_controller(run.stage) if from_config else controller,
+        notify,
+    )
+    plan.from_config = from_config
+    return plan
+
+
+def drop_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[DropTestPlan, str, str]:
+    """One drop built in a loop process (the ``drop-test`` plan of ``sashil.plans``: ``run.plan``
+    as :meth:`DropTestPlan.spec` gives it), its operator prompts handed to ``prompt`` as they come;
+    the stage that takes over at the release is the run's law, none, or a stage built from its spec
+    (``kind``: a ``sashil.stages`` entry)."""
+    spec = run.plan
+    controller = spec.get("controller", CONFIG_LAW)
+    if isinstance(controller, dict):
+        kind = str(controller.get("kind"))
+        stage_class = load_class(_registered(STAGES_GROUP, kind, "stage"), f"stage {kind!r}")
+        controller = stage_class.from_spec(controller)  # type: ignore[attr-defined]  # the stage's own constructor
+    plan = plan_drop(run, DropTestSettings(**spec["settings"]), prompt, controller)
+    plan.attach_rig(rig)
+    return plan, run.stage.law, "none"
+
+
+def _registered(group: str, kind: str, what: str) -> str:
+    """The target registered as ``kind`` in ``group`` (a one-line ConfigError naming the known ones)."""
+    table = entry_point_table(group)
+    if kind not in table:
+        raise ConfigError(f"no {what} of kind {kind!r} is registered (known: {', '.join(table)})")
+    return table[kind].target
+
+
+def run_drop_test(
+    config: RunConfig,
+    theta0_deg: float = -5.0,
+    current_a: float = 0.0,
+    duration_s: float = 10.0,
+    rig: RigInterface | None = None,
+    clock: Clock | None = None,
+    controller: Any = None,
+    notify: Callable[[str], None] | None = None,
+    data_path: str | Path | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
+    trace: Any = None,
+) -> DropRecord:
+    """One drop test at a constant current (or, after the release, under ``controller``: a stage,
+    or :data:`CONFIG_LAW` for the config's law).
+
+    On the real clock with ``loop.process`` (the default) the drop runs in a loop process of its
+    own (:mod:`sashil.runtime.loop_process`), which opens the rig, plays or waits for the operator
+    and runs the plan; its prompts reach ``notify`` as they come. A controller crosses to it as the
+    config's law or as its own ``spec()`` (a calibration step's stage); any other runs its drop in
+    this process. ``rig``: the rig for a run in
+    this process (default: the config's). ``data_path``: where every cycle of the loop is streamed
+    as it runs (the hold included, time from the loop's start); the record returned is the part
+    from the release. ``live``: views of the stream (``start(stream, timing)``, ``close(trips,
+    notes)``); ``stop``: a :class:`~sashil.runtime.signals.StopFlag` another thread may set;
+    ``trace``: a :class:`~sashil.recording.can_trace.CanTrace` (not started) fed the run's CAN
+    frames, closed after the run (its statistics in ``record.extra["can_trace"]``).
+
+    Returns the record from the release on. An error that ends the test early (a driver error, a
+    safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
+    up to it and the error in ``record.error``.
+    """
+    run = assemble(config)
+    plan = plan_drop(run, DropTestSettings.from_config(config, theta0_deg, current_a, duration_s), notify, controller)
+    outcome = engine.run(
+        run,
+        plan,
+        clock=clock,
+        rig=(lambda: rig) if rig is not None else None,
+        data_path=data_path,
+        live=live,
+        stop=stop,
+        trace=trace,
+    )
+    if live is not None:
+        live.close(outcome.trips, ())
+    # whatever ended the test early, the rig is at 0 A, deactivated and closed
+    error = outcome.error if outcome.error is not None else outcome.stop_error()
+    if error is not None and not isinstance(error, SashilError):
+        raise error
+    return _record(config, outcome, plan, error)
+
+
+def _record(config: RunConfig, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:
+    """The drop's record from the release on, from the run's stream: its columns, the run's summary
+    keys and facts, its metrics."""
+    record = drop_record(outcome.stream, plan, outcome.start_ns)
+    record.run = outcome.summary
+    record.error = error
+    columns = record.columns
+    if outcome.can_trace is not None:
+        record.extra["can_trace"] = outcome.can_trace
+    if outcome.loop_process is not None:
+        record.extra["loop_process"] = outcome.loop_process
+    if outcome.link is not None:
+        record.extra["link"] = outcome.link
+    if outcome.realtime:
+        record.extra["realtime"] = outcome.realtime
+    if outcome.recording is not None:
+        record.extra["recording"] = outcome.recording
+    record.metrics = drop_metrics(
+        columns["time_s"],
+        columns["theta_rad"],
+        settle_band_deg=config["drop_test"]["settle_band_deg"],
+        resolution_rad=plan.resolution,
+    )
+    return record

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.api import Run, load_run
-from sashil.config.verb_checks import input_file
+from sashil.engine.checks import input_file
 from sashil.errors import ConfigError
-from sashil.experiments.metrics import drop_metrics
 from sashil.identify.simulate import drop_test_inputs, simulate_columns
 from sashil.lab.events import Event, Listener, ignore
+from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.outputs import Outputs
@@ -53,7 +53,7 @@ def _inputs(config: RunConfig) -> tuple[dict[str, np.ndarray], np.ndarray | None
 
 
 def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listener = ignore) -> Run:
-    """Run the model of a resolved ``config`` (:func:`sashil.config.resolve.resolve` with verb
+    """Run the model of a resolved ``config`` (:func:`sashil.engine.resolve.resolve` with verb
     ``simulate`` and ``models=sashil.models.registry.MODEL_PARAMS``) on ``simulate.input`` (a
     data.csv or a run folder; None: a drop test from ``simulate.theta0_deg`` at ``current_a`` for
     ``duration_s``), starting at rest or moving (``simulate.start``), into a new run folder.

@@ -1,7 +1,7 @@
 """The bench behind the panel: one experiment at a time, started through the library, stopped by a flag.
 
 :class:`Bench` is the panel's only link to the rig. It resolves a page's choices into an
-experiment's config exactly as its verb does (:func:`sashil.config.resolve.resolve` with verb
+experiment's config exactly as its verb does (:func:`sashil.engine.resolve.resolve` with verb
 ``run``, ``drop-test`` or ``sweep``, the verb's options named as on its command line: a bad value
 is the CLI's one line and nothing starts), runs :func:`sashil.lab.closed_loop`,
 :func:`sashil.lab.drop_test` or :func:`sashil.lab.sweep` in a worker thread with a
@@ -265,7 +265,7 @@ class Bench:
         resolves its options (``sashil run``: road, duration_s; ``sashil drop-test``: theta0_deg,
         currents_a, duration_s; ``sashil sweep``: f_start_hz, f_stop_hz, duration_s,
         amplitude_deg, stepped, steps); ConfigError (one line) for anything refused."""
-        from sashil.config.resolve import ConfigSource, Option, resolve
+        from sashil.engine.resolve import ConfigSource, Option, resolve
 
         experiment = choice.get("experiment") or "run"
         if experiment not in EXPERIMENTS:
@@ -634,7 +634,7 @@ def sub_runs(config: Mapping[str, Any], experiment: str) -> list[str]:
     if experiment == "drop-test":
         return [f"{float(current):g} A" for current in config["drop_test"]["currents_a"]]
     if experiment == "sweep":
-        from sashil.experiments.sweep import frequencies
+        from sashil.lab._sweep import frequencies
 
         section = config["sweep"]
         if section["stepped"]:

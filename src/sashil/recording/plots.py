@@ -406,7 +406,7 @@ def plot_timing(path: str | Path, runs: Sequence[tuple[str, dict]]) -> Path:
 
 def chirp_frequency(time_s: np.ndarray, f_start_hz: float, f_stop_hz: float, sweep_s: float) -> np.ndarray:
     """Instantaneous road frequency of the linear chirp at ``time_s`` (held at ``f_stop_hz`` after
-    ``sweep_s``), as :func:`sashil.experiments.sweep.chirp_profile` drives it."""
+    ``sweep_s``), as :func:`sashil.lab._sweep.chirp_profile` drives it."""
     frac = np.clip(np.asarray(time_s, dtype=float) / sweep_s, 0.0, 1.0)
     return f_start_hz + (f_stop_hz - f_start_hz) * frac
 

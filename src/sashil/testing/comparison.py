@@ -1,11 +1,11 @@
 """What a lab asserts on about its law's run: comfort and travel against the best constant current,
 and the share of the optimal bound.
 
-The metrics are ``sashil compare``'s (:mod:`sashil.experiments.compare`): comfort is the RMS arm
+The metrics are ``sashil compare``'s (:mod:`sashil.lab._compare`): comfort is the RMS arm
 acceleration θ̈2 low-passed at ``compare.accel_bandwidth_hz``, travel the RMS relative angle θ, both
 after ``compare.settle_s``. The references are the passive damper at constant currents, each run on
 the same rig, road, seed and duration as the law (the law's ``config.yaml`` with the passive law).
-The optimal bound is :func:`sashil.experiments.optimal_bound.optimal_bound`'s: the best comfort any
+The optimal bound is :func:`sashil.lab.optimal_bound.optimal_bound`'s: the best comfort any
 damping inside the feasible band could reach on this road knowing it in advance, in the model's
 viscous envelope; a law's share of it is its comfort gain over the best constant current as a share
 of the bound's gain over the best constant damping (as ``compare.md`` reports it).
@@ -23,12 +23,12 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from sashil.api import Run
-from sashil.config.resolve import ConfigSource, resolve
 from sashil.config.typed import RunConfig
-from sashil.experiments.compare import LawJob, run_job
-from sashil.experiments.optimal_bound import BoundResult, optimal_bound
-from sashil.experiments.road_option import RoadParts, parse_road
+from sashil.engine.resolve import ConfigSource, resolve
+from sashil.lab._compare import LawJob, run_job
+from sashil.lab.optimal_bound import BoundResult, optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.roads.option import RoadParts, parse_road
 
 __all__ = ["Comparison", "compare_with_passive"]
 

@@ -1,7 +1,7 @@
 """The simulated rig a lab's tests run their law on, and :func:`run_law`.
 
 A run goes through the same library code as ``sashil compare`` runs each law with
-(:func:`sashil.experiments.compare.run_job`: the law's stage, the road, the one runner
+(:func:`sashil.lab._compare.run_job`: the law's stage, the road, the one runner
 :func:`~sashil.runtime.runner.run_plan` on the virtual clock, the metrics of the stream), into a run
 folder that :func:`sashil.load_run` reads: ``config.yaml`` (rerunning it with
 ``sashil compare --config`` repeats the run), ``data.csv``, ``timing.npz`` and ``summary.json``
@@ -18,14 +18,13 @@ from typing import Any
 
 from sashil.api import Run, load_run
 from sashil.config.parts import StageParts
-from sashil.config.resolve import ConfigSource, Option, resolve
 from sashil.config.typed import RunConfig
 from sashil.control.registry import law_run_label
-from sashil.experiments.compare import LawJob, run_job
-from sashil.experiments.road_option import RoadParts, parse_road
-from sashil.lab._compare import folder_name, law_summary
+from sashil.engine.resolve import ConfigSource, Option, resolve
+from sashil.lab._compare import LawJob, folder_name, law_summary, run_job
 from sashil.plugins import check_not_importing
 from sashil.recording.run_folder import RunFolder
+from sashil.roads.option import RoadParts, parse_road
 from sashil.scripting import law_spec, set_items
 
 __all__ = ["DEFAULT_ROAD", "SimRig", "run_law", "warm_up"]

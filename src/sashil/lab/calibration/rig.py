@@ -1,6 +1,6 @@
 """Running one plan step on the rig: the one adapter between calibrate and the experiment code.
 
-A step is a drop test (:func:`sashil.experiments.drop_test.run_drop_test`: hold, release, record;
+A step is a drop test (:func:`sashil.lab._drop_test.run_drop_test`: hold, release, record;
 on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does (with
 ``--prompts``, at the angle the host's prompt asks), on the bench a person) whose "controller"
 (:class:`StepStage`) commands the step's constant current and, from the release on, the road
@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.calibrate.plan import RoadChirp, Step
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
-from sashil.experiments.drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
 from sashil.identify.road import held_speed
+from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
+from sashil.lab.calibration.plan import RoadChirp, Step
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from sashil.config.verb_checks import check_theta0
+from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError
 
 if TYPE_CHECKING:

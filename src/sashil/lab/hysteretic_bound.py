@@ -1,6 +1,6 @@
 """The optimal bound on the rig's own model: the best comfort a damper could reach knowing the road
 in advance, with its Bouc-Wen state and the coil's lag, rather than the viscous envelope of
-:mod:`sashil.experiments.optimal_bound`.
+:mod:`sashil.lab.optimal_bound`.
 
 The envelope leaves out the hysteretic torque α(i)·z: where z sits at its bound z_u it is a friction
 of α1·z_u at 0 A and (α1 + α2·i_max)·z_u at i_max, so the rig's hard end is harder than the

@@ -1,5 +1,10 @@
 """The one resolution of a run's config: file, parameters, ``--set``, the law, the driver, the port
-and the verb's own options, checked by the schema once, into a read-only config.
+and the verb's own options, checked by the schema and by what the components declare (the law's
+parameters, the backend's capabilities, whether a road parses), into a read-only config.
+
+The config layer reads and validates a file against the schema (:mod:`sashil.config`); what a
+component declares is checked here, above the components: :func:`load_config` and
+:func:`apply_values` are the config's loaders with the law's own check after them.
 
 Every verb and ``sashil.run(...)`` describe where their config comes from as a
 :class:`ConfigSource`; :func:`resolve` applies it in a fixed order and resolves what depends on
@@ -12,25 +17,36 @@ is refused in one line naming it, never silently replaced.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sashil.config import Config, apply_params, check_controller, load_config, verb_checks
+from sashil.config import Config, apply_params, read_config
 from sashil.config.frozen import freeze_config, thaw
-from sashil.config.overrides import apply_values, parse_override
+from sashil.config.overrides import parse_override, set_values
+from sashil.config.parts import StageParts
 from sashil.config.schema import validate
 from sashil.config.sections import SCHEMA
 from sashil.drivers import declared_capabilities, rig_parts
+from sashil.engine import checks as verb_checks
 from sashil.errors import ConfigError
-from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD
 from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
+from sashil.roads.syntax import DEFAULT_SIM_ROAD
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
-__all__ = ["ConfigSource", "Option", "resolve"]
+__all__ = [
+    "ConfigSource",
+    "Option",
+    "apply_overrides",
+    "apply_values",
+    "check_controller",
+    "default_config",
+    "load_config",
+    "resolve",
+]
 
 #: verbs that run on the real clock whatever the backend
 REAL_CLOCK_VERBS = ("run",)
@@ -74,6 +90,47 @@ class ConfigSource:
     options: Sequence[Option] = ()
     driver: str | None = None
     port: str | None = None
+
+
+def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
+    """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`;
+    ``replaced``: the parameters of a law that ``controller.law`` has just replaced)."""
+    from sashil.control.law_config import check_controller as check_law  # the laws' entry points: only to check one
+
+    section = config.get("controller")
+    if not isinstance(section, dict):
+        raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
+    check_law(section, StageParts.read(config), source, replaced)
+
+
+def default_config() -> Config:
+    """The default config, checked: simulated rig, seed parameters, 1 kHz, the passive law at 0 A."""
+    return load_config(None)
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """A config file read and validated (:func:`sashil.config.read_config`; None: the defaults), its
+    law and parameters checked, naming the file."""
+    config = read_config(path)
+    check_controller(config, "defaults" if path is None else str(path))
+    return config
+
+
+def apply_values(config: Mapping[str, Any], values: Sequence[tuple[list[str], Any]], source: str) -> dict[str, Any]:
+    """A copy of ``config`` with each ``(dotted path, value)`` set in order
+    (:func:`sashil.config.overrides.set_values`), checked as a config file is: the schema, then the
+    law (``source``: the option named in error messages); ``config`` itself when there is nothing to set."""
+    if not values:
+        return config  # type: ignore[return-value]
+    out, replaced = set_values(config, values, source)
+    check_controller(out, source, replaced)
+    return out
+
+
+def apply_overrides(config: Mapping[str, Any], overrides: Iterable[str], source: str = "--set") -> dict[str, Any]:
+    """A checked copy of ``config`` with each ``section.key=value`` override applied in order
+    (``source``: the option named in error messages)."""
+    return apply_values(config, [parse_override(text, source) for text in overrides], source)
 
 
 def _load(source: ConfigSource) -> Config:

@@ -13,11 +13,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.calibrate.analysis import Calibration, analyse, gap_cut
-from sashil.calibrate.extra import candidates, suggest
-from sashil.calibrate.plan import Plan, Step, plan_from_config, road_chirp
-from sashil.calibrate.report import params_document, write_report
-from sashil.calibrate.rig import StepResult, StuckEncoderError, run_step
 from sashil.config.frozen import freeze_config, thaw
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble
@@ -27,6 +22,11 @@ from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import MIN_BLOCK_S, MIN_BLOCKS_PER_PARAMETER
 from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
+from sashil.lab.calibration.analysis import Calibration, analyse, gap_cut
+from sashil.lab.calibration.extra import candidates, suggest
+from sashil.lab.calibration.plan import Plan, Step, plan_from_config, road_chirp
+from sashil.lab.calibration.report import params_document, write_report
+from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import RunSet, ending
 from sashil.runtime.runner import CYCLES_FILE
@@ -154,7 +154,7 @@ def calibrate_rig(
 ) -> Outcome:
     """Calibrate the rig of ``config`` (its ``driver`` section says which: sim, serial, can).
 
-    Runs the plan of ``config['calibrate']`` (:func:`sashil.calibrate.plan.plan_from_config`),
+    Runs the plan of ``config['calibrate']`` (:func:`sashil.lab.calibration.plan.plan_from_config`),
     fits the model (seed 001 eqs. 9-17 for Bouc-Wen) to the ``fit`` runs, validates it on the
     held-out ones and writes ``out`` (default ``runs/<UTC>-calibrate/``): ``params.yaml`` (the
     shape ``sashil identify`` writes, accepted by ``--params`` on every verb), ``report.md`` with

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from sashil.experiments.compare import METRICS, LawResult
+from sashil.lab.compare_metrics import METRICS, LawResult
 from sashil.recording.labels import format_parameters
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 

@@ -5,7 +5,7 @@
 (a recorded or designed profile: columns ``time_s`` and ``theta_road_rad``, linearly interpolated,
 held at its last angle after its end; e.g. another run's ``data.csv``),
 ``--road iso8608:CLASS[:SPEED_M_S]`` (an ISO 8608 road of class A-H at ``road.speed_m_s``, through
-the rig's geometry ``road.lever_m``, seeded by ``road.seed``: :mod:`sashil.experiments.iso8608`),
+the rig's geometry ``road.lever_m``, seeded by ``road.seed``: :mod:`sashil.roads.iso8608`),
 ``--road bump:HEIGHT_DEG`` (a raised-cosine bump of ``road.bump_width_s`` at ``road.bump_start_s``)
 or ``--road none``; the amplitude defaults to ``sweep.amplitude_deg``. On the simulated rig with no ``--road`` the run
 gets :data:`DEFAULT_SIM_ROAD`, so a first run shows the arm moving instead of a flat line.
@@ -18,25 +18,23 @@ motor, as ``sashil sweep`` does.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample
+from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError, DataFileError
-from sashil.experiments.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
-from sashil.experiments.road_syntax import DEFAULT_SIM_ROAD, SYNTAX
-from sashil.experiments.sweep import chirp_profile, sine_profile
 from sashil.models.plant import RoadProfile
 from sashil.recording.data_file import read_data_csv
+from sashil.roads.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
+from sashil.roads.profiles import chirp_profile, sine_profile
+from sashil.roads.syntax import DEFAULT_SIM_ROAD, SYNTAX
 
 if TYPE_CHECKING:
-    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadParts", "RoadStage", "parse_road", "run_in_loop", "run_plan"]
+__all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadParts", "RoadStage", "parse_road"]
 
 
 @dataclass(frozen=True)
@@ -68,31 +66,6 @@ class RoadParts:
             bump_width_s=float(road["bump_width_s"]),
             bump_start_s=float(road["bump_start_s"]),
         )
-
-
-def run_plan(config: RunConfig) -> dict[str, Any]:
-    """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
-    text, what it is made with, and how long the run commands it."""
-    return {
-        "kind": "run",
-        "road": config["run"]["road"],
-        "road_parts": vars(RoadParts.read(config)),
-        "duration_s": config["run"]["duration_s"],
-    }
-
-
-def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
-    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``,
-    ``run.plan`` as :func:`run_plan` gives it): the law on its road (the rig's road motor gets the
-    profile's speed); its label and the road's text."""
-    from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
-
-    plan = run.plan
-    label, stage = make_stage(run.stage)
-    road, road_text = parse_road(plan["road"], RoadParts(**plan["road_parts"]))
-    if road is not None:
-        stage = RoadStage(stage, road, plan["duration_s"])
-    return stage, label, road_text
 
 
 def parse_road(text: str | None, parts: RoadParts) -> tuple[RoadProfile | None, str]:

@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from sashil.calibrate.analysis import PROFILE_NFEV, Calibration
-from sashil.calibrate.rig import StepResult
 from sashil.identify.data import Record
 from sashil.identify.fit import FitResult, simulate_fitted
 from sashil.identify.intervals import LAB, Intervals
 from sashil.identify.report import param_document
+from sashil.lab.calibration.analysis import PROFILE_NFEV, Calibration
+from sashil.lab.calibration.rig import StepResult
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 
 #: a parameter whose 95 % interval is wider than +- this fraction of its value is "not pinned down"
@@ -492,7 +492,7 @@ def _comparison_section(cal: Calibration) -> list[str]:
             _row(["rank", "model", "RMS [deg]", "held-out NRMSE"]),
             _row(["---"] * 4),
         ]
-        from sashil.calibrate.analysis import validate
+        from sashil.lab.calibration.analysis import validate
 
         for rank, r in enumerate(cal.results, start=1):
             vals = validate(r, cal.validate_records)

@@ -29,7 +29,6 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
-from sashil.calibrate.rig import StepResult
 from sashil.errors import DataFileError
 from sashil.identify.data import MIN_DURATION_S, Record, record_from_columns
 from sashil.identify.fit import (
@@ -45,6 +44,7 @@ from sashil.identify.fit import (
 from sashil.identify.intervals import Intervals, interval_blocks, jackknife
 from sashil.identify.rig_models import MODELS
 from sashil.identify.road import APPLIED_ROAD, road_of_columns, speed_steps_acceleration
+from sashil.lab.calibration.rig import StepResult
 from sashil.stats import nrmse
 
 #: the arm is at rest once it stays within this many encoder counts of its final angle

@@ -9,7 +9,7 @@ held-out validation, identifiability, 95 % intervals by :mod:`sashil.identify.in
 (:func:`calibrate_emulated`: the same against an emulated damper over a pty, for benchmarks).
 """
 
-from sashil.calibrate.emulated import calibrate_emulated
-from sashil.calibrate.session import Outcome, calibrate_rig
+from sashil.lab.calibration.emulated import calibrate_emulated
+from sashil.lab.calibration.session import Outcome, calibrate_rig
 
 __all__ = ["Outcome", "calibrate_emulated", "calibrate_rig"]

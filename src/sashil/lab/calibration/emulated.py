@@ -19,10 +19,10 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sashil.calibrate.plan import plan_from_config
 from sashil.config import dump_config
 from sashil.config.frozen import freeze_config, thaw
 from sashil.errors import DriverIOError
+from sashil.lab.calibration.plan import plan_from_config
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -45,7 +45,7 @@ def calibrate_emulated(
 ) -> Path:
     """Calibrate the damper of ``plant_config`` emulated over ``transport``; returns params.yaml's path.
 
-    ``plant_config``: a resolved config (``sashil.config.load_config``/``default_config``) whose
+    ``plant_config``: a resolved config (``sashil.engine.resolve.load_config``/``default_config``) whose
     ``model.params`` (and ``mismatch``, ``rig``) describe the true damper; its ``calibrate``
     section is the plan. The host runs with ``driver.sample_timeout_ms`` 300 and ``link_lost_ms``
     2000, at SCHED_FIFO priority 65 (best effort) and the emulator at 70, so that a shared

@@ -1,6 +1,6 @@
 """What each verb checks of its own keys beyond the schema, before anything runs.
 
-:func:`sashil.config.resolve.resolve` calls a verb's check (``VERB_CHECKS``) with the config it has
+:func:`sashil.engine.resolve.resolve` calls a verb's check (``VERB_CHECKS``) with the config it has
 just validated and ``named(key)``, the option that set a key (``--road``, ``--current``) or the key
 itself, so each refusal is one line naming what the user typed. These are cheap: nothing is opened,
 built or written.
@@ -71,7 +71,7 @@ def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-d
 
 def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) -> None:
     """ConfigError naming ``named(key)`` when the road ``text`` does not parse."""
-    from sashil.experiments.road_option import RoadParts, parse_road  # numpy and the road profiles: only for a road
+    from sashil.roads.option import RoadParts, parse_road  # numpy and the road profiles: only for a road
 
     try:
         parse_road(text, RoadParts.read(config))
@@ -154,18 +154,12 @@ def _road_of(config: RunConfig, key: str) -> str:
     return str(road or "none").strip()
 
 
-def reads_road_ahead(spec: str) -> bool:
-    """Whether the law ``spec`` reads the road ahead: the law's own declaration, read through the one
-    way the config reaches a law (:func:`sashil.config.law_reads_road_ahead`)."""
-    from sashil.config import law_reads_road_ahead  # the laws' entry points: only for a law
-
-    return law_reads_road_ahead(spec)
-
-
 def check_road_ahead(config: RunConfig, verb: str | None, named: Named, law: str | None = None) -> None:
     """Refuse a law that reads the road ahead (``law``, None: ``controller.law``) under a plan that
     commands no road: a drop test, a replay, a calibration, ``--road none``."""
     spec = law if law is not None else (config.get("controller") or {}).get("law")
+    from sashil.control.law_config import reads_road_ahead  # the laws' entry points: only for a law
+
     if not spec or not reads_road_ahead(str(spec)):
         return
     if verb in ROAD_PLANS:

@@ -91,7 +91,7 @@ class BoundResult:
     rms_accel_bound: float
     iterations: int
     #: the model the bound was found on: "envelope" (this module's) or "hysteretic"
-    #: (:mod:`sashil.experiments.hysteretic_bound`, where it lies lower)
+    #: (:mod:`sashil.lab.hysteretic_bound`, where it lies lower)
     model: str = "envelope"
 
     @property

@@ -1,1 +1,0 @@
-"""Experiment plans (drop test, sweep, bench run): what to command and when, apart from devices and recording."""
