@@ -13,9 +13,10 @@ from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.laws import SkyhookOnOff, band_limited_fraction
 from sashil.control.observer import BoucWenObserver
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig, rig_parts
+from sashil.drivers import open_rig
 from sashil.drivers.interface import RigSample
 from sashil.drivers.mismatch import mismatch_fractions, plant_sections
+from sashil.engine import assemble
 from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError, LawError
 from sashil.lab._drop_test import run_drop_test
@@ -217,13 +218,13 @@ def test_target_damping_drop_decays_exponentially_with_mismatch_and_constant_cur
     config = mismatched()
     ctl = make_controller("target-damping", StageParts.read(config))
     record = run_drop_test(
-        config, -5.0, 0.5, 6.0, rig=open_rig(rig_parts(config)), clock=VirtualClock(), controller=ctl
+        config, -5.0, 0.5, 6.0, rig=open_rig(assemble(config).rig), clock=VirtualClock(), controller=ctl
     )
     controlled = zetas(record.metrics)
     assert len(controlled) >= 4
     assert all(abs(z / 0.07 - 1.0) <= 0.10 for z in controlled), controlled
     constant = zetas(
-        run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(rig_parts(config)), clock=VirtualClock()).metrics
+        run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(assemble(config).rig), clock=VirtualClock()).metrics
     )
     assert constant[-1] / constant[0] > 1.2, constant  # Coulomb-like hysteresis: decrement grows as it decays
     assert record.columns["current_cmd_a"].max() > record.columns["current_cmd_a"].min()  # the controller commanded

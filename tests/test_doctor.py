@@ -123,7 +123,7 @@ def test_timer_slack():
 
 
 def test_machine_checks_cover_the_loop_section(config):
-    names = [c.name for c in machine_checks(MachineFacts(), config["loop"])]
+    names = [c.name for c in machine_checks(MachineFacts(), config["loop"]["rt"])]
     assert names == ["preemption", "sched_fifo", "memlock", "cpu_governor", "isolated_cpus", "timer_slack"]
 
 

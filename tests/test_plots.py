@@ -18,6 +18,7 @@ from sashil.engine.resolve import default_config
 from sashil.lab.report import write_report
 from sashil.recording import plots
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_config, write_summary
 
 
 @pytest.fixture
@@ -57,7 +58,7 @@ def loop_folder(root: Path, name: str, law: str, onoff: bool = False, **params: 
     config = default_config()
     config["controller"].update({"law": law, **params})
     folder = RunFolder.create(root / name, "run")
-    folder.write_config(config)
+    write_config(folder, config)
     t = np.arange(2000) * 1e-3
     road = math.radians(1.0) * np.sin(2 * np.pi * t)
     theta = 0.4 * road * np.cos(2 * np.pi * t)
@@ -79,7 +80,7 @@ def loop_folder(root: Path, name: str, law: str, onoff: bool = False, **params: 
     label = "passive 0 A" if law == "passive" else law
     stats = None if law == "passive" else {"clipped_cycles": 700, "passive_cycles": 0}
     timing = {"rate_hz": 1000.0, "cycles": 2000, "missed_deadlines": 0}
-    folder.write_summary(
+    write_summary(folder,
         {"verb": "run", "exit_status": "ok", "driver": "sim", "controller": label, "road": "sine 1 Hz, 1 deg",
          "controller_stats": stats, "timing": timing, "trips": []}
     )  # fmt: skip

@@ -9,7 +9,7 @@ import pytest
 from sashil.cli import main
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
-from sashil.drivers import open_rig, rig_parts
+from sashil.drivers import open_rig
 from sashil.engine import assemble
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.rerun_log import LiveTap, RerunLog, feasible_band, load_rrd
@@ -106,7 +106,7 @@ def test_live_tap_follows_a_loop_run_decimated(tmp_path, config):
     tap = LiveTap(RerunLog.open((*columns, "lateness_us"), save=rrd), every=10, band=(params, 1.0))
     folder = RunFolder.create(tmp_path / "R", "run")
     outcome = run_session(
-        InProcessLoop(assemble(config), open_rig(rig_parts(config)), stage, VirtualClock(), realtime=False),
+        InProcessLoop(assemble(config), open_rig(assemble(config).rig), stage, VirtualClock(), realtime=False),
         config,
         folder,
         1.5,

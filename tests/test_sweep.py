@@ -12,7 +12,6 @@ import pytest
 from sashil.cli import main
 from sashil.config.parts import StageParts
 from sashil.control.registry import make_controller
-from sashil.drivers import rig_parts
 from sashil.engine.resolve import default_config
 from sashil.lab._sweep import chirp_profile, sine_profile, stepped_sine
 
@@ -162,8 +161,8 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
     config["rig"]["angle_limit_deg"] = 3.0
     rigs, kept = [], []
 
-    def factory(cfg, road):
-        rigs.append(open_rig(rig_parts(cfg)))
+    def factory(run, road):
+        rigs.append(open_rig(run.rig))
         return rigs[-1]
 
     with pytest.raises(SafetyTrip):

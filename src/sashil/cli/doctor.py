@@ -58,34 +58,36 @@ def _check_arguments(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _check_arguments(args)
-    config = resolve_config(args)
-    driver, loop = config["driver"], config["loop"]
-    if args.walk and driver["name"] != "rtdac":
-        raise ConfigError(f"--walk: names an RT-DAC/USB2's channels (--driver rtdac), not driver {driver['name']}'s")
+    from sashil.engine import assemble
+
+    run_spec = assemble(resolve_config(args))
+    backend, loop = run_spec.rig.backend, run_spec.loop
+    if args.walk and backend != "rtdac":
+        raise ConfigError(f"--walk: names an RT-DAC/USB2's channels (--driver rtdac), not driver {backend}'s")
     from sashil.diagnostics.machine import machine_checks, read_facts
 
     sys_root = Path(args.sys_root)
-    checks: list[Check] = machine_checks(read_facts(sys_root), loop)
+    checks: list[Check] = machine_checks(read_facts(sys_root), loop.rt)
     if args.jitter_s > 0:
         from sashil.diagnostics.jitter import judge, measure
 
         checks.append(judge(measure(loop, args.jitter_s)))
-    if driver["name"] == "rtdac":
+    if backend == "rtdac":
         from sashil.diagnostics.rtdac import rtdac_checks
 
-        checks += rtdac_checks(config, args.round_trips, args.walk, args.fragment)
-    elif driver["port"] is None:
-        checks.append(Check("port", "port", "ok", f"driver {driver['name']}: no port (add --driver and --port)"))
+        checks += rtdac_checks(run_spec, args.round_trips, args.walk, args.fragment)
+    elif run_spec.rig.values.get("port") is None:
+        checks.append(Check("port", "port", "ok", f"driver {backend}: no port (add --driver and --port)"))
     else:
         from sashil.diagnostics.board import board_checks
         from sashil.diagnostics.port import port_checks
 
-        port_rows = port_checks(driver, float(loop["rate_hz"]), sys_root)
+        port_rows = port_checks({"name": backend, **run_spec.rig.values}, loop.rate_hz, sys_root)
         checks += port_rows
         if any(row.status == FAIL for row in port_rows):
             checks.append(Check("board", "hello", FAIL, "not checked: the port failed above", "fix the port first"))
         else:
-            checks += board_checks(config, args.round_trips)
+            checks += board_checks(run_spec, args.round_trips)
     code = exit_code(checks)
     if args.json:
         print(json.dumps({"exit_code": code, "checks": [c.as_dict() for c in checks]}, indent=2))

@@ -11,7 +11,7 @@ values: it is frozen, turns into JSON and back, and is all a loop process is sen
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sashil.config.frozen import freeze, thaw
@@ -136,8 +136,9 @@ class LoopParts:
 @dataclass(frozen=True)
 class RunSpec:
     """One run, assembled: its parts, the clock it runs on unless its verb chooses the real one
-    (``virtual``: simulated time) and the plan's own values (``plan``: its ``kind`` and
-    arguments). :meth:`to_json` and :meth:`from_json` carry it to a loop process."""
+    (``virtual``: simulated time), the plan's own values (``plan``: its ``kind`` and arguments) and
+    the experiment's (``options``: the values of the config keys its module declares, by name, as a
+    backend declares its own). :meth:`to_json` and :meth:`from_json` carry it to a loop process."""
 
     rig: RigParts
     stage: StageParts
@@ -145,10 +146,11 @@ class RunSpec:
     loop: LoopParts
     virtual: bool
     plan: Mapping[str, Any] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
 
     def with_plan(self, plan: Mapping[str, Any]) -> RunSpec:
         """This spec running another plan."""
-        return RunSpec(self.rig, self.stage, self.safety, self.loop, self.virtual, freeze(plan, "plan"))
+        return replace(self, plan=freeze(plan, "plan"))
 
     def to_json(self) -> dict[str, Any]:
         """Plain JSON values: each part a mapping of its fields."""
@@ -171,4 +173,5 @@ class RunSpec:
             loop=LoopParts(**{**data["loop"], "rt": freeze(data["loop"]["rt"], "loop.rt")}),
             virtual=bool(data["virtual"]),
             plan=freeze(data.get("plan") or {}, "plan"),
+            options=freeze(data.get("options") or {}, "options"),
         )

@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.frozen import freeze_config, thaw
+from sashil.config.parts import RigParts
 from sashil.diagnostics import FAIL, OK, WARN, Check
-from sashil.drivers import open_rig, rig_parts
+from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG
 from sashil.drivers.link_rig import LinkRig
 from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
@@ -22,7 +22,7 @@ from sashil.runtime.clock import RealClock
 from sashil.runtime.rt_setup import RealtimeSetup
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 #: how much longer than ``driver.watchdog_ms`` the host waits for the board to report a trip
 WATCHDOG_GRACE_S = 0.2
@@ -32,25 +32,26 @@ def _check(name: str, status: str, found: str, fix: str = "", data: dict[str, An
     return Check("board", name, status, found, fix, data or {})
 
 
-def board_checks(config: RunConfig, rounds: int) -> list[Check]:
-    """Hello/Version, ``rounds`` round trips at ``loop.rate_hz``, and the watchdog trip."""
-    host_paced = thaw(config)
-    host_paced["driver"]["pacing"] = "host"
-    rig = open_rig(rig_parts(freeze_config(host_paced)))
+def board_checks(run: RunSpec, rounds: int) -> list[Check]:
+    """Hello/Version, ``rounds`` round trips at ``loop.rate_hz``, and the watchdog trip, the run's
+    rig paced by the host."""
+    if "pacing" not in run.rig.values:
+        return [_check("hello", OK, f"driver {run.rig.backend}: no link to check")]
+    rig = open_rig(RigParts(run.rig.backend, {**run.rig.values, "pacing": "host"}))
     if not isinstance(rig, LinkRig):
         rig.close()
-        return [_check("hello", OK, f"driver {config['driver']['name']}: no link to check")]
+        return [_check("hello", OK, f"driver {run.rig.backend}: no link to check")]
     try:
         try:
             rig.configure()
         except DriverError as err:
             return [_check("hello", FAIL, str(err), "is the board powered and on this port, with this --driver?")]
         checks = [hello(rig)]
-        loop = config["loop"]
-        rt = RealtimeSetup.from_parts(loop["rt"])
+        loop = run.loop
+        rt = RealtimeSetup.from_parts(loop.rt)
         rt.apply()  # the round trips run as the loop would
         try:
-            checks.append(round_trips(rig, rounds, float(loop["rate_hz"]), loop["spin_margin_us"]))
+            checks.append(round_trips(rig, rounds, loop.rate_hz, loop.spin_margin_us))
             quiet_since = time.monotonic()  # the last Command went out; undoing the set-up takes a while
         except DriverIOError as err:
             checks.append(_check("link", FAIL, str(err), "check the cable and the adapter"))
@@ -58,7 +59,7 @@ def board_checks(config: RunConfig, rounds: int) -> list[Check]:
         finally:
             rt.restore()
         try:
-            checks.append(watchdog(rig, int(config["driver"]["watchdog_ms"]), quiet_since))
+            checks.append(watchdog(rig, int(run.rig.values["watchdog_ms"]), quiet_since))
         except DriverIOError as err:
             checks.append(_check("link", FAIL, str(err), "check the cable and the adapter"))
         if "low_latency" in rig.link_stats():

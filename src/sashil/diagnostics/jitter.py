@@ -9,8 +9,7 @@ pure, so tests feed it numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,19 +17,22 @@ from sashil.diagnostics import FAIL, OK, WARN, Check
 from sashil.runtime.clock import RealClock
 from sashil.runtime.rt_setup import RealtimeSetup
 
+if TYPE_CHECKING:
+    from sashil.config.parts import LoopParts
+
 #: histogram edges of the lateness (µs); the last bin holds everything above the last edge
 EDGES_US = (0, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000)
 
 
-def measure(loop: Mapping[str, Any], seconds: float, rate_hz: float | None = None) -> dict[str, Any]:
+def measure(loop: LoopParts, seconds: float, rate_hz: float | None = None) -> dict[str, Any]:
     """Wake at the loop's rate for ``seconds`` and report the lateness (µs) of each wake-up:
     p50/p99/max, the misses (a wake-up a whole period late), a histogram, and the set-up's outcomes."""
-    rate = float(rate_hz if rate_hz is not None else loop["rate_hz"])
+    rate = float(rate_hz if rate_hz is not None else loop.rate_hz)
     period_ns = round(1e9 / rate)
     cycles = max(1, round(seconds * rate))
-    clock = RealClock.for_rate(loop["spin_margin_us"], rate)
+    clock = RealClock.for_rate(loop.spin_margin_us, rate)
     late = np.zeros(cycles, dtype=np.int64)
-    rt = RealtimeSetup.from_parts(loop["rt"])
+    rt = RealtimeSetup.from_parts(loop.rt)
     rt.apply()
     try:
         deadline = clock.now_ns() + period_ns

@@ -228,9 +228,8 @@ def timer_slack(facts: MachineFacts, configured_ns: int) -> Check:
     )
 
 
-def machine_checks(facts: MachineFacts, loop: Mapping[str, Any]) -> list[Check]:
+def machine_checks(facts: MachineFacts, rt: Mapping[str, Any]) -> list[Check]:
     """Every machine check for the config's ``loop`` section."""
-    rt = loop["rt"]
     return [
         preemption(facts),
         sched_fifo(facts, int(rt["priority"])),

@@ -17,16 +17,18 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import yaml
 
 from sashil.diagnostics import FAIL, OK, WARN, Check
-from sashil.drivers import rig_parts
 from sashil.drivers.rtdac_codec import ad_volts, counter32
 from sashil.drivers.rtdac_rig import RtdacRig
 from sashil.drivers.rtdac_usb import UDEV_FILE, UDEV_RULE, describe_device
 from sashil.errors import DriverError, SashilError
+
+if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
 
 #: the part of a period the loop's own work needs beside the exchange
 LOOP_SHARE = 0.25
@@ -82,10 +84,10 @@ def exchange_checks(rig: RtdacRig, n: int, rate_hz: float) -> list[Check]:
     return [round_trip, rate]
 
 
-def board_checks(config: Any, round_trips: int) -> tuple[list[Check], RtdacRig | None]:
+def board_checks(run: RunSpec, round_trips: int) -> tuple[list[Check], RtdacRig | None]:
     """Find and open the board, read its header and map, time the exchange; the rig is left open
     (outputs at rest) for the walk, or None when it could not be opened."""
-    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
+    rig = RtdacRig.from_parts(run.rig.values)
     checks: list[Check] = []
     try:
         rig.configure()
@@ -114,7 +116,7 @@ def board_checks(config: Any, round_trips: int) -> tuple[list[Check], RtdacRig |
         )
     )
     checks.append(Check("board", "register map", OK, rig.map.describe()))
-    checks += exchange_checks(rig, round_trips, float(config["loop"]["rate_hz"]))
+    checks += exchange_checks(rig, round_trips, run.loop.rate_hz)
     checks.append(Check("board", "safe stop", WARN, NO_WATCHDOG, E_STOP))
     return checks, rig
 
@@ -335,7 +337,7 @@ def walk_checks(
 
 
 def rtdac_checks(
-    config: Any,
+    run: RunSpec,
     round_trips: int,
     walk: bool = False,
     fragment_path: str = "rtdac-wiring.yaml",
@@ -343,7 +345,7 @@ def rtdac_checks(
     say: Callable[[str], None] | None = None,
 ) -> list[Check]:
     """The board's checks, and the walk on request; the board is left with both outputs at rest."""
-    checks, rig = board_checks(config, round_trips)
+    checks, rig = board_checks(run, round_trips)
     if rig is None:
         return checks
     try:

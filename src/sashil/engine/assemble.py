@@ -1,6 +1,7 @@
 """A run's config read once into its parts (:class:`~sashil.config.parts.RunSpec`).
 
-The rig's parts are the values of the keys its backend declares (``reads``), the stage's the
+The rig's parts are the values of the keys its backend declares (``reads``), the experiment's
+options those of the keys its module declares (its ``READS``), the stage's the
 ``controller`` section with the model and the rig facts a law uses, the safety supervisor's its
 limits, the loop's its rate and set-up. Whether the run goes on simulated time follows from the
 backend (a simulated one) and ``driver.clock``.
@@ -12,7 +13,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze
-from sashil.config.parts import LoopParts, RunSpec, SafetyParts, StageParts
+from sashil.config.parts import LoopParts, RunSpec, SafetyParts, StageParts, read_key
 from sashil.drivers import on_virtual_clock, rig_parts
 
 if TYPE_CHECKING:
@@ -21,9 +22,12 @@ if TYPE_CHECKING:
 __all__ = ["assemble"]
 
 
-def assemble(config: RunConfig, plan: Mapping[str, Any] | None = None) -> RunSpec:
+def assemble(
+    config: RunConfig, plan: Mapping[str, Any] | None = None, reads: Mapping[str, str] | None = None
+) -> RunSpec:
     """The run of a resolved ``config`` (:func:`sashil.engine.resolve.resolve`) under ``plan`` (its
-    ``kind`` and values, as the plan's ``spec()`` gives them; None: none yet)."""
+    ``kind`` and values, as the plan's ``spec()`` gives them; None: none yet). ``reads``: the
+    experiment's own keys (``{value name: dotted config key}``), read into ``options``."""
     rig = rig_parts(config)
     virtual = on_virtual_clock(rig, config["driver"]["clock"])
     return RunSpec(
@@ -33,4 +37,5 @@ def assemble(config: RunConfig, plan: Mapping[str, Any] | None = None) -> RunSpe
         loop=LoopParts.read(config),
         virtual=virtual,
         plan=freeze(plan or {}, "plan"),
+        options=freeze({name: read_key(config, path) for name, path in (reads or {}).items()}, "options"),
     )

@@ -45,7 +45,7 @@ def check_drops(config: RunConfig, named: Named) -> None:
         raise ConfigError(
             f"{named('drop_test.theta0_deg')}: expected an angle within ±{THETA0_LIMIT_DEG:g} deg, got {theta0:g}"
         )
-    check_theta0(config, theta0, named("drop_test.theta0_deg"))
+    check_theta0(section["release_threshold_deg"], theta0, named("drop_test.theta0_deg"))
     currents = list(section["currents_a"])
     where = named("drop_test.currents_a")
     if not currents:
@@ -58,10 +58,10 @@ def check_drops(config: RunConfig, named: Named) -> None:
         raise ConfigError(f"{where}: each current once, got {currents}")
 
 
-def check_theta0(config: RunConfig, theta0_deg: float, option: str = "--theta0-deg") -> None:
+def check_theta0(threshold: float, theta0_deg: float, option: str = "--theta0-deg") -> None:
     """Refuse a hold angle the release could not be detected from: the release is the arm moving
-    ``drop_test.release_threshold_deg`` from the hold, and released at |theta0| below it, it swings less."""
-    threshold = config["drop_test"]["release_threshold_deg"]
+    ``threshold`` (``drop_test.release_threshold_deg``) from the hold, and released at |theta0|
+    below it, it swings less."""
     if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
         raise ConfigError(
             f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "

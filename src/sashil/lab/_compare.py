@@ -64,6 +64,7 @@ from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import ending
+from sashil.recording.summary_writer import write_config, write_summary
 from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.loop import stage_signals
 
@@ -337,7 +338,7 @@ def compare(
     configs = {job.label: job.config for job in jobs}
     summaries = {r.label: law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
     for label, summary in summaries.items():
-        subs[label].write_summary(summary)
+        write_summary(subs[label], summary)
     bound = _bound(config, road_profile, duration, on_event)
     header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound)
     notes = _notes(results, section)
@@ -350,7 +351,8 @@ def compare(
     write_compare_md(folder.file("compare.md"), results, header, notes, bound_rms, params, folders)
     plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}", bound_rms)
     error = _failures(results)
-    folder.write_summary(
+    write_summary(
+        folder,
         _summary(
             config,
             error,
@@ -364,7 +366,7 @@ def compare(
             folders,
             bound,
             shares,
-        )
+        ),
     )
     on_event(Event("progress", f"sashil compare: {wall:.1f} s of wall time", {"wall_s": wall}))
     on_event(Event("folder", f"compare folder: {folder.path}", {"folder": str(folder.path)}))
@@ -392,11 +394,11 @@ def _folders(outputs: Outputs, config: RunConfig, jobs: Sequence[Any]) -> tuple[
         "Each law ran with the config.yaml of its own folder: "
         + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
     )
-    folder.write_config(config, note)
+    write_config(folder, config, note)
     subs = {}
     for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
         sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
-        sub.write_config(job.config)
+        write_config(sub, job.config)
         job.folder, subs[job.label] = str(sub.path), sub
     return folder, subs
 

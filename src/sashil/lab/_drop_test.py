@@ -42,6 +42,7 @@ from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
 from sashil.recording.run_set import RunSet, ending
+from sashil.recording.summary_writer import write_config
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
@@ -50,7 +51,21 @@ if TYPE_CHECKING:
     from sashil.config.parts import RunSpec, StageParts
     from sashil.config.typed import RunConfig
 
-__all__ = ["drop_test", "result_line"]
+__all__ = ["READS", "DropRecord", "DropTestPlan", "drop_test", "result_line", "run_drop", "run_drop_test"]
+
+#: the drop test's own values (``{name: config key}``), read once by the engine into its run's
+#: ``options`` (:func:`sashil.engine.assemble`)
+READS = {
+    "theta0_deg": "drop_test.theta0_deg",
+    "currents_a": "drop_test.currents_a",
+    "duration_s": "drop_test.duration_s",
+    "settle_band_deg": "drop_test.settle_band_deg",
+    "hold_tolerance_deg": "drop_test.hold_tolerance_deg",
+    "hold_time_s": "drop_test.hold_time_s",
+    "release_threshold_deg": "drop_test.release_threshold_deg",
+    "hold_timeout_s": "drop_test.hold_timeout_s",
+    "port": "driver.port",
+}
 
 
 def _label(current: float) -> str:
@@ -94,27 +109,28 @@ def drop_test(
     exists; a run that fails after it started raises the error that ended it, after the folder is
     complete (its data up to the failure, its plot and summary)."""
     outputs = outputs if outputs is not None else Outputs()
-    section = config["drop_test"]
-    theta0_deg, duration = float(section["theta0_deg"]), float(section["duration_s"])
-    currents = [float(value) for value in section["currents_a"]]
-    outputs.check(config["driver"]["name"])
-    checked = stage_controller(StageParts.read(config))  # bad controller parameters fail here, before a folder exists
+    run = assemble(config, reads=READS)
+    drop = run.options
+    theta0_deg, duration = float(drop["theta0_deg"]), float(drop["duration_s"])
+    currents = [float(value) for value in drop["currents_a"]]
+    outputs.check(run.rig.backend)
+    checked = stage_controller(run.stage)  # bad controller parameters fail here, before a folder exists
     closed = checked is not None
     folder = RunFolder.create(outputs.out, "drop-test")
-    law, origin = law_label(config["controller"]["law"])
+    law, origin = law_label(run.stage.law)
     columns = DROP_COLUMNS + controller_columns(checked)
     live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
-    folder.write_config(config)
-    runs = _run_set(config, folder, law if closed else f"{law} (constant current per run)", origin, len(currents) > 1)
+    write_config(folder, config)
+    runs = _run_set(run, folder, law if closed else f"{law} (constant current per run)", origin, len(currents) > 1)
     overlay = []
     prompt = lambda line: on_event(Event("prompt", line))  # noqa: E731
     for current in currents:
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = runs.folder_for(_label(current))
-        record = run_drop_test(
-            config,
+        record = run_drop(
+            run,
             theta0_deg,
             current,
             duration,
@@ -123,10 +139,10 @@ def drop_test(
             data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             live=SessionHooks(*views) if views else None,
             stop=stop,
-            trace=outputs.can_trace(target.path, config["driver"]["port"]),
+            trace=outputs.can_trace(target.path, drop["port"]),
         )
-        _write_drop(config, outputs, target, record, current, label, sub_config=runs.several)
-        assert record.metrics is not None and record.run  # run_drop_test sets both
+        _write_drop(config if runs.several else None, outputs, target, record, current, label)
+        assert record.metrics is not None and record.run  # run_drop sets both
         if live is not None:
             live.note(
                 live_offset_s,
@@ -143,8 +159,8 @@ def drop_test(
         for note in result_warnings(record.metrics):
             on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
     under = f", under {law}" if closed else ""
-    title = f"Drop test from {theta0_deg:g}°{under} ({config['driver']['name']} rig)"
-    return _finish(folder, runs, overlay, title, section["settle_band_deg"], live, on_event)
+    title = f"Drop test from {theta0_deg:g}°{under} ({run.rig.backend} rig)"
+    return _finish(folder, runs, overlay, title, drop["settle_band_deg"], live, on_event)
 
 
 def _finish(
@@ -173,35 +189,35 @@ def _finish(
     return load_run(Path(folder.path))
 
 
-def _run_set(config: RunConfig, folder: RunFolder, controller: str, origin: str, several: bool) -> RunSet:
+def _run_set(run: RunSpec, folder: RunFolder, controller: str, origin: str, several: bool) -> RunSet:
     """The drop test's set of runs, one per current, with the keys its folder's summary shares."""
     return RunSet(
         folder,
         "drop-test",
         {
-            "driver": config["driver"]["name"],
+            "driver": run.rig.backend,
             "controller": controller,
             "controller_origin": origin,
-            "clock": "virtual" if assemble(config).virtual else "real",  # timing is simulated on the virtual clock
+            "clock": "virtual" if run.virtual else "real",  # timing is simulated on the virtual clock
         },
         several=several,
     )
 
 
 def _write_drop(
-    config: RunConfig,
+    config: RunConfig | None,
     outputs: Outputs,
     target: RunFolder,
     record: Any,
     current: float,
     label: str,
-    sub_config: bool,
 ) -> None:
-    """One drop's files in ``target``: its config when it is a sub-run, its data and the --format files."""
-    if sub_config:  # the sub-folder's config reruns its one drop
+    """One drop's files in ``target``: its data and the --format files, and when it is a sub-run of
+    the resolved ``config`` (None: the folder's own), its config, which reruns its one drop."""
+    if config is not None:
         own = thaw(config)
         own["drop_test"]["currents_a"] = [current]
-        target.write_config(own)
+        write_config(target, own)
     target.write_data(record.columns)
     outputs.write_formats(
         target.path,
@@ -286,14 +302,15 @@ class DropTestSettings:
     DECIDED = ("known_release_after_s", "pseudo_terminal")
 
     @classmethod
-    def from_config(cls, config: RunConfig, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
-        drop = config["drop_test"]
-        check_theta0(config, theta0_deg, "theta0_deg")
+    def of(cls, run: RunSpec, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
+        """One drop's settings in the assembled ``run`` (its ``options``: the drop test's :data:`READS`)."""
+        drop = run.options
+        check_theta0(drop["release_threshold_deg"], theta0_deg, "theta0_deg")
         return cls(
             theta0_rad=math.radians(theta0_deg),
             current_a=current_a,
             duration_s=duration_s,
-            rate_hz=config["loop"]["rate_hz"],
+            rate_hz=run.loop.rate_hz,
             hold_tolerance_rad=math.radians(drop["hold_tolerance_deg"]),
             hold_time_s=drop["hold_time_s"],
             release_threshold_rad=math.radians(drop["release_threshold_deg"]),
@@ -654,8 +671,8 @@ def _registered(group: str, kind: str, what: str) -> str:
     return table[kind].target
 
 
-def run_drop_test(
-    config: RunConfig,
+def run_drop(
+    run: RunSpec,
     theta0_deg: float = -5.0,
     current_a: float = 0.0,
     duration_s: float = 10.0,
@@ -669,8 +686,9 @@ def run_drop_test(
     stop: Any = None,
     trace: Any = None,
 ) -> DropRecord:
-    """One drop test at a constant current (or, after the release, under ``controller``: a stage,
-    or :data:`CONFIG_LAW` for the config's law).
+    """One drop test of the assembled ``run`` (its ``options``: the drop test's :data:`READS`) at a
+    constant current (or, after the release, under ``controller``: a stage, or :data:`CONFIG_LAW`
+    for the config's law).
 
     On the real clock with ``loop.process`` (the default) the drop runs in a loop process of its
     own (:mod:`sashil.runtime.loop_process`), which opens the rig, plays or waits for the operator
@@ -688,8 +706,7 @@ def run_drop_test(
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
-    run = assemble(config)
-    plan = plan_drop(run, DropTestSettings.from_config(config, theta0_deg, current_a, duration_s), notify, controller)
+    plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
     outcome = engine.run(
         run,
         plan,
@@ -706,10 +723,43 @@ def run_drop_test(
     error = outcome.error if outcome.error is not None else outcome.stop_error()
     if error is not None and not isinstance(error, SashilError):
         raise error
-    return _record(config, outcome, plan, error)
+    return _record(run, outcome, plan, error)
 
 
-def _record(config: RunConfig, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:
+def run_drop_test(
+    config: RunConfig,
+    theta0_deg: float = -5.0,
+    current_a: float = 0.0,
+    duration_s: float = 10.0,
+    rig: RigInterface | None = None,
+    clock: Clock | None = None,
+    controller: Any = None,
+    notify: Callable[[str], None] | None = None,
+    data_path: str | Path | None = None,
+    *,
+    live: Any = None,
+    stop: Any = None,
+    trace: Any = None,
+) -> DropRecord:
+    """One drop test of a resolved ``config``, assembled (:func:`run_drop` with the same arguments)."""
+    run = assemble(config, reads=READS)
+    return run_drop(
+        run,
+        theta0_deg,
+        current_a,
+        duration_s,
+        rig,
+        clock,
+        controller,
+        notify,
+        data_path,
+        live=live,
+        stop=stop,
+        trace=trace,
+    )
+
+
+def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:
     """The drop's record from the release on, from the run's stream: its columns, the run's summary
     keys and facts, its metrics."""
     record = drop_record(outcome.stream, plan, outcome.start_ns)
@@ -729,7 +779,7 @@ def _record(config: RunConfig, outcome: RunOutcome, plan: DropTestPlan, error: S
     record.metrics = drop_metrics(
         columns["time_s"],
         columns["theta_rad"],
-        settle_band_deg=config["drop_test"]["settle_band_deg"],
+        settle_band_deg=run.options["settle_band_deg"],
         resolution_rad=plan.resolution,
     )
     return record

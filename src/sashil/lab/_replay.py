@@ -41,6 +41,7 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_config, write_summary
 from sashil.runtime.loop import SETTLE_PHASE
 from sashil.runtime.session import EVENTS_FILE
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
@@ -93,7 +94,7 @@ def replay(
     check_columns(data, str(run.data_file))
     controller = make_controller(None, StageParts.read(config))
     folder = RunFolder.create(outputs.out, "replay")
-    folder.write_config(config)
+    write_config(folder, config)
     started = time.perf_counter()
     # the run's live changes (sashil tune) belong to its own law: replayed with it, not with another
     own_law = controller.name == (run.config.get("controller") or {}).get("law", "passive")
@@ -121,7 +122,7 @@ def replay(
         "times_real_time": round(span / seconds, 1) if seconds > 0 else None,
         "open_loop": True,
     }
-    folder.write_summary({"replay": facts})
+    write_summary(folder, {"replay": facts})
     _plot(folder.file("replay.png"), data, out, controller.name)
     current = diff.get("current_cmd_a")
     change = f"i* differs by RMS {current['rms']:.4g} A (max {current['max_abs']:.4g} A)" if current else ""

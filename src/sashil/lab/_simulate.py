@@ -22,6 +22,7 @@ from sashil.recording.data_file import read_data_csv
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_config, write_summary
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
@@ -74,7 +75,7 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     inputs, measured, source = _inputs(config)
     columns = simulate_columns(model, params, inputs, start_at_rest=config["simulate"]["start"] == "rest")
     folder = RunFolder.create(outputs.out, "simulate")
-    folder.write_config(config)
+    write_config(folder, config)
     if measured is not None:
         columns["theta_measured_rad"] = measured
     folder.write_data(columns)
@@ -90,7 +91,7 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     )
     if drops is not None:
         summary["drop_test"] = {name: metrics.as_dict() for name, metrics in drops.items()}
-    folder.write_summary(summary)
+    write_summary(folder, summary)
     fit = f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else ""
     on_event(Event("output", f"simulated {model} on {source}: {folder.path}{fit}", {"folder": str(folder.path)}))
     if drops is not None:

@@ -32,9 +32,9 @@ import numpy as np
 
 from sashil import engine
 from sashil.api import Run, load_run
-from sashil.config.parts import StageParts
+from sashil.config.parts import RunSpec
 from sashil.control.registry import law_run_label, make_controller
-from sashil.drivers import open_rig, rig_parts
+from sashil.drivers import open_rig
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.engine import assemble
 from sashil.errors import ConfigError, SashilError
@@ -49,6 +49,7 @@ from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
 from sashil.recording.run_set import RunSet
+from sashil.recording.summary_writer import write_config
 from sashil.roads.profiles import SweepRoad, chirp_profile, road_of, sine_profile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
@@ -56,10 +57,26 @@ from sashil.runtime.signals import StopFlag
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
-    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["TRANSMISSIBILITY_COLUMNS", "sweep"]
+__all__ = ["READS", "TRANSMISSIBILITY_COLUMNS", "run_profile", "run_sweep", "stepped_sine", "sweep"]
+
+#: the sweep's own values (``{name: config key}``), read once by the engine into its run's ``options``
+READS = {
+    key: f"sweep.{key}"
+    for key in (
+        "stepped",
+        "f_start_hz",
+        "f_stop_hz",
+        "steps",
+        "spacing",
+        "amplitude_deg",
+        "duration_s",
+        "ramp_s",
+        "measure_s",
+        "settle_s",
+    )
+}
 
 
 #: the columns of a stepped sine's ``transmissibility.csv``, one row per frequency
@@ -73,9 +90,14 @@ TRANSMISSIBILITY_COLUMNS = (
 )
 
 
-def _label(config: RunConfig) -> str:
-    """What commanded the damper: the law's label (``skyhook``; ``passive 1 A``)."""
-    return law_run_label(StageParts.read(config))
+def _assembled(config: RunConfig | RunSpec) -> RunSpec:
+    """The sweep's run: ``config`` assembled with the sweep's :data:`READS`, or the run itself."""
+    return config if isinstance(config, RunSpec) else assemble(config, reads=READS)
+
+
+def _shown(run: RunSpec) -> dict[str, Any]:
+    """The run's law section as a plot's label reads it (:func:`~sashil.recording.labels.controller_label`)."""
+    return {"controller": run.stage.controller}
 
 
 def _freq_label(f_hz: float) -> str:
@@ -111,11 +133,10 @@ def sweep(
     folder is complete (the data up to the failure, the summary)."""
 
     outputs = outputs if outputs is not None else Outputs()
-    outputs.check(config["driver"]["name"])
-    make_controller(
-        config["controller"]["law"], StageParts.read(config)
-    )  # bad law parameters fail here, before a folder exists
-    stepped = bool(config["sweep"]["stepped"])
+    run = assemble(config, reads=READS)
+    outputs.check(run.rig.backend)
+    make_controller(run.stage.law, run.stage)  # bad law parameters fail here, before a folder exists
+    stepped = bool(run.options["stepped"])
 
     # the config's law runs each frequency, so on the real clock a loop process runs it (unless the
     # CAN frames are traced: a sweep's one trace follows the rigs in this process)
@@ -127,23 +148,23 @@ def sweep(
         if stepped
         else outputs.open_rerun((*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
     )
-    folder.write_config(config)
-    label = _label(config)
+    write_config(folder, config)
+    label = law_run_label(run.stage)
     traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
     rig_factory = _traced_rigs(outputs, folder, traces)
     runs = RunSet(
         folder,
         "sweep",
-        {"driver": config["driver"]["name"], "controller": label, "mode": "stepped" if stepped else "chirp"},
+        {"driver": run.rig.backend, "controller": label, "mode": "stepped" if stepped else "chirp"},
         several=stepped,
     )
     extra: dict[str, Any] = {}
     failure: SashilError | None = None
     try:
         if stepped:
-            _stepped(config, label, folder, rig_factory, runs, extra, outputs, on_event, progress, watch)
+            _stepped(run, config, label, folder, rig_factory, runs, extra, outputs, on_event, progress, watch)
         else:
-            _chirp(config, label, folder, live, rig_factory, runs, extra, outputs, on_event, watch)
+            _chirp(run, label, folder, live, rig_factory, runs, extra, outputs, on_event, watch)
     except SashilError as err:
         failure = err
     finally:
@@ -190,6 +211,7 @@ def _ended(
 
 
 def _stepped(
+    run: RunSpec,
     config: RunConfig,
     label: str,
     folder: Any,
@@ -202,10 +224,11 @@ def _stepped(
     watch: dict[str, Any],
 ) -> None:
     """The stepped sine: each frequency's run into ``runs`` and its sub-folder, the table and plot
-    into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails)."""
+    into ``folder``, the sweep's own summary keys into ``extra`` (as far as it got when a run fails);
+    ``config``: the resolved config, which each frequency's folder records."""
 
-    section = config["sweep"]
-    name, stage = config["controller"]["law"], StageParts.read(config)
+    section = run.options
+    name, stage = run.stage.law, run.stage
     f_start, f_stop = section["f_start_hz"], section["f_stop_hz"]
     freqs = frequencies(f_start, f_stop, section["steps"], section["spacing"])
     bar = Progress(len(freqs), "stepped sine", enabled=progress)
@@ -215,7 +238,7 @@ def _stepped(
     def stream_to(f: float) -> Path:
         """Each frequency in its own sub-folder (a run folder of its own), its cycles streamed there."""
         sub = runs.folder_for(_freq_label(f))
-        sub.write_config(config)
+        write_config(sub, config)
         return sub.file(CYCLES_FILE)
 
     def keep(f: float, cols: dict[str, Any]) -> None:
@@ -229,7 +252,7 @@ def _stepped(
                 on_event(Event("progress", f"stepped sine: {f:.3g} Hz ({k + 1} of {len(freqs)})", {"frequency_hz": f}))
             try:
                 point = stepped_sine(
-                    config, lambda: make_controller(name, stage), [f], rig_factory, keep, stream_to, **watch
+                    run, lambda: make_controller(name, stage), [f], rig_factory, keep, stream_to, **watch
                 )[0]
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
@@ -253,7 +276,7 @@ def _stepped(
                 dict(p.__dict__),
             )
         )
-    _plot(folder, points, label, config)
+    _plot(folder, points, label, run)
     integrated = math.sqrt(sum(p.body_rms_rad**2 for p in points) / len(points))
     on_event(
         Event(
@@ -268,16 +291,16 @@ def _stepped(
     )
 
 
-def _plot(folder: Any, points: list[Any], label: str, config: RunConfig) -> None:
+def _plot(folder: Any, points: list[Any], label: str, run: RunSpec) -> None:
     """``transmissibility.png``, the curve named by the law, its parameters and current."""
 
     freq = [p.frequency_hz for p in points]
-    curve = (controller_label({"controller": label}, config), freq, [p.transmissibility for p in points])
+    curve = (controller_label({"controller": label}, _shown(run)), freq, [p.transmissibility for p in points])
     plot_transmissibility(folder.file("transmissibility.png"), [curve])
 
 
 def _chirp(
-    config: RunConfig,
+    run: RunSpec,
     label: str,
     folder: Any,
     live: Any,
@@ -291,10 +314,10 @@ def _chirp(
     """The chirp: one run into ``folder`` (data.csv however it ends, chirp.png, the live view), the
     body's RMS and peak into ``extra``."""
 
-    section = config["sweep"]
+    section = run.options
     f_start, f_stop, duration = section["f_start_hz"], section["f_stop_hz"], section["duration_s"]
     amplitude = math.radians(section["amplitude_deg"])
-    controller = make_controller(config["controller"]["law"], StageParts.read(config))
+    controller = make_controller(run.stage.law, run.stage)
     on_event(
         Event(
             "progress", f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s ({label}) ...", {"duration_s": duration}
@@ -302,7 +325,7 @@ def _chirp(
     )
     try:  # data.csv is written however the run ends
         cols, stage = run_sweep(
-            config,
+            run,
             controller,
             chirp_profile(amplitude, f_start, f_stop, duration, section["ramp_s"]),
             duration + section["ramp_s"],
@@ -320,13 +343,13 @@ def _chirp(
         folder.file("chirp.png"),
         cols,
         f"chirp {f_start:g}-{f_stop:g} Hz over {duration:g} s, {section['amplitude_deg']:g} deg road "
-        f"({controller_label({'controller': label}, config)})",
+        f"({controller_label({'controller': label}, _shown(run))})",
         chirp=(f_start, f_stop, duration),
     )
     if live is not None:
         shown = dict(cols)
-        if config["model"]["name"] == "bouc-wen":
-            feasible_band(shown, config["model"]["params"], config["rig"]["current_max_a"])
+        if run.stage.model["name"] == "bouc-wen":
+            feasible_band(shown, run.stage.model["params"], run.stage.current_max_a)
         live.log_columns(shown)
         live.close()
     body = cols["theta_rad"] + cols["theta_road_rad"]
@@ -464,7 +487,7 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: stream[name] for name in names} | {"seq": stream["seq"].astype(np.int64)}
 
 
-RigFactory = Callable[["RunConfig", RoadProfile], RigInterface]
+RigFactory = Callable[["RunSpec", RoadProfile], RigInterface]
 
 
 def sweep_stage(run: RunSpec, rig: RigInterface) -> SweepStage:
@@ -481,14 +504,14 @@ def sweep_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]
     return sweep_stage(run, rig), run.stage.law, str(run.plan["road"].get("shape"))
 
 
-def default_rig(config: RunConfig, road: RoadProfile) -> RigInterface:
-    """The rig a sweep runs on: the config's backend, whose road motor gets the profile's speed
+def default_rig(run: RunSpec, road: RoadProfile) -> RigInterface:
+    """The rig a sweep runs on: the run's backend, whose road motor gets the profile's speed
     from the sweep's commands (the simulated rig's road wheel as a board's)."""
-    return open_rig(rig_parts(config))
+    return open_rig(run.rig)
 
 
 def run_profile(
-    config: RunConfig,
+    config: RunConfig | RunSpec,
     controller: Any,
     road: RoadProfile,
     duration_s: float,
@@ -508,7 +531,7 @@ def run_profile(
 
 
 def run_sweep(
-    config: RunConfig,
+    config: RunConfig | RunSpec,
     controller: Any,
     road: RoadProfile,
     duration_s: float,
@@ -521,7 +544,8 @@ def run_sweep(
     stop: Any = None,
     law_of_config: bool = False,
 ) -> tuple[dict[str, np.ndarray], SweepStage]:
-    """One run of ``controller`` under the road profile through the one runner
+    """One run of ``controller`` under the road profile, in the run of ``config`` (a resolved config,
+    or the sweep's assembled run), through the one runner
     (:func:`~sashil.runtime.runner.run_plan`: safety, signals, real-time set-up on the real clock,
     the road at rest and 0 A at the end); returns the recorded columns and the run's stage (its
     :attr:`~SweepStage.clip_count` and :meth:`~SweepStage.stats`).
@@ -538,7 +562,7 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    run = assemble(config)
+    run = _assembled(config)
     stage = SweepStage(controller, road, duration_s)
     stage.from_config = law_of_config
     outcome = engine.run(
@@ -546,7 +570,7 @@ def run_sweep(
         stage,
         duration_s,
         clock=clock,
-        rig=lambda: (rig_factory or default_rig)(config, road),
+        rig=lambda: (rig_factory or default_rig)(run, road),
         data_path=data_path,
         live=live,
         stop=stop,
@@ -579,7 +603,7 @@ class SteppedPoint:
 
 
 def stepped_sine(
-    config: RunConfig,
+    config: RunConfig | RunSpec,
     make_controller: Callable[[], Any],
     freqs: list[float],
     rig_factory: RigFactory | None = None,
@@ -595,7 +619,8 @@ def stepped_sine(
     ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to; ``live``
     and ``stop``: each frequency's run's views and stop flag; ``law_of_config``: ``make_controller``
     makes the config's law (:func:`run_sweep`)."""
-    sweep = config["sweep"]
+    run = _assembled(config)
+    sweep = run.options
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
     for f in freqs:
@@ -606,7 +631,7 @@ def stepped_sine(
         # starts the next one at rest instead of with a step of the road speed
         stop_s = start + measure
         cols, stage = run_sweep(
-            config,
+            run,
             controller,
             sine_profile(amplitude, f, sweep["ramp_s"], stop_s),
             stop_s + sweep["ramp_s"],

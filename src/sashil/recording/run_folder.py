@@ -1,4 +1,5 @@
-"""The run folder of docs/architecture.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots.
+"""The run folder of docs/architecture.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots
+(``config.yaml`` and ``summary.json`` through their one writer, :mod:`sashil.recording.summary_writer`).
 
 A run folder is created only after every input has been checked, so a bad argument leaves nothing
 behind; files are written under a temporary name and renamed, so a reader never sees half a file.
@@ -8,22 +9,14 @@ from __future__ import annotations
 
 import csv
 import io
-import json
-import platform
 import shutil
-import socket
-import subprocess
-import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from sashil._version import __version__
-from sashil.config import dump_config
 from sashil.errors import ConfigError
 from sashil.recording.data_file import Columns, write_data_csv
-from sashil.recording.summary_schema import normalise
 
 
 def utc_now() -> datetime:
@@ -33,33 +26,6 @@ def utc_now() -> datetime:
 def utc_stamp(moment: datetime | None = None) -> str:
     """``20261121T103000Z``-style stamp for folder names."""
     return (moment or utc_now()).strftime("%Y%m%dT%H%M%SZ")
-
-
-def git_revision() -> str | None:
-    """The git revision sashil runs from, when it runs from a checkout."""
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            timeout=2,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
-
-
-def provenance() -> dict[str, Any]:
-    """What describes the software and machine a run came from."""
-    return {
-        "sashil_version": __version__,
-        "git_revision": git_revision(),
-        "host": socket.gethostname(),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-        "command_line": sys.argv[:],
-    }
 
 
 #: the run folders this process created (path, whether it made the folder itself): bad input found
@@ -144,7 +110,7 @@ class RunFolder:
         """Whether any recorded row (``data.csv`` or ``cycles.csv``, here or in a sub-folder) is on disk."""
         return any(_has_rows(f) for name in DATA_FILES for f in self.path.rglob(name))
 
-    def _write_text(self, name: str, text: str) -> Path:
+    def write_text(self, name: str, text: str) -> Path:
         target = self.file(name)
         tmp = target.with_name(target.name + ".part")
         tmp.write_text(text, encoding="utf-8")
@@ -157,12 +123,7 @@ class RunFolder:
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(columns)
         writer.writerows([["" if value is None else value for value in row] for row in rows])
-        return self._write_text(name, buffer.getvalue())
-
-    def write_config(self, config: Mapping[str, Any], note: str | None = None) -> Path:
-        """``config.yaml``: the resolved config, after ``note`` as YAML comment lines when given."""
-        head = "".join(f"# {line}\n" for line in note.splitlines()) if note else ""
-        return self._write_text("config.yaml", head + dump_config(config))
+        return self.write_text(name, buffer.getvalue())
 
     def write_data(self, columns: Columns, name: str = "data.csv") -> Path:
         return write_data_csv(self.file(name), columns)
@@ -182,18 +143,3 @@ class RunFolder:
             )
         tmp.replace(target)
         return target
-
-    def write_summary(self, summary: Mapping[str, Any], name: str = "summary.json") -> Path:
-        """``summary.json`` in the one schema of :mod:`sashil.recording.summary_schema`, written once,
-        at the end of the run (a second write is a bug: RuntimeError)."""
-        if name == "summary.json":
-            if self.summary_written:
-                raise RuntimeError(f"{self.path}: summary.json is written once, at the end of the run")
-            self.summary_written = True
-        doc = {
-            **normalise(summary, self.verb),
-            "started_utc": self.started_utc.isoformat(),
-            "ended_utc": utc_now().isoformat(),
-            "provenance": provenance(),
-        }
-        return self._write_text(name, json.dumps(doc, indent=2, allow_nan=False) + "\n")

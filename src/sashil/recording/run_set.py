@@ -17,6 +17,7 @@ from typing import Any
 
 from sashil.errors import exit_code_of, status_of
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_summary
 
 __all__ = ["RUN_LEVEL_KEYS", "RunSet", "ending"]
 
@@ -84,8 +85,9 @@ class RunSet:
         if self.several:  # the run's own summary: its entry's values of the common keys win (its controller)
             common = {key: row.get(key, value) for key, value in self.common.items()}
             run_level = {key: row.get(key) for key in RUN_LEVEL_KEYS}
-            self.folder_for(name).write_summary(
-                {**common, "verb": self.verb, **ending(error), **run_level, "runs": [{**row, "folder": "."}]}
+            write_summary(
+                self.folder_for(name),
+                {**common, "verb": self.verb, **ending(error), **run_level, "runs": [{**row, "folder": "."}]},
             )
         if error is not None and self.error is None:
             self.error = error
@@ -103,5 +105,5 @@ class RunSet:
             "runs": self.entries,
             **extra,
         }
-        self.folder.write_summary(summary)
+        write_summary(self.folder, summary)
         return summary

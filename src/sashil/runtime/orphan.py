@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import SashilError
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_summary
 from sashil.runtime.runner import end_summary
 from sashil.runtime.stream import RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
@@ -49,7 +50,8 @@ def finish_alone(
     run = RunFolder(folder, verb)
     run.write_timing(timing)
     error = SashilError(f"{end['stop_reason']}: the loop stopped at 0 A and wrote the rest of the data itself")
-    run.write_summary(
+    write_summary(
+        run,
         {
             "verb": verb,
             **end_summary(
@@ -64,5 +66,5 @@ def finish_alone(
             "driver": spec.rig.backend,
             "tuning": end["tuning"],
             "loop_process": {"pid": os.getpid(), "threads": end["threads"], "session_died": True},
-        }
+        },
     )

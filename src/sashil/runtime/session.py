@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sashil.recording.run_folder import RunFolder
+from sashil.recording.summary_writer import write_config, write_summary
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
@@ -145,7 +146,7 @@ def run_session(
     ``stop``: a flag another thread may set to stop the run cleanly (signals are routed to it as
     well when the session runs on the main thread)."""
     try:
-        folder.write_config(config)
+        write_config(folder, config)
     except BaseException:
         loop.abort()
         raise
@@ -187,5 +188,5 @@ def _close_folder(
     summary = {**summary, "driver": driver}
     if finish is not None:
         summary.update(finish(summary))
-    folder.write_summary(summary)
+    write_summary(folder, summary)
     return summary

@@ -151,7 +151,7 @@ def plan_from_config(config: RunConfig, source: str = "config") -> Plan:
                 f"{source}: calibrate.{key}: expected an angle away from 0 and within ±{limit:g} deg "
                 f"(rig.angle_limit_deg), got {angle:g}"
             )
-        check_theta0(config, angle, f"{source}: calibrate.{key}")
+        check_theta0(config["drop_test"]["release_threshold_deg"], angle, f"{source}: calibrate.{key}")
     f0, f1 = section["road_f_start_hz"], section["road_f_stop_hz"]
     if f1 < f0:
         raise ConfigError(f"{source}: calibrate.road_f_stop_hz: expected >= road_f_start_hz ({f0:g}), got {f1:g}")

@@ -29,6 +29,7 @@ from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_set import RunSet, ending
+from sashil.recording.summary_writer import write_config
 from sashil.runtime.runner import CYCLES_FILE
 
 if TYPE_CHECKING:
@@ -185,7 +186,7 @@ def calibrate_rig(
     check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
     check_port(config)
     folder = RunFolder.create(out, "calibrate")
-    folder.write_config(config)
+    write_config(folder, config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
     runs = RunSet(folder, "calibrate", {"driver": config["driver"]["name"]}, sub_root=runs_folder.path)
     say(
