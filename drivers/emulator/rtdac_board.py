@@ -325,10 +325,11 @@ def build_board(
     layouts = {m.logic: m for m in known_maps()}
     if logic not in layouts:
         raise ValueError(f"logic: expected one of {', '.join(layouts)}, got {logic!r}")
-    wiring = Wiring.from_section(config["rtdac"], **(wiring_changes or {}))
+    section = rig_parts(config, "rtdac").values["rtdac"]  # the board's section, as the host's backend reads it
+    wiring = Wiring.from_section(section, **(wiring_changes or {}))
     if stage_gain != 1.0:
         wiring = replace(wiring, coil_map_current_a=tuple(stage_gain * a for a in wiring.coil_map_current_a))
-    motor = RoadMotor.from_section(config["rtdac"], road_tau_s)
+    motor = RoadMotor.from_section(section, road_tau_s)
     ident = identity or BoardIdentity(logic_version=layouts[logic].logic_version)
     return RtdacBoard(
         SimulatedRig.from_parts(rig_parts(config, "sim").values), layouts[logic], wiring, ident, operator, faults, motor

@@ -8,6 +8,8 @@ import math
 from typing import TYPE_CHECKING
 
 from sashil.api import Run, load_run
+from sashil.engine import assemble
+from sashil.lab.calibration.plan import READS
 from sashil.lab.calibration.session import calibrate_rig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
@@ -37,7 +39,7 @@ def calibrate(
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("calibrate")
-    section = config["calibrate"]
+    section = assemble(config, reads=READS).options["calibrate"]
     inertia = section["inertia_kg_m2"]
     outcome = calibrate_rig(
         config,

@@ -27,7 +27,11 @@ if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["closed_loop", "run_in_loop", "run_plan"]
+__all__ = ["READS", "closed_loop", "run_in_loop", "run_plan"]
+
+#: ``sashil run``'s own values (``{name: config key}``), read once by the engine into its run's
+#: ``options``: how long, the road and what it is made with, the port a CAN trace names
+READS = {"duration_s": "run.duration_s", "road": "run.road", "port": "driver.port", **RoadParts.READS}
 
 
 def closed_loop(
@@ -53,17 +57,19 @@ def closed_loop(
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
 
     outputs = outputs if outputs is not None else Outputs()
-    outputs.check(config["driver"]["name"])
-    duration = config["run"]["duration_s"]
-    rate = float(config["loop"]["rate_hz"])
-    backend = config["driver"]["name"]
-    loop, process, rig, (label, road_text, columns) = _start_loop(config, outputs, on_event, tune)
+    spec = assemble(config, reads=READS)
+    outputs.check(spec.rig.backend)
+    duration = spec.options["duration_s"]
+    rate, backend = spec.loop.rate_hz, spec.rig.backend
+    loop, process, rig, (label, road_text, columns) = _start_loop(
+        spec.with_plan(run_plan(spec)), outputs, on_event, tune
+    )
     try:
         folder = RunFolder.create(outputs.out, "run")
     except BaseException:
         loop.abort()
         raise
-    live = outputs.open_live_tap(config, columns, "sashil run", folder.path)
+    live = outputs.open_live_tap(spec.stage.model, spec.stage.current_max_a, columns, "sashil run", folder.path)
     if progress:  # a bar on a terminal, a line every 10 s otherwise
         live = SessionHooks(live, RunProgress(duration, rate))
     if views:
@@ -79,7 +85,7 @@ def closed_loop(
     if process is None:
         trace = outputs.start_can_trace(rig, folder.path)
     else:
-        trace = outputs.follow_can_trace(folder.path, config["driver"]["port"], process.can_frames)
+        trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
     finish = _Finish(outputs, folder, road_text, trace, process)
 
     def say(line: str) -> None:
@@ -96,12 +102,12 @@ def closed_loop(
 
 
 def _start_loop(
-    config: RunConfig, outputs: Outputs, on_event: Listener, tune: bool
+    spec: RunSpec, outputs: Outputs, on_event: Listener, tune: bool
 ) -> tuple[SessionLoop, LoopProcess | None, Any, tuple[str, str, tuple[str, ...]]]:
-    """The run's loop, ready: in a loop process of its own (``loop.process``) or in this one; the
-    process (None in this one), the rig (None in a process) and the stage's label, road text and columns."""
-    duration = config["run"]["duration_s"]
-    spec = assemble(config, run_plan(config))
+    """The loop of the assembled run ``spec``, ready: in a loop process of its own (``loop.process``)
+    or in this one; the process (None in this one), the rig (None in a process) and the stage's
+    label, road text and columns."""
+    duration = spec.options["duration_s"]
     clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)  # sashil run is on the real clock
     if loop_in_process(spec, clock):
         process = LoopProcess(spec, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
@@ -191,14 +197,15 @@ def _in_this_process(spec: RunSpec, on_event: Listener) -> tuple[Any, Any, str, 
     return rig, stage, label, road_text, tuple(record_columns(stage))
 
 
-def run_plan(config: RunConfig) -> dict[str, Any]:
+def run_plan(run: RunSpec) -> dict[str, Any]:
     """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
-    text, what it is made with, and how long the run commands it."""
+    text, what it is made with, and how long the run commands it, from the run's ``options``
+    (:data:`READS`)."""
     return {
         "kind": "run",
-        "road": config["run"]["road"],
-        "road_parts": vars(RoadParts.read(config)),
-        "duration_s": config["run"]["duration_s"],
+        "road": run.options["road"],
+        "road_parts": vars(RoadParts.of(run.options)),
+        "duration_s": run.options["duration_s"],
     }
 
 

@@ -302,6 +302,11 @@ class DropTestSettings:
     DECIDED = ("known_release_after_s", "pseudo_terminal")
 
     @classmethod
+    def from_config(cls, config: RunConfig, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
+        """One drop's settings in a resolved config (:meth:`of` its assembled run)."""
+        return cls.of(assemble(config, reads=READS), theta0_deg, current_a, duration_s)
+
+    @classmethod
     def of(cls, run: RunSpec, theta0_deg: float, current_a: float, duration_s: float) -> DropTestSettings:
         """One drop's settings in the assembled ``run`` (its ``options``: the drop test's :data:`READS`)."""
         drop = run.options

@@ -36,6 +36,7 @@ from sashil.config.parts import StageParts
 from sashil.control.controller import Controller
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import NO_EDGE, RigSample
+from sashil.engine import assemble
 from sashil.errors import DataFileError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
@@ -92,19 +93,20 @@ def replay(
     run = load_run(run_folder)
     data = run.data
     check_columns(data, str(run.data_file))
-    controller = make_controller(None, StageParts.read(config))
+    spec = assemble(config)
+    controller = make_controller(None, spec.stage)
     folder = RunFolder.create(outputs.out, "replay")
     write_config(folder, config)
     started = time.perf_counter()
     # the run's live changes (sashil tune) belong to its own law: replayed with it, not with another
-    own_law = controller.name == (run.config.get("controller") or {}).get("law", "passive")
+    own_law = controller.name == StageParts.read(run.config).law
     changes = recorded_changes(Path(run_folder) / EVENTS_FILE) if own_law else {}
     out = replay_rows(
         controller,
         data,
-        int(config["rig"]["encoder_counts_per_rev"]),
+        spec.stage.counts_per_rev,
         changes,
-        rate_hz=float(config["loop"]["rate_hz"]),
+        rate_hz=spec.loop.rate_hz,
     )
     seconds = time.perf_counter() - started
     supervised = (data["trip_code"] != 0).astype(float) if "trip_code" in data else np.zeros(data["time_s"].size)

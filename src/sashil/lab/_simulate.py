@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.api import Run, load_run
+from sashil.engine import assemble
 from sashil.engine.checks import input_file
 from sashil.errors import ConfigError
 from sashil.identify.simulate import drop_test_inputs, simulate_columns
@@ -26,16 +27,24 @@ from sashil.recording.summary_writer import write_config, write_summary
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
-__all__ = ["drop_table", "simulate"]
+__all__ = ["READS", "drop_table", "simulate"]
+
+#: ``sashil simulate``'s own values (``{name: config key}``), read once by the engine into its
+#: run's ``options``
+READS = {
+    **{key: f"simulate.{key}" for key in ("input", "theta0_deg", "current_a", "duration_s", "start")},
+    "settle_band_deg": "drop_test.settle_band_deg",
+}
 
 
-def _inputs(config: RunConfig) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
+def _inputs(section: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray | None, str]:
     """The model's inputs (time, current, road, torque and the initial angle), the recorded angle
-    to compare with (None for a drop test) and a description of the source."""
+    to compare with (None for a drop test) and a description of the source, from the run's
+    ``options`` (:data:`READS`)."""
 
-    section = config["simulate"]
     if not section["input"]:
         theta0, current = section["theta0_deg"], section["current_a"]
         return (
@@ -68,12 +77,13 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("simulate")
-    model = config["model"]["name"]
-    params = dict(config["model"]["params"])
+    run = assemble(config, reads=READS)
+    model = str(run.stage.model["name"])
+    params = dict(run.stage.model["params"])
     if model == "bouc-wen":
         params = {**BoucWenParams().as_dict(), **params}
-    inputs, measured, source = _inputs(config)
-    columns = simulate_columns(model, params, inputs, start_at_rest=config["simulate"]["start"] == "rest")
+    inputs, measured, source = _inputs(run.options)
+    columns = simulate_columns(model, params, inputs, start_at_rest=run.options["start"] == "rest")
     folder = RunFolder.create(outputs.out, "simulate")
     write_config(folder, config)
     if measured is not None:
@@ -84,11 +94,7 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
         summary["rms_rad"] = float(np.sqrt(np.mean((columns["theta_rad"] - measured) ** 2)))
         summary["nrmse"] = nrmse(columns["theta_rad"], measured)
     _plot(folder.file("theta.png"), columns, model, source, summary.get("nrmse"))
-    drops = (
-        _drop_metrics(config, columns, measured, inputs)
-        if not config["simulate"]["input"] or _is_drop(inputs)
-        else None
-    )
+    drops = _drop_metrics(run, columns, measured, inputs) if not run.options["input"] or _is_drop(inputs) else None
     if drops is not None:
         summary["drop_test"] = {name: metrics.as_dict() for name, metrics in drops.items()}
     write_summary(folder, summary)
@@ -107,13 +113,13 @@ def _is_drop(inputs: Mapping[str, np.ndarray]) -> bool:
 
 
 def _drop_metrics(
-    config: RunConfig, columns: Mapping[str, np.ndarray], measured: np.ndarray | None, inputs: Mapping[str, Any]
+    run: RunSpec, columns: Mapping[str, np.ndarray], measured: np.ndarray | None, inputs: Mapping[str, Any]
 ) -> dict[str, Any]:
     """Drop-test metrics (period, peaks, ζ) of the simulated angle and, when given, the recorded one,
-    with the config's settling band and encoder resolution."""
+    with the run's settling band and encoder resolution."""
 
-    band = config["drop_test"]["settle_band_deg"]
-    resolution = 2.0 * math.pi / config["rig"]["encoder_counts_per_rev"]
+    band = run.options["settle_band_deg"]
+    resolution = 2.0 * math.pi / run.stage.counts_per_rev
     out = {"simulated": drop_metrics(columns["time_s"], columns["theta_rad"], band, resolution)}
     if measured is not None:
         out["recorded"] = drop_metrics(inputs["time_s"], measured, band, resolution)

@@ -340,7 +340,10 @@ class Bench:
                 folder = base.with_name(f"{base.name}-{suffix}")
             law = self.laws[str(choice["law"])]
             declared = [p["name"] for p in law.about["parameters"]]
-            values = {name: config["controller"].get(name) for name in declared}
+            from sashil.engine import assemble
+
+            run_spec = assemble(config, reads=PANEL_READS)
+            values = {name: run_spec.stage.controller.get(name) for name in declared}
             self.run = RunState(
                 state="starting",
                 run_id=self.run.run_id + 1,
@@ -349,21 +352,19 @@ class Bench:
                 folder=str(folder),
                 start_values=dict(values),
                 values=dict(values),
-                plan=sub_runs(config, experiment),
+                plan=sub_runs(run_spec.options, experiment),
             )
             self._config = config
             self._flag = StopFlag()
-            rate = float(config["loop"]["rate_hz"])
+            rate = run_spec.loop.rate_hz
             self._step = decimation_step(rate)
-            simulated_time = config["driver"].get("clock") == "virtual"
+            simulated_time = run_spec.virtual
             self._keep = max(1, int(rate * (TRACE_WINDOW_S if simulated_time else CATCH_UP_S)))
             self._segment = 0
             self._sent_row = 0
             self.view = StreamView(self.run.plan, self._keep, self._sub_run_started)
-            model = config.get("model", {})
-            self._band = (
-                (model["params"], float(config["rig"]["current_max_a"])) if model.get("name") == "bouc-wen" else None
-            )
+            model = run_spec.stage.model
+            self._band = (model["params"], run_spec.stage.current_max_a) if model.get("name") == "bouc-wen" else None
             outputs = Outputs(out=folder)
             self._thread = threading.Thread(
                 target=self._work,
@@ -628,15 +629,20 @@ class Bench:
         return encode_batch(select_columns(rows, stream.columns, self._band))
 
 
-def sub_runs(config: Mapping[str, Any], experiment: str) -> list[str]:
+#: what the panel reads of a run's experiment to label its sub-runs (a run's ``options``)
+PANEL_READS = {"drop_test": "drop_test", "sweep": "sweep"}
+
+
+def sub_runs(options: Mapping[str, Any], experiment: str) -> list[str]:
     """The labels of an experiment's sub-runs, in the order its loops run: a drop test's currents,
-    a stepped sine's frequencies, a chirp's band; a run on a road is one, unlabelled."""
+    a stepped sine's frequencies, a chirp's band; a run on a road is one, unlabelled (``options``:
+    a run's, :data:`PANEL_READS`)."""
     if experiment == "drop-test":
-        return [f"{float(current):g} A" for current in config["drop_test"]["currents_a"]]
+        return [f"{float(current):g} A" for current in options["drop_test"]["currents_a"]]
     if experiment == "sweep":
         from sashil.lab._sweep import frequencies
 
-        section = config["sweep"]
+        section = options["sweep"]
         if section["stepped"]:
             steps = frequencies(section["f_start_hz"], section["f_stop_hz"], section["steps"], section["spacing"])
             return [f"{f:.3g} Hz" for f in steps]

@@ -18,7 +18,7 @@ from sashil.errors import ConfigError
 from sashil.recording.formats import can_formats, check_formats, write_data_formats
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    pass
 
 __all__ = ["IN_RUN_FOLDER", "Outputs"]
 
@@ -71,17 +71,19 @@ class Outputs:
             columns, save=save, viewer=self.rerun_viewer, connect=self.rerun_connect, name=name, bind=self.rerun_bind
         )
 
-    def open_live_tap(self, config: RunConfig, columns: Sequence[str], name: str, folder: Path) -> Any:
+    def open_live_tap(
+        self, model: Mapping[str, Any], current_max_a: float, columns: Sequence[str], name: str, folder: Path
+    ) -> Any:
         """A :class:`~sashil.recording.rerun_log.LiveTap` for a loop run, or None without a live view.
-        The feasible torque band is added for the Bouc-Wen model."""
+        The feasible torque band of ``model`` (its ``name`` and ``params``) up to ``current_max_a``
+        is added for the Bouc-Wen model."""
         if not self.live_view:
             return None
         from sashil.recording.rerun_log import LiveTap
 
-        model = config.get("model", {})
         band = None
         if model.get("name") == "bouc-wen" and "z_hat" in columns and "theta_dot_rad_s" in columns:
-            band = (model["params"], float(config["rig"]["current_max_a"]))
+            band = (model["params"], float(current_max_a))
         extra = ("lateness_us",) + (("band_lo_nm", "band_hi_nm") if band is not None else ())
         return LiveTap(self.open_rerun(tuple(columns) + extra, name, folder), band=band)
 

@@ -18,11 +18,13 @@ motor, as ``sashil sweep`` does.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from sashil.config.parts import read_key
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError, DataFileError
 from sashil.models.plant import RoadProfile
@@ -30,9 +32,6 @@ from sashil.recording.data_file import read_data_csv
 from sashil.roads.iso8608 import CLASSES, bump_profile, iso8608_height, periodic_profile
 from sashil.roads.profiles import chirp_profile, sine_profile
 from sashil.roads.syntax import DEFAULT_SIM_ROAD, SYNTAX
-
-if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
 
 __all__ = ["DEFAULT_SIM_ROAD", "SYNTAX", "RoadParts", "RoadStage", "parse_road"]
 
@@ -52,20 +51,30 @@ class RoadParts:
     bump_width_s: float
     bump_start_s: float
 
+    #: the config keys a road is made with (``{field: dotted key}``), as a backend declares its own
+    READS: ClassVar[Mapping[str, str]] = {
+        "rate_hz": "loop.rate_hz",
+        "ramp_s": "sweep.ramp_s",
+        "amplitude_deg": "sweep.amplitude_deg",
+        "lever_m": "road.lever_m",
+        "speed_m_s": "road.speed_m_s",
+        "seed": "road.seed",
+        "period_s": "road.period_s",
+        "bump_width_s": "road.bump_width_s",
+        "bump_start_s": "road.bump_start_s",
+    }
+
     @classmethod
-    def read(cls, config: RunConfig) -> RoadParts:
-        road, sweep = config["road"], config["sweep"]
-        return cls(
-            rate_hz=float(config["loop"]["rate_hz"]),
-            ramp_s=float(sweep["ramp_s"]),
-            amplitude_deg=float(sweep["amplitude_deg"]),
-            lever_m=float(road["lever_m"]),
-            speed_m_s=float(road["speed_m_s"]),
-            seed=int(road["seed"]),
-            period_s=float(road["period_s"]),
-            bump_width_s=float(road["bump_width_s"]),
-            bump_start_s=float(road["bump_start_s"]),
-        )
+    def of(cls, values: Mapping[str, Any]) -> RoadParts:
+        """The parts among ``values`` (a run's ``options`` that include :attr:`READS`): the seed a
+        whole number, the rest numbers."""
+        numbers = {name: float(values[name]) for name in cls.READS if name != "seed"}
+        return cls(seed=int(values["seed"]), **numbers)
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any]) -> RoadParts:
+        """The parts of a resolved config, by :attr:`READS`."""
+        return cls.of({name: read_key(config, path) for name, path in cls.READS.items()})
 
 
 def parse_road(text: str | None, parts: RoadParts) -> tuple[RoadProfile | None, str]:

@@ -38,10 +38,10 @@ from typing import Any
 import numpy as np
 
 from sashil.api import Run
-from sashil.config.parts import StageParts
 from sashil.control.law_api import Law, LawState
 from sashil.control.law_config import build_law
 from sashil.control.law_registry import find_law
+from sashil.engine import assemble
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 from sashil.plugins import check_not_importing
@@ -99,19 +99,19 @@ def check_law(
     rig = replace(rig, sets={"compare.settle_s": min(1.0, duration_s / 2), **dict(rig.sets)})
     params = dict(params or {})
     try:
-        config = rig.config(law, road=road, duration_s=duration_s, params=params)
-        instance = build_law(find_law(str(config["controller"]["law"])), StageParts.read(config), params)
+        stage = assemble(rig.config(law, road=road, duration_s=duration_s, params=params)).stage
+        instance = build_law(find_law(stage.law), stage, params)
     except ConfigError as err:
         return ContractReport(name, (f"{name}: parameters: {err}",))
     except Exception as err:  # the constructor or parameters_changed() of the law itself
         return ContractReport(name, (f"{name}: cannot be built with {params or 'its defaults'}: {_first_line(err)}",))
-    i_max = float(config["rig"]["current_max_a"])
+    i_max = stage.current_max_a
     faults = _probe_faults(instance, i_max)
     times: list[int] = []
     spec = _timed_spec(law, timer, times)
     first = run_law(spec, road=road, duration_s=duration_s, params=params, rig=rig)
     compute = _quantiles_us(times)
-    found = _run_faults(first, instance, i_max, BoucWenParams.from_mapping(config["model"]["params"]), torque_reach)
+    found = _run_faults(first, instance, i_max, BoucWenParams.from_mapping(stage.model["params"]), torque_reach)
     if found and found[0].startswith("failed at "):  # one fault, one line: the run's, which says when
         what = found[0].partition(": ")[2].removesuffix(" (the run ended at 0 A)")
         faults = [fault for fault in faults if not fault.startswith(what)]

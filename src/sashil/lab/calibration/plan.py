@@ -16,10 +16,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from sashil.engine import assemble
 from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError
+from sashil.lab._drop_test import READS as DROP_READS
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
 #: rig time a step costs beyond its record (connect, the operator's hold and release), an estimate
@@ -122,16 +125,27 @@ def road_chirp(section: Mapping[str, Any]) -> RoadChirp:
     )
 
 
+#: the calibration's own values (``{name: config key}``), read once by the engine into its run's
+#: ``options``: its section, the rig's angle limit, and the drop test's (each step is a drop)
+READS = {**DROP_READS, "calibrate": "calibrate", "angle_limit_deg": "rig.angle_limit_deg"}
+
+
 def plan_from_config(config: RunConfig, source: str = "config") -> Plan:
-    """The plan of the config's ``calibrate`` section, checked against the rig (one-line ConfigError).
+    """The plan of a resolved config's ``calibrate`` section (:func:`plan_of` its assembled run)."""
+    return plan_of(assemble(config, reads=READS), source)
+
+
+def plan_of(run: RunSpec, source: str = "config") -> Plan:
+    """The plan of the run's ``calibrate`` section (its ``options``, :data:`READS`), checked against
+    the rig (one-line ConfigError).
 
     Currents must lie in [0, rig.current_max_a]; the fit needs at least two currents when the model
     has current terms (checked by the caller, which knows whether they are asked for); the estimated
     rig time must stay within ``max_rig_time_s``; the road chirp must stay below a tenth of the
     loop rate."""
-    section: Mapping[str, Any] = config["calibrate"]
-    i_max = float(config["rig"]["current_max_a"])
-    limit = float(config["rig"]["angle_limit_deg"])
+    section: Mapping[str, Any] = run.options["calibrate"]
+    i_max = run.stage.current_max_a
+    limit = float(run.options["angle_limit_deg"])
 
     def currents(key: str) -> list[float]:
         values = section[key]
@@ -151,11 +165,11 @@ def plan_from_config(config: RunConfig, source: str = "config") -> Plan:
                 f"{source}: calibrate.{key}: expected an angle away from 0 and within ±{limit:g} deg "
                 f"(rig.angle_limit_deg), got {angle:g}"
             )
-        check_theta0(config["drop_test"]["release_threshold_deg"], angle, f"{source}: calibrate.{key}")
+        check_theta0(run.options["release_threshold_deg"], angle, f"{source}: calibrate.{key}")
     f0, f1 = section["road_f_start_hz"], section["road_f_stop_hz"]
     if f1 < f0:
         raise ConfigError(f"{source}: calibrate.road_f_stop_hz: expected >= road_f_start_hz ({f0:g}), got {f1:g}")
-    if f1 > config["loop"]["rate_hz"] / 10:
+    if f1 > run.loop.rate_hz / 10:
         raise ConfigError(
             f"{source}: calibrate.road_f_stop_hz: expected at most a tenth of loop.rate_hz, got {f1:g} Hz"
         )

@@ -21,11 +21,11 @@ import numpy as np
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.identify.road import held_speed
-from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
+from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop
 from sashil.lab.calibration.plan import RoadChirp, Step
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
@@ -116,17 +116,15 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     return out
 
 
-def run_step(config: RunConfig, step: Step, data_path: str | Path | None = None) -> StepResult:
-    """Run one step on the config's rig; errors that end it early are in ``result.error`` (the rig is
+def run_step(run: RunSpec, step: Step, data_path: str | Path | None = None) -> StepResult:
+    """Run one step on the run's rig (``run``: the calibration's assembled run); errors that end it early are in ``result.error`` (the rig is
     already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError.
     ``data_path``: where the runner streams the step's every cycle as it runs."""
     stage = StepStage(step)
-    record = run_drop_test(
-        config, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path
-    )
+    record = run_drop(run, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path)
     columns = on_device_clock(record, step.road is not None)
     error = record.error
-    counts = config["rig"]["encoder_counts_per_rev"]
+    counts = run.stage.counts_per_rev
     theta = columns.get("theta_rad", np.zeros(0))
     if error is None and (theta.size == 0 or np.ptp(theta) < MIN_COUNTS_MOVED * TWO_PI / counts):
         error = StuckEncoderError(

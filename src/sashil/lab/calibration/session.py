@@ -24,7 +24,7 @@ from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
 from sashil.lab.calibration.analysis import Calibration, analyse, gap_cut
 from sashil.lab.calibration.extra import candidates, suggest
-from sashil.lab.calibration.plan import Plan, Step, plan_from_config, road_chirp
+from sashil.lab.calibration.plan import READS, Plan, Step, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
 from sashil.recording.run_folder import RunFolder
@@ -33,6 +33,7 @@ from sashil.recording.summary_writer import write_config
 from sashil.runtime.runner import CYCLES_FILE
 
 if TYPE_CHECKING:
+    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
 
 #: times a step is repeated when a link gap (a host pause that lost samples) cuts its record short
@@ -83,10 +84,9 @@ def check_plan(plan: Plan, source: str, block_s: float | None = None) -> None:
             )
 
 
-def check_port(config: RunConfig) -> None:
+def check_port(port: str | None) -> None:
     """A link's port given as a device path (``/dev/ttyACM0``) must exist: refused in one line before
     the operator is told to press the arm (the first prompt comes before the rig is opened)."""
-    port = config["driver"]["port"]
     if isinstance(port, str) and port.startswith("/") and not Path(port).exists():
         raise ConfigError(f"--port (driver.port): {port}: no such device (is the board plugged in?)")
 
@@ -155,7 +155,7 @@ def calibrate_rig(
 ) -> Outcome:
     """Calibrate the rig of ``config`` (its ``driver`` section says which: sim, serial, can).
 
-    Runs the plan of ``config['calibrate']`` (:func:`sashil.lab.calibration.plan.plan_from_config`),
+    Runs the plan of its ``calibrate`` section (:func:`sashil.lab.calibration.plan.plan_of`),
     fits the model (seed 001 eqs. 9-17 for Bouc-Wen) to the ``fit`` runs, validates it on the
     held-out ones and writes ``out`` (default ``runs/<UTC>-calibrate/``): ``params.yaml`` (the
     shape ``sashil identify`` writes, accepted by ``--params`` on every verb), ``report.md`` with
@@ -182,21 +182,23 @@ def calibrate_rig(
         derived = thaw(config)
         derived["calibrate"]["model"] = model
         config = freeze_config(derived)
-    plan = plan_from_config(config, source)
-    check_plan(plan, source, float(config["calibrate"]["interval_block_s"]))
-    check_port(config)
+    run = assemble(config, reads=READS)
+    section = run.options["calibrate"]
+    plan = plan_of(run, source)
+    check_plan(plan, source, float(section["interval_block_s"]))
+    check_port(run.options["port"])
     folder = RunFolder.create(out, "calibrate")
     write_config(folder, config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
-    runs = RunSet(folder, "calibrate", {"driver": config["driver"]["name"]}, sub_root=runs_folder.path)
+    runs = RunSet(folder, "calibrate", {"driver": run.rig.backend}, sub_root=runs_folder.path)
     say(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
-        f"({config['driver']['name']} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
+        f"({run.rig.backend} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
-    session = _Session(config, plan, folder, runs, say, prompt or say, J)
+    session = _Session(run, plan, folder, runs, say, prompt or say, J)
     session.run_steps(plan.steps, 1, len(plan.steps))
     say(f"rig time {session.rig_s:.0f} s; fitting ...")
-    extra = int(config["calibrate"]["extra_steps"])
+    extra = int(section["extra_steps"])
     cal = session.fit(profile and not extra)
     if extra:
         cal = session.run_extra_steps(cal, extra, profile)
@@ -205,10 +207,10 @@ def calibrate_rig(
 
 @dataclass
 class _Session:
-    """One calibration under way: its config and plan, its folders, the runs so far, how it talks
-    to the user (``say``) and to the operator (``tell``)."""
+    """One calibration under way: its assembled run (``options``: :data:`READS`) and plan, its
+    folders, the runs so far, how it talks to the user (``say``) and to the operator (``tell``)."""
 
-    config: RunConfig
+    run: RunSpec
     plan: Plan
     folder: RunFolder
     runs: RunSet
@@ -221,13 +223,13 @@ class _Session:
 
     @property
     def counts_per_rev(self) -> int:
-        return int(self.config["rig"]["encoder_counts_per_rev"])
+        return self.run.stage.counts_per_rev
 
     def run_once(self, step: Step, data_path: Path) -> StepResult:
         """One run of ``step``, the operator told first which angle to hold."""
-        hold_s = float(self.config["drop_test"]["hold_time_s"])
+        hold_s = float(self.run.options["hold_time_s"])
         self.tell(f"{step.name}: {hold_prompt(step.theta0_deg)}, hold it still {hold_s:g} s and let go")
-        return run_step(self.config, step, data_path)
+        return run_step(self.run, step, data_path)
 
     def run_steps(self, steps: Sequence[Step], first: int, total: int) -> None:
         """Run ``steps`` (numbered from ``first`` of ``total``) into :attr:`results`; the rig time so
@@ -301,8 +303,8 @@ class _Session:
     def fit(self, profile_n: bool) -> Calibration:
         """The model fitted to the fit runs, validated on the held-out ones, with the extra steps
         that would shrink its widest interval ranked."""
-        section = self.config["calibrate"]
-        current_max_a = float(self.config["rig"]["current_max_a"])
+        section = self.run.options["calibrate"]
+        current_max_a = self.run.stage.current_max_a
         cal = analyse(
             [r for r in self.results if r.step.role == "fit"],
             [r for r in self.results if r.step.role == "validate"],
@@ -355,7 +357,7 @@ class _Session:
 
     def write(self, cal: Calibration, inertia_given: bool) -> Outcome:
         """``params.yaml``, ``report.md`` with its plots, and the folder's ``summary.json``."""
-        config, rig_s = self.config, self.rig_s
+        run, rig_s = self.run, self.rig_s
         rows = [_summary_row(r) for r in self.results]
         params_path = write_params(self.folder.file("params.yaml"), params_document(cal, inertia_given, rig_s, rows))
         report_path = write_report(
@@ -364,10 +366,10 @@ class _Session:
             self.results,
             self.J,
             inertia_given,
-            config["rig"]["encoder_counts_per_rev"],
-            config["rig"]["current_max_a"],
+            run.stage.counts_per_rev,
+            run.stage.current_max_a,
             rig_s,
-            virtual=assemble(config).virtual,
+            virtual=run.virtual,
         )
         self.runs.finish(
             model=cal.best.model,
