@@ -16,22 +16,19 @@ is refused in one line naming it, never silently replaced.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sashil.config import Config, apply_params, read_config
-from sashil.config.frozen import freeze_config, thaw
+from sashil.config import Config, read_config
+from sashil.config.compose import ConfigSource, Option, config_steps
+from sashil.config.frozen import freeze_config
 from sashil.config.overrides import parse_override, set_values
 from sashil.config.parts import StageParts
-from sashil.config.schema import validate
-from sashil.config.sections import SCHEMA
 from sashil.drivers import declared_capabilities, rig_parts
 from sashil.engine import checks as verb_checks
 from sashil.errors import ConfigError
-from sashil.models.registry import MODEL_PARAMS, RIG_MODELS
+from sashil.models.registry import RIG_MODELS
 from sashil.roads.syntax import DEFAULT_SIM_ROAD
 
 if TYPE_CHECKING:
@@ -62,34 +59,6 @@ VERB_CHECKS: dict[str, Callable[[RunConfig, Callable[[str], str]], None]] = {
     "sweep": verb_checks.check_sweep,
     "compare": verb_checks.check_compare,
 }
-
-
-@dataclass(frozen=True)
-class Option:
-    """A verb option that sets a config key: its name as the user gave it (``--duration``), the
-    dotted key (``run.duration_s``) and the value (None: not given, the config's value stands)."""
-
-    name: str
-    key: str
-    value: Any
-
-
-@dataclass(frozen=True)
-class ConfigSource:
-    """Where a run's config comes from, in the order :func:`resolve` applies it."""
-
-    #: a YAML file, an already-loaded mapping (checked like a file), or None for the defaults
-    config: str | Path | Mapping[str, Any] | None = None
-    #: a parameter file from ``sashil identify`` that replaces the model
-    params: str | Path | None = None
-    #: the law (``--controller``): a registered name, ``package.module:Class`` or ``file.py:Class``
-    controller: str | None = None
-    #: ``--set`` texts, ``section.key=value`` with a YAML value
-    sets: Sequence[str] = ()
-    #: the verb's own options, each a config key
-    options: Sequence[Option] = ()
-    driver: str | None = None
-    port: str | None = None
 
 
 def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
@@ -133,14 +102,6 @@ def apply_overrides(config: Mapping[str, Any], overrides: Iterable[str], source:
     return apply_values(config, [parse_override(text, source) for text in overrides], source)
 
 
-def _load(source: ConfigSource) -> Config:
-    if isinstance(source.config, Mapping):
-        config = validate(thaw(source.config), SCHEMA, "config")
-        check_controller(config, "config")
-        return config
-    return load_config(source.config)
-
-
 def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> RunConfig:
     """The read-only config ``verb`` runs with, from ``source``. Order: the file (or defaults),
     ``params``, the law then each ``--set``, the verb's options, ``--driver``/``--port``; then the
@@ -148,31 +109,10 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
     the verb cannot run (not in ``models``, default the rig models) is refused. The result is a
     :class:`~sashil.config.frozen.FrozenSection` typed as :class:`~sashil.config.typed.RunConfig`
     (the schema's sections, generated from it), so mypy checks every read of it."""
-    config = _load(source)
-    if source.params is not None:
-        config = apply_params(config, source.params)
-        check_controller(config, str(source.params))  # the law's checks against the new model
-    sets = [parse_override(text) for text in source.sets]
-    if source.controller:  # the law before its --set keys, which may set its parameters
-        config = apply_values(
-            config, [(["controller", "law"], source.controller), *sets], "--set" if sets else "--controller"
-        )
-    else:
-        config = apply_values(config, sets, "--set")
-    for option in source.options:
-        if option.value is not None:
-            config = apply_values(config, [(option.key.split("."), option.value)], option.name)
-    _check_model(config, source, verb, models if models is not None else RIG_MODELS)
-    if source.params is not None and _mismatched(config.get("mismatch") or {}):
-        logging.getLogger("sashil").warning(
-            "--params %s: the config's mismatch: section is applied on top of these parameters "
-            "(the simulated plant differs from them)",
-            source.params,
-        )
-    if source.driver is not None:
-        config = apply_values(config, [(["driver", "name"], source.driver)], "--driver")
-    if source.port is not None:
-        config = apply_values(config, [(["driver", "port"], source.port)], "--port")
+    config: Config = {}
+    for step in config_steps(source, verb, models if models is not None else RIG_MODELS):
+        check_controller(step.config, step.source, step.replaced)  # before the next step is composed
+        config = step.config
     if verb not in RIGLESS_VERBS:
         _resolve_backend(config, source, verb)
     resolved = freeze_config(config)
@@ -218,33 +158,3 @@ def _named(source: ConfigSource, key: str) -> str:
         if option.key == key and option.value is not None:
             return option.name
     return key
-
-
-def _check_model(config: Config, source: ConfigSource, verb: str | None, models: Sequence[str]) -> None:
-    """ConfigError, one line naming where the model came from (``--set model.name``, ``--params``
-    or ``--config``), when the verb cannot run the config's model."""
-    name = config["model"]["name"]
-    if name in models:
-        return
-    sets = [item for item in source.sets if item.partition("=")[0].strip() == "model.name"]
-    if sets:
-        where = f"--set {sets[-1]}"
-    elif source.params is not None:
-        where = f"--params {source.params}"
-    else:
-        where = f"--config {source.config if not isinstance(source.config, Mapping) else '(mapping)'}"
-    who = f"sashil {verb}" if verb else "this verb"
-    raise ConfigError(
-        f"{where}: a {name} model; {who} runs {' or '.join(models)} models only (the rig plant and the "
-        f"controller's observer are Bouc-Wen); sashil simulate runs {', '.join(MODEL_PARAMS)}"
-    )
-
-
-def _mismatched(section: Mapping[str, Any]) -> bool:
-    """Whether a ``mismatch`` section changes the simulated plant at all."""
-    return bool(
-        section.get("fraction")
-        or any(section.get("params", {}).values())
-        or section.get("coil_tau")
-        or any(section.get(key) is not None for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"))
-    )
