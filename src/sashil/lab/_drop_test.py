@@ -27,7 +27,7 @@ import numpy as np
 from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
-from sashil.config.parts import StageParts
+from sashil.config.parts import RunSpec, StageParts
 from sashil.control.law_registry import law_label
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.drivers.operator_prompt import hold_prompt
@@ -48,10 +48,10 @@ from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
 
 if TYPE_CHECKING:
-    from sashil.config.parts import RunSpec, StageParts
+    from sashil.config.parts import StageParts
     from sashil.config.typed import RunConfig
 
-__all__ = ["READS", "DropRecord", "DropTestPlan", "drop_test", "result_line", "run_drop", "run_drop_test"]
+__all__ = ["READS", "DropRecord", "DropTestPlan", "drop_test", "result_line", "run_drop_test"]
 
 #: the drop test's own values (``{name: config key}``), read once by the engine into its run's
 #: ``options`` (:func:`sashil.engine.assemble`)
@@ -129,7 +129,7 @@ def drop_test(
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = runs.folder_for(_label(current))
-        record = run_drop(
+        record = run_drop_test(
             run,
             theta0_deg,
             current,
@@ -142,7 +142,7 @@ def drop_test(
             trace=outputs.can_trace(target.path, drop["port"]),
         )
         _write_drop(config if runs.several else None, outputs, target, record, current, label)
-        assert record.metrics is not None and record.run  # run_drop sets both
+        assert record.metrics is not None and record.run  # run_drop_test sets both
         if live is not None:
             live.note(
                 live_offset_s,
@@ -676,8 +676,8 @@ def _registered(group: str, kind: str, what: str) -> str:
     return table[kind].target
 
 
-def run_drop(
-    run: RunSpec,
+def run_drop_test(
+    config: RunConfig | RunSpec,
     theta0_deg: float = -5.0,
     current_a: float = 0.0,
     duration_s: float = 10.0,
@@ -691,8 +691,8 @@ def run_drop(
     stop: Any = None,
     trace: Any = None,
 ) -> DropRecord:
-    """One drop test of the assembled ``run`` (its ``options``: the drop test's :data:`READS`) at a
-    constant current (or, after the release, under ``controller``: a stage, or :data:`CONFIG_LAW`
+    """One drop test of a resolved ``config`` or of the drop test's assembled run (its ``options``:
+    :data:`READS`) at a constant current (or, after the release, under ``controller``: a stage, or :data:`CONFIG_LAW`
     for the config's law).
 
     On the real clock with ``loop.process`` (the default) the drop runs in a loop process of its
@@ -711,6 +711,7 @@ def run_drop(
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
+    run = config if isinstance(config, RunSpec) else assemble(config, reads=READS)
     plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
     outcome = engine.run(
         run,
@@ -729,39 +730,6 @@ def run_drop(
     if error is not None and not isinstance(error, SashilError):
         raise error
     return _record(run, outcome, plan, error)
-
-
-def run_drop_test(
-    config: RunConfig,
-    theta0_deg: float = -5.0,
-    current_a: float = 0.0,
-    duration_s: float = 10.0,
-    rig: RigInterface | None = None,
-    clock: Clock | None = None,
-    controller: Any = None,
-    notify: Callable[[str], None] | None = None,
-    data_path: str | Path | None = None,
-    *,
-    live: Any = None,
-    stop: Any = None,
-    trace: Any = None,
-) -> DropRecord:
-    """One drop test of a resolved ``config``, assembled (:func:`run_drop` with the same arguments)."""
-    run = assemble(config, reads=READS)
-    return run_drop(
-        run,
-        theta0_deg,
-        current_a,
-        duration_s,
-        rig,
-        clock,
-        controller,
-        notify,
-        data_path,
-        live=live,
-        stop=stop,
-        trace=trace,
-    )
 
 
 def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:

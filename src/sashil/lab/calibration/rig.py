@@ -21,7 +21,7 @@ import numpy as np
 from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
 from sashil.errors import DriverError, SashilError
 from sashil.identify.road import held_speed
-from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop
+from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
 from sashil.lab.calibration.plan import RoadChirp, Step
 
 if TYPE_CHECKING:
@@ -121,7 +121,7 @@ def run_step(run: RunSpec, step: Step, data_path: str | Path | None = None) -> S
     already at 0 A), with the data up to them. A record that never moved is a StuckEncoderError.
     ``data_path``: where the runner streams the step's every cycle as it runs."""
     stage = StepStage(step)
-    record = run_drop(run, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path)
+    record = run_drop_test(run, step.theta0_deg, step.current_a, step.duration_s, controller=stage, data_path=data_path)
     columns = on_device_clock(record, step.road is not None)
     error = record.error
     counts = run.stage.counts_per_rev
