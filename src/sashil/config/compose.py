@@ -40,7 +40,7 @@ class Option:
 
 @dataclass(frozen=True)
 class ConfigSource:
-    """Where a run's config comes from, in the order :func:`config_steps` applies it."""
+    """Where a run's config comes from, in the order :func:`resolve` applies it."""
 
     #: a YAML file, an already-loaded mapping (checked like a file), or None for the defaults
     config: str | Path | Mapping[str, Any] | None = None
