@@ -105,8 +105,9 @@ def _last_crossing(
     lambda: (
         *(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
         *(0.0, 0.0, 0.0),
-        *(1, 1e-3, 0.0, 0.9, 1.5e-3),
+        *(1, 1e-3, 0.0, 0.9),
         False,
+        1.5e-3,
         *(1.0, 109.0, 0.7, 1.5, 1.0, 1.0, 873.0, 1.0, 700.0, 0.099, 0.9),
     )
 )
@@ -126,8 +127,8 @@ def advance(
     h: float,
     cmd: float,
     decay: float,
-    q: float,
     held: bool,
+    q: float,
     J: float,
     k: float,
     c1: float,
@@ -143,9 +144,9 @@ def advance(
     """``count`` sub-steps of ``h`` s towards the coil current ``cmd``, timing the encoders' last count
     changes. The state now: time ``t``, relative angle ``theta``, its rate ``v``, the damper's ``z``,
     the coil current ``i``, the road's angle ``r`` and rate ``rv``; the wheel's angle is ``road0 +
-    speed * (t - road_t0)``; ``decay``: exp(-h/tau) of the coil; ``q``: one count [rad]; ``held``:
-    the operator holds the relative angle (the coil alone moves, and the road); then the plant's
-    coefficients.
+    speed * (t - road_t0)``; ``decay``: exp(-h/tau) of the coil; ``held``: the operator holds the
+    relative angle (the coil alone moves, and the road); then what stays for a run: ``q``, one count
+    [rad], and the plant's coefficients.
 
     Returns (t, theta, theta_dot, z, i, road angle, then for the arm and the road encoder the
     sub-step of its last count change (-1: none), the fraction of that sub-step and the direction).
