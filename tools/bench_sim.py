@@ -14,10 +14,14 @@ Prints:
   the sim backend's ``read`` (the plant's sub-steps, the encoder counts and edge times in one
   compiled call, :func:`sashil.drivers.sim_advance.advance`; the sample), the plan (and under a law the controller: estimator + observer
   + law + inverse), safety (``check`` + ``limit``), recording (the loop's row into the stream and the
-  stream's columns after the run), the backend's ``write``, and the loop's own overhead (the whole
-  run less the parts: deadlines, timing rings, the runner's set-up and the record derived after the run);
-  the CPU other threads spent during the run is its own row (BLAS's worker threads spin for about
-  0.1 s once a matrix set-up wakes them);
+  stream's columns after the run), the backend's ``write``; then what the whole run costs beyond
+  those parts, in three rows: the parts called in turn as a cycle calls them (no loop around them)
+  less the sum of each alone (what they cost each other: the caches and branch history they share),
+  the per-run cost (set-up, warm-up, the record derived after the run: from the same drop with a
+  ``SHORT_S`` record, the cost that does not grow with the run's length) and the loop around the
+  parts (the rest: the clock, deadlines, timing rings, the stop and tuning checks); the CPU other
+  threads spent during the run is its own row (BLAS's worker threads spin for about 0.1 s once a
+  matrix set-up wakes them);
   for reference, the bare plant (``RigPlant.step``) over the same commands;
 - the damper model's real-time step (BoucWenZ.advance over one 1 kHz sample's angle increment of a
   recorded drop test, plus the torque), median / p99 / max per sample.
