@@ -26,7 +26,6 @@ window stays closed too long the writer writes anyway, keeping the flush promise
 
 from __future__ import annotations
 
-import array
 import itertools
 import os
 import sys
@@ -214,12 +213,11 @@ class Recorder:
         if not self.keep:
             raise ValueError("the recorder keeps no rows (keep=False)")
         count, width = self._head, self._width
-        values = list(itertools.chain.from_iterable(itertools.islice(self._ring, count)))
-        try:  # C doubles straight from the numbers (numpy's own conversion of a list costs several times this)
-            flat = np.frombuffer(array.array("d", values), dtype=float)
-        except TypeError:  # a stage signal that is not a number (None: NaN, as numpy reads it)
-            flat = np.array(values, dtype=float)
-        table = flat.reshape(count, width).T.copy()
+        values = itertools.chain.from_iterable(itertools.islice(self._ring, count))
+        try:
+            table = np.fromiter(values, dtype=float, count=count * width).reshape(count, width).T.copy()
+        except (TypeError, ValueError):  # a stage signal that is not a number (None: NaN, as numpy reads it)
+            table = np.array(self._ring[:count], dtype=float).reshape(count, width).T.copy()
         return dict(zip(self.columns, table, strict=True))
 
     def summary(self) -> dict[str, Any]:
