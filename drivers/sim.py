@@ -103,7 +103,6 @@ class SimulatedRig(RigInterface):
         self.angle_noise_rad = float(angle_noise_rad)
         self.current_noise_a = float(current_noise_a)
         self._rng = random.Random(noise_seed)
-        self._noisy = bool(self.angle_noise_rad or self.current_noise_a)
         self._command = 0.0
         self._seq = 0
         self._t0_ns: int | None = None
@@ -195,7 +194,7 @@ class SimulatedRig(RigInterface):
         theta_road = st.theta_road_rad
         theta_arm = st.theta_rad + theta_road
         current = st.current_a
-        if self._noisy:
+        if self.angle_noise_rad or self.current_noise_a:
             theta_arm, theta_road, current = self._noise(theta_arm, theta_road, current)
         scale = self._counts_per_rad
         self._seq += 1
