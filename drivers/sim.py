@@ -20,6 +20,8 @@ import random
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+import numpy as np
+
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
@@ -119,7 +121,7 @@ class SimulatedRig(RigInterface):
         self._split_s = -1.0
         self._split = (1, 0.0, 0.0)  # a read's sub-steps, their length and the coil's decay over one
         #: the compiled step's arguments that stay for the run: one count [rad], the plant's coefficients
-        self._constants = (self._count_rad, *plant._coefficients)
+        self._constants = np.array((self._count_rad, *plant._coefficients), dtype=np.float64)
 
     #: the config keys the simulated rig is built from (:meth:`from_parts`)
     reads: ClassVar[Mapping[str, str]] = {"model": "model", "rig": "rig", "mismatch": "mismatch"}
@@ -274,7 +276,7 @@ class SimulatedRig(RigInterface):
             self._command,  # clamped where it is set (write, set_initial_current)
             decay,
             plant._held_at is not None,
-            *self._constants,
+            self._constants,
         )
         st.time_s, st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a = t, theta, v, z, i
         st.theta_road_rad, st.theta_road_dot_rad_s, st.torque_in_nm = road, wheel.speed_rad_s, 0.0
