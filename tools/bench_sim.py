@@ -127,13 +127,15 @@ def bench_speed(law: str, repeats: int, record_s: float) -> None:
 
 
 def _cpu(block: Callable[[], Any], repeats: int = 3) -> float:
-    """CPU seconds of ``block()``, the best of ``repeats`` (the machine may be shared: preemptions do
-    not count, and the best run is the one least slowed by a neighbour's use of the caches)."""
+    """This thread's CPU seconds of ``block()``, the best of ``repeats`` (the machine may be shared:
+    preemptions do not count, and the best run is the one least slowed by a neighbour's use of the
+    caches; BLAS's worker threads, spinning after a set-up woke them, are the whole run's row of
+    their own, not a part's)."""
     best = math.inf
     for _ in range(repeats):
-        cpu0 = time.process_time()
+        cpu0 = time.thread_time()
         block()
-        best = min(best, time.process_time() - cpu0)
+        best = min(best, time.thread_time() - cpu0)
     return best
 
 
@@ -183,7 +185,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     # the cost of a run that does not grow with its length: the same drop with a record SHORT_S long
     short = run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()).run["timing"]["cycles"]
     short_cpu = _cpu(lambda: run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()))
-    per_run = short_cpu - short * (whole - short_cpu) / (cycles - short)
+    per_run = short_cpu - short * (loop_thread - short_cpu) / (cycles - short)  # the loop's thread, both
     commands = commands[:cycles]
     steps = samples[:cycles]
     release_after = max(config["drop_test"]["hold_time_s"] + 0.1, 0.3)
