@@ -20,6 +20,8 @@ import random
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+import numpy as np
+
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
@@ -118,6 +120,8 @@ class SimulatedRig(RigInterface):
         self._road_end: float | None = None
         self._split_s = -1.0
         self._split = (1, 0.0, 0.0)  # a read's sub-steps, their length and the coil's decay over one
+        #: the compiled step's arguments that stay for the run: one count [rad], the plant's coefficients
+        self._constants = np.array((self._count_rad, *plant._coefficients), dtype=np.float64)
 
     #: the config keys the simulated rig is built from (:meth:`from_parts`)
     reads: ClassVar[Mapping[str, str]] = {"model": "model", "rig": "rig", "mismatch": "mismatch"}
@@ -164,13 +168,14 @@ class SimulatedRig(RigInterface):
 
     # cycle ---------------------------------------------------------------------------------
     def read(self, t_ns: int, dt_ns: int) -> RigSample:
-        if self.state is RigState.CLOSED or self.state is RigState.UNCONFIGURED:
+        if self.state is not RigState.ACTIVE and self.state is not RigState.CONFIGURED:
             raise DriverError(f"sim: read() in state {self.state.value}")
-        if self._t0_ns is None:
-            self._t0_ns = self._last_ns = t_ns
+        t0 = self._t0_ns
+        if t0 is None:
+            self._t0_ns = self._last_ns = t0 = t_ns
         plant = self.plant
-        elapsed = (t_ns - self._last_ns) * 1e-9
         start_ns = self._last_ns
+        elapsed = (t_ns - start_ns) * 1e-9
         if self._release_at_s is not None:
             release_in = self._release_at_s - plant.state.time_s
             if release_in <= elapsed:
@@ -191,14 +196,10 @@ class SimulatedRig(RigInterface):
         theta_road = st.theta_road_rad
         theta_arm = st.theta_rad + theta_road
         current = st.current_a
-        if self.angle_noise_rad:
-            theta_arm += self._rng.gauss(0.0, self.angle_noise_rad)
-            theta_road += self._rng.gauss(0.0, self.angle_noise_rad)
-        if self.current_noise_a:
-            current += self._rng.gauss(0.0, self.current_noise_a)
+        if self.angle_noise_rad or self.current_noise_a:
+            theta_arm, theta_road, current = self._noise(theta_arm, theta_road, current)
         scale = self._counts_per_rad
         self._seq += 1
-        t0 = self._t0_ns
         arm_edge, road_edge = self.arm_edge, self.road_edge
         # positional: seq, time_ns, device_time_us, arm_counts, road_counts, current_a, flags, counts_per_rev,
         # then each encoder's last edge (device time [us], direction)
@@ -216,6 +217,15 @@ class SimulatedRig(RigInterface):
             NO_EDGE if road_edge is None else (road_edge[0] - t0) // 1000,
             0 if road_edge is None else road_edge[1],
         )
+
+    def _noise(self, theta_arm: float, theta_road: float, current: float) -> tuple[float, float, float]:
+        """The sensors' seeded Gaussian noise on the two angles and the measured current."""
+        if self.angle_noise_rad:
+            theta_arm += self._rng.gauss(0.0, self.angle_noise_rad)
+            theta_road += self._rng.gauss(0.0, self.angle_noise_rad)
+        if self.current_noise_a:
+            current += self._rng.gauss(0.0, self.current_noise_a)
+        return theta_arm, theta_road, current
 
     # encoder edges ---------------------------------------------------------------------------
     def _angles(self) -> tuple[float, float]:
@@ -249,7 +259,6 @@ class SimulatedRig(RigInterface):
             decay = math.exp(-h / plant.coil_tau_s) if plant.coil_tau_s > 0.0 else 0.0
             self._split_s, self._split = seconds, (count, h, decay)
         count, h, decay = self._split
-        command = self._command  # clamped where it is set (write, set_initial_current)
         wheel = self.wheel
         t, theta, v, z, i, road, arm_j, arm_s, arm_dir, road_j, road_s, road_dir = advance(
             st.time_s,
@@ -264,11 +273,10 @@ class SimulatedRig(RigInterface):
             wheel._t0,
             count,
             h,
-            command,
+            self._command,  # clamped where it is set (write, set_initial_current)
             decay,
-            self._count_rad,
             plant._held_at is not None,
-            *plant._coefficients,
+            self._constants,
         )
         st.time_s, st.theta_rad, st.theta_dot_rad_s, st.z, st.current_a = t, theta, v, z, i
         st.theta_road_rad, st.theta_road_dot_rad_s, st.torque_in_nm = road, wheel.speed_rad_s, 0.0

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from sashil.drivers.encoder_edges import MAX_POINTS, MIN_POINTS, TOLERANCE, quick_test, stays_in_cell
 from sashil.models._jit import jit, loop_kernel
 from sashil.models.plant import rig_substep
@@ -105,9 +107,9 @@ def _last_crossing(
     lambda: (
         *(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
         *(0.0, 0.0, 0.0),
-        *(1, 1e-3, 0.0, 0.9, 1.5e-3),
+        *(1, 1e-3, 0.0, 0.9),
         False,
-        *(1.0, 109.0, 0.7, 1.5, 1.0, 1.0, 873.0, 1.0, 700.0, 0.099, 0.9),
+        np.array([1.5e-3, 1.0, 109.0, 0.7, 1.5, 1.0, 1.0, 873.0, 1.0, 700.0, 0.099, 0.9]),
     )
 )
 @jit
@@ -126,30 +128,34 @@ def advance(
     h: float,
     cmd: float,
     decay: float,
-    q: float,
     held: bool,
-    J: float,
-    k: float,
-    c1: float,
-    c2: float,
-    alpha1: float,
-    alpha2: float,
-    beta: float,
-    gamma: float,
-    delta: float,
-    n: float,
-    z_u: float,
+    constants: np.ndarray,
 ) -> tuple[float, float, float, float, float, float, int, float, int, int, float, int]:
     """``count`` sub-steps of ``h`` s towards the coil current ``cmd``, timing the encoders' last count
     changes. The state now: time ``t``, relative angle ``theta``, its rate ``v``, the damper's ``z``,
     the coil current ``i``, the road's angle ``r`` and rate ``rv``; the wheel's angle is ``road0 +
-    speed * (t - road_t0)``; ``decay``: exp(-h/tau) of the coil; ``q``: one count [rad]; ``held``:
-    the operator holds the relative angle (the coil alone moves, and the road); then the plant's
-    coefficients.
+    speed * (t - road_t0)``; ``decay``: exp(-h/tau) of the coil; ``held``: the operator holds the
+    relative angle (the coil alone moves, and the road); ``constants``: what stays for a run, one
+    array (one argument to pass from Python, not twelve): ``q``, one count [rad], then the plant's
+    coefficients J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u.
 
     Returns (t, theta, theta_dot, z, i, road angle, then for the arm and the road encoder the
     sub-step of its last count change (-1: none), the fraction of that sub-step and the direction).
     """
+    q, J, k, c1, c2, alpha1, alpha2, beta, gamma, delta, n, z_u = (
+        constants[0],
+        constants[1],
+        constants[2],
+        constants[3],
+        constants[4],
+        constants[5],
+        constants[6],
+        constants[7],
+        constants[8],
+        constants[9],
+        constants[10],
+        constants[11],
+    )
     road = (h, road0, speed, road_t0)
     arm_j, arm_s, arm_dir = -1, 0.0, 0
     road_j, road_s, road_dir = -1, 0.0, 0

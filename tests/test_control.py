@@ -78,6 +78,13 @@ def test_observer_z_is_the_model_z_update_and_torque_is_eq9():
         by_increment.update_increment(after - before, -0.2, 0.0)
     assert by_increment.z == pytest.approx(obs.z, rel=1e-12)
     assert by_increment.torque_nm == pytest.approx(obs.z - 0.7 * 0.2, rel=1e-12)
+    # the controller's call goes straight to the compiled z-update: bit for bit the model's own step
+    law, z = BoucWenZ.from_params(SEED), 0.0
+    direct = BoucWenObserver(SEED)
+    for before, after in itertools.pairwise(angles):
+        z = law.advance(z, after - before)
+        assert direct.update_increment(after - before, 0.3, 0.4) == SEED.torque(z, 0.3, 0.4)
+        assert direct.z == z
 
 
 # --- inverse --------------------------------------------------------------------------------
@@ -113,6 +120,23 @@ def test_inverse_current_minimises_the_torque_error_over_the_current_range(targe
     grid = [k / 1000 for k in range(1001)]
     best = min(abs(SEED.torque(z, v, c) - target) for c in grid)
     assert abs(SEED.torque(z, v, i) - target) <= best + 1e-12
+
+
+@pytest.mark.parametrize("mode", ["full", "rule", "viscous"])
+def test_solving_on_the_band_set_this_cycle_is_the_inverse_current(mode):
+    """The controller sets the band once a cycle and solves on its line: the same current, clip and
+    passive counts as ``current`` recomputing the band, bit for bit."""
+    once, twice = HysteresisInverse(SEED, 1.0, mode=mode), HysteresisInverse(SEED, 1.0, mode=mode)
+    for target in (-3.0, -0.08, 0.0, 0.3, 1.6, 5.0, float("nan")):
+        for z, v in ((0.1, 1.0), (-0.1, 0.05), (0.05, -0.4), (-0.0015, 0.001)):
+            at_zero, authority = once.band(z, v)
+            solved = once.solve(target, at_zero, authority, v)
+            assert solved == twice.current(target, z, v)  # a NaN target: 0 A from both
+            assert (once.clipped, once.clip_count, once.passive_count) == (
+                twice.clipped,
+                twice.clip_count,
+                twice.passive_count,
+            )
 
 
 def test_viscous_only_inverse_ignores_alpha():

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from sashil.config.parts import StageParts
+from sashil.control.edge_kalman import _scalar_update
 from sashil.control.kalman import EDGE_BAD_MIN_EVENTS, KalmanRigEstimator
 from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
@@ -170,3 +172,20 @@ def test_a_run_with_bad_edge_times_ends_at_zero_current_with_exit_3_and_the_coun
     assert rig.currents[-1] == 0.0  # the shutdown's safe command
     stats = ctl.stats()
     assert stats["edge_rejects"] > 0.01 * (stats["edge_rejects"] + stats["edge_events"])
+
+
+def test_one_scalar_update_is_the_kalman_gain_whatever_the_scratch_holds():
+    """x += K e, P -= K h P with K = P h / (h P h + r), against numpy's own arithmetic; the scratch
+    for P h is written before it is read (a NaN left in it changes nothing)."""
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(6, 6))
+    p0 = a @ a.T + np.eye(6)
+    x0 = rng.normal(size=6)
+    h = np.array([1.0, -0.002, 1.0, -0.002, 0.0, 2e-6])
+    for scratch in (np.zeros(6), np.full(6, np.nan)):
+        x, p = x0.copy(), p0.copy()
+        _scalar_update(x, p, h, 0.3, 1e-4, scratch)
+        ph = p0 @ h
+        gain = ph / (h @ ph + 1e-4)
+        assert np.allclose(x, x0 + gain * 0.3, rtol=1e-12, atol=0.0)
+        assert np.allclose(p, p0 - np.outer(gain, ph), rtol=1e-12, atol=1e-15)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import subprocess
 import sys
 import textwrap
 import time
+
+import numpy as np
 
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
@@ -129,3 +132,22 @@ def test_data_survives_sigkill_mid_run(tmp_path):
     assert n > 500
     assert data["seq"].tolist() == list(range(n))
     assert path.read_bytes().endswith(b"\n")  # whole lines only
+
+
+def test_a_kept_stream_reads_whole_numbers_as_floats_and_a_missing_signal_as_nan():
+    """The kept rows hold the sample's integers (seq, edge times) and may hold a stage signal of None:
+    the columns are floats, None a NaN, as numpy would read them."""
+    recorder = Recorder(None, ("time_s", "seq", "z_hat"), keep=True).start()
+    for k, value in enumerate((0.5, None, 2)):
+        row = recorder.begin_row()
+        row[:] = [k * 1e-3, k, value]
+        recorder.commit_row()
+    recorder.close()
+    stream = recorder.stream()
+    assert stream["seq"].dtype == np.float64 and stream["seq"].tolist() == [0.0, 1.0, 2.0]
+    assert stream["z_hat"][0] == 0.5 and math.isnan(stream["z_hat"][1]) and stream["z_hat"][2] == 2.0
+    numbers = Recorder(None, ("time_s", "seq"), keep=True).start()
+    for k in range(3):
+        numbers.begin_row()[:] = [k * 0.1, k]
+        numbers.commit_row()
+    assert numbers.stream()["time_s"].tobytes() == np.array([0.0, 0.1, 0.2]).tobytes()

@@ -14,10 +14,14 @@ Prints:
   the sim backend's ``read`` (the plant's sub-steps, the encoder counts and edge times in one
   compiled call, :func:`sashil.drivers.sim_advance.advance`; the sample), the plan (and under a law the controller: estimator + observer
   + law + inverse), safety (``check`` + ``limit``), recording (the loop's row into the stream and the
-  stream's columns after the run), the backend's ``write``, and the loop's own overhead (the whole
-  run less the parts: deadlines, timing rings, the runner's set-up and the record derived after the run);
-  the CPU other threads spent during the run is its own row (BLAS's worker threads spin for about
-  0.1 s once a matrix set-up wakes them);
+  stream's columns after the run), the backend's ``write``; then what the whole run costs beyond
+  those parts, in three rows: the parts called in turn as a cycle calls them (no loop around them)
+  less the sum of each alone (what they cost each other: the caches and branch history they share),
+  the per-run cost (set-up, warm-up, the record derived after the run: from the same drop with a
+  ``SHORT_S`` record, the cost that does not grow with the run's length) and the loop around the
+  parts (the rest: the clock, deadlines, timing rings, the stop and tuning checks); the CPU other
+  threads spent during the run is its own row (BLAS's worker threads spin for about 0.1 s once a
+  matrix set-up wakes them);
   for reference, the bare plant (``RigPlant.step``) over the same commands;
 - the damper model's real-time step (BoucWenZ.advance over one 1 kHz sample's angle increment of a
   recorded drop test, plus the torque), median / p99 / max per sample.
@@ -55,6 +59,8 @@ from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.safety import SafetySupervisor
 
 clock = time.perf_counter_ns
+#: the record length [s] of the short drop whose cost is taken as the per-run part of a drop's
+SHORT_S = 0.2
 
 
 def drop_config(law: str) -> dict[str, Any]:
@@ -121,13 +127,15 @@ def bench_speed(law: str, repeats: int, record_s: float) -> None:
 
 
 def _cpu(block: Callable[[], Any], repeats: int = 3) -> float:
-    """CPU seconds of ``block()``, the best of ``repeats`` (the machine may be shared: preemptions do
-    not count, and the best run is the one least slowed by a neighbour's use of the caches)."""
+    """This thread's CPU seconds of ``block()``, the best of ``repeats`` (the machine may be shared:
+    preemptions do not count, and the best run is the one least slowed by a neighbour's use of the
+    caches; BLAS's worker threads, spinning after a set-up woke them, are the whole run's row of
+    their own, not a part's)."""
     best = math.inf
     for _ in range(repeats):
-        cpu0 = time.process_time()
+        cpu0 = time.thread_time()
         block()
-        best = min(best, time.process_time() - cpu0)
+        best = min(best, time.thread_time() - cpu0)
     return best
 
 
@@ -167,13 +175,17 @@ def bench_breakdown(law: str, record_s: float) -> None:
     record = run_drop_test(config, -5.0, current, record_s, rig=rig, controller=controller)
     # a fresh controller for each timed block, built beforehand: its construction (the filter's
     # gains, the law's set-up) is not a per-cycle cost
-    built = [None if law == "passive" else make_controller(law, StageParts.read(config)) for _ in range(16)]
+    built = [None if law == "passive" else make_controller(law, StageParts.read(config)) for _ in range(32)]
 
     def fresh() -> Any:
         return built.pop()
 
     cycles = record.run["timing"]["cycles"]
     whole, loop_thread = _cpu_and_thread(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
+    # the cost of a run that does not grow with its length: the same drop with a record SHORT_S long
+    short = run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()).run["timing"]["cycles"]
+    short_cpu = _cpu(lambda: run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()))
+    per_run = short_cpu - short * (loop_thread - short_cpu) / (cycles - short)  # the loop's thread, both
     commands = commands[:cycles]
     steps = samples[:cycles]
     release_after = max(config["drop_test"]["hold_time_s"] + 0.1, 0.3)
@@ -233,6 +245,34 @@ def bench_breakdown(law: str, record_s: float) -> None:
             cmd.current_a = command
             limit(cmd, dt_ns)
 
+    def in_turn() -> None:
+        """A cycle's calls one after another over the run's times, as the loop makes them, without
+        the loop around them (no clock, deadlines, timing rings, stop or tuning checks)."""
+        sim = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+        sim.operator_hold(math.radians(-5.0), release_after)
+        sim.set_initial_current(current)
+        sim.configure()
+        sim.activate()
+        settings = DropTestSettings.from_config(config, -5.0, current, record_s)
+        settings.known_release_after_s = release_after
+        plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], fresh())
+        safety = SafetySupervisor.from_parts(SafetyParts.read(config))
+        safety.start(steps[0][1])
+        recorder = Recorder(None, record_columns(plan), keep=True)
+        loop = ControlLoop(sim, plan, VirtualClock(), rate, recorder=recorder)
+        loop.start_ns = steps[0][1]
+        read, check, step, limit, row, write = sim.read, safety.check, plan.step, safety.limit, loop._record, sim.write
+        for _, t_ns, dt_ns in steps:
+            sample = read(t_ns, dt_ns)
+            check(sample, t_ns)
+            cmd = step(sample, t_ns, dt_ns)
+            if cmd is None:
+                break
+            cmd = limit(cmd, dt_ns)
+            row(t_ns, sample, cmd.current_a, cmd.road_speed_rad_s, 0)
+            write(cmd, t_ns, dt_ns)
+        recorder.stream()
+
     def recording_alone() -> None:
         settings = DropTestSettings.from_config(config, -5.0, current, record_s)
         plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], fresh())
@@ -257,11 +297,15 @@ def bench_breakdown(law: str, record_s: float) -> None:
         ("safety (check + limit)", _cpu(safety_alone)),
         ("recording (the row into the stream, the stream's columns)", _cpu(recording_alone)),
         ("backend write", write_only),
-        ("other threads than the loop's (BLAS workers, when a set-up wakes them)", whole - loop_thread),
     ]
-    rows.append(
-        ("loop and runner (the rest: deadlines, timing rings, set-up, the record)", whole - sum(v for _, v in rows))
-    )
+    parts = sum(v for _, v in rows)
+    turn = _cpu(in_turn)
+    rows += [
+        ("the parts in turn, beyond each alone (caches and branches they share)", turn - parts),
+        ("other threads than the loop's (BLAS workers, when a set-up wakes them)", whole - loop_thread),
+        (f"per run: set-up, warm-up, the record after the run ({per_run * 1e3:.1f} ms a run)", per_run),
+    ]
+    rows.append(("the loop around the parts (clock, deadlines, timing rings, checks)", whole - sum(v for _, v in rows)))
     what = "passive" if law == "passive" else f"under {law!r}"
     print(f"CPU cost per cycle, drop test {what} ({cycles} cycles; each part alone over the run's samples):")
     for label, value in rows:

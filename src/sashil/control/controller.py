@@ -283,7 +283,7 @@ class Controller:
         body_ddot = -self._k_over_j * theta - self._inv_j * torque_hat
         self.body_ddot_rad_s2 = body_ddot
         inv = self.inverse
-        inv.band(z, v)
+        at_zero, authority = inv.band(z, v)
         lo, hi = inv.band_lo_nm, inv.band_hi_nm
         self.band_lo_nm, self.band_hi_nm = lo, hi
         state = self.state
@@ -311,7 +311,7 @@ class Controller:
             cmd = self.lead.command(target, measured) if self.lead_direct else target
         else:
             self.torque_cmd_nm = out
-            target = inv.current(out, z, v)
+            target = inv.solve(out, at_zero, authority, v)
             cmd = self.lead.command(target, measured)
         self.current_target_a = target
         # safety clamp: the coil only ever sees a finite current in [0, i_max]

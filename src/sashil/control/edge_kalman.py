@@ -48,11 +48,13 @@ def _state() -> tuple[np.ndarray, np.ndarray]:
     return np.zeros(6), np.eye(6)
 
 
-@loop_kernel(lambda: (*_state(), np.ones(6), 0.0, 1.0))
+@loop_kernel(lambda: (*_state(), np.ones(6), 0.0, 1.0, np.zeros(6)))
 @jit
-def _scalar_update(x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: float, variance: float) -> None:
-    """x += K e, P -= K h P with K = P h / (h P h + r): one scalar measurement."""
-    ph = np.zeros(6)
+def _scalar_update(
+    x: np.ndarray, p: np.ndarray, h: np.ndarray, innovation: float, variance: float, ph: np.ndarray
+) -> None:
+    """x += K e, P -= K h P with K = P h / (h P h + r): one scalar measurement (``ph``: room for P h,
+    the caller's, so a cycle's updates share one)."""
     for i in range(6):
         acc = 0.0
         for j in range(6):
@@ -130,13 +132,16 @@ def edge_cycle(
     f[2, 3] = dt
     f[2, 4] = half
     f[3, 4] = dt
-    fp = f @ p
-    p[:, :] = fp @ f.T + q_scale * q
+    fpf = (f @ p) @ f.T
+    for i in range(6):
+        for j in range(6):
+            p[i, j] = fpf[i, j] + q_scale * q[i, j]
     floor = VARIANCE_FLOOR_COUNTS2 * 4.0 * half_count * half_count
     # the innovation check sees the prediction's miss of each count's cell and of each event's
     # boundary, before any measurement of this cycle moves it
     worst = max(abs(_cell(arm - (x[0] + x[2]), half_count)), abs(_cell(road - x[2], half_count)))
     h = np.zeros(6)
+    ph = np.empty(6)
     if arm_tau >= 0.0:
         tau = arm_tau
         h[0], h[1], h[2], h[3], h[4], h[5] = 1.0, -tau, 1.0, -tau, 0.0, 0.5 * tau * tau
@@ -144,7 +149,7 @@ def edge_cycle(
         predicted = x[0] + x[2] - tau * rate + 0.5 * tau * tau * (body_accel + x[5])
         variance = time_var * rate * rate + accel_psd * tau * tau * tau / 3.0 + floor
         worst = max(worst, abs(arm_boundary - predicted))
-        _scalar_update(x, p, h, arm_boundary - predicted, variance)
+        _scalar_update(x, p, h, arm_boundary - predicted, variance, ph)
     if road_tau >= 0.0:
         tau = road_tau
         h[0], h[1], h[2], h[3], h[4], h[5] = 0.0, 0.0, 1.0, -tau, 0.5 * tau * tau, 0.0
@@ -152,18 +157,18 @@ def edge_cycle(
         predicted = x[2] - tau * rate + 0.5 * tau * tau * (x[4] + road_accel)
         variance = time_var * rate * rate + floor
         worst = max(worst, abs(road_boundary - predicted))
-        _scalar_update(x, p, h, road_boundary - predicted, variance)
+        _scalar_update(x, p, h, road_boundary - predicted, variance, ph)
     cell_var = 4.0 * half_count * half_count / 12.0
     h[0], h[1], h[2], h[3], h[4], h[5] = 1.0, 0.0, 1.0, 0.0, 0.0, 0.0
-    _scalar_update(x, p, h, arm - (x[0] + x[2]), arm_var)
+    _scalar_update(x, p, h, arm - (x[0] + x[2]), arm_var, ph)
     e_cell = _cell(arm - (x[0] + x[2]), half_count)
     if e_cell != 0.0:  # outside the count's cell: back to its edge, at the quantisation's variance
-        _scalar_update(x, p, h, e_cell, cell_var)
+        _scalar_update(x, p, h, e_cell, cell_var, ph)
     h[0], h[1], h[2], h[3], h[4], h[5] = 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-    _scalar_update(x, p, h, road - x[2], road_var)
+    _scalar_update(x, p, h, road - x[2], road_var, ph)
     e_cell = _cell(road - x[2], half_count)
     if e_cell != 0.0:
-        _scalar_update(x, p, h, e_cell, cell_var)
+        _scalar_update(x, p, h, e_cell, cell_var, ph)
     for i in range(6):  # keep P symmetric against rounding
         for j in range(i + 1, 6):
             mean = 0.5 * (p[i, j] + p[j, i])

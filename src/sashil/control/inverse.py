@@ -76,6 +76,11 @@ class HysteresisInverse:
     def current(self, torque_nm: float, z: float, v: float) -> float:
         """i* for the desired torque ``torque_nm`` at the observed z and rate v."""
         at_zero, authority = self.band(z, v)
+        return self.solve(torque_nm, at_zero, authority, v)
+
+    def solve(self, torque_nm: float, at_zero: float, authority: float, v: float) -> float:
+        """i* for ``torque_nm`` on the line :meth:`band` set this cycle (``at_zero`` = T(0), ``authority``
+        = dT/di) at the rate ``v``: the controller sets the band once a cycle and solves on it."""
         if self.viscous_only:  # the comparison inverse without the hysteresis (alpha = 0)
             at_zero, authority = self.params.torque_line(0.0, v)
         if self.rule and torque_nm * v <= 0.0:

@@ -103,6 +103,8 @@ EDGE_LIMIT_SHARE = 1.0 / 3.0
 #: bad events: once this many events were seen, a share of bad ones above EDGE_BAD_SHARE is a fault
 EDGE_BAD_MIN_EVENTS = 100
 EDGE_BAD_SHARE = 0.01
+#: :meth:`KalmanRigEstimator._event`'s (age, boundary) for an encoder without a new event to fuse
+NOTHING_NEW = (-1.0, 0.0)
 
 
 def one_blas_thread() -> contextlib.AbstractContextManager[object]:
@@ -166,6 +168,7 @@ class KalmanRigEstimator(EstimatorOutputs):
     :class:`sashil.control.estimator.RigEstimator`."""
 
     __slots__ = (
+        "_count_vars",
         "_counts_per_rev",
         "_cycles",
         "_dt",
@@ -270,6 +273,8 @@ class KalmanRigEstimator(EstimatorOutputs):
         gain = steady_state_gain(self._dt, var, self.accel_psd, self.commanded_road_jerk_psd, self.bias_psd)
         self._gain_commanded = tuple((float(row[0]), float(row[1])) for row in gain)
         self._counts_per_rev = counts_per_rev
+        #: a count's variance for an encoder that had edge events (weak) and one that had none (q^2/12)
+        self._count_vars = (self._count_var(EDGE_COUNT_SIGMA_COUNTS, q), self._count_var(math.sqrt(1.0 / 12.0), q))
 
     def update(self, sample: RigSample, dt: float, body_accel: float = 0.0, road_accel: float | None = None) -> None:
         """Take one sample ``dt`` [s] after the previous one; ``body_accel``: the model's arm acceleration;
@@ -351,25 +356,24 @@ class KalmanRigEstimator(EstimatorOutputs):
         """(age [s], boundary angle) of encoder ``k``'s edge event if it is new and fit to fuse, else
         (-1, 0). An event from the future or older than the last one taken is counted and left out."""
         if direction == 0 or edge_us < 0:
-            return -1.0, 0.0
+            return NOTHING_NEW
         last = self._last_edge_us[k]
         if edge_us == last:
-            return -1.0, 0.0  # the same edge as before: nothing new
+            return NOTHING_NEW  # the same edge as before: nothing new
         if edge_us > now_us or (last != NO_EDGE and edge_us < last):
             self.edge_rejects += 1
-            return -1.0, 0.0
+            return NOTHING_NEW
         self._last_edge_us[k] = edge_us
         self.edge_events += 1
         tau = (now_us - edge_us) * 1e-6
         if not self.started or tau > EDGE_MAX_AGE_S:
-            return -1.0, 0.0  # the filter starts from this sample's counts; a stale event says no more
+            return NOTHING_NEW  # the filter starts from this sample's counts; a stale event says no more
         return tau, (counts - 0.5 * direction) * scale
 
-    def _count_var(self, k: int, scale: float) -> float:
-        """The variance encoder ``k``'s count is read with: weak once it had events, q^2/12 before
-        (plus the configured angle noise)."""
-        sigma = EDGE_COUNT_SIGMA_COUNTS if self._last_edge_us[k] != NO_EDGE else math.sqrt(1.0 / 12.0)
-        return (sigma * scale) ** 2 + self.angle_noise_rad**2
+    def _count_var(self, sigma_counts: float, scale: float) -> float:
+        """The variance a count is read with when its error is ``sigma_counts`` counts of ``scale``
+        [rad] (plus the configured angle noise)."""
+        return (sigma_counts * scale) ** 2 + self.angle_noise_rad**2
 
     def _update_with_edges(
         self,
@@ -384,12 +388,20 @@ class KalmanRigEstimator(EstimatorOutputs):
         """:meth:`update` with the samples' edge events (:mod:`sashil.control.edge_kalman`); ``scale``
         is one count [rad], ``arm`` and ``road`` the encoders' angles as counted."""
         now_us = sample.device_time_us
-        arm_tau, arm_boundary = self._event(
-            0, sample.arm_edge_us, sample.arm_edge_dir, sample.arm_counts, now_us, scale
+        last = self._last_edge_us
+        arm_us, road_us = sample.arm_edge_us, sample.road_edge_us
+        # an edge time equal to the last one taken is the same event again: nothing new (:meth:`_event`)
+        arm_tau, arm_boundary = (
+            NOTHING_NEW
+            if arm_us == last[0]
+            else self._event(0, arm_us, sample.arm_edge_dir, sample.arm_counts, now_us, scale)
         )
-        road_tau, road_boundary = self._event(
-            1, sample.road_edge_us, sample.road_edge_dir, sample.road_counts, now_us, scale
+        road_tau, road_boundary = (
+            NOTHING_NEW
+            if road_us == last[1]
+            else self._event(1, road_us, sample.road_edge_dir, sample.road_counts, now_us, scale)
         )
+        weak, quantised = self._count_vars
         xa = self._xa
         if not self.started:
             xa[:] = (arm - road, 0.0, road, 0.0, 0.0, 0.0)
@@ -412,8 +424,8 @@ class KalmanRigEstimator(EstimatorOutputs):
                     arm_boundary,
                     road_tau,
                     road_boundary,
-                    self._count_var(0, scale),
-                    self._count_var(1, scale),
+                    weak if last[0] != NO_EDGE else quantised,
+                    weak if last[1] != NO_EDGE else quantised,
                     0.5 * scale,
                     EDGE_TIME_SIGMA_S * EDGE_TIME_SIGMA_S,
                     self.accel_psd,
