@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze
-from sashil.config.parts import LoopParts, RunSpec, SafetyParts, StageParts, read_key
+from sashil.config.parts import LoopParts, RigParts, RunSpec, SafetyParts, StageParts, read_key
 from sashil.drivers import on_virtual_clock, rig_parts
 
 if TYPE_CHECKING:
@@ -23,13 +23,23 @@ __all__ = ["assemble"]
 
 
 def assemble(
-    config: RunConfig, plan: Mapping[str, Any] | None = None, reads: Mapping[str, str] | None = None
+    config: RunConfig,
+    plan: Mapping[str, Any] | None = None,
+    reads: Mapping[str, str] | None = None,
+    *,
+    drives_rig: bool = True,
 ) -> RunSpec:
     """The run of a resolved ``config`` (:func:`sashil.engine.resolve.resolve`) under ``plan`` (its
     ``kind`` and values, as the plan's ``spec()`` gives them; None: none yet). ``reads``: the
-    experiment's own keys (``{value name: dotted config key}``), read into ``options``."""
-    rig = rig_parts(config)
-    virtual = on_virtual_clock(rig, config["driver"]["clock"])
+    experiment's own keys (``{value name: dotted config key}``), read into ``options``.
+    ``drives_rig`` False: a verb that drives no rig (``simulate``, a model on recorded inputs),
+    whose model need not be one a backend can run: the rig's parts are its backend's name alone,
+    and no backend is asked whether it runs on simulated time."""
+    if drives_rig:
+        rig = rig_parts(config)
+        virtual = on_virtual_clock(rig, config["driver"]["clock"])
+    else:
+        rig, virtual = RigParts(str(config["driver"]["name"]), freeze({}, "rig parts")), False
     return RunSpec(
         rig=rig,
         stage=StageParts.read(config),
