@@ -58,6 +58,20 @@ def test_the_commanded_road_and_its_window_are_the_speeds_to_come_and_the_measur
     assert state.road_ahead_rad.tolist() == [4.25, 4.25]  # 3 + (2.5 + 0.5*2.5 - 2.5)
 
 
+def test_a_runs_road_is_sampled_beyond_its_duration_so_a_run_that_outlasts_it_on_the_wall_clock_stays_planned():
+    from sashil.control.preview import OVERRUN_FRACTION, run_road
+
+    road = run_road(lambda t: t, 1e-3, 2.0, 0)
+    exact = commanded_road(lambda t: t, 1e-3, 2.0 * (1.0 + OVERRUN_FRACTION), 0)
+    assert road.rate_rad_s.size == exact.rate_rad_s.size == int(round(2.0 * (1.0 + OVERRUN_FRACTION) / 1e-3)) + 1
+    assert np.array_equal(road.rate_rad_s, exact.rate_rad_s)
+    # a run of no set duration: the unbounded span, no margin on it
+    assert (
+        run_road(lambda t: 0.0, 0.5, None, 0).rate_rad_s.size
+        == commanded_road(lambda t: 0.0, 0.5, None, 0).rate_rad_s.size
+    )
+
+
 @pytest.mark.parametrize(
     ("argv", "where"),
     [
