@@ -24,15 +24,19 @@ compare (:mod:`sashil.experiments.hysteretic_bound`) on the damper's true model:
   (:func:`sashil.experiments.hysteretic_bound.bound_on_chain`: compare's share over a link);
 - ``truth``: the emulator's true θ̈2 against the bound (one chain: the plant's, as on the simulated rig).
 
-The host's load average is printed beside each damper's runs (the serial runs are real time).
+With ``--repeat N`` each damper's serial runs go N rounds: the median share is the damper's and each
+round's is printed beside it (a run's realised road varies with the host's and the emulator's pauses,
+so one round's share varies). The host's load average is printed beside each run (the serial runs
+are real time).
 
     .venv/bin/python tools/bench_preview_link.py [--quick] [--dampers seed,n 1,J 2] [--duration S]
-        [--calibrated DIR] [--calibrate] [--no-serial]
+        [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import statistics
@@ -186,7 +190,7 @@ def shares(runs: dict[str, float], refs: dict[str, float], on_chain: bool) -> fl
     return share_of_bound(runs[LAW], passive[best], bound)
 
 
-def damper_row(name: str, road: str, duration: float, calibrated: Path | None, serial: bool) -> dict[str, Any]:
+def damper_row(name: str, road: str, duration: float, calibrated: Path | None, serial: int) -> dict[str, Any]:
     """Every share of one damper (module docstring)."""
     config = config_of(dict(DAMPERS)[name], duration)
     refs = model_refs(config, road, duration)
@@ -197,13 +201,27 @@ def damper_row(name: str, road: str, duration: float, calibrated: Path | None, s
     if params_path is not None and params_path.exists():
         row["calibrated"] = shares({**sim, LAW: calibrated_run(config, params_path, road, duration)}, refs, False)
     if serial:
-        row.update(serial_shares(config, road, duration, refs))
+        row.update(serial_shares(config, road, duration, refs, serial))
     progress(f"{name}: {_row_text(row)}")
     return row
 
 
-def serial_shares(config: dict[str, Any], road: str, duration: float, refs: dict[str, float]) -> dict[str, Any]:
-    """The three runs over serial and the preview law's shares on each chain."""
+def serial_shares(
+    config: dict[str, Any], road: str, duration: float, refs: dict[str, float], repeat: int = 1
+) -> dict[str, Any]:
+    """The three runs over serial, ``repeat`` times, and the preview law's shares on each chain: the
+    median of the rounds (each round's shares beside it: a run's realised road varies with the host's
+    pauses, so one round's share varies)."""
+    rounds = [serial_round(config, road, duration, refs) for _ in range(repeat)]
+    out: dict[str, Any] = {"serial_rounds": rounds}
+    for key in ("serial_model_bound", "serial_one_chain", "serial_truth"):
+        known = [r[key] for r in rounds if math.isfinite(r[key])]
+        out[key] = statistics.median(known) if known else math.nan
+    return out
+
+
+def serial_round(config: dict[str, Any], road: str, duration: float, refs: dict[str, float]) -> dict[str, Any]:
+    """One round of the three runs over serial and the preview law's shares on each chain."""
     encoders, truth, status = {}, {}, {}
     with tempfile.TemporaryDirectory(prefix="sashil-preview-link-") as tmp:
         for label, sets in labels(config):
@@ -215,8 +233,9 @@ def serial_shares(config: dict[str, Any], road: str, duration: float, refs: dict
         "serial_model_bound": shares(encoders, refs, False),
         "serial_one_chain": shares(encoders, refs, True),
         "serial_truth": shares(truth, refs, False),
-        "serial_rms": {"encoders": encoders, "truth": truth},
-        "serial_status": status,
+        "encoders": encoders,
+        "truth": truth,
+        "status": status,
     }
 
 
@@ -249,11 +268,14 @@ def table(rows: list[dict[str, Any]]) -> None:
             cells.append(pick(known) if known else math.nan)
         print(f"  {what:10s}" + "".join(f"{cell:33.1f}%" for cell in cells))
     for row in rows:
-        if "serial_rms" in row:
-            enc, truth = row["serial_rms"]["encoders"], row["serial_rms"]["truth"]
+        for i, r in enumerate(row.get("serial_rounds", ())):
+            enc, truth = r["encoders"], r["truth"]
             floors = "  ".join(f"{k} {math.sqrt(max(0.0, enc[k] ** 2 - truth[k] ** 2)):.3f}" for k in enc)
-            print(f"  {row['damper']}: encoders' floor sqrt(enc² − truth²) [rad/s²]: {floors}")
-            print(f"    status: {row['serial_status']}")
+            print(
+                f"  {row['damper']} round {i + 1}: shares {r['serial_model_bound']:.1f} / {r['serial_one_chain']:.1f} / "
+                f"{r['serial_truth']:.1f} %; encoders' floor sqrt(enc² − truth²) [rad/s²]: {floors}"
+            )
+            print(f"    RMS θ̈2 encoders {enc}, truth {truth}; {r['status']}")
 
 
 def main() -> int:
@@ -264,6 +286,8 @@ def main() -> int:
     parser.add_argument("--calibrated", type=Path, help="DIR/<damper>/params.yaml: models calibrated over serial")
     parser.add_argument("--calibrate", action="store_true", help="calibrate into --calibrated first (over serial)")
     parser.add_argument("--no-serial", action="store_true", help="leave out the runs over serial")
+    parser.add_argument("--json", type=Path, help="write every damper's figures here")
+    parser.add_argument("--repeat", type=int, default=1, help="rounds of the serial runs per damper (median)")
     args = parser.parse_args()
     dampers = ["seed"] if args.quick else [d.strip() for d in args.dampers.split(",")]
     duration = 3.0 if args.quick else args.duration
@@ -274,8 +298,11 @@ def main() -> int:
     if args.calibrate and args.calibrated is not None:
         calibrate(dampers, args.calibrated)
     print(f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {len(dampers)} dampers, {ROAD}, {duration:g} s")
-    rows = [damper_row(d, ROAD, duration, args.calibrated, not args.no_serial) for d in dampers]
+    rounds = 0 if args.no_serial else max(1, args.repeat)
+    rows = [damper_row(d, ROAD, duration, args.calibrated, rounds) for d in dampers]
     table(rows)
+    if args.json is not None:
+        args.json.write_text(json.dumps(rows, indent=1), encoding="utf-8")
     return 0
 
 
