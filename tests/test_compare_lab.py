@@ -64,7 +64,7 @@ def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
     from sashil.experiments.hysteretic_bound import model_passive
     from sashil.experiments.optimal_bound import BoundResult
     from sashil.experiments.road_option import RoadParts, parse_road
-    from sashil.lab._compare import _scale_bound
+    from sashil.lab._compare import _header, _scale_bound
     from sashil.models.hysteresis import BoucWenParams
 
     config = _config()
@@ -88,6 +88,10 @@ def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
         run.accel_source = "plant"
     assert _scale_bound(config, road, 3.0, bound, runs, configs) == 1.2
     assert math.isnan(_scale_bound(config, road, 3.0, None, runs, configs))
+    # compare.md's header names the scale only where it is not the bound's own
+    header = _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, math.hypot(1.2, floor))
+    assert header["share's scale"].startswith(f"the bound on the encoders' chain, RMS θ̈2 {math.hypot(1.2, floor):.4g}")
+    assert "share's scale" not in _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, 1.2)
 
 
 def test_a_law_that_fails_gets_its_row_and_the_summary_names_it(tmp_path):

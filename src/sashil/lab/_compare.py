@@ -11,6 +11,7 @@ gets its row saying why; the others still run.
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from collections.abc import Mapping, Sequence
@@ -344,15 +345,10 @@ def compare(
     for label, summary in summaries.items():
         subs[label].write_summary(summary)
     bound = _bound(config, road_profile, duration, on_event)
-    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound)
+    bound_rms = _scale_bound(config, road_profile, duration, bound, results, configs)
+    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
     notes = _notes(results, section)
     gain = bound.gain_pct if bound is not None else float("nan")
-    bound_rms = _scale_bound(config, road_profile, duration, bound, results, configs)
-    if bound is not None and bound_rms != bound.rms_accel_bound:
-        header["share's scale"] = (
-            f"the bound on the encoders' chain, RMS θ̈2 {bound_rms:.4g} rad/s²: their floor (the best passive "
-            "run's excess over the model's own at its current) added to the bound's in quadrature"
-        )
     shares = shares_of_bound(results, bound_rms)
     params = {label: summary["parameters"] for label, summary in summaries.items()}
     folders = {label: sub.path.name for label, sub in subs.items()}
@@ -422,8 +418,10 @@ def _header(
     laws: int,
     wall: float,
     bound: Any,
+    scale_bound: float = float("nan"),
 ) -> dict[str, str]:
-    """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound."""
+    """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound,
+    and the shares' scale where it is not the bound's own (``scale_bound``: :func:`_scale_bound`)."""
     section = config["compare"]
     header = {
         "road": f"`{road}`: {road_text}",
@@ -437,6 +435,11 @@ def _header(
             f"damping of the viscous envelope ({bound.c_passive:.3g} N m s/rad), knowing the road in advance, on the "
             f"rig's model: its Bouc-Wen state and the coil's lag, θ̈2 low-passed as measured here"
         )
+        if math.isfinite(scale_bound) and scale_bound != bound.rms_accel_bound:
+            header["share's scale"] = (
+                f"the bound on the encoders' chain, RMS θ̈2 {scale_bound:.4g} rad/s²: their floor (the best passive "
+                "run's excess over the model's own at its current) added to the bound's in quadrature"
+            )
     return header
 
 
