@@ -44,6 +44,7 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
     assert math.isfinite(summary["optimal_bound_gain_pct"])
     # the share of the bound on one scale: the best passive run's RMS θ̈2 is 0 %, the bound's 100 %
     bound = summary["optimal_bound_rms_accel_rad_s2"]
+    assert summary["share_scale_bound_rms_accel_rad_s2"] == bound  # the plant's own θ̈2: the bound's own chain
     passive = min(law["rms_accel_rad_s2"] for law in summary["laws"] if law["law"].startswith("passive"))
     for law in summary["laws"]:
         expected = 100.0 * (passive - law["rms_accel_rad_s2"]) / (passive - bound)
@@ -55,6 +56,42 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
     }
     assert [e.data["law"] for e in events if "law" in e.data] == list(table["law"])
     assert [e.text for e in events if e.kind == "folder"] == [f"compare folder: {run.path}"]
+
+
+def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
+    from sashil.config.overrides import apply_overrides
+    from sashil.experiments.optimal_bound import BoundResult
+    from sashil.lab._compare import _header, _scale_bound
+    from sashil.lab.compare_metrics import LawResult
+    from sashil.lab.hysteretic_bound import model_passive
+    from sashil.models.hysteresis import BoucWenParams
+    from sashil.roads.option import RoadParts, parse_road
+
+    config = _config()
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
+    params = BoucWenParams.from_mapping(config["model"]["params"])
+    tau, settle = float(config["rig"]["coil_tau_s"]), float(config["compare"]["settle_s"])
+    model = model_passive(
+        params, 1.0, tau, road, 3.0, settle, bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"])
+    )
+    configs = {"passive 1 A": apply_overrides(config, ["controller.law=passive", "controller.current_a=1.0"])}
+    configs["passive 0 A"] = apply_overrides(config, ["controller.law=passive", "controller.current_a=0.0"])
+    bound = BoundResult(1.0, 3.0, 1.2, 1, "hysteretic")
+    floor = 1.0
+    runs = [
+        LawResult("passive 0 A", metrics={"rms_accel_rad_s2": 9.0}, accel_source="encoders"),
+        LawResult("passive 1 A", metrics={"rms_accel_rad_s2": math.hypot(model, floor)}, accel_source="encoders"),
+    ]
+    # the best passive run's excess over the model's own at 1 A is the chain's floor: added to the bound
+    assert _scale_bound(config, road, 3.0, bound, runs, configs) == pytest.approx(math.hypot(1.2, floor), rel=1e-6)
+    for run in runs:  # the plant's own θ̈2: the bound as it is
+        run.accel_source = "plant"
+    assert _scale_bound(config, road, 3.0, bound, runs, configs) == 1.2
+    assert math.isnan(_scale_bound(config, road, 3.0, None, runs, configs))
+    # compare.md's header names the scale only where it is not the bound's own
+    header = _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, math.hypot(1.2, floor))
+    assert header["share's scale"].startswith(f"the bound on the encoders' chain, RMS θ̈2 {math.hypot(1.2, floor):.4g}")
+    assert "share's scale" not in _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, 1.2)
 
 
 def test_a_law_that_fails_gets_its_row_and_the_summary_names_it(tmp_path):

@@ -57,6 +57,20 @@ def test_the_commanded_road_and_its_window_are_the_speeds_to_come_and_the_measur
     assert state.road_ahead_rad.tolist() == [4.25, 4.25]  # 3 + (2.5 + 0.5*2.5 - 2.5)
 
 
+def test_a_runs_road_is_sampled_beyond_its_duration_so_a_run_that_outlasts_it_on_the_wall_clock_stays_planned():
+    from sashil.control.preview import OVERRUN_FRACTION, run_road
+
+    road = run_road(lambda t: t, 1e-3, 2.0, 0)
+    exact = commanded_road(lambda t: t, 1e-3, 2.0 * (1.0 + OVERRUN_FRACTION), 0)
+    assert road.rate_rad_s.size == exact.rate_rad_s.size == int(round(2.0 * (1.0 + OVERRUN_FRACTION) / 1e-3)) + 1
+    assert np.array_equal(road.rate_rad_s, exact.rate_rad_s)
+    # a run of no set duration: the unbounded span, no margin on it
+    assert (
+        run_road(lambda t: 0.0, 0.5, None, 0).rate_rad_s.size
+        == commanded_road(lambda t: 0.0, 0.5, None, 0).rate_rad_s.size
+    )
+
+
 @pytest.mark.parametrize(
     ("argv", "where"),
     [
@@ -251,6 +265,38 @@ def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_o
         LawResult("law", metrics={"rms_accel_rad_s2": 1.8}),
     ]
     assert shares_of_bound(runs, 1.6) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})
+
+
+def test_the_bound_on_a_chain_adds_the_chains_floor_in_quadrature_so_a_law_at_the_bound_reads_100_percent():
+    from sashil.experiments.compare_report import share_of_bound
+    from sashil.experiments.hysteretic_bound import bound_on_chain
+
+    # the model's passive run 2.0 and bound 1.0; a chain adding a floor of 1.0 in quadrature reads
+    # the passive run as sqrt(5) and a law at the bound as sqrt(2)
+    floor = 1.0
+    passive, law = math.hypot(2.0, floor), math.hypot(1.0, floor)
+    bound = bound_on_chain(1.0, passive, 2.0)
+    assert bound == pytest.approx(law)
+    assert share_of_bound(law, passive, bound) == pytest.approx(100.0)
+    # on the model's own chain nothing changes; a chain that reads below the model takes its floor off
+    assert bound_on_chain(1.0, 2.0, 2.0) == 1.0
+    assert bound_on_chain(1.0, math.sqrt(3.5), 2.0) == pytest.approx(math.sqrt(0.5))
+    assert math.isnan(bound_on_chain(1.0, 1.0, 2.0))  # no positive bound left: no scale
+    assert math.isnan(bound_on_chain(1.0, math.nan, 2.0))
+
+
+def test_the_models_passive_run_is_the_bounds_model_at_a_constant_current_and_stiffer_damping_lowers_it():
+    from sashil.experiments.hysteretic_bound import hysteretic_bound, model_passive
+
+    config = default_config()
+    config["road"]["period_s"] = 10.0
+    road, _ = parse_road("iso8608:C", RoadParts.read(config))
+    seed = _seed_context().model
+    soft, hard = (model_passive(seed, i, 0.0, road, 4.0, 1.0) for i in (0.0, 1.0))
+    # on this road the seed's passive runs: 1 A is the better (compare's sim runs: 3.99 and 2.39)
+    assert hard < soft
+    # the bound is the best plan of the same model: never above the best constant current
+    assert hysteretic_bound(seed, 1.0, 0.0, road, 4.0, 1.0) <= min(soft, hard) * (1.0 + 1e-9)
 
 
 def test_the_hysteretic_bound_without_hysteresis_or_coil_lag_is_the_envelopes_and_with_them_lies_lower():

@@ -25,8 +25,8 @@ SCRIPTS = sorted((ROOT / "tools").glob("*.py"))
 #: QEMU's serial socket, drive Chromium against the panel, or run whole verbs on the real clock and fit
 #: (readme_figures: the timing figure's runs, a calibration and an identification)
 E2E = {
-    "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "bench_rtdac.py",
-    "panel_figures.py", "qemu_smoke.py", "readme_figures.py",
+    "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "bench_preview_link.py",
+    "bench_rtdac.py", "panel_figures.py", "qemu_smoke.py", "readme_figures.py",
 }  # fmt: skip
 
 #: scripts whose quick mode a test elsewhere runs whole and checks the figures of (script: that test)

@@ -55,7 +55,7 @@ from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
 from sashil.control.law_api import Law, LawState
 from sashil.control.observer import BoucWenObserver
-from sashil.control.preview import RoadWindow, commanded_road
+from sashil.control.preview import RoadWindow, run_road
 from sashil.drivers.interface import RigCommand, RigSample, clamp_current
 from sashil.errors import LawError, SafetyTrip
 
@@ -138,12 +138,13 @@ class Controller:
     def attach_road(self, speed: Any, duration_s: float | None) -> None:
         """The road speed ``speed(t)`` [rad/s] a plan will command from this stage's first cycle, for
         ``duration_s`` (None: until stopped). A law that reads the road ahead gets it sampled at the
-        loop's period (``Law.plan_road``, now) and its window each cycle; any other law ignores it."""
+        loop's period a little beyond the duration (:func:`sashil.control.preview.run_road`)
+        (``Law.plan_road``, now) and its window each cycle; any other law ignores it."""
         law = self.law
         if not law.reads_road_ahead:
             return
         cycles = int(law.preview_cycles())
-        road = commanded_road(speed, self.nominal_dt_s, duration_s, cycles)
+        road = run_road(speed, self.nominal_dt_s, duration_s, cycles)
         law.plan_road(road)
         # a law that planned on the whole road and reads no window costs the cycle nothing more
         self._road_window = RoadWindow(road, cycles) if cycles > 0 else None

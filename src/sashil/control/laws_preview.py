@@ -127,20 +127,7 @@ class PreviewOptimal(Law):
                 from_constant=False,
             )
         self._dt = road.dt_s
-        self._receding = None
-        cycles = int(self.replan_slot_cycles)
-        slots = int(round(float(self.replan_horizon_s) / (cycles * road.dt_s)))
-        if slots > 0 and plan.command_a.size:
-            coarse = (
-                BoucWenPlanModel.of(ctx.model, ctx.coil_tau_s, cycles * road.dt_s)
-                if kind == "bouc-wen"
-                else PlanModel.of(
-                    ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, cycles * road.dt_s
-                )
-            )
-            self._receding = RecedingPlan(
-                coarse, ctx.current_max_a, plan.command_a, road.rate_rad_s, road.dt_s, cycles, slots
-            )
+        self._receding = self._receding_of(plan.command_a, road)
         self._i = plan.command_a.tolist()
         self._theta = plan.theta_rad.tolist()
         self._body = plan.body_dot_rad_s.tolist()

@@ -56,9 +56,9 @@ from sashil.engine.checks import check_road_ahead
 from sashil.engine.resolve import apply_overrides
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.compare_metrics import METRICS, LawResult, metrics_of
-from sashil.lab.compare_report import plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
+from sashil.lab.compare_report import best_passive, plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
 from sashil.lab.events import Event, Listener, ignore
-from sashil.lab.hysteretic_bound import hysteretic_bound
+from sashil.lab.hysteretic_bound import bound_on_chain, hysteretic_bound, model_passive
 from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.outputs import Outputs
@@ -281,9 +281,14 @@ def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) ->
     bound = optimal_bound(params, i_max, road, duration, settle)
     # the bound is the rig model's own (its Bouc-Wen state): a law on the rig can beat the envelope's,
     # and where the hysteresis stiffens the damper the envelope's lies out of any law's reach
-    tau = float(config["controller"].get("coil_tau_s") or config["rig"]["coil_tau_s"])
     hysteretic = hysteretic_bound(
-        params, i_max, tau, road, duration, settle, bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"])
+        params,
+        i_max,
+        _coil_tau(config),
+        road,
+        duration,
+        settle,
+        bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"]),
     )
     bound = replace(bound, rms_accel_bound=hysteretic, model="hysteretic")
     on_event(
@@ -294,6 +299,34 @@ def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) ->
         )
     )
     return bound
+
+
+def _coil_tau(config: RunConfig) -> float:
+    """The coil's lag the bound's model takes: the controller's, else the rig's [s]."""
+    return float(config["controller"].get("coil_tau_s") or config["rig"]["coil_tau_s"])
+
+
+def _scale_bound(
+    config: RunConfig, road: Any, duration: float, bound: Any, results: list[Any], configs: Mapping[str, Any]
+) -> float:
+    """The 100 % of the shares' scale: the bound's RMS θ̈2 where the runs' θ̈2 is the plant's own, and
+    the bound put on the encoders' chain where it is theirs (:func:`bound_on_chain`, with the
+    model's passive run at the best passive run's current), so both ends and the laws are read on one
+    chain. NaN without a bound."""
+    best = best_passive(results)
+    if bound is None or best is None or best.accel_source != "encoders":
+        return bound.rms_accel_bound if bound is not None else float("nan")
+    current = float(configs[best.label]["controller"]["current_a"])
+    model = model_passive(
+        BoucWenParams.from_mapping(config["model"]["params"]),
+        current,
+        _coil_tau(config),
+        road,
+        duration,
+        float(config["compare"]["settle_s"]),
+        bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"]),
+    )
+    return bound_on_chain(bound.rms_accel_bound, best.metrics["rms_accel_rad_s2"], model)
 
 
 def compare(
@@ -340,10 +373,10 @@ def compare(
     for label, summary in summaries.items():
         write_summary(subs[label], summary)
     bound = _bound(config, road_profile, duration, on_event)
-    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound)
+    bound_rms = _scale_bound(config, road_profile, duration, bound, results, configs)
+    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
     notes = _notes(results, section)
     gain = bound.gain_pct if bound is not None else float("nan")
-    bound_rms = bound.rms_accel_bound if bound is not None else float("nan")
     shares = shares_of_bound(results, bound_rms)
     params = {label: summary["parameters"] for label, summary in summaries.items()}
     folders = {label: sub.path.name for label, sub in subs.items()}
@@ -366,6 +399,7 @@ def compare(
             folders,
             bound,
             shares,
+            bound_rms,
         ),
     )
     on_event(Event("progress", f"sashil compare: {wall:.1f} s of wall time", {"wall_s": wall}))
@@ -413,8 +447,10 @@ def _header(
     laws: int,
     wall: float,
     bound: Any,
+    scale_bound: float = float("nan"),
 ) -> dict[str, str]:
-    """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound."""
+    """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound,
+    and the shares' scale where it is not the bound's own (``scale_bound``: :func:`_scale_bound`)."""
     section = config["compare"]
     header = {
         "road": f"`{road}`: {road_text}",
@@ -428,6 +464,11 @@ def _header(
             f"damping of the viscous envelope ({bound.c_passive:.3g} N m s/rad), knowing the road in advance, on the "
             f"rig's model: its Bouc-Wen state and the coil's lag, θ̈2 low-passed as measured here"
         )
+        if math.isfinite(scale_bound) and scale_bound != bound.rms_accel_bound:
+            header["share's scale"] = (
+                f"the bound on the encoders' chain, RMS θ̈2 {scale_bound:.4g} rad/s²: their floor (the best passive "
+                "run's excess over the model's own at its current) added to the bound's in quadrature"
+            )
     return header
 
 
@@ -461,6 +502,7 @@ def _summary(
     folders: Mapping[str, str],
     bound: Any = None,
     shares: Mapping[str, float] | None = None,
+    scale_bound: float = float("nan"),
 ) -> dict[str, Any]:
     """The comparison's ``summary.json``: how it ended, the road, each law's status, metrics and share
     of the optimal bound, each law's run."""
@@ -476,6 +518,7 @@ def _summary(
         "optimal_bound_gain_pct": gain,
         "optimal_bound_rms_accel_rad_s2": bound.rms_accel_bound if bound is not None else float("nan"),
         "optimal_bound_model": bound.model if bound is not None else None,
+        "share_scale_bound_rms_accel_rad_s2": scale_bound,
         "laws": [
             {
                 "law": r.label,
