@@ -59,11 +59,11 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
 
 
 def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
-    from sashil.config.overrides import apply_overrides
-    from sashil.experiments.optimal_bound import BoundResult
+    from sashil.engine.resolve import apply_overrides
     from sashil.lab._compare import _header, _scale_bound
     from sashil.lab.compare_metrics import LawResult
     from sashil.lab.hysteretic_bound import model_passive
+    from sashil.lab.optimal_bound import BoundResult
     from sashil.models.hysteresis import BoucWenParams
     from sashil.roads.option import RoadParts, parse_road
 

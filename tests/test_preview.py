@@ -268,8 +268,8 @@ def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_o
 
 
 def test_the_bound_on_a_chain_adds_the_chains_floor_in_quadrature_so_a_law_at_the_bound_reads_100_percent():
-    from sashil.experiments.compare_report import share_of_bound
-    from sashil.experiments.hysteretic_bound import bound_on_chain
+    from sashil.lab.compare_report import share_of_bound
+    from sashil.lab.hysteretic_bound import bound_on_chain
 
     # the model's passive run 2.0 and bound 1.0; a chain adding a floor of 1.0 in quadrature reads
     # the passive run as sqrt(5) and a law at the bound as sqrt(2)
@@ -286,7 +286,7 @@ def test_the_bound_on_a_chain_adds_the_chains_floor_in_quadrature_so_a_law_at_th
 
 
 def test_the_models_passive_run_is_the_bounds_model_at_a_constant_current_and_stiffer_damping_lowers_it():
-    from sashil.experiments.hysteretic_bound import hysteretic_bound, model_passive
+    from sashil.lab.hysteretic_bound import hysteretic_bound, model_passive
 
     config = default_config()
     config["road"]["period_s"] = 10.0
