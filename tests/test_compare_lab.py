@@ -60,7 +60,8 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
 
 def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
     from sashil.engine.resolve import apply_overrides
-    from sashil.lab._compare import _header, _scale_bound
+    from sashil.engine import assemble
+    from sashil.lab._compare import READS, _header, _scale_bound
     from sashil.lab.compare_metrics import LawResult
     from sashil.lab.hysteretic_bound import model_passive
     from sashil.lab.optimal_bound import BoundResult
@@ -77,21 +78,22 @@ def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
     configs = {"passive 1 A": apply_overrides(config, ["controller.law=passive", "controller.current_a=1.0"])}
     configs["passive 0 A"] = apply_overrides(config, ["controller.law=passive", "controller.current_a=0.0"])
     bound = BoundResult(1.0, 3.0, 1.2, 1, "hysteretic")
+    run_spec = assemble(config, reads=READS)
     floor = 1.0
     runs = [
         LawResult("passive 0 A", metrics={"rms_accel_rad_s2": 9.0}, accel_source="encoders"),
         LawResult("passive 1 A", metrics={"rms_accel_rad_s2": math.hypot(model, floor)}, accel_source="encoders"),
     ]
     # the best passive run's excess over the model's own at 1 A is the chain's floor: added to the bound
-    assert _scale_bound(config, road, 3.0, bound, runs, configs) == pytest.approx(math.hypot(1.2, floor), rel=1e-6)
+    assert _scale_bound(run_spec, road, 3.0, bound, runs, configs) == pytest.approx(math.hypot(1.2, floor), rel=1e-6)
     for run in runs:  # the plant's own θ̈2: the bound as it is
         run.accel_source = "plant"
-    assert _scale_bound(config, road, 3.0, bound, runs, configs) == 1.2
-    assert math.isnan(_scale_bound(config, road, 3.0, None, runs, configs))
+    assert _scale_bound(run_spec, road, 3.0, bound, runs, configs) == 1.2
+    assert math.isnan(_scale_bound(run_spec, road, 3.0, None, runs, configs))
     # compare.md's header names the scale only where it is not the bound's own
-    header = _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, math.hypot(1.2, floor))
+    header = _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, math.hypot(1.2, floor))
     assert header["share's scale"].startswith(f"the bound on the encoders' chain, RMS θ̈2 {math.hypot(1.2, floor):.4g}")
-    assert "share's scale" not in _header(config, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, 1.2)
+    assert "share's scale" not in _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, 1.2)
 
 
 def test_a_law_that_fails_gets_its_row_and_the_summary_names_it(tmp_path):

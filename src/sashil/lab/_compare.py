@@ -45,7 +45,7 @@ from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import parse_override
-from sashil.config.parts import StageParts
+from sashil.config.parts import RunSpec, StageParts, read_key
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label, make_stage
@@ -86,6 +86,16 @@ __all__ = [
     "run_job",
     "split_sets",
 ]
+
+#: the comparison's own values (``{name: config key}``), read once by the engine into each run's
+#: ``options``: the ``compare`` section and what its road is made with
+READS = {
+    **{
+        key: f"compare.{key}"
+        for key in ("road", "duration_s", "jobs", "rest_s", "settle_s", "accel_bandwidth_hz", "coil_resistance_ohm")
+    },
+    **RoadParts.READS,
+}
 
 
 @dataclass(frozen=True)
@@ -141,11 +151,11 @@ def _law_config(base: Mapping[str, Any], law: CompareLaw, extra: Sequence[str] =
 
     try:
         declared = find_law(law.law).cls.params()  # an unknown law named as such, before its parameters
-        config = thaw(base)
-        section = config.get("controller") or {}
+        doc = thaw(base)  # the law's own config document, written to its folder's config.yaml
+        section = doc.get("controller") or {}
         for key in [k for k in section if k not in CONTROLLER.fields and k not in declared]:
             del section[key]
-        return freeze(apply_overrides(config, [f"controller.law={law.law}", *law.sets, *extra], "--set"))
+        return freeze(apply_overrides(doc, [f"controller.law={law.law}", *law.sets, *extra], "--set"))
     except ConfigError as err:
         raise ConfigError(f"--controller {law.law}: {err}") from None
 
@@ -160,14 +170,13 @@ def folder_name(label: str) -> str:
 def own_law(config: RunConfig) -> list[CompareLaw]:
     """The config's own law when it is not passive (a compared law's config.yaml given back with
     --config), as the law to compare when none is named."""
-    law = (config.get("controller") or {}).get("law", "passive")
-    return [] if law == "passive" else [CompareLaw(str(law))]
+    law = StageParts.read(config).law
+    return [] if law == "passive" else [CompareLaw(law)]
 
 
-def _jobs(base: Mapping[str, Any], laws: Sequence[CompareLaw], road: str, duration: float) -> list[Any]:
-    """The references (passive at 0 A and i_max) and each law, every config checked."""
+def _jobs(base: Mapping[str, Any], i_max: float, laws: Sequence[CompareLaw], road: str, duration: float) -> list[Any]:
+    """The references (passive at 0 A and ``i_max``) and each law, every config checked."""
 
-    i_max = float(base["rig"]["current_max_a"])
     jobs: dict[str, LawJob] = {}
     for current in (0.0, i_max):
         config = _law_config(base, CompareLaw("passive"), [f"controller.current_a={current}"])
@@ -188,16 +197,16 @@ def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
     reported = (stats.get("law") or {}).get("parameters") if isinstance(stats, Mapping) else None
     if isinstance(reported, Mapping):
         return dict(reported)
-    section = config["controller"]
-    declared = find_law(str(section["law"])).cls.params()
-    return {key: section.get(key, param.default) for key, param in declared.items()}
+    stage = StageParts.read(config)
+    declared = find_law(stage.law).cls.params()
+    return {key: stage.controller.get(key, param.default) for key, param in declared.items()}
 
 
 def law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
     """A compared law's own summary.json: the runner's keys of its run, the law (name, origin,
     parameters) and its metrics (also as its one entry of ``runs``)."""
 
-    entry = find_law(str(config["controller"]["law"]))
+    entry = find_law(StageParts.read(config).law)
     common = dict(result.summary)
     if not common:  # the law never started: its status says why
         common = {"exit_status": "error", "exit_code": 1}
@@ -208,7 +217,7 @@ def law_summary(result: Any, config: RunConfig, road_text: str, duration: float)
     return {
         **common,
         "verb": "compare",
-        "driver": config["driver"]["name"],
+        "driver": read_key(config, "driver.name"),
         "controller": result.label,
         "controller_origin": entry.origin,
         "parameters": law_parameters(result, config),
@@ -268,27 +277,27 @@ def _accel_note(results: list[Any], bandwidth_hz: float) -> str:
     )
 
 
-def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) -> Any:
-    """The optimal bound on this road for the config's model (None without a road, or when the run
+def _bound(run: RunSpec, road: Any, duration: float, on_event: Listener) -> Any:
+    """The optimal bound on this road for the run's model (None without a road, or when the run
     is shorter than the settling time)."""
 
-    settle = float(config["compare"]["settle_s"])
+    settle = float(run.options["settle_s"])
     if road is None or duration <= settle:
         return None
-    params = BoucWenParams.from_mapping(config["model"]["params"])
+    params = BoucWenParams.from_mapping(run.stage.model["params"])
     start = time.perf_counter()
-    i_max = float(config["rig"]["current_max_a"])
+    i_max = run.stage.current_max_a
     bound = optimal_bound(params, i_max, road, duration, settle)
     # the bound is the rig model's own (its Bouc-Wen state): a law on the rig can beat the envelope's,
     # and where the hysteresis stiffens the damper the envelope's lies out of any law's reach
     hysteretic = hysteretic_bound(
         params,
         i_max,
-        _coil_tau(config),
+        run.stage.coil_tau_s,
         road,
         duration,
         settle,
-        bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"]),
+        bandwidth_hz=float(run.options["accel_bandwidth_hz"]),
     )
     bound = replace(bound, rms_accel_bound=hysteretic, model="hysteretic")
     on_event(
@@ -301,13 +310,8 @@ def _bound(config: RunConfig, road: Any, duration: float, on_event: Listener) ->
     return bound
 
 
-def _coil_tau(config: RunConfig) -> float:
-    """The coil's lag the bound's model takes: the controller's, else the rig's [s]."""
-    return float(config["controller"].get("coil_tau_s") or config["rig"]["coil_tau_s"])
-
-
 def _scale_bound(
-    config: RunConfig, road: Any, duration: float, bound: Any, results: list[Any], configs: Mapping[str, Any]
+    run: RunSpec, road: Any, duration: float, bound: Any, results: list[Any], configs: Mapping[str, Any]
 ) -> float:
     """The 100 % of the shares' scale: the bound's RMS θ̈2 where the runs' θ̈2 is the plant's own, and
     the bound put on the encoders' chain where it is theirs (:func:`bound_on_chain`, with the
@@ -316,15 +320,15 @@ def _scale_bound(
     best = best_passive(results)
     if bound is None or best is None or best.accel_source != "encoders":
         return bound.rms_accel_bound if bound is not None else float("nan")
-    current = float(configs[best.label]["controller"]["current_a"])
+    current = float(StageParts.read(configs[best.label]).controller["current_a"])
     model = model_passive(
-        BoucWenParams.from_mapping(config["model"]["params"]),
+        BoucWenParams.from_mapping(run.stage.model["params"]),
         current,
-        _coil_tau(config),
+        run.stage.coil_tau_s,
         road,
         duration,
-        float(config["compare"]["settle_s"]),
-        bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"]),
+        float(run.options["settle_s"]),
+        bandwidth_hz=float(run.options["accel_bandwidth_hz"]),
     )
     return bound_on_chain(bound.rms_accel_bound, best.metrics["rms_accel_rad_s2"], model)
 
@@ -347,16 +351,17 @@ def compare(
     ``error`` (exit code 1) naming it, and a ``warning`` event says so."""
 
     outputs = outputs if outputs is not None else Outputs()
-    outputs.check(config["driver"]["name"])
-    section = config["compare"]
+    run = assemble(config, reads=READS)
+    outputs.check(run.rig.backend)
+    section = run.options
     road, duration = str(section["road"]), float(section["duration_s"])
     chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws] or own_law(config)
     for law in chosen:  # a law that reads the road ahead needs the road: refused before anything is written
         check_road_ahead(config, "compare", str, law.law)
-    jobs = _jobs(config, chosen, road, duration)
-    virtual = assemble(config).virtual
+    jobs = _jobs(config, run.stage.current_max_a, chosen, road, duration)
+    virtual = run.virtual
     processes = int(section["jobs"]) if virtual else 1
-    road_profile, road_text = parse_road(road, RoadParts.read(config))
+    road_profile, road_text = parse_road(road, RoadParts.of(section))
     folder, subs = _folders(outputs, config, jobs)
     on_event(
         Event(
@@ -372,9 +377,9 @@ def compare(
     summaries = {r.label: law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
     for label, summary in summaries.items():
         write_summary(subs[label], summary)
-    bound = _bound(config, road_profile, duration, on_event)
-    bound_rms = _scale_bound(config, road_profile, duration, bound, results, configs)
-    header = _header(config, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
+    bound = _bound(run, road_profile, duration, on_event)
+    bound_rms = _scale_bound(run, road_profile, duration, bound, results, configs)
+    header = _header(run, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
     notes = _notes(results, section)
     gain = bound.gain_pct if bound is not None else float("nan")
     shares = shares_of_bound(results, bound_rms)
@@ -387,7 +392,7 @@ def compare(
     write_summary(
         folder,
         _summary(
-            config,
+            run,
             error,
             f"{road}: {road_text}",
             duration,
@@ -438,7 +443,7 @@ def _folders(outputs: Outputs, config: RunConfig, jobs: Sequence[Any]) -> tuple[
 
 
 def _header(
-    config: RunConfig,
+    run: RunSpec,
     road: str,
     road_text: str,
     duration: float,
@@ -451,11 +456,11 @@ def _header(
 ) -> dict[str, str]:
     """The lines at the head of ``compare.md``: the road, the duration, the rig, the wall time, the bound,
     and the shares' scale where it is not the bound's own (``scale_bound``: :func:`_scale_bound`)."""
-    section = config["compare"]
+    section = run.options
     header = {
         "road": f"`{road}`: {road_text}",
         "duration": f"{duration:g} s per law, the first {section['settle_s']:g} s left out of the metrics",
-        "rig": f"{config['driver']['name']} ({'virtual clock' if virtual else 'real clock'}), {config['loop']['rate_hz']:g} Hz",
+        "rig": f"{run.rig.backend} ({'virtual clock' if virtual else 'real clock'}), {run.loop.rate_hz:g} Hz",
         "wall time": f"{wall:.1f} s for {laws} laws in {processes} process(es)",
     }
     if bound is not None:
@@ -490,7 +495,7 @@ def _notes(results: list[LawResult], section: Mapping[str, Any]) -> list[str]:
 
 
 def _summary(
-    config: RunConfig,
+    run: RunSpec,
     error: SashilError | None,
     road: str,
     duration: float,
@@ -509,7 +514,7 @@ def _summary(
     shares = shares or {}
     return {
         "verb": "compare",
-        "driver": config["driver"]["name"],
+        "driver": run.rig.backend,
         **ending(error),
         "road": road,
         "duration_s": duration,
@@ -585,28 +590,23 @@ class MeasuredStage:
         return self.stage.step(sample, t_ns, dt_ns)
 
 
-def _stage(config: RunConfig) -> Any:
-    return make_stage(StageParts.read(config))[1]
-
-
 def run_job(job: LawJob) -> LawResult:
     """Run one law on the road (on the clock the config's backend runs on) and measure it; a law
     that fails, trips or stops gets a result saying why instead of metrics."""
     from scipy.signal import welch
 
-    config = job.config
+    run = assemble(job.config, reads=READS)
     result = LawResult(job.label, metrics=dict.fromkeys(METRICS, math.nan))
     folder = RunFolder(Path(job.folder), "compare") if job.folder is not None else None
     start = time.perf_counter()
     try:
-        road, _ = parse_road(job.road, RoadParts.read(config))
-        stage = _stage(config)
+        road, _ = parse_road(job.road, RoadParts.of(run.options))
+        stage = make_stage(run.stage)[1]
         if road is not None:
             stage = RoadStage(stage, road, job.duration_s)
-        spec = assemble(config)
-        rig = open_rig(spec.rig)
+        rig = open_rig(run.rig)
         outcome = engine.run(
-            spec,
+            run,
             MeasuredStage(stage, rig),
             job.duration_s,
             rig=lambda: rig,
@@ -628,14 +628,14 @@ def run_job(job: LawJob) -> LawResult:
         result.status = f"{outcome.exit_status}: {why}"
         return result
     try:
-        metrics, t, accel, result.accel_source = metrics_of(outcome.stream, config)
+        metrics, t, accel, result.accel_source = metrics_of(outcome.stream, run)
     except (KeyError, ValueError) as err:
         result.status = f"no metrics: {err}"
         return result
     result.metrics = metrics
-    rate = float(config["loop"]["rate_hz"])
+    rate = run.loop.rate_hz
     f, pxx = welch(accel, fs=rate, nperseg=min(accel.size, int(8 * rate)))
-    band = f <= 4.0 * float(config["compare"]["accel_bandwidth_hz"])
+    band = f <= 4.0 * float(run.options["accel_bandwidth_hz"])
     result.psd_f, result.psd = f[band].tolist(), pxx[band].tolist()
     window = t <= t[0] + TRACE_S
     result.trace_t = t[window][::TRACE_DECIMATE].tolist()

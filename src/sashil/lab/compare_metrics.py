@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from sashil.config.typed import RunConfig
+    from sashil.config.parts import RunSpec
 
 __all__ = ["METRICS", "LawResult", "arm_acceleration", "metrics_of", "sample_times"]
 
@@ -100,11 +100,11 @@ def sample_times(stream: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None
     return times, first
 
 
-def metrics_of(stream: dict[str, Any], config: RunConfig) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
+def metrics_of(stream: dict[str, Any], run: RunSpec) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
     """The metrics of a law's stream (module docstring), its time and θ̈2 after the settling, and
-    where θ̈2 came from."""
-    rate = float(config["loop"]["rate_hz"])
-    section = config["compare"]
+    where θ̈2 came from (``run``: the law's, its ``options`` the ``compare`` section's keys)."""
+    rate = run.loop.rate_hz
+    section = run.options
     time_s = np.asarray(stream["time_s"], dtype=float)[:-1]  # the last row is the shutdown's safe state
     accel, source = arm_acceleration(
         {k: np.asarray(v)[:-1] for k, v in stream.items()}, rate, float(section["accel_bandwidth_hz"])

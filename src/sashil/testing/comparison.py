@@ -20,11 +20,14 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any
 
 from sashil.api import Run
-from sashil.config.typed import RunConfig
+from sashil.config.frozen import freeze_config
+from sashil.config.parts import StageParts
+from sashil.engine import assemble
 from sashil.engine.resolve import ConfigSource, resolve
+from sashil.lab._compare import READS as COMPARE_READS
 from sashil.lab._compare import LawJob, run_job
 from sashil.lab.optimal_bound import BoundResult, optimal_bound
 from sashil.models.hysteresis import BoucWenParams
@@ -77,7 +80,8 @@ def compare_with_passive(run: Run, currents_a: Sequence[float] | None = None, *,
     summary = run.summary
     if summary.get("exit_status") != "ok" or not run.metrics:
         raise ValueError(f"{run.path}: the law's run did not finish ({summary.get('error') or summary.get('status')})")
-    i_max = float(config["rig"]["current_max_a"])
+    stage = StageParts.read(config)
+    i_max = stage.current_max_a
     currents = [fraction * i_max for fraction in CURRENT_FRACTIONS] if currents_a is None else list(currents_a)
     if not currents:
         raise ValueError("currents_a: give at least one constant current")
@@ -88,7 +92,7 @@ def compare_with_passive(run: Run, currents_a: Sequence[float] | None = None, *,
     comfort_gain = 100.0 * (1.0 - accel / passive[comfort]["rms_accel_rad_s2"])
     bound_gain = _bound(config).gain_pct if bound else math.nan
     return Comparison(
-        law=str(summary.get("controller") or config["controller"]["law"]),
+        law=str(summary.get("controller") or stage.law),
         rms_accel_rad_s2=accel,
         rms_theta_deg=theta,
         comfort_current_a=comfort,
@@ -116,7 +120,7 @@ def _passive(config: dict[str, Any], current_a: float) -> dict[str, float]:
             ConfigSource(config=config, controller="passive", sets=(f"controller.current_a={current_a!r}",)),
             "compare",
         )
-        section = passive["compare"]
+        section = assemble(passive, reads=COMPARE_READS).options
         result = run_job(
             LawJob(f"passive {current_a:g} A", passive, str(section["road"]), float(section["duration_s"]))
         )
@@ -130,13 +134,14 @@ def _bound(config: dict[str, Any]) -> BoundResult:
     """The optimal bound on the run's road for its model (module docstring)."""
     key = _key(config, "bound")
     if key not in _bound_cache:
-        section = config["compare"]
-        road, _ = parse_road(str(section["road"]), RoadParts.read(cast(RunConfig, config)))
+        run = assemble(freeze_config(config), reads=COMPARE_READS)
+        section = run.options
+        road, _ = parse_road(str(section["road"]), RoadParts.of(section))
         if road is None:
             raise ValueError("compare.road: none: the optimal bound needs a road")
         _bound_cache[key] = optimal_bound(
-            BoucWenParams.from_mapping(config["model"]["params"]),
-            float(config["rig"]["current_max_a"]),
+            BoucWenParams.from_mapping(run.stage.model["params"]),
+            run.stage.current_max_a,
             road,
             float(section["duration_s"]),
             float(section["settle_s"]),
