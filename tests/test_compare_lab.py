@@ -59,8 +59,8 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
 
 
 def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
-    from sashil.engine.resolve import apply_overrides
     from sashil.engine import assemble
+    from sashil.engine.resolve import apply_overrides
     from sashil.lab._compare import READS, _header, _scale_bound
     from sashil.lab.compare_metrics import LawResult
     from sashil.lab.hysteretic_bound import model_passive
