@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from sashil.engine.assemble import assemble
+from sashil.engine.assemble import assemble, assembled
 from sashil.engine.where import loop_in_process
 
 if TYPE_CHECKING:
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 _LAZY = {"run": "sashil.engine.running"}
 
-__all__ = ["assemble", "loop_in_process", "run"]
+__all__ = ["assemble", "assembled", "loop_in_process", "run"]
 
 
 def __getattr__(name: str) -> Any:

@@ -19,7 +19,7 @@ from sashil.drivers import on_virtual_clock, rig_parts
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
 
-__all__ = ["assemble"]
+__all__ = ["assemble", "assembled"]
 
 
 def assemble(
@@ -49,3 +49,9 @@ def assemble(
         plan=freeze(plan or {}, "plan"),
         options=freeze({name: read_key(config, path) for name, path in (reads or {}).items()}, "options"),
     )
+
+
+def assembled(config: RunConfig | RunSpec, reads: Mapping[str, str]) -> RunSpec:
+    """``config`` assembled with an experiment's ``reads``, or, already assembled, the run itself: for
+    the library functions a caller hands either a resolved config or the experiment's run."""
+    return config if isinstance(config, RunSpec) else assemble(config, reads=reads)

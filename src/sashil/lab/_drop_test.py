@@ -31,7 +31,7 @@ from sashil.config.parts import RunSpec, StageParts
 from sashil.control.law_registry import law_label
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.drivers.operator_prompt import hold_prompt
-from sashil.engine import assemble
+from sashil.engine import assemble, assembled
 from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.lab.events import Event, Listener, ignore
@@ -711,7 +711,7 @@ def run_drop_test(
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
-    run = config if isinstance(config, RunSpec) else assemble(config, reads=READS)
+    run = assembled(config, READS)
     plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
     outcome = engine.run(
         run,

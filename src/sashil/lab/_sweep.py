@@ -36,7 +36,7 @@ from sashil.config.parts import RunSpec
 from sashil.control.registry import law_run_label, make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, capabilities_of
-from sashil.engine import assemble
+from sashil.engine import assemble, assembled
 from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
@@ -88,11 +88,6 @@ TRANSMISSIBILITY_COLUMNS = (
     "observer_nrmse",
     "clipped_cycles",
 )
-
-
-def _assembled(config: RunConfig | RunSpec) -> RunSpec:
-    """The sweep's run: ``config`` assembled with the sweep's :data:`READS`, or the run itself."""
-    return config if isinstance(config, RunSpec) else assemble(config, reads=READS)
 
 
 def _shown(run: RunSpec) -> dict[str, Any]:
@@ -562,7 +557,7 @@ def run_sweep(
     (exit 130) after ``keep``; the error that ended a run carries its ``safe_state`` (how the coil
     settled at 0 A after a stop).
     """
-    run = _assembled(config)
+    run = assembled(config, READS)
     stage = SweepStage(controller, road, duration_s)
     stage.from_config = law_of_config
     outcome = engine.run(
@@ -619,7 +614,7 @@ def stepped_sine(
     ``stream_to(frequency_hz)``: the file the runner streams that frequency's cycles to; ``live``
     and ``stop``: each frequency's run's views and stop flag; ``law_of_config``: ``make_controller``
     makes the config's law (:func:`run_sweep`)."""
-    run = _assembled(config)
+    run = assembled(config, READS)
     sweep = run.options
     amplitude = math.radians(sweep["amplitude_deg"])
     points = []
