@@ -5,7 +5,7 @@ calibration plan's steps): one folder, a sub-folder per run, one error rule, one
 of what ended a run), :class:`RunSet` the one engine of a verb of several runs: it makes the
 sub-folders, writes each run's ``summary.json`` and the folder's, and stops the set at the first
 run that fails (what ran before it is kept). Every ``summary.json`` goes through
-:meth:`~sashil.recording.run_folder.RunFolder.write_summary` and its one schema
+:func:`~sashil.recording.summary_writer.write_summary` and its one schema
 (:mod:`sashil.recording.summary_schema`).
 """
 
