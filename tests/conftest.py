@@ -28,6 +28,7 @@ import pytest
 from warm_sashil import WarmSashil
 
 from sashil.engine.resolve import default_config
+from sashil.runtime import loop_server
 
 #: how long a thread or child that is on its way out may take to end after the test
 GRACE_S = 2.0
@@ -111,8 +112,12 @@ def _pty_fds() -> set[tuple[int, str]]:
 
 
 def _children() -> set[int]:
-    """Pids whose parent is this process (running or zombie: a zombie was never waited for)."""
-    me, out = os.getpid(), set()
+    """Pids whose parent is this process (running or zombie: a zombie was never waited for), the
+    loop processes its loop server forked counted as its own and the server, kept for the worker's
+    later runs (sashil.runtime.loop_server), not counted."""
+    server = loop_server.running()
+    parents = {os.getpid()} if server is None else {os.getpid(), server.pid}
+    out = set()
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -121,9 +126,9 @@ def _children() -> set[int]:
                 fields = stat.read().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        if int(fields[1]) == me:
+        if int(fields[1]) in parents:
             out.add(int(entry))
-    return out
+    return out - ({server.pid} if server is not None else set())
 
 
 def _settle(check, before, deadline: float):

@@ -16,12 +16,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+import processes
 import pytest
+from processes import loop_of
 
 import sashil
 from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab import closed_loop
 from sashil.recording.data_file import read_data_csv
+from sashil.runtime import loop_server
 from sashil.runtime.signals import StopFlag
 
 pytestmark = pytest.mark.e2e
@@ -125,9 +128,7 @@ def _start_run(out: Path, *args: str) -> tuple[subprocess.Popen, int]:
             break
     else:
         raise AssertionError(f"the loop never ran (exit {proc.wait()})")
-    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
-    assert len(children) == 1
-    return proc, int(children[0])
+    return proc, loop_of(proc.pid)
 
 
 def _kill_the_loop(out: Path, *args: str) -> tuple[subprocess.Popen, str]:
@@ -272,8 +273,11 @@ def test_a_disk_too_full_for_the_run_ends_the_loop_process_before_anything_is_en
 
     from sashil.errors import DiskSpaceError
 
-    def children() -> set[str]:  # this process's children (a session-wide helper of the tests may be one)
-        return set(Path(f"/proc/{os.getpid()}/task/{os.getpid()}/children").read_text().split())
+    def children() -> set[int]:  # this process's loop processes (a session-wide helper of the tests may be a child)
+        server = loop_server.running()
+        return set(processes.children(os.getpid())) - {server.pid} | set(
+            processes.children(server.pid) if server else ()
+        )
 
     before = children()
     usage = namedtuple("usage", "total used free")

@@ -1,10 +1,11 @@
 """The session's side of a loop in its own process: start it, feed its views, end the run's documents.
 
-The loop process (:mod:`sashil.runtime.worker`) is a fresh interpreter started with
-:func:`subprocess.Popen` (``sys.executable -m sashil.runtime.worker``): no fork of this process's
-threads and locks, no re-import of the caller's ``__main__`` (a script or notebook that calls
-``sashil.run(MyLaw)`` runs once), and the law crosses as its name in the run's assembled spec, never pickled.
-sashil's real-time loop is Linux-only (``SCHED_FIFO``, ``/dev/shm``, ``os.getppid``).
+The loop process (:mod:`sashil.runtime.worker`) is a fork of this process's loop server
+(:mod:`sashil.runtime.loop_server`), a fresh interpreter started once with its imports and kernels
+loaded: no fork of this process's threads and locks, no re-import of the caller's ``__main__`` (a
+script or notebook that calls ``sashil.run(MyLaw)`` runs once), and the law crosses as its name in
+the run's assembled spec, never pickled. sashil's real-time loop is Linux-only (``SCHED_FIFO``,
+``/dev/shm``, ``os.getppid``).
 
 The session process keeps everything that is not the cycle: the recorder
 (:class:`~sashil.runtime.stream_recorder.StreamRecorder`), the views (the live view, progress,
@@ -43,6 +44,8 @@ from sashil import errors
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG, SAFE_COMMAND, capabilities_of
 from sashil.errors import error_of
+from sashil.runtime import loop_server
+from sashil.runtime.loop_server import ForkedLoop
 from sashil.runtime.mailbox import CALLER_STOP
 from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, losses, outcome_of
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
@@ -135,7 +138,9 @@ class LoopProcess:
         self.rate_hz = spec.loop.rate_hz
         #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
         self.loop_cpu: int | None = spec.loop.rt.get("cpu") if realtime else None
-        self.process: subprocess.Popen[bytes] | None = None
+        self.process: ForkedLoop | subprocess.Popen[bytes] | None = None
+        #: what the loop server said while it prepared, before this loop's messages began
+        self._early: list[str] = []
         self.stream: Stream | None = None
         self.ready: dict[str, Any] = {}
         self._messages = -1
@@ -154,10 +159,10 @@ class LoopProcess:
 
     # -- start ------------------------------------------------------------------------------------
     def start(self) -> LoopProcess:
-        """Give the job to a loop process started ahead (:func:`start_ahead`), else start one."""
+        """Give the job to a new loop process (:func:`_spawn`)."""
         self._started = time.perf_counter()
         remove_stale()
-        self.process, self._messages, self._spawned = _take_ahead() or _spawn()
+        self.process, self._messages, self._spawned = _spawn(self._early)
         self._keep_off(self.loop_cpu)
         assert self.process.stdin is not None
         self.process.stdin.write((json.dumps(self.job) + "\n").encode())
@@ -199,6 +204,9 @@ class LoopProcess:
         """Forward the warm-up's progress (``say(kind, text)``) until the loop is ready; raise the
         loop's error (a port that cannot be opened: ConfigError) if it fails first."""
         assert self.process is not None
+        for line in self._early:
+            say("progress", line)
+        self._early.clear()
         while True:
             for message in self._read(POLL_S):
                 kind = message["kind"]
@@ -343,18 +351,25 @@ class LoopProcess:
             self.stream = None
 
 
-def _spawn() -> tuple[subprocess.Popen[bytes], int, float]:
-    """A new loop process (it imports and warms its kernels, then waits for its job on stdin), the
-    descriptor its messages arrive on, and when it was started (``time.perf_counter``)."""
+def _spawn(early: list[str]) -> tuple[ForkedLoop | subprocess.Popen[bytes], int, float]:
+    """A new loop process, forked by this process's loop server (:mod:`sashil.runtime.loop_server`;
+    the server's progress while it prepares is appended to ``early``), or a fresh interpreter when
+    no server can be had; the descriptor its messages arrive on, and when it was asked for
+    (``time.perf_counter``). Either way it has imported and warmed its kernels, or does so, and
+    waits for its job on stdin."""
     started = time.perf_counter()
     read_fd, write_fd = os.pipe()
     try:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
-            stdin=subprocess.PIPE,
-            pass_fds=(write_fd,),
-            close_fds=True,
-        )
+        try:
+            process: ForkedLoop | subprocess.Popen[bytes] = loop_server.server().fork(write_fd, early.append)
+        except OSError as err:
+            logging.getLogger(__name__).warning("no loop server (%s): the loop process starts afresh", err)
+            process = subprocess.Popen(
+                [sys.executable, "-m", "sashil.runtime.worker", "--messages", str(write_fd)],
+                stdin=subprocess.PIPE,
+                pass_fds=(write_fd,),
+                close_fds=True,
+            )
     except BaseException:
         os.close(read_fd)
         raise
@@ -363,38 +378,16 @@ def _spawn() -> tuple[subprocess.Popen[bytes], int, float]:
     return process, read_fd, started
 
 
-#: a loop process started ahead of its run, with its messages' descriptor
-_ahead: tuple[subprocess.Popen[bytes], int, float] | None = None
-
-
 def start_ahead() -> None:
-    """Start a loop process now, to be given the next run's job: its interpreter, imports and
-    kernels are ready by the time the session has resolved the config (``sashil run`` calls this
-    first; a bench page after each run). One waits at a time; unused, it ends with this process."""
-    global _ahead
-    if _ahead is not None and _ahead[0].poll() is None:
-        return
-    _ahead = _spawn()
+    """Start this process's loop server now: its interpreter, imports and kernels are ready by the
+    time the session has resolved the config (``sashil run`` calls this first; a bench page at its
+    start), and each run's loop process is a fork of it."""
+    loop_server.server()
 
 
 def stop_ahead() -> None:
-    """End the loop process started ahead, if one waits (a server that stops)."""
-    taken = _take_ahead()
-    if taken is not None:
-        process, fd, _ = taken
-        if process.stdin is not None:
-            process.stdin.close()  # no job: it exits
-        process.wait()
-        os.close(fd)
-
-
-def _take_ahead() -> tuple[subprocess.Popen[bytes], int, float] | None:
-    global _ahead
-    taken, _ahead = _ahead, None
-    if taken is not None and taken[0].poll() is not None:  # it ended (a signal): not usable
-        os.close(taken[1])
-        return None
-    return taken
+    """End this process's loop server, once its loops have ended (a server that stops)."""
+    loop_server.stop()
 
 
 def _log_level() -> int | None:

@@ -414,14 +414,15 @@ def remove_stale(folder: Path | None = None) -> list[Path]:
                 pids += [int(words[SESSION_PID_W]), int(words[LOOP_PID_W])]
         except OSError:
             continue
-        if not any(pid > 0 and _alive(pid) for pid in pids):
+        if not any(pid > 0 and pid_alive(pid) for pid in pids):
             with contextlib.suppress(OSError):
                 path.unlink()
                 removed.append(path)
     return removed
 
 
-def _alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (another user's too)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

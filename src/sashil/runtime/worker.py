@@ -1,12 +1,13 @@
-"""The loop process: ``python -m sashil.runtime.worker --messages FD``, started by the session.
+"""The loop process: a fork of the loop server (``python -m sashil.runtime.worker --serve FD``,
+:mod:`sashil.runtime.loop_server`), or a fresh ``python -m sashil.runtime.worker --messages FD``
+where no server can be had, started by the session.
 
 It runs the cycle and nothing else: the rig's I/O, the safety supervisor, the plan, the
 controller and the lab's law, each cycle's row into the run's stream (:mod:`sashil.runtime.stream`).
 No other Python thread runs in it. What it does, in order:
 
-0. imports the loop's modules and loads every numba kernel (:func:`prepare`), so a process
-   started ahead of its run (:func:`sashil.runtime.loop_process.start_ahead`) has done it when
-   the job arrives;
+0. imports the loop's modules and loads every numba kernel (:func:`prepare`): the server once,
+   before its first fork, so a fork has done it when the job arrives;
 1. reads its job from stdin, one JSON line: the assembled run (:class:`~sashil.config.parts.RunSpec`:
    the rig's, the stage's, the safety supervisor's and the loop's parts and the plan's values; the
    law named by its spec, a registered name, ``package.module:Class`` or ``file.py:Class``, imported
@@ -115,10 +116,11 @@ def build(spec: RunSpec, messages: Messages) -> tuple[Any, Any, str, str]:
     return rig, stage, label, road_text
 
 
-def prepare(messages: Messages) -> None:
+def prepare(progress: Callable[[str], None]) -> None:
     """What every run needs, done before the job arrives (a process started ahead of its run does
-    it while the session resolves the config): the loop's modules imported and every numba kernel
-    compiled or loaded from the cache, its progress sent on an empty cache."""
+    it while the session resolves the config; the loop server once for all its forks): the loop's
+    modules imported and every numba kernel compiled or loaded from the cache, its progress told
+    ``progress`` on an empty cache."""
     import sashil.control.registry
     import sashil.drivers
     import sashil.runtime.loop
@@ -126,29 +128,44 @@ def prepare(messages: Messages) -> None:
     from sashil.runtime.warmup import warm_kernels
 
     plan_builder("run")  # sashil run's plan and its road profiles, the run a process is started ahead for
-    warm_kernels(lambda line: messages.send("progress", text=line))
+    warm_kernels(progress)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m sashil.runtime.worker", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--messages", type=int, required=True, help="descriptor for the messages to the session")
+    parser.add_argument("--messages", type=int, help="descriptor for the messages to the session")
+    parser.add_argument(
+        "--serve", type=int, help="be the loop server on this control socket (sashil.runtime.loop_server)"
+    )
     args = parser.parse_args(argv)
-    messages = Messages(args.messages)
+    if args.serve is not None:
+        from sashil.runtime.serve import serve
 
+        return serve(args.serve, prepare, take_job)
+    if args.messages is None:
+        parser.error("one of --messages and --serve is required")
+    messages = Messages(args.messages)
+    return take_job(messages, lambda: prepare(lambda line: messages.send("progress", text=line)))
+
+
+def take_job(messages: Messages, before: Callable[[], None] = lambda: None, parent: int | None = None) -> int:
+    """Do ``before`` (the preparation of a fresh process), read the job from stdin and run it; the
+    exit code. ``parent``: the pid whose end means the session's (the loop server that forked this
+    process; None: the job's session)."""
     with catch_stop_signals() as flag:
         try:
-            prepare(messages)
+            before()
             job = sys.stdin.readline()
             if not job.strip():  # a process started ahead that was never given a run
                 return 0
-            return run(json.loads(job), messages, flag)
+            return run(json.loads(job), messages, flag, parent)
         except BaseException as err:
             messages.send("error", **error_fields(err))
             return exit_code_of("error", err) or 1
 
 
-def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
-    """The loop process's work (module doc); returns its exit code."""
+def run(job: dict[str, Any], messages: Messages, flag: Any, parent: int | None = None) -> int:
+    """The loop process's work (module doc), its exit code; ``parent`` as :func:`take_job`'s."""
     from sashil.runtime.clock import RealClock
     from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
     from sashil.runtime.rt_setup import RealtimeSetup
@@ -180,7 +197,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         return 1
     started = json.loads(go)
     folder = Path(started["folder"])
-    session_pid = int(job["session_pid"])
+    session_pid = int(job["session_pid"]) if parent is None else parent
     # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
     stop = LoopStop(flag, stream, session_pid, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
     tuning = None
