@@ -25,8 +25,8 @@ identification's accuracy without the link's timing noise, as a reference.
 
 About 2 minutes of rig time per damper (plus the fit): ~12 minutes for all five.
 
-``--quick``: damper 0 only (unless --dampers) with :data:`QUICK_PLAN` (two 1 s drops to fit, one
-held out, no road run): seconds; the figures mean little.
+``--quick``: damper 0 only (unless --dampers) with :data:`QUICK_PLAN` (two 0.8 s drops to fit, one
+held out, no road run: the fewest and shortest steps the plan allows); the figures mean little.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ QUICK_PLAN = {
     "small_currents_a": [],
     "road_currents_a": [],
     "validate_currents_a": [0.5],
-    "drop_duration_s": 1.0,
+    "drop_duration_s": 0.8,
 }
 
 
@@ -166,9 +166,7 @@ def main() -> None:
         default="serial",
         help="the emulated rig over serial or slcan, or sim: the in-process simulated rig (no link, reference)",
     )
-    parser.add_argument(
-        "--quick", action="store_true", help="damper 0 only, two 1 s drops to fit and one held out (seconds)"
-    )
+    parser.add_argument("--quick", action="store_true", help="damper 0 only, two 0.8 s drops to fit and one held out")
     args = parser.parse_args()
     dampers = args.dampers or ("0" if args.quick else None)
     chosen = [int(x) for x in dampers.split(",")] if dampers else list(range(len(DAMPERS)))

@@ -35,7 +35,7 @@ CAP_SYS_NICE).
     python tools/bench_loop.py --link          # and over serial against the emulated boards
     python tools/bench_loop.py --duration 5    # quick look
     python tools/bench_loop.py --paired 3      # and three runs of the own process beside a bare loop
-    python tools/bench_loop.py --quick         # 0.5 s per run, no 5 kHz run: the code path only (seconds)
+    python tools/bench_loop.py --quick         # 0.2 s per run, no 5 kHz run: the code path only (seconds)
 """
 
 from __future__ import annotations
@@ -244,13 +244,13 @@ def main(argv: list[str] | None = None) -> int:
         "--paired", type=int, default=0, metavar="N", help="N runs of the own process beside a bare loop at once"
     )
     parser.add_argument(
-        "--quick", action="store_true", help="0.5 s per run, no 5 kHz run (seconds; the figures mean little)"
+        "--quick", action="store_true", help="0.2 s per run, no 5 kHz run (seconds; the figures mean little)"
     )
     parser.add_argument("--bare-json", action="store_true", help=argparse.SUPPRESS)  # a paired run's bare loop
     parser.add_argument("--cpu", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.quick:
-        args.duration = args.fast_duration = 0.5
+        args.duration = args.fast_duration = 0.2
         args.fast_rate = 0.0  # the own-process run at 1 kHz takes the same path
     config = load_config(args.config)
     if args.priority is not None:

@@ -20,7 +20,7 @@ status carried the stream's live health counts, and the page's safe-state line a
 on a shared machine is noisy: run it on an otherwise idle box.
 
     python tools/bench_panel.py                 # 30 s runs, two pages
-    python tools/bench_panel.py --quick         # 1.5 s runs, one page: the code path only (seconds)
+    python tools/bench_panel.py --quick         # 0.5 s runs, one page: the code path only (seconds)
 """
 
 from __future__ import annotations
@@ -224,9 +224,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=30.0, help="seconds per run (default 30)")
     parser.add_argument("--pages", type=int, default=2, help="pages streaming during the panel run (default 2)")
-    parser.add_argument("--quick", action="store_true", help="1.5 s runs, one page: the code path only")
+    parser.add_argument("--quick", action="store_true", help="0.5 s runs, one page: the code path only")
     args = parser.parse_args()
-    duration, pages = (1.5, 1) if args.quick else (args.duration, args.pages)
+    duration, pages = (0.5, 1) if args.quick else (args.duration, args.pages)
     with tempfile.TemporaryDirectory() as tmp:
         bare = bare_run(Path(tmp) / "bare", duration)  # also warms the kernels' cache for the click
         panel = panel_run(Path(tmp) / "runs", duration, pages)

@@ -31,6 +31,9 @@ are real time).
 
     .venv/bin/python tools/bench_preview_link.py [--quick] [--dampers seed,n 1,J 2] [--duration S]
         [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH]
+
+``--quick``: the seed damper alone, 2.5 s runs (0.5 s after the 2 s left out), one round over serial:
+seconds; the figures mean little.
 """
 
 from __future__ import annotations
@@ -281,7 +284,7 @@ def table(rows: list[dict[str, Any]]) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="the seed damper, 3 s runs, serial only: seconds")
+    parser.add_argument("--quick", action="store_true", help="the seed damper, 2.5 s runs, serial only: seconds")
     parser.add_argument("--dampers", default=",".join(DAMPERS_DEFAULT), help="comma-separated damper names")
     parser.add_argument("--duration", type=float, default=12.0, help="seconds per run (the first 2 s left out)")
     parser.add_argument("--calibrated", type=Path, help="DIR/<damper>/params.yaml: models calibrated over serial")
@@ -291,7 +294,7 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=1, help="rounds of the serial runs per damper (median)")
     args = parser.parse_args()
     dampers = ["seed"] if args.quick else [d.strip() for d in args.dampers.split(",")]
-    duration = 3.0 if args.quick else args.duration
+    duration = 2.5 if args.quick else args.duration
     unknown = [d for d in dampers if d not in dict(DAMPERS)]
     if unknown:
         print(f"--dampers: no damper {unknown[0]!r} (bench_drop_damping's names)", file=sys.stderr)
