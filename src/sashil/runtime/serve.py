@@ -88,9 +88,8 @@ def _ended(pid: int, send: Callable[..., None]) -> bool:
 
 
 def _forked(fds: list[int], take_job: Callable[..., int]) -> int:
-    """The fork's life as a loop process: its job's descriptors in place, then the job; its exit code."""
-    from sashil.runtime.worker import Messages
-
+    """The fork's life as a loop process: its job's descriptors in place, then the job
+    (``take_job(messages_fd, parent=...)``); its exit code."""
     code = 1
     try:
         job, messages, out, err = fds
@@ -100,7 +99,7 @@ def _forked(fds: list[int], take_job: Callable[..., int]) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         for signum in IGNORED[1:]:
             signal.signal(signum, signal.SIG_DFL)
-        code = take_job(Messages(messages), parent=os.getppid())
+        code = take_job(messages, parent=os.getppid())
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:

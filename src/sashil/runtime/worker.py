@@ -43,6 +43,7 @@ from typing import Any
 from sashil.config.parts import RunSpec
 from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
 from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
+from sashil.runtime.serve import serve
 from sashil.runtime.signals import catch_stop_signals
 
 #: rows of the stream per second of the loop's rate: how far the recorder may fall behind
@@ -139,9 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.serve is not None:
-        from sashil.runtime.serve import serve
-
-        return serve(args.serve, prepare, take_job)
+        return serve(args.serve, prepare, lambda fd, parent: take_job(Messages(fd), parent=parent))
     if args.messages is None:
         parser.error("one of --messages and --serve is required")
     messages = Messages(args.messages)
