@@ -30,6 +30,9 @@ compiler rejects is listed apart and not counted.
 first of the C board's current clamp, each against the one test file of its code (:data:`QUICK_TESTS`,
 :data:`QUICK_C_TESTS`), with the same checks of the tests without a mutant first: seconds.
 
+``--jobs N`` tests N mutants at once, each in a child process of its own (default: one per CPU this
+process may use); a C survivor's end-to-end check runs alone.
+
 Exit status 0 when every mutant is killed, 1 otherwise.
 """
 
@@ -48,6 +51,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -354,15 +358,19 @@ def _verdict(n: int, total: int, label: str, text: str, verdict: str, quiet: boo
         print(f"[{n:2}/{total}] {label:40} {text:60} {verdict}", flush=True)
 
 
-def _run_python(found: list[Mutant], timeout_s: float, quiet: bool, tests: list[str] = TESTS) -> list[Mutant] | None:
-    """The survivors among ``found`` against ``tests``, or None when they fail without a mutant."""
+def _run_python(
+    found: list[Mutant], timeout_s: float, quiet: bool, tests: list[str] = TESTS, jobs: int = 1
+) -> list[Mutant] | None:
+    """The survivors among ``found`` against ``tests`` (``jobs`` mutants at a time), or None when
+    they fail without a mutant."""
     ok, why = run(None, timeout_s, tests)
     if not ok:
         print(f"the Python tests fail without a mutant ({why}): fix them first", file=sys.stderr)
         return None
     survivors = []
-    for n, m in enumerate(found, 1):
-        passed, why = run(m, timeout_s, tests)
+    with ThreadPoolExecutor(jobs) as pool:  # each mutant's tests run in a child process of their own
+        results = pool.map(lambda m: run(m, timeout_s, tests), found)
+    for n, (m, (passed, why)) in enumerate(zip(found, results, strict=True), 1):
         _verdict(n, len(found), m.label, m.text, "SURVIVED" if passed else f"killed by {why}", quiet)
         if passed:
             survivors.append(m)
@@ -370,22 +378,28 @@ def _run_python(found: list[Mutant], timeout_s: float, quiet: bool, tests: list[
 
 
 def _run_c(
-    found: list[CMutant], timeout_s: float, quiet: bool, tests: list[str] = C_TESTS
+    found: list[CMutant], timeout_s: float, quiet: bool, tests: list[str] = C_TESTS, jobs: int = 1
 ) -> tuple[list[CMutant], list[CMutant]] | None:
     """(survivors, mutants not counted: equivalent or not building) among ``found`` against ``tests``
-    (then C_E2E_TESTS for a survivor), or None when the tests fail without a mutant."""
+    (``jobs`` mutants at a time; then C_E2E_TESTS for a survivor, one at a time), or None when the
+    tests fail without a mutant."""
     with tempfile.TemporaryDirectory(prefix="mutate-cache-") as cache:
         ok, why = run_c(None, tests, cache, timeout_s)
         if not ok:
             print(f"the C tests fail without a mutant ({why}): fix them first", file=sys.stderr)
             return None
         e2e_checked, survivors, stillborn = False, [], []
+        runnable = [k for k, m in enumerate(found) if _equivalent(m) is None]
+        with ThreadPoolExecutor(jobs) as pool:
+            first = dict(
+                zip(runnable, pool.map(lambda k: run_c(found[k], tests, cache, timeout_s), runnable), strict=True)
+            )
         for n, m in enumerate(found, 1):
             if _equivalent(m) is not None:  # nothing to run: no test could tell it apart
                 stillborn.append(m)
                 _verdict(n, len(found), m.label, m.text, f"equivalent: {_equivalent(m)} (not counted)", quiet)
                 continue
-            passed, why = run_c(m, tests, cache, timeout_s)
+            passed, why = first[n - 1]
             if passed and not e2e_checked:  # the end-to-end tests must pass without a mutant first
                 ok, e2e_why = run_c(None, C_E2E_TESTS, cache, timeout_s)
                 if not ok:
@@ -416,6 +430,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-q", "--quiet", action="store_true", help="only the kill rates and the survivors")
     parser.add_argument("--timeout", type=float, default=120.0, metavar="S", help="per mutant (default 120)")
     parser.add_argument(
+        "--jobs",
+        type=int,
+        default=len(os.sched_getaffinity(0)),
+        metavar="N",
+        help="mutants tested at once, each in a process of its own (default: the CPUs this process may use)",
+    )
+    parser.add_argument(
         "--quick",
         action="store_true",
         help="two mutants only: the first of the supervisor, the first of the C clamp (seconds)",
@@ -436,11 +457,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     started = time.monotonic()
     tests, c_tests = (QUICK_TESTS, QUICK_C_TESTS) if args.quick else (TESTS, C_TESTS)
-    survivors = _run_python(found, args.timeout, args.quiet, tests)
+    survivors = _run_python(found, args.timeout, args.quiet, tests, args.jobs)
     if survivors is None:
         return 2
     python_s = time.monotonic() - started
-    c_result = _run_c(c_found, args.timeout, args.quiet, c_tests)
+    c_result = _run_c(c_found, args.timeout, args.quiet, c_tests, args.jobs)
     if c_result is None:
         return 2
     c_survivors, stillborn = c_result
