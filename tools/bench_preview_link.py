@@ -26,16 +26,18 @@ compare (:mod:`sashil.lab.hysteretic_bound`) on the damper's true model:
 
 With ``--repeat N`` each damper's serial runs go N rounds: the median share is the damper's and each
 round's is printed beside it (a run's realised road varies with the host's and the emulator's pauses,
-so one round's share varies). The host's load average is printed beside each run (the serial runs
+so one round's share varies). ``--keep DIR`` keeps each serial run's folder (its data.csv and the
+emulator's truth log) in DIR/<damper>/round-<i>, to study the encoders' θ̈2 offline. The host's load average is printed beside each run (the serial runs
 are real time).
 
     .venv/bin/python tools/bench_preview_link.py [--quick] [--dampers seed,n 1,J 2] [--duration S]
-        [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH]
+        [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH] [--keep DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -191,7 +193,9 @@ def shares(runs: dict[str, float], refs: dict[str, float], on_chain: bool) -> fl
     return share_of_bound(runs[LAW], passive[best], bound)
 
 
-def damper_row(name: str, road: str, duration: float, calibrated: Path | None, serial: int) -> dict[str, Any]:
+def damper_row(
+    name: str, road: str, duration: float, calibrated: Path | None, serial: int, keep: Path | None = None
+) -> dict[str, Any]:
     """Every share of one damper (module docstring)."""
     config = config_of(dict(DAMPERS)[name], duration)
     refs = model_refs(config, road, duration)
@@ -202,18 +206,24 @@ def damper_row(name: str, road: str, duration: float, calibrated: Path | None, s
     if params_path is not None and params_path.exists():
         row["calibrated"] = shares({**sim, LAW: calibrated_run(config, params_path, road, duration)}, refs, False)
     if serial:
-        row.update(serial_shares(config, road, duration, refs, serial))
+        folder = keep / name.replace(" ", "_") if keep is not None else None
+        row.update(serial_shares(config, road, duration, refs, serial, folder))
     progress(f"{name}: {_row_text(row)}")
     return row
 
 
 def serial_shares(
-    config: dict[str, Any], road: str, duration: float, refs: dict[str, float], repeat: int = 1
+    config: dict[str, Any],
+    road: str,
+    duration: float,
+    refs: dict[str, float],
+    repeat: int = 1,
+    keep: Path | None = None,
 ) -> dict[str, Any]:
     """The three runs over serial, ``repeat`` times, and the preview law's shares on each chain: the
     median of the rounds (each round's shares beside it: a run's realised road varies with the host's
     pauses, so one round's share varies)."""
-    rounds = [serial_round(config, road, duration, refs) for _ in range(repeat)]
+    rounds = [serial_round(config, road, duration, refs, keep, i) for i in range(repeat)]
     out: dict[str, Any] = {"serial_rounds": rounds}
     for key in ("serial_model_bound", "serial_one_chain", "serial_truth"):
         known = [r[key] for r in rounds if math.isfinite(r[key])]
@@ -221,10 +231,18 @@ def serial_shares(
     return out
 
 
-def serial_round(config: dict[str, Any], road: str, duration: float, refs: dict[str, float]) -> dict[str, Any]:
-    """One round of the three runs over serial and the preview law's shares on each chain."""
+def serial_round(
+    config: dict[str, Any], road: str, duration: float, refs: dict[str, float], keep: Path | None = None, i: int = 0
+) -> dict[str, Any]:
+    """One round of the three runs over serial and the preview law's shares on each chain; ``keep``:
+    the runs' folders (data.csv, the emulator's truth log) kept in keep/round-<i>."""
     encoders, truth, status = {}, {}, {}
-    with tempfile.TemporaryDirectory(prefix="sashil-preview-link-") as tmp:
+    with contextlib.ExitStack() as stack:
+        if keep is None:
+            tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="sashil-preview-link-"))
+        else:
+            tmp = str(keep / f"round-{i + 1}")
+            Path(tmp).mkdir(parents=True, exist_ok=True)
         for label, sets in labels(config):
             load = os.getloadavg()[0]
             encoders[label], truth[label], status[label] = serial_run(config, sets, label, road, duration, Path(tmp))
@@ -288,6 +306,7 @@ def main() -> int:
     parser.add_argument("--calibrate", action="store_true", help="calibrate into --calibrated first (over serial)")
     parser.add_argument("--no-serial", action="store_true", help="leave out the runs over serial")
     parser.add_argument("--json", type=Path, help="write every damper's figures here")
+    parser.add_argument("--keep", type=Path, help="keep the serial runs' folders in KEEP/<damper>/round-<i>")
     parser.add_argument("--repeat", type=int, default=1, help="rounds of the serial runs per damper (median)")
     args = parser.parse_args()
     dampers = ["seed"] if args.quick else [d.strip() for d in args.dampers.split(",")]
@@ -300,7 +319,7 @@ def main() -> int:
         calibrate(dampers, args.calibrated)
     print(f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {len(dampers)} dampers, {ROAD}, {duration:g} s")
     rounds = 0 if args.no_serial else max(1, args.repeat)
-    rows = [damper_row(d, ROAD, duration, args.calibrated, rounds) for d in dampers]
+    rows = [damper_row(d, ROAD, duration, args.calibrated, rounds, args.keep) for d in dampers]
     table(rows)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1), encoding="utf-8")
