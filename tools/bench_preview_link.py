@@ -24,6 +24,9 @@ compare (:mod:`sashil.lab.hysteretic_bound`) on the damper's true model:
   (:func:`sashil.lab.hysteretic_bound.bound_on_chain`: compare's share over a link);
 - ``truth``: the emulator's true θ̈2 against the bound (one chain: the plant's, as on the simulated rig).
 
+Each round's runs are printed below the table: the RMS θ̈2 of the encoders and of the truth, and
+the encoders' off the truth [%] (compare's chain alone: the same run, both low-passed alike).
+
 With ``--repeat N`` each damper's serial runs go N rounds: the median share is the damper's and each
 round's is printed beside it (a run's realised road varies with the host's and the emulator's pauses,
 so one round's share varies). ``--keep DIR`` keeps each serial run's folder (its data.csv and the
@@ -289,10 +292,10 @@ def table(rows: list[dict[str, Any]]) -> None:
     for row in rows:
         for i, r in enumerate(row.get("serial_rounds", ())):
             enc, truth = r["encoders"], r["truth"]
-            floors = "  ".join(f"{k} {math.sqrt(max(0.0, enc[k] ** 2 - truth[k] ** 2)):.3f}" for k in enc)
+            off = "  ".join(f"{k} {100 * (enc[k] / truth[k] - 1):+.1f}" for k in enc)
             print(
                 f"  {row['damper']} round {i + 1}: shares {r['serial_model_bound']:.1f} / {r['serial_one_chain']:.1f} / "
-                f"{r['serial_truth']:.1f} %; encoders' floor sqrt(enc² − truth²) [rad/s²]: {floors}"
+                f"{r['serial_truth']:.1f} %; encoders' RMS θ̈2 against the truth's [%]: {off}"
             )
             print(f"    RMS θ̈2 encoders {enc}, truth {truth}; {r['status']}")
 
