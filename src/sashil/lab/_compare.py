@@ -27,8 +27,8 @@ Metrics, after ``compare.settle_s``:
   twice, then low-passed, on a uniform grid of the samples' own device time (a link loses samples and
   repeats one when a cycle reads nothing new; a grid of the rows would read those as jumps)
   (:func:`sashil.lab.compare_metrics.arm_acceleration`). Over the emulated serial link it reads the
-  emulator's true θ̈2 to within 0.3–1.6 % RMS, a little low where the arm moves slowly and its edges
-  lie further apart than the band's shortest period; through the samples' counts alone (a stream
+  emulator's true θ̈2 0–2 % low in RMS (30 s runs), where the arm moves slowly and its edges lie
+  further apart than the band's shortest period; through the samples' counts alone (a stream
   without the edge columns) a 4096-count encoder adds a floor of about 0.8–1.1 rad/s² RMS in
   quadrature at 20 Hz, the same for every law;
 * travel: RMS of the relative angle θ;
