@@ -102,9 +102,10 @@ def arm_curve(stream: dict[str, Any], theta2: np.ndarray, sampled: tuple[np.ndar
     than the count at each sample's time (the edge-time reading of an incremental encoder: Merry,
     van de Molengraft and Steinbuch, 2010, "Velocity and acceleration estimation for optical
     incremental encoders", Mechatronics 20(1)). A count read at each sample is the angle plus an
-    error of up to half a count; differentiated twice, that error is raised by ω⁴ and fills the
-    metric's band. The edges' spline leaves only the shape of θ2 between two edges, which it does not
-    see (most at a reversal inside one count), and the edges' timing.
+    error of up to half a count; differentiated twice, that error's spectrum is raised by ω⁴ and
+    fills the metric's band. The edges' spline leaves only the shape of θ2 between two edges, which
+    it does not see (most at a reversal inside one count, and where edges lie further apart than the
+    band's period: it reads RMS θ̈2 a little low there), and the edges' timing.
 
     Without edges (an older board, a recorder without the columns, an angle that is not a count)
     the spline runs through the samples' counts (``sampled``: their times and first rows,
