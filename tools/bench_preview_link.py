@@ -24,13 +24,19 @@ compare (:mod:`sashil.lab.hysteretic_bound`) on the damper's true model:
   (:func:`sashil.lab.hysteretic_bound.bound_on_chain`: compare's share over a link);
 - ``truth``: the emulator's true θ̈2 against the bound (one chain: the plant's, as on the simulated rig).
 
+Each round's runs are printed below the table: the RMS θ̈2 of the encoders and of the truth, and
+the encoders' off the truth [%] (compare's chain alone: the same run, both low-passed alike).
+
 With ``--repeat N`` each damper's serial runs go N rounds: the median share is the damper's and each
 round's is printed beside it (a run's realised road varies with the host's and the emulator's pauses,
-so one round's share varies). The host's load average is printed beside each run (the serial runs
+so one round's share varies). ``--keep DIR`` keeps each serial run's folder (its data.csv and the
+emulator's truth log) in DIR/<damper>/round-<i>, to study the encoders' θ̈2 offline. A serial run's
+link can fail under load (a write times out while the emulator stalls); ``--retries N`` runs such a
+run again, up to N times, and its status says so. The host's load average is printed beside each run (the serial runs
 are real time).
 
     .venv/bin/python tools/bench_preview_link.py [--quick] [--dampers seed,n 1,J 2] [--duration S]
-        [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH]
+        [--calibrated DIR] [--calibrate] [--no-serial] [--repeat N] [--json PATH] [--keep DIR] [--retries N]
 
 ``--quick``: the seed damper alone, 2.5 s runs (0.5 s after the 2 s left out), one round over serial:
 seconds; the figures mean little.
@@ -39,6 +45,7 @@ seconds; the figures mean little.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -184,17 +191,25 @@ def model_refs(config: dict[str, Any], road_text: str, duration: float) -> dict[
 
 
 def shares(runs: dict[str, float], refs: dict[str, float], on_chain: bool) -> float:
-    """The preview law's share of the bound with the best passive run of ``runs``; ``on_chain``: the
-    bound put on the runs' chain first (:func:`bound_on_chain`)."""
-    passive = {k: v for k, v in runs.items() if k.startswith("passive") and math.isfinite(v)}
-    if not passive:
-        return math.nan
+    """The preview law's share of the bound with the best passive run of ``runs`` (NaN when one is
+    missing); ``on_chain``: the bound put on the runs' chain first (:func:`bound_on_chain`)."""
+    passive = {k: v for k, v in runs.items() if k.startswith("passive")}
+    if not passive or not all(math.isfinite(v) for v in passive.values()):
+        return math.nan  # a round without one of its passive runs: that one may have been the best
     best = min(passive, key=lambda k: passive[k])
     bound = bound_on_chain(refs["bound"], passive[best], refs[best]) if on_chain else refs["bound"]
     return share_of_bound(runs[LAW], passive[best], bound)
 
 
-def damper_row(name: str, road: str, duration: float, calibrated: Path | None, serial: int) -> dict[str, Any]:
+def damper_row(
+    name: str,
+    road: str,
+    duration: float,
+    calibrated: Path | None,
+    serial: int,
+    keep: Path | None = None,
+    retries: int = 0,
+) -> dict[str, Any]:
     """Every share of one damper (module docstring)."""
     config = config_of(dict(DAMPERS)[name], duration)
     refs = model_refs(config, road, duration)
@@ -205,18 +220,25 @@ def damper_row(name: str, road: str, duration: float, calibrated: Path | None, s
     if params_path is not None and params_path.exists():
         row["calibrated"] = shares({**sim, LAW: calibrated_run(config, params_path, road, duration)}, refs, False)
     if serial:
-        row.update(serial_shares(config, road, duration, refs, serial))
+        folder = keep / name.replace(" ", "_") if keep is not None else None
+        row.update(serial_shares(config, road, duration, refs, serial, folder, retries))
     progress(f"{name}: {_row_text(row)}")
     return row
 
 
 def serial_shares(
-    config: dict[str, Any], road: str, duration: float, refs: dict[str, float], repeat: int = 1
+    config: dict[str, Any],
+    road: str,
+    duration: float,
+    refs: dict[str, float],
+    repeat: int = 1,
+    keep: Path | None = None,
+    retries: int = 0,
 ) -> dict[str, Any]:
     """The three runs over serial, ``repeat`` times, and the preview law's shares on each chain: the
     median of the rounds (each round's shares beside it: a run's realised road varies with the host's
     pauses, so one round's share varies)."""
-    rounds = [serial_round(config, road, duration, refs) for _ in range(repeat)]
+    rounds = [serial_round(config, road, duration, refs, keep, i, retries) for i in range(repeat)]
     out: dict[str, Any] = {"serial_rounds": rounds}
     for key in ("serial_model_bound", "serial_one_chain", "serial_truth"):
         known = [r[key] for r in rounds if math.isfinite(r[key])]
@@ -224,15 +246,36 @@ def serial_shares(
     return out
 
 
-def serial_round(config: dict[str, Any], road: str, duration: float, refs: dict[str, float]) -> dict[str, Any]:
-    """One round of the three runs over serial and the preview law's shares on each chain."""
+def serial_round(
+    config: dict[str, Any],
+    road: str,
+    duration: float,
+    refs: dict[str, float],
+    keep: Path | None = None,
+    i: int = 0,
+    retries: int = 0,
+) -> dict[str, Any]:
+    """One round of the three runs over serial and the preview law's shares on each chain; ``keep``:
+    the runs' folders (data.csv, the emulator's truth log) kept in keep/round-<i>; a run whose link
+    failed (a write timeout while the emulator stalls under load) is run again up to ``retries``
+    times, in keep/round-<i>/retry-<n>."""
     encoders, truth, status = {}, {}, {}
-    with tempfile.TemporaryDirectory(prefix="sashil-preview-link-") as tmp:
+    with contextlib.ExitStack() as stack:
+        if keep is None:
+            tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="sashil-preview-link-"))
+        else:
+            tmp = str(keep / f"round-{i + 1}")
+            Path(tmp).mkdir(parents=True, exist_ok=True)
         for label, sets in labels(config):
-            load = os.getloadavg()[0]
-            encoders[label], truth[label], status[label] = serial_run(config, sets, label, road, duration, Path(tmp))
-            progress(f"serial {label}: {status[label]}, encoders {encoders[label]:.3f}, truth {truth[label]:.3f}")
-            status[label] += f" (load {load:.2f})"
+            for attempt in range(1 + retries):
+                load = os.getloadavg()[0]
+                folder = Path(tmp) / f"retry-{attempt}" if attempt else Path(tmp)
+                folder.mkdir(exist_ok=True)
+                encoders[label], truth[label], status[label] = serial_run(config, sets, label, road, duration, folder)
+                progress(f"serial {label}: {status[label]}, encoders {encoders[label]:.3f}, truth {truth[label]:.3f}")
+                status[label] += f" (load {load:.2f})" + (f" (retry {attempt})" if attempt else "")
+                if math.isfinite(encoders[label]):
+                    break
     return {
         "serial_model_bound": shares(encoders, refs, False),
         "serial_one_chain": shares(encoders, refs, True),
@@ -274,10 +317,10 @@ def table(rows: list[dict[str, Any]]) -> None:
     for row in rows:
         for i, r in enumerate(row.get("serial_rounds", ())):
             enc, truth = r["encoders"], r["truth"]
-            floors = "  ".join(f"{k} {math.sqrt(max(0.0, enc[k] ** 2 - truth[k] ** 2)):.3f}" for k in enc)
+            off = "  ".join(f"{k} {100 * (enc[k] / truth[k] - 1):+.1f}" for k in enc)
             print(
                 f"  {row['damper']} round {i + 1}: shares {r['serial_model_bound']:.1f} / {r['serial_one_chain']:.1f} / "
-                f"{r['serial_truth']:.1f} %; encoders' floor sqrt(enc² − truth²) [rad/s²]: {floors}"
+                f"{r['serial_truth']:.1f} %; encoders' RMS θ̈2 against the truth's [%]: {off}"
             )
             print(f"    RMS θ̈2 encoders {enc}, truth {truth}; {r['status']}")
 
@@ -291,6 +334,8 @@ def main() -> int:
     parser.add_argument("--calibrate", action="store_true", help="calibrate into --calibrated first (over serial)")
     parser.add_argument("--no-serial", action="store_true", help="leave out the runs over serial")
     parser.add_argument("--json", type=Path, help="write every damper's figures here")
+    parser.add_argument("--keep", type=Path, help="keep the serial runs' folders in KEEP/<damper>/round-<i>")
+    parser.add_argument("--retries", type=int, default=0, help="run a serial run whose link failed again, N times")
     parser.add_argument("--repeat", type=int, default=1, help="rounds of the serial runs per damper (median)")
     args = parser.parse_args()
     dampers = ["seed"] if args.quick else [d.strip() for d in args.dampers.split(",")]
@@ -303,7 +348,7 @@ def main() -> int:
         calibrate(dampers, args.calibrated)
     print(f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; {len(dampers)} dampers, {ROAD}, {duration:g} s")
     rounds = 0 if args.no_serial else max(1, args.repeat)
-    rows = [damper_row(d, ROAD, duration, args.calibrated, rounds) for d in dampers]
+    rows = [damper_row(d, ROAD, duration, args.calibrated, rounds, args.keep, max(0, args.retries)) for d in dampers]
     table(rows)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1), encoding="utf-8")

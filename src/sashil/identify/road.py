@@ -42,11 +42,11 @@ MIN_EDGES = 4
 def edge_boundaries(
     edge_s: np.ndarray, edge_dir: np.ndarray, counts: np.ndarray, time_s: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The road encoder's distinct edges: their times [s] and the boundaries they crossed [counts,
-    half-integers], from each sample's last edge (``edge_s``: NaN none; ``edge_dir`` +1/-1, 0 none)
-    and its count. Edges out of time order are left out. The chain of boundaries starts again where
-    samples were lost (``time_s``: a step of more than 1.5 median periods), where an edge may have
-    been missed. None: fewer than MIN_EDGES edges."""
+    """An encoder's distinct edges (the road's here, the arm's in compare's θ̈2): their times [s] and
+    the boundaries they crossed [counts, half-integers], from each sample's last edge (``edge_s``: NaN
+    none; ``edge_dir`` +1/-1, 0 none) and its count. Edges out of time order are left out. The chain
+    of boundaries starts again where samples were lost (``time_s``: a step of more than 1.5 median
+    periods), where an edge may have been missed. None: fewer than MIN_EDGES edges."""
     edge_s = np.asarray(edge_s, dtype=float)
     edge_dir = np.asarray(edge_dir, dtype=float)
     counts = np.asarray(counts, dtype=float)

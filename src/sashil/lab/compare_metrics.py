@@ -3,8 +3,9 @@ acceleration θ̈2, low-passed), travel (the RMS of the relative angle θ), the 
 coil's energy, after ``compare.settle_s``; and a law's result record.
 
 θ̈2 is the plant's own on a simulated rig, (−k·θ − T)/J of its true state (seed 001 eq. 13); on
-any other rig the arm angle θ2 = θ + θ1 of the encoders, differentiated twice after the low-pass,
-on a uniform grid of the samples' own device time.
+any other rig the arm encoder's angle θ2 = θ + θ1, a curve through its edges (each an exact angle at
+its own time; through the samples' counts where the stream has no edges) on the samples' own device
+time, differentiated twice, then low-passed, on a uniform grid of that time.
 """
 
 from __future__ import annotations
@@ -16,9 +17,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from scipy.interpolate import CubicSpline
+
     from sashil.config.parts import RunSpec
 
-__all__ = ["METRICS", "LawResult", "arm_acceleration", "metrics_of", "sample_times"]
+__all__ = ["METRICS", "LawResult", "arm_acceleration", "arm_curve", "metrics_of", "sample_times"]
 
 
 @dataclass
@@ -53,7 +56,14 @@ METRICS = (
 
 def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float) -> tuple[np.ndarray, str]:
     """θ̈2 [rad/s²] low-passed at ``bandwidth_hz``: the plant's own when the stream has it, else from
-    the encoders (θ2 = θ + θ1, low-passed, differentiated twice); and which it is."""
+    the encoders (the second derivative of the arm angle's curve, :func:`arm_curve`, low-passed);
+    and which it is.
+
+    The encoders' θ2 is differentiated before the low-pass: inside the record the order makes no
+    difference (both are linear and time-invariant), but at its ends the zero-phase filter extends
+    its input by a point reflection, which keeps an angle's slope and flips its curvature (a step of
+    2·θ̈2 at the end, read as a transient of up to twice the local θ̈2 over the filter's length),
+    while it keeps an acceleration's value, as it does for the plant's own."""
     from scipy.signal import butter, sosfiltfilt
 
     sos = butter(4, min(bandwidth_hz, 0.45 * rate_hz), fs=rate_hz, output="sos")
@@ -66,21 +76,73 @@ def arm_acceleration(stream: dict[str, Any], rate_hz: float, bandwidth_hz: float
         return smooth(true), "plant"
     theta2 = np.asarray(stream["theta_rad"], dtype=float) + np.asarray(stream["theta_road_rad"], dtype=float)
     dt = 1.0 / rate_hz
-    sampled = sample_times(stream)
-    if sampled is None:
-        return np.asarray(np.gradient(np.gradient(smooth(theta2), dt), dt)), "encoders"
     # a link's samples are taken on the device's clock, with gaps where samples were lost and a
-    # cycle that read no new sample repeating the last: differentiate on a uniform grid of the
-    # device's time, then read the result back at every row
-    from scipy.interpolate import CubicSpline
-
+    # cycle that read no new sample repeating the last: θ̈2 on a uniform grid of the device's time,
+    # read back at every row (without a device clock the rows are the samples, one period apart)
+    sampled = sample_times(stream) or (np.arange(theta2.size) * dt, np.arange(theta2.size))
     times, first = sampled
+    if times.size < 2:
+        return np.zeros(theta2.size), "encoders"
+    curve = arm_curve(stream, theta2, sampled)
     grid = np.arange(times[0], times[-1] + 0.5 * dt, dt)
     grid = grid[grid <= times[-1]]
-    on_grid = CubicSpline(times, theta2[first])(grid)  # a lost sample's gap bridged smoothly
-    accel = np.gradient(np.gradient(smooth(on_grid), dt), dt)
+    # beyond the curve's first and last point θ̈2 is held at its end value
+    accel = smooth(np.asarray(curve(np.clip(grid, curve.x[0], curve.x[-1]), 2)))
     row_times = np.interp(np.arange(theta2.size), first, times)
     return np.asarray(np.interp(row_times, grid, accel)), "encoders"
+
+
+def arm_curve(stream: dict[str, Any], theta2: np.ndarray, sampled: tuple[np.ndarray, np.ndarray]) -> CubicSpline:
+    """The arm angle θ2 [rad] against the device's time [s] from the arm encoder, a cubic spline:
+    through its edges when the stream has them, else through the samples' counts.
+
+    The edges (``arm_edge_us``, ``arm_edge_dir``: each sample's last count change, ``drivers/protocol.md``,
+    "Encoder edges") are the instants θ2 crossed a boundary between two counts: points of θ2 without
+    quantisation (:func:`sashil.identify.road.edge_boundaries`), placed at their own times rather
+    than the count at each sample's time (the edge-time reading of an incremental encoder: Merry,
+    van de Molengraft and Steinbuch, 2010, "Velocity and acceleration estimation for optical
+    incremental encoders", Mechatronics 20(1)). A count read at each sample is the angle plus an
+    error of up to half a count; differentiated twice, that error's spectrum is raised by ω⁴ and
+    fills the metric's band. The edges' spline leaves only the shape of θ2 between two edges, which
+    it does not see (most at a reversal inside one count, and where edges lie further apart than the
+    band's period: it reads RMS θ̈2 a little low there), and the edges' timing.
+
+    Without edges (an older board, a recorder without the columns, an angle that is not a count)
+    the spline runs through the samples' counts (``sampled``: their times and first rows,
+    :func:`sample_times`), a lost sample's gap bridged smoothly."""
+    from scipy.interpolate import CubicSpline
+
+    from sashil.identify.road import edge_boundaries
+
+    times, first = sampled
+    q = encoder_count(stream, theta2)
+    edges = None
+    if q > 0.0 and {"arm_edge_us", "arm_edge_dir", "device_time_us"} <= stream.keys():
+        edge_us = np.asarray(stream["arm_edge_us"], dtype=float)
+        edges = edge_boundaries(
+            np.where(edge_us >= 0.0, edge_us * 1e-6, np.nan),
+            np.asarray(stream["arm_edge_dir"], dtype=float),
+            np.rint(theta2 / q),
+            np.asarray(stream["device_time_us"], dtype=float) * 1e-6,
+        )
+    if edges is None:
+        return CubicSpline(times, theta2[first])
+    t_edge, boundary = edges
+    return CubicSpline(t_edge, boundary * q)
+
+
+def encoder_count(stream: dict[str, Any], theta2: np.ndarray) -> float:
+    """One count of the encoders [rad], from the recorded angles, 0 when they are not counts: the
+    smaller of the relative angle's and the road angle's smallest step
+    (:func:`sashil.identify.road.count_quantum`; each a whole number of counts, read exactly, while
+    their sum θ2 carries the sum's rounding), if θ2 is a whole number of it."""
+    from sashil.identify.road import count_quantum
+
+    steps = [count_quantum(np.asarray(stream[key], dtype=float)) for key in ("theta_rad", "theta_road_rad")]
+    q = min((step for step in steps if step > 0.0), default=0.0)
+    if q <= 0.0 or not np.all(np.abs(theta2 / q - np.rint(theta2 / q)) < 1e-6):
+        return 0.0
+    return q
 
 
 def sample_times(stream: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
