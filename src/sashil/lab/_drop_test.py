@@ -113,11 +113,11 @@ def drop_test(
     drop = run.options
     theta0_deg, duration = float(drop["theta0_deg"]), float(drop["duration_s"])
     currents = [float(value) for value in drop["currents_a"]]
+    outputs.check(run.rig.backend)
     checked = stage_controller(run.stage)  # bad controller parameters fail here, before a folder exists
     closed = checked is not None
-    law, origin = law_label(run.stage.law)
-    outputs.check(run.rig.backend)
     folder = RunFolder.create(outputs.out, "drop-test")
+    law, origin = law_label(run.stage.law)
     columns = DROP_COLUMNS + controller_columns(checked)
     live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
     live_offset_s = 0.0
@@ -129,7 +129,7 @@ def drop_test(
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = runs.folder_for(_label(current))
-        record = _drop(
+        record = run_drop_test(
             run,
             theta0_deg,
             current,
@@ -711,38 +711,7 @@ def run_drop_test(
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
     up to it and the error in ``record.error``.
     """
-    return _drop(
-        assembled(config, READS),
-        theta0_deg,
-        current_a,
-        duration_s,
-        rig,
-        clock,
-        controller,
-        notify,
-        data_path,
-        live=live,
-        stop=stop,
-        trace=trace,
-    )
-
-
-def _drop(
-    run: RunSpec,
-    theta0_deg: float,
-    current_a: float,
-    duration_s: float,
-    rig: RigInterface | None = None,
-    clock: Clock | None = None,
-    controller: Any = None,
-    notify: Callable[[str], None] | None = None,
-    data_path: str | Path | None = None,
-    *,
-    live: Any = None,
-    stop: Any = None,
-    trace: Any = None,
-) -> DropRecord:
-    """:func:`run_drop_test` of the drop test's assembled ``run``."""
+    run = assembled(config, READS)
     plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
     outcome = engine.run(
         run,
