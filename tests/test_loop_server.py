@@ -113,3 +113,31 @@ def test_a_session_whose_environment_changed_gets_a_new_server(monkeypatch):
         assert second is not first and not first.alive()
     finally:
         loop_server.stop()
+
+
+def test_a_fork_of_the_session_starts_its_own_server_and_leaves_its_parents_alone():
+    first = loop_server.server()
+    try:
+        read_fd, write_fd = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the fork: its own server, told to end when done
+            code = 1
+            try:
+                own = loop_server.server()
+                os.write(write_fd, f"{own.pid}\n".encode())
+                loop_server.stop()
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(write_fd)
+        with os.fdopen(read_fd) as pipe:
+            child_server = int(pipe.read())
+        assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
+        assert child_server != first.pid and first.alive() and loop_server.server() is first
+        loop, messages = _fork(first)  # the parent's server still forks its loops
+        assert loop.stdin is not None
+        loop.stdin.close()
+        assert loop.wait(timeout=30) == 0
+        os.close(messages)
+    finally:
+        loop_server.stop()

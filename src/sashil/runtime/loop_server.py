@@ -111,6 +111,8 @@ class LoopServer:
         finally:
             theirs.close()
         self.pid = self.process.pid
+        #: the session process whose server this is (a fork of the session has none of its own yet)
+        self.owner = os.getpid()
         self.environment = dict(os.environ)
         self._control = ours
         self._lock = threading.Lock()
@@ -198,9 +200,13 @@ _server_lock = threading.Lock()
 
 def server() -> LoopServer:
     """This process's loop server, started on first use, and again when it has ended or when the
-    session's environment has changed since it started (a fork runs in the server's environment)."""
+    session's environment has changed since it started (a fork runs in the server's environment);
+    a process forked from a session starts its own."""
     global _server
     with _server_lock:
+        if _server is not None and _server.owner != os.getpid():  # a fork of the session: the server is its parent's
+            _server._control.close()  # this copy only: the parent's keeps the socket open
+            _server = None
         if _server is not None and (not _server.alive() or _server.environment != os.environ):
             old, _server = _server, None
             old.close()
@@ -211,7 +217,7 @@ def server() -> LoopServer:
 
 def running() -> LoopServer | None:
     """This process's loop server if it runs (the tests' leak check counts its loops as this process's)."""
-    return _server if _server is not None and _server.alive() else None
+    return _server if _server is not None and _server.owner == os.getpid() and _server.alive() else None
 
 
 def stop() -> None:
