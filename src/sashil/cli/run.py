@@ -57,11 +57,11 @@ def run(args: argparse.Namespace) -> int:
     from sashil.runtime.loop_process import start_ahead, stop_ahead
 
     setup_logging(args)
-    start_ahead()  # the loop process imports and warms up while the config is resolved here
+    start_ahead()  # the loop server imports and warms up while the config is resolved here
     try:
         return _run(args)
     finally:
-        stop_ahead()  # not taken (bad input, loop.process: false): it ends here
+        stop_ahead()  # the loop server ends with the run (or unused: bad input, loop.process: false)
 
 
 def _run(args: argparse.Namespace) -> int:

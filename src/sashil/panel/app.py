@@ -430,7 +430,7 @@ def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncCon
 
         from sashil.runtime.loop_process import start_ahead, stop_ahead
 
-        start_ahead()  # the first run's loop process imports and warms up before the first click
+        start_ahead()  # the loop server imports and warms up before the first click
         task = asyncio.create_task(broadcaster())
         try:
             yield
@@ -440,6 +440,6 @@ def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncCon
                 await task
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
-            stop_ahead()  # after the run's thread has ended: its last act starts the next run's process
+            stop_ahead()  # the loop server ends after the run's thread has (its last act asks for the server)
 
     return lifespan

@@ -425,7 +425,7 @@ class Bench:
             self._on_event(Event("progress", f"run ended: {status}", {"exit_status": status}))
             from sashil.runtime.loop_process import start_ahead
 
-            start_ahead()  # the next run's loop process, ready before the next click
+            start_ahead()  # the loop server, ready to fork the next run's loop before the next click
 
     def _on_event(self, event: Event) -> None:
         with self._lock:

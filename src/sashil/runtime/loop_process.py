@@ -381,7 +381,8 @@ def _spawn(early: list[str]) -> tuple[ForkedLoop | subprocess.Popen[bytes], int,
 def start_ahead() -> None:
     """Start this process's loop server now: its interpreter, imports and kernels are ready by the
     time the session has resolved the config (``sashil run`` calls this first; a bench page at its
-    start), and each run's loop process is a fork of it."""
+    start and after each run, which starts a new one only if it has ended), and each run's loop
+    process is a fork of it."""
     loop_server.server()
 
 
