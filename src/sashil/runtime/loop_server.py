@@ -117,8 +117,6 @@ class LoopServer:
         self._control = ours
         self._lock = threading.Lock()
         self._exits: dict[int, int] = {}
-        self._progress: list[str] = []
-        self.children: set[int] = set()
 
     def alive(self) -> bool:
         return self.process.poll() is None and self._control.fileno() >= 0
@@ -137,7 +135,6 @@ class LoopServer:
             raise
         finally:
             os.close(job_read)
-        self.children.add(pid)
         return ForkedLoop(self, pid, os.fdopen(job_write, "wb"))
 
     def _until_forked(self, say: Callable[[str], None] | None) -> int:
@@ -156,10 +153,8 @@ class LoopServer:
             if pid not in self._exits:
                 self._receive(timeout_s)
             if pid in self._exits:
-                self.children.discard(pid)
                 return self._exits[pid]
             if not self.alive() and not pid_alive(pid):  # the server died: its loop's code is lost
-                self.children.discard(pid)
                 return self._exits.setdefault(pid, 1)
             return None
 
