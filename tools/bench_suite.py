@@ -50,6 +50,16 @@ def _durations(junit: Path) -> list[tuple[float, str]]:
     ]
 
 
+def _failures(junit: Path) -> list[str]:
+    """Each failed or erred test with the first line of its message."""
+    out = []
+    for case in ET.parse(junit).getroot().iter("testcase"):
+        for outcome in (*case.iter("failure"), *case.iter("error")):
+            message = (outcome.get("message") or "").strip().splitlines()[:1] or [""]
+            out.append(f"{case.get('classname')}::{case.get('name')}: {message[0][:300]}")
+    return out
+
+
 def _workers(args: list[str]) -> int:
     """The workers a tier runs on: pytest-xdist's ``-n auto`` is one per CPU this process may use."""
     if "-n" not in args:
@@ -75,6 +85,7 @@ def run_tier(name: str, args: list[str], files: list[str], out: Path) -> dict:
         "code": done.returncode,
         "summary": tail[0],
         "durations": _durations(junit) if junit.exists() else [],
+        "failures": _failures(junit) if junit.exists() else [],
         "workers": _workers(args),
     }
 
@@ -128,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     failed = [tier for tier in tiers if tier["code"] not in (0, 5)]
     for tier in failed:
         print(f"{tier['name']} tier failed (exit {tier['code']}): {tier['summary']}", file=sys.stderr)
+        for line in tier["failures"]:
+            print(f"  FAILED {line}", file=sys.stderr)
     return 1 if failed else 0
 
 
