@@ -89,9 +89,6 @@ class ForkedLoop:
     def kill(self) -> None:
         self.send_signal(signal.SIGKILL)
 
-    def terminate(self) -> None:
-        self.send_signal(signal.SIGTERM)
-
 
 class LoopServer:
     """The server process and its control socket (module doc)."""
