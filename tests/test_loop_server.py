@@ -104,15 +104,44 @@ def _running(pid: int) -> bool:
         return False
 
 
-def test_a_session_whose_environment_changed_gets_a_new_server(monkeypatch):
+def test_a_changed_startup_variable_gets_a_new_server_any_other_change_keeps_it(monkeypatch):
     first = loop_server.server()
     try:
         assert loop_server.server() is first
-        monkeypatch.setenv("SASHIL_TEST_MARK", "1")
+        monkeypatch.setenv("LAB_NOTE", "a run's own variable")  # travels with each fork instead
+        monkeypatch.setenv("PYTEST_CURRENT_TEST", "another test")
+        assert loop_server.server() is first and first.alive()
+        monkeypatch.setenv("SASHIL_TEST_MARK", "1")  # read while a loop process starts
         second = loop_server.server()
         assert second is not first and not first.alive()
     finally:
         loop_server.stop()
+
+
+def test_a_fork_takes_the_sessions_environment_as_its_own():
+    from sashil.runtime import serve
+
+    job_read, job_write = os.pipe()
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # stands for the server's fork: the job reports the environment it runs in
+
+        def take_job(messages: int, parent: int) -> int:
+            os.write(messages, json.dumps(dict(os.environ)).encode())
+            return 0
+
+        code = 1
+        try:
+            os.close(read_fd)
+            code = serve._forked([job_read, write_fd, os.dup(1), os.dup(2)], {"LAB_NOTE": "from the session"}, take_job)
+        finally:
+            os._exit(code)
+    for fd in (job_read, job_write, write_fd):
+        os.close(fd)
+    with os.fdopen(read_fd, "rb") as pipe:
+        environment = json.loads(pipe.read())
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
+    assert environment == {"LAB_NOTE": "from the session"}
 
 
 def test_a_fork_of_the_session_starts_its_own_server_and_leaves_its_parents_alone():

@@ -54,14 +54,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sashil.runtime.loop_process import start_ahead, stop_ahead
+    from sashil.runtime.loop_process import start_ahead
 
     setup_logging(args)
     start_ahead()  # the loop server imports and warms up while the config is resolved here
-    try:
-        return _run(args)
-    finally:
-        stop_ahead()  # the loop server ends with the run (or unused: bad input, loop.process: false)
+    return _run(args)
 
 
 def _run(args: argparse.Namespace) -> int:

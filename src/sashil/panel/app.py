@@ -418,8 +418,8 @@ def _socket(panel: Panel) -> Callable[[WebSocket], Awaitable[None]]:
 
 
 def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncContextManager[None]]:
-    """The server's lifespan: the display ticks, a loop process started ahead, and at the end the
-    bench stopped and joined."""
+    """The server's lifespan: the display ticks, the loop server started ahead (it ends with the
+    process), and at the end the bench stopped and joined."""
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
@@ -428,7 +428,7 @@ def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncCon
                 panel.tick()
                 await asyncio.sleep(1.0 / FPS)
 
-        from sashil.runtime.loop_process import start_ahead, stop_ahead
+        from sashil.runtime.loop_process import start_ahead
 
         start_ahead()  # the loop server imports and warms up before the first click
         task = asyncio.create_task(broadcaster())
@@ -440,6 +440,5 @@ def _lifespan(panel: Panel) -> Callable[[Starlette], contextlib.AbstractAsyncCon
                 await task
             panel.bench.stop("STOP (the panel server is shutting down)")
             await run_in_threadpool(panel.bench.join)
-            stop_ahead()  # the loop server ends after the run's thread has (its last act asks for the server)
 
     return lifespan

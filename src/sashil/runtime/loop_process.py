@@ -382,13 +382,10 @@ def start_ahead() -> None:
     """Start this process's loop server now: its interpreter, imports and kernels are ready by the
     time the session has resolved the config (``sashil run`` calls this first; a bench page at its
     start and after each run, which starts a new one only if it has ended), and each run's loop
-    process is a fork of it."""
+    process is a fork of it. The server serves this process's later runs too (an in-process
+    session: a lab's script, a test worker) and ends with it: the process's end closes the control
+    socket (:mod:`sashil.runtime.loop_server`)."""
     loop_server.server()
-
-
-def stop_ahead() -> None:
-    """End this process's loop server, once its loops have ended (a server that stops)."""
-    loop_server.stop()
 
 
 def _log_level() -> int | None:

@@ -9,10 +9,12 @@ interpreter started once per session process; it imports the loop's modules and 
 and holds no lock when it forks, so each fork is the clean copy a fresh interpreter would be, with
 the work already done; the job then crosses to it as it does to a fresh one (stdin, one JSON line).
 
-What a fork takes from the session at the moment it is asked for: the working directory and the
-session's standard output and error (their descriptors cross the control socket, so a loop's lines
-go where a fresh process's would). The environment is the server's: a session whose environment
-has changed since starts a new server (:func:`server`).
+What a fork takes from the session at the moment it is asked for: the working directory, the
+environment and the session's standard output and error (their descriptors cross the control
+socket, so a loop's lines go where a fresh process's would). The variables read while an interpreter
+starts and the kernels load (:data:`STARTUP_PREFIXES`) shaped the server itself: a session where
+one of them has changed since starts a new server (:func:`server`); any other change (a test's
+name, a run's own variable) travels with the next fork.
 
 Lifetime and the session's death. The server ignores the terminal's and ``kill``'s stop signals
 (a Ctrl-C stops the loop, which the session and the loop handle, never the server under it) and
@@ -24,7 +26,7 @@ the loop, which then ends its run itself (:mod:`sashil.runtime.orphan`).
 
 Protocol on the control socket (``AF_UNIX``, ``SOCK_SEQPACKET``: one message a packet, JSON):
 
-- session → server: ``{"kind": "fork", "cwd": ...}`` with four descriptors (the job's read end,
+- session → server: ``{"kind": "fork", "cwd": ..., "environment": {...}}`` with four descriptors (the job's read end,
   the messages' write end, standard output, standard error); ``{"kind": "close"}``;
 - server → session: ``{"kind": "progress", "text": ...}`` while it prepares, ``{"kind": "forked",
   "pid": N}`` for each fork, ``{"kind": "exit", "pid": N, "code": C}`` when a loop process has
@@ -42,7 +44,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import IO, Any
 
 from sashil.runtime.stream import pid_alive
@@ -53,6 +55,15 @@ FORK_FDS = 4
 PACKET = 65536
 #: how often the server looks for loops that have ended [s]
 REAP_S = 0.05
+#: the environment variables that shape an interpreter's start and its imports (the interpreter's
+#: own, numba's, the numeric libraries' threads, the dynamic loader's, sashil's): a server started
+#: under other values is not the one a fresh loop process would be
+STARTUP_PREFIXES = ("PYTHON", "NUMBA_", "SASHIL_", "LD_", "OMP_", "OPENBLAS_", "MKL_")
+
+
+def startup_environment(environ: Mapping[str, str]) -> dict[str, str]:
+    """The part of ``environ`` that shapes a fresh interpreter's start (:data:`STARTUP_PREFIXES`)."""
+    return {name: value for name, value in environ.items() if name.startswith(STARTUP_PREFIXES)}
 
 
 class ForkedLoop:
@@ -110,7 +121,8 @@ class LoopServer:
         self.pid = self.process.pid
         #: the session process whose server this is (a fork of the session has none of its own yet)
         self.owner = os.getpid()
-        self.environment = dict(os.environ)
+        #: the variables its start read (:func:`startup_environment`)
+        self.environment = startup_environment(os.environ)
         self._control = ours
         self._lock = threading.Lock()
         self._exits: dict[int, int] = {}
@@ -123,7 +135,9 @@ class LoopServer:
         prepares (its first fork on a machine whose kernels are not cached yet) goes to ``say``."""
         job_read, job_write = os.pipe()
         try:
-            request = json.dumps({"kind": "fork", "cwd": os.getcwd()}).encode()
+            request = json.dumps({"kind": "fork", "cwd": os.getcwd(), "environment": dict(os.environ)}).encode()
+            if len(request) > PACKET:
+                raise OSError(f"the session's environment ({len(request)} bytes) does not fit a control message")
             with self._lock:
                 socket.send_fds(self._control, [request], [job_read, messages_fd, 1, 2])
                 pid = self._until_forked(say)
@@ -191,15 +205,15 @@ _server_lock = threading.Lock()
 
 
 def server() -> LoopServer:
-    """This process's loop server, started on first use, and again when it has ended or when the
-    session's environment has changed since it started (a fork runs in the server's environment);
-    a process forked from a session starts its own."""
+    """This process's loop server, started on first use, and again when it has ended or when a
+    variable that shaped its start has changed since (:func:`startup_environment`); a process
+    forked from a session starts its own."""
     global _server
     with _server_lock:
         if _server is not None and _server.owner != os.getpid():  # a fork of the session: the server is its parent's
             _server._control.close()  # this copy only: the parent's keeps the socket open
             _server = None
-        if _server is not None and (not _server.alive() or _server.environment != os.environ):
+        if _server is not None and (not _server.alive() or _server.environment != startup_environment(os.environ)):
             old, _server = _server, None
             old.close()
         if _server is None:

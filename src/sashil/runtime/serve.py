@@ -69,7 +69,7 @@ def serve(
             code = 1
             try:
                 control.close()
-                code = _forked(fds, take_job)
+                code = _forked(fds, request["environment"], take_job)
             finally:
                 os._exit(code)
         for fd in fds:
@@ -87,11 +87,13 @@ def _ended(pid: int, send: Callable[..., None]) -> bool:
     return True
 
 
-def _forked(fds: list[int], take_job: Callable[..., int]) -> int:
-    """The fork's life as a loop process: its job's descriptors in place, then the job
-    (``take_job(messages_fd, parent=...)``); its exit code."""
+def _forked(fds: list[int], environment: dict[str, str], take_job: Callable[..., int]) -> int:
+    """The fork's life as a loop process: its job's descriptors in place and the session's
+    ``environment`` its own, then the job (``take_job(messages_fd, parent=...)``); its exit code."""
     code = 1
     try:
+        os.environ.clear()
+        os.environ.update(environment)
         job, messages, out, err = fds
         for fd, target in ((job, 0), (out, 1), (err, 2)):
             os.dup2(fd, target)
