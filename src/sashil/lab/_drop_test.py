@@ -34,6 +34,7 @@ from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble, assembled
 from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
+from sashil.lab.compare_metrics import sample_times
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
@@ -738,7 +739,6 @@ def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: Sashil
     record = drop_record(outcome.stream, plan, outcome.start_ns)
     record.run = outcome.summary
     record.error = error
-    columns = record.columns
     if outcome.can_trace is not None:
         record.extra["can_trace"] = outcome.can_trace
     if outcome.loop_process is not None:
@@ -749,10 +749,32 @@ def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: Sashil
         record.extra["realtime"] = outcome.realtime
     if outcome.recording is not None:
         record.extra["recording"] = outcome.recording
+    time_s, theta = sampled_angle(record)
     record.metrics = drop_metrics(
-        columns["time_s"],
-        columns["theta_rad"],
-        settle_band_deg=run.options["settle_band_deg"],
-        resolution_rad=plan.resolution,
+        time_s, theta, settle_band_deg=run.options["settle_band_deg"], resolution_rad=plan.resolution
     )
     return record
+
+
+def sampled_angle(record: DropRecord) -> tuple[np.ndarray, np.ndarray]:
+    """The drop's angle against the clock that sampled it, time zero at the release: the device's
+    (each distinct sample once, at its own device time) when the rig's samples carry one, else the
+    loop's. Over a link the loop reads a sample a round trip after the device took it, and on a
+    busy host a late cycle later still: peaks and the period on the loop's clock would carry that
+    lateness, which is the host's, not the arm's. A device clock that only restates the loop's (a
+    simulated rig's: the loop's time in whole µs, :data:`SAME_CLOCK_S`) gives way to the loop's,
+    which is finer."""
+    loop_time, theta = record.columns["time_s"], record.columns["theta_rad"]
+    sampled = sample_times(record.stream) if record.device_release_s is not None else None
+    if sampled is None:
+        return loop_time, theta
+    times, rows = sampled
+    device_time = times - record.device_release_s
+    if rows.size == loop_time.size and np.all(np.abs(device_time - loop_time) <= SAME_CLOCK_S):
+        return loop_time, theta
+    return device_time, theta[rows]
+
+
+#: the largest difference between a device's sample times and the loop's at which the device's clock
+#: is the loop's restated (whole µs, and the release's instant read between two samples) [s]
+SAME_CLOCK_S = 2e-6
