@@ -56,9 +56,10 @@ PACKET = 65536
 #: how often the server looks for loops that have ended [s]
 REAP_S = 0.05
 #: the environment variables that shape an interpreter's start and its imports (the interpreter's
-#: own, numba's, the numeric libraries' threads, the dynamic loader's, sashil's): a server started
-#: under other values is not the one a fresh loop process would be
-STARTUP_PREFIXES = ("PYTHON", "NUMBA_", "SASHIL_", "LD_", "OMP_", "OPENBLAS_", "MKL_")
+#: own, numba's, the numeric libraries' threads, the dynamic loader's, sashil's) or that a module
+#: keeps once read (the temporary directory: :mod:`tempfile`): a server started under other values
+#: is not the one a fresh loop process would be
+STARTUP_PREFIXES = ("PYTHON", "NUMBA_", "SASHIL_", "LD_", "OMP_", "OPENBLAS_", "MKL_", "TMP", "TEMP")
 
 
 def startup_environment(environ: Mapping[str, str]) -> dict[str, str]:
