@@ -26,6 +26,19 @@ def test_ci_runs_the_readme_test_command():
     assert second in (ROOT / ".ci" / "run").read_text()
 
 
+def test_a_failed_test_in_the_readme_command_fails_ci():
+    """``set -e`` lets a failed command inside an && list pass: the line must stop CI itself."""
+    import subprocess
+
+    _, second = _quick_start_commands()
+    (line,) = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if second in line]
+    failing = line.replace(second, "true && false && true")  # the parallel tier fails, the alone tier is skipped
+    done = subprocess.run(
+        ["bash", "-c", f"set -euo pipefail\n{failing}\necho CI-went-on"], capture_output=True, text=True
+    )
+    assert done.returncode != 0 and "CI-went-on" not in done.stdout
+
+
 def test_the_readme_python_examples_run(tmp_path, monkeypatch):
     import subprocess
     import sys
