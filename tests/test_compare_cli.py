@@ -15,6 +15,10 @@ from doc_blocks import example
 from sashil.cli import main
 from sashil.lab.compare_metrics import arm_acceleration
 
+#: the longest host pause [ms] in a law's run over a link that the comparisons below accept (compare's
+#: default): one moves a law's travel and comfort by 5 % at worst, 0.4 % typically (tools/bench_compare_pause.py)
+MAX_PAUSE_MS = 20.0
+
 SHORT = ["--duration", "3", "--set", "compare.settle_s=1", "--set", "road.period_s=10"]
 
 
@@ -127,7 +131,8 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
     comfortable on both."""
     from test_link_e2e import Emulator, relaxed_config
 
-    common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q"]
+    common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q",
+              "--set", f"compare.max_pause_ms={MAX_PAUSE_MS}"]  # fmt: skip
     assert main(["compare", *common, "--controller", "skyhook-add", "--out", str(tmp_path / "sim")]) == 0
     emu = Emulator(tmp_path, "serial", "python")
     try:
@@ -141,13 +146,15 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
     sim, over = rows(tmp_path / "sim"), rows(tmp_path / "link")
     assert set(sim) == set(over) == {"passive 0 A", "passive 1 A", "skyhook-add"}
     assert all(over[law]["status"] == "ok" for law in over), over
-    links = [json.loads(p.read_text())["link"] for p in (tmp_path / "link").glob("*/summary.json")]
-    assert len(links) == 3
-    if any(link["watchdog_samples"] for link in links):
-        # the host paused longer than the board's watchdog (measured once with two busy cores
-        # beside: 101 ms): the board cut the current, and the road profile, a function of the
-        # host's time, stepped when the host came back; the laws no longer ran the same road
-        pytest.skip("the host paused longer than the board's watchdog: the runs are not comparable")
+    runs = [json.loads(p.read_text()) for p in (tmp_path / "link").glob("*/summary.json")]
+    assert len(runs) == 3
+    # compare ran again each law whose host paused longer than compare.max_pause_ms (the board
+    # holds the road's speed meanwhile: a kick to the arm, tools/bench_compare_pause.py); a law
+    # whose every run paused, or whose board cut the current, did not meet the others' road
+    paused = {run["controller"]: run["pauses_ms"] for run in runs if run["pauses_ms"][-1] > MAX_PAUSE_MS}
+    if paused or any(run["link"]["watchdog_samples"] for run in runs):
+        pytest.skip(f"the host paused in every run of {paused or 'a law, past the watchdog'}: not comparable")
+    seen = {run["controller"]: run["pauses_ms"] for run in runs}
 
     def figure(table: dict, law: str, key: str, against: str | None = None) -> float:
         return float(table[law][key]) / (float(table[against][key]) if against else 1.0)
@@ -163,7 +170,7 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
         # each law against the reference: travel within 4 %, comfort within 9 % with two busy cores beside
         for key, rel in (("rms_theta_deg", 0.12), ("rms_accel_rad_s2", 0.15)):
             relative = figure(over, law, key, "passive 1 A")
-            assert relative == pytest.approx(figure(sim, law, key, "passive 1 A"), rel=rel), (law, key)
+            assert relative == pytest.approx(figure(sim, law, key, "passive 1 A"), rel=rel), (law, key, seen)
 
 
 def test_the_encoders_arm_acceleration_is_taken_on_the_devices_clock():

@@ -422,6 +422,17 @@ COMPARE = Section(
         "rest_s": Field(
             "float", 5.0, low=0.0, high=600.0, doc="on a real rig: time at rest (0 A, road stopped) between laws"
         ),
+        "max_pause_ms": Field(
+            "float",
+            20.0,
+            low=0.0,
+            low_open=True,
+            high=10000.0,
+            doc="on a real rig: a law whose host paused longer (its road speed held) is run again",
+        ),
+        "repeats": Field(
+            "int", 2, low=0, high=10, doc="on a real rig: times a law is run again for a host pause (max_pause_ms)"
+        ),
         "jobs": Field("int", 1, low=1, high=64, doc="simulated rig: laws run in this many processes (--jobs)"),
         "road": Field("str", "iso8608:C", doc="the road every law runs on (--road syntax)"),
         "duration_s": Field(

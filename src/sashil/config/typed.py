@@ -243,6 +243,8 @@ class CompareSection(TypedDict):
     coil_resistance_ohm: ReadOnly[float]
     settle_s: ReadOnly[float]
     rest_s: ReadOnly[float]
+    max_pause_ms: ReadOnly[float]
+    repeats: ReadOnly[int]
     jobs: ReadOnly[int]
     road: ReadOnly[str]
     duration_s: ReadOnly[float]

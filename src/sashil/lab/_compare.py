@@ -42,6 +42,7 @@ import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -60,6 +61,7 @@ from sashil.engine.checks import check_road_ahead
 from sashil.engine.resolve import apply_overrides
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.compare_metrics import METRICS, LawResult, metrics_of
+from sashil.lab.compare_pauses import PausePolicy, paused_note, run_unpaused
 from sashil.lab.compare_report import best_passive, plot_compare, shares_of_bound, write_compare_md, write_metrics_csv
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.hysteretic_bound import bound_on_chain, hysteretic_bound, model_passive
@@ -96,7 +98,17 @@ __all__ = [
 READS = {
     **{
         key: f"compare.{key}"
-        for key in ("road", "duration_s", "jobs", "rest_s", "settle_s", "accel_bandwidth_hz", "coil_resistance_ohm")
+        for key in (
+            "road",
+            "duration_s",
+            "jobs",
+            "rest_s",
+            "max_pause_ms",
+            "repeats",
+            "settle_s",
+            "accel_bandwidth_hz",
+            "coil_resistance_ohm",
+        )
     },
     **RoadParts.READS,
 }
@@ -229,14 +241,18 @@ def law_summary(result: Any, config: RunConfig, road_text: str, duration: float)
         "duration_s": duration,
         "status": result.status,
         "accel_source": result.accel_source,
+        "pauses_ms": result.pauses_ms,
         "metrics": result.metrics,
         "runs": [{"folder": ".", "controller": result.label, **result.metrics}],
     }
 
 
-def _run_jobs(jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_event: Listener) -> list[Any]:
+def _run_jobs(
+    jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_event: Listener, policy: PausePolicy
+) -> list[Any]:
     """Run the jobs: in ``processes`` processes on the virtual clock, else one after another with
-    the rig at rest for ``rest_s`` between them."""
+    the rig at rest for ``rest_s`` between them, each run again while its host paused longer than
+    ``policy`` allows (:func:`~sashil.lab.compare_pauses.run_unpaused`)."""
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
@@ -257,11 +273,16 @@ def _run_jobs(jobs: list[Any], processes: int, rest_s: float, virtual: bool, on_
         for result in results:
             done(result)
         return results
+
+    def rest() -> None:
+        if not virtual and rest_s > 0:
+            time.sleep(rest_s)  # the runner left the rig at 0 A with the road stopped: let it settle
+
     results = []
     for i, job in enumerate(jobs):
-        if i and not virtual and rest_s > 0:
-            time.sleep(rest_s)  # the runner left the rig at 0 A with the road stopped: let it settle
-        result = run_job(job)
+        if i:
+            rest()
+        result = run_job(job) if virtual else run_unpaused(partial(run_job, job), rest, policy, on_event)
         done(result)
         results.append(result)
     return results
@@ -375,7 +396,8 @@ def compare(
         )
     )
     start = time.perf_counter()
-    results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event)
+    policy = PausePolicy.of(section)
+    results = _run_jobs(jobs, processes, float(section["rest_s"]), virtual, on_event, policy)
     wall = time.perf_counter() - start
     configs = {job.label: job.config for job in jobs}
     summaries = {r.label: law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
@@ -384,7 +406,7 @@ def compare(
     bound = _bound(run, road_profile, duration, on_event)
     bound_rms = _scale_bound(run, road_profile, duration, bound, results, configs)
     header = _header(run, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
-    notes = _notes(results, section)
+    notes = _notes(results, section, policy)
     gain = bound.gain_pct if bound is not None else float("nan")
     shares = shares_of_bound(results, bound_rms)
     params = {label: summary["parameters"] for label, summary in summaries.items()}
@@ -481,9 +503,12 @@ def _header(
     return header
 
 
-def _notes(results: list[LawResult], section: Mapping[str, Any]) -> list[str]:
-    """The notes under ``compare.md``'s table: what its columns mean and where each law's run is."""
+def _notes(results: list[LawResult], section: Mapping[str, Any], policy: PausePolicy) -> list[str]:
+    """The notes under ``compare.md``'s table: the laws the host's pauses ran again, what its columns
+    mean and where each law's run is."""
+    paused = paused_note(results, policy)
     return [
+        *([paused] if paused else []),
         _accel_note(results, float(section["accel_bandwidth_hz"])),
         f"Coil energy: R·∫i² dt with R = {section['coil_resistance_ohm']:g} Ω (compare.coil_resistance_ohm).",
         "θ̈2 vs best passive: 1 − RMS θ̈2 / that of the best constant current run (positive: better).",
@@ -534,6 +559,7 @@ def _summary(
                 "status": r.status,
                 "accel_source": r.accel_source,
                 "wall_s": r.wall_s,
+                "pauses_ms": r.pauses_ms,
                 **r.metrics,
                 "share_of_bound_pct": shares.get(r.label, float("nan")),
             }

@@ -40,6 +40,9 @@ class LawResult:
     accel_source: str = ""
     #: the runner's common summary keys of the law's run (timing, trips, controller_stats, ...)
     summary: dict[str, Any] = field(default_factory=dict)
+    #: the host's longest pause in each run of the law [ms], the last the one kept
+    #: (:mod:`sashil.lab.compare_pauses`); empty where the laws ran on the virtual clock
+    pauses_ms: list[float] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
