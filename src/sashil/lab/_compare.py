@@ -4,8 +4,9 @@
 Each law runs on the road ``compare.road`` for ``compare.duration_s`` through the one runner, beside the passive damper at 0 A and at i_max, which are always
 included. Every law is checked before anything runs. On the simulated rig on the virtual clock the
 laws may run in ``compare.jobs`` parallel processes; on any other rig they run one after another,
-the rig at rest (0 A, the road stopped) for ``compare.rest_s`` in between. A law that fails or trips
-gets its row saying why; the others still run.
+the rig at rest (0 A, the road stopped) for ``compare.rest_s`` in between, and a law whose host paused
+longer than ``compare.max_pause_ms`` runs again (:mod:`sashil.lab.compare_pauses`). A law that fails
+or trips gets its row saying why; the others still run.
 
 A :class:`LawJob` is one law's run: its label, its checked config (``controller.law`` and its
 parameters), the road spec, the duration and its run folder. :func:`run_job` builds the law's stage
