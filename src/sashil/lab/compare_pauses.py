@@ -42,6 +42,10 @@ class PausePolicy:
         """The policy of a run's ``compare`` options."""
         return cls(float(section["max_pause_ms"]), int(section["repeats"]))
 
+    def too_long(self, pause_ms: float) -> bool:
+        """Whether a run whose host paused ``pause_ms`` did not meet the others' road (NaN: no)."""
+        return pause_ms > self.max_pause_ms
+
 
 def pause_ms(summary: Mapping[str, Any]) -> float:
     """A run's longest host pause [ms]: its loop's worst lateness (NaN when its summary has none)."""
@@ -65,7 +69,7 @@ def run_unpaused(
         result = run()
         pause = pause_ms(result.summary)
         pauses.append(pause)
-        if not result.ok or not pause > policy.max_pause_ms or len(pauses) > policy.repeats:
+        if not result.ok or not policy.too_long(pause) or len(pauses) > policy.repeats:
             result.pauses_ms = pauses
             return result
         on_event(
@@ -84,7 +88,7 @@ def paused_note(results: Sequence[LawResult], policy: PausePolicy) -> str | None
     """The line under ``compare.md``'s table for the laws run again, or whose every run paused (None:
     every law ran unpaused the first time)."""
     again = {r.label: r.pauses_ms for r in results if len(r.pauses_ms) > 1}
-    still = [r.label for r in results if r.pauses_ms and r.pauses_ms[-1] > policy.max_pause_ms]
+    still = [r.label for r in results if r.pauses_ms and policy.too_long(r.pauses_ms[-1])]
     if not again and not still:
         return None
     parts = []
