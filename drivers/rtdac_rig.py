@@ -217,8 +217,13 @@ class RtdacRig(RigInterface):
         image[reg.encoder_reset] = 0  # every counter counting
         for kind, channel in ((w.coil_output, w.coil_channel), (w.road_output, w.road_channel)):
             if kind == "pwm":
-                image[reg.pwm_prescaler_word(channel)] = w.pwm_prescaler & 0x7FFF
-                image[reg.pwm_mode_word(channel)] = (PWM_MODE_CODE[w.pwm_mode] << 1) | ((w.pwm_prescaler >> 15) & 1)
+                mode_word = reg.pwm_mode_word(channel)
+                if w.pwm_prescaler is not None:
+                    image[reg.pwm_prescaler_word(channel)] = w.pwm_prescaler & 0x7FFF
+                    high = (w.pwm_prescaler >> 15) & 1
+                else:
+                    high = image[mode_word] & 1  # the board's own prescaler stays
+                image[mode_word] = (PWM_MODE_CODE[w.pwm_mode] << 1) | high
                 image[reg.pwm_width_word(channel)] = 0
             elif kind == "da":
                 image[reg.da_word(channel)] = DA_ZERO

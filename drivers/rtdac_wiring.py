@@ -26,7 +26,7 @@ class Wiring:
     coil_channel: int = 0
     coil_map_current_a: tuple[float, ...] = (0.0, 1.0)
     coil_map_output: tuple[float, ...] = (0.0, 1.0)
-    coil_sense_ad: int | None = 0
+    coil_sense_ad: int | None = None
     coil_sense_a_per_v: float = 0.2
     coil_sense_offset_v: float = 0.0
     coil_loop_ki_per_s: float = 20.0
@@ -37,8 +37,13 @@ class Wiring:
     road_kp_per_rad: float = 20.0
     road_lag_s: float = 0.02
     road_output_limit: float = 10.0
-    pwm_prescaler: int = 0
+    pwm_prescaler: int | None = None
     pwm_mode: str = "12-bit"
+    coil_loop_authority: float = 0.25
+    heartbeat_bit: int | None = None
+    confirmed: tuple[str, ...] = ()
+    bringup_current_max_a: float = 0.3
+    bringup_road_output: float = 0.25
 
     @classmethod
     def from_section(cls, section: Mapping[str, Any], **changes: Any) -> Wiring:

@@ -55,7 +55,14 @@ __all__ = [{names}]
 #: choices that plugins extend (a backend is an entry point): typed as the plain string they are
 OPEN_CHOICES = {("driver", "name")}
 #: a schema kind -> its Python type in a resolved config (lists are tuples once frozen)
-KINDS = {"float": "float", "int": "int", "bool": "bool", "str": "str", "float_list": "tuple[float, ...]"}
+KINDS = {
+    "float": "float",
+    "int": "int",
+    "bool": "bool",
+    "str": "str",
+    "float_list": "tuple[float, ...]",
+    "choice_list": "tuple[str, ...]",
+}
 
 
 def class_name(path: tuple[str, ...]) -> str:

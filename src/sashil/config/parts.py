@@ -91,16 +91,29 @@ class SafetyParts:
     slew_a_per_s: float
     sensor_timeout_cycles: int
     trip_on_device_fault: bool
+    max_angle_rate_rad_s: float = 60.0
+    arm_travel_deg: float | None = None
+    road_error_max_rad: float = 0.05
+    road_error_ms: float = 20.0
+    road_limit_ms: float = 50.0
+    coil_authority_ms: float = 50.0
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> SafetyParts:
         safety, rig = config["safety"], config["rig"]
+        travel = safety["arm_travel_deg"]
         return cls(
             current_max_a=float(rig["current_max_a"]),
             angle_limit_deg=float(rig["angle_limit_deg"]) if safety["angle_interlock"] else None,
             slew_a_per_s=float(safety["slew_a_per_s"]),
             sensor_timeout_cycles=int(safety["sensor_timeout_cycles"]),
             trip_on_device_fault=bool(safety["trip_on_device_fault"]),
+            max_angle_rate_rad_s=float(safety["max_angle_rate_rad_s"]),
+            arm_travel_deg=None if travel is None else float(travel),
+            road_error_max_rad=float(safety["road_error_max_rad"]),
+            road_error_ms=float(safety["road_error_ms"]),
+            road_limit_ms=float(safety["road_limit_ms"]),
+            coil_authority_ms=float(safety["coil_authority_ms"]),
         )
 
 

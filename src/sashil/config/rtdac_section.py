@@ -15,6 +15,13 @@ from sashil.errors import ConfigError
 
 #: the highest channel number a board can have (4-bit module counts; 16 A/D: RTDACBoard.cs)
 _TOP = 15
+#: the coil's wiring keys: until doctor --walk confirms them all, the coil runs under its bring-up cap
+COIL_KEYS = ("coil_output", "coil_channel", "coil_map_current_a", "coil_map_output")
+#: the road's wiring keys: until all are confirmed, the road motor runs under its bring-up cap
+ROAD_KEYS = ("road_output", "road_channel", "road_encoder", "road_counts_per_rev", "road_reversed")
+#: the arm's and the coil sense's keys, which the walk also confirms
+OTHER_KEYS = ("arm_encoder", "arm_counts_per_rev", "arm_reversed", "coil_sense_ad", "coil_sense_a_per_v")
+WIRING_KEYS = COIL_KEYS + ROAD_KEYS + OTHER_KEYS
 
 
 def check_rtdac_section(given: Any, section: dict[str, Any], source: str, dotted: str) -> dict[str, Any]:
@@ -121,7 +128,12 @@ RTDAC = Section(
             doc="the output at each current point: a duty 0-1 (pwm) or volts (da); between points linear (a guess: calibrate it)",
         ),
         "coil_sense_ad": Field(
-            "int?", 0, low=0, high=_TOP, doc="A/D channel that reads the coil current (null: none wired; a guess)"
+            "int?",
+            None,
+            low=0,
+            high=_TOP,
+            doc="A/D channel that reads the coil current (null: none wired, current_a empty; set it once "
+            "doctor --walk confirms a channel)",
         ),
         "coil_sense_a_per_v": Field("float", 0.2, low=1e-6, high=1e6, doc="coil current per A/D volt [A/V] (a guess)"),
         "coil_sense_offset_v": Field("float", 0.0, low=-10.0, high=10.0, doc="A/D volts at 0 A [V]"),
@@ -167,8 +179,53 @@ RTDAC = Section(
         "road_output_limit": Field(
             "float", 10.0, low=0.0, low_open=True, high=10.0, doc="largest road output magnitude [V, or duty]"
         ),
-        "pwm_prescaler": Field("int", 0, low=0, high=0xFFFF, doc="PWM prescaler written to the channels sashil drives"),
+        "pwm_prescaler": Field(
+            "int?",
+            None,
+            low=0,
+            high=0xFFFF,
+            doc="PWM prescaler written to the channels sashil drives (null: the board's own, as read, stays)",
+        ),
         "pwm_mode": Field("choice", "12-bit", choices=("12-bit", "8-bit"), doc="PWM width resolution"),
+        # what doctor --walk confirmed, and the limits until it has ------------------------------
+        "confirmed": Field(
+            "choice_list",
+            [],
+            choices=WIRING_KEYS,
+            doc="the wiring keys doctor --walk confirmed on this rig; a group not wholly confirmed runs under "
+            "its bring-up cap (the coil: " + ", ".join(COIL_KEYS) + "; the road: " + ", ".join(ROAD_KEYS) + ")",
+        ),
+        "bringup_current_max_a": Field(
+            "float",
+            0.3,
+            low=0.0,
+            high=10.0,
+            doc="largest coil current [A] while the coil's wiring is not confirmed (a wrong channel drives "
+            "at most this map's output)",
+        ),
+        "bringup_road_output": Field(
+            "float",
+            0.25,
+            low=0.0,
+            high=1.0,
+            doc="largest road output, a fraction of road_output_limit, while the road's wiring is not confirmed",
+        ),
+        "coil_loop_authority": Field(
+            "float",
+            0.25,
+            low=0.0,
+            high=1.0,
+            doc="largest correction of the current loop, a fraction of the map's output for the command: the "
+            "coil's output stays within (1 ± this) x the map's (a dead sense cannot drive it to full duty)",
+        ),
+        "heartbeat_bit": Field(
+            "int?",
+            None,
+            low=0,
+            high=25,
+            doc="digital output bit toggled every cycle for a retriggerable watchdog relay on the power "
+            "stages (null: none); it stops when the loop stops, and the relay drops both stages",
+        ),
     },
     doc="INTECO's RT-DAC/USB2 board (driver.name: rtdac): finding it, and the rig's wiring to it",
     check=check_rtdac_section,

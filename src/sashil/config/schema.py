@@ -18,7 +18,7 @@ from sashil.errors import ConfigError
 class Field:
     """One leaf key: its kind, default and allowed range or choices."""
 
-    kind: str  # "float" | "int" | "bool" | "str" | "choice" | "float?" | "str?" | "float_list"
+    kind: str  # "float" | "int" | "bool" | "str" | "choice" | "float?" | "str?" | "float_list" | "choice_list"
     default: Any
     low: float | None = None
     high: float | None = None
@@ -37,6 +37,8 @@ class Field:
             return "a string" + (" or null" if self.kind.endswith("?") else "")
         if self.kind == "float_list":
             return "a list of numbers"
+        if self.kind == "choice_list":
+            return "a list of names from " + ", ".join(repr(c) for c in self.choices)
         word = "an integer" if self.kind == "int" else "a number"
         parts = []
         if self.low is not None:
@@ -67,6 +69,10 @@ class Field:
             if value not in self.choices:
                 raise fail()
             return value
+        if kind == "choice_list":
+            if not isinstance(value, (list, tuple)) or any(item not in self.choices for item in value):
+                raise fail()
+            return list(dict.fromkeys(value))
         if kind == "float_list":
             if not isinstance(value, (list, tuple)):  # a resolved (read-only) config holds tuples
                 raise fail()

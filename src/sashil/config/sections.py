@@ -195,6 +195,42 @@ SAFETY = Section(
             "int", 20, low=1, high=1_000_000, doc="trip after this many cycles without a fresh sample"
         ),
         "trip_on_device_fault": Field("bool", True, doc="trip when the device reports a fault or overcurrent flag"),
+        "max_angle_rate_rad_s": Field(
+            "float",
+            60.0,
+            low=0.0,
+            low_open=True,
+            doc="the fastest either encoder's angle can turn [rad/s]: a step between two samples faster than "
+            "this (plus one count) is an encoder fault (an index reset, wrong counts per revolution) and trips",
+        ),
+        "arm_travel_deg": Field(
+            "float?",
+            None,
+            low=0.0,
+            low_open=True,
+            high=360.0,
+            doc="the arm's travel |theta2| from where its counter was zeroed [deg]: beyond it trips (null: off)",
+        ),
+        "road_error_max_rad": Field(
+            "float",
+            0.05,
+            low=0.0,
+            low_open=True,
+            doc="a host-closed road loop's largest angle error from its reference [rad], held road_error_ms, trips",
+        ),
+        "road_error_ms": Field(
+            "float", 20.0, low=0.0, doc="how long the road's error may stay beyond road_error_max_rad [ms]"
+        ),
+        "road_limit_ms": Field(
+            "float", 50.0, low=0.0, doc="how long the road motor's output may stay at its limit [ms] before a trip"
+        ),
+        "coil_authority_ms": Field(
+            "float",
+            50.0,
+            low=0.0,
+            doc="how long the coil's current loop may stay at its authority limit [ms] (its sense disagrees with "
+            "the command) before a trip",
+        ),
     },
     doc="the host-side safety supervisor (current clamp [0, rig.current_max_a] is always on)",
 )

@@ -106,8 +106,13 @@ class RtdacSection(TypedDict):
     road_kp_per_rad: ReadOnly[float]
     road_lag_s: ReadOnly[float]
     road_output_limit: ReadOnly[float]
-    pwm_prescaler: ReadOnly[int]
+    pwm_prescaler: ReadOnly[int | None]
     pwm_mode: ReadOnly[Literal["12-bit", "8-bit"]]
+    confirmed: ReadOnly[tuple[str, ...]]
+    bringup_current_max_a: ReadOnly[float]
+    bringup_road_output: ReadOnly[float]
+    coil_loop_authority: ReadOnly[float]
+    heartbeat_bit: ReadOnly[int | None]
 
 
 class LoopRtSection(TypedDict):
@@ -140,6 +145,12 @@ class SafetySection(TypedDict):
     slew_a_per_s: ReadOnly[float]
     sensor_timeout_cycles: ReadOnly[int]
     trip_on_device_fault: ReadOnly[bool]
+    max_angle_rate_rad_s: ReadOnly[float]
+    arm_travel_deg: ReadOnly[float | None]
+    road_error_max_rad: ReadOnly[float]
+    road_error_ms: ReadOnly[float]
+    road_limit_ms: ReadOnly[float]
+    coil_authority_ms: ReadOnly[float]
 
 
 class DropTestSection(TypedDict):
