@@ -48,6 +48,12 @@ class RigSample:
     arm_edge_dir: int = 0
     road_edge_us: int = NO_EDGE  # the same for the road encoder
     road_edge_dir: int = 0
+    #: what a backend that closes the road's and the coil's loops on the host saw at its last write:
+    #: the road angle's error from its reference [rad] (NaN: no host road loop, or no road commanded),
+    #: the road output held at its bound, and the coil's current loop held at its authority bound
+    road_error_rad: float = math.nan
+    road_at_limit: bool = False
+    coil_at_authority: bool = False
 
     @property
     def theta_rad(self) -> float:
@@ -115,6 +121,12 @@ class RigCapabilities:
     #: the backend reports the plant's true damper torque (a simulation): ``plant_truth`` returns it
     #: and the arm acceleration it causes, which no sensor of a real rig measures
     true_torque: bool = False
+    #: the road motor can be driven both ways; False: one direction only (a road whose speed changes
+    #: sign is refused before anything is energised)
+    road_reverses: bool = True
+    #: a sample's ``current_a`` is a measured coil current; False: nothing senses it (NaN), so a stop
+    #: can confirm the outputs at rest but not 0 A
+    current_sensed: bool = True
 
 
 class PlantTruth(NamedTuple):

@@ -6,7 +6,7 @@ and, where an A/D senses the coil current, corrects it with an integral loop on 
 :class:`RoadDrive` closes the road motor's loop on the road encoder, as sashil's own board does on
 its side: the commanded road speed integrates into a reference angle, and the output is the speed's
 feed-forward (led by the motor's lag: a first-order motor's inverse) plus a gain on the angle's
-error; it keeps the tracking error's statistics.
+error; it keeps the tracking error's statistics and says when its output sits at a bound.
 """
 
 from __future__ import annotations
@@ -27,37 +27,75 @@ def interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
 
 
 class CoilDrive:
-    """The coil current's output (module docstring); ``ki_per_s`` 0 or no sense: the map alone."""
+    """The coil current's output (module docstring); ``ki_per_s`` 0 or no sense: the map alone.
+
+    The loop's authority is bounded: the output stays within ``rest + (1 ± authority)·(map - rest)``
+    of the map's output for the command, so a sense that reads nothing (or too much) moves the coil at
+    most that far from the map; :attr:`at_authority` says the bound held the output this cycle.
+    """
 
     def __init__(
-        self, map_current_a: Sequence[float], map_output: Sequence[float], ki_per_s: float, current_max_a: float
+        self,
+        map_current_a: Sequence[float],
+        map_output: Sequence[float],
+        ki_per_s: float,
+        current_max_a: float,
+        authority: float = 0.25,
     ):
         self.map_current_a = tuple(map_current_a)
         self.map_output = tuple(map_output)
         self.ki_per_s = ki_per_s
         self.current_max_a = current_max_a
+        self.authority = authority
         self.rest = self.map_output[0]
+        self.at_authority = False
         self._integral_a = 0.0
 
     def reset(self) -> None:
         self._integral_a = 0.0
+        self.at_authority = False
 
     def output(self, current_a: float, sensed_a: float | None, dt_s: float) -> float:
         """The output for ``current_a``; the loop integrates the error of the sensed current
-        (None: not sensed) over ``dt_s``, its correction held within ±``current_max_a``."""
+        (None: not sensed) over ``dt_s``, within the authority bound (class docstring)."""
+        self.at_authority = False
         if current_a <= 0.0 or current_a != current_a:
             self._integral_a = 0.0
             return self.rest
-        if sensed_a is not None and self.ki_per_s > 0.0 and dt_s > 0.0:
-            step = self.ki_per_s * (current_a - sensed_a) * min(dt_s, 0.01)
-            self._integral_a = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
-        return interp(current_a + self._integral_a, self.map_current_a, self.map_output)
+        rest = self.rest
+        planned = interp(current_a, self.map_current_a, self.map_output)
+        if sensed_a is None or self.ki_per_s <= 0.0 or dt_s <= 0.0 or sensed_a != sensed_a:
+            return planned
+        step = self.ki_per_s * (current_a - sensed_a) * min(dt_s, 0.01)
+        integral = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
+        out = interp(current_a + integral, self.map_current_a, self.map_output)
+        span = self.authority * (planned - rest)
+        low, high = planned - span, planned + span
+        if out > high or out < low:
+            self.at_authority = True  # held at the bound: the integral stays where it was (no wind-up)
+            return high if out > high else low
+        self._integral_a = integral
+        return out
 
 
 class RoadDrive:
-    """The road motor's loop on its encoder (module docstring)."""
+    """The road motor's loop on its encoder (module docstring).
 
-    def __init__(self, output_per_rad_s: float, kp_per_rad: float, limit: float, rest: float = 0.0, lag_s: float = 0.0):
+    ``limit`` bounds the output's magnitude; ``reverses`` False (a one-direction PWM output) bounds it
+    below by 0, so a negative output (a brake the wiring cannot give) is rest, never forward drive.
+    Each cycle leaves :attr:`error_rad` (the angle error, NaN with no road commanded) and
+    :attr:`at_limit` (the output held at a bound) for the safety supervisor.
+    """
+
+    def __init__(
+        self,
+        output_per_rad_s: float,
+        kp_per_rad: float,
+        limit: float,
+        rest: float = 0.0,
+        lag_s: float = 0.0,
+        reverses: bool = True,
+    ):
         self.output_per_rad_s = output_per_rad_s
         self.kp_per_rad = kp_per_rad
         #: the motor's time constant: its speed lags its output as a first-order system would, so the
@@ -65,12 +103,16 @@ class RoadDrive:
         self.lag_s = lag_s
         self._last_speed: float | None = None
         self.limit = limit
+        self.reverses = reverses
         self.rest = rest
         self.speed_rad_s: float | None = None
         self.reference_rad: float | None = None
+        self.error_rad = math.nan
+        self.at_limit = False
         self.error_count = 0
         self.error_sq_sum = 0.0
         self.error_max_rad = 0.0
+        self.limit_cycles = 0
 
     def command(self, speed_rad_s: float | None) -> None:
         """The road speed from now on (None or NaN: unchanged)."""
@@ -82,12 +124,15 @@ class RoadDrive:
         self.speed_rad_s = None
         self.reference_rad = None
         self._last_speed = None
+        self.error_rad = math.nan
+        self.at_limit = False
 
     def output(self, road_angle_rad: float, dt_s: float) -> float:
         """The motor's output (volts or a signed duty) at the measured road angle; rest when no road
         speed was ever commanded."""
         speed = self.speed_rad_s
         if speed is None:
+            self.at_limit = False
             return self.rest
         accel = 0.0
         if self.reference_rad is None:
@@ -98,17 +143,25 @@ class RoadDrive:
                 accel = (speed - self._last_speed) / dt_s
         self._last_speed = speed
         error = self.reference_rad - road_angle_rad
+        self.error_rad = error
         self.error_count += 1
         self.error_sq_sum += error * error
         self.error_max_rad = max(self.error_max_rad, abs(error))
         out = (speed + self.lag_s * accel) * self.output_per_rad_s + self.kp_per_rad * error
-        return min(max(out, -self.limit), self.limit)
+        low = -self.limit if self.reverses else 0.0
+        held = min(max(out, low), self.limit)
+        self.at_limit = held != out
+        if self.at_limit:
+            self.limit_cycles += 1
+        return held
 
     def tracking(self) -> dict[str, float | int]:
-        """How well the road followed its reference: RMS and largest angle error [rad], cycles."""
+        """How well the road followed its reference: RMS and largest angle error [rad], cycles, and
+        the cycles its output was held at a limit."""
         n = self.error_count
         return {
             "road_cycles": n,
             "road_error_rms_rad": round(math.sqrt(self.error_sq_sum / n), 6) if n else 0.0,
             "road_error_max_rad": round(self.error_max_rad, 6),
+            "road_limit_cycles": self.limit_cycles,
         }

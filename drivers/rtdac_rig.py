@@ -1,27 +1,36 @@
 """The rtdac backend: INTECO's RT-DAC/USB2 board over USB (pyusb), the rig's wiring from config.
 
-One loop cycle is one exchange with the board: ``write`` sends a write frame with the cycle's
-outputs, ``read`` asks for a read frame and decodes it (:mod:`~sashil.drivers.rtdac_codec`). The
-register map is chosen from the header of the first frame (:mod:`~sashil.drivers.rtdac_map`); the
-wiring (which counter is the arm and which the road wheel, which output drives the coil and which
-the road motor, which A/D senses the coil) comes from the ``rtdac`` section, read once into plain
-values here.
+One loop cycle is one exchange with the board: ``read`` asks for a read frame and decodes it
+(:mod:`~sashil.drivers.rtdac_codec`), ``write`` sends a write frame built from that read: the board's
+own words as read this cycle, with only sashil's words changed (the coil's and the road motor's
+output words, the direction and heartbeat bits; at configure the channels' modes, the sense's gain
+and the counters' reset). The register map is chosen from the header of the first frame
+(:mod:`~sashil.drivers.rtdac_map`); the wiring comes from the ``rtdac`` section, read once into plain
+values, and what of it ``sashil doctor --walk`` has not confirmed runs under the bring-up caps
+(:mod:`~sashil.drivers.rtdac_bringup`).
+
+The counters: configure, with both outputs at rest and before any plan asks the operator to touch
+the arm, pulses the arm's and the road's reset bits, then reads the counters once more and subtracts
+what they still show (a board that ignores the reset word): theta2 and theta1 read 0 at the rest the
+arm hangs in.
 
 The coil: the commanded current becomes a PWM duty or a D/A voltage through the power stage's
-calibration map, corrected by an integral loop on the sensed current where an A/D senses it
-(:class:`~sashil.drivers.rtdac_outputs.CoilDrive`). A sample's ``current_a`` is that sensed current;
-with no sense wired it is the commanded current through the coil's first-order lag
-(``rig.coil_tau_s``), and :meth:`RtdacRig.link_stats` says which (``current_source``).
+calibration map, corrected by an integral loop on the sensed current where an A/D senses it, within
+the loop's authority (:class:`~sashil.drivers.rtdac_outputs.CoilDrive`). A sample's ``current_a`` is
+that sensed current; with no sense wired it is NaN: nothing measures it, and the stop says "outputs
+at rest (no current sense)".
 
 The road motor: the host closes its loop on the road encoder
-(:class:`~sashil.drivers.rtdac_outputs.RoadDrive`); ``link_stats`` reports how well it tracked.
+(:class:`~sashil.drivers.rtdac_outputs.RoadDrive`); each sample carries the loop's error and whether
+its output, or the coil's loop, sat at a bound, for the safety supervisor's road and coil trips.
 
 Safety: the board has no watchdog and keeps its last outputs when the host goes quiet (neither
-public register map has a timeout or an enable word). So every stop path ends in
-:meth:`RtdacRig.deactivate`, which writes both outputs to rest (duty 0, or the D/A's 0 V) and
-confirms it from the board's readback of those registers (and the sensed current, where one is
-wired). What no host code covers (the host and the loop both killed, the cable pulled) is the
-hardware E-stop's to cover.
+public register map has a timeout or an enable word). Every stop path ends in
+:meth:`RtdacRig.deactivate`, which writes both outputs to rest and confirms it from the board's
+readback of those registers, masked to the bits each register holds (and the sensed current where
+one is wired), retrying until a deadline. ``rtdac.heartbeat_bit`` toggles a digital output every
+cycle for a retriggerable watchdog relay on the power stages: the one path that covers the host
+killed outright or the cable pulled.
 """
 
 from __future__ import annotations
@@ -34,17 +43,19 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample, RigState
+from sashil.drivers.rtdac_bringup import BringUp
 from sashil.drivers.rtdac_codec import (
     AD_BUSY_BIT,
-    DA_ZERO,
+    DA_MAX,
+    PWM_MAX,
     PWM_MODE_CODE,
+    WRITE_MARK,
     Header,
     ad_volts,
     counter32,
     da_word,
     decode_frame,
     decode_header,
-    encode_write,
     pwm_width,
 )
 from sashil.drivers.rtdac_map import RegisterMap, choose_map, known_maps
@@ -59,6 +70,12 @@ log = logging.getLogger("sashil")
 SAFE_CURRENT_A = 0.02
 #: how long deactivate resends the rest frame for a readback (and a sensed current) that confirm it
 SAFE_CONFIRM_S = 0.3
+#: exchanges in a row whose readback of an output word differs from what was written before the
+#: backend concludes the board ignores that word
+IGNORED_AFTER = 3
+_HIGH7 = bytes(b & 0x7F for b in range(256))  # a written word's high byte holds 7 bits (RTDACUSB2.cs line 177)
+_SIGN32 = 1 << 31
+_WRAP32 = 1 << 32
 
 
 class RtdacRig(RigInterface):
@@ -82,7 +99,8 @@ class RtdacRig(RigInterface):
         super().__init__()
         self.usb = usb
         self.wiring = wiring
-        self.current_max_a = current_max_a
+        self.bringup = BringUp.of(wiring, current_max_a)
+        self.current_max_a = self.bringup.current_max_a
         self.coil_tau_s = coil_tau_s
         self.application = application
         self.map_dir = map_dir
@@ -90,21 +108,39 @@ class RtdacRig(RigInterface):
         self.header: Header | None = None
         self.map: RegisterMap | None = None
         self.coil = CoilDrive(
-            wiring.coil_map_current_a, wiring.coil_map_output, wiring.coil_loop_ki_per_s, current_max_a
+            wiring.coil_map_current_a,
+            wiring.coil_map_output,
+            wiring.coil_loop_ki_per_s,
+            current_max_a,
+            wiring.coil_loop_authority,
         )
         self.road = RoadDrive(
-            wiring.road_output_per_rad_s, wiring.road_kp_per_rad, wiring.road_output_limit, 0.0, wiring.road_lag_s
+            wiring.road_output_per_rad_s,
+            wiring.road_kp_per_rad,
+            self.bringup.road_output_limit,
+            0.0,
+            wiring.road_lag_s,
+            reverses=road_reverses(wiring),
         )
-        self._frame = bytearray()
+        self._raw: Any = None  # the latest read frame, as read
+        self._frame = bytearray()  # the write frame being built
         self._coil_word = 0
         self._road_word = 0
-        self._dir_word: int | None = None
+        self._out_mask = 0x3FFF  # the bits an output word holds: the D/A's 14, or the PWM width's
+        #: (word, bit mask, bits) sashil owns in a word that is otherwise the board's: the direction
+        #: and heartbeat bits, and their pins' mode and direction
+        self._bits: list[tuple[int, int, int]] = []
+        self._dir: tuple[int, int] | None = None  # (word, bit) of the road's direction
+        self._beat: tuple[int, int] | None = None  # (word, bit) of the heartbeat
+        self._beat_on = False
+        self._settings: dict[int, int] = {}  # words set once at configure (modes, prescalers, gain)
+        self._offsets = (0, 0)  # counts the counters showed after their reset (subtracted)
+        self._written: dict[int, int] = {}  # output word -> the value the last write frame carried
+        self._ignored: dict[int, int] = {}  # output word -> exchanges in a row it read back otherwise
         self._seq = 0
         self._t0_ns: int | None = None
-        self._last_t_ns: int | None = None
         self._road_angle = 0.0
         self._sensed_a: float | None = None
-        self._modelled_a = 0.0
         self._command_a = 0.0
         self._busy_since_ns: int | None = None
         self._busy_limit_ns = round(busy_limit_s * 1e9)
@@ -147,15 +183,20 @@ class RtdacRig(RigInterface):
 
     @property
     def capabilities(self) -> RigCapabilities:  # type: ignore[override]  # depends on the wiring
-        return RigCapabilities(road_actuator=self.wiring.road_output != "none", link=True)
+        return RigCapabilities(
+            road_actuator=self.wiring.road_output != "none",
+            link=True,
+            road_reverses=road_reverses(self.wiring),
+            current_sensed=self.wiring.coil_sense_ad is not None,
+        )
 
     def describe(self) -> str:
         return self.link.where
 
     # lifecycle --------------------------------------------------------------------------------
     def configure(self) -> None:
-        """Open the board, read its header, choose its register map, check the wiring fits it and put
-        both outputs at rest (the board keeps whatever a previous host left)."""
+        """Open the board, read its header, choose its register map, check the wiring fits it, put
+        both outputs at rest (the board keeps whatever a previous host left) and zero the counters."""
         if self.state is RigState.CLOSED:
             raise DriverError("rtdac: configure() after close()")
         if self.state is not RigState.UNCONFIGURED:
@@ -163,7 +204,8 @@ class RtdacRig(RigInterface):
         maps = known_maps(self.map_dir)
         self.link.open()
         try:
-            words = decode_frame(self.link.read_frame())
+            raw = self.link.read_frame()
+            words = decode_frame(raw)
             self.header = decode_header(words)
             if self.application is not None and self.header.application.strip() != self.application:
                 raise DriverError(
@@ -172,8 +214,9 @@ class RtdacRig(RigInterface):
                 )
             self.map = choose_map(self.header, maps)
             self._check_wiring(self.header, self.map)
-            self._build_frame(words)
-            self.link.write_frame(self._frame)
+            self._own_words(words)
+            self._raw = raw
+            self._zero_counters()
         except DriverError as err:
             self.link.close()
             if type(err) is DriverError:
@@ -182,6 +225,9 @@ class RtdacRig(RigInterface):
         except BaseException:
             self.link.close()
             raise
+        line = self.bringup.line()
+        if line is not None:
+            log.warning("%s", line)
         self.state = RigState.CONFIGURED
 
     def _check_wiring(self, header: Header, reg: RegisterMap) -> None:
@@ -209,53 +255,98 @@ class RtdacRig(RigInterface):
         if w.coil_sense_ad is not None:
             need(w.coil_sense_ad < reg.ad_count, "coil_sense_ad", f"A/D channel {w.coil_sense_ad}")
 
-    def _build_frame(self, words: tuple[int, ...]) -> None:
-        """The write frame: the board's own settings as read, sashil's channels set up, outputs at rest."""
+    def _own_words(self, words: tuple[int, ...]) -> None:
+        """The words and bits sashil owns: set once at configure (its channels' modes, the sense's
+        gain) or every cycle (the outputs, the direction and heartbeat bits)."""
         w, reg = self.wiring, self.map
         assert reg is not None
-        image = list(words)
-        image[reg.encoder_reset] = 0  # every counter counting
+        settings: dict[int, int] = {}
         for kind, channel in ((w.coil_output, w.coil_channel), (w.road_output, w.road_channel)):
             if kind == "pwm":
                 mode_word = reg.pwm_mode_word(channel)
                 if w.pwm_prescaler is not None:
-                    image[reg.pwm_prescaler_word(channel)] = w.pwm_prescaler & 0x7FFF
+                    settings[reg.pwm_prescaler_word(channel)] = w.pwm_prescaler & 0x7FFF
                     high = (w.pwm_prescaler >> 15) & 1
                 else:
-                    high = image[mode_word] & 1  # the board's own prescaler stays
-                image[mode_word] = (PWM_MODE_CODE[w.pwm_mode] << 1) | high
-                image[reg.pwm_width_word(channel)] = 0
-            elif kind == "da":
-                image[reg.da_word(channel)] = DA_ZERO
+                    high = words[mode_word] & 1  # the board's own prescaler stays
+                settings[mode_word] = (PWM_MODE_CODE[w.pwm_mode] << 1) | high
         if w.coil_sense_ad is not None:
             word, shift = reg.ad_gain_word(w.coil_sense_ad)
-            image[word] &= ~(0x7 << shift)  # gain x1: the full ±10 V range
+            settings[word] = words[word] & ~(0x7 << shift)  # gain x1: the full ±10 V range
+        self._settings = settings
         self._coil_word = reg.pwm_width_word(w.coil_channel) if w.coil_output == "pwm" else reg.da_word(w.coil_channel)
         if w.road_output == "pwm":
             self._road_word = reg.pwm_width_word(w.road_channel)
         elif w.road_output == "da":
             self._road_word = reg.da_word(w.road_channel)
-        if w.road_output == "pwm" and w.road_direction_bit is not None:
-            bit = w.road_direction_bit
-            self._dir_word = reg.output + (1 if bit >= 15 else 0)
-            self._dir_bit = 1 << (bit % 15)
-            image[reg.pin_mode + (1 if bit >= 15 else 0)] &= ~self._dir_bit  # GPIO (RTDACBoard.cs line 13)
-            image[reg.direction + (1 if bit >= 15 else 0)] &= ~self._dir_bit  # output (line 14)
-        self._frame = bytearray(encode_write(image))
+        self._out_mask = PWM_MAX[w.pwm_mode]
+        self._bits = []
+        for name, bit in (
+            ("_dir", w.road_direction_bit if w.road_output == "pwm" else None),
+            ("_beat", w.heartbeat_bit),
+        ):
+            if bit is None:
+                setattr(self, name, None)
+                continue
+            offset, mask = (1 if bit >= 15 else 0), 1 << (bit % 15)
+            setattr(self, name, (reg.output + offset, mask))
+            self._bits += [(reg.pin_mode + offset, mask, 0), (reg.direction + offset, mask, 0)]  # GPIO, output
         self._rest_words = {self._coil_word: self._coil_rest()}
         if w.road_output != "none":
             self._rest_words[self._road_word] = self._output_word(w.road_output, self.road.rest)
+
+    def _zero_counters(self) -> None:
+        """Both outputs at rest, the arm's and the road's counters reset, and what they show after the
+        reset kept as their offsets (0 on a board that takes the reset word)."""
+        w, reg = self.wiring, self.map
+        assert reg is not None
+        bits = 1 << w.arm_encoder
+        if w.road_encoder is not None:
+            bits |= 1 << w.road_encoder
+        for reset in (bits, 0):
+            self._start_frame()
+            self._put(reg.encoder_reset, reset)
+            for word, value in self._rest_words.items():
+                self._put(word, value)
+            self._send()
+            self._raw = self.link.read_frame()
+        words = decode_frame(self._raw)
+        self._offsets = (0, 0)
+        self._offsets = (self._arm_raw(words), self._road_raw(words))
+
+    # the write frame --------------------------------------------------------------------------
+    def _start_frame(self) -> None:
+        """The write frame as the latest read: the board's own words, then sashil's settings and bits."""
+        frame = bytearray(self._raw)
+        frame[0:2] = WRITE_MARK
+        frame[3::2] = frame[3::2].translate(_HIGH7)
+        self._frame = frame
+        for word, value in self._settings.items():
+            self._put(word, value)
+        if self.map is not None:
+            self._put(self.map.encoder_reset, 0)  # every counter counting
+        for word, mask, bits in self._bits:
+            self._put_bits(word, mask, bits)
+
+    def _send(self) -> None:
+        self.link.write_frame(self._frame)
 
     def _coil_rest(self) -> int:
         return self._output_word(self.wiring.coil_output, self.coil.rest)
 
     def _output_word(self, kind: str, value: float) -> int:
+        """The register word of an output: a PWM width (a duty below 0 is 0: the wiring drives one
+        way), or a D/A voltage."""
         if kind == "pwm":
-            return pwm_width(abs(value), self.wiring.pwm_mode)
+            return pwm_width(value, self.wiring.pwm_mode)
         return da_word(value)
 
     def _put(self, word: int, value: int) -> None:
         struct.pack_into("<H", self._frame, 2 * word, value & 0x7FFF)
+
+    def _put_bits(self, word: int, mask: int, bits: int) -> None:
+        value = int.from_bytes(self._frame[2 * word : 2 * word + 2], "little")
+        self._put(word, (value & ~mask) | (bits & mask))
 
     # raw access for sashil doctor's walk: the outputs by channel, one exchange at a time ------------
     def exchange_frame(self) -> bytes:
@@ -263,9 +354,22 @@ class RtdacRig(RigInterface):
         return bytes(self._frame)
 
     def exchange(self) -> tuple[int, ...]:
-        """One exchange with the frame as it stands; the read frame's words."""
-        self.link.write_frame(self._frame)
-        return decode_frame(self.link.read_frame())
+        """One exchange with the frame as it stands (the heartbeat toggled); the read frame's words."""
+        self._beat_bit()
+        self._send()
+        self._raw = self.link.read_frame()
+        words = decode_frame(self._raw)
+        pending = bytes(self._frame)
+        self._start_frame()
+        for word in self._channel_words():
+            self._put(word, int.from_bytes(pending[2 * word : 2 * word + 2], "little"))
+        return words
+
+    def _channel_words(self) -> list[int]:
+        reg = self.map
+        assert reg is not None
+        out = [reg.pwm_width_word(c) for c in range(reg.pwm_count)] + [reg.da_word(c) for c in range(reg.da_count)]
+        return out + ([self._dir[0]] if self._dir is not None else [])
 
     def set_output(self, kind: str, channel: int, value: float) -> None:
         """Set PWM ``channel``'s duty or D/A ``channel``'s volts in the next frame (any channel: the walk
@@ -284,6 +388,8 @@ class RtdacRig(RigInterface):
         if self.state is not RigState.CONFIGURED:
             raise DriverError(f"{self.describe()}: activate() in state {self.state.value} (configure() first)")
         self.coil.reset()
+        self._ignored = {}
+        self._written = {}
         self.state = RigState.ACTIVE
 
     def deactivate(self) -> None:
@@ -293,30 +399,66 @@ class RtdacRig(RigInterface):
         was_active = self.state is RigState.ACTIVE
         if was_active:
             self.state = RigState.CONFIGURED
-        if self.link.dev is None or self.map is None:
+        if self.link.dev is None or self.map is None or self._raw is None:
             return
         start = time.monotonic()
         confirmed = False
-        try:
-            self.rest_outputs()
-            while True:
-                self.link.write_frame(self._frame)
-                words = decode_frame(self.link.read_frame())
-                at_rest = all(words[word] == value for word, value in self._rest_words.items())
+        last_error: Exception | None = None
+        while True:
+            try:
+                self._start_frame()
+                self.rest_outputs()
+                self._send()
+                self._raw = self.link.read_frame()
+                words = decode_frame(self._raw)
                 sensed = self._sense(words)
-                if at_rest and (sensed is None or abs(sensed) <= max(SAFE_CURRENT_A, 0.02 * self.current_max_a)):
+                if self._at_rest(words) and (
+                    sensed is None or abs(sensed) <= max(SAFE_CURRENT_A, 0.02 * self.current_max_a)
+                ):
                     confirmed = True
                     break
-                if time.monotonic() - start > SAFE_CONFIRM_S:
+            except Exception as err:
+                last_error = err
+                if not self._recover():
                     break
-        except Exception as err:
-            log.warning(
-                "%s: deactivate: %s: the board keeps its last outputs (the E-stop is the answer)", self.describe(), err
-            )
+            if time.monotonic() - start > SAFE_CONFIRM_S:
+                break
         self.safe_state["safe_state_confirmed"] = confirmed
         self.safe_state["safe_state_ms"] = round((time.monotonic() - start) * 1e3, 3)
         if not confirmed:
-            log.warning("%s: deactivate: the board's readback did not confirm both outputs at rest", self.describe())
+            why = f": {last_error}" if last_error is not None else ""
+            log.warning(
+                "%s: deactivate: could not confirm both outputs at rest within %g s%s; the board keeps its last "
+                "outputs: use the E-stop",
+                self.describe(),
+                SAFE_CONFIRM_S,
+                why,
+            )
+
+    def _recover(self) -> bool:
+        """After a failed exchange: the link's own recovery where it has one; whether to try again."""
+        recover = getattr(self.link, "recover", None)
+        if recover is None:
+            return False
+        try:
+            recover()
+        except Exception:
+            return False
+        return True
+
+    def _at_rest(self, words: tuple[int, ...]) -> bool:
+        """Whether the read frame shows both outputs at rest, each word masked to the bits its register holds."""
+        return all(self._read_back(words, word) == value for word, value in self._rest_words.items())
+
+    def _read_back(self, words: tuple[int, ...], word: int) -> int:
+        mask = self._out_mask if self._is_pwm(word) else DA_MAX
+        return words[word] & mask
+
+    def _is_pwm(self, word: int) -> bool:
+        w = self.wiring
+        return (word == self._coil_word and w.coil_output == "pwm") or (
+            word == self._road_word and w.road_output == "pwm"
+        )
 
     def close(self) -> None:
         if self.state is RigState.CLOSED:
@@ -335,87 +477,142 @@ class RtdacRig(RigInterface):
             return self._sensed_a  # a conversion under way: the last value stands
         return (ad_volts(value) - self.wiring.coil_sense_offset_v) * self.wiring.coil_sense_a_per_v
 
-    def read(self, t_ns: int, dt_ns: int) -> RigSample:
-        if self.state not in (RigState.CONFIGURED, RigState.ACTIVE):
-            raise DriverError(f"{self.describe()}: read() in state {self.state.value}")
-        words = decode_frame(self.link.read_frame())
+    def _arm_raw(self, words: tuple[int, ...]) -> int:
         reg, w = self.map, self.wiring
         assert reg is not None
         low, high = reg.counter_words(w.arm_encoder)
-        arm = counter32(words[low], words[high]) * (-1 if w.arm_reversed else 1)
+        return _less(counter32(words[low], words[high]), self._offsets[0])
+
+    def _road_raw(self, words: tuple[int, ...]) -> int:
+        reg, w = self.map, self.wiring
+        assert reg is not None
+        if w.road_encoder is None:
+            return 0
+        low, high = reg.counter_words(w.road_encoder)
+        return _less(counter32(words[low], words[high]), self._offsets[1])
+
+    def read(self, t_ns: int, dt_ns: int) -> RigSample:
+        if self.state not in (RigState.CONFIGURED, RigState.ACTIVE):
+            raise DriverError(f"{self.describe()}: read() in state {self.state.value}")
+        self._raw = raw = self.link.read_frame()
+        words = decode_frame(raw)
+        w = self.wiring
+        if self._written:
+            self._check_taken(words)
+        arm = self._arm_raw(words) * (-1 if w.arm_reversed else 1)
         road = 0
         if w.road_encoder is not None:
-            low, high = reg.counter_words(w.road_encoder)
-            road_raw = counter32(words[low], words[high]) * (-1 if w.road_reversed else 1)
+            road_raw = self._road_raw(words) * (-1 if w.road_reversed else 1)
             self._road_angle = road_raw * TWO_PI / w.road_counts_per_rev
             road = round(road_raw * w.arm_counts_per_rev / w.road_counts_per_rev)
+        current = math.nan
         if w.coil_sense_ad is not None:
-            if words[reg.ad_value_word(w.coil_sense_ad)] & AD_BUSY_BIT:
-                if self._busy_since_ns is None:
-                    self._busy_since_ns = t_ns
-                elif t_ns - self._busy_since_ns > self._busy_limit_ns:
-                    raise DriverIOError(
-                        f"{self.describe()}: A/D {w.coil_sense_ad} (the coil current) has stayed busy for "
-                        f"{(t_ns - self._busy_since_ns) * 1e-6:.0f} ms (a stuck busy bit)"
-                    )
-            else:
-                self._busy_since_ns = None
+            self._check_busy(words, t_ns)
             self._sensed_a = self._sense(words)
-            current = self._sensed_a if self._sensed_a is not None else math.nan
-        else:
-            if self._last_t_ns is not None and self.coil_tau_s > 0.0:
-                alpha = 1.0 - math.exp(-(t_ns - self._last_t_ns) * 1e-9 / self.coil_tau_s)
-                self._modelled_a += alpha * (self._command_a - self._modelled_a)
-            else:
-                self._modelled_a = self._command_a
-            current = self._modelled_a
+            if self._sensed_a is not None:
+                current = self._sensed_a
         if self._t0_ns is None:
             self._t0_ns = t_ns
-        self._last_t_ns = t_ns
         self._seq += 1
         self.stats["samples"] += 1
-        return RigSample(self._seq, t_ns, (t_ns - self._t0_ns) // 1000, arm, road, current, 0, w.arm_counts_per_rev)
+        return RigSample(
+            self._seq,
+            t_ns,
+            (t_ns - self._t0_ns) // 1000,
+            arm,
+            road,
+            current,
+            0,
+            w.arm_counts_per_rev,
+            road_error_rad=self.road.error_rad,
+            road_at_limit=self.road.at_limit,
+            coil_at_authority=self.coil.at_authority,
+        )
+
+    def _check_busy(self, words: tuple[int, ...], t_ns: int) -> None:
+        reg, channel = self.map, self.wiring.coil_sense_ad
+        assert reg is not None and channel is not None
+        if words[reg.ad_value_word(channel)] & AD_BUSY_BIT:
+            if self._busy_since_ns is None:
+                self._busy_since_ns = t_ns
+            elif t_ns - self._busy_since_ns > self._busy_limit_ns:
+                raise DriverIOError(
+                    f"{self.describe()}: A/D {channel} (the coil current) has stayed busy for "
+                    f"{(t_ns - self._busy_since_ns) * 1e-6:.0f} ms (a stuck busy bit)"
+                )
+        else:
+            self._busy_since_ns = None
+
+    def _check_taken(self, words: tuple[int, ...]) -> None:
+        """The board took the last write's output words: DriverIOError once one reads back otherwise
+        :data:`IGNORED_AFTER` exchanges in a row (a word the board ignores: the wrong channel or map)."""
+        for word, value in self._written.items():
+            if self._read_back(words, word) == value:
+                self._ignored[word] = 0
+                continue
+            misses = self._ignored.get(word, 0) + 1
+            self._ignored[word] = misses
+            if misses >= IGNORED_AFTER:
+                what = "the coil's output" if word == self._coil_word else "the road motor's output"
+                raise DriverIOError(
+                    f"{self.describe()}: the board ignores word {word} ({what}): it reads back "
+                    f"{self._read_back(words, word)} where {value} was written, {misses} exchanges in a row; check "
+                    f"the register map ({self.map.describe() if self.map else '?'}) and the output's channel"
+                )
 
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
-        """The cycle's outputs, in one write frame: the coil's (rest unless active) and the road motor's."""
-        if self.map is None or self.link.dev is None:
+        """The cycle's outputs, in one write frame built from this cycle's read: the coil's (rest
+        unless active), the road motor's and its direction, and the heartbeat."""
+        if self.map is None or self.link.dev is None or self._raw is None:
             return
         dt_s = dt_ns * 1e-9
         if self.state is RigState.ACTIVE:
-            self._command_a = (
-                min(max(cmd.current_a, 0.0), self.current_max_a) if cmd.current_a == cmd.current_a else 0.0
-            )
+            current = cmd.current_a
+            self._command_a = min(max(current, 0.0), self.current_max_a) if current == current else 0.0
             coil = self.coil.output(self._command_a, self._sensed_a, dt_s)
             self.road.command(cmd.road_speed_rad_s)
         else:
             self._command_a = 0.0
-            coil = self.coil.rest
+            coil = self.coil.output(0.0, None, dt_s)
             self.road.stop()
         w = self.wiring
-        self._put(self._coil_word, self._output_word(w.coil_output, coil))
+        self._start_frame()
+        written = self._written
+        word = self._output_word(w.coil_output, coil)
+        self._put(self._coil_word, word)
+        written[self._coil_word] = word & (self._out_mask if w.coil_output == "pwm" else DA_MAX)
         if w.road_output != "none":
             road = self.road.output(self._road_angle, dt_s)
-            self._put(self._road_word, self._output_word(w.road_output, road))
-            if self._dir_word is not None:
-                offset = 2 * self._dir_word
-                value = int.from_bytes(self._frame[offset : offset + 2], "little")
-                value = (value | self._dir_bit) if road < 0.0 else (value & ~self._dir_bit)
-                self._put(self._dir_word, value)
-        self.link.write_frame(self._frame)
+            word = self._output_word(w.road_output, abs(road) if self._dir is not None else road)
+            self._put(self._road_word, word)
+            written[self._road_word] = word & (self._out_mask if w.road_output == "pwm" else DA_MAX)
+            if self._dir is not None:
+                self._put_bits(self._dir[0], self._dir[1], self._dir[1] if road < 0.0 else 0)
+        self._beat_bit()
+        self._send()
+
+    def _beat_bit(self) -> None:
+        """Toggle the heartbeat bit in the frame about to be sent (none wired: nothing)."""
+        if self._beat is not None:
+            self._beat_on = not self._beat_on
+            self._put_bits(self._beat[0], self._beat[1], self._beat[1] if self._beat_on else 0)
 
     # facts --------------------------------------------------------------------------------------
     def codec_counters(self) -> dict[str, int]:
         return {"bad_frames": 0}
 
     def link_stats(self) -> dict[str, Any]:
-        """Exchanges, what ``current_a`` is, the road's tracking, the header and the last safe-state check."""
+        """Exchanges, what ``current_a`` is, the guesses and caps, the road's tracking, the header and
+        the last safe-state check."""
         w = self.wiring
-        source = (
-            f"sensed (A/D {w.coil_sense_ad})"
-            if w.coil_sense_ad is not None
-            else "commanded through the coil's lag (rig.coil_tau_s; no sense wired)"
-        )
-        facts: dict[str, Any] = {**self.stats, "bad_frames": 0, "current_source": source, **self.road.tracking()}
+        source = f"sensed (A/D {w.coil_sense_ad})" if w.coil_sense_ad is not None else "none (no current sense)"
+        facts: dict[str, Any] = {
+            **self.stats,
+            "bad_frames": 0,
+            "current_source": source,
+            **self.bringup.facts(),
+            **self.road.tracking(),
+        }
         if self.header is not None:
             facts["board"] = self.header.describe()
         if self.map is not None:
@@ -423,4 +620,14 @@ class RtdacRig(RigInterface):
         return {**facts, **self.safe_state}
 
 
-__all__ = ["RtdacRig", "Wiring"]
+def road_reverses(wiring: Wiring) -> bool:
+    """Whether the wiring can drive the road motor both ways: a D/A, or a PWM with a direction bit."""
+    return wiring.road_output != "pwm" or wiring.road_direction_bit is not None
+
+
+def _less(count: int, offset: int) -> int:
+    """``count - offset`` on the 32-bit counter's circle, signed."""
+    return (count - offset + _SIGN32) % _WRAP32 - _SIGN32
+
+
+__all__ = ["RtdacRig", "Wiring", "road_reverses"]

@@ -12,6 +12,7 @@ import math
 import pytest
 
 from sashil.config.frozen import freeze_config
+from sashil.config.rtdac_section import WIRING_KEYS
 from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Operator
 from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, RtdacBoard, build_board
@@ -23,6 +24,9 @@ from sashil.engine.resolve import default_config
 from sashil.errors import ConfigError, DriverError, DriverIOError, DriverTimeoutError, ProtocolError
 
 PERIOD_NS = 1_000_000
+#: the emulated bench's wiring as the walk confirmed it: the defaults, with the coil sensed on A/D 0
+BENCH_SECTION = {"confirmed": list(WIRING_KEYS), "coil_sense_ad": 0}
+BENCH = {f"rtdac.{key}": value for key, value in BENCH_SECTION.items()}
 
 
 class Clock:
@@ -58,13 +62,14 @@ def make(
     operator: Operator | None = None,
     board_sets: dict | None = None,
 ) -> tuple[RtdacRig, RtdacBoard, Clock, Tap]:
+    sets = {**BENCH, **(sets or {})}
     raw = default_config()
-    for key, value in (sets or {}).items():
+    for key, value in sets.items():
         section, name = key.split(".")
         raw[section][name] = value
     config = freeze_config(raw)
     board_raw = default_config()
-    for key, value in {**(sets or {}), **(board_sets or {})}.items():
+    for key, value in {**sets, **(board_sets or {})}.items():
         section, name = key.split(".")
         board_raw[section][name] = value
     clock = Clock()
@@ -129,24 +134,47 @@ def test_a_commanded_current_becomes_a_duty_and_the_sensed_current_follows():
 def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
     raw = default_config()
     clock = Clock()
-    board = build_board(freeze_config(raw), stage_gain=0.8)  # 20 % less current than the map says
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
+    board = build_board(freeze_config(raw), stage_gain=0.85)  # 15 % less current than the map says
+    host = default_config()
+    host["rtdac"].update(BENCH_SECTION)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(host), "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.configure()
     rig.activate()
     sample = cycle(rig, clock, RigCommand(0.6), 600)
-    assert sample.current_a == pytest.approx(0.6, abs=0.01)
+    assert sample.current_a == pytest.approx(0.6, abs=0.01)  # within the loop's authority: +17.6 % of the map
+    assert not sample.coil_at_authority
     rig.close()
 
 
-def test_without_a_current_sense_the_record_says_current_a_is_the_modelled_coil():
+@pytest.mark.parametrize("sense", ["dead", "doubled"])
+def test_a_sense_that_disagrees_moves_the_coil_at_most_the_loops_authority_and_says_so(sense):
+    """A sense on a channel that reads nothing (A/D 5: nothing wired there) or at twice its scale: the
+    duty stays within (1 ± 0.25) x the map's duty for the command, and the sample says the loop sits at
+    its bound (the supervisor trips on it)."""
+    sets = {"rtdac.coil_sense_ad": 5} if sense == "dead" else {"rtdac.coil_sense_a_per_v": 0.4}
+    rig, board, clock, _ = make(sets, board_sets={"rtdac.coil_sense_ad": 0, "rtdac.coil_sense_a_per_v": 0.2})
+    rig.configure()
+    rig.activate()
+    duties = []
+    for _ in range(300):
+        sample = cycle(rig, clock, RigCommand(0.4), 1)
+        duties.append(board.output("pwm", 0))
+    count = 1 / 4095  # one step of the 12-bit width
+    assert 0.75 * 0.4 - count <= min(duties) and max(duties) <= 1.25 * 0.4 + count
+    assert duties[-1] == pytest.approx(0.4 * (1.25 if sense == "dead" else 0.75), abs=count)
+    assert sample.coil_at_authority
+    rig.close()
+
+
+def test_without_a_current_sense_current_a_is_empty_not_a_model():
     rig, _board, clock, _ = make({"rtdac.coil_sense_ad": None})
     rig.configure()
     rig.activate()
     sample = cycle(rig, clock, RigCommand(1.0), 10)
-    tau = 0.010
-    assert sample.current_a == pytest.approx(1.0 - math.exp(-9e-3 / tau), rel=1e-6)
-    assert rig.link_stats()["current_source"].startswith("commanded through the coil's lag")
+    assert math.isnan(sample.current_a)
+    assert not rig.capabilities.current_sensed
+    assert rig.link_stats()["current_source"] == "none (no current sense)"
     rig.close()
 
 
@@ -172,8 +200,8 @@ def test_the_encoders_wiring_signs_and_resolutions_come_from_config():
         "rtdac.road_counts_per_rev": 1024,
     }
     rig, board, clock, _ = make(sets)
+    rig.configure()  # the counters zeroed with the arm at rest, then the operator presses it down
     board.rig.plant.hold(math.radians(-5.0))
-    rig.configure()
     sample = cycle(rig, clock, RigCommand(0.0), 1)
     assert math.degrees(sample.theta_rad) == pytest.approx(-5.0, abs=0.1)
     low, _ = board.map.counter_words(5)

@@ -19,6 +19,8 @@ def sample(seq, theta_deg=0.0, flags=0):
 
 
 def supervisor(**kw):
+    """A supervisor whose encoder-step check lets these tests' angles jump (its own tests below set it)."""
+    kw.setdefault("max_angle_rate_rad_s", math.inf)
     s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=math.radians(30.0), **kw)
     s.start(1_000_000_000)
     return s
@@ -60,6 +62,7 @@ def test_angle_interlock_both_ways_with_time_and_reason():
 def test_interlock_off():
     s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=None)
     s.check(sample(1, 80.0), 0)
+    s.check(sample(2, 80.0), 1_000_000)
     assert s.trips == []
 
 
@@ -122,7 +125,7 @@ def test_the_supervisor_takes_the_configs_limits(config):
 # boundaries (each kills a mutant of tools/mutate_safety.py) ---------------------------------------
 def test_the_angle_limit_itself_is_inside():
     edge = sample(1, 30.0).theta_rad
-    s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=edge)
+    s = SafetySupervisor(current_max_a=1.0, angle_limit_rad=edge, max_angle_rate_rad_s=math.inf)
     s.check(sample(1, 30.0), 0)
     s.check(sample(2, -30.0), 1)
     assert s.trips == []
@@ -149,3 +152,100 @@ def test_summary_reports_the_limits():
     summary = supervisor(slew_a_per_s=5.0).summary()
     assert summary["angle_limit_deg"] == pytest.approx(30.0) and summary["slew_a_per_s"] == 5.0
     assert SafetySupervisor(current_max_a=1.0).summary()["angle_limit_deg"] is None
+
+
+# encoder steps, the arm's travel, and the host-closed loops ------------------------------------
+MS = 1_000_000
+T0 = 1_000_000_000
+
+
+def counted(seq, arm=0, road=0, **facts):
+    return RigSample(seq, 0, 0, arm, road, 0.0, 0, COUNTS, **facts)
+
+
+def stepper():
+    """10 rev/s at 3600 counts a revolution: 36 counts a millisecond, 37 with the one count's grace."""
+    s = SafetySupervisor(current_max_a=1.0, max_angle_rate_rad_s=10 * 2 * math.pi)
+    s.start(T0)
+    return s
+
+
+@pytest.mark.parametrize("which", ["arm", "road"])
+def test_an_encoder_step_faster_than_the_rig_can_turn_trips_naming_the_encoder(which):
+    s = stepper()
+    s.check(counted(1), T0)
+    s.check(counted(2, **{which: 37}), T0 + MS)  # exactly the allowed step
+    s.check(counted(3, **{which: 0}), T0 + 2 * MS)  # back, as fast
+    s.check(counted(4, **{which: -73}), T0 + 4 * MS)  # two periods: twice the step, one grace
+    with pytest.raises(SafetyTrip, match=rf"the {which} angle jumped 38 counts in 1.0 ms, more than 37"):
+        s.check(counted(5, **{which: -35}), T0 + 5 * MS)
+    assert s.trips[-1].kind == "encoder_step" and s.trip_code == 4
+
+
+def test_the_first_sample_after_a_start_is_no_step():
+    s = stepper()
+    s.check(counted(1, arm=5000, road=-5000), T0)  # an index reset's value before the run: no step yet
+    s.start(T0 + MS)
+    s.check(counted(2, arm=0, road=0), T0 + 2 * MS)
+    assert s.trips == []
+
+
+def test_the_arm_beyond_its_travel_trips_both_ways_and_its_edge_is_inside():
+    edge = counted(1, arm=100).arm_counts * 2 * math.pi / COUNTS  # 10 deg as the supervisor computes it
+    s = SafetySupervisor(current_max_a=1.0, arm_travel_rad=edge, max_angle_rate_rad_s=math.inf)
+    s.start(T0)
+    s.check(counted(1, arm=100), T0)
+    s.check(counted(2, arm=-100), T0 + MS)
+    with pytest.raises(SafetyTrip, match=r"\|theta2\| = 10.10 deg beyond 10 deg \(safety.arm_travel_deg\)"):
+        s.check(counted(3, arm=-101), T0 + 2 * MS)
+    s = SafetySupervisor(current_max_a=1.0, arm_travel_rad=edge, max_angle_rate_rad_s=math.inf)
+    with pytest.raises(SafetyTrip, match="arm travel"):
+        s.check(counted(1, arm=101), T0)
+    assert s.trips[-1].kind == "arm_travel" and s.trip_code == 5
+    s = SafetySupervisor(current_max_a=1.0, max_angle_rate_rad_s=math.inf)  # no travel: off
+    s.check(counted(1, arm=3000), T0)
+    assert s.trips == []
+
+
+@pytest.mark.parametrize(
+    ("kind", "code", "beyond", "within", "text"),
+    [
+        ("road_tracking", 6, {"road_error_rad": -0.0501}, {"road_error_rad": 0.05}, "the road is 0.050 rad off"),
+        ("road_limit", 7, {"road_at_limit": True}, {"road_at_limit": False}, "output held at its limit for 50 ms"),
+        ("coil_sense", 8, {"coil_at_authority": True}, {"coil_at_authority": False}, "sensed current disagrees"),
+    ],
+)
+def test_a_loop_held_beyond_its_bound_trips_only_after_its_time(kind, code, beyond, within, text):
+    bound_ms = {"road_tracking": 20, "road_limit": 50, "coil_sense": 50}[kind]
+    s = SafetySupervisor(current_max_a=1.0)
+    s.start(T0)
+    t = T0
+    for seq in range(1, 4):  # within, for ever
+        s.check(counted(seq, **within), t)
+        t += 100 * MS
+    s.check(counted(4, **beyond), t)  # beyond from here ...
+    s.check(counted(5, **beyond), t + (bound_ms - 1) * MS)  # ... not yet its time
+    s.check(counted(6, **within), t + bound_ms * MS)  # a break: the time starts again
+    s.check(counted(7, **beyond), t + (bound_ms + 1) * MS)
+    s.check(counted(8, **beyond), t + (2 * bound_ms) * MS)
+    assert s.trips == []
+    with pytest.raises(SafetyTrip, match=text):
+        s.check(counted(9, **beyond), t + (2 * bound_ms + 1) * MS)  # exactly its time since seq 7
+    assert s.trips[-1].kind == kind and s.trip_code == code
+    assert s.trips[-1].time_s == pytest.approx((t - T0) * 1e-9 + (2 * bound_ms + 1) * 1e-3)
+
+
+def test_no_host_road_loop_is_never_off_its_reference():
+    s = SafetySupervisor(current_max_a=1.0)
+    s.start(T0)
+    for seq in range(1, 200):
+        s.check(counted(seq), T0 + seq * MS)  # road_error_rad NaN by default
+    assert s.trips == []
+
+
+def test_the_bounds_come_from_the_config_parts():
+    parts = SafetyParts(1.0, None, 0.0, 20, True, 30.0, 12.0, 0.02, 5.0, 7.0, 9.0)
+    s = SafetySupervisor.from_parts(parts)
+    assert s.max_angle_rate_rad_s == 30.0 and s.arm_travel_rad == pytest.approx(math.radians(12.0))
+    assert (s.road_error_max_rad, s.road_error_ns, s.road_limit_ns, s.coil_authority_ns) == (0.02, 5 * MS, 7 * MS, 9 * MS)
+    assert SafetySupervisor.from_parts(SafetyParts(1.0, None, 0.0, 20, True)).arm_travel_rad is None

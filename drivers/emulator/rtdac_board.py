@@ -81,6 +81,44 @@ class BoardFaults:
     timeout_after_s: float | None = None
     #: opening the board is refused (a missing udev rule)
     permission_denied: bool = False
+    #: what every counter shows at power-up: counts an earlier program left (0: none)
+    counter_preset: int = 0
+    #: then the arm's counter resets to 0 once, as an index pulse resets a counter
+    index_reset_after_s: float | None = None
+    #: words of a write frame the board does not take (they keep their value)
+    ignored_words: tuple[int, ...] = ()
+
+
+@dataclass
+class Relay:
+    """A retriggerable watchdog relay on the power stages, retriggered by a digital output's toggles.
+
+    It closes at a toggle of ``bit`` and opens ``hold_ms`` after the last one; open, the coil's and the
+    road motor's power stages are unpowered whatever the board's outputs say."""
+
+    bit: int
+    hold_ms: float = 20.0
+    last_toggle_ns: int | None = None
+    level: int = 0
+    #: times it opened after having been closed, during a session (a host pause longer than hold_ms)
+    drops: int = 0
+
+    def closed(self, now_ns: int) -> bool:
+        last = self.last_toggle_ns
+        return last is not None and now_ns - last <= self.hold_ms * 1e6
+
+    def opened_at_ns(self) -> int | None:
+        """When it opened (or opens) after the last toggle."""
+        last = self.last_toggle_ns
+        return None if last is None else last + round(self.hold_ms * 1e6)
+
+    def take(self, level: int, now_ns: int) -> None:
+        """The bit's level in a write frame at ``now_ns``: a change retriggers the relay."""
+        if level != self.level:
+            if self.last_toggle_ns is not None and not self.closed(now_ns):
+                self.drops += 1
+            self.level = level
+            self.last_toggle_ns = now_ns
 
 
 @dataclass
@@ -125,8 +163,19 @@ class RtdacBoard:
         operator: Operator | None = None,
         faults: BoardFaults | None = None,
         motor: RoadMotor | None = None,
+        relay: Relay | None = None,
+        press_after_s: float = 0.2,
+        press_s: float = 0.3,
     ):
+        """``relay``: a watchdog relay on the power stages (None: none wired); the operator presses the
+        arm ``press_after_s`` after the host's claim, moving it to the hold angle over ``press_s``, as a
+        person does once the host has connected and asked."""
         self.rig = rig
+        self.relay = relay
+        self.press_after_s = press_after_s
+        self.press_s = press_s
+        self._press: tuple[int, float, float, int] | None = None  # (start ns, from rad, to rad, release ns)
+        self._index_done = False
         self.motor = motor or RoadMotor()
         self.map = register_map
         self.wiring = wiring or Wiring()
@@ -167,7 +216,10 @@ class RtdacBoard:
         self.claimed = True
         self.session_start_ns = now_ns
         if self.operator is not None:
-            self.rig.operator_hold(math.radians(self.operator.next_hold_deg()), self.operator.release_after_s)
+            angle = math.radians(self.operator.next_hold_deg())
+            start = now_ns + round(self.press_after_s * 1e9)
+            release = now_ns + round(self.operator.release_after_s * 1e9)
+            self._press = (start, self.rig.plant.state.theta_rad, angle, release)
 
     def release(self) -> None:
         self.claimed = False
@@ -227,9 +279,17 @@ class RtdacBoard:
 
     def _set_counter(self, channel: int, angle_rad: float, counts_per_rev: int, reversed_: bool) -> None:
         counts = round(angle_rad * counts_per_rev / TWO_PI) * (-1 if reversed_ else 1)
+        preset = self.faults.counter_preset
         if (self.words[self.map.encoder_reset] >> channel) & 1:
-            self._counter_zero[channel] = counts  # held at 0 while its reset bit is set
-        value = (counts - self._counter_zero.get(channel, 0)) & 0xFFFF_FFFF
+            self._counter_zero[channel] = counts + preset  # held at 0 while its reset bit is set
+        elif (
+            channel == self.wiring.arm_encoder
+            and not self._index_done
+            and self._since(self._last_ns or 0, self.faults.index_reset_after_s)
+        ):
+            self._index_done = True
+            self._counter_zero[channel] = counts + preset  # an index pulse: 0 from here
+        value = (counts + preset - self._counter_zero.get(channel, 0)) & 0xFFFF_FFFF
         low, high = self.map.counter_words(channel)
         self.words[low], self.words[high] = value & 0xFFFF, value >> 16
 
@@ -247,8 +307,14 @@ class RtdacBoard:
     def _apply(self, frame: bytes, now_ns: int) -> None:
         written = _FRAME.unpack(frame)
         words = self.words
+        ignored = self.faults.ignored_words
         for word in self._writable:
-            words[word] = written[word]
+            if word not in ignored:
+                words[word] = written[word]
+        relay = self.relay
+        if relay is not None:
+            word = self.map.output + (1 if relay.bit >= 15 else 0)
+            relay.take((words[word] >> (relay.bit % 15)) & 1, now_ns)
         self._drive(now_ns)
 
     def output(self, kind: str, channel: int) -> float:
@@ -260,10 +326,11 @@ class RtdacBoard:
     def _drive(self, now_ns: int) -> None:
         """The power stage and the road motor follow the outputs just written."""
         w = self.wiring
+        powered = self.relay is None or self.relay.closed(now_ns)
         level = self.output(w.coil_output, w.coil_channel)
-        self.drive_a = max(0.0, interp(level, w.coil_map_output, w.coil_map_current_a))
+        self.drive_a = max(0.0, interp(level, w.coil_map_output, w.coil_map_current_a)) if powered else 0.0
         road = 0.0
-        if w.road_output != "none":
+        if w.road_output != "none" and powered:
             road = self.output(w.road_output, w.road_channel)
             if w.road_output == "pwm" and w.road_direction_bit is not None:
                 bit = w.road_direction_bit
@@ -279,6 +346,11 @@ class RtdacBoard:
         """Step the plant to ``now_ns``; the road motor's speed lags its target (first order)."""
         last = self._last_ns
         self._last_ns = now_ns
+        self._operator(now_ns)
+        relay = self.relay
+        if relay is not None and (self.drive_a or self.road_target_rad_s) and not relay.closed(now_ns):
+            self.drive_a, self.road_target_rad_s = 0.0, 0.0  # the relay opened: both stages unpowered
+            self.rig.write(RigCommand(0.0, None), last if last is not None else now_ns, 0)
         if last is not None and now_ns > last:
             alpha = 1.0 - math.exp(-(now_ns - last) * 1e-9 / self.motor.tau_s)
             speed = self._road_speed + alpha * (self.road_target_rad_s - self._road_speed)
@@ -286,6 +358,19 @@ class RtdacBoard:
                 self._road_speed = speed
                 self.rig.write(RigCommand(self.drive_a, speed), last, 0)
         self.rig.read(now_ns, 0)
+
+    def _operator(self, now_ns: int) -> None:
+        """The operator's press: the arm moved to the hold angle over ``press_s``, then held until the release."""
+        press = self._press
+        if press is None or now_ns < press[0]:
+            return
+        start, origin, angle, release = press
+        done = (now_ns - start) * 1e-9 / self.press_s if self.press_s > 0.0 else 1.0
+        if done < 1.0:
+            self.rig.plant.hold(origin + (angle - origin) * done)
+            return
+        self._press = None
+        self.rig.operator_hold(angle, max(release - now_ns, 0) * 1e-9)
 
     @property
     def road_speed_rad_s(self) -> float:
@@ -314,6 +399,7 @@ def build_board(
     stage_gain: float = 1.0,
     road_tau_s: float = 0.02,
     wiring_changes: dict[str, Any] | None = None,
+    relay: Relay | None = None,
 ) -> RtdacBoard:
     """The emulated board around the simulated rig the config describes (model, rig and mismatch
     sections), laid out as FPGA logic ``logic`` (a built-in map), wired as its ``rtdac`` section says
@@ -326,11 +412,21 @@ def build_board(
     if logic not in layouts:
         raise ValueError(f"logic: expected one of {', '.join(layouts)}, got {logic!r}")
     section = rig_parts(config, "rtdac").values["rtdac"]  # the board's section, as the host's backend reads it
-    wiring = Wiring.from_section(section, **(wiring_changes or {}))
+    # the bench's truth: the config's wiring, with the coil's current sensed on A/D 0 where the config
+    # reads no sense (a host that reads none is the host's choice, not the bench's wiring)
+    sense = section["coil_sense_ad"] if section["coil_sense_ad"] is not None else 0
+    wiring = Wiring.from_section(section, **{"coil_sense_ad": sense, **(wiring_changes or {})})
     if stage_gain != 1.0:
         wiring = replace(wiring, coil_map_current_a=tuple(stage_gain * a for a in wiring.coil_map_current_a))
     motor = RoadMotor.from_section(section, road_tau_s)
     ident = identity or BoardIdentity(logic_version=layouts[logic].logic_version)
     return RtdacBoard(
-        SimulatedRig.from_parts(rig_parts(config, "sim").values), layouts[logic], wiring, ident, operator, faults, motor
+        SimulatedRig.from_parts(rig_parts(config, "sim").values),
+        layouts[logic],
+        wiring,
+        ident,
+        operator,
+        faults,
+        motor,
+        relay,
     )

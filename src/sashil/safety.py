@@ -5,10 +5,16 @@ Two jobs, both once per cycle and free of I/O (the loop does the I/O):
 * ``check(sample, t_ns)`` after ``rig.read``: the **angle interlock** (|theta| beyond the rig's
   mechanical limit, ``rig.angle_limit_deg``), the **sensor timeout** (no fresh sample for
   ``safety.sensor_timeout_cycles`` cycles; a sample is fresh when its sequence number advanced,
-  modulo the 16-bit wire counter, so a repeated or backward sequence number is a stale sample), and
-  the device's own **fault / overcurrent flags**. A violation is recorded as a :class:`Trip` (time
-  from the start of the run, reason) and raised as :class:`~sashil.errors.SafetyTrip`; the loop
-  then commands 0 A, deactivates and closes the rig.
+  modulo the 16-bit wire counter, so a repeated or backward sequence number is a stale sample),
+  the device's own **fault / overcurrent flags**, an **encoder step** no rig can make between two
+  samples (faster than ``safety.max_angle_rate_rad_s``, plus one count: an index reset, a wrong
+  counts per revolution), the **arm's travel** (|theta2| beyond ``safety.arm_travel_deg``), and what a
+  backend that closes the road's and the coil's loops on the host reports: the **road off its
+  reference** (beyond ``safety.road_error_max_rad`` for ``safety.road_error_ms``), the **road output
+  at its limit** (for ``safety.road_limit_ms``) and the **coil's current loop at its authority
+  limit** (its sense disagrees with the command, for ``safety.coil_authority_ms``). A violation is
+  recorded as a :class:`Trip` (time from the start of the run, reason) and raised as
+  :class:`~sashil.errors.SafetyTrip`; the loop then commands 0 A, deactivates and closes the rig.
 * ``limit(cmd, dt_ns)`` before ``rig.write``: the **current clamp** to [0, i_max] (NaN -> 0 A) and
   the optional **slew limit** |di/dt| <= ``safety.slew_a_per_s`` over the measured period. These
   never stop the run; the clamped cycles are counted.
@@ -27,6 +33,7 @@ from sashil.drivers.interface import (
     FLAG_FAULT,
     FLAG_OVERCURRENT,
     FLAG_STUCK_SENSOR,
+    TWO_PI,
     RigCommand,
     RigSample,
     clamp_current,
@@ -37,7 +44,16 @@ if TYPE_CHECKING:
     from sashil.config.parts import SafetyParts
 
 #: the data.csv ``trip_code`` column: 0 = no trip, else the kind below
-TRIP_CODES = {"angle_interlock": 1, "sensor_timeout": 2, "device_fault": 3}
+TRIP_CODES = {
+    "angle_interlock": 1,
+    "sensor_timeout": 2,
+    "device_fault": 3,
+    "encoder_step": 4,
+    "arm_travel": 5,
+    "road_tracking": 6,
+    "road_limit": 7,
+    "coil_sense": 8,
+}
 
 SEQ_MODULUS = 1 << 16  # sequence numbers wrap at 2**16 on the wire
 SEQ_HALF = SEQ_MODULUS // 2
@@ -73,8 +89,23 @@ class SafetySupervisor:
         slew_a_per_s: float = 0.0,
         sensor_timeout_cycles: int = 20,
         trip_on_device_fault: bool = True,
+        max_angle_rate_rad_s: float = 60.0,
+        arm_travel_rad: float | None = None,
+        road_error_max_rad: float = 0.05,
+        road_error_ms: float = 20.0,
+        road_limit_ms: float = 50.0,
+        coil_authority_ms: float = 50.0,
     ):
         self.current_max_a = float(current_max_a)
+        self.max_angle_rate_rad_s = float(max_angle_rate_rad_s)
+        self.arm_travel_rad = None if arm_travel_rad is None else float(arm_travel_rad)
+        self.road_error_max_rad = float(road_error_max_rad)
+        self.road_error_ns = round(road_error_ms * 1e6)
+        self.road_limit_ns = round(road_limit_ms * 1e6)
+        self.coil_authority_ns = round(coil_authority_ms * 1e6)
+        #: when each held condition (road off, road at limit, coil at authority) began; None: not held
+        self._held_since: dict[str, int | None] = {"road_tracking": None, "road_limit": None, "coil_sense": None}
+        self._last_counts: tuple[int, int, int] | None = None  # (t_ns, arm, road) of the last fresh sample
         self.angle_limit_rad = None if angle_limit_rad is None else float(angle_limit_rad)
         self.slew_a_per_s = float(slew_a_per_s)
         self.sensor_timeout_cycles = int(sensor_timeout_cycles)
@@ -99,6 +130,12 @@ class SafetySupervisor:
             slew_a_per_s=limits.slew_a_per_s,
             sensor_timeout_cycles=limits.sensor_timeout_cycles,
             trip_on_device_fault=limits.trip_on_device_fault,
+            max_angle_rate_rad_s=limits.max_angle_rate_rad_s,
+            arm_travel_rad=math.radians(limits.arm_travel_deg) if limits.arm_travel_deg is not None else None,
+            road_error_max_rad=limits.road_error_max_rad,
+            road_error_ms=limits.road_error_ms,
+            road_limit_ms=limits.road_limit_ms,
+            coil_authority_ms=limits.coil_authority_ms,
         )
 
     def start(self, t_ns: int) -> None:
@@ -107,6 +144,9 @@ class SafetySupervisor:
         self._last_seq = None
         self._not_fresh = 0
         self._last_current = 0.0
+        self._last_counts = None
+        for name in self._held_since:
+            self._held_since[name] = None
 
     @property
     def trip_code(self) -> int:
@@ -132,6 +172,75 @@ class SafetySupervisor:
                     f"angle interlock: |theta| = {abs(math.degrees(theta)):.2f} deg beyond the limit "
                     f"{math.degrees(limit):g} deg (rig.angle_limit_deg)",
                 )
+        self._check_encoders(sample, t_ns)
+        self._check_loops(sample, t_ns)
+
+    def _check_encoders(self, sample: RigSample, t_ns: int) -> None:
+        """An encoder step faster than the rig can turn, and the arm beyond its travel."""
+        last = self._last_counts
+        self._last_counts = (t_ns, sample.arm_counts, sample.road_counts)
+        per_rad = sample.counts_per_rev / TWO_PI
+        if last is not None:
+            dt_s = (t_ns - last[0]) * 1e-9
+            allowed = self.max_angle_rate_rad_s * dt_s * per_rad + 1.0
+            for name, now, before in (("arm", sample.arm_counts, last[1]), ("road", sample.road_counts, last[2])):
+                step = abs(now - before)
+                if step > allowed:
+                    self._trip(
+                        t_ns,
+                        "encoder_step",
+                        f"encoder step: the {name} angle jumped {step} counts in {dt_s * 1e3:.1f} ms, more than "
+                        f"{allowed:.0f} (safety.max_angle_rate_rad_s = {self.max_angle_rate_rad_s:g}): an index "
+                        f"reset or a wrong counts per revolution",
+                    )
+        travel = self.arm_travel_rad
+        if travel is not None:
+            arm = sample.arm_counts / per_rad
+            if not -travel <= arm <= travel:
+                self._trip(
+                    t_ns,
+                    "arm_travel",
+                    f"arm travel: |theta2| = {abs(math.degrees(arm)):.2f} deg beyond "
+                    f"{math.degrees(travel):g} deg (safety.arm_travel_deg)",
+                )
+
+    def _check_loops(self, sample: RigSample, t_ns: int) -> None:
+        """The road off its reference, the road output at its limit, the coil's loop at its authority,
+        each held longer than its bound."""
+        error = sample.road_error_rad
+        if self._held("road_tracking", abs(error) > self.road_error_max_rad, t_ns, self.road_error_ns):  # NaN: never
+            self._trip(
+                t_ns,
+                "road_tracking",
+                f"the road is {abs(error):.3f} rad off its reference, beyond {self.road_error_max_rad:g} rad for "
+                f"{self.road_error_ns * 1e-6:g} ms (safety.road_error_max_rad, safety.road_error_ms): check the "
+                f"road's encoder direction, counts per revolution and output channel",
+            )
+        if self._held("road_limit", sample.road_at_limit, t_ns, self.road_limit_ns):
+            self._trip(
+                t_ns,
+                "road_limit",
+                f"the road motor's output held at its limit for {self.road_limit_ns * 1e-6:g} ms "
+                f"(safety.road_limit_ms): the road cannot follow its command",
+            )
+        if self._held("coil_sense", sample.coil_at_authority, t_ns, self.coil_authority_ns):
+            self._trip(
+                t_ns,
+                "coil_sense",
+                f"the coil's sensed current disagrees with the command: its current loop held at its authority "
+                f"limit for {self.coil_authority_ns * 1e-6:g} ms (safety.coil_authority_ms): check the coil "
+                f"sense's channel and scale",
+            )
+
+    def _held(self, kind: str, now_held: bool, t_ns: int, bound_ns: int) -> bool:
+        """Whether ``now_held`` has held for ``bound_ns`` without a break (its start kept by ``kind``)."""
+        if not now_held:
+            self._held_since[kind] = None
+            return False
+        since = self._held_since[kind]
+        if since is None:
+            self._held_since[kind] = since = t_ns
+        return t_ns - since >= bound_ns
 
     def _advances(self, seq: int) -> bool:
         """Whether ``seq`` is fresh: the first one, or ahead of the last by less than half the counter."""

@@ -57,6 +57,54 @@ def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--timeout-after", type=float, metavar="S", help="reads go unanswered after S seconds")
     group.add_argument("--permission-denied", action="store_true", help="opening the board is refused (no udev rule)")
+    group.add_argument(
+        "--counter-preset",
+        type=int,
+        default=0,
+        metavar="N",
+        help="every counter shows N at power-up, as an earlier program left it (default 0)",
+    )
+    group.add_argument(
+        "--index-reset-after", type=float, metavar="S", help="the arm's counter resets to 0 once after S seconds"
+    )
+    group.add_argument(
+        "--ignore-word",
+        type=int,
+        action="append",
+        default=[],
+        metavar="W",
+        help="the board does not take word W of a write frame (repeatable)",
+    )
+    group.add_argument(
+        "--relay-bit",
+        type=int,
+        metavar="B",
+        help="a watchdog relay on the power stages, retriggered by digital output B's toggles (default: none)",
+    )
+    group.add_argument(
+        "--relay-ms",
+        type=float,
+        default=20.0,
+        metavar="MS",
+        help="the relay opens MS after the last toggle (default 20)",
+    )
+
+
+def _word(option: str, value: int) -> int:
+    if not 1 <= value <= 251:
+        raise ConfigError(f"{option}: expected a word of a write frame from 1 to 251, got {value}")
+    return value
+
+
+def relay_line(relay: Any) -> str:
+    """The relay's facts as one line: its last retrigger and its opening (monotonic ns, comparable
+    across the machine's processes), and how often a pause opened it during a session."""
+    if relay.last_toggle_ns is None:
+        return "relay: never retriggered (open: the power stages were never powered)"
+    return (
+        f"relay: last toggle at {relay.last_toggle_ns} ns, open from {relay.opened_at_ns()} ns "
+        f"({relay.hold_ms:g} ms later); dropped {relay.drops} times while retriggered"
+    )
 
 
 def _seconds(option: str, value: float | None) -> float | None:
@@ -68,7 +116,7 @@ def _seconds(option: str, value: float | None) -> float | None:
 def run_rtdac(
     args: argparse.Namespace, config: Any, operator: Any, duration: float | None, announce: Callable[[str], None]
 ) -> int:
-    from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, build_board
+    from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, Relay, build_board
     from sashil.drivers.emulator.rtdac_usb import BoardServer
 
     if not args.link:
@@ -81,7 +129,17 @@ def run_rtdac(
         short_frame_after_s=_seconds("--short-frame-after", args.short_frame_after),
         timeout_after_s=_seconds("--timeout-after", args.timeout_after),
         permission_denied=args.permission_denied,
+        counter_preset=args.counter_preset,
+        index_reset_after_s=_seconds("--index-reset-after", args.index_reset_after),
+        ignored_words=tuple(_word("--ignore-word", w) for w in args.ignore_word),
     )
+    relay = None
+    if args.relay_bit is not None:
+        if not 0 <= args.relay_bit <= 25:
+            raise ConfigError(f"--relay-bit: expected a digital output bit from 0 to 25, got {args.relay_bit}")
+        if not 0.0 < args.relay_ms <= 10_000.0:
+            raise ConfigError(f"--relay-ms: expected milliseconds in (0, 10000], got {args.relay_ms:g}")
+        relay = Relay(args.relay_bit, args.relay_ms)
     logic_word = int(args.logic, 16)
     if args.header_logic is not None:
         try:
@@ -97,7 +155,9 @@ def run_rtdac(
     identity = BoardIdentity(logic_version=logic_word, application=args.application)
     if not 0.0 < args.road_tau_ms <= 10_000.0:
         raise ConfigError(f"--road-tau-ms: expected milliseconds in (0, 10000], got {args.road_tau_ms:g}")
-    board = build_board(config, args.logic, identity, operator, faults, args.stage_gain, args.road_tau_ms * 1e-3)
+    board = build_board(
+        config, args.logic, identity, operator, faults, args.stage_gain, args.road_tau_ms * 1e-3, relay=relay
+    )
     try:
         server = BoardServer(board, args.link)
     except OSError as err:
@@ -126,6 +186,8 @@ def run_rtdac(
             signal.signal(sig, handler)
         realtime.restore()
     state = "at rest" if board.at_rest() else "NOT at rest (the board keeps its last outputs)"
+    if relay is not None:
+        print(f"sashil emulate: {relay_line(relay)}", file=sys.stderr, flush=True)
     print(
         f"sashil emulate: {why}; exchanges {board.exchanges}, bad frames from host {board.bad_frames}, outputs {state}",
         file=sys.stderr,

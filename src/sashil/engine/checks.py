@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
 
@@ -152,6 +152,27 @@ def _road_of(config: RunConfig, key: str) -> str:
     """The road a verb's key names (``run.road``, ``compare.road``), ``none`` when unset."""
     road = config["run"]["road"] if key == "run.road" else config["compare"]["road"]
     return str(road or "none").strip()
+
+
+#: the verbs whose plans drive the road motor, and the key of their road (None: the verb's own roads)
+ROAD_DRIVERS: dict[str, str | None] = {"run": "run.road", "compare": "compare.road", "sweep": None, "calibrate": None}
+
+
+def check_road_reverses(config: Any, verb: str | None, reverses: bool, named: Named) -> None:
+    """Refuse, before anything is energised, a plan that drives the road on wiring that turns the road
+    motor one way only: every road sashil plays (a sine, a chirp, ISO 8608, a bump) reverses it, and a
+    one-way output cannot brake."""
+    if reverses or verb not in ROAD_DRIVERS:
+        return
+    key = ROAD_DRIVERS[verb]
+    if key is not None and str(config[key.split(".")[0]]["road"] or "none").strip() == "none":
+        return
+    road = f"{named(key)} {config[key.split('.')[0]]['road']}: " if key is not None else f"sashil {verb}: "
+    raise ConfigError(
+        f"{road}the road motor's wiring drives it one way only (rtdac.road_output pwm with no "
+        "rtdac.road_direction_bit), and this road reverses it: set rtdac.road_direction_bit to the motor's "
+        "direction output, or drive the road from a D/A (rtdac.road_output: da)"
+    )
 
 
 def check_road_ahead(config: RunConfig, verb: str | None, named: Named, law: str | None = None) -> None:

@@ -150,6 +150,7 @@ def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> 
         )
     if verb == "run" and config["run"]["road"] is None:
         config["run"]["road"] = DEFAULT_SIM_ROAD if caps.simulated else "none"
+    verb_checks.check_road_reverses(config, verb, caps.road_reverses, lambda key: _named(source, key))
 
 
 def _named(source: ConfigSource, key: str) -> str:

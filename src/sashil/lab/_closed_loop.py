@@ -14,6 +14,7 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.formats import can_formats
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
+from sashil.recording.rest import rest_phrase
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.roads.option import RoadParts, RoadStage, parse_road
@@ -165,7 +166,7 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
         on_event(Event("warning", f"safety trip at {trip['time_s']:.3f} s: {trip['reason']}", trip))
     on_event(Event("folder", f"run folder: {folder.path}", {"folder": str(folder.path)}))
     if outcome.exit_status == "stopped":
-        on_event(Event("warning", f"sashil run: stopped by {outcome.stop_reason}; damper at 0 A"))
+        on_event(Event("warning", f"sashil run: stopped by {outcome.stop_reason}; {rest_phrase(summary)}"))
     error = outcome.error
     if error is not None and not isinstance(error, KeyboardInterrupt):
         if isinstance(error, SashilError):

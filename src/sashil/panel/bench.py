@@ -27,6 +27,7 @@ from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event
 from sashil.panel.catalog import LawChoice, laws_catalog
 from sashil.panel.frames import decimation_step, encode_batch, next_window, select_columns
+from sashil.recording.rest import NO_SENSE_REST, safe_state_current
 from sashil.runtime.signals import StopFlag
 
 #: after a stall, a batch reaches back at most this far on the real clock (older rows may have left
@@ -683,7 +684,9 @@ def safe_state(summary: Mapping[str, Any]) -> dict[str, Any] | None:
 def safe_state_line(safe: Mapping[str, Any], stopped: bool) -> str:
     """The one line a page shows of ``safe``: ``0 A confirmed: coil at 0.012 A 38 ms after STOP``."""
     after = f"{1e3 * float(safe.get('after_s') or 0.0):.0f} ms after {'STOP' if stopped else 'the end'}"
-    current = f"coil at {float(safe['current_a']):.3f} A"
+    current = safe_state_current(safe)
+    if safe.get("sensed") is False:
+        return f"{NO_SENSE_REST}: commanded {after}; the board's readback is the only confirmation"
     if safe.get("confirmed"):
         return f"0 A confirmed: {current} {after}"
     return f"0 A NOT confirmed: {current} {after}: check the rig"

@@ -351,10 +351,12 @@ class ControlLoop:
             rig.write(SAFE_COMMAND, t_ns, 0)  # a host-paced board answers each command with a sample
             reads += 1
             deadline += period
+        sensed = sample.current_a == sample.current_a  # NaN: no sense measures the coil
         self.result.safe_state = {
-            "current_a": round(float(sample.current_a), 4),
+            "current_a": round(float(sample.current_a), 4) if sensed else None,
             "after_s": round((t_ns - start) * 1e-9, 4),
             "confirmed": abs(sample.current_a) <= SAFE_CURRENT_A,
+            "sensed": sensed,
             "reads": reads,  # rows the settling added to the record
         }
         return t_ns, sample
