@@ -29,9 +29,12 @@ def interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
 class CoilDrive:
     """The coil current's output (module docstring); ``ki_per_s`` 0 or no sense: the map alone.
 
-    The loop's authority is bounded: the output stays within ``rest + (1 ± authority)·(map - rest)``
-    of the map's output for the command, so a sense that reads nothing (or too much) moves the coil at
-    most that far from the map; :attr:`at_authority` says the bound held the output this cycle.
+    The loop compares the sensed current with the current the command gives through the coil's
+    first-order lag (``tau_s``, seed 001's coil model), not with the command itself, so a command's
+    step does not wind it up: what it integrates is the power stage's static mismatch with the map.
+    Its authority is bounded: the output stays within ``rest + (1 ± authority)·(map - rest)`` of the
+    map's output for the command, so a sense that reads nothing (or too much) moves the coil at most
+    that far from the map; :attr:`at_authority` says the bound held the output this cycle.
     """
 
     def __init__(
@@ -41,6 +44,7 @@ class CoilDrive:
         ki_per_s: float,
         current_max_a: float,
         authority: float = 0.25,
+        tau_s: float = 0.0,
     ):
         self.map_current_a = tuple(map_current_a)
         self.map_output = tuple(map_output)
@@ -48,17 +52,26 @@ class CoilDrive:
         self.current_max_a = current_max_a
         self.authority = authority
         self.rest = self.map_output[0]
+        self.tau_s = tau_s
         self.at_authority = False
         self._integral_a = 0.0
+        self._expected_a = 0.0
 
     def reset(self) -> None:
         self._integral_a = 0.0
+        self._expected_a = 0.0
         self.at_authority = False
 
     def output(self, current_a: float, sensed_a: float | None, dt_s: float) -> float:
         """The output for ``current_a``; the loop integrates the error of the sensed current
         (None: not sensed) over ``dt_s``, within the authority bound (class docstring)."""
         self.at_authority = False
+        expected = self._expected_a
+        if self.tau_s > 0.0 and dt_s > 0.0:
+            expected += (1.0 - math.exp(-dt_s / self.tau_s)) * (max(current_a, 0.0) - expected)
+        else:
+            expected = max(current_a, 0.0)
+        self._expected_a = expected if current_a == current_a else 0.0
         if current_a <= 0.0 or current_a != current_a:
             self._integral_a = 0.0
             return self.rest
@@ -66,7 +79,7 @@ class CoilDrive:
         planned = interp(current_a, self.map_current_a, self.map_output)
         if sensed_a is None or self.ki_per_s <= 0.0 or dt_s <= 0.0 or sensed_a != sensed_a:
             return planned
-        step = self.ki_per_s * (current_a - sensed_a) * min(dt_s, 0.01)
+        step = self.ki_per_s * (expected - sensed_a) * min(dt_s, 0.01)
         integral = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
         out = interp(current_a + integral, self.map_current_a, self.map_output)
         span = self.authority * (planned - rest)

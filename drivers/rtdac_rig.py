@@ -39,7 +39,7 @@ import logging
 import math
 import struct
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample, RigState
@@ -70,6 +70,11 @@ log = logging.getLogger("sashil")
 SAFE_CURRENT_A = 0.02
 #: how long deactivate resends the rest frame for a readback (and a sensed current) that confirm it
 SAFE_CONFIRM_S = 0.3
+#: how long the counters must stand still before configure zeroes them, how long it waits for that,
+#: and how often it reads them meanwhile [s]
+STILL_S = 0.5
+STILL_WAIT_S = 20.0
+STILL_POLL_S = 0.005
 #: exchanges in a row whose readback of an output word differs from what was written before the
 #: backend concludes the board ignores that word
 IGNORED_AFTER = 3
@@ -113,6 +118,7 @@ class RtdacRig(RigInterface):
             wiring.coil_loop_ki_per_s,
             current_max_a,
             wiring.coil_loop_authority,
+            coil_tau_s,
         )
         self.road = RoadDrive(
             wiring.road_output_per_rad_s,
@@ -144,6 +150,9 @@ class RtdacRig(RigInterface):
         self._command_a = 0.0
         self._busy_since_ns: int | None = None
         self._busy_limit_ns = round(busy_limit_s * 1e9)
+        #: the clock and the sleep configure waits for the arm's stillness on (a test's simulated time)
+        self.monotonic: Callable[[], float] = time.monotonic
+        self.sleep: Callable[[float], None] = time.sleep
         self.stats: dict[str, Any] = {"samples": 0, "samples_missed": 0, "timeouts": 0, "watchdog_samples": 0}
         self.safe_state: dict[str, bool | float | None] = {"safe_state_confirmed": None, "safe_state_ms": None}
 
@@ -295,11 +304,40 @@ class RtdacRig(RigInterface):
         if w.road_output != "none":
             self._rest_words[self._road_word] = self._output_word(w.road_output, self.road.rest)
 
+    def _wait_still(self) -> None:
+        """Both outputs at rest until the arm's and the road's counters have not moved for
+        :data:`STILL_S` (the arm hangs at its rest); DriverError when they still move after
+        :data:`STILL_WAIT_S` (nothing energised)."""
+        monotonic = self.monotonic
+        start = last_move = monotonic()
+        seen: tuple[int, int] | None = None
+        while True:
+            self._start_frame()
+            self.rest_outputs()
+            self._send()
+            self._raw = self.link.read_frame()
+            words = decode_frame(self._raw)
+            now_counts = (self._arm_raw(words), self._road_raw(words))
+            now = monotonic()
+            if now_counts != seen:
+                seen, last_move = now_counts, now
+            elif now - last_move >= STILL_S:
+                return
+            if now - start > STILL_WAIT_S:
+                raise DriverError(
+                    f"{self.describe()}: the arm's or the road's counter still moves after {STILL_WAIT_S:g} s with "
+                    "both outputs at rest; its zero is taken with the arm hanging still: let it settle (or check "
+                    f"the encoder's wiring for noise), then start again"
+                )
+            self.sleep(STILL_POLL_S)
+
     def _zero_counters(self) -> None:
-        """Both outputs at rest, the arm's and the road's counters reset, and what they show after the
-        reset kept as their offsets (0 on a board that takes the reset word)."""
+        """Both outputs at rest, the arm still, the arm's and the road's counters reset, and what they
+        show after the reset kept as their offsets (0 on a board that takes the reset word)."""
         w, reg = self.wiring, self.map
         assert reg is not None
+        self._offsets = (0, 0)
+        self._wait_still()
         bits = 1 << w.arm_encoder
         if w.road_encoder is not None:
             bits |= 1 << w.road_encoder

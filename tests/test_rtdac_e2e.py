@@ -21,6 +21,8 @@ import pytest
 import yaml
 from processes import loop_of
 
+from sashil.config.rtdac_section import WIRING_KEYS
+
 pytestmark = pytest.mark.e2e
 
 SASHIL = [sys.executable, "-c", "import sys; from sashil.cli import main; sys.exit(main(sys.argv[1:]))"]
@@ -66,14 +68,20 @@ ROAD_APART_RAD = 0.01
 MAX_PAUSE_MS = 20.0
 
 
-def relaxed(tmp: Path) -> str:
+def relaxed(tmp: Path, confirmed: bool = True) -> str:
     """Loss budgets, the busy-bit limit and the transfer timeout relaxed for a shared machine's pauses
-    (a VM stops a process for tens of milliseconds now and then); the faults use the defaults."""
-    path = tmp / "relaxed.yaml"
-    path.write_text(
-        "driver:\n  link_lost_ms: 500.0\n  max_lost_fraction: 1.0\nloop:\n  max_missed_fraction: 1.0\n"
-        "rtdac:\n  transfer_timeout_ms: 300.0\n"
-    )
+    (a VM stops a process for tens of milliseconds now and then); the faults use the defaults. With
+    ``confirmed`` the emulated bench's wiring as doctor --walk confirms it: the defaults, the coil's
+    current sensed on A/D 0."""
+    path = tmp / ("relaxed.yaml" if confirmed else "relaxed-guessed.yaml")
+    doc = {
+        "driver": {"link_lost_ms": 500.0, "max_lost_fraction": 1.0},
+        "loop": {"max_missed_fraction": 1.0},
+        "rtdac": {"transfer_timeout_ms": 300.0},
+    }
+    if confirmed:
+        doc["rtdac"].update({"confirmed": list(WIRING_KEYS), "coil_sense_ad": 0})
+    path.write_text(yaml.safe_dump(doc))
     return str(path)
 
 
@@ -295,7 +303,8 @@ def test_doctor_json_runs_without_a_terminal(tmp_path, board):
 def test_each_fault_ends_in_one_line_at_rest_where_the_board_is_reachable(tmp_path, board, flags, text, code, at_rest):
     emu = board(*flags)
     done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "passive", "--set",
-                  "controller.current_a=0.7", "--road", "sine:1:1", "--duration", "5", "--out", str(tmp_path / "run"))  # fmt: skip
+                  "controller.current_a=0.7", "--set", "rtdac.coil_sense_ad=0", "--road", "sine:1:1", "--duration", "5",
+                  "--out", str(tmp_path / "run"))  # fmt: skip
     last = done.stderr.strip().splitlines()[-1]
     assert done.returncode == code, done.stderr
     assert text in last, done.stderr

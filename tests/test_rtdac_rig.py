@@ -77,7 +77,18 @@ def make(
     port = Tap(board, clock)
     rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(port)
+    on_clock(rig, clock)
     return rig, board, clock, port
+
+
+def on_clock(rig: RtdacRig, clock: Clock) -> None:
+    """The rig's waits (the arm's stillness at configure) on the board's simulated clock."""
+    rig.monotonic = lambda: clock.now * 1e-9
+
+    def sleep(seconds: float) -> None:
+        clock.now += round(seconds * 1e9)
+
+    rig.sleep = sleep
 
 
 def cycle(rig: RtdacRig, clock: Clock, cmd: RigCommand, n: int = 1):
@@ -139,6 +150,7 @@ def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
     host["rtdac"].update(BENCH_SECTION)
     rig = RtdacRig.from_parts(rig_parts(freeze_config(host), "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
+    on_clock(rig, clock)
     rig.configure()
     rig.activate()
     sample = cycle(rig, clock, RigCommand(0.6), 600)
@@ -241,17 +253,21 @@ def test_a_bad_wiring_key_is_refused_when_the_config_is_checked():
         validate({"rtdac": {"road_encoder": 0}}, SCHEMA, "lab.yaml")
 
 
+#: a fault's time from the claim: after configure, which waits 0.5 s for the arm to stand still
+AFTER_CONFIGURE_S = 0.8
+
+
 @pytest.mark.parametrize(
     ("faults", "error", "text"),
     [
-        (BoardFaults(vanish_after_s=0.05), DriverIOError, "the board is gone (No such device"),
+        (BoardFaults(vanish_after_s=AFTER_CONFIGURE_S), DriverIOError, "the board is gone (No such device"),
         (
-            BoardFaults(short_frame_after_s=0.05),
+            BoardFaults(short_frame_after_s=AFTER_CONFIGURE_S),
             ProtocolError,
             "a read frame of 502 bytes from endpoint 4, expected 504",
         ),
-        (BoardFaults(timeout_after_s=0.05), DriverTimeoutError, "no answer within 20 ms (transfer timed out)"),
-        (BoardFaults(stuck_busy_after_s=0.05), DriverIOError, "A/D 0 (the coil current) has stayed busy for"),
+        (BoardFaults(timeout_after_s=AFTER_CONFIGURE_S), DriverTimeoutError, "no answer within 20 ms (transfer timed out)"),
+        (BoardFaults(stuck_busy_after_s=AFTER_CONFIGURE_S), DriverIOError, "A/D 0 (the coil current) has stayed busy for"),
     ],
 )
 def test_a_fault_mid_run_is_one_line_and_the_board_ends_at_rest_where_it_can(faults, error, text):

@@ -210,7 +210,7 @@ def test_the_arm_beyond_its_travel_trips_both_ways_and_its_edge_is_inside():
 @pytest.mark.parametrize(
     ("kind", "code", "beyond", "within", "text"),
     [
-        ("road_tracking", 6, {"road_error_rad": -0.0501}, {"road_error_rad": 0.05}, "the road is 0.050 rad off"),
+        ("road_tracking", 6, {"road_error_rad": -0.0201}, {"road_error_rad": 0.02}, "the road is 0.020 rad off"),
         ("road_limit", 7, {"road_at_limit": True}, {"road_at_limit": False}, "output held at its limit for 50 ms"),
         ("coil_sense", 8, {"coil_at_authority": True}, {"coil_at_authority": False}, "sensed current disagrees"),
     ],

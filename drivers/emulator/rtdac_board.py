@@ -174,7 +174,9 @@ class RtdacBoard:
         self.relay = relay
         self.press_after_s = press_after_s
         self.press_s = press_s
-        self._press: tuple[int, float, float, int] | None = None  # (start ns, from rad, to rad, release ns)
+        self._press: tuple[float, float] | None = None  # (from rad, to rad) of the operator's press to come
+        self._reset_ns: int | None = None  # the host's last counter reset this session: the operator's cue
+        self._written_reset = 0  # the reset word of the host's last write frame
         self._index_done = False
         self.motor = motor or RoadMotor()
         self.map = register_map
@@ -215,11 +217,9 @@ class RtdacBoard:
         self._advance(now_ns)
         self.claimed = True
         self.session_start_ns = now_ns
+        self._reset_ns = None
         if self.operator is not None:
-            angle = math.radians(self.operator.next_hold_deg())
-            start = now_ns + round(self.press_after_s * 1e9)
-            release = now_ns + round(self.operator.release_after_s * 1e9)
-            self._press = (start, self.rig.plant.state.theta_rad, angle, release)
+            self._press = (self.rig.plant.state.theta_rad, math.radians(self.operator.next_hold_deg()))
 
     def release(self) -> None:
         self.claimed = False
@@ -308,6 +308,10 @@ class RtdacBoard:
         written = _FRAME.unpack(frame)
         words = self.words
         ignored = self.faults.ignored_words
+        reset = written[self.map.encoder_reset]
+        if self._written_reset and not reset:
+            self._reset_ns = now_ns  # the reset released: the host has zeroed the counters
+        self._written_reset = reset
         for word in self._writable:
             if word not in ignored:
                 words[word] = written[word]
@@ -360,16 +364,22 @@ class RtdacBoard:
         self.rig.read(now_ns, 0)
 
     def _operator(self, now_ns: int) -> None:
-        """The operator's press: the arm moved to the hold angle over ``press_s``, then held until the release."""
-        press = self._press
-        if press is None or now_ns < press[0]:
+        """The operator's press, once the host has zeroed the counters (it then asks for the hold): from
+        ``press_after_s`` after that, the arm moved to the hold angle over ``press_s``, then held until
+        ``release_after_s`` after it."""
+        press, cue, operator = self._press, self._reset_ns, self.operator
+        if press is None or cue is None or operator is None:
             return
-        start, origin, angle, release = press
+        start = cue + round(self.press_after_s * 1e9)
+        if now_ns < start:
+            return
+        origin, angle = press
         done = (now_ns - start) * 1e-9 / self.press_s if self.press_s > 0.0 else 1.0
         if done < 1.0:
             self.rig.plant.hold(origin + (angle - origin) * done)
             return
         self._press = None
+        release = cue + round(operator.release_after_s * 1e9)
         self.rig.operator_hold(angle, max(release - now_ns, 0) * 1e-9)
 
     @property

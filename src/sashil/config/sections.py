@@ -213,10 +213,11 @@ SAFETY = Section(
         ),
         "road_error_max_rad": Field(
             "float",
-            0.05,
+            0.02,
             low=0.0,
             low_open=True,
-            doc="a host-closed road loop's largest angle error from its reference [rad], held road_error_ms, trips",
+            doc="a host-closed road loop's largest angle error from its reference [rad], held road_error_ms, trips "
+            "(ten times the loop's usual largest on a rightly wired bench)",
         ),
         "road_error_ms": Field(
             "float", 20.0, low=0.0, doc="how long the road's error may stay beyond road_error_max_rad [ms]"
