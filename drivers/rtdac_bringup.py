@@ -30,6 +30,8 @@ class BringUp:
     current_max_a: float
     #: the largest road output magnitude [V, or duty]
     road_output_limit: float
+    #: the road output's unit: "V" (a D/A) or "duty" (a PWM)
+    road_unit: str = "V"
 
     @classmethod
     def of(cls, wiring: Wiring, current_max_a: float) -> BringUp:
@@ -40,7 +42,7 @@ class BringUp:
         road_capped = wiring.road_output != "none" and any(key in guesses for key in ROAD_KEYS)
         current = min(current_max_a, wiring.bringup_current_max_a) if coil_capped else current_max_a
         road = wiring.road_output_limit * (wiring.bringup_road_output if road_capped else 1.0)
-        return cls(guesses, coil_capped, road_capped, current, road)
+        return cls(guesses, coil_capped, road_capped, current, road, "duty" if wiring.road_output == "pwm" else "V")
 
     def caps(self) -> list[str]:
         """The caps in force, each as a phrase ("the coil at 0.3 A (rtdac.bringup_current_max_a)")."""
@@ -48,7 +50,8 @@ class BringUp:
         if self.coil_capped:
             out.append(f"the coil at {self.current_max_a:g} A (rtdac.bringup_current_max_a)")
         if self.road_capped:
-            out.append(f"the road output at {self.road_output_limit:g} (rtdac.bringup_road_output)")
+            size = f"{self.road_output_limit:g} V" if self.road_unit == "V" else f"duty {self.road_output_limit:g}"
+            out.append(f"the road output at {size} (rtdac.bringup_road_output)")
         return out
 
     def line(self) -> str | None:

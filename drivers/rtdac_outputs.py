@@ -63,32 +63,36 @@ class CoilDrive:
         self.at_authority = False
 
     def output(self, current_a: float, sensed_a: float | None, dt_s: float) -> float:
-        """The output for ``current_a``; the loop integrates the error of the sensed current
-        (None: not sensed) over ``dt_s``, within the authority bound (class docstring)."""
+        """The output for ``current_a`` (0, below or NaN: rest); the loop integrates the error of the
+        sensed current (None or NaN: not sensed) against the lagged command over ``dt_s``, within the
+        authority bound (class docstring)."""
         self.at_authority = False
-        expected = self._expected_a
-        if self.tau_s > 0.0 and dt_s > 0.0:
-            expected += (1.0 - math.exp(-dt_s / self.tau_s)) * (max(current_a, 0.0) - expected)
-        else:
-            expected = max(current_a, 0.0)
-        self._expected_a = expected if current_a == current_a else 0.0
-        if current_a <= 0.0 or current_a != current_a:
+        if not current_a > 0.0:  # 0 A, below it, or NaN: rest, the loop's correction forgotten
             self._integral_a = 0.0
+            self._lag(0.0, dt_s)
             return self.rest
-        rest = self.rest
+        expected = self._lag(current_a, dt_s)
         planned = interp(current_a, self.map_current_a, self.map_output)
-        if sensed_a is None or self.ki_per_s <= 0.0 or dt_s <= 0.0 or sensed_a != sensed_a:
+        if sensed_a is None or sensed_a != sensed_a:
             return planned
         step = self.ki_per_s * (expected - sensed_a) * min(dt_s, 0.01)
         integral = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
         out = interp(current_a + integral, self.map_current_a, self.map_output)
-        span = self.authority * (planned - rest)
-        low, high = planned - span, planned + span
-        if out > high or out < low:
+        span = self.authority * (planned - self.rest)
+        if out > planned + span:
             self.at_authority = True  # held at the bound: the integral stays where it was (no wind-up)
-            return high if out > high else low
+            return planned + span
+        if out < planned - span:
+            self.at_authority = True
+            return planned - span
         self._integral_a = integral
         return out
+
+    def _lag(self, current_a: float, dt_s: float) -> float:
+        """The current ``current_a`` gives through the coil's first-order lag, advanced by ``dt_s``."""
+        alpha = 1.0 - math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 1.0
+        self._expected_a += alpha * (current_a - self._expected_a)
+        return self._expected_a
 
 
 class RoadDrive:

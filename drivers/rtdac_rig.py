@@ -42,7 +42,15 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from sashil.drivers.interface import TWO_PI, RigCapabilities, RigCommand, RigInterface, RigSample, RigState
+from sashil.drivers.interface import (
+    TWO_PI,
+    RigCapabilities,
+    RigCommand,
+    RigInterface,
+    RigSample,
+    RigState,
+    clamp_current,
+)
 from sashil.drivers.rtdac_bringup import BringUp
 from sashil.drivers.rtdac_codec import (
     AD_BUSY_BIT,
@@ -98,15 +106,18 @@ class RtdacRig(RigInterface):
         map_dir: str | None = None,
         backend: Any = None,
         busy_limit_s: float = 0.025,
+        rate_hz: float | None = None,
     ):
         """``backend``: a pyusb backend object to find the board through (default: the one ``usb``
-        names); ``busy_limit_s``: how long the coil sense A/D may stay busy before the run ends."""
+        names); ``busy_limit_s``: how long the coil sense A/D may stay busy before the run ends;
+        ``rate_hz``: the loop's rate, which the board's USB link must carry (None: not checked)."""
         super().__init__()
         self.usb = usb
         self.wiring = wiring
         self.bringup = BringUp.of(wiring, current_max_a)
         self.current_max_a = self.bringup.current_max_a
         self.coil_tau_s = coil_tau_s
+        self.rate_hz = rate_hz
         self.application = application
         self.map_dir = map_dir
         self.link = BoardLink(usb, backend)
@@ -163,6 +174,7 @@ class RtdacRig(RigInterface):
         "link_lost_ms": "driver.link_lost_ms",
         "current_max_a": "rig.current_max_a",
         "coil_tau_s": "rig.coil_tau_s",
+        "rate_hz": "loop.rate_hz",
     }
 
     @classmethod
@@ -188,6 +200,7 @@ class RtdacRig(RigInterface):
             map_dir=section["map_dir"],
             backend=backend,
             busy_limit_s=max(values["link_lost_ms"], 1.0) * 1e-3,
+            rate_hz=values.get("rate_hz"),
         )
 
     @property
@@ -213,6 +226,13 @@ class RtdacRig(RigInterface):
         maps = known_maps(self.map_dir)
         self.link.open()
         try:
+            carries = getattr(self.link, "max_rate_hz", None)  # what the bus's speed carries (None: unknown)
+            if carries is not None and self.rate_hz is not None and self.rate_hz > carries:
+                raise DriverError(
+                    f"{self.describe()}: loop.rate_hz {self.rate_hz:g} Hz is more than this USB link carries "
+                    f"({carries:g} exchanges a second: {getattr(self.link, 'speed_text', 'its bus speed')}); plug the "
+                    "board into a high-speed (USB 2.0) port, or lower loop.rate_hz"
+                )
             raw = self.link.read_frame()
             words = decode_frame(raw)
             self.header = decode_header(words)
@@ -605,8 +625,7 @@ class RtdacRig(RigInterface):
             return
         dt_s = dt_ns * 1e-9
         if self.state is RigState.ACTIVE:
-            current = cmd.current_a
-            self._command_a = min(max(current, 0.0), self.current_max_a) if current == current else 0.0
+            self._command_a = clamp_current(cmd.current_a, self.current_max_a)  # the bring-up cap within
             coil = self.coil.output(self._command_a, self._sensed_a, dt_s)
             self.road.command(cmd.road_speed_rad_s)
         else:

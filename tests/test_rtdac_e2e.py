@@ -371,3 +371,54 @@ def test_a_panel_run_over_the_rtdac_streams_and_stops_at_rest(tmp_path, board):
     assert summary["driver"] == "rtdac" and summary["link"]["safe_state_confirmed"] is True
     assert read_csv(folder / "data.csv")["current_cmd_a"][-1] == 0.0
     assert "outputs at rest" in emu.stop().splitlines()[-1]
+
+
+def relay_facts(said: str) -> dict[str, int]:
+    """The emulated relay's last toggle and opening [monotonic ns] and its drops, from the board's last lines."""
+    import re
+
+    (line,) = [text for text in said.splitlines() if "relay: last toggle" in text]
+    found = re.search(r"last toggle at (\d+) ns, open from (\d+) ns .*dropped (\d+) times", line)
+    assert found, line
+    return {"last_ns": int(found[1]), "open_ns": int(found[2]), "drops": int(found[3])}
+
+
+def test_the_heartbeat_holds_the_relay_through_a_run_and_every_host_process_killed_opens_it(tmp_path, board):
+    """A retriggerable relay on the power stages, retriggered by rtdac.heartbeat_bit's toggles: closed
+    through a whole run at 1 kHz; with the session, its loop server and its loop process all killed
+    (SIGKILL), it opens within 50 ms: both stages unpowered, whatever the board's outputs still say."""
+    emu = board("--relay-bit", "3", "--relay-ms", "20")
+    config = relaxed(tmp_path)
+    done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "passive", "--set",
+                  "controller.current_a=0.5", "--set", "rtdac.heartbeat_bit=3", "--road", "sine:1:1", "--duration", "3",
+                  "--config", config, "--out", str(tmp_path / "run"))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    late_ms = metrics(tmp_path / "run")["timing"]["lateness_us"]["max"] * 1e-3
+    proc = subprocess.Popen(
+        [*SASHIL, "run", "--out", str(tmp_path / "killed"), "-v", "--set", "loop.rt.priority=0", "--driver", "rtdac",
+         "--port", emu.port, "--current", "0.8", "--set", "rtdac.heartbeat_bit=3", "--duration", "30",
+         "--config", config],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        for line in proc.stderr:  # type: ignore[union-attr]
+            if line.startswith("loop: running"):
+                break
+        else:
+            raise AssertionError(f"the loop never ran (exit {proc.wait()})")
+        loop = loop_of(proc.pid)
+        time.sleep(0.5)
+        killed_ns = time.monotonic_ns()
+        os.killpg(proc.pid, signal.SIGKILL)  # the session and its loop server
+        os.kill(loop, signal.SIGKILL)
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    said = emu.stop()
+    relay = relay_facts(said)
+    assert relay["open_ns"] - killed_ns <= 50_000_000, (relay, killed_ns)
+    assert "NOT at rest" in said.splitlines()[-1]  # the board keeps its outputs: the relay is what cuts them
+    if late_ms < 20.0:  # a host paused longer than the relay's time drops it mid-run, as it should
+        assert relay["drops"] == 0, (relay, late_ms)

@@ -125,7 +125,7 @@ def test_an_index_reset_mid_run_is_an_encoder_step_that_trips():
 
 
 def test_a_coil_word_the_board_ignores_is_one_line_naming_the_word():
-    rig, board, clock, _ = make(faults=BoardFaults(ignored_words=(22,)))  # PWM 0's width
+    rig, _board, clock, _ = make(faults=BoardFaults(ignored_words=(22,)))  # PWM 0 width
     rig.configure()
     rig.activate()
     with pytest.raises(DriverIOError, match=r"the board ignores word 22 \(the coil's output\): it reads back 0"):
@@ -173,7 +173,7 @@ def test_a_guessed_wiring_runs_under_its_caps_and_says_which_keys_are_guesses():
     assert board.output("pwm", 0) == pytest.approx(1.0, abs=1e-3)  # the coil's keys confirmed: no cap
     facts = rig.link_stats()
     assert facts["guesses"] == [k for k in WIRING_KEYS if k not in COIL_KEYS]
-    assert facts["caps"] == ["the road output at 2.5 (rtdac.bringup_road_output)"]
+    assert facts["caps"] == ["the road output at 2.5 V (rtdac.bringup_road_output)"]
     rig.close()
     rig, board, clock, _ = make(GUESSED)
     rig.configure()

@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from sashil.config.frozen import freeze_config  # noqa: E402
+from sashil.config.rtdac_section import WIRING_KEYS  # noqa: E402
 from sashil.drivers import rig_parts  # noqa: E402
 from sashil.drivers.emulator.rtdac_board import build_board  # noqa: E402
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend, SocketPort  # noqa: E402
@@ -56,6 +57,9 @@ def bench_config() -> object:
     and then), so the run measures the exchange rather than ending at the first pause."""
     raw = default_config()
     raw["rtdac"]["transfer_timeout_ms"] = 500.0
+    if "confirmed" in raw["rtdac"]:  # the bench as the walk confirms it: the coil's current sensed on A/D 0
+        raw["rtdac"]["confirmed"] = list(WIRING_KEYS)
+        raw["rtdac"]["coil_sense_ad"] = 0
     return freeze_config(raw)
 
 

@@ -1,8 +1,12 @@
 """Mutation testing of the safety code: flip each comparison, one at a time, and run the tests.
 
 Python targets: every comparison in ``src/sashil/safety.py`` (the host's supervisor), in
-``clamp_current`` of ``drivers/interface.py`` (the one current clamp) and in the device watchdog of
-``drivers/emulator/device.py`` (the comparisons that read ``watchdog*`` or ``_last_cmd_ns``).
+``clamp_current`` of ``drivers/interface.py`` (the one current clamp), in the device watchdog of
+``drivers/emulator/device.py`` (the comparisons that read ``watchdog*`` or ``_last_cmd_ns``), and in
+what the rtdac backend lets reach a board with no watchdog of its own: the coil's and the road's
+outputs (``output`` and ``_lag`` of ``drivers/rtdac_outputs.py``: the current loop's authority, the
+road's limits and its one-way clamp) and the bring-up caps of a guessed wiring (``BringUp.of`` of
+``drivers/rtdac_bringup.py``).
 
 C targets, the board that runs on the bench (``drivers/firmware/sashil_board.c``): the current clamp
 (``set_drive``), the watchdog (in ``sashil_board_tick`` and ``sashil_board_next_event_us``), and the
@@ -58,7 +62,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 #: the tests of the safety path (unit tier: the virtual clock, no pty, no child process)
-TESTS = ["tests/test_safety.py", "tests/test_emulator_device.py", "tests/test_loop.py", "tests/test_sim_driver.py"]
+TESTS = [
+    "tests/test_safety.py",
+    "tests/test_emulator_device.py",
+    "tests/test_loop.py",
+    "tests/test_sim_driver.py",
+    "tests/test_rtdac_outputs.py",
+]
 
 #: the C board's tests (unit tier), and the end-to-end ones on the C board for what those miss
 C_TESTS = ["tests/test_firmware_board.py", "tests/test_firmware_fuzz.py"]
@@ -94,6 +104,9 @@ TARGETS = (
     Target("sashil.safety", "src/sashil/safety.py"),
     Target("sashil.drivers.interface", "drivers/interface.py", function="clamp_current"),
     Target("sashil.drivers.emulator.device", "drivers/emulator/device.py", mentions=("watchdog", "_last_cmd_ns")),
+    Target("sashil.drivers.rtdac_outputs", "drivers/rtdac_outputs.py", function="output"),
+    Target("sashil.drivers.rtdac_outputs", "drivers/rtdac_outputs.py", function="_lag"),
+    Target("sashil.drivers.rtdac_bringup", "drivers/rtdac_bringup.py", function="of"),
 )
 
 

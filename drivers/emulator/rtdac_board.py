@@ -102,6 +102,8 @@ class Relay:
     level: int = 0
     #: times it opened after having been closed, during a session (a host pause longer than hold_ms)
     drops: int = 0
+    #: retriggered in this session: a gap longer than hold_ms from here on is a drop
+    armed: bool = False
 
     def closed(self, now_ns: int) -> bool:
         last = self.last_toggle_ns
@@ -115,10 +117,11 @@ class Relay:
     def take(self, level: int, now_ns: int) -> None:
         """The bit's level in a write frame at ``now_ns``: a change retriggers the relay."""
         if level != self.level:
-            if self.last_toggle_ns is not None and not self.closed(now_ns):
+            if self.armed and not self.closed(now_ns):
                 self.drops += 1
             self.level = level
             self.last_toggle_ns = now_ns
+            self.armed = True
 
 
 @dataclass
@@ -218,6 +221,8 @@ class RtdacBoard:
         self.claimed = True
         self.session_start_ns = now_ns
         self._reset_ns = None
+        if self.relay is not None:
+            self.relay.armed = False  # a new host: the gap since the last one's toggles is no drop
         if self.operator is not None:
             self._press = (self.rig.plant.state.theta_rad, math.radians(self.operator.next_hold_deg()))
 
