@@ -129,6 +129,17 @@ def test_a_full_speed_link_refuses_a_1_khz_loop_in_one_line_before_any_transfer(
     link.close()
 
 
+def test_the_backend_refuses_a_loop_faster_than_a_full_speed_link_before_anything_is_written():
+    if "rate_hz" not in RtdacRig.reads:
+        pytest.skip("the rtdac backend does not pass loop.rate_hz to its link (RtdacRig.reads['rate_hz'])")
+    board, port, _clock = board_and_port(UsbFaults(full_speed=True))
+    rig = rig_on(port)
+    with pytest.raises(DriverError, match=r"^rtdac: the board is on a full-speed USB link \(12 Mbit/s\), which carries"):
+        rig.configure()
+    assert port.writes() == [] and board.at_rest()
+    rig.close()
+
+
 @pytest.mark.parametrize(
     ("missing", "text"),
     [
@@ -293,3 +304,21 @@ def test_the_read_frames_after_a_recovery_are_fresh():
     low, high = board.map.counter_words(0)
     assert words[low] == board.words[low] and words[high] == board.words[high]
     rig.close()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--stale-frames", "-1"], "--stale-frames: expected a count from 0 to 64, got -1"),
+        (["--halt-after", "-0.5"], "--halt-after: expected seconds >= 0, got -0.5"),
+        (["--wedge-after", "nan"], "--wedge-after: expected seconds >= 0, got nan"),
+    ],
+)
+def test_a_bad_usb_fault_flag_is_one_line_and_exit_2_with_no_socket(tmp_path, capsys, flags, message):
+    from sashil.cli import main
+
+    link = tmp_path / "rtdac.sock"
+    assert main(["emulate", "--transport", "rtdac", "--link", str(link), "--duration", "0.1", *flags]) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(errors) == 1 and message in errors[0], errors
+    assert not link.exists()

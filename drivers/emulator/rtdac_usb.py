@@ -75,7 +75,7 @@ class UsbFaults:
     stale_frames: int = 0
     #: then ``halt_endpoint`` stalls every transfer (a pipe error) until the host clears its halt; once
     halt_after_s: float | None = None
-    halt_endpoint: int = ENDPOINT_IN
+    halt_endpoint: int = ENDPOINT_OUT
     #: then every transfer fails (an I/O error) until the host resets the device or claims it again; once
     wedge_after_s: float | None = None
 

@@ -79,7 +79,7 @@ def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
         "--halt-after",
         type=float,
         metavar="S",
-        help="endpoint 0x84 halts after S seconds, until the host clears its halt (once)",
+        help="endpoint 0x02 (frames to the board) halts after S seconds, until the host clears its halt (once)",
     )
     group.add_argument(
         "--wedge-after",
