@@ -47,7 +47,7 @@ def speed_words(speed: int | None) -> str:
     """``"full-speed (12 Mbit/s)"``, or ``"of unknown speed"``."""
     if speed not in SPEED_WORDS:
         return "of unknown speed"
-    name, rate = SPEED_WORDS[speed]  # type: ignore[index]
+    name, rate = SPEED_WORDS[speed]
     return f"{name} ({rate})"
 
 

@@ -297,10 +297,14 @@ def test_a_run_on_a_full_speed_link_is_refused_in_one_line_with_nothing_energise
     done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "passive", "--set",
                   "controller.current_a=0.7", "--duration", "2", "--out", str(tmp_path / "run"))  # fmt: skip
     assert done.returncode == 2, done.stderr
-    assert done.stderr.strip().splitlines()[-1].endswith(
-        "rtdac: the board is on a full-speed USB link (12 Mbit/s), which carries at most 1055 exchanges a second "
-        "(948 us of bus time each, USB 2.0 section 5.11.3) and leaves room for a 844 Hz loop; loop.rate_hz is 1000: "
-        "plug the board into a high-speed (USB 2.0) port with no USB 1.1 hub between, or --set loop.rate_hz=844"
+    assert (
+        done.stderr.strip()
+        .splitlines()[-1]
+        .endswith(
+            "rtdac: the board is on a full-speed USB link (12 Mbit/s), which carries at most 1055 exchanges a second "
+            "(948 us of bus time each, USB 2.0 section 5.11.3) and leaves room for a 844 Hz loop; loop.rate_hz is 1000: "
+            "plug the board into a high-speed (USB 2.0) port with no USB 1.1 hub between, or --set loop.rate_hz=844"
+        )
     )
     assert not (tmp_path / "run").exists()
     said = emu.stop().splitlines()[-1]

@@ -19,7 +19,7 @@ from sashil.drivers.emulator.rtdac_board import BoardFaults, build_board
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend, UsbFaults
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.rtdac_bus import exchange_ns, link_limits, transaction_ns, transfer_ns
-from sashil.drivers.rtdac_codec import DA_ZERO, READ_REQUEST, decode_frame
+from sashil.drivers.rtdac_codec import DA_ZERO, READ_REQUEST
 from sashil.drivers.rtdac_rest import rest_until_confirmed
 from sashil.drivers.rtdac_rig import RtdacRig
 from sashil.drivers.rtdac_usb import BoardLink, UsbSettings
@@ -134,7 +134,9 @@ def test_the_backend_refuses_a_loop_faster_than_a_full_speed_link_before_anythin
         pytest.skip("the rtdac backend does not pass loop.rate_hz to its link (RtdacRig.reads['rate_hz'])")
     board, port, _clock = board_and_port(UsbFaults(full_speed=True))
     rig = rig_on(port)
-    with pytest.raises(DriverError, match=r"^rtdac: the board is on a full-speed USB link \(12 Mbit/s\), which carries"):
+    with pytest.raises(
+        DriverError, match=r"^rtdac: the board is on a full-speed USB link \(12 Mbit/s\), which carries"
+    ):
         rig.configure()
     assert port.writes() == [] and board.at_rest()
     rig.close()
@@ -294,16 +296,6 @@ def test_recover_on_a_link_never_opened_says_so():
     _board, port, _clock = board_and_port()
     with pytest.raises(DriverIOError, match="recover: the board is not open"):
         link_to(port).recover()
-
-
-def test_the_read_frames_after_a_recovery_are_fresh():
-    board, port, rig, _ = driven(UsbFaults(halt_after_s=0.05))
-    rig.link.recover()
-    board.rig.plant.hold(math.radians(7.0))
-    words = decode_frame(rig.link.read_frame())
-    low, high = board.map.counter_words(0)
-    assert words[low] == board.words[low] and words[high] == board.words[high]
-    rig.close()
 
 
 @pytest.mark.parametrize(
