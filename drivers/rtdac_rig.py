@@ -68,6 +68,7 @@ from sashil.drivers.rtdac_codec import (
 )
 from sashil.drivers.rtdac_map import RegisterMap, choose_map, known_maps
 from sashil.drivers.rtdac_outputs import CoilDrive, RoadDrive
+from sashil.drivers.rtdac_rest import rest_until_confirmed
 from sashil.drivers.rtdac_usb import BoardLink, UsbSettings
 from sashil.drivers.rtdac_wiring import Wiring
 from sashil.errors import DriverError, DriverIOError
@@ -106,18 +107,16 @@ class RtdacRig(RigInterface):
         map_dir: str | None = None,
         backend: Any = None,
         busy_limit_s: float = 0.025,
-        rate_hz: float | None = None,
     ):
         """``backend``: a pyusb backend object to find the board through (default: the one ``usb``
-        names); ``busy_limit_s``: how long the coil sense A/D may stay busy before the run ends;
-        ``rate_hz``: the loop's rate, which the board's USB link must carry (None: not checked)."""
+        names); ``busy_limit_s``: how long the coil sense A/D may stay busy before the run ends (the
+        loop's rate, which the board's USB link must carry, is ``usb.rate_hz``)."""
         super().__init__()
         self.usb = usb
         self.wiring = wiring
         self.bringup = BringUp.of(wiring, current_max_a)
         self.current_max_a = self.bringup.current_max_a
         self.coil_tau_s = coil_tau_s
-        self.rate_hz = rate_hz
         self.application = application
         self.map_dir = map_dir
         self.link = BoardLink(usb, backend)
@@ -190,6 +189,7 @@ class RtdacRig(RigInterface):
             usb_backend=section["usb_backend"],
             port=values["port"],
             timeout_ms=section["transfer_timeout_ms"],
+            rate_hz=values.get("rate_hz"),
         )
         return cls(
             usb,
@@ -200,7 +200,6 @@ class RtdacRig(RigInterface):
             map_dir=section["map_dir"],
             backend=backend,
             busy_limit_s=max(values["link_lost_ms"], 1.0) * 1e-3,
-            rate_hz=values.get("rate_hz"),
         )
 
     @property
@@ -226,13 +225,6 @@ class RtdacRig(RigInterface):
         maps = known_maps(self.map_dir)
         self.link.open()
         try:
-            carries = getattr(self.link, "max_rate_hz", None)  # what the bus's speed carries (None: unknown)
-            if carries is not None and self.rate_hz is not None and self.rate_hz > carries:
-                raise DriverError(
-                    f"{self.describe()}: loop.rate_hz {self.rate_hz:g} Hz is more than this USB link carries "
-                    f"({carries:g} exchanges a second: {getattr(self.link, 'speed_text', 'its bus speed')}); plug the "
-                    "board into a high-speed (USB 2.0) port, or lower loop.rate_hz"
-                )
             raw = self.link.read_frame()
             words = decode_frame(raw)
             self.header = decode_header(words)
@@ -451,58 +443,44 @@ class RtdacRig(RigInterface):
         self.state = RigState.ACTIVE
 
     def deactivate(self) -> None:
-        """Both outputs to rest and the readback checked (module docstring); never raises."""
+        """Both outputs to rest and the readback checked (module docstring), the link recovered
+        between tries (clear_halt, then a reopen) until :data:`SAFE_CONFIRM_S`; never raises."""
         self._command_a = 0.0
         self.road.stop()
         was_active = self.state is RigState.ACTIVE
         if was_active:
             self.state = RigState.CONFIGURED
-        if self.link.dev is None or self.map is None or self._raw is None:
-            return
-        start = time.monotonic()
-        confirmed = False
-        last_error: Exception | None = None
-        while True:
-            try:
-                self._start_frame()
-                self.rest_outputs()
-                self._send()
-                self._raw = self.link.read_frame()
-                words = decode_frame(self._raw)
-                sensed = self._sense(words)
-                if self._at_rest(words) and (
-                    sensed is None or abs(sensed) <= max(SAFE_CURRENT_A, 0.02 * self.current_max_a)
-                ):
-                    confirmed = True
-                    break
-            except Exception as err:
-                last_error = err
-                if not self._recover():
-                    break
-            if time.monotonic() - start > SAFE_CONFIRM_S:
-                break
-        self.safe_state["safe_state_confirmed"] = confirmed
-        self.safe_state["safe_state_ms"] = round((time.monotonic() - start) * 1e3, 3)
-        if not confirmed:
-            why = f": {last_error}" if last_error is not None else ""
+        if self.map is None or self._raw is None:
+            return  # never greeted: nothing was written
+
+        def rest_and_read() -> tuple[int, ...]:
+            self._start_frame()
+            self.rest_outputs()
+            self._send()
+            self._raw = self.link.read_frame()
+            return decode_frame(self._raw)
+
+        def at_rest(words: tuple[int, ...]) -> bool:
+            sensed = self._sense(words)
+            quiet = sensed is None or abs(sensed) <= max(SAFE_CURRENT_A, 0.02 * self.current_max_a)
+            return self._at_rest(words) and quiet
+
+        outcome = rest_until_confirmed(
+            rest_and_read, at_rest, self.link.recover, time.monotonic, SAFE_CONFIRM_S, time.sleep
+        )
+        self.safe_state["safe_state_confirmed"] = outcome.confirmed
+        self.safe_state["safe_state_ms"] = round(outcome.elapsed_s * 1e3, 3)
+        self.safe_state["safe_state_attempts"] = outcome.attempts
+        if not outcome.confirmed:
+            why = f" (last: {outcome.last_error})" if outcome.last_error is not None else ""
             log.warning(
-                "%s: deactivate: could not confirm both outputs at rest within %g s%s; the board keeps its last "
-                "outputs: use the E-stop",
+                "%s: deactivate: could NOT confirm both outputs at rest in %d tries over %g s%s; the board keeps "
+                "its last outputs: use the E-stop",
                 self.describe(),
+                outcome.attempts,
                 SAFE_CONFIRM_S,
                 why,
             )
-
-    def _recover(self) -> bool:
-        """After a failed exchange: the link's own recovery where it has one; whether to try again."""
-        recover = getattr(self.link, "recover", None)
-        if recover is None:
-            return False
-        try:
-            recover()
-        except Exception:
-            return False
-        return True
 
     def _at_rest(self, words: tuple[int, ...]) -> bool:
         """Whether the read frame shows both outputs at rest, each word masked to the bits its register holds."""
@@ -621,7 +599,7 @@ class RtdacRig(RigInterface):
     def write(self, cmd: RigCommand, t_ns: int, dt_ns: int) -> None:
         """The cycle's outputs, in one write frame built from this cycle's read: the coil's (rest
         unless active), the road motor's and its direction, and the heartbeat."""
-        if self.map is None or self.link.dev is None or self._raw is None:
+        if self.map is None or self._raw is None:
             return
         dt_s = dt_ns * 1e-9
         if self.state is RigState.ACTIVE:
@@ -670,6 +648,7 @@ class RtdacRig(RigInterface):
             **self.bringup.facts(),
             **self.road.tracking(),
         }
+        facts.update(self.link.facts())
         if self.header is not None:
             facts["board"] = self.header.describe()
         if self.map is not None:

@@ -284,6 +284,41 @@ def test_doctor_json_runs_without_a_terminal(tmp_path, board):
     assert "no RT-DAC/USB2 found" in rows["board/usb"]["found"]
 
 
+def test_doctor_reports_the_link_the_board_is_on_and_the_stale_frames_it_drained(board):
+    emu = board("--stale-frames", "2")
+    done = sashil("doctor", "--driver", "rtdac", "--port", emu.port, "--jitter-s", "0", "--round-trips", "20", "--json")
+    rows = {f"{c['group']}/{c['name']}": c for c in json.loads(done.stdout)["checks"]}
+    link = rows["board/link"]
+    assert link["status"] == "ok", link
+    assert link["data"]["usb_ids"] == "04b4:8613" and link["data"]["serial"] == "1"
+    assert link["data"]["usb_speed"] == "high-speed (480 Mbit/s)" and link["data"]["bus_max_rate_hz"] == 35647
+    assert link["data"]["stale_frames_discarded"] == 2 and "2 stale frame(s) drained" in link["found"]
+    assert rows["board/at rest"]["status"] == "ok"
+
+
+def test_a_run_on_a_full_speed_link_is_refused_in_one_line_with_nothing_energised(tmp_path, board):
+    from sashil.drivers.rtdac_rig import RtdacRig
+
+    if "rate_hz" not in RtdacRig.reads:
+        pytest.skip("the rtdac backend does not pass loop.rate_hz to its link (RtdacRig.reads['rate_hz'])")
+    emu = board("--full-speed")
+    done = sashil("run", "--driver", "rtdac", "--port", emu.port, "--controller", "passive", "--set",
+                  "controller.current_a=0.7", "--duration", "2", "--out", str(tmp_path / "run"))  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert (
+        done.stderr.strip()
+        .splitlines()[-1]
+        .endswith(
+            "rtdac: the board is on a full-speed USB link (12 Mbit/s), which carries at most 1055 exchanges a second "
+            "(948 us of bus time each, USB 2.0 section 5.11.3) and leaves room for a 844 Hz loop; loop.rate_hz is 1000: "
+            "plug the board into a high-speed (USB 2.0) port with no USB 1.1 hub between, or --set loop.rate_hz=844"
+        )
+    )
+    assert not (tmp_path / "run").exists()
+    said = emu.stop().splitlines()[-1]
+    assert "exchanges 0" in said and "outputs at rest" in said, said
+
+
 @pytest.mark.parametrize(
     ("flags", "text", "code", "at_rest"),
     [
@@ -298,6 +333,12 @@ def test_doctor_json_runs_without_a_terminal(tmp_path, board):
             True,
         ),
         (("--permission-denied",), "permission denied", 2, True),
+        (
+            ("--missing-endpoint", "84"),
+            "the board has no bulk IN endpoint 0x84 (frames from the FPGA) on interface 0; it offers 0x02 bulk OUT",
+            2,
+            True,
+        ),
     ],
 )
 def test_each_fault_ends_in_one_line_at_rest_where_the_board_is_reachable(tmp_path, board, flags, text, code, at_rest):

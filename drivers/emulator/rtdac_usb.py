@@ -14,9 +14,16 @@ The backend reaches the board through a port:
 * :class:`DirectPort` calls a board in the same process, on a clock the caller gives (tests).
 
 One request, one reply, each a packet: ``O`` open, ``C`` claim, ``L`` release, ``I`` the board's
-identity (JSON), ``W`` + endpoint + data, ``R`` + endpoint + size. A reply starts with ``0`` (ok)
-or ``1`` + errno + text (libusb's errors: 13 access denied, 16 busy, 19 no such device); a read the
-board leaves unanswered times out on the host's side, as a USB transfer does.
+identity (JSON), ``U`` its USB side (speed, packet size, endpoints: JSON), ``W`` + endpoint + data,
+``R`` + endpoint + size, ``H`` + endpoint clear halt, ``X`` reset. A reply starts with ``0`` (ok)
+or ``1`` + errno + text (libusb's errors: 5 I/O error, 13 access denied, 16 busy, 19 no such
+device, 32 pipe error: a halted endpoint); a read the board leaves unanswered times out on the
+host's side, as a USB transfer does.
+
+The USB side's faults (:class:`UsbFaults`, held by :class:`UsbSide`) are the ones a host meets at
+first contact and on the stop path: the board enumerated at full speed, an endpoint missing, frames
+an earlier host asked for left waiting on endpoint 4, an endpoint that halts until the host clears
+it, and a transfer error that only a reset or a reopen cures.
 """
 
 from __future__ import annotations
@@ -27,8 +34,10 @@ import json
 import os
 import select
 import socket
+import struct
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -36,7 +45,7 @@ import usb.backend
 import usb.core
 
 from sashil.drivers.emulator.rtdac_board import BoardIdentity, RtdacBoard, TransferError, TransferTimeout
-from sashil.drivers.rtdac_codec import ENDPOINT_IN, ENDPOINT_OUT
+from sashil.drivers.rtdac_codec import ENDPOINT_IN, ENDPOINT_OUT, FRAME_WORDS
 
 OK, FAIL = b"\x00", b"\x01"
 #: the packet size the socket carries (a frame plus its header)
@@ -46,6 +55,81 @@ EMULATED_PREFIX = "emulated:"
 
 def _fail(code: int, text: str) -> bytes:
     return FAIL + bytes((code,)) + text.encode()
+
+
+#: the board's bulk endpoints: FPGA out and in, JTAG out and in (RTDACUSB2.cs lines 74-81)
+ENDPOINTS = (ENDPOINT_OUT, ENDPOINT_IN, 0x06, 0x88)
+#: libusb's speed codes: full (12 Mbit/s) and high (480 Mbit/s) speed
+FULL_SPEED, HIGH_SPEED = 2, 3
+
+
+@dataclass
+class UsbFaults:
+    """The board's USB side at fault; times count from the host's claim."""
+
+    #: the board enumerates at full speed (12 Mbit/s, 64-byte bulk packets), as behind a USB 1.1 hub
+    full_speed: bool = False
+    #: this endpoint is missing from the interface (0x02 or 0x84: a board with other firmware)
+    missing_endpoint: int | None = None
+    #: frames an earlier host asked for and never read, waiting on endpoint 4 when a host opens the board
+    stale_frames: int = 0
+    #: then ``halt_endpoint`` stalls every transfer (a pipe error) until the host clears its halt; once
+    halt_after_s: float | None = None
+    halt_endpoint: int = ENDPOINT_OUT
+    #: then every transfer fails (an I/O error) until the host resets the device or claims it again; once
+    wedge_after_s: float | None = None
+
+
+class UsbSide:
+    """The state of the board's USB side under :class:`UsbFaults`."""
+
+    def __init__(self, board: RtdacBoard, faults: UsbFaults | None = None):
+        self.board = board
+        self.faults = faults or UsbFaults()
+        words = struct.pack(f"<{FRAME_WORDS}H", *board.words)  # the registers an earlier host latched
+        self.stale = [words] * self.faults.stale_frames
+        self.halted: set[int] = set()
+        self.wedged = False
+        self._halt_spent = self._wedge_spent = False
+        self.clear_halts = 0
+        self.resets = 0
+
+    def describe(self) -> dict[str, Any]:
+        """What the host's backend builds its descriptors from (``U``)."""
+        f = self.faults
+        return {
+            "speed": FULL_SPEED if f.full_speed else HIGH_SPEED,
+            "max_packet": 64 if f.full_speed else 512,
+            "endpoints": [ep for ep in ENDPOINTS if ep != f.missing_endpoint],
+        }
+
+    def _after(self, now_ns: int, after_s: float | None) -> bool:
+        start = self.board.session_start_ns
+        return after_s is not None and start is not None and (now_ns - start) * 1e-9 >= after_s
+
+    def check(self, endpoint: int, now_ns: int) -> None:
+        """A transfer on ``endpoint``: TransferError when the side is halted there or wedged."""
+        f = self.faults
+        if not self._halt_spent and self._after(now_ns, f.halt_after_s):
+            self._halt_spent = True
+            self.halted.add(f.halt_endpoint)
+        if not self._wedge_spent and self._after(now_ns, f.wedge_after_s):
+            self._wedge_spent = True
+            self.wedged = True
+        if self.wedged:
+            raise TransferError(errno.EIO, "Input/Output Error (the board's FIFO is stuck)")
+        if endpoint in self.halted:
+            raise TransferError(errno.EPIPE, f"Pipe error (endpoint 0x{endpoint:02x} halted)")
+
+    def clear_halt(self, endpoint: int) -> None:
+        self.clear_halts += 1
+        self.halted.discard(endpoint)
+
+    def reset(self) -> None:
+        """A reset (or a new claim): the FIFOs and the endpoints start afresh."""
+        self.resets += 1
+        self.wedged = False
+        self.halted.clear()
 
 
 class BoardPort:
@@ -62,10 +146,14 @@ def serve(board: RtdacBoard, request: bytes, now_ns: int, holder: object, state:
     """The board's reply to one request from ``holder`` (a connection); ``state['holder']`` is who
     has claimed the board. None: the board leaves it unanswered."""
     op = request[:1]
+    side = state.get("usb")
+    side = side if isinstance(side, UsbSide) else None
     try:
         if op == b"I":
             ident = board.identity
             return OK + json.dumps(ident.__dict__).encode()
+        if op == b"U":
+            return OK + json.dumps((side or UsbSide(board)).describe()).encode()
         if op == b"O":
             board.open()
             return OK
@@ -74,18 +162,33 @@ def serve(board: RtdacBoard, request: bytes, now_ns: int, holder: object, state:
                 return _fail(errno.EBUSY, "Resource busy (another program has claimed the board)")
             state["holder"] = holder
             board.claim(now_ns)
+            if side is not None and side.wedged:
+                side.reset()
             return OK
         if op == b"L":
             if state.get("holder") is holder:
                 state["holder"] = None
                 board.release()
             return OK
+        if op == b"X":
+            if side is not None:
+                side.reset()
+            return OK
         if state.get("holder") is not holder:
             return _fail(errno.EBUSY, "Resource busy (the interface is not claimed)")
+        if op == b"H":
+            if side is not None:
+                side.clear_halt(request[1])
+            return OK
+        if side is not None and op in (b"W", b"R"):
+            side.check(request[1], now_ns)
         if op == b"W":
             return OK + board.bulk_write(request[1], request[2:], now_ns).to_bytes(2, "little")
         if op == b"R":
-            return OK + board.bulk_read(request[1], int.from_bytes(request[2:4], "little"), now_ns)
+            size = int.from_bytes(request[2:4], "little")
+            if side is not None and side.stale and request[1] == ENDPOINT_IN:
+                return OK + side.stale.pop(0)[:size]
+            return OK + board.bulk_read(request[1], size, now_ns)
     except TransferError as err:
         return _fail(err.errno, str(err))
     except TransferTimeout:
@@ -96,10 +199,13 @@ def serve(board: RtdacBoard, request: bytes, now_ns: int, holder: object, state:
 class DirectPort(BoardPort):
     """A board in this process, on the clock ``clock`` (nanoseconds)."""
 
-    def __init__(self, board: RtdacBoard, clock: Callable[[], int] = time.monotonic_ns):
+    def __init__(
+        self, board: RtdacBoard, clock: Callable[[], int] = time.monotonic_ns, usb_faults: UsbFaults | None = None
+    ):
         self.board = board
         self.clock = clock
-        self.state: dict[str, object] = {}
+        self.usb = UsbSide(board, usb_faults)
+        self.state: dict[str, object] = {"usb": self.usb}
 
     def call(self, request: bytes, timeout_s: float) -> bytes | None:
         return serve(self.board, request, self.clock(), self, self.state)
@@ -177,7 +283,7 @@ def _raise(reply: bytes | None, timeout_ms: float) -> bytes:
     if reply[:1] == OK:
         return reply[1:]
     code = reply[1]
-    libusb_code = {errno.EACCES: -3, errno.ENODEV: -4, errno.EBUSY: -6}.get(code, -99)
+    libusb_code = {errno.EIO: -1, errno.EACCES: -3, errno.ENODEV: -4, errno.EBUSY: -6, errno.EPIPE: -9}.get(code, -99)
     raise usb.core.USBError(reply[2:].decode(errors="replace"), libusb_code, code)
 
 
@@ -188,6 +294,8 @@ class EmulatedUsbBackend(usb.backend.IBackend):
         super().__init__()
         self.port = port
         self._identity: BoardIdentity | None = None
+        #: the board's USB side (``U``): speed, packet size, endpoints
+        self._usb: dict[str, Any] = {}
 
     def _call(self, request: bytes, timeout_ms: float = 1000.0) -> bytes:
         return _raise(self.port.call(request, timeout_ms * 1e-3), timeout_ms)
@@ -199,7 +307,11 @@ class EmulatedUsbBackend(usb.backend.IBackend):
         except usb.core.USBError:
             return iter(())  # no board there
         self._identity = BoardIdentity(**json.loads(payload))
+        self._usb = json.loads(self._call(b"U"))
         return iter((0,))
+
+    def _side(self) -> dict[str, Any]:
+        return self._usb or {"speed": HIGH_SPEED, "max_packet": 512, "endpoints": list(ENDPOINTS)}
 
     def get_device_descriptor(self, dev: Any) -> Any:
         ident = self._identity or BoardIdentity()
@@ -222,14 +334,14 @@ class EmulatedUsbBackend(usb.backend.IBackend):
             bus=1,
             port_number=1,
             port_numbers=(1,),
-            speed=3,
+            speed=self._side()["speed"],
         )
 
     def get_configuration_descriptor(self, dev: Any, config: int) -> Any:
         return SimpleNamespace(
             bLength=9,
             bDescriptorType=2,
-            wTotalLength=9 + 9 + 4 * 7,
+            wTotalLength=9 + 9 + 7 * len(self._side()["endpoints"]),
             bNumInterfaces=1,
             bConfigurationValue=1,
             iConfiguration=0,
@@ -246,7 +358,7 @@ class EmulatedUsbBackend(usb.backend.IBackend):
             bDescriptorType=4,
             bInterfaceNumber=0,
             bAlternateSetting=0,
-            bNumEndpoints=4,
+            bNumEndpoints=len(self._side()["endpoints"]),
             bInterfaceClass=0xFF,
             bInterfaceSubClass=0,
             bInterfaceProtocol=0,
@@ -254,18 +366,16 @@ class EmulatedUsbBackend(usb.backend.IBackend):
             extra_descriptors=[],
         )
 
-    #: the board's bulk endpoints: FPGA out and in, JTAG out and in (RTDACUSB2.cs lines 74-81)
-    ENDPOINTS = (ENDPOINT_OUT, ENDPOINT_IN, 0x06, 0x88)
-
     def get_endpoint_descriptor(self, dev: Any, ep: int, intf: int, alt: int, config: int) -> Any:
-        if ep >= len(self.ENDPOINTS):
+        side = self._side()
+        if ep >= len(side["endpoints"]):
             raise IndexError("no such endpoint")
         return SimpleNamespace(
             bLength=7,
             bDescriptorType=5,
-            bEndpointAddress=self.ENDPOINTS[ep],
+            bEndpointAddress=side["endpoints"][ep],
             bmAttributes=0x02,
-            wMaxPacketSize=512,
+            wMaxPacketSize=side["max_packet"],
             bInterval=0,
             bRefresh=0,
             bSynchAddress=0,
@@ -303,10 +413,10 @@ class EmulatedUsbBackend(usb.backend.IBackend):
         return False
 
     def reset_device(self, dev_handle: Any) -> None:
-        pass
+        self._call(b"X")
 
     def clear_halt(self, dev_handle: Any, ep: int) -> None:
-        pass
+        self._call(b"H" + bytes((ep,)))
 
     # transfers ----------------------------------------------------------------------------------
     def bulk_write(self, dev_handle: Any, ep: int, intf: int, data: Any, timeout: int) -> int:
@@ -346,16 +456,23 @@ def backend_for(port: str) -> EmulatedUsbBackend:
 class BoardServer:
     """Serves a board on a Unix socket at ``path`` until stopped (``sashil emulate --transport rtdac``)."""
 
-    def __init__(self, board: RtdacBoard, path: str, clock: Callable[[], int] = time.monotonic_ns):
+    def __init__(
+        self,
+        board: RtdacBoard,
+        path: str,
+        clock: Callable[[], int] = time.monotonic_ns,
+        usb_faults: UsbFaults | None = None,
+    ):
         self.board = board
         self.path = path
         self.clock = clock
+        self.usb = UsbSide(board, usb_faults)
         if os.path.exists(path):
             os.unlink(path)
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.listener.bind(path)
         self.listener.listen(4)
-        self.state: dict[str, object] = {}
+        self.state: dict[str, object] = {"usb": self.usb}
         self._stop_r, self._stop_w = os.pipe()
         self.connections: list[socket.socket] = []
 

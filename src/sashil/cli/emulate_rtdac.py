@@ -89,6 +89,37 @@ def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
         help="the relay opens MS after the last toggle (default 20)",
     )
 
+    group.add_argument(
+        "--full-speed",
+        action="store_true",
+        help="the board enumerates at full speed (12 Mbit/s, 64-byte packets), as behind a USB 1.1 hub",
+    )
+    group.add_argument(
+        "--missing-endpoint",
+        choices=("02", "84"),
+        metavar="EP",
+        help="endpoint 0x02 or 0x84 is missing from the board's interface (other firmware)",
+    )
+    group.add_argument(
+        "--stale-frames",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N frames an earlier host asked for and never read wait on endpoint 4 (default 0)",
+    )
+    group.add_argument(
+        "--halt-after",
+        type=float,
+        metavar="S",
+        help="endpoint 0x02 (frames to the board) halts after S seconds, until the host clears its halt (once)",
+    )
+    group.add_argument(
+        "--wedge-after",
+        type=float,
+        metavar="S",
+        help="every transfer fails after S seconds, until the host resets or reopens the board (once)",
+    )
+
 
 def _word(option: str, value: int) -> int:
     if not 1 <= value <= 251:
@@ -117,7 +148,7 @@ def run_rtdac(
     args: argparse.Namespace, config: Any, operator: Any, duration: float | None, announce: Callable[[str], None]
 ) -> int:
     from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, Relay, build_board
-    from sashil.drivers.emulator.rtdac_usb import BoardServer
+    from sashil.drivers.emulator.rtdac_usb import BoardServer, UsbFaults
 
     if not args.link:
         raise ConfigError("--link: expected the path of the board's socket (the host opens --port emulated:PATH)")
@@ -140,6 +171,15 @@ def run_rtdac(
         if not 0.0 < args.relay_ms <= 10_000.0:
             raise ConfigError(f"--relay-ms: expected milliseconds in (0, 10000], got {args.relay_ms:g}")
         relay = Relay(args.relay_bit, args.relay_ms)
+    if not 0 <= args.stale_frames <= 64:
+        raise ConfigError(f"--stale-frames: expected a count from 0 to 64, got {args.stale_frames}")
+    usb_faults = UsbFaults(
+        full_speed=args.full_speed,
+        missing_endpoint=None if args.missing_endpoint is None else int(args.missing_endpoint, 16),
+        stale_frames=args.stale_frames,
+        halt_after_s=_seconds("--halt-after", args.halt_after),
+        wedge_after_s=_seconds("--wedge-after", args.wedge_after),
+    )
     logic_word = int(args.logic, 16)
     if args.header_logic is not None:
         try:
@@ -159,7 +199,7 @@ def run_rtdac(
         config, args.logic, identity, operator, faults, args.stage_gain, args.road_tau_ms * 1e-3, relay=relay
     )
     try:
-        server = BoardServer(board, args.link)
+        server = BoardServer(board, args.link, usb_faults=usb_faults)
     except OSError as err:
         raise ConfigError(f"--link {args.link}: cannot create the socket ({err.strerror})") from None
 

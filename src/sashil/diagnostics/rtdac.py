@@ -22,16 +22,15 @@ from typing import TYPE_CHECKING, Any, TextIO
 import yaml
 
 from sashil.diagnostics import FAIL, OK, WARN, Check
+from sashil.drivers.rtdac_bus import LOOP_SHARE, highest_rate_hz
 from sashil.drivers.rtdac_codec import ad_volts, counter32
 from sashil.drivers.rtdac_rig import RtdacRig
-from sashil.drivers.rtdac_usb import UDEV_FILE, UDEV_RULE, describe_device
+from sashil.drivers.rtdac_usb import UDEV_FILE, UDEV_RULE, BoardLink, describe_device
 from sashil.errors import DriverError, SashilError
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
 
-#: the part of a period the loop's own work needs beside the exchange
-LOOP_SHARE = 0.25
 #: what the walk's pulses drive: a low duty, or a low voltage
 PULSE_DUTY = 0.1
 PULSE_VOLTS = 1.0
@@ -67,7 +66,7 @@ def exchange_checks(rig: RtdacRig, n: int, rate_hz: float) -> list[Check]:
         "p99_us": round(p99 * 1e6, 1),
         "max_us": round(times[-1] * 1e6, 1),
     }
-    highest = math.floor(1.0 / (p99 * (1.0 + LOOP_SHARE)))
+    highest = highest_rate_hz(p99)
     data["highest_rate_hz"] = highest
     round_trip = Check(
         "board", "exchange", OK, f"{n} exchanges: median {data['median_us']:g} us, p99 {data['p99_us']:g} us", data=data
@@ -100,12 +99,15 @@ def board_checks(run: RunSpec, round_trips: int) -> tuple[list[Check], RtdacRig 
             fix = "close the other program (MATLAB/Simulink, INTECO's toolbox, another sashil)"
         elif "no RT-DAC/USB2 found" in text:
             fix = "plug the board in and power it; lsusb lists it"
+        elif "USB link" in text:
+            fix = "plug the board into a high-speed (USB 2.0) port with no USB 1.1 hub between; lsusb -t shows 480M"
         checks.append(Check("board", "usb", FAIL, text, fix))
         rig.close()
         return checks, None
     assert rig.header is not None and rig.map is not None
     where = describe_device(rig.link.dev)
     checks.append(Check("board", "usb", OK, f"RT-DAC/USB2 at {where}"))
+    checks.append(link_check(rig.link, run.loop.rate_hz))
     checks.append(
         Check(
             "board",
@@ -119,6 +121,15 @@ def board_checks(run: RunSpec, round_trips: int) -> tuple[list[Check], RtdacRig 
     checks += exchange_checks(rig, round_trips, run.loop.rate_hz)
     checks.append(Check("board", "safe stop", WARN, NO_WATCHDOG, E_STOP))
     return checks, rig
+
+
+def link_check(link: BoardLink, rate_hz: float) -> Check:
+    """What the board said of itself at open (ids, strings, speed, stale frames) and whether its bus
+    carries ``rate_hz``."""
+    limit = link.max_rate_hz
+    ok = limit is None or rate_hz <= limit
+    fix = "" if ok else f"a high-speed (USB 2.0) port with no USB 1.1 hub between, or --set loop.rate_hz={limit}"
+    return Check("board", "link", OK if ok else WARN, link.summary(), fix, data=link.facts())
 
 
 # the walk ------------------------------------------------------------------------------------------
