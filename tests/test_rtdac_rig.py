@@ -266,8 +266,16 @@ AFTER_CONFIGURE_S = 0.8
             ProtocolError,
             "a read frame of 502 bytes from endpoint 4, expected 504",
         ),
-        (BoardFaults(timeout_after_s=AFTER_CONFIGURE_S), DriverTimeoutError, "no answer within 20 ms (transfer timed out)"),
-        (BoardFaults(stuck_busy_after_s=AFTER_CONFIGURE_S), DriverIOError, "A/D 0 (the coil current) has stayed busy for"),
+        (
+            BoardFaults(timeout_after_s=AFTER_CONFIGURE_S),
+            DriverTimeoutError,
+            "no answer within 20 ms (transfer timed out)",
+        ),
+        (
+            BoardFaults(stuck_busy_after_s=AFTER_CONFIGURE_S),
+            DriverIOError,
+            "A/D 0 (the coil current) has stayed busy for",
+        ),
     ],
 )
 def test_a_fault_mid_run_is_one_line_and_the_board_ends_at_rest_where_it_can(faults, error, text):

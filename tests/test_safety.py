@@ -216,23 +216,59 @@ def test_the_arm_beyond_its_travel_trips_both_ways_and_its_edge_is_inside():
     ],
 )
 def test_a_loop_held_beyond_its_bound_trips_only_after_its_time(kind, code, beyond, within, text):
-    bound_ms = {"road_tracking": 20, "road_limit": 50, "coil_sense": 50}[kind]
+    bound = {"road_tracking": 20, "road_limit": 50, "coil_sense": 50}[kind]
     s = SafetySupervisor(current_max_a=1.0)
     s.start(T0)
-    t = T0
-    for seq in range(1, 4):  # within, for ever
-        s.check(counted(seq, **within), t)
-        t += 100 * MS
-    s.check(counted(4, **beyond), t)  # beyond from here ...
-    s.check(counted(5, **beyond), t + (bound_ms - 1) * MS)  # ... not yet its time
-    s.check(counted(6, **within), t + bound_ms * MS)  # a break: the time starts again
-    s.check(counted(7, **beyond), t + (bound_ms + 1) * MS)
-    s.check(counted(8, **beyond), t + (2 * bound_ms) * MS)
+    # a sample a millisecond: within for 100 ms, beyond from 100 ms, a break at 100 + bound, beyond again
+    facts = {ms: within for ms in range(100)}
+    facts.update({ms: beyond for ms in range(100, 100 + bound)})
+    facts[100 + bound] = within
+    facts.update({ms: beyond for ms in range(101 + bound, 101 + 2 * bound)})
+    for ms, fact in facts.items():
+        s.check(counted(ms + 1, **fact), T0 + ms * MS)
     assert s.trips == []
     with pytest.raises(SafetyTrip, match=text):
-        s.check(counted(9, **beyond), t + (2 * bound_ms + 1) * MS)  # exactly its time since seq 7
+        s.check(counted(999, **beyond), T0 + (101 + 2 * bound) * MS)  # exactly its time since 101 + bound
     assert s.trips[-1].kind == kind and s.trip_code == code
-    assert s.trips[-1].time_s == pytest.approx((t - T0) * 1e-9 + (2 * bound_ms + 1) * 1e-3)
+    assert s.trips[-1].time_s == pytest.approx((101 + 2 * bound) * 1e-3)
+
+
+@pytest.mark.parametrize("kind", ["road_tracking", "road_limit"])
+def test_after_a_host_pause_the_road_is_given_its_grace_to_catch_up(kind):
+    beyond = {"road_tracking": {"road_error_rad": 0.5}, "road_limit": {"road_at_limit": True}}[kind]
+    bound = {"road_tracking": 20, "road_limit": 50}[kind]
+    s = SafetySupervisor(current_max_a=1.0, road_grace_ms=150.0)
+    s.start(T0)
+    for ms in range(10):
+        s.check(counted(ms + 1), T0 + ms * MS)
+    s.check(counted(11, **beyond), T0 + 13 * MS)  # four periods after the last: a pause
+    t = 13
+    while t < 13 + 150 + bound - 1:  # the grace, then the bound from its end
+        t += 1
+        s.check(counted(t, **beyond), T0 + t * MS)
+    assert s.trips == []
+    with pytest.raises(SafetyTrip):
+        s.check(counted(t + 1, **beyond), T0 + (t + 1) * MS)
+    assert s.trips[-1].time_s == pytest.approx((13 + 150 + bound) * 1e-3)
+
+
+def test_a_gap_of_three_periods_is_no_pause_and_the_coil_is_never_excused():
+    s = SafetySupervisor(current_max_a=1.0)
+    s.start(T0)
+    s.check(counted(1), T0)
+    s.check(counted(2), T0 + MS)
+    for ms in range(4, 24):  # three periods after the last, then on time: judged all along
+        s.check(counted(ms, road_error_rad=0.5), T0 + ms * MS)
+    with pytest.raises(SafetyTrip, match="the road is 0.500 rad off"):
+        s.check(counted(99, road_error_rad=0.5), T0 + 24 * MS)
+    s = SafetySupervisor(current_max_a=1.0)
+    s.start(T0)
+    s.check(counted(1), T0)
+    s.check(counted(2), T0 + MS)
+    for ms in range(10, 60):  # a pause excuses the road only
+        s.check(counted(ms, coil_at_authority=True), T0 + ms * MS)
+    with pytest.raises(SafetyTrip, match="sensed current disagrees"):
+        s.check(counted(99, coil_at_authority=True), T0 + 60 * MS)
 
 
 def test_no_host_road_loop_is_never_off_its_reference():
@@ -244,8 +280,14 @@ def test_no_host_road_loop_is_never_off_its_reference():
 
 
 def test_the_bounds_come_from_the_config_parts():
-    parts = SafetyParts(1.0, None, 0.0, 20, True, 30.0, 12.0, 0.02, 5.0, 7.0, 9.0)
+    parts = SafetyParts(1.0, None, 0.0, 20, True, 30.0, 12.0, 0.02, 5.0, 7.0, 9.0, 11.0)
     s = SafetySupervisor.from_parts(parts)
+    assert s.road_grace_ns == 11 * MS
     assert s.max_angle_rate_rad_s == 30.0 and s.arm_travel_rad == pytest.approx(math.radians(12.0))
-    assert (s.road_error_max_rad, s.road_error_ns, s.road_limit_ns, s.coil_authority_ns) == (0.02, 5 * MS, 7 * MS, 9 * MS)
+    assert (s.road_error_max_rad, s.road_error_ns, s.road_limit_ns, s.coil_authority_ns) == (
+        0.02,
+        5 * MS,
+        7 * MS,
+        9 * MS,
+    )
     assert SafetySupervisor.from_parts(SafetyParts(1.0, None, 0.0, 20, True)).arm_travel_rad is None

@@ -11,7 +11,8 @@ Two jobs, both once per cycle and free of I/O (the loop does the I/O):
   counts per revolution), the **arm's travel** (|theta2| beyond ``safety.arm_travel_deg``), and what a
   backend that closes the road's and the coil's loops on the host reports: the **road off its
   reference** (beyond ``safety.road_error_max_rad`` for ``safety.road_error_ms``), the **road output
-  at its limit** (for ``safety.road_limit_ms``) and the **coil's current loop at its authority
+  at its limit** (for ``safety.road_limit_ms``; neither judged for ``safety.road_grace_ms`` after a
+  host pause, a gap of more than three periods, while the road catches up with what the board held) and the **coil's current loop at its authority
   limit** (its sense disagrees with the command, for ``safety.coil_authority_ms``). A violation is
   recorded as a :class:`Trip` (time from the start of the run, reason) and raised as
   :class:`~sashil.errors.SafetyTrip`; the loop then commands 0 A, deactivates and closes the rig.
@@ -55,6 +56,8 @@ TRIP_CODES = {
     "coil_sense": 8,
 }
 
+#: a gap between two samples longer than this many of the loop's periods is a host pause
+PAUSE_PERIODS = 3
 SEQ_MODULUS = 1 << 16  # sequence numbers wrap at 2**16 on the wire
 SEQ_HALF = SEQ_MODULUS // 2
 
@@ -95,8 +98,12 @@ class SafetySupervisor:
         road_error_ms: float = 20.0,
         road_limit_ms: float = 50.0,
         coil_authority_ms: float = 50.0,
+        road_grace_ms: float = 150.0,
     ):
         self.current_max_a = float(current_max_a)
+        self.road_grace_ns = round(road_grace_ms * 1e6)
+        self._period_ns: int | None = None
+        self._grace_until_ns = 0
         self.max_angle_rate_rad_s = float(max_angle_rate_rad_s)
         self.arm_travel_rad = None if arm_travel_rad is None else float(arm_travel_rad)
         self.road_error_max_rad = float(road_error_max_rad)
@@ -136,6 +143,7 @@ class SafetySupervisor:
             road_error_ms=limits.road_error_ms,
             road_limit_ms=limits.road_limit_ms,
             coil_authority_ms=limits.coil_authority_ms,
+            road_grace_ms=limits.road_grace_ms,
         )
 
     def start(self, t_ns: int) -> None:
@@ -145,6 +153,8 @@ class SafetySupervisor:
         self._not_fresh = 0
         self._last_current = 0.0
         self._last_counts = None
+        self._period_ns = None
+        self._grace_until_ns = t_ns
         for name in self._held_since:
             self._held_since[name] = None
 
@@ -181,7 +191,12 @@ class SafetySupervisor:
         self._last_counts = (t_ns, sample.arm_counts, sample.road_counts)
         per_rad = sample.counts_per_rev / TWO_PI
         if last is not None:
-            dt_s = (t_ns - last[0]) * 1e-9
+            dt_ns = t_ns - last[0]
+            period = dt_ns if self._period_ns is None else min(self._period_ns, dt_ns)
+            self._period_ns = period  # the loop's period: the shortest gap between two samples
+            if dt_ns > PAUSE_PERIODS * period:  # the host paused: the board held the road's output meanwhile
+                self._grace_until_ns = t_ns + self.road_grace_ns
+            dt_s = dt_ns * 1e-9
             allowed = self.max_angle_rate_rad_s * dt_s * per_rad + 1.0
             for name, now, before in (("arm", sample.arm_counts, last[1]), ("road", sample.road_counts, last[2])):
                 step = abs(now - before)
@@ -208,7 +223,9 @@ class SafetySupervisor:
         """The road off its reference, the road output at its limit, the coil's loop at its authority,
         each held longer than its bound."""
         error = sample.road_error_rad
-        if self._held("road_tracking", abs(error) > self.road_error_max_rad, t_ns, self.road_error_ns):  # NaN: never
+        judged = t_ns >= self._grace_until_ns  # not while the road catches up after a host pause
+        off = judged and abs(error) > self.road_error_max_rad  # NaN: never off
+        if self._held("road_tracking", off, t_ns, self.road_error_ns):
             self._trip(
                 t_ns,
                 "road_tracking",
@@ -216,7 +233,7 @@ class SafetySupervisor:
                 f"{self.road_error_ns * 1e-6:g} ms (safety.road_error_max_rad, safety.road_error_ms): check the "
                 f"road's encoder direction, counts per revolution and output channel",
             )
-        if self._held("road_limit", sample.road_at_limit, t_ns, self.road_limit_ns):
+        if self._held("road_limit", judged and sample.road_at_limit, t_ns, self.road_limit_ns):
             self._trip(
                 t_ns,
                 "road_limit",

@@ -97,6 +97,7 @@ class SafetyParts:
     road_error_ms: float = 20.0
     road_limit_ms: float = 50.0
     coil_authority_ms: float = 50.0
+    road_grace_ms: float = 150.0
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> SafetyParts:
@@ -114,6 +115,7 @@ class SafetyParts:
             road_error_ms=float(safety["road_error_ms"]),
             road_limit_ms=float(safety["road_limit_ms"]),
             coil_authority_ms=float(safety["coil_authority_ms"]),
+            road_grace_ms=float(safety["road_grace_ms"]),
         )
 
 

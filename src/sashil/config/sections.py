@@ -222,6 +222,13 @@ SAFETY = Section(
         "road_error_ms": Field(
             "float", 20.0, low=0.0, doc="how long the road's error may stay beyond road_error_max_rad [ms]"
         ),
+        "road_grace_ms": Field(
+            "float",
+            150.0,
+            low=0.0,
+            doc="after a host pause (a sample more than three periods after the last) the road's error and "
+            "limit are not judged for this long [ms]: the board held the road's output while the host was away",
+        ),
         "road_limit_ms": Field(
             "float", 50.0, low=0.0, doc="how long the road motor's output may stay at its limit [ms] before a trip"
         ),

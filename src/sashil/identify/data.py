@@ -114,6 +114,9 @@ def record_from_columns(
     t = np.asarray(columns["time_s"], dtype=float)
     theta = np.asarray(columns["theta_rad"], dtype=float)
     current = np.asarray(columns["current_a"], dtype=float)
+    if "current_cmd_a" in columns and not np.all(np.isfinite(current)):
+        # no current sense (a bench with none wired leaves current_a empty): the command stands in
+        current = np.where(np.isfinite(current), current, np.asarray(columns["current_cmd_a"], dtype=float))
     torque_in = np.asarray(columns.get("torque_in_nm", np.zeros_like(t)), dtype=float)
     torque_in = np.where(np.isfinite(torque_in), torque_in, 0.0)
     applied = road_of_columns(columns)
