@@ -259,7 +259,7 @@ def test_a_gap_of_three_periods_is_no_pause_and_the_coil_is_never_excused():
     s.check(counted(2), T0 + MS)
     for ms in range(4, 24):  # three periods after the last, then on time: judged all along
         s.check(counted(ms, road_error_rad=0.5), T0 + ms * MS)
-    with pytest.raises(SafetyTrip, match="the road is 0.500 rad off"):
+    with pytest.raises(SafetyTrip, match=r"the road is 0\.500 rad off"):
         s.check(counted(99, road_error_rad=0.5), T0 + 24 * MS)
     s = SafetySupervisor(current_max_a=1.0)
     s.start(T0)
