@@ -355,7 +355,7 @@ def rtdac_maps_page() -> str:
     out = [HEADER, "# RT-DAC/USB2 register maps\n\n"]
     out.append(
         "INTECO's RT-DAC/USB2 exchanges its 252-word register file in one frame each way "
-        "(`--driver rtdac`, [your rig](../how-to/your-rig.md)). The board's header picks the map; these ship "
+        "(`--driver rtdac`, [the rtdac backend](backends/rtdac.md)). The board's header picks the map; these ship "
         f"with sashil as data (`drivers/rtdac_maps/`, {len(list(BUILTIN_DIR.glob('*.yaml')))} files), each fact "
         "cited in its file from the public source is-centre/rtdacusb2-bridge-app. A lab adds the map of "
         "another logic as a file of the same shape in the folder `rtdac.map_dir` names; a board no map serves "
