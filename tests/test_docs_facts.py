@@ -91,7 +91,7 @@ def _commands(line: str) -> list[tuple[str, list[str]]]:
     for part in re.split(r" && | \|\| | \| |; |\$\(|\)", line):
         words = part.split()
         for n, word in enumerate(words[:-1]):
-            if word.endswith("sashil") and not word.endswith("/sashil") or word == ".venv/bin/sashil":
+            if word in ("sashil", ".venv/bin/sashil"):
                 found.append((words[n + 1], words[n + 2 :]))
                 break
     return found
