@@ -194,6 +194,11 @@ def cli_page() -> str:
     out.append("One command, `sashil VERB [options]`; `sashil VERB --help` prints the same as below. ")
     out.append("`sashil --version` prints the version. Exit codes: [exit codes](exit-codes.md).\n\n")
     out.append(_table(["verb", "what it does"], [[f"[`{n}`](#{n})", p.description] for n, p in parsers.items()]))
+    shared = _shared_options(parsers)
+    out.append(
+        "\n### Options several verbs share\n\nEach verb's table below lists these too, with a link here.\n\n"
+        + _table(["option", "meaning"], [[option, meaning] for option, meaning in shared])
+    )
     for name, parser in parsers.items():
         out.append(f"\n## {name}\n\n{parser.description}\n\n")
         example = (parser.epilog or "").removeprefix("example:").strip()
@@ -203,7 +208,7 @@ def cli_page() -> str:
         shown = 0
         for group in parser._action_groups:
             rows = [
-                [_option(a), _help(a, parser.prog)]
+                [_option(a), SHARED_LINK if (_option(a), _help(a, parser.prog)) in shared else _help(a, parser.prog)]
                 for a in group._group_actions
                 if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
             ]
@@ -213,6 +218,21 @@ def cli_page() -> str:
         if not shown:
             out.append("No options.\n")
     return "".join(out)
+
+
+#: the meaning a verb's table gives an option that several verbs share with the same help
+SHARED_LINK = "as [shared](#options-several-verbs-share)"
+
+
+def _shared_options(parsers: dict[str, argparse.ArgumentParser]) -> dict[tuple[str, str], list[str]]:
+    """The options (as shown, with their help) that three verbs or more have alike, each with those
+    verbs: the page says each once."""
+    verbs: dict[tuple[str, str], list[str]] = {}
+    for name, parser in parsers.items():
+        for a in parser._actions:
+            if a.option_strings and a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction):
+                verbs.setdefault((_option(a), _help(a, parser.prog)), []).append(name)
+    return {key: names for key, names in verbs.items() if len(names) >= 3}
 
 
 def _usage(parser: argparse.ArgumentParser) -> str:
@@ -355,7 +375,7 @@ def rtdac_maps_page() -> str:
     out = [HEADER, "# RT-DAC/USB2 register maps\n\n"]
     out.append(
         "INTECO's RT-DAC/USB2 exchanges its 252-word register file in one frame each way "
-        "(`--driver rtdac`, [your rig](../how-to/your-rig.md)). The board's header picks the map; these ship "
+        "(`--driver rtdac`, [the rtdac backend](backends/rtdac.md)). The board's header picks the map; these ship "
         f"with sashil as data (`drivers/rtdac_maps/`, {len(list(BUILTIN_DIR.glob('*.yaml')))} files), each fact "
         "cited in its file from the public source is-centre/rtdacusb2-bridge-app. A lab adds the map of "
         "another logic as a file of the same shape in the folder `rtdac.map_dir` names; a board no map serves "

@@ -51,7 +51,7 @@ def add_set_option(parser: argparse.ArgumentParser) -> None:
 def add_driver_options(parser: argparse.ArgumentParser) -> None:
     """``--driver`` and ``--port`` (every verb that talks to a rig)."""
     parser.add_argument(
-        "--driver", metavar="NAME", help="override driver.name: sim, serial, can, or an installed backend's name"
+        "--driver", metavar="NAME", help="override driver.name: sim, serial, can, rtdac, or an installed backend's name"
     )
     parser.add_argument(
         "--port", metavar="PORT", help="pyserial URL/device path, or CAN channel (override driver.port)"

@@ -103,7 +103,7 @@ DRIVER = Section(
             "choice",
             "sim",
             choices=tuple(BACKENDS),
-            doc="the backend (--driver): the simulated rig, a serial or a CAN board",
+            doc="the backend (--driver): the simulated rig, sashil's board over serial or CAN, or INTECO's RT-DAC/USB2 (rtdac)",
         ),
         "port": Field("str?", None, doc="pyserial URL or device path, or CAN channel"),
         "clock": Field(
