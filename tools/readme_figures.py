@@ -1,19 +1,28 @@
-"""Regenerate the README's figures in ``docs/figures/`` with the sashil CLI (simulated rig).
+"""Make the figures of the simulated rig's verbs in ``docs/figures/``, each with ``NAME.json`` beside
+it: the numbers its caption may state, from the same run (``tools/figures.py`` is the one entry
+for every figure; ``tests/test_figures.py`` checks the captions against the data and the data against
+the code).
 
-* ``drop_test.png``: ``sashil drop-test --current 0 --current 1`` (peaks, envelope, ζ), and beside it
-  ``drop_test.json``: the command and each drop's ζ, δ and period as the legend and the quick start
-  show them (``tests/test_readme_figure.py`` fails when a fresh drop test no longer gives them);
+* ``drop_test.png``: ``sashil drop-test --current 0 --current 1`` (peaks, envelope, ζ); its data,
+  each drop's release angle, ζ, δ and period as the legend and the quick start show them
+  (``tests/test_readme_figure.py`` fails when a fresh drop test no longer gives them);
 * ``hysteresis.png``: the seed's damper (seed 001 eqs. 9-17) under a 1.6 Hz, 2° sine of θ at 0, 0.5
   and 1 A: torque against angle and against rate, from :class:`sashil.models.hysteresis.BoucWenZ`;
+  its data, each loop's peak torque, viscous and yield parts, energy per cycle and fill of its box;
 * ``compare.png``: ``sashil compare`` as the compare guide runs it (ISO 8608 class C, 10 s, four laws);
-* ``transmissibility.png``: ``sashil sweep --stepped --current 0`` (24 log-spaced frequencies);
+  its data, each run's RMS θ̈2 and θ, gain and share of the bound, and the bound;
+* ``transmissibility.png``: ``sashil report`` of three ``sashil sweep --stepped`` (24 log-spaced
+  frequencies): 0 A, 1 A and the compare's best law, skyhook-add (:data:`SWEEP_CURVES`); its data,
+  every point and each curve's peak;
 * ``calibration.png``: the held-out validation plot (``validation.png``) of ``sashil calibrate`` on the
-  simulated rig with a small plan (drops at 0 and 1 A and a road run to fit, a 0.5 A drop held out),
-  as the calibration tutorial shows it;
+  simulated rig with a small plan (drops at 0 and 1 A and road runs to fit, a 0.5 A drop held out),
+  as the calibration tutorial shows it; its data, each run's NRMSE;
 * ``identify.png``: ``sashil identify`` of the quick start's two drops (``params_fit.png``: the
-  recorded and the fitted θ, the residual beneath), as the identification guide shows it;
+  recorded and the fitted θ, the residual beneath), as the identification guide shows it; its data,
+  the fit's RMS residual and each run's;
 * ``timing.png``: ``sashil report`` of two 10 s ``sashil run``s at 1 kHz (passive 0 A and skyhook),
-  the percentile plot of their loop timing (on the machine this runs on).
+  the percentile plot of their loop timing (on the machine this runs on); its data, each run's
+  lateness and compute percentiles and missed deadlines.
 
     .venv/bin/python tools/readme_figures.py
     .venv/bin/python tools/readme_figures.py --quick   # a 2 s drop, 2 frequencies, 0.5 s runs; PNGs to a temporary folder
@@ -323,10 +332,16 @@ def make_timing(out: Path, tmp: Path, quick: bool, run: Run) -> dict:
         numbers[label] = {
             "cycles": str(timing["cycles"]),
             "missed_deadlines": str(timing["missed_deadlines"]),
-            **{f"lateness_{key}_us": fmt(value, 2) for key, value in timing["lateness_us"].items()},
-            **{f"compute_{key}_us": fmt(value, 2) for key, value in timing["compute_us"].items()},
+            **{f"lateness_{key}_us": microseconds(value) for key, value in timing["lateness_us"].items()},
+            **{f"compute_{key}_us": microseconds(value) for key, value in timing["compute_us"].items()},
         }
-    return {"command": f"sashil run --duration {seconds} at 1 kHz (1000 Hz), then sashil report", "runs": numbers}
+    commands = [f"sashil run --duration {seconds} {' '.join(setting)}" for setting in runs.values()]
+    return {"command": [*commands, "sashil report (the two)"], "rate_hz": "1000", "runs": numbers}
+
+
+def microseconds(value: float) -> str:
+    """A time in µs as a caption prints it: whole µs from 10 µs up, two significant figures below."""
+    return f"{value:.0f}" if value >= 10 else f"{value:.2g}"
 
 
 #: each figure's maker: ``make(out, tmp, quick, run)`` (``run(*args)``: one sashil command) writes NAME.png into ``out`` and returns the numbers its
