@@ -95,13 +95,14 @@ def emulator(folder: Path) -> Iterator[None]:
             process.wait()
 
 
-def rows(text: str) -> dict[str, str]:
-    """Each row of a doctor table that starts with a verdict: its check's name -> the verdict."""
+def rows(text: str) -> dict[str, dict[str, str]]:
+    """Each row of a doctor table that starts with a verdict: its check's name -> the verdict and
+    what was found."""
     found = {}
     for line in text.splitlines():
-        words = line.split()
+        words = line.split(maxsplit=2)
         if len(words) >= 2 and words[0] in VERDICTS:
-            found[words[1]] = words[0]
+            found[words[1]] = {"verdict": words[0], "found": words[2] if len(words) > 2 else ""}
     return found
 
 
@@ -135,7 +136,7 @@ def make_doctor(out: Path, tmp: Path, quick: bool) -> dict:
             done = subprocess.run(
                 [*sashil_command(), *command], cwd=folder, capture_output=True, text=True, timeout=300
             )
-        failed = [name for name, verdict in rows(done.stdout).items() if verdict == "FAIL"]
+        failed = [name for name, row in rows(done.stdout).items() if row["verdict"] == "FAIL"]
         if not failed:
             break
         print(f"doctor attempt {attempt} of {ATTEMPTS}: {', '.join(failed)} failed (a loaded machine)")
@@ -146,7 +147,8 @@ def make_doctor(out: Path, tmp: Path, quick: bool) -> dict:
     verdicts = rows(text)
     if not verdicts:
         raise SystemExit(f"sashil doctor printed no table (exit {done.returncode}): {done.stderr[-2000:]}")
-    return {"command": shown, "exit_code": str(done.returncode), "rows": verdicts}
+    lines = [line for line in text.splitlines() if line.strip()]
+    return {"command": shown, "exit_code": str(done.returncode), "rows": verdicts, "summary": lines[-1]}
 
 
 MAKERS = {"run": make_run, "doctor": make_doctor}
