@@ -29,6 +29,16 @@ def test_each_figure_is_kept_with_its_data(name):
     assert figures.kept_data(name), AGAIN.format(name=name)
 
 
+def test_every_figure_in_the_folder_is_made_by_an_entry_and_shown_on_a_page():
+    kept = {path.name for path in figures.OUT.iterdir() if path.suffix in (".png", ".svg")}
+    made = {figure.file for figure in figures.FIGURES.values()}
+    assert kept == made, (
+        f"in docs/figures/ but made by no entry: {sorted(kept - made)}; made but absent: {sorted(made - kept)}"
+    )
+    shown = {file for _page, file, _text in figures.captions()}
+    assert made <= shown, f"made but on no page: {sorted(made - shown)}"
+
+
 def test_every_caption_states_only_numbers_of_its_figures_data():
     wrong = figures.check_captions()
     assert not wrong, "\n".join(wrong)
@@ -83,3 +93,18 @@ def test_a_changed_number_in_the_kept_data_is_found():
     assert figures.recompute_hysteresis(kept) == [
         "hysteresis.loops.1 A.peak_torque_nm: kept '0.99', the code gives '0.98'"
     ]
+
+
+@pytest.mark.parametrize(
+    ("page", "command"),
+    [
+        ("docs/tutorials/your-own-law.md", "sashil " + " ".join(figures.tutorial_figures.RUN_COMMAND)),
+        ("docs/tutorials/connect-a-board.md", "sashil " + " ".join(figures.tutorial_figures.DOCTOR_COMMAND)),
+        ("docs/tutorials/connect-a-board.md", "sashil " + " ".join(figures.tutorial_figures.EMULATE_COMMAND)),
+        ("docs/how-to/compare-laws.md", "sashil " + " ".join(figures.readme_figures.COMPARE_COMMAND)),
+    ],
+)
+def test_a_figure_of_a_pages_command_is_of_that_command(page, command):
+    assert command in (ROOT / page).read_text(encoding="utf-8"), (
+        f"{page} no longer runs `{command}`: its figure is of it"
+    )
