@@ -39,6 +39,20 @@ def test_every_figure_in_the_folder_is_made_by_an_entry_and_shown_on_a_page():
     assert made <= shown, f"made but on no page: {sorted(made - shown)}"
 
 
+def test_each_figure_and_its_data_were_made_together():
+    wrong = figures.check_made(tuple(figures.FIGURES))
+    assert not wrong, "\n".join(wrong) + "\nrun .venv/bin/python tools/figures.py --figure NAME"
+
+
+def test_data_made_again_without_its_figure_is_found(tmp_path):
+    for name in ("hysteresis.png", "hysteresis.json", "rig.svg", "rig.json", figures.MADE):
+        (tmp_path / name).write_bytes((figures.OUT / name).read_bytes())
+    (tmp_path / "hysteresis.json").write_text('{"loops": {}}\n', encoding="utf-8")
+    assert figures.check_made(("hysteresis", "rig"), tmp_path) == [
+        "hysteresis: hysteresis.png and its data are not the pair tools/figures.py made together"
+    ]
+
+
 def test_every_caption_states_only_numbers_of_its_figures_data():
     wrong = figures.check_captions()
     assert not wrong, "\n".join(wrong)

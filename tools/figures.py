@@ -13,6 +13,9 @@ doctor: a healthy ``sashil doctor`` table against the emulated board) and ``pane
     .venv/bin/python tools/figures.py --check --slow       # ... and the recomputations that fit (tens of seconds each)
     .venv/bin/python tools/figures.py --quick              # CI: rig and hysteresis drawn into a temporary folder, then --check
 
+``made.json`` records the sha256 of each figure and of its data as one run made them: ``--check``
+finds a figure or a data file made again without the other.
+
 ``--check`` asserts, for every image of ``figures/`` in README.md and docs/ (its alt text and the
 italic caption paragraph under it), that each number it states occurs in the figure's kept data; and
 that the kept data is what the code gives now: hysteresis and rig recomputed whole, the law's
@@ -32,6 +35,7 @@ modes (``readme_figures.py``, ``tutorial_figures.py``, ``panel_figures.py``), wh
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import re
@@ -167,6 +171,40 @@ DATA_NUMBER = re.compile(r"\d+(?:\.\d+)?")
 IMAGE = re.compile(r"!\[(?P<alt>[^\]]*)\]\((?P<path>[^)\s]*figures/(?P<file>[\w.-]+))\)")
 
 
+#: the record of which figure file and data file each run made together
+MADE = "made.json"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def pair(name: str, out: Path = OUT) -> dict[str, str]:
+    """The sha256 of a figure's file and of its data file in ``out``."""
+    data = out / f"{DATA_OF.get(name, name)}.json"
+    return {"figure": _sha256(out / FIGURES[name].file), "data": _sha256(data)}
+
+
+def record_made(names: tuple[str, ...], out: Path = OUT) -> None:
+    """Note in ``made.json`` that the figure and the data of each of ``names`` were made together."""
+    path = out / MADE
+    made = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    made.update({name: pair(name, out) for name in names})
+    path.write_text(json.dumps(dict(sorted(made.items())), indent=2) + "\n", encoding="utf-8")
+
+
+def check_made(names: tuple[str, ...], out: Path = OUT) -> list[str]:
+    """Each figure whose file or data is not the pair tools/figures.py made together (one of the two
+    made again alone, or by another tool)."""
+    path = out / MADE
+    made = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    wrong = []
+    for name in names:
+        if made.get(name) != pair(name, out):
+            wrong.append(f"{name}: {FIGURES[name].file} and its data are not the pair tools/figures.py made together")
+    return wrong
+
+
 def kept_data(name: str) -> dict:
     return json.loads((OUT / f"{DATA_OF.get(name, name)}.json").read_text(encoding="utf-8"))
 
@@ -260,10 +298,13 @@ def make(names: tuple[str, ...], out: Path, quick: bool) -> None:
         lacking = panel_figures.missing()
         if lacking is None:
             panel_figures.figures(out, quick=quick)
+            names = (*names, *({"panel", "panel-runs"} - set(names)))  # one run takes both shots
         elif quick:
             print(f"panel figures: skipped: {lacking}")
+            names = tuple(name for name in names if name not in ("panel", "panel-runs"))
         else:
             raise SystemExit(f"panel figures: {lacking}")
+    record_made(names, out)
 
 
 def main() -> int:
@@ -286,7 +327,7 @@ def main() -> int:
         make(names, OUT, quick=False)
         print(f"made {len(names)} figure(s) into docs/figures/: {time.monotonic() - started:.1f} s")
         return 0
-    wrong = check_captions() + check_data(names, args.slow)
+    wrong = check_made(names) + check_captions() + check_data(names, args.slow)
     for line in wrong:
         print(line)
     print(f"figures check: {len(wrong)} disagreement(s), {time.monotonic() - started:.1f} s")
