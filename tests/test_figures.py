@@ -2,8 +2,8 @@
 
 Every figure in docs/figures/ keeps beside it the numbers its caption may state (NAME.json, written
 by the run that drew it). Here: every image of figures/ in README.md and docs/ is made by an entry of
-tools/figures.py, and each number its alt text and caption state is among its kept data; the kept
-data is what the code gives now (hysteresis and rig recomputed whole, the law's transmissibility at
+tools/figures.py, and each number its alt text and caption state is among its kept data; each figure
+and its data are the pair one run made (made.json holds their sha256); the kept data is what the code gives now (hysteresis and rig recomputed whole, the law's transmissibility at
 its peak, the panel page unchanged since its shots; end to end, every curve's peak, and the drop
 test, the comparison, the calibration and the identification run again whole on the virtual clock).
 """
