@@ -23,10 +23,11 @@ SCRIPTS = sorted((ROOT / "tools").glob("*.py"))
 
 #: the scripts that run on the wall clock against an emulated rig over ptys, a socket (the RT-DAC's) or
 #: QEMU's serial socket, drive Chromium against the panel, or run whole verbs on the real clock and fit
-#: (readme_figures: the timing figure's runs, a calibration and an identification)
+#: (readme_figures: the timing figure's runs, a calibration and an identification; tutorial_figures:
+#: a run and the emulated board's doctor)
 E2E = {
     "bench_calibrate.py", "bench_control_link.py", "bench_formats.py", "bench_link.py", "bench_preview_link.py",
-    "bench_rtdac.py", "panel_figures.py", "qemu_smoke.py", "readme_figures.py",
+    "bench_rtdac.py", "panel_figures.py", "qemu_smoke.py", "readme_figures.py", "tutorial_figures.py",
 }  # fmt: skip
 
 #: scripts whose quick mode a test elsewhere runs whole and checks the figures of (script: that test)

@@ -1,12 +1,12 @@
 """Regenerate the manual's panel figures in ``docs/figures/``: ``panel.png`` (the Bench view during a
-skyhook run, tuned once live) and ``panel-runs.png`` (the Runs view: that run and a passive one
-overlaid, and ``sashil report``'s tables of the two), with Playwright driving Debian's Chromium
+skyhook run, tuned once live) and ``panel-runs.png`` (the Runs view: the runs list, that run and a
+passive one overlaid), with Playwright driving Debian's Chromium
 against ``sashil panel`` on the simulated rig, as ``tests/test_panel_browser.py`` does.
 
 * A clean folder, as a lab's: the panel is started in a fresh temporary folder holding only
   ``bench.yaml`` and ``runs/``, with ``--config bench.yaml --runs runs``. The page shows the runs
   folder as it was given, so every path in the shots (the header's run folder, the events'
-  ``sashil tune runs/...``, the report's run list) reads ``runs/<UTC stamp>-run``: no temporary path.
+  ``sashil tune runs/...``) reads ``runs/<UTC stamp>-run``: no temporary path.
 * The real clock: the Bench view shows a run live and its law tuned while it runs, which a run on the
   virtual clock (over before the page sees it) cannot show. The runs are short: a 4 s passive run,
   then a skyhook run stopped after about 8 s.
@@ -23,7 +23,7 @@ the figures show) and of the two PNGs. ``tests/test_panel_figures.py`` fails whe
 are not the ones the committed figures were taken of: change the page, then run this tool.
 
     .venv/bin/python tools/panel_figures.py
-    .venv/bin/python tools/panel_figures.py --quick   # 0.5 s runs, no report; PNGs to a temporary folder
+    .venv/bin/python tools/panel_figures.py --quick   # 0.5 s runs; PNGs to a temporary folder
 
 Needs Playwright (the ``test`` extra) and the system's Chromium (``apt-get install chromium``), started
 as the browser tests start it (:mod:`sashil.testing.browser`); ``--quick`` says in one line which is
@@ -50,6 +50,9 @@ FIGURES = ("panel.png", "panel-runs.png")
 RECORD = "panel.json"
 #: the figures' loop rate (see the module's docstring: no overruns on a loaded machine)
 RATE_HZ = 250.0
+#: the skyhook run's c_sky at its start and as tuned live; the two runs' lengths [s] (full mode)
+C_SKY_START, C_SKY_TUNED = "1.5", "3"
+PASSIVE_S, SKYHOOK_S = 4.0, 8.0
 #: shots taken again from a fresh folder when a run missed a deadline
 ATTEMPTS = 3
 #: the Bench view's window, as tests/test_panel_browser.py opens it
@@ -116,7 +119,7 @@ def shoot(out: Path, quick: bool) -> list[str]:
     """Take the two shots into ``out``; the run folders the page shows."""
     from playwright.sync_api import sync_playwright
 
-    seconds = 0.5 if quick else 8.0
+    seconds = 0.5 if quick else SKYHOOK_S
     with tempfile.TemporaryDirectory(prefix="sashil-panel-figures-") as tmp, serve_panel(Path(tmp)) as url:
         with sync_playwright() as playwright:
             browser = launch_chromium(playwright)
@@ -126,18 +129,18 @@ def shoot(out: Path, quick: bool) -> list[str]:
                 page.wait_for_function("window.panel && window.panel.laws.length > 0 && window.panel.client")
 
                 # a passive run at 0 A to overlay the skyhook run on
-                start(page, "passive", {}, duration="0.5" if quick else "4")
+                start(page, "passive", {}, duration="0.5" if quick else f"{PASSIVE_S:g}")
                 page.wait_for_function("window.panel.status.state === 'idle'", timeout=FIRST_TRACE_MS)
                 passive = page.evaluate("window.panel.status")
                 check_no_misses(passive, quick)
 
                 # the skyhook run, tuned once live: c_sky 1.5 -> 3 through the slider's field and Enter
-                start(page, "skyhook", {"c_sky": "1.5"})
+                start(page, "skyhook", {"c_sky": C_SKY_START})
                 page.wait_for_function(
                     f"window.panel.data.time_s.length > 0 && window.panel.data.time_s.at(-1) > {seconds / 2}",
                     timeout=FIRST_TRACE_MS,
                 )
-                page.locator('#sliders input[type=number][data-param="c_sky"]').fill("3")
+                page.locator('#sliders input[type=number][data-param="c_sky"]').fill(C_SKY_TUNED)
                 page.locator('#sliders input[type=number][data-param="c_sky"]').press("Enter")
                 page.wait_for_function("window.panel.markers.length === 1")
                 page.wait_for_function(f"window.panel.data.time_s.at(-1) > {seconds}", timeout=FIRST_TRACE_MS)
@@ -150,19 +153,13 @@ def shoot(out: Path, quick: bool) -> list[str]:
                 skyhook = page.evaluate("window.panel.status")
                 check_no_misses(skyhook, quick)  # the Runs view shows its summary's count
 
-                # Runs: the two overlaid, and their report
+                # Runs: the two overlaid
                 names = [Path(status["folder"]).name for status in (skyhook, passive)]
                 for name in names:
                     page.wait_for_selector(f'#run-table input[data-run="{name}"]')
                     page.check(f'#run-table input[data-run="{name}"]')
                 page.click("#overlay")
                 page.wait_for_function("window.panel.overlay && window.panel.overlay.names.length === 2")
-                if not quick:
-                    page.click("#report")
-                    page.wait_for_function(
-                        "window.panel.report && window.panel.report.includes('## Controllers compared')",
-                        timeout=120_000,
-                    )
                 page.locator("#runs").scroll_into_view_if_needed()
                 page.mouse.move(0, 0)
                 (out / "panel-runs.png").write_bytes(page.locator("#runs").screenshot())
@@ -179,6 +176,9 @@ def record(out: Path) -> dict[str, Any]:
     return {
         "tool": "tools/panel_figures.py",
         "loop_rate_hz": RATE_HZ,
+        "default_loop_rate": "1 kHz",
+        "c_sky": {"start": C_SKY_START, "tuned_live": C_SKY_TUNED},
+        "runs_s": {"passive_0A": f"{PASSIVE_S:g}", "skyhook": f"{SKYHOOK_S:g}"},
         "static": static_hashes(),
         "figures": {name: hashlib.sha256((out / name).read_bytes()).hexdigest() for name in FIGURES},
     }
@@ -206,7 +206,7 @@ def figures(out: Path, quick: bool, attempts: int = ATTEMPTS) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="0.5 s runs, no report; PNGs to a temporary folder")
+    parser.add_argument("--quick", action="store_true", help="0.5 s runs; PNGs to a temporary folder")
     args = parser.parse_args()
     lacking = missing()
     if lacking is not None:
