@@ -149,6 +149,7 @@ class SafetySection(TypedDict):
     arm_travel_deg: ReadOnly[float | None]
     road_error_max_rad: ReadOnly[float]
     road_error_ms: ReadOnly[float]
+    road_grace_ms: ReadOnly[float]
     road_limit_ms: ReadOnly[float]
     coil_authority_ms: ReadOnly[float]
 
