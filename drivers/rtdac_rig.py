@@ -71,7 +71,7 @@ from sashil.drivers.rtdac_outputs import CoilDrive, RoadDrive
 from sashil.drivers.rtdac_rest import rest_until_confirmed
 from sashil.drivers.rtdac_usb import BoardLink, UsbSettings
 from sashil.drivers.rtdac_wiring import Wiring
-from sashil.errors import DriverError, DriverIOError
+from sashil.errors import DriverError, DriverIOError, DriverTimeoutError
 
 log = logging.getLogger("sashil")
 
@@ -83,7 +83,7 @@ SAFE_CONFIRM_S = 0.3
 #: and how often it reads them meanwhile [s]
 STILL_S = 0.5
 STILL_WAIT_S = 20.0
-STILL_POLL_S = 0.005
+STILL_POLL_S = 0.02
 #: exchanges in a row whose readback of an output word differs from what was written before the
 #: backend concludes the board ignores that word
 IGNORED_AFTER = 3
@@ -324,10 +324,15 @@ class RtdacRig(RigInterface):
         start = last_move = monotonic()
         seen: tuple[int, int] | None = None
         while True:
-            self._start_frame()
-            self.rest_outputs()
-            self._send()
-            self._raw = self.link.read_frame()
+            try:
+                self._start_frame()
+                self.rest_outputs()
+                self._send()
+                self._raw = self.link.read_frame()
+            except DriverTimeoutError:
+                if monotonic() - start > STILL_WAIT_S:
+                    raise
+                continue  # a late answer while nothing is driven: ask again (a busy host's pause)
             words = decode_frame(self._raw)
             now_counts = (self._arm_raw(words), self._road_raw(words))
             now = monotonic()

@@ -100,8 +100,8 @@ def measure(backend: object, cycles: int) -> tuple[list[float], list[float]]:
 
 
 class RecordedLink:
-    """A link that answers every read with one recorded frame and takes every write: the backend's
-    own work with no transfer under it."""
+    """A link that answers every read with the last frame written (a board that takes every word, as
+    a read frame shows them), first one recorded read: the backend's own work with no transfer under it."""
 
     def __init__(self, real: object):
         self.dev = getattr(real, "dev", None)
@@ -111,8 +111,11 @@ class RecordedLink:
     def read_frame(self) -> object:
         return self.frame
 
-    def write_frame(self, frame: object) -> None:
-        pass
+    def write_frame(self, frame: bytes | bytearray) -> None:
+        self.frame = frame  # the backend builds a new frame each cycle: no copy needed
+
+    def facts(self) -> dict[str, object]:
+        return {}
 
 
 def own_work(backend: object, cycles: int) -> list[float]:
