@@ -203,19 +203,23 @@ def find_revolution(start: Sequence[int], end: Sequence[int], road_encoder: int 
 
 
 def road_step(times: Sequence[float], angles: Sequence[float], level: float) -> tuple[float, float] | None:
-    """The road motor's step response: its steady speed per unit of output (the mean slope over the
-    trace's last 40 %) and its time constant (a first-order motor's angle at steady speed runs
-    ``speed * (t - lag)``: the tail's line meets the time axis at the lag). ``angles`` [rad] from the
-    output's step at time 0."""
+    """The road motor's step response: its steady speed per unit of output and its time constant.
+
+    A first-order motor stepped at time 0 runs, once steady, along ``angle = speed * (t - lag)``; the
+    least-squares line through the trace's last 40 % gives the speed (its slope) and the lag (where
+    it meets the time axis), the encoder's counts averaged out. ``angles`` [rad] from the step."""
     if len(times) < 10 or level == 0.0:
         return None
     tail = int(0.6 * len(times))
-    if times[-1] - times[tail] <= 0.0:
+    ts, ys = times[tail:], angles[tail:]
+    mean_t, mean_y = statistics.fmean(ts), statistics.fmean(ys)
+    spread = sum((t - mean_t) ** 2 for t in ts)
+    if spread <= 0.0:
         return None
-    speed = (angles[-1] - angles[tail]) / (times[-1] - times[tail])
+    speed = sum((t - mean_t) * (y - mean_y) for t, y in zip(ts, ys, strict=True)) / spread
     if abs(speed) < 1e-6:
         return None
-    lag = times[-1] - angles[-1] / speed
+    lag = mean_t - mean_y / speed
     return abs(speed / level), max(lag, 0.0)
 
 

@@ -66,6 +66,10 @@ PULSE = {"pwm": 0.10, "da": 0.30}
 PULSE_S = 0.3
 #: read at rest before a pulse (the A/Ds' level and spread) and after it (the coil decays, the road stops)
 REST_S = 0.1
+#: before each pulse every counter must stand still for SETTLE_S (the arm swings on after a road
+#: pulse), waited for at most SETTLE_MAX_S
+SETTLE_S = 0.3
+SETTLE_MAX_S = 20.0
 #: a pulse ends at once when the arm turns this far, or another counter this far (in the config's
 #: road_counts_per_rev, the only scale known before step 3)
 ARM_GUARD_DEG = 15.0
@@ -117,6 +121,8 @@ class Walk:
     road: RoadFinding | None = None
     _road_trace: PulseTrace | None = None
     _next: float = 0.0
+    #: the clock when the last exchange's read frame came [s]
+    read_at: float = 0.0
 
     # the board ------------------------------------------------------------------------------------
     @property
@@ -130,7 +136,7 @@ class Walk:
     def _tick(self) -> tuple[int, ...]:
         """One exchange, then the wait to the next tick of SAMPLE_S."""
         words = self.rig.exchange()
-        now = self.clock()
+        now = self.read_at = self.clock()
         self._next = max(self._next + SAMPLE_S, now)
         if self._next > now:
             self.sleep(self._next - now)
@@ -329,8 +335,23 @@ class Walk:
                 return f"counter {i} turned {b - a:+d} counts"
         return ""
 
+    def _settle(self) -> bool:
+        """Read until no counter has changed for SETTLE_S (False: not within SETTLE_MAX_S)."""
+        t0 = self.clock()
+        last = self._counts(self._tick())
+        still_since = t0
+        while self.clock() - t0 < SETTLE_MAX_S:
+            now = self._counts(self._tick())
+            if now != last:
+                last, still_since = now, self.clock()
+            elif self.clock() - still_since >= SETTLE_S:
+                return True
+        return False
+
     def _pulse(self, kind: str, channel: int, level: float) -> PulseTrace:
         """One output at ``level`` for PULSE_S (or until a guard), read throughout; at rest after."""
+        if not self._settle():
+            self.say(f"    the counters did not stand still for {SETTLE_S:g} s within {SETTLE_MAX_S:g} s")
         rest_ads: list[list[float]] = []
         words = self._tick()
         for _ in range(round(REST_S / SAMPLE_S)):
@@ -346,7 +367,7 @@ class Walk:
                 words = self._tick()
                 counts = self._counts(words)
                 last = self._ads(words, last)
-                trace.times.append(self.clock() - t0)
+                trace.times.append(self.read_at - t0)
                 trace.counts.append(counts)
                 trace.ads.append(last)
                 trace.stopped = self._guard(start, counts)
@@ -415,7 +436,7 @@ class Walk:
             answer = self.ask("  the wheel turns: press Enter as the mark comes back to the pointer (s: stop): ")
             while answer is None:
                 now = self._counts(self._tick())
-                times.append(self.clock() - t0)
+                times.append(self.read_at - t0)
                 counts.append(now[road.encoder] - start[road.encoder])
                 if times[-1] > REVOLUTION_MAX_S:
                     break
