@@ -419,7 +419,14 @@ class Walk:
         if counts is None:
             return
         self._confirm(("road_counts_per_rev",), {"road_counts_per_rev": counts})
-        self._outcome("revolution", True, f"the road wheel: {counts} counts a revolution")
+        how = ""
+        if choice == "m" and run is not None and run[0][-1] > 0.0:
+            per_s = abs(run[1][-1]) / run[0][-1]
+            how = (
+                f" (the motor turned {per_s:.0f} counts/s: each 0.1 s early or late at Enter is "
+                f"{0.1 * per_s:.0f} counts; h, the mark lined up by hand with the wheel still, is finer)"
+            )
+        self._outcome("revolution", True, f"the road wheel: {counts} counts a revolution{how}")
         if run is not None:
             self._motor_step(*run, counts)
 
