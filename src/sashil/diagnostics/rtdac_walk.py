@@ -55,7 +55,7 @@ from sashil.diagnostics.rtdac_findings import (
     pulse_effect,
     road_step,
 )
-from sashil.drivers.rtdac_codec import AD_BUSY_BIT, DA_ZERO, ad_volts, counter32
+from sashil.drivers.rtdac_codec import AD_BUSY_BIT, AD_GAINS, ad_volts, counter32
 from sashil.drivers.rtdac_rig import RtdacRig
 
 TWO_PI = 6.283185307179586
@@ -149,13 +149,16 @@ class Walk:
         return [counter32(words[lo], words[hi]) for lo, hi in (reg.counter_words(i) for i in range(count))]
 
     def _ads(self, words: tuple[int, ...], last: list[float] | None = None) -> list[float]:
-        """Every A/D's volts (a conversion under way: its last value stands)."""
+        """Every A/D's volts at its input, at the gain the board has set for it (a conversion under
+        way: its last value stands)."""
         reg = self.rig.map
         assert reg is not None
         values = []
         for i in range(reg.ad_count):
             word = words[reg.ad_value_word(i)]
-            values.append(last[i] if last is not None and word & AD_BUSY_BIT else ad_volts(word))
+            gain_word, shift = reg.ad_gain_word(i)
+            gain = min((words[gain_word] >> shift) & 0x7, len(AD_GAINS) - 1)
+            values.append(last[i] if last is not None and word & AD_BUSY_BIT else ad_volts(word, gain))
         return values
 
     def _held_counts(self) -> list[float]:
@@ -170,14 +173,17 @@ class Walk:
         self._tick()
 
     def at_rest(self) -> bool:
-        """The board's readback: every PWM width 0 and every D/A at its 0 V word."""
+        """The board's readback: every output's register as :meth:`rest` wrote it (duty 0, the D/A's
+        0 V word; the config's coil and road outputs at their rest)."""
         reg = self.rig.map
         assert reg is not None
+        frame = self.rig.exchange_frame()
         words = self._tick()
-        return all(
-            words[reg.pwm_width_word(k) if kind == "pwm" else reg.da_word(k)] == (0 if kind == "pwm" else DA_ZERO)
-            for kind, k in self.outputs
-        )
+        for kind, k in self.outputs:
+            word = reg.pwm_width_word(k) if kind == "pwm" else reg.da_word(k)
+            if words[word] != int.from_bytes(frame[2 * word : 2 * word + 2], "little"):
+                return False
+        return True
 
     # the operator ---------------------------------------------------------------------------------
     def _answer(self, prompt: str) -> str:
