@@ -106,8 +106,8 @@ def walk(tmp_path, choices: dict, bench_wiring: dict | None = None, **options):
 
 
 def test_the_walk_finds_a_bench_wired_unlike_the_config(tmp_path):
-    """Every key of the bench's truth found and confirmed: the coil on PWM 3 (the config guesses PWM 0,
-    which today's guess-pulsing walk would drive and find no sense on), the road on D/A 1 with its
+    """Every key of the bench's truth found and confirmed: the coil on PWM 3 (the config guesses PWM 0:
+    a walk that pulsed the guessed channel would find no sense there), the road on D/A 1 with its
     encoder (counter 5) reversed at 2000 counts a revolution, the arm on counter 4 counting down."""
     rows, fragment, operator, board = walk(tmp_path, {"scale": "0.2", "revolution": "m"})
     found = fragment["rtdac"]
