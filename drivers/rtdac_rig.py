@@ -431,6 +431,12 @@ class RtdacRig(RigInterface):
         tries the wiring it is asked to)."""
         reg = self.map
         assert reg is not None
+        if kind == "pwm" and reg.pwm_mode_word(channel) not in self._settings:
+            # a channel the config does not name: its mode set as the config's channels' are, from here on
+            mode_word = reg.pwm_mode_word(channel)
+            high = int.from_bytes(self._frame[2 * mode_word : 2 * mode_word + 2], "little") & 1
+            self._settings[mode_word] = (PWM_MODE_CODE[self.wiring.pwm_mode] << 1) | high
+            self._put(mode_word, self._settings[mode_word])
         word = reg.pwm_width_word(channel) if kind == "pwm" else reg.da_word(channel)
         self._put(word, self._output_word(kind, value))
 

@@ -228,28 +228,44 @@ def test_compare_over_the_rtdac_agrees_with_the_simulated_rig(tmp_path, board):
         assert relative == pytest.approx(reference, rel=0.12), (law, sim, over, seen)
 
 
+def read_until(stream, text: str, limit: int = 20_000) -> str:
+    """What ``stream`` says up to and including ``text`` (a prompt waits without a newline)."""
+    said = ""
+    while not said.endswith(text):
+        char = stream.read(1)
+        assert char and len(said) < limit, said
+        said += char
+    return said
+
+
 @pytest.mark.alone  # the round trips judged against the 1 ms period before the walk
 def test_doctor_finds_the_board_times_the_exchange_and_walks_the_channels(tmp_path, board):
-    """The emulated bench wired unlike the defaults (the arm on counter 3, counting down; the road on
-    counter 6): the walk finds it from the operator's answers, each step ended at rest."""
+    """The emulated bench wired unlike the config's guesses (the arm on counter 3, counting down; the
+    coil on PWM 3 with its sense on A/D 6; the road motor on D/A 1, its encoder counter 6 reversed):
+    the walk finds it from the operator's answers and its pulses, each step ended at rest."""
     # the emulated damper heavier than the seed's (c1 5 N m s/rad): the arm settles within a second of the drop
     emu = board("--hold-deg", "-5", "--release-after", "2", "--set", "model.params.c1=5", "--set", "rtdac.arm_encoder=3",
-                "--set", "rtdac.arm_reversed=true", "--set", "rtdac.road_encoder=6")  # fmt: skip
+                "--set", "rtdac.arm_reversed=true", "--set", "rtdac.road_encoder=6", "--set", "rtdac.coil_channel=3",
+                "--set", "rtdac.coil_sense_ad=6", "--set", "rtdac.road_channel=1", "--set", "rtdac.road_reversed=true")  # fmt: skip
     fragment = tmp_path / "wiring.yaml"
     proc = subprocess.Popen(
         [*SASHIL, "doctor", "--driver", "rtdac", "--port", emu.port, "--jitter-s", "0", "--round-trips", "300",
-         "--walk", "--fragment", str(fragment)],
+         "--walk", "--fragment", str(fragment), "--sense-a-per-v", "0.2",
+         "--config", relaxed(tmp_path)],  # the walk's half a minute of exchanges: a busy machine's stalls
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         assert proc.stdout is not None and proc.stdin is not None
-        prompt = proc.stdout.read(len("move the arm"))  # the walk's first prompt: the arm is held at -5 deg
-        assert prompt == "move the arm", prompt
-        time.sleep(5.0)  # the operator lets go 2 s after the claim; the arm comes to rest at 0 deg
-        proc.stdin.write("5\n")
+        # the walk's first prompt: the emulated operator holds the arm at -5 deg from the claim for 2 s
+        said = read_until(proc.stdout, "then press Enter (s: skip): ")
+        assert "hold the arm at the -5 deg marker" in said, said
+        proc.stdin.write("\n")
         proc.stdin.flush()
-        out, err = proc.communicate(input="\n\n", timeout=60)
-        out = prompt + out
+        said += read_until(proc.stdout, "when it rests at 0 deg, press Enter (s: skip): ")
+        time.sleep(5.0)  # the operator lets go 2 s after the claim; the arm comes to rest at 0 deg
+        # the pulses: yes; the revolution: skipped; the coil's map: yes
+        out, err = proc.communicate(input="\ny\ns\ny\n", timeout=120)
+        out = said + out
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -261,9 +277,17 @@ def test_doctor_finds_the_board_times_the_exchange_and_walks_the_channels(tmp_pa
     found = yaml.safe_load(fragment.read_text())["rtdac"]
     assert found["arm_encoder"] == 3 and found["arm_reversed"] is True
     assert found["arm_counts_per_rev"] == pytest.approx(4096, rel=0.03)
-    assert found["road_encoder"] == 6 and found["coil_sense_ad"] == 0
-    assert found["road_output_per_rad_s"] == pytest.approx(0.5, rel=0.1)
-    assert "OK    board/at rest" in out
+    assert (found["coil_output"], found["coil_channel"], found["coil_sense_ad"]) == ("pwm", 3, 6)
+    assert (found["road_output"], found["road_channel"], found["road_encoder"]) == ("da", 1, 6)
+    assert found["road_reversed"] is True and "road_counts_per_rev" not in found
+    assert found["coil_map_output"] == [0.0, 0.1, 0.2, 0.3]
+    assert found["coil_map_current_a"] == pytest.approx([0.0, 0.1, 0.2, 0.3], abs=0.003)
+    assert found["confirmed"] == [
+        "coil_output", "coil_channel", "coil_map_current_a", "coil_map_output", "road_output", "road_channel",
+        "road_encoder", "road_reversed", "arm_encoder", "arm_counts_per_rev", "arm_reversed", "coil_sense_ad",
+        "coil_sense_a_per_v",
+    ]  # fmt: skip
+    assert "OK    walk/outputs at rest" in out and "OK    board/at rest" in out
     assert "outputs at rest" in emu.stop().splitlines()[-1]
 
 

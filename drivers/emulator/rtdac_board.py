@@ -50,6 +50,8 @@ from sashil.drivers.sim import SimulatedRig
 TWO_PI = 2.0 * math.pi
 #: the road motor's dead band: below one D/A step [V] (or a duty as small) it stands still
 ROAD_DEAD_BAND = 20.0 / 16383
+#: an unpowered road motor slower than this [rad/s] stands still (friction), so a hand can turn the wheel
+ROAD_STILL_RAD_S = 1e-6
 _FRAME = struct.Struct(f"<{FRAME_WORDS}H")
 
 
@@ -363,6 +365,8 @@ class RtdacBoard:
         if last is not None and now_ns > last:
             alpha = 1.0 - math.exp(-(now_ns - last) * 1e-9 / self.motor.tau_s)
             speed = self._road_speed + alpha * (self.road_target_rad_s - self._road_speed)
+            if self.road_target_rad_s == 0.0 and abs(speed) < ROAD_STILL_RAD_S:
+                speed = 0.0
             if speed != self._road_speed:
                 self._road_speed = speed
                 self.rig.write(RigCommand(self.drive_a, speed), last, 0)

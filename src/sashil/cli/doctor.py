@@ -1,9 +1,15 @@
-"""``sashil doctor``: is this PC, this port and this board ready for the rig? One table of checks."""
+"""``sashil doctor``: is this PC, this port and this board ready for the rig? One table of checks.
+
+With ``--driver rtdac --walk`` it also finds the rig's wiring to INTECO's RT-DAC/USB2 with the operator
+(:mod:`sashil.diagnostics.rtdac_walk`: what the walk finds and what it does not) and writes it as a
+fragment of the ``rtdac`` section, with the keys it confirmed in ``rtdac.confirmed``.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from sashil.cli.common import add_config_options, add_driver_options, resolve_config
@@ -35,8 +41,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     walk.add_argument(
         "--walk",
         action="store_true",
-        help="name the rig's channels with the operator at the terminal: move the arm, pulse the coil, run the "
-        "road motor (each step confirmed, each ended at rest), then write a config fragment to review",
+        help="find the rig's wiring with the operator at the terminal, trusting none of the rtdac section's: "
+        "the arm's counter, counts per revolution and sign (the operator holds the arm at --arm-deg, then lets "
+        "it rest at 0); which PWM or D/A channel drives the coil and which A/D senses it, which drives the road "
+        "motor and which counter is its encoder, with its sign (each channel pulsed low for 0.3 s in turn); "
+        "the road wheel's counts per revolution (the motor turns it, or the operator by hand, until a mark "
+        "comes round), with the motor's speed per output and lag; the coil's map (output steps of a tenth of "
+        "full against the sense, to rtdac.bringup_current_max_a). Each step that drives an output asks first "
+        "(y/n), stays under the bring-up caps and ends at rest. Writes a fragment of the rtdac section with "
+        "what it found and rtdac.confirmed (the keys it confirmed; a skipped or failed step confirms none). "
+        "It does not find a PWM road motor's direction bit, a coil with no current sense, digital outputs "
+        "or the board's own settings (PWM prescaler and mode, A/D gains)",
+    )
+    walk.add_argument(
+        "--arm-deg",
+        type=float,
+        default=-5.0,
+        metavar="DEG",
+        help="the arm's marked angle for --walk [deg, theta2; the arm rests at 0] (default -5: the drop test's "
+        "marker; a wider angle, e.g. a stop, measures the counts per revolution finer)",
+    )
+    walk.add_argument(
+        "--sense-a-per-v",
+        type=float,
+        metavar="A_PER_V",
+        help="the coil current sense's scale for --walk [A/V] (the A/D reads volts; without it the walk asks "
+        "for it, or for a clamp meter's reading at the coil map's first step)",
     )
     walk.add_argument(
         "--fragment",
@@ -54,6 +84,13 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ConfigError(f"--round-trips: expected a count in [1, 1000000], got {args.round_trips}")
     if args.walk and args.json:
         raise ConfigError("--walk: asks the operator at a terminal; it does not run with --json")
+    if not (math.isfinite(args.arm_deg) and 0.0 < abs(args.arm_deg) <= 90.0):
+        raise ConfigError(f"--arm-deg: expected a marked angle in [-90, 90] deg other than 0, got {args.arm_deg:g}")
+    sense = args.sense_a_per_v
+    if sense is not None and not (math.isfinite(sense) and 1e-6 <= sense <= 1e6):
+        raise ConfigError(f"--sense-a-per-v: expected a scale in [1e-06, 1e+06] A/V, got {sense:g}")
+    if not args.walk and (sense is not None or args.arm_deg != -5.0):
+        raise ConfigError("--arm-deg, --sense-a-per-v: only with --walk")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -74,8 +111,10 @@ def run(args: argparse.Namespace) -> int:
         checks.append(judge(measure(loop, args.jitter_s)))
     if backend == "rtdac":
         from sashil.diagnostics.rtdac import rtdac_checks
+        from sashil.diagnostics.rtdac_walk import WalkOptions
 
-        checks += rtdac_checks(run_spec, args.round_trips, args.walk, args.fragment)
+        options = WalkOptions(args.arm_deg, args.sense_a_per_v)
+        checks += rtdac_checks(run_spec, args.round_trips, args.walk, args.fragment, options=options)
     elif run_spec.rig.values.get("port") is None:
         checks.append(Check("port", "port", "ok", f"driver {backend}: no port (add --driver and --port)"))
     else:

@@ -1,11 +1,12 @@
 """``sashil doctor --driver rtdac``: find the RT-DAC/USB2, read its header, time the exchange, and
-(``--walk``) name the rig's channels with the operator.
+(``--walk``) find the rig's wiring with the operator at the terminal.
 
-The walk asks the operator at the terminal, one step at a time, each ended with both outputs at
-rest: move the arm by hand through a known angle (which counter moved, counts per degree and
-sign); a short low-duty coil pulse (which A/D rose); the road motor at a low output (which other
-counter moved). Between the answers the board is read continuously. What it finds becomes a
-fragment of the ``rtdac`` section for the lab to review.
+The walk (:mod:`sashil.diagnostics.rtdac_walk`) trusts none of the ``rtdac`` section's wiring: it
+finds the arm's counter from an angle the operator sets, pulses every PWM and D/A channel to find
+the coil's output and sense and the road motor's output and encoder, measures the road wheel's
+counts per revolution and the coil's map, and writes what it found, with the keys it confirmed
+(``rtdac.confirmed``), as a fragment of the section for the lab to review. Its table rows say what
+each step found or why it found nothing.
 """
 
 from __future__ import annotations
@@ -16,14 +17,14 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TextIO
 
 import yaml
 
+from sashil.config.rtdac_section import WIRING_KEYS
 from sashil.diagnostics import FAIL, OK, WARN, Check
+from sashil.diagnostics.rtdac_walk import Walk, WalkOptions
 from sashil.drivers.rtdac_bus import LOOP_SHARE, highest_rate_hz
-from sashil.drivers.rtdac_codec import ad_volts, counter32
 from sashil.drivers.rtdac_rig import RtdacRig
 from sashil.drivers.rtdac_usb import UDEV_FILE, UDEV_RULE, BoardLink, describe_device
 from sashil.errors import DriverError, SashilError
@@ -133,173 +134,6 @@ def link_check(link: BoardLink, rate_hz: float) -> Check:
 
 
 # the walk ------------------------------------------------------------------------------------------
-@dataclass
-class Walk:
-    """The operator's walk through the channels (module docstring)."""
-
-    rig: RtdacRig
-    ask: Callable[[str], str | None]
-    say: Callable[[str], None]
-    found: dict[str, Any] = field(default_factory=dict)
-
-    def _words(self) -> tuple[int, ...]:
-        return self.rig.exchange()
-
-    def _counters(self, words: tuple[int, ...]) -> list[int]:
-        reg = self.rig.map
-        assert reg is not None
-        count = (self.rig.header.modules.get("encoder_i") if self.rig.header else None) or reg.encoder_count
-        return [counter32(words[lo], words[hi]) for lo, hi in (reg.counter_words(i) for i in range(count))]
-
-    def _ads(self, words: tuple[int, ...]) -> list[float]:
-        reg = self.rig.map
-        assert reg is not None
-        return [ad_volts(words[reg.ad_value_word(i)]) for i in range(reg.ad_count)]
-
-    def _rest(self) -> None:
-        self.rig.rest_outputs()
-        self._words()
-
-    def _set(self, kind: str, channel: int, value: float) -> None:
-        self.rig.set_output(kind, channel, value)
-
-    def arm(self) -> None:
-        answer = self.ask(
-            "move the arm by hand through a known angle and hold it there; then type that angle in degrees "
-            "(positive: the way theta2 rises) and press Enter, or s to skip: "
-        )
-        start = self._counters(self._words())
-        end, answer = self._watch(start, answer)
-        if answer is None:
-            return
-        try:
-            angle = float(answer)
-        except ValueError:
-            self.say(f"  '{answer}' is not an angle in degrees: the arm step is skipped")
-            return
-        moved = [e - s for s, e in zip(start, end, strict=True)]
-        channel = max(range(len(moved)), key=lambda i: abs(moved[i]))
-        if moved[channel] == 0 or angle == 0.0:
-            self.say("  no counter moved: the arm step found nothing")
-            return
-        per_degree = moved[channel] / angle
-        self.found.update(
-            arm_encoder=channel,
-            arm_counts_per_rev=round(abs(per_degree) * 360.0),
-            arm_reversed=per_degree < 0,
-        )
-        self.say(
-            f"  the arm is counter {channel}: {moved[channel]:+d} counts for {angle:g} deg, "
-            f"{abs(per_degree):.3f} counts/deg ({self.found['arm_counts_per_rev']} a revolution)"
-            + (", counting down" if per_degree < 0 else "")
-        )
-
-    def _watch(self, start: list[int], answer: str | None) -> tuple[list[int], str | None]:
-        """Read the board until the operator's answer (the ask returned None: still waiting)."""
-        end = start
-        while answer is None:
-            end = self._counters(self._words())
-            answer = self.ask("")
-        if answer.strip().lower() in ("s", "skip", "q"):
-            return end, None
-        return self._counters(self._words()), answer.strip()
-
-    def coil(self) -> None:
-        rig = self.rig
-        kind, channel = rig.wiring.coil_output, rig.wiring.coil_channel
-        level = PULSE_DUTY if kind == "pwm" else PULSE_VOLTS
-        shown = f"duty {level:.0%}" if kind == "pwm" else f"{level:g} V"
-        if not self._confirm(
-            f"press Enter to pulse the coil ({kind} {channel}) at {shown} for {PULSE_S:g} s, or s to skip: "
-        ):
-            return
-        before = self._ads(self._words())
-        peak = list(before)
-        try:
-            self._set(kind, channel, level)
-            end = time.monotonic() + PULSE_S
-            while time.monotonic() < end:
-                peak = [max(p, v) for p, v in zip(peak, self._ads(self._words()), strict=True)]
-        finally:
-            self._rest()
-        rise = [p - b for p, b in zip(peak, before, strict=True)]
-        channel_ad = max(range(len(rise)), key=lambda i: rise[i])
-        if rise[channel_ad] < 0.05:
-            self.say("  no A/D rose by 50 mV: no coil current sense found (rtdac.coil_sense_ad: null)")
-            self.found["coil_sense_ad"] = None
-            return
-        self.found["coil_sense_ad"] = channel_ad
-        self.say(f"  the coil current is A/D {channel_ad}: it rose {rise[channel_ad]:.3f} V (coil at rest again)")
-
-    def road(self) -> None:
-        rig = self.rig
-        kind, channel = rig.wiring.road_output, rig.wiring.road_channel
-        if kind == "none":
-            return
-        level = PULSE_DUTY if kind == "pwm" else PULSE_VOLTS
-        shown = f"duty {level:.0%}" if kind == "pwm" else f"{level:g} V"
-        if not self._confirm(
-            f"press Enter to run the road motor ({kind} {channel}) at {shown} for {ROAD_S:g} s, or s to skip: "
-        ):
-            return
-        start = self._counters(self._words())
-        trace: list[tuple[float, list[int]]] = []
-        try:
-            self._set(kind, channel, level)
-            t0 = time.monotonic()
-            while time.monotonic() < t0 + ROAD_S:
-                trace.append((time.monotonic() - t0, self._counters(self._words())))
-        finally:
-            self._rest()
-        moved = [e - s for s, e in zip(start, self._counters(self._words()), strict=True)]
-        arm = self.found.get("arm_encoder", rig.wiring.arm_encoder)
-        others = [i for i in range(len(moved)) if i != arm]
-        channel_enc = max(others, key=lambda i: abs(moved[i]))
-        if moved[channel_enc] == 0:
-            self.say("  no counter but the arm's moved: no road encoder found")
-            return
-        self.found.update(road_encoder=channel_enc, road_reversed=moved[channel_enc] * level < 0)
-        self.say(f"  the road wheel is counter {channel_enc}: {moved[channel_enc]:+d} counts (motor at rest again)")
-        per_rev = self.found.get("road_counts_per_rev", rig.wiring.road_counts_per_rev)
-        step = road_step(trace, channel_enc, start[channel_enc], per_rev, level)
-        if step is not None:
-            gain, lag = step
-            self.found.update(road_output_per_rad_s=round(1.0 / gain, 6), road_lag_s=round(lag, 4))
-            self.say(
-                f"  the road motor turns {gain:.3g} rad/s per {'unit duty' if kind == 'pwm' else 'V'}, "
-                f"with a lag of {lag * 1e3:.0f} ms (road_output_per_rad_s, road_lag_s; counts per revolution "
-                f"taken as {per_rev})"
-            )
-
-    def _confirm(self, prompt: str) -> bool:
-        answer = self.ask(prompt)
-        while answer is None:
-            self._words()
-            answer = self.ask("")
-        return answer.strip().lower() not in ("s", "skip", "q")
-
-
-def road_step(
-    trace: list[tuple[float, list[int]]], channel: int, start: int, counts_per_rev: int, level: float
-) -> tuple[float, float] | None:
-    """The road motor's step response from the walk's trace: its steady speed per unit of output
-    (the mean over the trace's last 40 %) and its time constant (where the angle's path meets the
-    first-order response's: at steady speed it runs ``lag`` behind a motor with none)."""
-    if len(trace) < 10 or level == 0.0:
-        return None
-    times = [t for t, _ in trace]
-    angles = [(counts[channel] - start) * 2.0 * math.pi / counts_per_rev for _, counts in trace]
-    tail = int(0.6 * len(trace))
-    if times[-1] - times[tail] <= 0.0:
-        return None
-    speed = (angles[-1] - angles[tail]) / (times[-1] - times[tail])
-    if abs(speed) < 1e-6:
-        return None
-    # a first-order motor's angle at steady speed: speed * (t - lag); the line through the tail's points
-    lag = times[-1] - angles[-1] / speed
-    return abs(speed / level), max(lag, 0.0)
-
-
 def terminal_asker(stream: TextIO = sys.stdin, out: TextIO = sys.stdout) -> Callable[[str], str | None]:
     """An ask that prints its prompt once and returns the operator's line, or None while none has come
     (so the walk keeps reading the board between the operator's keys)."""
@@ -322,29 +156,69 @@ def terminal_asker(stream: TextIO = sys.stdin, out: TextIO = sys.stdout) -> Call
 
 
 def walk_checks(
-    rig: RtdacRig, fragment_path: str, ask: Callable[[str], str | None], say: Callable[[str], None]
+    rig: RtdacRig,
+    fragment_path: str,
+    ask: Callable[[str], str | None],
+    say: Callable[[str], None],
+    options: WalkOptions | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
 ) -> list[Check]:
-    """The operator's walk, then the fragment written for review; both outputs at rest at the end."""
-    walk = Walk(rig, ask, say)
+    """The walk (:mod:`sashil.diagnostics.rtdac_walk`), one row a step, then the fragment written for
+    review; every output at rest at the end, confirmed by the board's readback."""
+    walk = Walk(rig, ask, say, options or WalkOptions(), clock, sleep)
     try:
-        walk.arm()
-        walk.coil()
-        walk.road()
+        walk.run()
     finally:
-        walk._rest()
-    if not walk.found:
-        return [Check("walk", "channels", WARN, "the walk found nothing (every step skipped or nothing moved)")]
-    fragment = {"driver": {"name": "rtdac"}, "rtdac": walk.found}
-    text = "# the RT-DAC wiring sashil doctor --walk found: review it before a run\n" + yaml.safe_dump(
-        fragment, sort_keys=False
+        walk.rest()
+    checks = [Check("walk", step, OK if ok else WARN, text) for step, ok, text in walk.outcomes]
+    at_rest = walk.at_rest()
+    checks.append(
+        Check(
+            "walk",
+            "outputs at rest",
+            OK if at_rest else FAIL,
+            "every PWM at duty 0 and every D/A at 0 V, confirmed by the readback"
+            if at_rest
+            else "the readback did not confirm every output at rest",
+            "" if at_rest else E_STOP,
+        )
     )
+    if not walk.found:
+        checks.append(Check("walk", "fragment", WARN, "the walk found nothing (every step skipped or nothing moved)"))
+        return checks
+    text = fragment_text(walk.found, walk.confirmed_keys())
     try:
         with open(fragment_path, "w", encoding="utf-8") as handle:
             handle.write(text)
     except OSError as err:
         raise DriverError(f"--fragment {fragment_path}: cannot write ({err.strerror})") from None
-    found = ", ".join(f"{k}={v}" for k, v in walk.found.items())
-    return [Check("walk", "channels", OK, f"{found}; written to {fragment_path}", data=dict(walk.found))]
+    confirmed = walk.confirmed_keys()
+    left = [key for key in WIRING_KEYS if key not in confirmed]
+    checks.append(
+        Check(
+            "walk",
+            "fragment",
+            OK if not left else WARN,
+            f"written to {fragment_path}: {len(confirmed)} of {len(WIRING_KEYS)} wiring keys confirmed"
+            + (f"; unconfirmed (the config's guesses, under the bring-up caps): {', '.join(left)}" if left else ""),
+            f"review {fragment_path}, then run with --config {fragment_path}",
+            data={"found": dict(walk.found), "confirmed": confirmed},
+        )
+    )
+    return checks
+
+
+def fragment_text(found: dict[str, Any], confirmed: list[str]) -> str:
+    """The fragment of the ``rtdac`` section the walk writes: what it found, and which wiring keys
+    it confirmed (a group not wholly confirmed runs under its bring-up cap)."""
+    section = {**found, "confirmed": confirmed}
+    return (
+        "# the RT-DAC wiring sashil doctor --walk found on this bench: review it, then --config this file.\n"
+        "# rtdac.confirmed lists the wiring keys the walk confirmed; the coil and the road motor run under\n"
+        "# rtdac.bringup_current_max_a and rtdac.bringup_road_output until all of their keys are confirmed.\n"
+        + yaml.safe_dump({"driver": {"name": "rtdac"}, "rtdac": section}, sort_keys=False)
+    )
 
 
 def rtdac_checks(
@@ -354,6 +228,7 @@ def rtdac_checks(
     fragment_path: str = "rtdac-wiring.yaml",
     ask: Callable[[str], str | None] | None = None,
     say: Callable[[str], None] | None = None,
+    options: WalkOptions | None = None,
 ) -> list[Check]:
     """The board's checks, and the walk on request; the board is left with both outputs at rest."""
     checks, rig = board_checks(run, round_trips)
@@ -361,7 +236,7 @@ def rtdac_checks(
         return checks
     try:
         if walk:
-            checks += walk_checks(rig, fragment_path, ask or terminal_asker(), say or print)
+            checks += walk_checks(rig, fragment_path, ask or terminal_asker(), say or print, options)
     finally:
         rig.deactivate()
         confirmed = rig.safe_state.get("safe_state_confirmed")
