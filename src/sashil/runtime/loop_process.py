@@ -5,7 +5,7 @@ The loop process (:mod:`sashil.runtime.worker`) is a fork of this process's loop
 loaded: no fork of this process's threads and locks, no re-import of the caller's ``__main__`` (a
 script or notebook that calls ``sashil.run(MyLaw)`` runs once), and the law crosses as its name in
 the run's assembled spec, never pickled. sashil's real-time loop is Linux-only (``SCHED_FIFO``,
-``/dev/shm``, ``os.getppid``).
+``/dev/shm``, a pipe's ``O_ASYNC`` and ``pidfd_open``).
 
 The session process keeps everything that is not the cycle: the recorder
 (:class:`~sashil.runtime.stream_recorder.StreamRecorder`), the views (the live view, progress,
@@ -17,11 +17,14 @@ stops on its own signal, and the session, which catches SIGINT, SIGTERM and SIGH
 writes the signal into the stream's stop word, so a signal sent to the session alone stops the
 loop too. A caller's :class:`~sashil.runtime.signals.StopFlag` is passed on the same way.
 
-Faults: if the loop process dies (``kill -9``), the board's watchdog takes the coil to 0 A; the
-session keeps every committed row, then reopens the link and confirms the current it reads
-(:func:`confirm_safe`) rather than assume it, and ``summary.json`` says the loop died. If the
-session dies, the loop sees it within a cycle (:mod:`sashil.runtime.mailbox`) and ends the run
-itself (:mod:`sashil.runtime.orphan`).
+Faults: if the loop process dies (``kill -9``), the coil is left to the board until the session
+acts: sashil's board cuts it when its watchdog expires, the RT-DAC/USB2 has no watchdog and keeps
+its last outputs. The session keeps every committed row, then reopens the link, commands 0 A and
+confirms the current it reads (:func:`confirm_safe`) rather than assume it, and ``summary.json``
+says the loop died. If the session dies, its write end of the job's pipe (the loop's stdin, held
+for the whole run: :meth:`LoopProcess.close` lets it go) closes with it: the loop process is told
+at once (:class:`~sashil.runtime.orphan.SessionWatch`), stops at its next cycle at 0 A as a stop
+signal would, and ends the run itself (:mod:`sashil.runtime.orphan`).
 """
 
 from __future__ import annotations
@@ -335,6 +338,9 @@ class LoopProcess:
         return 0 if self.stream is None else int(self.stream.header[FRAMES_DROPPED_W])
 
     def close(self) -> None:
+        """Give the session's CPUs back and let go of the loop process: its job's pipe (whose end,
+        while the loop still runs, stops it at 0 A to end the run alone: :mod:`sashil.runtime.orphan`),
+        its messages and the stream."""
         for tid, allowed in self._affinity.items():
             try:
                 os.sched_setaffinity(tid, allowed)
@@ -405,8 +411,8 @@ def _stop_code(stop: StopFlag) -> int:
 class SessionSignals:
     """SIGINT, SIGTERM and SIGHUP caught by the session for the run: each writes its number into
     the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code.
-    A third one ends a loop process that does not stop (``kill``: the board's watchdog then takes
-    the coil to 0 A, and the session confirms it as after any death of the loop)."""
+    A third one ends a loop process that does not stop (``kill``: the session then reopens the rig,
+    commands 0 A and confirms it, as after any death of the loop)."""
 
     #: stop signals after which a loop process that has not ended is killed
     KILL_AFTER = 3
@@ -493,13 +499,15 @@ class LoopEnd:
     stop: StopFlag
 
     def facts(self, pid: int | None, startup_s: float | None, **more: Any) -> dict[str, Any]:
-        """The loop process's facts for summary.json: its pid, threads and start-up (and ``more``);
-        ``died`` when it died."""
+        """The loop process's facts for summary.json: its pid, threads, start-up and the loop's
+        start on CLOCK_MONOTONIC (``start_ns``: the record's ``time_s`` counts from it, so another
+        process's clock can be laid beside the record) (and ``more``); ``died`` when it died."""
         end = self.end
         facts = {
             "pid": pid,
             "threads": end.get("threads"),
             "startup_s": None if startup_s is None else round(startup_s, 3),
+            "start_ns": end.get("start_ns"),
             **more,
         }
         if "loop_died" in end:

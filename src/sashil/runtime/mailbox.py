@@ -5,10 +5,11 @@ cycle without blocking:
 
 * :class:`LoopStop` is the loop's stop flag. It is set by a signal delivered to the loop process
   (SIGINT from the terminal reaches the whole process group), by the session's stop word (a
-  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death:
-  the loop compares ``os.getppid()`` with the session's pid every cycle, which changes the moment
-  the session is gone and the loop is re-parented (exact, one cheap system call, and unlike
-  ``PR_SET_PDEATHSIG`` it follows the process rather than the thread that spawned it).
+  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death,
+  which the loop's :class:`~sashil.runtime.orphan.SessionWatch` turns into a request of the same
+  flag the moment it happens (the session's own pipe and pid, whichever process is the loop's
+  parent; unlike ``PR_SET_PDEATHSIG`` it follows the session rather than the parent's thread).
+  A cycle reads the flag and the stop word: no system call.
 * :class:`MailboxTuning` is :class:`~sashil.runtime.tuning.LiveTuning` fed from the stream's
   mailbox: the session's tuning socket posts each request there, and the loop answers it between
   two cycles, at the first cycle after it arrived, with the same checks and events as in one
@@ -17,16 +18,18 @@ cycle without blocking:
 
 from __future__ import annotations
 
-import os
 import signal
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.stream import BAD_FRAMES_W, CLIPPED_W, SAMPLES_LOST_W, STOP_BY_CALLER, STOP_W, WATCHDOG_W, Stream
 from sashil.runtime.tune_socket import answer
 from sashil.runtime.tuning import LiveTuning, TuneEvent
+
+if TYPE_CHECKING:
+    from sashil.runtime.orphan import SessionWatch
 
 #: the stop reason of a loop whose session process died
 SESSION_DIED = "the session process died"
@@ -45,39 +48,47 @@ def stop_reason(code: int) -> str:
 
 
 class LoopStop:
-    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals. The loop
-    asks it once per cycle; every ``every`` cycles it also calls ``tick`` (the health's writer)."""
+    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals and,
+    through ``session``'s watch, the session's death. The loop asks it once per cycle; every
+    ``every`` cycles it also calls ``tick`` (the health's writer) and looks at the session again
+    (:meth:`~sashil.runtime.orphan.SessionWatch.check`)."""
 
-    __slots__ = ("_countdown", "_every", "_flag", "_header", "_session_pid", "_tick", "orphaned")
+    __slots__ = ("_countdown", "_every", "_flag", "_header", "_session", "_tick")
 
     def __init__(
-        self, flag: StopFlag, stream: Stream, session_pid: int, tick: Callable[[], None] | None = None, every: int = 100
+        self,
+        flag: StopFlag,
+        stream: Stream,
+        session: SessionWatch | None = None,
+        tick: Callable[[], None] | None = None,
+        every: int = 100,
     ):
         self._flag = flag
         self._header = stream.header
-        self._session_pid = session_pid
-        #: the session died: the loop is alone with the stream and the run folder
-        self.orphaned = False
+        self._session = session
         self._tick = tick
         self._every = max(1, int(every))
         self._countdown = 0
 
     @property
+    def orphaned(self) -> bool:
+        """The session died: the loop is alone with the stream and the run folder."""
+        return self._session is not None and self._session.gone
+
+    @property
     def requested(self) -> bool:
-        if self._tick is not None:
-            self._countdown -= 1
-            if self._countdown <= 0:
-                self._countdown = self._every
+        self._countdown -= 1
+        if self._countdown <= 0:
+            self._countdown = self._every
+            if self._tick is not None:
                 self._tick()
+            if self._session is not None:
+                self._session.check()
         if self._flag.requested:
             return True
         code = self._header[STOP_W]
         if code:
             self._flag.request(stop_reason(int(code)))
-            return True
-        if os.getppid() != self._session_pid:
-            self.orphaned = True
-            self._flag.request(SESSION_DIED)
             return True
         return False
 
