@@ -1,5 +1,5 @@
-"""The loop's watch on its session (sashil.runtime.orphan.SessionWatch), in this process: the end of
-the job's pipe, signalled by the kernel, and the end of the session's pid, looked at."""
+"""The loop's watch on its session (sashil.runtime.orphan): the session's hold on the stream, a robust
+mutex the kernel marks when its holding thread dies, and the end of the job's pipe, signalled."""
 
 from __future__ import annotations
 
@@ -7,10 +7,24 @@ import fcntl
 import os
 import signal
 import subprocess
+import sys
 
 import pytest
 
-from sashil.runtime.orphan import SessionWatch
+from sashil.runtime.mailbox import SESSION_DIED, LoopStop
+from sashil.runtime.orphan import SessionHold, SessionWatch
+from sashil.runtime.signals import StopFlag
+from sashil.runtime.stream import HOLDER_W, Stream
+
+#: the robust futex's bit the kernel sets when the owner died (linux/futex.h FUTEX_OWNER_DIED)
+FUTEX_OWNER_DIED = 0x40000000
+
+
+@pytest.fixture
+def stream(tmp_path):
+    made = Stream.create(("time_s", "current_a"), capacity=8, window=4096, folder=tmp_path)
+    yield made
+    made.close()
 
 
 @pytest.fixture
@@ -33,7 +47,7 @@ def test_the_pipe_s_end_is_signalled_at_once_and_the_callback_runs_once(pipe):
     before = signal.getsignal(signal.SIGIO)
     watch = SessionWatch(pipe["read"], None, lambda: called.append(True)).start()
     try:
-        assert not watch.gone and not watch.check() and called == []
+        assert watch.hold is None and not watch.gone and not watch.check() and called == []
         os.write(pipe["write"], b"x")  # bytes from the session are no end: dropped
         assert not watch.check() and not watch.gone
         _close(pipe, "write")  # the session's end: SIGIO, no look of the loop's own
@@ -54,15 +68,43 @@ def test_a_session_that_ended_before_the_watch_started_is_seen_by_the_start(pipe
         watch.stop()
 
 
-def test_a_session_whose_pipe_end_outlives_it_is_seen_by_its_pid(pipe):
-    # the session's write end still held elsewhere (a child it forked kept it): its pid's end tells
-    session = subprocess.Popen(["cat"], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL)
+def test_the_hold_is_a_word_the_loop_reads_each_cycle_and_letting_it_go_stops_the_loop(stream, pipe):
+    hold = SessionHold(stream).take()
     try:
-        watch = SessionWatch(pipe["read"], session.pid).start()
+        assert hold.held, "no robust mutex here (glibc's layout expected on Linux)"
+        holder = int(stream.header[HOLDER_W])
+        assert holder != 0 and holder != os.getpid()  # a thread of its own holds it
+        flag = StopFlag()
+        watch = SessionWatch(pipe["read"], stream, lambda: flag.request(SESSION_DIED)).start()
+        try:
+            assert watch.holder == holder and watch.hold[0] == holder
+            stop = LoopStop(flag, stream, watch)
+            assert not stop.requested and not stop.requested
+            hold.release()  # the session lets go (it closed the loop process while the loop ran)
+            assert stop.requested and stop.orphaned and stop.signal_name == SESSION_DIED
+            assert stream.header[HOLDER_W] == 0
+        finally:
+            watch.stop()
+    finally:
+        hold.release()
+
+
+def test_a_killed_session_s_hold_reads_owner_died(stream, pipe):
+    session = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys\nfrom sashil.runtime.orphan import SessionHold\nfrom sashil.runtime.stream import Stream\n"
+         "hold = SessionHold(Stream.attach(sys.argv[1])).take()\nprint(hold.held, flush=True)\nsys.stdin.read()\n",
+         str(stream.path)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert session.stdout.readline().strip() == "True"  # type: ignore[union-attr]
+        watch = SessionWatch(pipe["read"], stream).start()  # the pipe stays open: the hold alone tells
         try:
             assert not watch.check()
-            session.stdin.close()  # type: ignore[union-attr]  # cat ends at its input's end
+            session.kill()
             session.wait(timeout=30)
+            assert watch.hold[0] & FUTEX_OWNER_DIED  # the kernel's mark on the dead holder's word
             assert watch.check() and watch.gone
         finally:
             watch.stop()
@@ -70,3 +112,5 @@ def test_a_session_whose_pipe_end_outlives_it_is_seen_by_its_pid(pipe):
         if session.poll() is None:
             session.kill()
             session.wait()
+        session.stdin.close()  # type: ignore[union-attr]
+        session.stdout.close()  # type: ignore[union-attr]

@@ -208,22 +208,6 @@ def test_the_loop_stops_on_the_stop_word_and_on_its_session_s_death(stream):
         os.close(read_fd)
 
 
-def test_the_session_is_looked_at_again_every_so_many_cycles_with_the_health(stream):
-    looks: list[str] = []
-
-    class Session:
-        gone = False
-
-        def check(self) -> bool:
-            looks.append("session")
-            return False
-
-    stop = LoopStop(StopFlag(), stream, Session(), tick=lambda: looks.append("health"), every=3)  # type: ignore[arg-type]
-    for _ in range(7):
-        assert not stop.requested
-    assert looks == ["health", "session"] * 3  # cycles 1, 4 and 7
-
-
 class Gain(Law):
     """A law with one tunable float."""
 

@@ -5,11 +5,12 @@ cycle without blocking:
 
 * :class:`LoopStop` is the loop's stop flag. It is set by a signal delivered to the loop process
   (SIGINT from the terminal reaches the whole process group), by the session's stop word (a
-  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death,
-  which the loop's :class:`~sashil.runtime.orphan.SessionWatch` turns into a request of the same
-  flag the moment it happens (the session's own pipe and pid, whichever process is the loop's
-  parent; unlike ``PR_SET_PDEATHSIG`` it follows the session rather than the parent's thread).
-  A cycle reads the flag and the stop word: no system call.
+  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death
+  (:mod:`sashil.runtime.orphan`): a cycle reads the session's hold, a word of the stream that the
+  kernel changes the moment the session's holding thread dies, and the job's pipe's end sets the
+  flag from its ``SIGIO``. Both follow the session, whichever process is the loop's parent
+  (unlike ``PR_SET_PDEATHSIG``, which follows the parent's thread). A cycle reads the flag, the
+  stop word and the hold: no system call.
 * :class:`MailboxTuning` is :class:`~sashil.runtime.tuning.LiveTuning` fed from the stream's
   mailbox: the session's tuning socket posts each request there, and the loop answers it between
   two cycles, at the first cycle after it arrived, with the same checks and events as in one
@@ -48,12 +49,12 @@ def stop_reason(code: int) -> str:
 
 
 class LoopStop:
-    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals and,
-    through ``session``'s watch, the session's death. The loop asks it once per cycle; every
-    ``every`` cycles it also calls ``tick`` (the health's writer) and looks at the session again
-    (:meth:`~sashil.runtime.orphan.SessionWatch.check`)."""
+    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals and the
+    session's death, which the loop reads every cycle from ``session``'s hold (a started
+    :class:`~sashil.runtime.orphan.SessionWatch`: one word of shared memory against the holder's
+    thread id) and its pipe signals. Every ``every`` cycles it also calls ``tick`` (the health's writer)."""
 
-    __slots__ = ("_countdown", "_every", "_flag", "_header", "_session", "_tick")
+    __slots__ = ("_countdown", "_every", "_flag", "_header", "_hold", "_holder", "_session", "_tick")
 
     def __init__(
         self,
@@ -66,6 +67,8 @@ class LoopStop:
         self._flag = flag
         self._header = stream.header
         self._session = session
+        self._hold = session.hold if session is not None else None
+        self._holder = session.holder if session is not None else 0
         self._tick = tick
         self._every = max(1, int(every))
         self._countdown = 0
@@ -77,18 +80,20 @@ class LoopStop:
 
     @property
     def requested(self) -> bool:
-        self._countdown -= 1
-        if self._countdown <= 0:
-            self._countdown = self._every
-            if self._tick is not None:
+        if self._tick is not None:
+            self._countdown -= 1
+            if self._countdown <= 0:
+                self._countdown = self._every
                 self._tick()
-            if self._session is not None:
-                self._session.check()
         if self._flag.requested:
             return True
         code = self._header[STOP_W]
         if code:
             self._flag.request(stop_reason(int(code)))
+            return True
+        hold = self._hold
+        if hold is not None and hold[0] != self._holder:  # the session's holding thread died (or let go)
+            self._session.lost()  # type: ignore[union-attr]  # a hold comes with its watch
             return True
         return False
 

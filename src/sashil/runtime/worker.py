@@ -17,7 +17,7 @@ No other Python thread runs in it. What it does, in order:
    greets the board, then creates the stream for the stage's columns and says ``ready``;
 3. waits for the session's ``go`` line (the session has made the run folder and started the
    recorder), watches its session from then on (:class:`~sashil.runtime.orphan.SessionWatch`: the
-   session's end of stdin and its pid), applies ``loop.rt`` and runs
+   session's hold in the stream and its end of stdin), applies ``loop.rt`` and runs
    :class:`~sashil.runtime.loop.ControlLoop`;
 4. sends ``end``: how the loop ended, the timing counters, the rig's facts (link statistics), the
    tuning events. If the session died, the watch has stopped the loop at its next cycle, at 0 A
@@ -213,32 +213,31 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         return 1
     started = json.loads(go)
     folder = Path(started["folder"])
-    # the session's end stops the loop the moment it happens: its write end of stdin closes (and its pid ends)
-    session = SessionWatch(sys.stdin.fileno(), job.get("session_pid"), lambda: flag.request(SESSION_DIED))
-    # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
-    stop = LoopStop(flag, stream, session, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
-    tuning = None
-    if tunable:
-        tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
-    writer = StreamWriter(stream)
-    loop = control_loop(
-        spec,
-        rig,
-        stage,
-        RealClock.for_rate(spec.loop.spin_margin_us, rate),
-        job.get("duration_s"),
-        warn=lambda line: messages.send("warning", text=line),
-        recorder=writer,
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(rate),
-    )
-    loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
-    rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
-    stream.set_state("running")
-    stream.header[THREADS_W] = threading.active_count()
-    session.start()
+    # the session's end stops the loop the moment it happens: its hold let go, its end of stdin closed
+    session = SessionWatch(sys.stdin.fileno(), stream, lambda: flag.request(SESSION_DIED)).start()
     try:
+        # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
+        stop = LoopStop(flag, stream, session, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
+        tuning = None
+        if tunable:
+            tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
+        writer = StreamWriter(stream)
+        loop = control_loop(
+            spec,
+            rig,
+            stage,
+            RealClock.for_rate(spec.loop.spin_margin_us, rate),
+            job.get("duration_s"),
+            warn=lambda line: messages.send("warning", text=line),
+            recorder=writer,
+            tuning=tuning,
+            stop=stop,
+            timing=stream.timing(rate),
+        )
+        loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
+        rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
+        stream.set_state("running")
+        stream.header[THREADS_W] = threading.active_count()
         error = run_realtime(loop, rt, lambda line: messages.send("progress", text=line))
         session.check()  # a session that ended during the shutdown has no one to record the rest either
     finally:
