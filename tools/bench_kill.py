@@ -207,7 +207,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     runs = 1 if args.quick else args.runs
     backends = [b for b in args.backend or ("sim", "serial-c") if b == "sim" or compiler() is not None]
-    ways = (("kill -9", signal.SIGKILL),) if args.kill_only else (("kill -9", signal.SIGKILL), ("SIGINT (baseline)", signal.SIGINT))
+    ways = (
+        (("kill -9", signal.SIGKILL),)
+        if args.kill_only
+        else (("kill -9", signal.SIGKILL), ("SIGINT (baseline)", signal.SIGINT))
+    )
     lines = [
         f"bench_kill: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {_commit()}, "
         f"{os.cpu_count()} CPUs, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} (start)",

@@ -136,7 +136,6 @@ class LoopProcess:
             "duration_s": duration_s,
             "realtime": realtime,
             "tune": tune,
-            "session_pid": os.getpid(),
             "log_level": _log_level(),
             "sys_path": list(sys.path),  # a law's module imports there as it does here
         }

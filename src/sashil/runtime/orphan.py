@@ -128,9 +128,7 @@ class SessionHold:
         self._let_go.set()
         self._thread.join(HOLD_WAIT_S)
         self._thread = None
-        if self._mutex is not None:
-            del self._mutex  # the ctypes view of the stream's map, which the map's close needs gone
-            self._mutex = None
+        self._mutex = None  # the ctypes view of the stream's map, which the map's close needs gone
 
 
 class SessionWatch:
