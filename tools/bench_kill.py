@@ -5,7 +5,9 @@ On the real clock, as a lab runs it: ``sashil run --current A --duration 30`` in
 session), its loop in a loop process forked from the session's loop server. One second into the
 loop the session gets SIGKILL; its loop process, alone, must stop at 0 A, read on until the coil's
 current has decayed and end the run itself (:mod:`sashil.runtime.orphan`). The baseline is the
-same run stopped cleanly: SIGINT to the session, which writes it into the stream's stop word.
+same run stopped cleanly: SIGINT to the session, which writes it into the stream's stop word. The
+loop runs with the default real-time set-up (``loop.rt``: SCHED_FIFO where the process may), as at
+the bench.
 
 Each run is timed on CLOCK_MONOTONIC from the signal: the loop's record (``data.csv``, its
 ``time_s`` counting from the loop's start, ``summary.json``'s ``loop_process.start_ns``) gives when
@@ -13,8 +15,8 @@ the loop commanded 0 A (its first row at 0 A after the signal) and when the coil
 first row from then on whose measured current is at most 0.05 A, the loop's own settle bound); the
 loop server's and the loop process's ends are polled in /proc. Backends: the simulated rig, and
 serial against ``sashil emulate --board c`` (the firmware's C logic, when a C compiler is found),
-where the coil's true current comes from the emulator's ``--truth`` log, joined with the record on
-the samples' ``seq``.
+where the coil's true current comes from the emulator's ``--truth`` log, its device time put on
+the host's clock through the samples both hold (joined on ``seq``).
 
     python tools/bench_kill.py                      # 5 runs of each backend and signal
     python tools/bench_kill.py --runs 3 --save tools/bench_kill.out
@@ -110,8 +112,7 @@ def one_run(backend: str, signum: int, folder: Path) -> dict[str, float | None]:
     emulator = Emulator(folder) if backend == "serial-c" else None
     link = ["--driver", "serial", "--port", emulator.link, "--config", _relaxed(folder)] if emulator else []
     session = subprocess.Popen(
-        [*SASHIL, "run", "--duration", "30", "--current", str(CURRENT_A), "--out", str(out), "-v",
-         "--set", "loop.rt.priority=0", *link],
+        [*SASHIL, "run", "--duration", "30", "--current", str(CURRENT_A), "--out", str(out), "-v", *link],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
@@ -154,10 +155,19 @@ def one_run(backend: str, signum: int, folder: Path) -> dict[str, float | None]:
         "loop_s": (ends["loop"] - signalled) * 1e-9 if "loop" in ends else None,
     }
     if truth:
-        true_current = dict(zip(truth["seq"].astype(int) & 0xFFFF, np.abs(truth["current_true_a"]), strict=False))
-        joined = np.array([true_current.get(int(seq) & 0xFFFF, np.nan) for seq in data["seq"]])
-        result["true_rest_s"] = _rest_s(row_ns, signalled, first_zero, joined)
+        truth_ns = _on_the_host_s_clock(truth, data["seq"], row_ns)
+        above = np.flatnonzero(np.abs(truth["current_true_a"]) > REST_A)
+        rest = int(above[-1]) + 1 if above.size else 0
+        result["true_rest_s"] = (truth_ns[rest] - signalled) * 1e-9 if rest < len(truth_ns) else None
     return result
+
+
+def _on_the_host_s_clock(truth: dict[str, np.ndarray], seqs: np.ndarray, row_ns: np.ndarray) -> np.ndarray:
+    """The truth log's samples on the host's CLOCK_MONOTONIC [ns]: the board's clock shifted by the
+    median of (host row time - device time) over the samples both hold (joined on ``seq``)."""
+    device_ns = {int(seq): int(us) * 1000 for seq, us in zip(truth["seq"], truth["device_time_us"], strict=True)}
+    shifts = [host - device_ns[int(seq)] for seq, host in zip(seqs, row_ns, strict=True) if int(seq) in device_ns]
+    return truth["device_time_us"] * 1000 + np.median(shifts)
 
 
 def _rest_s(row_ns: np.ndarray, signalled: int, first_zero: int | None, current: np.ndarray) -> float | None:
