@@ -249,16 +249,9 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         tuning.close()
     end = loop_end(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
-    if stop.orphaned:
-        finish_alone(
-            stream,
-            writer,
-            folder / started.get("data", "data.csv"),
-            spec,
-            end,
-            loop.timing,
-            started.get("verb", "run"),
-        )
+    if stop.orphaned:  # nobody records the rest: the loop process writes it and the summary itself
+        data = folder / started.get("data", "data.csv")
+        finish_alone(stream, writer, data, spec, end, loop.timing, started.get("verb", "run"))
     else:
         messages.send("end", **end)
     writer.release()
