@@ -60,7 +60,7 @@ def serve(
         if not ready:
             continue
         data, fds, _, _ = socket.recv_fds(control, PACKET, FORK_FDS)
-        if not data:  # the session died without a word: end now, its loops have seen it themselves
+        if not data:  # the session died without a word: end at once, its loops have seen it themselves
             return 0
         request = json.loads(data)
         if request["kind"] == "close":
