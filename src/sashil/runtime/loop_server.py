@@ -135,7 +135,9 @@ class LoopServer:
 
     def fork(self, messages_fd: int, say: Callable[[str], None] | None = None) -> ForkedLoop:
         """A new loop process whose messages go to ``messages_fd``; the server's progress while it
-        prepares (its first fork on a machine whose kernels are not cached yet) goes to ``say``."""
+        prepares (its first fork on a machine whose kernels are not cached yet) goes to ``say``.
+        The job's pipe's write end (``stdin``) is this process's alone: its end is the loop's sign
+        of this process's end (:mod:`sashil.runtime.orphan`)."""
         job_read, job_write = os.pipe()
         try:
             request = json.dumps({"kind": "fork", "cwd": os.getcwd(), "environment": dict(os.environ)}).encode()
@@ -189,7 +191,8 @@ class LoopServer:
         return message
 
     def close(self) -> None:
-        """Tell the server to end once its loops have ended, and wait for it."""
+        """Tell the server to end once its loops have ended, and wait for it (60 s at most; a
+        server still there then is killed)."""
         if self._control.fileno() >= 0:
             try:
                 self._control.send(json.dumps({"kind": "close"}).encode())
