@@ -126,7 +126,7 @@ def test_a_fork_takes_the_sessions_environment_as_its_own():
     pid = os.fork()
     if pid == 0:  # stands for the server's fork: the job reports the environment it runs in
 
-        def take_job(messages: int, parent: int) -> int:
+        def take_job(messages: int) -> int:
             os.write(messages, json.dumps(dict(os.environ)).encode())
             return 0
 

@@ -13,6 +13,7 @@ from sashil.control.law_api import Law, Param
 from sashil.drivers import rig_parts
 from sashil.errors import RecordingError
 from sashil.runtime.mailbox import SESSION_DIED, LoopStop, MailboxTuning
+from sashil.runtime.orphan import SessionWatch
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.stream import (
     COMMITTED_W,
@@ -185,16 +186,26 @@ def test_the_mailbox_carries_one_request_and_its_answer(stream):
 
 def test_the_loop_stops_on_the_stop_word_and_on_its_session_s_death(stream):
     flag = StopFlag()
-    stop = LoopStop(flag, stream, os.getppid())
+    stop = LoopStop(flag, stream)
     assert not stop.requested
     stream.header[STOP_W] = int(signal.SIGTERM)
     assert stop.requested and stop.signal_name == "SIGTERM" and not stop.orphaned
-    other = LoopStop(StopFlag(), stream, os.getppid())
+    other = LoopStop(StopFlag(), stream)
     stream.header[STOP_W] = STOP_BY_CALLER
     assert other.requested and other.signal_name == "stop requested"
     stream.header[STOP_W] = 0
-    orphan = LoopStop(StopFlag(), stream, session_pid=os.getppid() + 1)  # not this process's parent
-    assert orphan.requested and orphan.orphaned and orphan.signal_name == SESSION_DIED
+    read_fd, write_fd = os.pipe()  # the job's pipe: the session holds the write end
+    orphan_flag = StopFlag()
+    session = SessionWatch(read_fd, None, lambda: orphan_flag.request(SESSION_DIED)).start()
+    try:
+        orphan = LoopStop(orphan_flag, stream, session)
+        assert not orphan.requested and not orphan.orphaned
+        os.close(write_fd)  # the session's end: SIGIO, the flag set before the next cycle asks
+        assert orphan_flag.requested and orphan.requested and orphan.orphaned
+        assert orphan.signal_name == SESSION_DIED
+    finally:
+        session.stop()
+        os.close(read_fd)
 
 
 class Gain(Law):

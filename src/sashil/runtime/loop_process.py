@@ -5,7 +5,7 @@ The loop process (:mod:`sashil.runtime.worker`) is a fork of this process's loop
 loaded: no fork of this process's threads and locks, no re-import of the caller's ``__main__`` (a
 script or notebook that calls ``sashil.run(MyLaw)`` runs once), and the law crosses as its name in
 the run's assembled spec, never pickled. sashil's real-time loop is Linux-only (``SCHED_FIFO``,
-``/dev/shm``, ``os.getppid``).
+``/dev/shm``, robust futexes, a pipe's ``O_ASYNC``).
 
 The session process keeps everything that is not the cycle: the recorder
 (:class:`~sashil.runtime.stream_recorder.StreamRecorder`), the views (the live view, progress,
@@ -17,11 +17,16 @@ stops on its own signal, and the session, which catches SIGINT, SIGTERM and SIGH
 writes the signal into the stream's stop word, so a signal sent to the session alone stops the
 loop too. A caller's :class:`~sashil.runtime.signals.StopFlag` is passed on the same way.
 
-Faults: if the loop process dies (``kill -9``), the board's watchdog takes the coil to 0 A; the
-session keeps every committed row, then reopens the link and confirms the current it reads
-(:func:`confirm_safe`) rather than assume it, and ``summary.json`` says the loop died. If the
-session dies, the loop sees it within a cycle (:mod:`sashil.runtime.mailbox`) and ends the run
-itself (:mod:`sashil.runtime.orphan`).
+Faults: if the loop process dies (``kill -9``), the coil is left to the board until the session
+acts: sashil's board cuts it when its watchdog expires, the RT-DAC/USB2 has no watchdog and keeps
+its last outputs. The session keeps every committed row, then reopens the link, commands 0 A and
+confirms the current it reads (:func:`confirm_safe`) rather than assume it, and ``summary.json``
+says the loop died. If the session dies, the loop sees it at its next cycle, whichever process
+is its parent: a thread of the session holds a robust mutex in the stream for the run, whose word
+the kernel marks as the thread dies, and the session's write end of the job's pipe (the loop's
+stdin) closes as the process ends (both held from :meth:`LoopProcess.go` to :meth:`LoopProcess.close`).
+The loop then stops at 0 A as a stop signal would and ends the run itself
+(:mod:`sashil.runtime.orphan`).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from sashil.errors import error_of
 from sashil.runtime import loop_server
 from sashil.runtime.loop_server import ForkedLoop
 from sashil.runtime.mailbox import CALLER_STOP
+from sashil.runtime.orphan import SessionHold
 from sashil.runtime.runner import LoopHooks, RunOutcome, check_disk, losses, outcome_of
 from sashil.runtime.signals import STOP_SIGNALS, StopFlag
 from sashil.runtime.stream import (
@@ -130,7 +136,6 @@ class LoopProcess:
             "duration_s": duration_s,
             "realtime": realtime,
             "tune": tune,
-            "session_pid": os.getpid(),
             "log_level": _log_level(),
             "sys_path": list(sys.path),  # a law's module imports there as it does here
         }
@@ -156,6 +161,8 @@ class LoopProcess:
         self._affinity: dict[int, set[int]] = {}
         #: what the session did about the loop's CPU, for the summary's ``realtime``
         self.session_affinity: str | None = None
+        #: this process's hold on the stream while the loop runs (:meth:`go` to :meth:`close`)
+        self._hold: SessionHold | None = None
 
     # -- start ------------------------------------------------------------------------------------
     def start(self) -> LoopProcess:
@@ -228,8 +235,10 @@ class LoopProcess:
 
     def go(self, data_path: Path, verb: str = "run") -> None:
         """Start the loop (the run folder is made and the recorder writing ``data_path``, where the
-        loop appends the rest of the rows itself if the session dies, with the ``verb``'s summary)."""
-        assert self.process is not None and self.process.stdin is not None
+        loop appends the rest of the rows itself if the session dies, with the ``verb``'s summary),
+        this process's hold on the stream taken first (:class:`~sashil.runtime.orphan.SessionHold`)."""
+        assert self.process is not None and self.process.stdin is not None and self.stream is not None
+        self._hold = SessionHold(self.stream).take()
         message = {"folder": str(data_path.parent), "data": data_path.name, "verb": verb}
         self.process.stdin.write((json.dumps(message) + "\n").encode())
         self.process.stdin.flush()
@@ -335,12 +344,18 @@ class LoopProcess:
         return 0 if self.stream is None else int(self.stream.header[FRAMES_DROPPED_W])
 
     def close(self) -> None:
+        """Give the session's CPUs back and let go of the loop process: the hold on its stream and
+        its job's pipe (either let go while the loop still runs stops it at 0 A to end the run
+        alone: :mod:`sashil.runtime.orphan`), its messages and the stream."""
         for tid, allowed in self._affinity.items():
             try:
                 os.sched_setaffinity(tid, allowed)
             except OSError:  # a thread that has ended since
                 pass
         self._affinity.clear()
+        if self._hold is not None:  # before the stream is unmapped
+            self._hold.release()
+            self._hold = None
         if self._messages >= 0:
             os.close(self._messages)
             self._messages = -1
@@ -405,8 +420,8 @@ def _stop_code(stop: StopFlag) -> int:
 class SessionSignals:
     """SIGINT, SIGTERM and SIGHUP caught by the session for the run: each writes its number into
     the stream's stop word (the loop stops at its next cycle) and is remembered for the exit code.
-    A third one ends a loop process that does not stop (``kill``: the board's watchdog then takes
-    the coil to 0 A, and the session confirms it as after any death of the loop)."""
+    A third one ends a loop process that does not stop (``kill``: the session then reopens the rig,
+    commands 0 A and confirms it, as after any death of the loop)."""
 
     #: stop signals after which a loop process that has not ended is killed
     KILL_AFTER = 3
@@ -493,13 +508,15 @@ class LoopEnd:
     stop: StopFlag
 
     def facts(self, pid: int | None, startup_s: float | None, **more: Any) -> dict[str, Any]:
-        """The loop process's facts for summary.json: its pid, threads and start-up (and ``more``);
-        ``died`` when it died."""
+        """The loop process's facts for summary.json: its pid, threads, start-up and the loop's
+        start on CLOCK_MONOTONIC (``start_ns``: the record's ``time_s`` counts from it, so another
+        process's clock can be laid beside the record) (and ``more``); ``died`` when it died."""
         end = self.end
         facts = {
             "pid": pid,
             "threads": end.get("threads"),
             "startup_s": None if startup_s is None else round(startup_s, 3),
+            "start_ns": end.get("start_ns"),
             **more,
         }
         if "loop_died" in end:

@@ -19,10 +19,12 @@ name, a run's own variable) travels with the next fork.
 Lifetime and the session's death. The server ignores the terminal's and ``kill``'s stop signals
 (a Ctrl-C stops the loop, which the session and the loop handle, never the server under it) and
 ends when its control socket says so: a ``close`` message (the session is done: the server ends
-once its loops have) or the socket's end with no ``close`` (the session died: the server ends at
-once). A loop process compares ``os.getppid()`` with its parent, the server, every cycle
-(:class:`~sashil.runtime.mailbox.LoopStop`): the session's death ends the server, which re-parents
-the loop, which then ends its run itself (:mod:`sashil.runtime.orphan`).
+once its loops have) or the socket's end with no ``close`` (the session died: the server leaves
+at once, without the interpreter's teardown). The server relays nothing of the session's death:
+each loop process watches its session itself, through the session's end of the job's pipe (its
+stdin) and the session's pid (:class:`~sashil.runtime.orphan.SessionWatch`), stops at 0 A at its
+next cycle, and ends its run alone (:mod:`sashil.runtime.orphan`), whether the server has ended
+yet or not.
 
 Protocol on the control socket (``AF_UNIX``, ``SOCK_SEQPACKET``: one message a packet, JSON):
 
@@ -133,7 +135,9 @@ class LoopServer:
 
     def fork(self, messages_fd: int, say: Callable[[str], None] | None = None) -> ForkedLoop:
         """A new loop process whose messages go to ``messages_fd``; the server's progress while it
-        prepares (its first fork on a machine whose kernels are not cached yet) goes to ``say``."""
+        prepares (its first fork on a machine whose kernels are not cached yet) goes to ``say``.
+        The job's pipe's write end (``stdin``) is this process's alone: its end is the loop's sign
+        of this process's end (:mod:`sashil.runtime.orphan`)."""
         job_read, job_write = os.pipe()
         try:
             request = json.dumps({"kind": "fork", "cwd": os.getcwd(), "environment": dict(os.environ)}).encode()
@@ -187,7 +191,8 @@ class LoopServer:
         return message
 
     def close(self) -> None:
-        """Tell the server to end once its loops have ended, and wait for it."""
+        """Tell the server to end once its loops have ended, and wait for it (60 s at most; a
+        server still there then is killed)."""
         if self._control.fileno() >= 0:
             try:
                 self._control.send(json.dumps({"kind": "close"}).encode())

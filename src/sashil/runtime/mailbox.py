@@ -5,10 +5,12 @@ cycle without blocking:
 
 * :class:`LoopStop` is the loop's stop flag. It is set by a signal delivered to the loop process
   (SIGINT from the terminal reaches the whole process group), by the session's stop word (a
-  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death:
-  the loop compares ``os.getppid()`` with the session's pid every cycle, which changes the moment
-  the session is gone and the loop is re-parented (exact, one cheap system call, and unlike
-  ``PR_SET_PDEATHSIG`` it follows the process rather than the thread that spawned it).
+  signal the session caught, a page's STOP, a Python caller's flag), or by the session's death
+  (:mod:`sashil.runtime.orphan`): a cycle reads the session's hold, a word of the stream that the
+  kernel changes the moment the session's holding thread dies, and the job's pipe's end sets the
+  flag from its ``SIGIO``. Both follow the session, whichever process is the loop's parent
+  (unlike ``PR_SET_PDEATHSIG``, which follows the parent's thread). A cycle reads the flag, the
+  stop word and the hold: no system call.
 * :class:`MailboxTuning` is :class:`~sashil.runtime.tuning.LiveTuning` fed from the stream's
   mailbox: the session's tuning socket posts each request there, and the loop answers it between
   two cycles, at the first cycle after it arrived, with the same checks and events as in one
@@ -17,16 +19,18 @@ cycle without blocking:
 
 from __future__ import annotations
 
-import os
 import signal
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.stream import BAD_FRAMES_W, CLIPPED_W, SAMPLES_LOST_W, STOP_BY_CALLER, STOP_W, WATCHDOG_W, Stream
 from sashil.runtime.tune_socket import answer
 from sashil.runtime.tuning import LiveTuning, TuneEvent
+
+if TYPE_CHECKING:
+    from sashil.runtime.orphan import SessionWatch
 
 #: the stop reason of a loop whose session process died
 SESSION_DIED = "the session process died"
@@ -45,22 +49,34 @@ def stop_reason(code: int) -> str:
 
 
 class LoopStop:
-    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals. The loop
-    asks it once per cycle; every ``every`` cycles it also calls ``tick`` (the health's writer)."""
+    """The loop process's stop flag (module doc); ``flag`` takes the process's own signals and the
+    session's death, which the loop reads every cycle from ``session``'s hold (a started
+    :class:`~sashil.runtime.orphan.SessionWatch`: one word of shared memory against the holder's
+    thread id) and its pipe signals. Every ``every`` cycles it also calls ``tick`` (the health's writer)."""
 
-    __slots__ = ("_countdown", "_every", "_flag", "_header", "_session_pid", "_tick", "orphaned")
+    __slots__ = ("_countdown", "_every", "_flag", "_header", "_hold", "_holder", "_session", "_tick")
 
     def __init__(
-        self, flag: StopFlag, stream: Stream, session_pid: int, tick: Callable[[], None] | None = None, every: int = 100
+        self,
+        flag: StopFlag,
+        stream: Stream,
+        session: SessionWatch | None = None,
+        tick: Callable[[], None] | None = None,
+        every: int = 100,
     ):
         self._flag = flag
         self._header = stream.header
-        self._session_pid = session_pid
-        #: the session died: the loop is alone with the stream and the run folder
-        self.orphaned = False
+        self._session = session
+        self._hold = session.hold if session is not None else None
+        self._holder = session.holder if session is not None else 0
         self._tick = tick
         self._every = max(1, int(every))
         self._countdown = 0
+
+    @property
+    def orphaned(self) -> bool:
+        """The session died: the loop is alone with the stream and the run folder."""
+        return self._session is not None and self._session.gone
 
     @property
     def requested(self) -> bool:
@@ -75,9 +91,9 @@ class LoopStop:
         if code:
             self._flag.request(stop_reason(int(code)))
             return True
-        if os.getppid() != self._session_pid:
-            self.orphaned = True
-            self._flag.request(SESSION_DIED)
+        hold = self._hold
+        if hold is not None and hold[0] != self._holder:  # the session's holding thread died (or let go)
+            self._session.lost()  # type: ignore[union-attr]  # a hold comes with its watch
             return True
         return False
 

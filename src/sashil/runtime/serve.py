@@ -5,7 +5,9 @@ The server is single-threaded and stays so: it waits on its control socket, fork
 loops it forked. Each fork takes the request's descriptors as its stdin (the job), its messages'
 descriptor and its standard output and error, starts in the request's working directory, gets the
 default stop signals back and takes its job as a fresh loop process would
-(:func:`sashil.runtime.worker.take_job`), its parent the server.
+(:func:`sashil.runtime.worker.take_job`), its parent the server. The loop watches its session, not
+its parent (:class:`~sashil.runtime.orphan.SessionWatch`): the server's end, whatever its cause,
+stops no run.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ def serve(
     take_job: Callable[..., int],
 ) -> int:
     """Serve fork requests on ``control_fd`` until the session closes the socket (then once every
-    loop forked has ended) or dies (then at once); ``prepare(progress)`` first, once."""
+    loop forked has ended) or dies (then at once, its loops left to end their runs alone, each
+    having seen its session's end itself); ``prepare(progress)`` first, once. Each fork runs
+    ``take_job(messages_fd)``."""
     for signum in IGNORED:
         signal.signal(signum, signal.SIG_IGN)
     control = socket.socket(fileno=control_fd)
@@ -56,7 +60,7 @@ def serve(
         if not ready:
             continue
         data, fds, _, _ = socket.recv_fds(control, PACKET, FORK_FDS)
-        if not data:  # the session died without a word: end now, its loops see it
+        if not data:  # the session died without a word: end at once, its loops have seen it themselves
             return 0
         request = json.loads(data)
         if request["kind"] == "close":
@@ -89,7 +93,7 @@ def _ended(pid: int, send: Callable[..., None]) -> bool:
 
 def _forked(fds: list[int], environment: dict[str, str], take_job: Callable[..., int]) -> int:
     """The fork's life as a loop process: its job's descriptors in place and the session's
-    ``environment`` its own, then the job (``take_job(messages_fd, parent=...)``); its exit code."""
+    ``environment`` its own, then the job (``take_job(messages_fd)``); its exit code."""
     code = 1
     try:
         os.environ.clear()
@@ -101,7 +105,7 @@ def _forked(fds: list[int], environment: dict[str, str], take_job: Callable[...,
         signal.signal(signal.SIGINT, signal.default_int_handler)
         for signum in IGNORED[1:]:
             signal.signal(signum, signal.SIG_DFL)
-        code = take_job(messages, parent=os.getppid())
+        code = take_job(messages)
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:

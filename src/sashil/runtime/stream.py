@@ -15,7 +15,8 @@ in program order, so a row is complete before the count that publishes it.
 Layout (little-endian int64 words and float64 rows, every region page-aligned):
 
 ====================  =======================================================================
-page 0                header words (:data:`HEADER`) and the column names as JSON
+page 0                header words (:data:`HEADER`), the column names as JSON and, in its last
+                      :data:`HOLD_BYTES`, the session's hold (:class:`~sashil.runtime.orphan.SessionHold`)
 page 1                the mailbox: a request to the loop (a live parameter change), as JSON
 page 2                the mailbox's reply, as JSON
 rows                  ``capacity`` rows of ``width`` float64 (``data.csv``'s columns)
@@ -51,7 +52,7 @@ from sashil.runtime.timing import DEFAULT_WINDOW, TimingStats, shared_size
 
 PAGE = mmap.PAGESIZE
 MAGIC = int.from_bytes(b"SASHSTRM", "little")
-VERSION = 1
+VERSION = 2
 #: where the stream files live: memory-backed when the system has it
 STREAM_DIR = Path("/dev/shm") if Path("/dev/shm").is_dir() else Path(tempfile.gettempdir())
 #: the most bytes of JSON a mailbox page holds
@@ -88,8 +89,14 @@ HEALTH_WORDS = {
     "watchdog": WATCHDOG_W,
     "clipped_cycles": CLIPPED_W,
 }
+#: the session's holding thread while it holds the hold (its kernel thread id; 0: no hold)
+HOLDER_W = 28
 HEADER_WORDS = 32
 COLUMNS_OFFSET = 8 * HEADER_WORDS
+#: the session's hold, a process-shared robust mutex, at the end of page 0 [bytes] (room for any
+#: C library's ``pthread_mutex_t``: 40 bytes with glibc on x86-64, 48 on arm64)
+HOLD_BYTES = 64
+HOLD_OFFSET = PAGE - HOLD_BYTES
 
 STATES = ("created", "warming", "ready", "running", "ended", "died")
 #: a stop asked for by the caller (a page's STOP, a Python caller), not by a signal
@@ -127,6 +134,8 @@ class Stream:
         self._frames_at = self._timing_at + _pages(shared_size(self.window))
         self._mail = memoryview(handle)[PAGE : 2 * PAGE]
         self._reply = memoryview(handle)[2 * PAGE : 3 * PAGE]
+        #: the bytes of the session's hold (:data:`HOLD_OFFSET`)
+        self.hold = memoryview(handle)[HOLD_OFFSET:PAGE]
 
     # -- making and opening ---------------------------------------------------------------------
     @staticmethod
@@ -148,7 +157,7 @@ class Stream:
         (ENOSPC) when its file system cannot hold it."""
         folder = STREAM_DIR if folder is None else Path(folder)
         names = json.dumps(list(columns)).encode()
-        if COLUMNS_OFFSET + len(names) > PAGE:
+        if COLUMNS_OFFSET + len(names) > HOLD_OFFSET:
             raise ValueError(f"{len(columns)} columns do not fit the stream's header")
         if capacity < 2:
             raise ValueError("a stream holds at least 2 rows")
@@ -200,7 +209,7 @@ class Stream:
         self.rows = np.empty((0, self.width))
         header = self.header
         self.header = list(header)
-        for view in (header, self._mail, self._reply):
+        for view in (header, self._mail, self._reply, self.hold):
             view.release()
         with contextlib.suppress(BufferError):  # a timing view still held: the map goes with the process
             self._map.close()

@@ -16,11 +16,14 @@ No other Python thread runs in it. What it does, in order:
    (:func:`~sashil.runtime.warmup.warm_up`, its progress sent to the session), opens the port and
    greets the board, then creates the stream for the stage's columns and says ``ready``;
 3. waits for the session's ``go`` line (the session has made the run folder and started the
-   recorder), applies ``loop.rt`` and runs :class:`~sashil.runtime.loop.ControlLoop`;
+   recorder), watches its session from then on (:class:`~sashil.runtime.orphan.SessionWatch`: the
+   session's hold in the stream and its end of stdin), applies ``loop.rt`` and runs
+   :class:`~sashil.runtime.loop.ControlLoop`;
 4. sends ``end``: how the loop ended, the timing counters, the rig's facts (link statistics), the
-   tuning events. If the session died (:class:`~sashil.runtime.mailbox.LoopStop`) the loop ends
-   at 0 A with the road at rest, appends the rows the recorder had not written to ``data.csv``,
-   and writes ``summary.json`` and ``timing.npz`` itself, saying so.
+   tuning events. If the session died, the watch has stopped the loop at its next cycle, at 0 A
+   with the road at rest, as a stop signal does; the loop process then appends the rows the
+   recorder had not written to ``data.csv`` and writes ``summary.json`` and ``timing.npz``
+   itself, saying so (:mod:`sashil.runtime.orphan`).
 
 Messages to the session are JSON lines on the descriptor ``--messages``: ``{"kind": "progress" |
 "warning" | "ready" | "error" | "end", ...}``. An error before the loop (a port that cannot be
@@ -38,7 +41,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from sashil.config.parts import RunSpec
 from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
@@ -140,33 +143,47 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.serve is not None:
-        return serve(args.serve, prepare, lambda fd, parent: take_job(Messages(fd), parent=parent))
+        code = serve(args.serve, prepare, lambda fd: take_job(Messages(fd)))
+        _exit_at_once(code)
     if args.messages is None:
         parser.error("one of --messages and --serve is required")
     messages = Messages(args.messages)
     return take_job(messages, lambda: prepare(lambda line: messages.send("progress", text=line)))
 
 
-def take_job(messages: Messages, before: Callable[[], None] = lambda: None, parent: int | None = None) -> int:
+def _exit_at_once(code: int) -> NoReturn:
+    """End the loop server with ``code`` without the interpreter's teardown (its loaded kernels and
+    libraries take tenths of a second to finalise): a session that died is seen gone by its loops
+    on their own (:mod:`sashil.runtime.orphan`), and the server holds nothing to flush but its
+    standard output and error."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
+def take_job(messages: Messages, before: Callable[[], None] = lambda: None) -> int:
     """Do ``before`` (the preparation of a fresh process), read the job from stdin and run it; the
-    exit code. ``parent``: the pid whose end means the session's (the loop server that forked this
-    process; None: the job's session)."""
+    exit code."""
     with catch_stop_signals() as flag:
         try:
             before()
             job = sys.stdin.readline()
             if not job.strip():  # a process started ahead that was never given a run
                 return 0
-            return run(json.loads(job), messages, flag, parent)
+            return run(json.loads(job), messages, flag)
         except BaseException as err:
             messages.send("error", **error_fields(err))
             return exit_code_of("error", err) or 1
 
 
-def run(job: dict[str, Any], messages: Messages, flag: Any, parent: int | None = None) -> int:
-    """The loop process's work (module doc), its exit code; ``parent`` as :func:`take_job`'s."""
+def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
+    """The loop process's work (module doc), its exit code."""
     from sashil.runtime.clock import RealClock
-    from sashil.runtime.mailbox import HealthWriter, LoopStop, MailboxTuning
+    from sashil.runtime.mailbox import SESSION_DIED, HealthWriter, LoopStop, MailboxTuning
+    from sashil.runtime.orphan import SessionWatch, finish_alone
     from sashil.runtime.rt_setup import RealtimeSetup
     from sashil.runtime.runner import control_loop, loop_end, run_realtime
     from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
@@ -196,30 +213,35 @@ def run(job: dict[str, Any], messages: Messages, flag: Any, parent: int | None =
         return 1
     started = json.loads(go)
     folder = Path(started["folder"])
-    session_pid = int(job["session_pid"]) if parent is None else parent
-    # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
-    stop = LoopStop(flag, stream, session_pid, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
-    tuning = None
-    if tunable:
-        tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
-    writer = StreamWriter(stream)
-    loop = control_loop(
-        spec,
-        rig,
-        stage,
-        RealClock.for_rate(spec.loop.spin_margin_us, rate),
-        job.get("duration_s"),
-        warn=lambda line: messages.send("warning", text=line),
-        recorder=writer,
-        tuning=tuning,
-        stop=stop,
-        timing=stream.timing(rate),
-    )
-    loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
-    rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
-    stream.set_state("running")
-    stream.header[THREADS_W] = threading.active_count()
-    error = run_realtime(loop, rt, lambda line: messages.send("progress", text=line))
+    # the session's end stops the loop the moment it happens: its hold let go, its end of stdin closed
+    session = SessionWatch(sys.stdin.fileno(), stream, lambda: flag.request(SESSION_DIED)).start()
+    try:
+        # the run's health for the views about ten times a second (samples lost, bad frames, watchdog, clipping)
+        stop = LoopStop(flag, stream, session, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
+        tuning = None
+        if tunable:
+            tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
+        writer = StreamWriter(stream)
+        loop = control_loop(
+            spec,
+            rig,
+            stage,
+            RealClock.for_rate(spec.loop.spin_margin_us, rate),
+            job.get("duration_s"),
+            warn=lambda line: messages.send("warning", text=line),
+            recorder=writer,
+            tuning=tuning,
+            stop=stop,
+            timing=stream.timing(rate),
+        )
+        loop.on_overrun = lambda timing: stream.header.__setitem__(MISSED_W, timing.missed_deadlines)
+        rt = RealtimeSetup.from_parts(spec.loop.rt) if job.get("realtime", True) else None
+        stream.set_state("running")
+        stream.header[THREADS_W] = threading.active_count()
+        error = run_realtime(loop, rt, lambda line: messages.send("progress", text=line))
+        session.check()  # a session that ended during the shutdown has no one to record the rest either
+    finally:
+        session.stop()
     if writer.error is not None and error is None:
         error = writer.error
     stream.header[THREADS_W] = max(int(stream.header[THREADS_W]), threading.active_count())
@@ -227,18 +249,9 @@ def run(job: dict[str, Any], messages: Messages, flag: Any, parent: int | None =
         tuning.close()
     end = loop_end(loop, error, stage, rt, rig, tuning, int(stream.header[THREADS_W]))
     stream.set_state("ended")
-    if stop.orphaned:
-        from sashil.runtime.orphan import finish_alone
-
-        finish_alone(
-            stream,
-            writer,
-            folder / started.get("data", "data.csv"),
-            spec,
-            end,
-            loop.timing,
-            started.get("verb", "run"),
-        )
+    if stop.orphaned:  # nobody records the rest: the loop process writes it and the summary itself
+        data = folder / started.get("data", "data.csv")
+        finish_alone(stream, writer, data, spec, end, loop.timing, started.get("verb", "run"))
     else:
         messages.send("end", **end)
     writer.release()
