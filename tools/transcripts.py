@@ -97,7 +97,8 @@ def walk_transcript() -> str:
             )
         finally:
             rig.close()
-    return "\n".join(operator.transcript) + "\n\n" + table(checks).rstrip("\n") + "\n"
+    text = "\n".join(operator.transcript) + "\n\n" + table(checks).rstrip("\n") + "\n"
+    return text.replace(str(Path(tmp) / "rtdac-wiring.yaml"), "rtdac-wiring.yaml")
 
 
 def doctor_transcript() -> str:

@@ -44,6 +44,23 @@ NO_WATCHDOG = (
     "raises, the loop process killed); it cannot when both of its processes die or the cable is pulled"
 )
 E_STOP = "wire the rig's hardware E-stop to cut the coil's and the road motor's power; keep it in reach"
+HEARTBEAT = (
+    "wire a retriggerable watchdog relay on the power stages to a digital output and set rtdac.heartbeat_bit "
+    "(docs: the heartbeat relay); and the E-stop, in reach"
+)
+
+
+def safe_stop_check(heartbeat_bit: int | None) -> Check:
+    """What ends a stop the host cannot run: the heartbeat relay where its bit is set, else only the E-stop."""
+    if heartbeat_bit is None:
+        return Check("board", "safe stop", WARN, NO_WATCHDOG, HEARTBEAT)
+    return Check(
+        "board",
+        "safe stop",
+        OK,
+        f"the RT-DAC/USB2 has no watchdog; digital output {heartbeat_bit} toggles every cycle (rtdac.heartbeat_bit) "
+        "for a watchdog relay on the power stages, which drops them when the host stops: test that it does",
+    )
 
 
 def exchange_times(rig: RtdacRig, n: int) -> list[float]:
@@ -120,7 +137,7 @@ def board_checks(run: RunSpec, round_trips: int) -> tuple[list[Check], RtdacRig 
     )
     checks.append(Check("board", "register map", OK, rig.map.describe()))
     checks += exchange_checks(rig, round_trips, run.loop.rate_hz)
-    checks.append(Check("board", "safe stop", WARN, NO_WATCHDOG, E_STOP))
+    checks.append(safe_stop_check(rig.wiring.heartbeat_bit))
     return checks, rig
 
 
