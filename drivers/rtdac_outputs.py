@@ -79,19 +79,19 @@ class CoilDrive:
         integral = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
         out = interp(current_a + integral, self.map_current_a, self.map_output)
         span = self.authority * (planned - self.rest)
-        if out > planned + span:
-            self.at_authority = True  # held at the bound: the integral stays where it was (no wind-up)
-            return planned + span
-        if out < planned - span:
-            self.at_authority = True
-            return planned - span
-        self._integral_a = integral
-        return out
+        low, high = planned - span, planned + span
+        # at its authority: pushing on at a bound, or at the map's end, which holds its last output
+        self.at_authority = (step > 0.0 and out >= min(high, self.map_output[-1])) or (step < 0.0 and out <= low)
+        if not self.at_authority:
+            self._integral_a = integral  # at the bound the integral stays where it was: no wind-up
+        return min(max(out, low), high)
 
     def _lag(self, current_a: float, dt_s: float) -> float:
         """The current ``current_a`` gives through the coil's first-order lag, advanced by ``dt_s``."""
-        alpha = 1.0 - math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 1.0
-        self._expected_a += alpha * (current_a - self._expected_a)
+        if self.tau_s > 0.0:
+            self._expected_a += (1.0 - math.exp(-dt_s / self.tau_s)) * (current_a - self._expected_a)
+        else:
+            self._expected_a = current_a  # no lag: the command itself
         return self._expected_a
 
 

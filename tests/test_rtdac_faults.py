@@ -170,7 +170,7 @@ def test_a_guessed_wiring_runs_under_its_caps_and_says_which_keys_are_guesses():
     rig.configure()
     rig.activate()
     cycle(rig, clock, RigCommand(1.0), 50)
-    assert board.output("pwm", 0) == pytest.approx(1.0, abs=1e-3)  # the coil's keys confirmed: no cap
+    assert board.output("pwm", 0) == pytest.approx(1.0, abs=5e-3)  # the coil's keys confirmed: no cap
     facts = rig.link_stats()
     assert facts["guesses"] == [k for k in WIRING_KEYS if k not in COIL_KEYS]
     assert facts["caps"] == ["the road output at 2.5 V (rtdac.bringup_road_output)"]

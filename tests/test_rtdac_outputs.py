@@ -35,21 +35,34 @@ def test_the_loop_corrects_by_the_sensed_error_and_stops_exactly_at_its_authorit
     drive = coil()
     assert drive.output(0.5, 0.0, DT) == 0.5625  # step 16 * 0.5 / 128 = 1/16
     assert not drive.at_authority
-    drive.reset()
-    assert drive.output(0.5, -0.5, DT) == 0.625  # step 1/8: exactly 1.25 x the map's 0.5
+    assert drive.output(0.5, 0.5, DT) == 0.5625  # no error: the correction stays
     assert not drive.at_authority
-    assert drive.output(0.5, -0.5, DT) == 0.625  # a further 1/8 would pass it: held at the bound
+    assert drive.output(0.5, 0.375, DT) == 0.578125  # step 1/64
+    drive.reset()
+    assert drive.output(0.5, -0.5, DT) == 0.625  # step 1/8 reaches 1.25 x the map's 0.5 exactly, pushing on
     assert drive.at_authority
-    assert drive.output(0.5, 0.5, DT) == 0.625  # the integral was not wound past it: no error, no move
+    assert drive.output(0.5, -1.5, DT) == 0.625  # a larger push: held at the bound
+    assert drive.at_authority
+    assert drive.output(0.5, 0.5, DT) == 0.5  # the integral was not wound up at the bound: no error, the map
     assert not drive.at_authority
 
 
 def test_the_bound_below_holds_a_sense_that_reads_too_much():
     drive = coil()
-    assert drive.output(0.5, 1.5, DT) == 0.375  # step -1/8: exactly 0.75 x the map's
-    assert not drive.at_authority
-    assert drive.output(0.5, 1.5, DT) == 0.375
+    assert drive.output(0.5, 1.5, DT) == 0.375  # step -1/8: exactly 0.75 x the map's, pushing on
     assert drive.at_authority
+    assert drive.output(0.5, 0.625, DT) == 0.484375  # step -1/64 alone: within the bound
+    assert not drive.at_authority
+
+
+def test_the_maps_end_is_a_bound_too_and_a_smaller_command_is_held_within_its_own():
+    drive = coil()
+    assert drive.output(1.0, 0.0, DT) == 1.0  # the map holds its last output: pushing on at it
+    assert drive.at_authority
+    drive.reset()
+    assert drive.output(0.5, 0.4375, DT) == 0.5078125  # a correction of 1/128 kept
+    assert drive.output(0.02, 0.02, DT) == pytest.approx(0.025)  # no push; held at 1.25 x 0.02, not over
+    assert not drive.at_authority
 
 
 def test_rest_forgets_the_correction():

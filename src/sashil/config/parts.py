@@ -94,7 +94,7 @@ class SafetyParts:
     max_angle_rate_rad_s: float = 60.0
     arm_travel_deg: float | None = None
     road_error_max_rad: float = 0.02
-    road_error_ms: float = 20.0
+    road_error_ms: float = 5.0
     road_limit_ms: float = 50.0
     coil_authority_ms: float = 50.0
     road_grace_ms: float = 150.0

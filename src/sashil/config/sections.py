@@ -220,7 +220,11 @@ SAFETY = Section(
             "(ten times the loop's usual largest on a rightly wired bench)",
         ),
         "road_error_ms": Field(
-            "float", 20.0, low=0.0, doc="how long the road's error may stay beyond road_error_max_rad [ms]"
+            "float",
+            5.0,
+            low=0.0,
+            doc="how long the road's error may stay beyond road_error_max_rad [ms]: five periods at 1 kHz, short "
+            "enough that a reversed road encoder, whose error the loop's own gain drives up, ends within 0.1 rad",
         ),
         "road_grace_ms": Field(
             "float",
