@@ -46,6 +46,11 @@ def add_rtdac_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="MS",
         help="the road motor's time constant: its speed follows its output with this first-order lag (default 20)",
     )
+    add_rtdac_faults(group)
+
+
+def add_rtdac_faults(group: Any) -> None:
+    """The emulated board's faults and the bench's own (a relay, counters an earlier program left)."""
     group.add_argument(
         "--vanish-after", type=float, metavar="S", help="the board disappears from the bus after S seconds"
     )
@@ -144,16 +149,11 @@ def _seconds(option: str, value: float | None) -> float | None:
     return value
 
 
-def run_rtdac(
-    args: argparse.Namespace, config: Any, operator: Any, duration: float | None, announce: Callable[[str], None]
-) -> int:
-    from sashil.drivers.emulator.rtdac_board import BoardFaults, BoardIdentity, Relay, build_board
-    from sashil.drivers.emulator.rtdac_usb import BoardServer, UsbFaults
+def _faults(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """The board's faults, the bench's relay (None: none wired) and the USB side's faults, checked."""
+    from sashil.drivers.emulator.rtdac_board import BoardFaults, Relay
+    from sashil.drivers.emulator.rtdac_usb import UsbFaults
 
-    if not args.link:
-        raise ConfigError("--link: expected the path of the board's socket (the host opens --port emulated:PATH)")
-    if not 0.0 < args.stage_gain <= 10.0:
-        raise ConfigError(f"--stage-gain: expected a gain in (0, 10], got {args.stage_gain:g}")
     faults = BoardFaults(
         vanish_after_s=_seconds("--vanish-after", args.vanish_after),
         stuck_busy_after_s=_seconds("--stuck-busy-after", args.stuck_busy_after),
@@ -180,6 +180,20 @@ def run_rtdac(
         halt_after_s=_seconds("--halt-after", args.halt_after),
         wedge_after_s=_seconds("--wedge-after", args.wedge_after),
     )
+    return faults, relay, usb_faults
+
+
+def run_rtdac(
+    args: argparse.Namespace, config: Any, operator: Any, duration: float | None, announce: Callable[[str], None]
+) -> int:
+    from sashil.drivers.emulator.rtdac_board import BoardIdentity, build_board
+    from sashil.drivers.emulator.rtdac_usb import BoardServer
+
+    if not args.link:
+        raise ConfigError("--link: expected the path of the board's socket (the host opens --port emulated:PATH)")
+    if not 0.0 < args.stage_gain <= 10.0:
+        raise ConfigError(f"--stage-gain: expected a gain in (0, 10], got {args.stage_gain:g}")
+    faults, relay, usb_faults = _faults(args)
     logic_word = int(args.logic, 16)
     if args.header_logic is not None:
         try:
