@@ -212,3 +212,24 @@ def test_without_the_heartbeat_the_relay_never_closes_and_nothing_is_powered():
     cycle(rig, clock, RigCommand(0.5, 1.0), 100)
     assert board.drive_a == 0.0 and board.rig.plant.state.current_a == pytest.approx(0.0, abs=1e-6)
     rig.close()
+
+
+def test_bad_rtdac_keys_are_one_line_naming_the_key_and_exit_2(tmp_path, capsys):
+    from sashil.cli import main
+
+    cases = {
+        "rtdac.confirmed=[coil_output, bogus]": "rtdac.confirmed: expected a list of names from 'coil_output'",
+        "rtdac.heartbeat_bit=40": "rtdac.heartbeat_bit: expected a number >= 0 and <= 25 or null, got 40",
+        "rtdac.bringup_road_output=1.5": "rtdac.bringup_road_output: expected a number >= 0 and <= 1, got 1.5",
+    }
+    for setting, text in cases.items():
+        code = main(["run", "--driver", "rtdac", "--port", f"emulated:{tmp_path}/none.sock", "--set", setting,
+                     "--duration", "1", "--out", str(tmp_path / "run")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and text in err and "\n" not in err, err
+        assert not (tmp_path / "run").exists()
+    both = ["--set", "rtdac.road_output=pwm", "--set", "rtdac.road_channel=2", "--set", "rtdac.road_output_limit=1"]
+    both += ["--set", "rtdac.road_direction_bit=4", "--set", "rtdac.heartbeat_bit=4"]
+    code = main(["run", "--driver", "rtdac", "--port", f"emulated:{tmp_path}/none.sock", *both, "--duration", "1"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "rtdac.heartbeat_bit: the same digital output as road_direction_bit (4)" in err, err

@@ -61,6 +61,11 @@ def check_rtdac_section(given: Any, section: dict[str, Any], source: str, dotted
         raise ConfigError(
             f"{source}: {dotted}.road_encoder: the same counter as arm_encoder ({section['arm_encoder']})"
         )
+    if section["heartbeat_bit"] is not None and section["heartbeat_bit"] == section["road_direction_bit"]:
+        raise ConfigError(
+            f"{source}: {dotted}.heartbeat_bit: the same digital output as road_direction_bit "
+            f"({section['heartbeat_bit']}): the heartbeat toggles it every cycle"
+        )
     if section["road_output"] == "pwm" and section["road_output_limit"] > 1.0:
         raise ConfigError(
             f"{source}: {dotted}.road_output_limit: expected a duty at most 1 for a PWM road output, "
