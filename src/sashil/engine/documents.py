@@ -34,16 +34,16 @@ class Documents:
     def __init__(self, subscribers: Sequence[Subscriber] = ()):
         self.subscribers = tuple(subscribers)
 
-    def emit(self, kind: str, document: Mapping[str, Any]) -> None:
+    def emit(self, kind: str, fields: Mapping[str, Any]) -> None:
+        """Hand every subscriber the document of ``kind`` with ``fields``."""
         for subscriber in self.subscribers:
-            subscriber(kind, document)
+            subscriber(kind, fields)
 
     def start(self, run: str | None, config: Mapping[str, Any] | None, spec: RunSpec | None = None) -> None:
         """A run begins (``run`` None: the verb's folder itself): its resolved ``config`` (None: none
-        recorded for it), its assembled ``spec`` and the versions."""
-        document = {"run": run, "config": config, "versions": versions()}
-        document["spec"] = spec.to_json() if spec is not None else None
-        self.emit("start", document)
+        recorded for it), its assembled ``spec`` (read-only; ``spec.to_json()`` its plain values) and
+        the versions."""
+        self.emit("start", {"run": run, "config": config, "spec": spec, "versions": versions()})
 
     def progress(self, run: str | None, text: str) -> None:
         self.emit("progress", {"run": run, "text": text})

@@ -68,9 +68,9 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.hysteretic_bound import bound_on_chain, hysteretic_bound, model_passive
 from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.folder_writer import ending
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.run_set import ending
 from sashil.recording.summary_writer import write_config, write_summary
 from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.loop import stage_signals

@@ -29,6 +29,7 @@ from sashil.api import Run, load_run
 from sashil.config.frozen import thaw
 from sashil.config.parts import RunSpec, StageParts
 from sashil.control.law_registry import law_label
+from sashil.control.registry import stage_signals
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble, assembled
@@ -115,12 +116,12 @@ def drop_test(
     theta0_deg, duration = float(drop["theta0_deg"]), float(drop["duration_s"])
     currents = [float(value) for value in drop["currents_a"]]
     outputs.check(run.rig.backend)
-    checked = stage_controller(run.stage)  # bad controller parameters fail here, before a folder exists
-    closed = checked is not None
+    # the law and its parameters were checked in the resolution; its controller is built where each drop's loop runs
+    signals = stage_signals(run.stage)
+    closed = bool(signals)
     folder = RunFolder.create(outputs.out, "drop-test")
     law, origin = law_label(run.stage.law)
-    columns = DROP_COLUMNS + controller_columns(checked)
-    live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
+    live = outputs.open_rerun(DROP_COLUMNS + signals, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     several = len(currents) > 1
     common = {

@@ -3,7 +3,7 @@
 The engine hands every subscriber the same documents, in order (:mod:`sashil.engine.documents`):
 
 * ``start``: a run begins. ``{"run": name or None, "config": the resolved config or None, "spec":
-  the assembled run as JSON values, "versions": the software's}``. ``run`` None is the folder
+  the assembled run (a :class:`~sashil.config.parts.RunSpec`), "versions": the software's}``. ``run`` None is the folder
   itself; a name is one run of several (its sub-folder). The writer writes ``config.yaml`` from
   ``config`` (none when it is None: a run whose folder records no config of its own).
 * ``progress``: what a run is doing (``{"run": name, "text": ...}``): for views; the writer keeps
@@ -76,16 +76,16 @@ class FolderWriter:
         self.summary: dict[str, Any] | None = None
         self._subs: dict[str, RunFolder] = {}
 
-    def __call__(self, kind: str, document: Mapping[str, Any]) -> None:
-        """Take one document of the verb (see the module docstring)."""
-        name = document.get("run")
+    def __call__(self, kind: str, fields: Mapping[str, Any]) -> None:
+        """Take one document of the verb, its ``kind`` and ``fields`` (see the module docstring)."""
+        name = fields.get("run")
         if kind == "start":
-            if document.get("config") is not None:
-                self._write_config(self.folder_for(name), document["config"], document.get("note"))
+            if fields.get("config") is not None:
+                self._write_config(self.folder_for(name), fields["config"], fields.get("note"))
         elif kind == "stop" and name is None:
-            self._close(document.get("extra", {}))
+            self._close(fields.get("extra", {}))
         elif kind == "stop":
-            self._run_ended(str(name), document)
+            self._run_ended(str(name), fields)
 
     def folder_for(self, name: str | None) -> RunFolder:
         """Where run ``name`` writes: its sub-folder (created), or the folder itself for a single
@@ -105,20 +105,21 @@ class FolderWriter:
             return "."
         return str((self.sub_root / name).relative_to(self.folder.path))
 
-    def _run_ended(self, name: str, document: Mapping[str, Any]) -> None:
+    def _run_ended(self, name: str, fields: Mapping[str, Any]) -> None:
         """One run's files: its data and --format files, its entry in the folder's summary and, as
         one of several, its own summary (its entry's values of the common keys win: its controller).
         The first failing run is the folder's error."""
-        target, error = self.folder_for(name), document.get("error")
-        if document.get("data") is not None:
-            target.write_data(document["data"])
+        target, error, data = self.folder_for(name), fields.get("error"), fields.get("data")
+        if data is not None:
+            target.write_data(data)
             if self.outputs is not None:
                 status = ending(error)["exit_status"]
-                formats = document.get("formats", {})
-                self.outputs.write_formats(target.path, self.verb, document["data"], exit_status=status, **formats)
+                self.outputs.write_formats(
+                    target.path, self.verb, data, exit_status=status, **fields.get("formats", {})
+                )
         row = {
             "folder": self._folder_key(name),
-            **document.get("entry", {}),
+            **fields.get("entry", {}),
             **{k: v for k, v in ending(error).items() if k != "exit_code"},
         }
         self.entries.append(row)
