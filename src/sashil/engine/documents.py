@@ -39,11 +39,14 @@ class Documents:
         for subscriber in self.subscribers:
             subscriber(kind, fields)
 
-    def start(self, run: str | None, config: Mapping[str, Any] | None, spec: RunSpec | None = None) -> None:
+    def start(
+        self, run: str | None, config: Mapping[str, Any] | None, spec: RunSpec | None = None, note: str | None = None
+    ) -> None:
         """A run begins (``run`` None: the verb's folder itself): its resolved ``config`` (None: none
-        recorded for it), its assembled ``spec`` (read-only; ``spec.to_json()`` its plain values) and
-        the versions."""
-        self.emit("start", {"run": run, "config": config, "spec": spec, "versions": versions()})
+        recorded for it; ``note``: what its config.yaml says of it first), its assembled ``spec``
+        (read-only; ``spec.to_json()`` its plain values) and the versions."""
+        fields = {"run": run, "config": config, "note": note, "spec": spec, "versions": versions()}
+        self.emit("start", fields)
 
     def progress(self, run: str | None, text: str) -> None:
         self.emit("progress", {"run": run, "text": text})
@@ -52,6 +55,10 @@ class Documents:
         """Run ``run`` ended: the loop's summary keys (``outcome``), what ended it, and the
         experiment's ``analysis`` (``entry``, ``data``, ``formats``)."""
         self.emit("stop", {"run": run, "outcome": outcome, "error": error, **analysis})
+
+    def summary(self, run: str | None, summary: Mapping[str, Any]) -> None:
+        """Run ``run`` (None: the verb) ended with the summary the verb composed itself."""
+        self.emit("stop", {"run": run, "summary": summary})
 
     def end(self, **extra: Any) -> None:
         """The verb ended: its own summary keys."""

@@ -15,6 +15,7 @@ counts and the release threshold).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -124,13 +125,7 @@ def drop_test(
     live = outputs.open_rerun(DROP_COLUMNS + signals, "sashil drop-test", folder.path)
     live_offset_s = 0.0
     several = len(currents) > 1
-    common = {
-        "driver": run.rig.backend,
-        "controller": law if closed else f"{law} (constant current per run)",
-        "controller_origin": origin,
-        "clock": "virtual" if run.virtual else "real",  # timing is simulated on the virtual clock
-    }
-    writer = FolderWriter(folder, "drop-test", common, several=several, outputs=outputs)
+    writer = _writer(run, folder, law if closed else f"{law} (constant current per run)", origin, several, outputs)
     documents = Documents([writer])
     documents.start(None, config, run)
     overlay = []
@@ -139,11 +134,6 @@ def drop_test(
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = writer.folder_for(_label(current))
-
-        def describe(record: DropRecord, current: float = current, label: str = label) -> dict[str, Any]:
-            entry = _drop_row(record, current, label, theta0_deg)
-            return {"entry": entry, "data": record.columns, "formats": {"current_a": current, "controller": label}}
-
         record = run_drop_test(
             run,
             theta0_deg,
@@ -158,7 +148,7 @@ def drop_test(
             documents=documents,
             name=_label(current),
             recorded_config=_one_drop(config, current) if several else None,
-            describe=describe,
+            describe=functools.partial(_described, current, label, theta0_deg),
         )
         assert record.metrics is not None and record.run  # run_drop_test sets both
         if live is not None:
@@ -206,6 +196,26 @@ def _finish(
     if writer.error is not None:
         raise writer.error  # the data up to it is on disk
     return load_run(Path(folder.path))
+
+
+def _writer(
+    run: RunSpec, folder: RunFolder, controller: str, origin: str, several: bool, outputs: Outputs
+) -> FolderWriter:
+    """The writer of the drop test's folder, with the keys its summaries share."""
+    common = {
+        "driver": run.rig.backend,
+        "controller": controller,
+        "controller_origin": origin,
+        "clock": "virtual" if run.virtual else "real",  # timing is simulated on the virtual clock
+    }
+    return FolderWriter(folder, "drop-test", common, several=several, outputs=outputs)
+
+
+def _described(current: float, label: str, theta0_deg: float, record: DropRecord) -> dict[str, Any]:
+    """One drop's analysis for its stop document: its row of the summary, its data and what its
+    --format files are labelled with."""
+    entry = _drop_row(record, current, label, theta0_deg)
+    return {"entry": entry, "data": record.columns, "formats": {"current_a": current, "controller": label}}
 
 
 def _one_drop(config: RunConfig, current: float) -> RunConfig:

@@ -16,6 +16,9 @@ The engine hands every subscriber the same documents, in order (:mod:`sashil.eng
 * ``stop`` with ``run`` None: the verb ended (``{"run": None, "extra": the verb's own keys}``): the
   folder's ``summary.json``, with every run's entry, how the set ended (the first failing run
   ends it; what ran before it is kept) and a single run's loop keys at the top.
+* ``stop`` with ``summary``: a run (``run`` a name) or the verb (``run`` None) whose summary the
+  verb has composed itself (a session's, a comparison's, a simulation's): its ``summary.json`` is
+  those keys after the common ones.
 
 :func:`ending` is the one error rule of every summary (the status, the one line and the exit code
 of what ended a run). ``config.yaml`` and ``summary.json`` are written here, each from one place
@@ -82,6 +85,8 @@ class FolderWriter:
         if kind == "start":
             if fields.get("config") is not None:
                 self._write_config(self.folder_for(name), fields["config"], fields.get("note"))
+        elif kind == "stop" and "summary" in fields:
+            self._write_summary(self.folder_for(name), {**self.common, **fields["summary"]})
         elif kind == "stop" and name is None:
             self._close(fields.get("extra", {}))
         elif kind == "stop":
