@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from sashil.engine.documents import Documents, versions
 from sashil.errors import ConfigError, SafetyTrip
+from sashil.recording.documents import Documents, versions
 from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.run_folder import RunFolder
 

@@ -9,7 +9,7 @@ Either way the verb gets one :class:`~sashil.runtime.runner.RunOutcome`, its str
 A session's loop (``sashil run``, a script's, the panel's: its folder made once the loop is ready,
 its law tuned live) is started by the same rule (:func:`start_session`).
 
-Given the verb's :class:`~sashil.engine.documents.Documents`, the engine emits the run's ``start``
+Given the verb's :class:`~sashil.recording.documents.Documents`, the engine emits the run's ``start``
 document before the loop (the resolved config, the assembled run, the versions) and its ``stop``
 after it: the outcome's summary keys, to which the experiment's ``analyse`` adds its analysis.
 """
@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.config.parts import RunSpec
 from sashil.drivers import RigInterface, open_rig
-from sashil.engine.documents import Documents
 from sashil.engine.where import loop_in_process
+from sashil.recording.documents import Documents
 from sashil.runtime.clock import Clock, RealClock, default_clock
 from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import RunOutcome, run_plan

@@ -59,7 +59,6 @@ from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
 from sashil.engine import assemble
 from sashil.engine.checks import check_road_ahead
-from sashil.engine.documents import Documents
 from sashil.engine.resolve import apply_overrides
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.compare_metrics import METRICS, LawResult, metrics_of
@@ -69,6 +68,7 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.hysteretic_bound import bound_on_chain, hysteretic_bound, model_passive
 from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder

@@ -27,7 +27,7 @@ import numpy as np
 
 from sashil import engine
 from sashil.api import Run, load_run
-from sashil.config.frozen import thaw
+from sashil.config.overrides import set_values
 from sashil.config.parts import RunSpec, StageParts
 from sashil.control.law_registry import law_label
 from sashil.control.registry import stage_signals
@@ -35,12 +35,12 @@ from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble, assembled
 from sashil.engine.checks import check_theta0
-from sashil.engine.documents import Documents
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.lab.compare_metrics import sample_times
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
@@ -116,6 +116,8 @@ def drop_test(
     drop = run.options
     theta0_deg, duration = float(drop["theta0_deg"]), float(drop["duration_s"])
     currents = [float(value) for value in drop["currents_a"]]
+    # each drop of several records the config that reruns it alone: the resolved one at its current
+    own = {c: set_values(config, [(["drop_test", "currents_a"], [c])], "--current")[0] for c in currents}
     outputs.check(run.rig.backend)
     # the law and its parameters were checked in the resolution; its controller is built where each drop's loop runs
     signals = stage_signals(run.stage)
@@ -134,23 +136,20 @@ def drop_test(
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
         target = writer.folder_for(_label(current))
-        record = run_drop_test(
+        settings = DropTestSettings.of(run, theta0_deg, current, duration)
+        record = run_drop(
             run,
-            theta0_deg,
-            current,
-            duration,
-            controller=CONFIG_LAW if closed else None,
-            notify=prompt,
+            plan_drop(run, settings, prompt, CONFIG_LAW if closed else None),
             data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             live=SessionHooks(*views) if views else None,
             stop=stop,
             trace=outputs.can_trace(target.path, drop["port"]),
             documents=documents,
             name=_label(current),
-            recorded_config=_one_drop(config, current) if several else None,
+            recorded_config=own[current] if several else None,
             describe=functools.partial(_described, current, label, theta0_deg),
         )
-        assert record.metrics is not None and record.run  # run_drop_test sets both
+        assert record.metrics is not None and record.run  # run_drop sets both
         if live is not None:
             live.note(
                 live_offset_s,
@@ -216,13 +215,6 @@ def _described(current: float, label: str, theta0_deg: float, record: DropRecord
     --format files are labelled with."""
     entry = _drop_row(record, current, label, theta0_deg)
     return {"entry": entry, "data": record.columns, "formats": {"current_a": current, "controller": label}}
-
-
-def _one_drop(config: RunConfig, current: float) -> RunConfig:
-    """The config of one drop of several: the resolved ``config`` at ``current`` alone, which reruns it."""
-    own = thaw(config)
-    own["drop_test"]["currents_a"] = [current]
-    return own  # type: ignore[return-value]  # the resolved config with one key changed
 
 
 def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dict[str, Any]:
@@ -715,6 +707,39 @@ def run_drop_test(
     """
     run = assembled(config, READS)
     plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
+    return run_drop(
+        run,
+        plan,
+        rig=rig,
+        clock=clock,
+        data_path=data_path,
+        live=live,
+        stop=stop,
+        trace=trace,
+        documents=documents,
+        name=name,
+        recorded_config=recorded_config,
+        describe=describe,
+    )
+
+
+def run_drop(
+    run: RunSpec,
+    plan: DropTestPlan,
+    *,
+    rig: RigInterface | None = None,
+    clock: Clock | None = None,
+    data_path: str | Path | None = None,
+    live: Any = None,
+    stop: Any = None,
+    trace: Any = None,
+    documents: Documents | None = None,
+    name: str | None = None,
+    recorded_config: Mapping[str, Any] | None = None,
+    describe: Callable[[DropRecord], Mapping[str, Any]] | None = None,
+) -> DropRecord:
+    """The drop ``plan`` of the drop test's assembled ``run`` through the engine, and its record
+    (the arguments as :func:`run_drop_test` takes them)."""
     records: list[DropRecord] = []
 
     def analyse(outcome: RunOutcome) -> dict[str, Any]:

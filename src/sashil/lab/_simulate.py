@@ -14,13 +14,13 @@ import numpy as np
 from sashil.api import Run, load_run
 from sashil.engine import assemble
 from sashil.engine.checks import input_file
-from sashil.engine.documents import Documents
 from sashil.errors import ConfigError
 from sashil.identify.simulate import drop_test_inputs, simulate_columns
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure

@@ -37,11 +37,11 @@ from sashil.control.registry import law_run_label, make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.engine import assemble, assembled
-from sashil.engine.documents import Documents
 from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.plant import RoadProfile
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.formats import can_formats
 from sashil.recording.labels import controller_label

@@ -1,6 +1,6 @@
 """The run folder's writer: a subscriber to a verb's documents that writes what ran and how it ended.
 
-The engine hands every subscriber the same documents, in order (:mod:`sashil.engine.documents`):
+The engine hands every subscriber the same documents, in order (:mod:`sashil.recording.documents`):
 
 * ``start``: a run begins. ``{"run": name or None, "config": the resolved config or None, "spec":
   the assembled run (a :class:`~sashil.config.parts.RunSpec`), "versions": the software's}``. ``run`` None is the folder

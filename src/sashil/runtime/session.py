@@ -22,6 +22,7 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
@@ -146,9 +147,9 @@ def run_session(
     and timing are on disk; the keys it returns are added before ``summary.json`` is written, once.
     ``stop``: a flag another thread may set to stop the run cleanly (signals are routed to it as
     well when the session runs on the main thread)."""
-    writer = FolderWriter(folder, verb, {}, several=False)  # the folder's config.yaml and summary.json
+    documents = Documents([FolderWriter(folder, verb, {}, several=False)])  # its config.yaml and summary.json
     try:
-        writer("start", {"run": None, "config": config})
+        documents.start(None, config, loop.spec)
     except BaseException:
         loop.abort()
         raise
@@ -166,7 +167,7 @@ def run_session(
         if outcome.loop_process is not None:
             head["loop_process"] = outcome.loop_process
         outcome.summary = _close_folder(
-            writer, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
+            folder, documents, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
         )
     finally:
         loop.close()
@@ -174,22 +175,22 @@ def run_session(
 
 
 def _close_folder(
-    writer: FolderWriter,
+    folder: RunFolder,
+    documents: Documents,
     driver: str,
     timing: Any,
     event_rows: list[list[Any]],
     summary: dict[str, Any],
     finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None,
 ) -> dict[str, Any]:
-    """A session's last writes into its folder (``writer``'s), wherever its loop ran: the live changes
+    """A session's last writes into ``folder``, wherever its loop ran: the live changes
     (``events.csv``, when there were any), the timing file, and ``summary.json`` once: ``summary``
     with the run's ``driver`` and the keys the verb's ``finish`` hook adds, given the summary so far."""
-    folder = writer.folder
     if event_rows:
         folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, event_rows)
     folder.write_timing(timing)
     summary = {**summary, "driver": driver}
     if finish is not None:
         summary.update(finish(summary))
-    writer("stop", {"run": None, "summary": summary})
+    documents.summary(None, summary)
     return summary

@@ -20,10 +20,10 @@ from sashil.api import Run, load_run
 from sashil.config.parts import StageParts
 from sashil.config.typed import RunConfig
 from sashil.control.registry import law_run_label
-from sashil.engine.documents import Documents
 from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab._compare import LawJob, folder_name, law_summary, run_job
 from sashil.plugins import check_not_importing
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
 from sashil.roads.option import RoadParts, parse_road

@@ -16,7 +16,6 @@ import numpy as np
 from sashil.config.frozen import freeze_config, thaw
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble
-from sashil.engine.documents import Documents
 from sashil.errors import ConfigError, DriverIOError, SashilError
 from sashil.identify.data import MIN_CURRENT_SPREAD_A, Record
 from sashil.identify.fit import FitResult, simulate_fitted
@@ -28,6 +27,7 @@ from sashil.lab.calibration.extra import candidates, suggest
 from sashil.lab.calibration.plan import READS, Plan, Step, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
+from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE

@@ -1,4 +1,5 @@
-"""The documents a verb's runs emit, handed to its subscribers in order.
+"""The documents a verb's runs emit, handed to its subscribers in order: the engine emits each run's
+start and stop (:func:`sashil.engine.run`), a verb its folder's start and end.
 
 A subscriber is a callable ``(kind, document)``: the run folder's writer
 (:class:`~sashil.recording.folder_writer.FolderWriter`) among them. The kinds and their keys are the
