@@ -105,3 +105,32 @@ def test_a_loop_process_is_sent_the_assembled_run_and_no_config():
 def test_a_missing_key_is_named():
     with pytest.raises(KeyError, match=r"driver\.nope"):
         read_key(_config(), "driver.nope")
+
+
+def test_the_engine_emits_a_runs_start_and_its_stop_with_the_experiments_analysis():
+    """engine.run hands the verb's subscribers the run's start (the config its folder records, the
+    assembled run, the versions) before the loop, and its stop after it: the loop's summary keys,
+    what ended it and the experiment's analysis (here a drop's, on simulated time)."""
+    from sashil.lab._drop_test import run_drop_test
+    from sashil.recording.documents import Documents, versions
+
+    config = _config()
+    seen: list[tuple[str, dict]] = []
+    documents = Documents([lambda kind, fields: seen.append((kind, dict(fields)))])
+    record = run_drop_test(
+        config,
+        -5.0,
+        0.5,
+        0.3,
+        documents=documents,
+        name="i0.500A",
+        recorded_config=config,
+        describe=lambda record: {"entry": {"peaks": len(record.metrics.peaks_deg)}, "data": record.columns},
+    )
+    assert [kind for kind, _ in seen] == ["start", "stop"]
+    start, stop = seen[0][1], seen[1][1]
+    assert start["run"] == "i0.500A" and start["config"] is config and start["versions"] == versions()
+    assert isinstance(start["spec"], RunSpec) and start["spec"].rig.backend == "sim" and start["spec"].virtual
+    assert stop["run"] == "i0.500A" and stop["error"] is None and stop["outcome"] is record.run
+    assert stop["outcome"]["exit_status"] == "ok" and stop["outcome"]["timing"]["cycles"] > 0
+    assert stop["entry"] == {"peaks": len(record.metrics.peaks_deg)} and stop["data"] is record.columns

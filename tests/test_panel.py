@@ -257,7 +257,7 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
 
 @pytest.mark.e2e
 def test_a_run_streams_tunes_and_stops_at_0_a(panel):
-    _, client = panel
+    state, client = panel
     with (
         client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as control,
         client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as watch,
@@ -294,14 +294,11 @@ def test_a_run_streams_tunes_and_stops_at_0_a(panel):
     assert summary["exit_status"] == "stopped"
     data = read_csv(folder / "data.csv")
     assert data["current_cmd_a"][-1] == 0.0  # the run ends on the safe state
-    # every row a page was sent is a row of data.csv, at the same time, with the same values
-    shown = {name: np.concatenate([b[name] for b in batches]) for name in PLOT_COLUMNS}
-    assert len(shown["time_s"]) > 20
-    index = np.searchsorted(data["time_s"], shown["time_s"])
-    np.testing.assert_array_equal(data["time_s"][index], shown["time_s"])
-    for name in ("theta_rad", "theta_dot_rad_s", "torque_cmd_nm", "torque_hat_nm", "current_a", "theta_road_rad"):
-        np.testing.assert_allclose(shown[name], data[name][index], rtol=1e-9, atol=1e-12, err_msg=name)
-    assert np.all(shown["band_lo_nm"] == shown["band_lo_nm"])  # the Bouc-Wen band is drawn (no NaN)
+    # every row a page was sent is a row of data.csv, at the same time, with the same values, in order
+    traced = ("theta_rad", "theta_dot_rad_s", "torque_cmd_nm", "torque_hat_nm", "current_a", "theta_road_rad")
+    assert_rows_of(batches, data, traced, decimation_step(float(state.bench._config["loop"]["rate_hz"])))
+    band = np.concatenate([b["band_lo_nm"] for b in batches])
+    assert np.all(band == band)  # the Bouc-Wen band is drawn (no NaN)
     with (folder / "events.csv").open() as f:
         tuned = [row for row in csv.DictReader(f) if row["key"] == "c_sky" and row["status"] == "applied"]
     assert [(float(r["old"]), float(r["new"])) for r in tuned] == [(1.5, 2.5), (2.5, 1.5)]
@@ -475,10 +472,7 @@ def test_a_run_over_the_emulated_serial_link_streams_and_stops_at_0_a(tmp_path):
         assert json.loads((folder / "summary.json").read_text())["driver"] == "serial"
         data = read_csv(folder / "data.csv")
         assert data["current_cmd_a"][-1] == 0.0
-        shown = np.concatenate([b["theta_rad"] for b in batches])
-        times = np.concatenate([b["time_s"] for b in batches])
-        index = np.searchsorted(data["time_s"], times)
-        np.testing.assert_array_equal(data["theta_rad"][index], shown)
+        assert_rows_of(batches, data, ("theta_rad", "current_cmd_a"), decimation_step(bench._config["loop"]["rate_hz"]))
     finally:
         emu.stop()
 
@@ -812,19 +806,28 @@ def by_sub_run(ws: Any) -> tuple[dict[str, Any], dict[int, list[dict[str, np.nda
                 return data, shown, statuses
 
 
-def rows_match(batches: list[dict[str, np.ndarray]], data: dict[str, np.ndarray], names: tuple[str, ...]) -> int:
-    """Every row of ``batches`` is a row of ``data`` at the same time with the same values; their count."""
+def assert_rows_of(
+    batches: list[dict[str, np.ndarray]], data: dict[str, np.ndarray], names: tuple[str, ...], step: int
+) -> np.ndarray:
+    """What the stream promises a page, whatever the number of rows a machine managed to send: every
+    row of ``batches`` is a row of ``data`` (a run's data.csv, a sub-run's cycles.csv) at the same
+    time with the same values, picked on the fixed grid of row numbers (every ``step``-th), each
+    once and in the order of the run. The rows' numbers in ``data``."""
+    assert batches, "no batch reached the page"
     shown = {name: np.concatenate([b[name] for b in batches]) for name in ("time_s", *names)}
     index = np.searchsorted(data["time_s"], shown["time_s"])
+    assert np.all(index < len(data["time_s"])), "a row sent after data.csv's last"
     np.testing.assert_array_equal(data["time_s"][index], shown["time_s"])
     for name in names:
         np.testing.assert_allclose(shown[name], data[name][index], rtol=1e-9, atol=1e-12, err_msg=name)
-    return len(shown["time_s"])
+    assert np.all(np.diff(index) > 0), "rows sent out of order, or twice"
+    assert np.all(index % step == 0), f"rows sent off the grid of every {step}th row: {index[index % step != 0]}"
+    return index
 
 
 @pytest.mark.e2e
 def test_a_drop_test_from_the_page_runs_each_current_asked(panel):
-    _, client = panel
+    state, client = panel
     with client.websocket_connect(WS, subprotocols=PROTOCOLS, headers={"origin": ORIGIN}) as ws:
         headers = {**CHANGES, "x-sashil-client": ws.receive_json()["client"]}
         choice = {"experiment": "drop-test", "law": "passive", "currents_a": "0 1", "duration_s": 1.5, "theta0_deg": -5}
@@ -840,9 +843,10 @@ def test_a_drop_test_from_the_page_runs_each_current_asked(panel):
     labels = {s["sub_run"]["index"]: s["sub_run"]["label"] for s in statuses if s["sub_run"]}
     assert labels == {1: "0 A", 2: "1 A"} and end["sub_run"] == {"index": 2, "of": 2, "label": "1 A"}
     # each sub-run's traces are rows of its own loop's stream (cycles.csv: time from its loop's start)
+    step = decimation_step(float(state.bench._config["loop"]["rate_hz"]))
     for index, name in ((1, "i0.000A"), (2, "i1.000A")):
         cycles = read_csv(folder / name / "cycles.csv")
-        assert rows_match(shown[index], cycles, ("theta_rad", "current_a", "current_cmd_a")) > 10
+        assert_rows_of(shown[index], cycles, ("theta_rad", "current_a", "current_cmd_a"), step)
         assert np.all(np.concatenate([b["current_cmd_a"] for b in shown[index]])[:5] == float(name[1:6]))
     assert sum(line.startswith("period ") for line in end["results"]) == 2  # each drop's figures
 
@@ -868,9 +872,10 @@ def test_a_stepped_sweep_from_the_page_runs_its_frequencies(tmp_path):
     summary = json.loads((folder / "summary.json").read_text())
     assert [round(p["frequency_hz"], 6) for p in summary["points"]] == [1.0, 2.0]
     assert {s["sub_run"]["label"] for s in statuses if s["sub_run"]} == {"1 Hz", "2 Hz"}
+    step = decimation_step(float(bench._config["loop"]["rate_hz"]))
     for index, name in ((1, "f1.000Hz"), (2, "f2.000Hz")):
         cycles = read_csv(folder / name / "cycles.csv")
-        assert rows_match(shown[index], cycles, ("theta_rad", "theta_road_rad", "current_cmd_a")) > 10
+        assert_rows_of(shown[index], cycles, ("theta_rad", "theta_road_rad", "current_cmd_a"), step)
     assert any("transmissibility" in line for line in end["results"])
 
 
@@ -900,11 +905,11 @@ def test_stop_shows_the_decay_and_the_boards_confirmation(panel):
     data = read_csv(folder / "data.csv")
     zero = int(np.flatnonzero(data["current_cmd_a"] != 0.0)[-1]) + 1  # from here on, 0 A commanded
     assert data["current_a"][zero] > 0.5 and abs(data["current_a"][-1]) <= 0.05  # the decay is recorded
-    assert rows_match(batches, data, ("current_a", "current_cmd_a")) > 10
+    rate = float(state.bench._config["loop"]["rate_hz"])
+    assert_rows_of(batches, data, ("current_a", "current_cmd_a"), decimation_step(rate))
     times = np.concatenate([b["time_s"] for b in batches])
     decay = times[times >= data["time_s"][zero]]
     assert len(decay) >= 2  # the page drew the decay, to within one decimation step of its end
-    rate = float(state.bench._config["loop"]["rate_hz"])
     assert data["time_s"][-1] - decay[-1] < decimation_step(rate) / rate + 1e-9
 
 

@@ -12,7 +12,7 @@ import yaml
 
 import sashil
 from sashil.cli import main
-from sashil.lab import _closed_loop as closed_loop_module
+from sashil.engine import running as engine_running
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime.clock import VirtualClock
 
@@ -44,7 +44,7 @@ def virtual_run_clock(monkeypatch):
         def for_rate(spin_margin_us: float, rate_hz: float) -> VirtualClock:
             return VirtualClock()
 
-    monkeypatch.setattr(closed_loop_module, "RealClock", Clock)
+    monkeypatch.setattr(engine_running, "RealClock", Clock)
 
 
 def test_run_config_holds_the_law_road_rate_and_duration_and_reruns_them(tmp_path, virtual_run_clock):

@@ -65,6 +65,12 @@ INF = float("inf")
 SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
 
 
+def signal_names(law_class: type[Law]) -> tuple[str, ...]:
+    """The per-cycle values a controller of ``law_class`` records: :data:`SIGNALS`, and a current
+    law's own output (``current_law_a``) beside the command."""
+    return SIGNALS + (("current_law_a",) if law_class.output_kind() == "current" else ())
+
+
 def _first_line(err: BaseException) -> str:
     text = (str(err).splitlines() or [""])[0]
     return f"{type(err).__name__}: {text}" if text else type(err).__name__
@@ -91,7 +97,7 @@ class Controller:
         self.origin = origin
         self.direct = law.output_kind() == "current"
         #: what the loop records each cycle: the law's own current beside the command for a current law
-        self.signal_names = SIGNALS + (("current_law_a",) if self.direct else ())
+        self.signal_names = signal_names(type(law))
         #: whether the coil-lag lead acts on a current law's output (module docstring)
         self.lead_direct = bool(lead_current_laws)
         self._law_output = law.current if self.direct else law.torque

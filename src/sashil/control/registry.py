@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from sashil.config.parts import StageParts
-from sashil.control.controller import Controller
+from sashil.control.controller import Controller, signal_names
 from sashil.control.estimator import RigEstimator
 from sashil.control.inverse import CoilLagCompensator, HysteresisInverse
 from sashil.control.kalman import KalmanRigEstimator
@@ -32,6 +32,13 @@ __all__ = ["law_reads_state", "law_run_label", "make_controller", "make_estimato
 def law_reads_state(parts: StageParts) -> bool:
     """Whether the stage's law reads the rig's state (:attr:`sashil.control.law_api.Law.reads_state`)."""
     return bool(find_law(parts.law).cls.reads_state)
+
+
+def stage_signals(parts: StageParts) -> tuple[str, ...]:
+    """What a controller of the stage's law records each cycle (:func:`~sashil.control.controller.signal_names`);
+    none for a law that reads no state (it runs as a constant-current stage), from the law's class alone."""
+    cls = find_law(parts.law).cls
+    return signal_names(cls) if cls.reads_state else ()
 
 
 def _stage_law(parts: StageParts, name: str | None = None) -> tuple[LawEntry, Law]:

@@ -6,23 +6,35 @@ there: in a loop process of its own, which builds the same plan from its values
 (:func:`~sashil.runtime.plan_process.run_plan_process`), or in this process through the one
 runner (:func:`~sashil.runtime.runner.run_plan`), the plan given its rig first (``plan.attach_rig``).
 Either way the verb gets one :class:`~sashil.runtime.runner.RunOutcome`, its stream read back.
+A session's loop (``sashil run``, a script's, the panel's: its folder made once the loop is ready,
+its law tuned live) is started by the same rule (:func:`start_session`).
+
+Given the verb's :class:`~sashil.recording.documents.Documents`, the engine emits the run's ``start``
+document before the loop (the resolved config, the assembled run, the versions) and its ``stop``
+after it: the outcome's summary keys, to which the experiment's ``analyse`` adds its analysis.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sashil.config.parts import RunSpec
 from sashil.drivers import RigInterface, open_rig
 from sashil.engine.where import loop_in_process
-from sashil.runtime.clock import Clock, default_clock
+from sashil.recording.documents import Documents
+from sashil.runtime.clock import Clock, RealClock, default_clock
 from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import RunOutcome, run_plan
+from sashil.runtime.session import InProcessLoop, SessionLoop
 
-__all__ = ["run"]
+if TYPE_CHECKING:
+    from sashil.runtime.loop_process import LoopProcess
+
+__all__ = ["StartedLoop", "run", "start_session"]
 
 log = logging.getLogger("sashil")
 
@@ -40,6 +52,10 @@ def run(
     trace: Any = None,
     realtime: bool = True,
     say: Callable[[str], None] = log.warning,
+    documents: Documents | None = None,
+    name: str | None = None,
+    config: Mapping[str, Any] | None = None,
+    analyse: Callable[[RunOutcome], Mapping[str, Any]] | None = None,
 ) -> RunOutcome:
     """Run ``plan`` of the assembled ``spec`` for ``duration_s`` (None: until the plan ends) and
     return its outcome, the stream read back (:attr:`RunOutcome.stream`).
@@ -51,8 +67,37 @@ def run(
     :class:`~sashil.recording.can_trace.CanTrace` (not started) fed the run's CAN frames, closed
     after the run (its statistics in :attr:`RunOutcome.can_trace`). ``realtime``: apply ``loop.rt``
     to a loop in this process on the real clock. ``say``: the loop's warnings. Bad input found before the loop
-    starts raises with nothing energised; what ends the loop does not raise."""
+    starts raises with nothing energised; what ends the loop does not raise.
+
+    ``documents``: where the run's documents go, as run ``name`` (None: the verb's folder itself):
+    ``start`` with ``config`` (the config its folder records; None: none), ``stop`` with the
+    outcome and ``analyse(outcome)`` (the experiment's analysis: ``error``, what ended the run as
+    the experiment judges it, ``entry``, ``data``, ``formats``), which is called with or without
+    documents."""
     clock = clock if clock is not None else default_clock(spec)
+    if documents is not None:
+        documents.start(name, config, spec)
+    outcome = _run_loop(spec, plan, duration_s, clock, rig, data_path, live, stop, trace, realtime, say)
+    analysis = dict(analyse(outcome)) if analyse is not None else {}
+    if documents is not None:
+        documents.stop(str(name), outcome.summary, analysis.pop("error", outcome.error), **analysis)
+    return outcome
+
+
+def _run_loop(
+    spec: RunSpec,
+    plan: Any,
+    duration_s: float | None,
+    clock: Clock,
+    rig: Callable[[], RigInterface] | None,
+    data_path: str | Path | None,
+    live: Any,
+    stop: Any,
+    trace: Any,
+    realtime: bool,
+    say: Callable[[str], None],
+) -> RunOutcome:
+    """The loop of ``plan`` where the one rule says it runs (see :func:`run`)."""
     if loop_in_process(spec, clock, plan):
         return run_plan_process(spec, plan, duration_s, data_path=data_path, say=say, live=live, stop=stop, trace=trace)
     board = rig() if rig is not None else open_rig(spec.rig)
@@ -85,3 +130,65 @@ def run(
         trace_stats = trace.close() if trace is not None else None
     outcome.can_trace = trace_stats
     return outcome
+
+
+@dataclass(frozen=True)
+class StartedLoop:
+    """A session's loop, ready to go (:func:`start_session`): the loop (a
+    :class:`~sashil.runtime.session.SessionLoop`), its loop process (None: it runs in this process)
+    and its rig (None: the rig is the loop process's), the stage's label, the road's text and the
+    stage's columns."""
+
+    loop: SessionLoop
+    process: LoopProcess | None
+    rig: RigInterface | None
+    label: str
+    road_text: str
+    columns: tuple[str, ...]
+
+
+def start_session(
+    spec: RunSpec,
+    duration_s: float | None,
+    *,
+    tune: bool = True,
+    can_trace: bool = False,
+    say: Callable[[str, str], None] = lambda kind, text: log.warning("%s", text),
+) -> StartedLoop:
+    """The loop of a session on the real clock (``sashil run``, a script's, the panel's) of the
+    assembled run ``spec`` (its ``plan``: the kind and values a loop builds its stage from), made
+    ready where the one rule says it runs (:func:`~sashil.engine.where.loop_in_process`): in a loop
+    process of its own, or in this one (the rig built, its port open, the board greeted). Its stage
+    is built by the same function either way (:func:`~sashil.runtime.worker.build`), once, where
+    the loop runs. ``tune``: the loop serves live changes of its law; ``can_trace``: the loop
+    process puts every CAN frame into the stream; ``say(kind, text)``: the warm-up's progress and
+    warnings. Bad input (a port that cannot be opened) raises before anything is energised."""
+    clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)
+    if loop_in_process(spec, clock):
+        # the session's side of a loop process loads here: a run on simulated time never needs it
+        from sashil.runtime.loop_process import LoopProcess
+
+        process = LoopProcess(spec, duration_s, tune=tune, can_trace=can_trace).start()
+        try:
+            ready = process.wait_ready(say)
+        except BaseException:
+            process.close()
+            raise
+        return StartedLoop(process, process, None, ready["label"], ready["road"], tuple(ready["columns"]))
+    # the law, the estimator and numba's kernels load here: a session whose loop runs in a loop
+    # process never loads them
+    from sashil.runtime.loop import record_columns
+    from sashil.runtime.worker import build
+
+    rig, stage, label, road_text = build(spec, _Said(say))
+    return StartedLoop(InProcessLoop(spec, rig, stage, clock), None, rig, label, road_text, record_columns(stage))
+
+
+class _Said:
+    """A loop built in this process tells its progress as a loop process's messages do."""
+
+    def __init__(self, say: Callable[[str, str], None]):
+        self.say = say
+
+    def send(self, kind: str, **fields: Any) -> None:
+        self.say(kind, str(fields.get("text", "")))

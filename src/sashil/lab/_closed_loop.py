@@ -6,9 +6,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from sashil import engine
 from sashil.api import Run, load_run
 from sashil.drivers.interface import RigInterface
-from sashil.engine import assemble, loop_in_process
+from sashil.engine import assemble
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.formats import can_formats
@@ -18,15 +19,14 @@ from sashil.recording.rest import rest_phrase
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.roads.option import RoadParts, RoadStage, parse_road
-from sashil.runtime.clock import RealClock
-from sashil.runtime.loop_process import LoopProcess
-from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
+from sashil.runtime.session import run_session
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
+    from sashil.runtime.loop_process import LoopProcess
 
 __all__ = ["READS", "closed_loop", "run_in_loop", "run_plan"]
 
@@ -62,15 +62,20 @@ def closed_loop(
     outputs.check(spec.rig.backend)
     duration = spec.options["duration_s"]
     rate, backend = spec.loop.rate_hz, spec.rig.backend
-    loop, process, rig, (label, road_text, columns) = _start_loop(
-        spec.with_plan(run_plan(spec)), outputs, on_event, tune
+    started = engine.start_session(
+        spec.with_plan(run_plan(spec)),
+        duration,
+        tune=tune,
+        can_trace=bool(can_formats(tuple(outputs.formats))),
+        say=lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text)),
     )
+    loop, process, label, road_text = started.loop, started.process, started.label, started.road_text
     try:
         folder = RunFolder.create(outputs.out, "run")
     except BaseException:
         loop.abort()
         raise
-    live = outputs.open_live_tap(spec.stage.model, spec.stage.current_max_a, columns, "sashil run", folder.path)
+    live = outputs.open_live_tap(spec.stage.model, spec.stage.current_max_a, started.columns, "sashil run", folder.path)
     if progress:  # a bar on a terminal, a line every 10 s otherwise
         live = SessionHooks(live, RunProgress(duration, rate))
     if views:
@@ -84,7 +89,7 @@ def closed_loop(
         )
     )
     if process is None:
-        trace = outputs.start_can_trace(rig, folder.path)
+        trace = outputs.start_can_trace(started.rig, folder.path)
     else:
         trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
     finish = _Finish(outputs, folder, road_text, trace, process)
@@ -100,28 +105,6 @@ def closed_loop(
         if trace is not None and finish.trace_stats is None:
             trace.close()
     return _ended(outcome, folder, on_event)
-
-
-def _start_loop(
-    spec: RunSpec, outputs: Outputs, on_event: Listener, tune: bool
-) -> tuple[SessionLoop, LoopProcess | None, Any, tuple[str, str, tuple[str, ...]]]:
-    """The loop of the assembled run ``spec``, ready: in a loop process of its own (``loop.process``)
-    or in this one; the process (None in this one), the rig (None in a process) and the stage's
-    label, road text and columns."""
-    duration = spec.options["duration_s"]
-    clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)  # sashil run is on the real clock
-    if loop_in_process(spec, clock):
-        process = LoopProcess(spec, duration, tune=tune, can_trace=bool(can_formats(tuple(outputs.formats)))).start()
-        try:
-            ready = process.wait_ready(
-                lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text))
-            )
-        except BaseException:
-            process.close()
-            raise
-        return process, process, None, (ready["label"], ready["road"], tuple(ready["columns"]))
-    rig, stage, label, road_text, columns = _in_this_process(spec, on_event)
-    return InProcessLoop(spec, rig, stage, clock), None, rig, (label, road_text, columns)
 
 
 class _Finish:
@@ -173,29 +156,6 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
             raise error
         raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
     return load_run(folder.path)
-
-
-def _in_this_process(spec: RunSpec, on_event: Listener) -> tuple[Any, Any, str, str, tuple[str, ...]]:
-    """The rig (its port open, the board greeted), the stage, its label, the road's text and the
-    stage's columns, for a loop in this process (``loop.process: false``). The law, the estimator
-    and numba's kernels load here: a session whose loop runs in a loop process never loads them."""
-    from sashil.drivers import open_rig
-    from sashil.runtime.loop import record_columns
-    from sashil.runtime.warmup import warm_up
-
-    rig = open_rig(spec.rig)  # built, not opened
-    try:
-        stage, label, road_text = run_in_loop(spec, rig, lambda line: None)
-        # the kernels and the law warmed before the board is greeted: a board's timers start at the
-        # handshake, and the loop's first deadline follows it at once
-        warm_up(stage, lambda line: on_event(Event("progress", line)))
-        # open the port and greet the board now (configure is idempotent; the loop's own call finds
-        # it done): a port that cannot be opened is one line, before any set-up, output or folder
-        rig.configure()
-    except BaseException:
-        rig.close()
-        raise
-    return rig, stage, label, road_text, tuple(record_columns(stage))
 
 
 def run_plan(run: RunSpec) -> dict[str, Any]:

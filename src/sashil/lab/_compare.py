@@ -68,10 +68,10 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.hysteretic_bound import bound_on_chain, hysteretic_bound, model_passive
 from sashil.lab.optimal_bound import optimal_bound
 from sashil.models.hysteresis import BoucWenParams
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.run_set import ending
-from sashil.recording.summary_writer import write_config, write_summary
 from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.loop import stage_signals
 
@@ -388,7 +388,7 @@ def compare(
     virtual = run.virtual
     processes = int(section["jobs"]) if virtual else 1
     road_profile, road_text = parse_road(road, RoadParts.of(section))
-    folder, subs = _folders(outputs, config, jobs)
+    folder, subs, documents = _folders(outputs, config, jobs)
     on_event(
         Event(
             "progress",
@@ -403,7 +403,7 @@ def compare(
     configs = {job.label: job.config for job in jobs}
     summaries = {r.label: law_summary(r, configs[r.label], f"{road}: {road_text}", duration) for r in results}
     for label, summary in summaries.items():
-        write_summary(subs[label], summary)
+        documents.summary(folder_name(label), summary)
     bound = _bound(run, road_profile, duration, on_event)
     bound_rms = _scale_bound(run, road_profile, duration, bound, results, configs)
     header = _header(run, road, road_text, duration, virtual, processes, len(jobs), wall, bound, bound_rms)
@@ -416,8 +416,8 @@ def compare(
     write_compare_md(folder.file("compare.md"), results, header, notes, bound_rms, params, folders)
     plot_compare(folder.file("compare.png"), results, f"{road}: {road_text}", bound_rms)
     error = _failures(results)
-    write_summary(
-        folder,
+    documents.summary(
+        None,
         _summary(
             run,
             error,
@@ -451,22 +451,27 @@ def _failures(results: Sequence[LawResult]) -> SashilError | None:
     )
 
 
-def _folders(outputs: Outputs, config: RunConfig, jobs: Sequence[Any]) -> tuple[RunFolder, dict[str, RunFolder]]:
+def _folders(
+    outputs: Outputs, config: RunConfig, jobs: Sequence[Any]
+) -> tuple[RunFolder, dict[str, RunFolder], Documents]:
     """The comparison's folder (its config.yaml says which laws' folders ran what) and each law's
-    run folder inside it, its config.yaml written now (``data.csv`` comes as it runs)."""
+    run folder inside it, its config.yaml written now (``data.csv`` comes as it runs); the
+    comparison's documents, which its folder's writer takes."""
     folder = RunFolder.create(outputs.out, "compare")
+    writer = FolderWriter(folder, "compare", {})
+    documents = Documents([writer])
     note = (
         "The config every law of this comparison started from: its controller section is not one of them.\n"
         "Each law ran with the config.yaml of its own folder: "
         + ", ".join(f"{folder_name(job.label)}/" for job in jobs)
     )
-    write_config(folder, config, note)
+    documents.start(None, config, note=note)
     subs = {}
     for job in jobs:  # each law a run of its own: its folder, config.yaml now, data.csv as it runs
-        sub = RunFolder.create(folder.path / folder_name(job.label), "compare")
-        write_config(sub, job.config)
+        sub = writer.folder_for(folder_name(job.label))
+        documents.start(folder_name(job.label), job.config)
         job.folder, subs[job.label] = str(sub.path), sub
-    return folder, subs
+    return folder, subs, documents
 
 
 def _header(

@@ -15,9 +15,10 @@ counts and the release threshold).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,9 +27,10 @@ import numpy as np
 
 from sashil import engine
 from sashil.api import Run, load_run
-from sashil.config.frozen import thaw
+from sashil.config.overrides import set_values
 from sashil.config.parts import RunSpec, StageParts
 from sashil.control.law_registry import law_label
+from sashil.control.registry import stage_signals
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble, assembled
@@ -38,12 +40,12 @@ from sashil.lab.compare_metrics import sample_times
 from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
-from sashil.recording.run_set import RunSet, ending
-from sashil.recording.summary_writer import write_config
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
@@ -114,36 +116,40 @@ def drop_test(
     drop = run.options
     theta0_deg, duration = float(drop["theta0_deg"]), float(drop["duration_s"])
     currents = [float(value) for value in drop["currents_a"]]
+    # each drop of several records the config that reruns it alone: the resolved one at its current
+    own = {c: set_values(config, [(["drop_test", "currents_a"], [c])], "--current")[0] for c in currents}
     outputs.check(run.rig.backend)
-    checked = stage_controller(run.stage)  # bad controller parameters fail here, before a folder exists
-    closed = checked is not None
+    # the law and its parameters were checked in the resolution; its controller is built where each drop's loop runs
+    signals = stage_signals(run.stage)
+    closed = bool(signals)
     folder = RunFolder.create(outputs.out, "drop-test")
     law, origin = law_label(run.stage.law)
-    columns = DROP_COLUMNS + controller_columns(checked)
-    live = outputs.open_rerun(columns, "sashil drop-test", folder.path)
+    live = outputs.open_rerun(DROP_COLUMNS + signals, "sashil drop-test", folder.path)
     live_offset_s = 0.0
-    write_config(folder, config)
-    runs = _run_set(run, folder, law if closed else f"{law} (constant current per run)", origin, len(currents) > 1)
+    several = len(currents) > 1
+    writer = _writer(run, folder, law if closed else f"{law} (constant current per run)", origin, several, outputs)
+    documents = Documents([writer])
+    documents.start(None, config, run)
     overlay = []
     prompt = lambda line: on_event(Event("prompt", line))  # noqa: E731
     for current in currents:
         label = f"{law} (from {current:g} A until the release)" if closed else f"{law} {current:g} A"
         on_event(Event("progress", f"drop test from {theta0_deg:g} deg, {label} ...", {"current_a": current}))
-        target = runs.folder_for(_label(current))
-        record = run_drop_test(
+        target = writer.folder_for(_label(current))
+        settings = DropTestSettings.of(run, theta0_deg, current, duration)
+        record = run_drop(
             run,
-            theta0_deg,
-            current,
-            duration,
-            controller=CONFIG_LAW if closed else None,
-            notify=prompt,
+            plan_drop(run, settings, prompt, CONFIG_LAW if closed else None),
             data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             live=SessionHooks(*views) if views else None,
             stop=stop,
             trace=outputs.can_trace(target.path, drop["port"]),
+            documents=documents,
+            name=_label(current),
+            recorded_config=own[current] if several else None,
+            describe=functools.partial(_described, current, label, theta0_deg),
         )
-        _write_drop(config if runs.several else None, outputs, target, record, current, label)
-        assert record.metrics is not None and record.run  # run_drop_test sets both
+        assert record.metrics is not None and record.run  # run_drop sets both
         if live is not None:
             live.note(
                 live_offset_s,
@@ -151,8 +157,8 @@ def drop_test(
             )
             live.log_columns(record.columns, live_offset_s)
             live_offset_s += duration + 1.0
-        entry = runs.add(_label(current), _drop_row(record, current, label, theta0_deg), record.error)
-        if runs.failed:
+        entry = writer.entries[-1]
+        if writer.failed:
             overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
             break
         overlay.append({**entry, **record.columns, "label": label})
@@ -161,12 +167,13 @@ def drop_test(
             on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
     under = f", under {law}" if closed else ""
     title = f"Drop test from {theta0_deg:g}°{under} ({run.rig.backend} rig)"
-    return _finish(folder, runs, overlay, title, drop["settle_band_deg"], live, on_event)
+    return _finish(folder, writer, documents, overlay, title, drop["settle_band_deg"], live, on_event)
 
 
 def _finish(
     folder: RunFolder,
-    runs: RunSet,
+    writer: FolderWriter,
+    documents: Documents,
     overlay: list[dict[str, Any]],
     title: str,
     band_deg: float,
@@ -178,56 +185,36 @@ def _finish(
     plot = plot_drop_test(folder.file("drop_test.png"), overlay, title, band_deg=band_deg)
     if live is not None:
         live.close()
-    if runs.error is not None and getattr(runs.error, "exit_code", 1) == 2:
+    if writer.error is not None and getattr(writer.error, "exit_code", 1) == 2:
         # bad input found on opening the rig (a port that cannot be opened) or before the drop began
         # (an emulated rig whose operator holds nothing): the drop never started, no folder
         folder.discard()
-        raise runs.error
-    runs.finish()
+        raise writer.error
+    documents.end()
     on_event(Event("folder", f"run folder: {folder.path} (plot {plot.name})", {"folder": str(folder.path)}))
-    if runs.error is not None:
-        raise runs.error  # the data up to it is on disk
+    if writer.error is not None:
+        raise writer.error  # the data up to it is on disk
     return load_run(Path(folder.path))
 
 
-def _run_set(run: RunSpec, folder: RunFolder, controller: str, origin: str, several: bool) -> RunSet:
-    """The drop test's set of runs, one per current, with the keys its folder's summary shares."""
-    return RunSet(
-        folder,
-        "drop-test",
-        {
-            "driver": run.rig.backend,
-            "controller": controller,
-            "controller_origin": origin,
-            "clock": "virtual" if run.virtual else "real",  # timing is simulated on the virtual clock
-        },
-        several=several,
-    )
+def _writer(
+    run: RunSpec, folder: RunFolder, controller: str, origin: str, several: bool, outputs: Outputs
+) -> FolderWriter:
+    """The writer of the drop test's folder, with the keys its summaries share."""
+    common = {
+        "driver": run.rig.backend,
+        "controller": controller,
+        "controller_origin": origin,
+        "clock": "virtual" if run.virtual else "real",  # timing is simulated on the virtual clock
+    }
+    return FolderWriter(folder, "drop-test", common, several=several, outputs=outputs)
 
 
-def _write_drop(
-    config: RunConfig | None,
-    outputs: Outputs,
-    target: RunFolder,
-    record: Any,
-    current: float,
-    label: str,
-) -> None:
-    """One drop's files in ``target``: its data and the --format files, and when it is a sub-run of
-    the resolved ``config`` (None: the folder's own), its config, which reruns its one drop."""
-    if config is not None:
-        own = thaw(config)
-        own["drop_test"]["currents_a"] = [current]
-        write_config(target, own)
-    target.write_data(record.columns)
-    outputs.write_formats(
-        target.path,
-        "drop-test",
-        record.columns,
-        exit_status=ending(record.error)["exit_status"],
-        current_a=current,
-        controller=label,
-    )
+def _described(current: float, label: str, theta0_deg: float, record: DropRecord) -> dict[str, Any]:
+    """One drop's analysis for its stop document: its row of the summary, its data and what its
+    --format files are labelled with."""
+    entry = _drop_row(record, current, label, theta0_deg)
+    return {"entry": entry, "data": record.columns, "formats": {"current_a": current, "controller": label}}
 
 
 def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dict[str, Any]:
@@ -691,6 +678,10 @@ def run_drop_test(
     live: Any = None,
     stop: Any = None,
     trace: Any = None,
+    documents: Documents | None = None,
+    name: str | None = None,
+    recorded_config: Mapping[str, Any] | None = None,
+    describe: Callable[[DropRecord], Mapping[str, Any]] | None = None,
 ) -> DropRecord:
     """One drop test of a resolved ``config`` or of the drop test's assembled run (its ``options``:
     :data:`READS`) at a constant current (or, after the release, under ``controller``: a stage, or :data:`CONFIG_LAW`
@@ -706,7 +697,9 @@ def run_drop_test(
     from the release. ``live``: views of the stream (``start(stream, timing)``, ``close(trips,
     notes)``); ``stop``: a :class:`~sashil.runtime.signals.StopFlag` another thread may set;
     ``trace``: a :class:`~sashil.recording.can_trace.CanTrace` (not started) fed the run's CAN
-    frames, closed after the run (its statistics in ``record.extra["can_trace"]``).
+    frames, closed after the run (its statistics in ``record.extra["can_trace"]``). ``documents``:
+    the verb's documents, this drop as run ``name`` recording ``recorded_config`` (None: none of its own),
+    its stop document the drop's analysis as ``describe(record)`` gives it.
 
     Returns the record from the release on. An error that ends the test early (a driver error, a
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
@@ -714,7 +707,52 @@ def run_drop_test(
     """
     run = assembled(config, READS)
     plan = plan_drop(run, DropTestSettings.of(run, theta0_deg, current_a, duration_s), notify, controller)
-    outcome = engine.run(
+    return run_drop(
+        run,
+        plan,
+        rig=rig,
+        clock=clock,
+        data_path=data_path,
+        live=live,
+        stop=stop,
+        trace=trace,
+        documents=documents,
+        name=name,
+        recorded_config=recorded_config,
+        describe=describe,
+    )
+
+
+def run_drop(
+    run: RunSpec,
+    plan: DropTestPlan,
+    *,
+    rig: RigInterface | None = None,
+    clock: Clock | None = None,
+    data_path: str | Path | None = None,
+    live: Any = None,
+    stop: Any = None,
+    trace: Any = None,
+    documents: Documents | None = None,
+    name: str | None = None,
+    recorded_config: Mapping[str, Any] | None = None,
+    describe: Callable[[DropRecord], Mapping[str, Any]] | None = None,
+) -> DropRecord:
+    """The drop ``plan`` of the drop test's assembled ``run`` through the engine, and its record
+    (the arguments as :func:`run_drop_test` takes them)."""
+    records: list[DropRecord] = []
+
+    def analyse(outcome: RunOutcome) -> dict[str, Any]:
+        if live is not None:
+            live.close(outcome.trips, ())
+        # whatever ended the test early, the rig is at 0 A, deactivated and closed
+        error = outcome.error if outcome.error is not None else outcome.stop_error()
+        if error is not None and not isinstance(error, SashilError):
+            raise error
+        records.append(_record(run, outcome, plan, error))
+        return {"error": error, **(describe(records[0]) if describe is not None else {})}
+
+    engine.run(
         run,
         plan,
         clock=clock,
@@ -723,14 +761,12 @@ def run_drop_test(
         live=live,
         stop=stop,
         trace=trace,
+        documents=documents,
+        name=name,
+        config=recorded_config,
+        analyse=analyse,
     )
-    if live is not None:
-        live.close(outcome.trips, ())
-    # whatever ended the test early, the rig is at 0 A, deactivated and closed
-    error = outcome.error if outcome.error is not None else outcome.stop_error()
-    if error is not None and not isinstance(error, SashilError):
-        raise error
-    return _record(run, outcome, plan, error)
+    return records[0]
 
 
 def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: SashilError | None) -> DropRecord:

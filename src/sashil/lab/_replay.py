@@ -39,10 +39,11 @@ from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.engine import assemble
 from sashil.errors import DataFileError
 from sashil.lab.events import Event, Listener, ignore
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
 from sashil.runtime.loop import SETTLE_PHASE
 from sashil.runtime.session import EVENTS_FILE
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
@@ -96,7 +97,8 @@ def replay(
     spec = assemble(config)
     controller = make_controller(None, spec.stage)
     folder = RunFolder.create(outputs.out, "replay")
-    write_config(folder, config)
+    documents = Documents([FolderWriter(folder, "replay", {}, several=False)])
+    documents.start(None, config, spec)
     started = time.perf_counter()
     # the run's live changes (sashil tune) belong to its own law: replayed with it, not with another
     own_law = controller.name == StageParts.read(run.config).law
@@ -124,7 +126,7 @@ def replay(
         "times_real_time": round(span / seconds, 1) if seconds > 0 else None,
         "open_loop": True,
     }
-    write_summary(folder, {"replay": facts})
+    documents.summary(None, {"replay": facts})
     _plot(folder.file("replay.png"), data, out, controller.name)
     current = diff.get("current_cmd_a")
     change = f"i* differs by RMS {current['rms']:.4g} A (max {current['max_abs']:.4g} A)" if current else ""

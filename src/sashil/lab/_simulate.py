@@ -20,10 +20,11 @@ from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
 from sashil.stats import nrmse
 
 if TYPE_CHECKING:
@@ -85,7 +86,8 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     inputs, measured, source = _inputs(run.options)
     columns = simulate_columns(model, params, inputs, start_at_rest=run.options["start"] == "rest")
     folder = RunFolder.create(outputs.out, "simulate")
-    write_config(folder, config)
+    documents = Documents([FolderWriter(folder, "simulate", {}, several=False)])
+    documents.start(None, config, run)
     if measured is not None:
         columns["theta_measured_rad"] = measured
     folder.write_data(columns)
@@ -97,7 +99,7 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     drops = _drop_metrics(run, columns, measured, inputs) if not run.options["input"] or _is_drop(inputs) else None
     if drops is not None:
         summary["drop_test"] = {name: metrics.as_dict() for name, metrics in drops.items()}
-    write_summary(folder, summary)
+    documents.summary(None, summary)
     fit = f" (NRMSE {100 * summary['nrmse']:.3g} %)" if measured is not None else ""
     on_event(Event("output", f"simulated {model} on {source}: {folder.path}{fit}", {"folder": str(folder.path)}))
     if drops is not None:

@@ -41,6 +41,8 @@ from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.plant import RoadProfile
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.formats import can_formats
 from sashil.recording.labels import controller_label
 from sashil.recording.outputs import Outputs
@@ -48,8 +50,6 @@ from sashil.recording.plots import plot_chirp, plot_transmissibility
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
-from sashil.recording.run_set import RunSet
-from sashil.recording.summary_writer import write_config
 from sashil.roads.profiles import SweepRoad, chirp_profile, road_of, sine_profile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
@@ -143,30 +143,29 @@ def sweep(
         if stepped
         else outputs.open_rerun((*SWEEP_COLUMNS, "band_lo_nm", "band_hi_nm"), "sashil sweep", folder.path)
     )
-    write_config(folder, config)
     label = law_run_label(run.stage)
     traces: list[Any] = []  # the CAN frame trace (formats blf|asc|log|mf4), started with the first rig
     rig_factory = _traced_rigs(outputs, folder, traces)
-    runs = RunSet(
-        folder,
-        "sweep",
-        {"driver": run.rig.backend, "controller": label, "mode": "stepped" if stepped else "chirp"},
-        several=stepped,
-    )
+    common = {"driver": run.rig.backend, "controller": label, "mode": "stepped" if stepped else "chirp"}
+    runs = FolderWriter(folder, "sweep", common, several=stepped)
+    documents = Documents([runs])
+    documents.start(None, config, run)
     extra: dict[str, Any] = {}
     failure: SashilError | None = None
     try:
         if stepped:
-            _stepped(run, config, label, folder, rig_factory, runs, extra, outputs, on_event, progress, watch)
+            _stepped(
+                run, config, label, folder, rig_factory, documents, runs, extra, outputs, on_event, progress, watch
+            )
         else:
-            _chirp(run, label, folder, live, rig_factory, runs, extra, outputs, on_event, watch)
+            _chirp(run, label, folder, live, rig_factory, documents, extra, outputs, on_event, watch)
     except SashilError as err:
         failure = err
     finally:
         trace_stats = traces[0].close() if traces else None
     if traces:
         extra["can_trace"] = trace_stats
-    return _ended(folder, runs, extra, failure, on_event)
+    return _ended(folder, documents, extra, failure, on_event)
 
 
 def _traced_rigs(outputs: Outputs, folder: RunFolder, traces: list[Any]) -> Callable[[Any, Any], Any]:
@@ -187,14 +186,14 @@ def _traced_rigs(outputs: Outputs, folder: RunFolder, traces: list[Any]) -> Call
 
 
 def _ended(
-    folder: RunFolder, runs: RunSet, extra: dict[str, Any], failure: SashilError | None, on_event: Listener
+    folder: RunFolder, documents: Documents, extra: dict[str, Any], failure: SashilError | None, on_event: Listener
 ) -> Run:
     """The sweep's summary, and its folder told as an event; bad input found on opening the rig
     leaves no folder, and an error that ended the sweep early is raised after the folder is complete."""
     if failure is not None and failure.exit_code == ConfigError.exit_code and not folder.recorded():
         folder.discard()  # bad input found on opening the rig (a port that cannot be opened): no folder
         raise failure
-    runs.finish(**extra)
+    documents.end(**extra)
     if failure is not None:
         kept = "what was recorded is kept" if folder.recorded() else "nothing was recorded"
         on_event(
@@ -211,7 +210,8 @@ def _stepped(
     label: str,
     folder: Any,
     rig_factory: Any,
-    runs: Any,
+    documents: Documents,
+    runs: FolderWriter,
     extra: dict[str, Any],
     outputs: Outputs,
     on_event: Listener,
@@ -232,9 +232,8 @@ def _stepped(
 
     def stream_to(f: float) -> Path:
         """Each frequency in its own sub-folder (a run folder of its own), its cycles streamed there."""
-        sub = runs.folder_for(_freq_label(f))
-        write_config(sub, config)
-        return sub.file(CYCLES_FILE)
+        documents.start(_freq_label(f), config, run)
+        return runs.folder_for(_freq_label(f)).file(CYCLES_FILE)
 
     def keep(f: float, cols: dict[str, Any]) -> None:
         sub = runs.folder_for(_freq_label(f))
@@ -251,11 +250,12 @@ def _stepped(
                 )[0]
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
-                    runs.add(_freq_label(f), {"frequency_hz": f, "safe_state": getattr(err, "safe_state", None)}, err)
+                    entry = {"frequency_hz": f, "safe_state": getattr(err, "safe_state", None)}
+                    documents.stop(_freq_label(f), {}, err, entry=entry)
                 raise
             points.append(point)
             extra["points"].append(point.__dict__)
-            runs.add(_freq_label(f), dict(point.__dict__))
+            documents.stop(_freq_label(f), {}, None, entry=dict(point.__dict__))
             bar.advance(1, f"{f:.3g} Hz")
     finally:
         bar.close()
@@ -300,7 +300,7 @@ def _chirp(
     folder: Any,
     live: Any,
     rig_factory: Any,
-    runs: Any,
+    documents: Documents,
     extra: dict[str, Any],
     outputs: Outputs,
     on_event: Listener,
@@ -331,7 +331,7 @@ def _chirp(
         )
     except SashilError as err:
         if err.exit_code != ConfigError.exit_code:
-            runs.add("chirp", {"safe_state": getattr(err, "safe_state", None)}, err)
+            documents.stop("chirp", {}, err, entry={"safe_state": getattr(err, "safe_state", None)})
         raise
     outputs.write_formats(folder.path, "sweep", cols, exit_status="ok", controller=label)
     plot_chirp(
@@ -366,7 +366,7 @@ def _chirp(
             {"body_rms_rad": body_rms, "body_peak_rad": body_peak},
         )
     )
-    runs.add("chirp", {})
+    documents.stop("chirp", {}, None)
     extra.update(summary)
 
 

@@ -3,9 +3,10 @@
 ``run_session`` is what ``sashil run`` (and ``tools/bench_loop.py``) call. Its loop runs in this
 process (:class:`InProcessLoop`: the one runner, RT set-up, signals, safety and the threaded
 recorder) or in a process of its own (:class:`~sashil.runtime.loop_process.LoopProcess`: the
-session records the loop's stream); the session's own part is the same either way. It writes
-``config.yaml`` first and always writes ``summary.json`` at the end, once, whatever ended the loop
-(a signal, a trip, an error, the loop process's death). The rig is already in the safe state (0 A,
+session records the loop's stream); the session's own part is the same either way. Its folder's
+writer (:class:`~sashil.recording.folder_writer.FolderWriter`) writes ``config.yaml`` first and
+always ``summary.json`` at the end, once, whatever ended the loop (a signal, a trip, an error, the
+loop process's death). The rig is already in the safe state (0 A,
 deactivated, closed) when the summary is written.
 
 summary.json (docs/architecture.md fixed keys first): ``exit_status`` (ok | stopped | safety_trip |
@@ -21,8 +22,9 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
@@ -145,8 +147,9 @@ def run_session(
     and timing are on disk; the keys it returns are added before ``summary.json`` is written, once.
     ``stop``: a flag another thread may set to stop the run cleanly (signals are routed to it as
     well when the session runs on the main thread)."""
+    documents = Documents([FolderWriter(folder, verb, {}, several=False)])  # its config.yaml and summary.json
     try:
-        write_config(folder, config)
+        documents.start(None, config, loop.spec)
     except BaseException:
         loop.abort()
         raise
@@ -164,7 +167,7 @@ def run_session(
         if outcome.loop_process is not None:
             head["loop_process"] = outcome.loop_process
         outcome.summary = _close_folder(
-            folder, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
+            folder, documents, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
         )
     finally:
         loop.close()
@@ -173,6 +176,7 @@ def run_session(
 
 def _close_folder(
     folder: RunFolder,
+    documents: Documents,
     driver: str,
     timing: Any,
     event_rows: list[list[Any]],
@@ -188,5 +192,5 @@ def _close_folder(
     summary = {**summary, "driver": driver}
     if finish is not None:
         summary.update(finish(summary))
-    write_summary(folder, summary)
+    documents.summary(None, summary)
     return summary

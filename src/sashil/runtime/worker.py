@@ -41,7 +41,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, Protocol
 
 from sashil.config.parts import RunSpec
 from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
@@ -99,7 +99,14 @@ def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:
     return load_target(plans[kind].target, f"plan {kind!r}")  # type: ignore[return-value]  # a registered builder
 
 
-def build(spec: RunSpec, messages: Messages) -> tuple[Any, Any, str, str]:
+class Sender(Protocol):
+    """Where a loop's build tells its progress and prompts: a loop process's :class:`Messages`, or
+    the session's own when the loop runs in its process."""
+
+    def send(self, kind: str, **fields: Any) -> None: ...
+
+
+def build(spec: RunSpec, messages: Sender) -> tuple[Any, Any, str, str]:
     """The rig (built, configured: its port open and the board greeted) and the warmed plan of the
     run ``spec`` (:func:`plan_builder` of its plan's kind), its label and the road's text; the
     plan's operator prompts go to the session as ``prompt`` messages."""

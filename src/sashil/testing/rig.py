@@ -23,8 +23,9 @@ from sashil.control.registry import law_run_label
 from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab._compare import LawJob, folder_name, law_summary, run_job
 from sashil.plugins import check_not_importing
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
 from sashil.roads.option import RoadParts, parse_road
 from sashil.scripting import law_spec, set_items
 
@@ -121,10 +122,11 @@ def run_law(
     label = law_run_label(StageParts.read(config))
     root = Path(rig.out) if rig.out is not None else Path(tempfile.mkdtemp(prefix="sashil-testing-"))
     folder = RunFolder.create(_free(root / folder_name(label)), "compare")
-    write_config(folder, config)
+    documents = Documents([FolderWriter(folder, "compare", {}, several=False)])
+    documents.start(None, config)
     result = run_job(LawJob(label, config, road, float(duration_s), str(folder.path)))
     _, road_text = parse_road(road, RoadParts.read(config))
-    write_summary(folder, law_summary(result, config, f"{road}: {road_text}", float(duration_s)))
+    documents.summary(None, law_summary(result, config, f"{road}: {road_text}", float(duration_s)))
     return load_run(folder.path)
 
 

@@ -27,9 +27,9 @@ from sashil.lab.calibration.extra import candidates, suggest
 from sashil.lab.calibration.plan import READS, Plan, Step, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.run_set import RunSet, ending
-from sashil.recording.summary_writer import write_config
 from sashil.runtime.runner import CYCLES_FILE
 
 if TYPE_CHECKING:
@@ -132,10 +132,12 @@ def plan_rms(result: FitResult, records: Sequence[Record]) -> float:
     return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
 
 
-def _stopped(runs: RunSet, results: list[StepResult], rig_s: float, say: Callable[[str], None]) -> None:
+def _stopped(
+    documents: Documents, runs: FolderWriter, results: list[StepResult], rig_s: float, say: Callable[[str], None]
+) -> None:
     """A step failed: the runs so far and summary.json are kept, nothing is fitted; raises its error."""
     assert runs.error is not None
-    runs.finish(
+    documents.end(
         rig_time_s=round(rig_s, 2),
         note="the plan was cut short: the runs recorded so far are kept; nothing was fitted",
     )
@@ -188,14 +190,15 @@ def calibrate_rig(
     check_plan(plan, source, float(section["interval_block_s"]))
     check_port(run.options["port"])
     folder = RunFolder.create(out, "calibrate")
-    write_config(folder, config)
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
-    runs = RunSet(folder, "calibrate", {"driver": run.rig.backend}, sub_root=runs_folder.path)
+    runs = FolderWriter(folder, "calibrate", {"driver": run.rig.backend}, sub_root=runs_folder.path)
+    documents = Documents([runs])
+    documents.start(None, config, run)
     say(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
         f"({run.rig.backend} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
-    session = _Session(run, plan, folder, runs, say, prompt or say, J)
+    session = _Session(run, plan, folder, documents, runs, say, prompt or say, J)
     session.run_steps(plan.steps, 1, len(plan.steps))
     say(f"rig time {session.rig_s:.0f} s; fitting ...")
     extra = int(section["extra_steps"])
@@ -213,7 +216,8 @@ class _Session:
     run: RunSpec
     plan: Plan
     folder: RunFolder
-    runs: RunSet
+    documents: Documents
+    runs: FolderWriter
     say: Callable[[str], None]
     tell: Callable[[str], None]
     J: float
@@ -250,15 +254,15 @@ class _Session:
                 shutil.rmtree(self.folder.path, ignore_errors=True)
                 raise error
             self.results.append(result)
-            if result.columns.get("time_s") is not None and result.columns["time_s"].size:
-                target.write_data(result.columns)
-            self.runs.add(step.name, {**_summary_row(result), "metrics": result.extra.get("metrics")}, result.error)
+            recorded = result.columns.get("time_s") is not None and result.columns["time_s"].size
+            entry = {**_summary_row(result), "metrics": result.extra.get("metrics")}
+            self.documents.stop(step.name, {}, result.error, entry=entry, data=result.columns if recorded else None)
             if result.error is not None:
                 failure = result.error
                 break
         self.rig_s = time.perf_counter() - self.started
         if failure is not None:
-            _stopped(self.runs, self.results, self.rig_s, self.say)
+            _stopped(self.documents, self.runs, self.results, self.rig_s, self.say)
 
     def attempts(self, step: Step, target: RunFolder) -> StepResult:
         """The record of ``step``: once more after a transient link fault, and up to
@@ -371,7 +375,7 @@ class _Session:
             rig_s,
             virtual=run.virtual,
         )
-        self.runs.finish(
+        self.documents.end(
             model=cal.best.model,
             inertia_given=inertia_given,
             held_out_nrmse={v.name: v.nrmse for v in cal.validations},
