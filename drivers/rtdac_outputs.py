@@ -32,9 +32,11 @@ class CoilDrive:
     The loop compares the sensed current with the current the command gives through the coil's
     first-order lag (``tau_s``, seed 001's coil model), not with the command itself, so a command's
     step does not wind it up: what it integrates is the power stage's static mismatch with the map.
-    Its authority is bounded: the output stays within ``rest + (1 ± authority)·(map - rest)`` of the
-    map's output for the command, so a sense that reads nothing (or too much) moves the coil at most
-    that far from the map; :attr:`at_authority` says the bound held the output this cycle.
+    Its authority is bounded: its correction is at most ``authority`` times the commanded current, and
+    the output stays within ``rest + (1 ± authority)·(map - rest)`` of the map's output for the
+    command, so a sense that reads nothing (or too much) moves the coil at most that far from the
+    map; :attr:`at_authority` says the correction asked for passed that bound this cycle (a power
+    stage further off its map than the authority, or a sense that disagrees with the coil).
     """
 
     def __init__(
@@ -76,15 +78,13 @@ class CoilDrive:
         if sensed_a is None or sensed_a != sensed_a:
             return planned
         step = self.ki_per_s * (expected - sensed_a) * min(dt_s, 0.01)
-        integral = min(max(self._integral_a + step, -self.current_max_a), self.current_max_a)
-        out = interp(current_a + integral, self.map_current_a, self.map_output)
-        span = self.authority * (planned - self.rest)
-        low, high = planned - span, planned + span
-        # at its authority: pushing on at a bound, or at the map's end, which holds its last output
-        self.at_authority = (step > 0.0 and out >= min(high, self.map_output[-1])) or (step < 0.0 and out <= low)
-        if not self.at_authority:
-            self._integral_a = integral  # at the bound the integral stays where it was: no wind-up
-        return min(max(out, low), high)
+        limit = self.authority * current_a  # the loop's authority, as a current
+        wanted = self._integral_a + step
+        self._integral_a = min(max(wanted, -limit), limit)  # held at the bound: no wind-up past it
+        self.at_authority = self._integral_a != wanted  # the correction asked for passes the authority
+        out = interp(current_a + self._integral_a, self.map_current_a, self.map_output)
+        span = self.authority * (planned - self.rest)  # the output's bound too, whatever the map's shape
+        return min(max(out, planned - span), planned + span)
 
     def _lag(self, current_a: float, dt_s: float) -> float:
         """The current ``current_a`` gives through the coil's first-order lag, advanced by ``dt_s``."""

@@ -233,3 +233,24 @@ def test_bad_rtdac_keys_are_one_line_naming_the_key_and_exit_2(tmp_path, capsys)
     code = main(["run", "--driver", "rtdac", "--port", f"emulated:{tmp_path}/none.sock", *both, "--duration", "1"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "rtdac.heartbeat_bit: the same digital output as road_direction_bit (4)" in err, err
+
+
+def test_a_rightly_wired_coil_driven_hard_never_meets_its_authority():
+    """Commands a law gives (steps between 0 A and the map's top, held for a while and for a cycle)
+    on a bench whose sense and stage are as configured: the loop never passes its authority."""
+    rig, board, clock, _ = make()
+    safety = SafetySupervisor(current_max_a=1.0)
+    rig.configure()
+    rig.activate()
+    safety.start(clock.host)
+    at_authority = 0
+    for cycle_no in range(3000):
+        current = 1.0 if (cycle_no // 37) % 2 else (0.0 if cycle_no % 5 else 0.6)
+        clock.now += PERIOD_NS
+        clock.host += PERIOD_NS
+        sample = rig.read(clock.host, PERIOD_NS)
+        safety.check(sample, clock.host)  # raises on a trip
+        rig.write(safety.limit(RigCommand(current), PERIOD_NS), clock.host, PERIOD_NS)
+        at_authority += rig.coil.at_authority
+    assert at_authority == 0
+    rig.close()

@@ -39,30 +39,35 @@ def test_the_loop_corrects_by_the_sensed_error_and_stops_exactly_at_its_authorit
     assert not drive.at_authority
     assert drive.output(0.5, 0.375, DT) == 0.578125  # step 1/64
     drive.reset()
-    assert drive.output(0.5, -0.5, DT) == 0.625  # step 1/8 reaches 1.25 x the map's 0.5 exactly, pushing on
+    assert drive.output(0.5, -0.5, DT) == 0.625  # step 1/8: exactly the authority (0.25 x 0.5 A), not past it
+    assert not drive.at_authority
+    assert drive.output(0.5, -1.5, DT) == 0.625  # a further push: held at the bound, and it says so
     assert drive.at_authority
-    assert drive.output(0.5, -1.5, DT) == 0.625  # a larger push: held at the bound
-    assert drive.at_authority
-    assert drive.output(0.5, 0.5, DT) == 0.5  # the integral was not wound up at the bound: no error, the map
+    assert drive.output(0.5, 0.5, DT) == 0.625  # no error: the correction held at the bound stays
     assert not drive.at_authority
 
 
 def test_the_bound_below_holds_a_sense_that_reads_too_much():
     drive = coil()
-    assert drive.output(0.5, 1.5, DT) == 0.375  # step -1/8: exactly 0.75 x the map's, pushing on
+    assert drive.output(0.5, 1.5, DT) == 0.375  # step -1/8: exactly 0.75 x the map's
+    assert not drive.at_authority
+    assert drive.output(0.5, 1.5, DT) == 0.375
     assert drive.at_authority
-    assert drive.output(0.5, 0.625, DT) == 0.484375  # step -1/64 alone: within the bound
+    assert drive.output(0.5, 0.375, DT) == 0.390625  # step +1/64 from the bound
     assert not drive.at_authority
 
 
-def test_the_maps_end_is_a_bound_too_and_a_smaller_command_is_held_within_its_own():
+def test_the_maps_end_holds_the_output_and_the_correction_still_meets_its_authority():
     drive = coil()
-    assert drive.output(1.0, 0.0, DT) == 1.0  # the map holds its last output: pushing on at it
+    for _ in range(2):  # corrections of 1/8 and 1/4: the map holds its last output
+        assert drive.output(1.0, 0.0, DT) == 1.0
+        assert not drive.at_authority
+    assert drive.output(1.0, 0.0, DT) == 1.0  # 3/8 asked, 1/4 allowed
     assert drive.at_authority
     drive.reset()
     assert drive.output(0.5, 0.4375, DT) == 0.5078125  # a correction of 1/128 kept
-    assert drive.output(0.02, 0.02, DT) == pytest.approx(0.025)  # no push; held at 1.25 x 0.02, not over
-    assert not drive.at_authority
+    assert drive.output(0.02, 0.02, DT) == pytest.approx(0.025)  # 1/128 passes 0.25 x 0.02 A: held at it
+    assert drive.at_authority
 
 
 def test_rest_forgets_the_correction():
