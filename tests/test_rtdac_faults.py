@@ -238,7 +238,7 @@ def test_bad_rtdac_keys_are_one_line_naming_the_key_and_exit_2(tmp_path, capsys)
 def test_a_rightly_wired_coil_driven_hard_never_meets_its_authority():
     """Commands a law gives (steps between 0 A and the map's top, held for a while and for a cycle)
     on a bench whose sense and stage are as configured: the loop never passes its authority."""
-    rig, board, clock, _ = make()
+    rig, _board, clock, _ = make()
     safety = SafetySupervisor(current_max_a=1.0)
     rig.configure()
     rig.activate()
