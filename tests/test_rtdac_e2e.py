@@ -256,9 +256,11 @@ def test_doctor_finds_the_board_times_the_exchange_and_walks_the_channels(tmp_pa
     )  # fmt: skip
     try:
         assert proc.stdout is not None and proc.stdin is not None
-        # the walk's first prompt: the emulated operator holds the arm at -5 deg from the claim for 2 s
+        # the walk's first prompt: the emulated operator presses the arm to -5 deg once the host has zeroed
+        # the counters (0.2 s after, over 0.3 s) and lets go 2 s after the zeroing
         said = read_until(proc.stdout, "then press Enter (s: skip): ")
         assert "hold the arm at the -5 deg marker" in said, said
+        time.sleep(1.0)  # the arm held by now
         proc.stdin.write("\n")
         proc.stdin.flush()
         said += read_until(proc.stdout, "when it rests at 0 deg, press Enter (s: skip): ")
