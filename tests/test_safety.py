@@ -291,3 +291,17 @@ def test_the_bounds_come_from_the_config_parts():
         9 * MS,
     )
     assert SafetySupervisor.from_parts(SafetyParts(1.0, None, 0.0, 20, True)).arm_travel_rad is None
+
+
+def test_samples_a_link_hands_over_in_a_burst_are_judged_on_the_devices_clock():
+    """Two samples the device took 1 ms apart, read 0.2 ms apart on the host: the step a millisecond
+    allows (36 counts and the one count's grace), not a fifth of it."""
+    s = stepper()
+    s.check(RigSample(1, 0, 1_000, 0, 0, 0.0, 0, COUNTS), T0)
+    s.check(RigSample(2, 0, 2_000, 37, 0, 0.0, 0, COUNTS), T0 + MS // 5)
+    with pytest.raises(SafetyTrip, match=r"the arm angle jumped 38 counts in 1\.0 ms, more than 37"):
+        s.check(RigSample(3, 0, 3_000, 75, 0, 0.0, 0, COUNTS), T0 + 2 * MS // 5)
+    s = stepper()  # a device clock that steps back: the host's gap
+    s.check(RigSample(1, 0, 5_000, 0, 0, 0.0, 0, COUNTS), T0)
+    with pytest.raises(SafetyTrip, match=r"jumped 38 counts in 1\.0 ms"):
+        s.check(RigSample(2, 0, 1_000, 38, 0, 0.0, 0, COUNTS), T0 + MS)

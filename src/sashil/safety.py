@@ -112,7 +112,8 @@ class SafetySupervisor:
         self.coil_authority_ns = round(coil_authority_ms * 1e6)
         #: when each held condition (road off, road at limit, coil at authority) began; None: not held
         self._held_since: dict[str, int | None] = {"road_tracking": None, "road_limit": None, "coil_sense": None}
-        self._last_counts: tuple[int, int, int] | None = None  # (t_ns, arm, road) of the last fresh sample
+        #: (t_ns, arm, road, device_time_us) of the last fresh sample
+        self._last_counts: tuple[int, int, int, int] | None = None
         self.angle_limit_rad = None if angle_limit_rad is None else float(angle_limit_rad)
         self.slew_a_per_s = float(slew_a_per_s)
         self.sensor_timeout_cycles = int(sensor_timeout_cycles)
@@ -188,7 +189,7 @@ class SafetySupervisor:
     def _check_encoders(self, sample: RigSample, t_ns: int) -> None:
         """An encoder step faster than the rig can turn, and the arm beyond its travel."""
         last = self._last_counts
-        self._last_counts = (t_ns, sample.arm_counts, sample.road_counts)
+        self._last_counts = (t_ns, sample.arm_counts, sample.road_counts, sample.device_time_us)
         per_rad = sample.counts_per_rev / TWO_PI
         if last is not None:
             dt_ns = t_ns - last[0]
@@ -196,7 +197,10 @@ class SafetySupervisor:
             self._period_ns = period  # the loop's period: the shortest gap between two samples
             if dt_ns > PAUSE_PERIODS * period:  # the host paused: the board held the road's output meanwhile
                 self._grace_until_ns = t_ns + self.road_grace_ns
-            dt_s = dt_ns * 1e-9
+            # the longer of the host's gap and the device's: a link hands over samples the device took a
+            # period apart in a burst (a device clock that steps back counts for nothing)
+            device_ns = max(sample.device_time_us - last[3], 0) * 1000
+            dt_s = max(dt_ns, device_ns) * 1e-9
             allowed = self.max_angle_rate_rad_s * dt_s * per_rad + 1.0
             for name, now, before in (("arm", sample.arm_counts, last[1]), ("road", sample.road_counts, last[2])):
                 step = abs(now - before)
