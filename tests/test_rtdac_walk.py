@@ -31,6 +31,7 @@ from sashil.diagnostics.rtdac_findings import (
 )
 from sashil.diagnostics.rtdac_walk import PULSE_S, REST_S, SETTLE_S, Walk, WalkOptions
 from sashil.drivers import rig_parts
+from sashil.drivers.emulator.board_clock import BoardClock
 from sashil.drivers.emulator.rtdac_board import RtdacBoard, build_board
 from sashil.drivers.emulator.rtdac_operator import BenchOperator
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend
@@ -58,26 +59,9 @@ STAGE_GAIN = 0.8
 AD_COUNT_A = 10.0 / 2048 * 0.2
 
 
-class Clock:
-    """The board's clock: each transfer takes 20 us, and the walk's waits move it on."""
-
-    def __init__(self) -> None:
-        self.now = 1_000_000_000
-
-    def __call__(self) -> int:
-        self.now += 20_000
-        return self.now
-
-    def seconds(self) -> float:
-        return self.now * 1e-9
-
-    def sleep(self, seconds: float) -> None:
-        self.now += round(seconds * 1e9)
-
-
-def bench(bench_wiring: dict | None = None, board_sets: dict | None = None) -> tuple[RtdacRig, RtdacBoard, Clock]:
+def bench(bench_wiring: dict | None = None, board_sets: dict | None = None) -> tuple[RtdacRig, RtdacBoard, BoardClock]:
     """The host's rig on the default config, the emulated board wired as ``bench_wiring``."""
-    clock = Clock()
+    clock = BoardClock()
     raw = default_config()
     for key, value in (board_sets or {}).items():
         section, name = key.split(".")
@@ -139,7 +123,7 @@ def test_the_fragment_is_a_config_that_drives_the_bench_it_was_found_on(tmp_path
     (the map has the stage's 0.8), and the road's loop on its reversed encoder tracks."""
     walk(tmp_path, {"scale": "0.2", "revolution": "m"})
     config = load_config(tmp_path / "wiring.yaml")
-    clock = Clock()
+    clock = BoardClock()
     board = build_board(freeze_config(default_config()), stage_gain=STAGE_GAIN, wiring_changes=BENCH)
     rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))

@@ -36,6 +36,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from sashil.config.frozen import freeze_config  # noqa: E402
 from sashil.config.rtdac_section import WIRING_KEYS  # noqa: E402
 from sashil.drivers import rig_parts  # noqa: E402
+from sashil.drivers.emulator.board_clock import BoardClock  # noqa: E402
 from sashil.drivers.emulator.rtdac_board import RoadMotor, RtdacBoard, build_board  # noqa: E402
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend  # noqa: E402
 from sashil.drivers.interface import RigCommand  # noqa: E402
@@ -49,28 +50,11 @@ from sashil.safety import SafetySupervisor  # noqa: E402
 PERIOD_NS = 1_000_000
 
 
-class Clock:
-    """The board's clock: each transfer takes 20 us; the host's loop clock moves a period a cycle."""
-
-    def __init__(self) -> None:
-        self.now = 1_000_000_000
-
-    def __call__(self) -> int:
-        self.now += 20_000
-        return self.now
-
-    def seconds(self) -> float:
-        return self.now * 1e-9
-
-    def sleep(self, seconds: float) -> None:
-        self.now += round(seconds * 1e9)
-
-
-def bench(host: dict, truth: dict, motor: RoadMotor) -> tuple[RtdacRig, RtdacBoard, Clock]:
+def bench(host: dict, truth: dict, motor: RoadMotor) -> tuple[RtdacRig, RtdacBoard, BoardClock]:
     """The host's rig on ``host``'s rtdac keys, the board wired as ``truth``, its road motor ``motor``."""
     raw = default_config()
     raw["rtdac"].update(host)
-    clock = Clock()
+    clock = BoardClock()
     board = build_board(freeze_config(default_config()), wiring_changes=truth)
     board.motor = motor
     rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac").values)
@@ -79,7 +63,7 @@ def bench(host: dict, truth: dict, motor: RoadMotor) -> tuple[RtdacRig, RtdacBoa
     return rig, board, clock
 
 
-def run(rig: RtdacRig, board: RtdacBoard, clock: Clock, cmd: RigCommand, seconds: float) -> dict:
+def run(rig: RtdacRig, board: RtdacBoard, clock: BoardClock, cmd: RigCommand, seconds: float) -> dict:
     """``cmd`` each cycle under the supervisor until a trip or ``seconds``; then the bench watched 0.3 s
     more while it coasts at rest."""
     safety = SafetySupervisor(current_max_a=1.0)

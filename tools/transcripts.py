@@ -33,6 +33,7 @@ from sashil.diagnostics import table  # noqa: E402
 from sashil.diagnostics.rtdac import walk_checks  # noqa: E402
 from sashil.diagnostics.rtdac_walk import WalkOptions  # noqa: E402
 from sashil.drivers import rig_parts  # noqa: E402
+from sashil.drivers.emulator.board_clock import BoardClock  # noqa: E402
 from sashil.drivers.emulator.rtdac_board import build_board  # noqa: E402
 from sashil.drivers.emulator.rtdac_operator import BenchOperator  # noqa: E402
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend  # noqa: E402
@@ -58,26 +59,9 @@ BLOCK = re.compile(r"(<!-- transcript: (\w+) -->\n```text\n)(.*?)(```\n<!-- /tra
 ROW = re.compile(r"^(OK|WARN|FAIL|SKIP)\s+(\S+/\S+(?: \S+)*?)\s{2,}")
 
 
-class Clock:
-    """The board's clock: each transfer takes 20 us, and the walk's waits move it on."""
-
-    def __init__(self) -> None:
-        self.now = 1_000_000_000
-
-    def __call__(self) -> int:
-        self.now += 20_000
-        return self.now
-
-    def seconds(self) -> float:
-        return self.now * 1e-9
-
-    def sleep(self, seconds: float) -> None:
-        self.now += round(seconds * 1e9)
-
-
 def walk_transcript() -> str:
     """The walk's dialogue and its rows, against the emulated bench in this process."""
-    clock = Clock()
+    clock = BoardClock()
     board = build_board(freeze_config(default_config()), stage_gain=STAGE_GAIN, wiring_changes=BENCH)
     rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
