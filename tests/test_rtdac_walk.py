@@ -32,7 +32,7 @@ from sashil.diagnostics.rtdac_findings import (
 from sashil.diagnostics.rtdac_walk import PULSE_S, REST_S, SETTLE_S, Walk, WalkOptions
 from sashil.drivers import rig_parts
 from sashil.drivers.emulator.board_clock import BoardClock
-from sashil.drivers.emulator.rtdac_board import RtdacBoard, build_board
+from sashil.drivers.emulator.rtdac_board import REWIRED_BENCH, RtdacBoard, build_board
 from sashil.drivers.emulator.rtdac_operator import BenchOperator
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend
 from sashil.drivers.interface import RigCommand
@@ -41,18 +41,7 @@ from sashil.drivers.rtdac_wiring import Wiring
 from sashil.engine.resolve import default_config, load_config
 
 #: the bench's truth, unlike the config's guesses
-BENCH = {
-    "arm_encoder": 4,
-    "arm_reversed": True,
-    "coil_output": "pwm",
-    "coil_channel": 3,
-    "coil_sense_ad": 6,
-    "road_output": "da",
-    "road_channel": 1,
-    "road_encoder": 5,
-    "road_reversed": True,
-    "road_counts_per_rev": 2000,
-}
+BENCH = REWIRED_BENCH
 #: the bench's power stage gives 0.8 of the current the config's map says (0.8 A at duty 1)
 STAGE_GAIN = 0.8
 #: one A/D count of the sense at the bench's 0.2 A/V (12 bits over +-10 V) [A]

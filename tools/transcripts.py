@@ -34,7 +34,7 @@ from sashil.diagnostics.rtdac import walk_checks  # noqa: E402
 from sashil.diagnostics.rtdac_walk import WalkOptions  # noqa: E402
 from sashil.drivers import rig_parts  # noqa: E402
 from sashil.drivers.emulator.board_clock import BoardClock  # noqa: E402
-from sashil.drivers.emulator.rtdac_board import build_board  # noqa: E402
+from sashil.drivers.emulator.rtdac_board import REWIRED_BENCH, build_board  # noqa: E402
 from sashil.drivers.emulator.rtdac_operator import BenchOperator  # noqa: E402
 from sashil.drivers.emulator.rtdac_usb import DirectPort, EmulatedUsbBackend  # noqa: E402
 from sashil.drivers.rtdac_rig import RtdacRig  # noqa: E402
@@ -42,18 +42,7 @@ from sashil.engine.resolve import default_config  # noqa: E402
 
 PAGE = ROOT / "docs" / "tutorials" / "inteco-first-hour.md"
 #: the emulated bench's truth, unlike the config's guesses
-BENCH = {
-    "arm_encoder": 4,
-    "arm_reversed": True,
-    "coil_output": "pwm",
-    "coil_channel": 3,
-    "coil_sense_ad": 6,
-    "road_output": "da",
-    "road_channel": 1,
-    "road_encoder": 5,
-    "road_reversed": True,
-    "road_counts_per_rev": 2000,
-}
+BENCH = REWIRED_BENCH
 STAGE_GAIN = 0.8  # the bench's power stage gives 0.8 of the current the config's map says
 BLOCK = re.compile(r"(<!-- transcript: (\w+) -->\n```text\n)(.*?)(```\n<!-- /transcript -->)", re.S)
 ROW = re.compile(r"^(OK|WARN|FAIL|SKIP)\s+(\S+/\S+(?: \S+)*?)\s{2,}")

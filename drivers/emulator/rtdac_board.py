@@ -55,6 +55,23 @@ ROAD_STILL_RAD_S = 1e-6
 _FRAME = struct.Struct(f"<{FRAME_WORDS}H")
 
 
+#: a bench wired unlike every default guess of the ``rtdac`` section (``build_board``'s
+#: ``wiring_changes``): the arm on counter 4 counting down, the coil on PWM 3 sensed on A/D 6, the road
+#: motor on D/A 1 with its encoder on counter 5 counting down at 2000 a revolution
+REWIRED_BENCH: dict[str, Any] = {
+    "arm_encoder": 4,
+    "arm_reversed": True,
+    "coil_output": "pwm",
+    "coil_channel": 3,
+    "coil_sense_ad": 6,
+    "road_output": "da",
+    "road_channel": 1,
+    "road_encoder": 5,
+    "road_reversed": True,
+    "road_counts_per_rev": 2000,
+}
+
+
 @dataclass(frozen=True)
 class RoadMotor:
     """The emulated road motor: its speed per volt (or per unit duty) and its time constant."""
