@@ -50,6 +50,7 @@ import numpy as np
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
 from sashil.control.plan_boucwen import BoucWenPlanModel
+from sashil.control.preview_horizon import HorizonPlanner, HorizonSpec, InlinePlanner
 from sashil.control.preview_mpc import RecedingPlan
 from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current
 from sashil.errors import ConfigError
@@ -65,6 +66,18 @@ class PreviewOptimal(Law):
     name = "preview-optimal"
     reads_road_ahead = True
 
+    plan = Param(
+        "receding",
+        choices=("receding", "open-loop"),
+        doc="re-plan from the estimated state over the preview (receding), or plan the whole road before the run",
+    )
+    preview_s = Param(1.0, unit="s", low=0.0, high=1.0, doc="road known ahead of each re-plan (receding)")
+    horizon_s = Param(1.0, unit="s", low=0.01, high=2.0, doc="time each re-plan looks ahead (receding)")
+    slot_cycles = Param(5, low=1, high=100, doc="cycles per step of the re-plan's model (receding)")
+    replan_cycles = Param(
+        20, low=1, high=1000, doc="cycles between re-plans, and from a request to its plan in force (receding)"
+    )
+    replan_iterations = Param(30, low=1, high=10000, doc="L-BFGS-B iterations per re-plan at most (receding)")
     block_s = Param(10.0, unit="s", low=0.05, high=600.0, doc="length of each planned block")
     tail_s = Param(2.0, unit="s", low=0.0, high=60.0, doc="road after a block that its optimisation also sees")
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
@@ -104,11 +117,40 @@ class PreviewOptimal(Law):
         self._dt = 1.0 / float(self.context.rate_hz)
         self._last = 0.0
         self._receding: RecedingPlan | None = None
+        self.planner: InlinePlanner | None = None
+        self._replan = int(self.replan_cycles)
+        if str(self.plan) == "receding":
+            slot = int(self.slot_cycles)
+            if self._replan % slot:
+                raise ConfigError(
+                    f"controller.replan_cycles: expected a multiple of controller.slot_cycles ({slot}), got {self._replan}"
+                )
+            self._spec = HorizonSpec(
+                self._dt,
+                slot,
+                max(1, int(round(float(self.horizon_s) / (slot * self._dt)))),
+                self.preview_cycles(),
+                self._replan,
+                int(self.replan_iterations),
+            )
+
+    def preview_cycles(self) -> int:
+        """The cycles of road ahead each re-plan reads (receding; 0 for the plan of the whole road)."""
+        if str(self.plan) != "receding":
+            return 0
+        return int(round(float(self.preview_s) / self._dt))
 
     def plan_road(self, road: CommandedRoad) -> None:
-        """Plan the damping of every cycle of ``road`` (module docstring)."""
+        """Receding: the first plan, from rest over the road's first preview; open-loop: plan the
+        damping of every cycle of ``road`` (module docstring)."""
         assert self.context is not None
         ctx = self.context
+        if str(self.plan) == "receding":
+            planner = HorizonPlanner(ctx.model, ctx.coil_tau_s, ctx.current_max_a, self._spec)
+            self.planner = InlinePlanner(planner)
+            self._first = planner.plan(0, (0.0, 0.0, 0.0, 0.0), road.rate_rad_s, at_once=True)
+            self.planner.start(self._first)
+            return
         kind = str(self.plan_model)
         friction = PlanModel.of(ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
         horizon = Horizon(
@@ -151,9 +193,20 @@ class PreviewOptimal(Law):
     def reset(self) -> None:
         if self._receding is not None:
             self._receding.restart()
+        if self.planner is not None:
+            self.planner.planner.last = self._first
+            self.planner.start(self._first)
 
     def current(self, state: LawState) -> float:
         k = int(state.time_s / self._dt + 0.5)
+        planner = self.planner
+        if planner is not None:
+            if k % self._replan == 0 and k > 0:
+                planner.request(
+                    k, (state.theta_rad, state.body_dot_rad_s, state.z_hat, state.current_a), state.road_ahead_dot_rad_s
+                )
+            plan = planner.latest(k)
+            return 0.0 if plan is None else plan.command_at(k)
         if k >= len(self._i):  # past the planned road (or none planned): the last current, no feedback
             return self._last
         u = self._i[k]
