@@ -50,7 +50,7 @@ import numpy as np
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
 from sashil.control.plan_boucwen import BoucWenPlanModel
-from sashil.control.preview_horizon import HorizonPlanner, HorizonSpec, InlinePlanner
+from sashil.control.preview_horizon import HorizonPlanner, HorizonSpec, InlinePlanner, PlanSource
 from sashil.control.preview_mpc import RecedingPlan
 from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current
 from sashil.errors import ConfigError
@@ -117,7 +117,7 @@ class PreviewOptimal(Law):
         self._dt = 1.0 / float(self.context.rate_hz)
         self._last = 0.0
         self._receding: RecedingPlan | None = None
-        self.planner: InlinePlanner | None = None
+        self.planner: PlanSource | None = None
         self._replan = int(self.replan_cycles)
         if str(self.plan) == "receding":
             slot = int(self.slot_cycles)
@@ -147,8 +147,8 @@ class PreviewOptimal(Law):
         ctx = self.context
         if str(self.plan) == "receding":
             planner = HorizonPlanner(ctx.model, ctx.coil_tau_s, ctx.current_max_a, self._spec)
-            self.planner = InlinePlanner(planner)
             self._first = planner.plan(0, (0.0, 0.0, 0.0, 0.0), road.rate_rad_s, at_once=True)
+            self.planner = InlinePlanner(planner)
             self.planner.start(self._first)
             return
         kind = str(self.plan_model)
@@ -194,7 +194,6 @@ class PreviewOptimal(Law):
         if self._receding is not None:
             self._receding.restart()
         if self.planner is not None:
-            self.planner.planner.last = self._first
             self.planner.start(self._first)
 
     def current(self, state: LawState) -> float:

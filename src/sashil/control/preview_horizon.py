@@ -23,13 +23,14 @@ of a cycle, and past its last slot holds the last.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from sashil.control.plan_boucwen import BoucWenPlanModel
 from sashil.models.hysteresis import BoucWenParams
 
-__all__ = ["HorizonPlan", "HorizonPlanner", "HorizonSpec"]
+__all__ = ["HorizonPlan", "HorizonPlanner", "HorizonSpec", "InlinePlanner", "PlanSource"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,8 @@ class HorizonPlanner:
 
     def __init__(self, params: BoucWenParams, coil_tau_s: float, i_max: float, spec: HorizonSpec):
         self.spec = spec
+        self.params = params
+        self.coil_tau_s = float(coil_tau_s)
         self.i_max = float(i_max)
         self.h = spec.slot_cycles * spec.dt_s
         model = BoucWenPlanModel.of(params, coil_tau_s, self.h)
@@ -157,6 +160,19 @@ class HorizonPlanner:
         return float(cost), self._grad.copy()
 
 
+class PlanSource(Protocol):
+    """Where a preview law's plans come from: :class:`InlinePlanner`, or a planner beside the loop
+    (:class:`sashil.runtime.planner.PlannerProcess`)."""
+
+    def start(self, plan: HorizonPlan) -> None: ...
+
+    def request(self, cycle: int, state: tuple[float, float, float, float], road_ahead: np.ndarray) -> None: ...
+
+    def latest(self, cycle: int) -> HorizonPlan | None: ...
+
+    def close(self) -> None: ...
+
+
 class InlinePlanner:
     """Plans in the loop's own cycle and hands the plan over ``delay_cycles`` later, the cycle a
     planner beside the loop answers by at the latest: on simulated time the loop's results are then
@@ -170,8 +186,9 @@ class InlinePlanner:
         self._pending: HorizonPlan | None = None
 
     def start(self, plan: HorizonPlan) -> None:
-        """The plan in force from the run's first cycle (made before it)."""
+        """The plan in force from the run's first cycle (made before it), the next made from it."""
         self._current, self._pending = plan, None
+        self.planner.last = plan
 
     def request(self, cycle: int, state: tuple[float, float, float, float], road_ahead: np.ndarray) -> None:
         """Plan from ``state`` at ``cycle`` on ``road_ahead`` (in force from ``cycle`` + the delay); a
