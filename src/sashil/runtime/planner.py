@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.control.law_api import Law
 from sashil.control.preview_horizon import HorizonPlan, HorizonPlanner, HorizonSpec, InlinePlanner
 from sashil.models.hysteresis import BoucWenParams
 
@@ -167,10 +168,12 @@ class PlannerProcess:
 
 
 def _law_of(stage: Any) -> Any:
-    """The law inside a loop stage (a road stage around a controller, or the controller), or None."""
+    """The law inside a loop stage (a road stage around a controller, the controller, or the law), or None."""
     for _ in range(4):
         if stage is None:
             return None
+        if isinstance(stage, Law):
+            return stage
         law = getattr(stage, "law", None)
         if law is not None:
             return law
