@@ -408,6 +408,44 @@ def provenance() -> dict[str, Any]:
     }
 
 
+def loop_cost(pairs: int, duration: float, preview: list[str], out: Path) -> dict[str, Any]:
+    """``pairs`` pairs of ``sashil run`` on the real clock (the loop in its own process, the simulated
+    rig, ISO 8608 class C at 10 m/s): ``passive`` at 0.5 A, then ``preview-optimal`` with its planner
+    process beside, one after the other so both see the same minute of a shared machine; per run
+    the lateness and compute quantiles [µs], missed deadlines and the load; per pair the difference
+    of the p99 lateness (preview − passive)."""
+    import sashil
+
+    runs: list[dict[str, Any]] = []
+    for index in range(pairs):
+        pair = {}
+        for law in ("passive", "preview-optimal"):
+            folder = out / f"loop-{index}-{law}"
+            keys = ["controller.current_a=0.5"] if law == "passive" else list(preview)
+            run = sashil.run(law, duration_s=duration, road="iso8608:C:10", set=keys, out=folder)
+            timing = run.summary["timing"]
+            pair[law] = {
+                "exit_status": run.summary["exit_status"],
+                "lateness_us": timing["lateness_us"],
+                "compute_us": timing["compute_us"],
+                "missed_deadlines": timing["missed_deadlines"],
+                "load": os.getloadavg()[0],
+            }
+        p99 = {law: float(pair[law]["lateness_us"]["p99"]) for law in pair}
+        pair["p99_lateness_change_us"] = p99["preview-optimal"] - p99["passive"]
+        runs.append(pair)
+        print(
+            f"  pair {index}: p99 lateness passive {p99['passive']:.1f} µs, preview-optimal "
+            f"{p99['preview-optimal']:.1f} µs (change {pair['p99_lateness_change_us']:+.1f} µs); compute p99 "
+            f"{pair['passive']['compute_us']['p99']:.1f} / {pair['preview-optimal']['compute_us']['p99']:.1f} µs; "
+            f"missed {pair['passive']['missed_deadlines']} / {pair['preview-optimal']['missed_deadlines']} "
+            f"(load {os.getloadavg()[0]:.2f})",
+            flush=True,
+        )
+    changes = [pair["p99_lateness_change_us"] for pair in runs]
+    return {"pairs": runs, "median_p99_change_us": statistics.median(changes), "worst_p99_change_us": max(changes)}
+
+
 def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, float, float]:
     """p50, p99 and max of the preview law's controller step [µs] over one run on the seed damper."""
     from sashil.control.registry import make_controller
@@ -538,6 +576,7 @@ def main() -> int:
     parser.add_argument("--mismatch", type=float, help="measure the laws built on a model off by this fraction")
     parser.add_argument("--curve", action="store_true", help="the share against the preview length on four plants")
     parser.add_argument("--png", type=Path, default=Path("tools/out/preview_curve.png"), help="the curve's figure")
+    parser.add_argument("--loop-cost", type=int, metavar="PAIRS", help="PAIRS of real-clock runs, passive and preview")
     parser.add_argument("--set", action="append", default=[], help="controller.KEY=VALUE for the preview law (repeat)")
     args = parser.parse_args()
     if args.quick:  # the curve on one case, a short horizon: the code path in seconds
@@ -552,6 +591,21 @@ def main() -> int:
     )
     start = time.perf_counter()
     pairs = [(d, r) for d in dampers for r in roads]
+    if args.loop_cost:
+        import tempfile
+
+        before = provenance()
+        with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
+            cost = loop_cost(args.loop_cost, duration, args.set, Path(scratch))
+        print(
+            f"p99 lateness, preview-optimal − passive: median {cost['median_p99_change_us']:+.1f} µs, "
+            f"worst {cost['worst_p99_change_us']:+.1f} µs over {args.loop_cost} pairs (goal: within 5 µs)"
+        )
+        if args.json is not None:
+            record = {"tool": "tools/bench_preview.py --loop-cost", "started": before, "ended": provenance(), **cost}
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+        return 0
     if args.curve or args.quick:
         previews = list(QUICK_PREVIEWS if args.quick else PREVIEWS)
         before = provenance()

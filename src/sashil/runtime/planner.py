@@ -45,6 +45,9 @@ __all__ = ["PlannerProcess", "end_beside_loop", "plan_beside_loop"]
 
 REQUEST_W, CYCLE_W, PLAN_W, START_W, STOP_W, READY_W, MADE_W = range(7)
 HEADER_WORDS = 8
+#: the planner's numeric libraries on one thread: a BLAS thread pool spinning beside the loop's core
+#: slows both (L-BFGS-B's small factorisations took ten times as long with it on a busy machine)
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 SHM_DIR = Path("/dev/shm") if Path("/dev/shm").is_dir() else Path("/tmp")
 
 
@@ -98,7 +101,9 @@ class PlannerProcess:
         }
         try:
             self.process = subprocess.Popen(
-                [sys.executable, "-m", "sashil.runtime.planner", json.dumps(job)], pass_fds=(read_fd,)
+                [sys.executable, "-m", "sashil.runtime.planner", json.dumps(job)],
+                pass_fds=(read_fd,),
+                env={**os.environ, **ONE_THREAD},
             )
         finally:
             os.close(read_fd)
@@ -183,7 +188,8 @@ def _law_of(stage: Any) -> Any:
 
 def plan_beside_loop(stage: Any, virtual: bool) -> PlannerProcess | None:
     """On the real clock, a law that plans inline (``law.planner`` an :class:`InlinePlanner`) is
-    given a :class:`PlannerProcess` in its place; on simulated time it keeps planning inline."""
+    given a :class:`PlannerProcess` in its place, ready before this returns (its interpreter
+    started and its kernels loaded: about a second); on simulated time it keeps planning inline."""
     law = _law_of(stage)
     inline = getattr(law, "planner", None)
     if virtual or not isinstance(inline, InlinePlanner):
@@ -193,6 +199,7 @@ def plan_beside_loop(stage: Any, virtual: bool) -> PlannerProcess | None:
         return None
     beside = PlannerProcess(inline, first)
     law.planner = beside
+    beside.wait_ready()  # before the first deadline, as the loop's own kernels are warmed
     return beside
 
 
