@@ -152,8 +152,9 @@ def test_beside_the_loop_a_planner_process_makes_the_inline_plans_and_leaves_not
             if beside.plans_made:
                 break
             time.sleep(0.05)
-        made = beside.latest(40)
-        expected = reference.latest(40)
+        due = 20 + law._spec.delay_cycles
+        made = beside.latest(due)
+        expected = reference.latest(due)
         assert made is not None and expected is not None
         assert made.start == expected.start == 20
         assert made.command_a.tolist() == expected.command_a.tolist()
@@ -162,3 +163,27 @@ def test_beside_the_loop_a_planner_process_makes_the_inline_plans_and_leaves_not
         beside.close()
     assert beside.process.returncode == 0
     assert not Path(path).exists()
+
+
+def test_the_dahl_plant_of_the_benchmark_is_bouc_wen_with_n_1_beta_0_and_gamma_delta_rho():
+    """Dahl's w' = ρ·(θ̇ − |θ̇|·w) (seed 001 eq. 20) is Bouc-Wen's z' = δ·θ̇ − γ·|θ̇|·z − β·θ̇·|z|
+    (eq. 17 at n = 1, as sashil.models.hysteresis writes it) at β = 0, γ = δ = ρ; the benchmark's Dahl plant keeps the damper's yield torque α·z_u and
+    its stiffness before yield α·δ."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    from bench_preview import dahl_plant
+
+    from sashil.models.dahl import dahl_w_advance
+    from sashil.models.hysteresis import advance_z
+
+    seed = BoucWenParams()
+    plant = BoucWenParams(**dahl_plant({}))
+    rho = plant.delta
+    assert (plant.n, plant.beta, plant.gamma, plant.z_bound) == (1.0, 0.0, rho, 1.0)
+    assert plant.alpha1 * plant.z_bound == pytest.approx(seed.alpha1 * seed.z_bound)
+    assert plant.alpha1 * plant.delta == pytest.approx(seed.alpha1 * seed.delta)
+    for w, step in ((0.0, 1e-4), (0.5, -3e-4), (-0.9, 2e-3), (0.99, 1e-2)):
+        bouc_wen = advance_z(w, step, plant.beta, plant.gamma, plant.delta, plant.n, plant.z_bound)
+        # advance_z integrates by Runge-Kutta in the travel, Dahl's is the exact solution
+        assert bouc_wen == pytest.approx(dahl_w_advance(w, step, rho), rel=1e-5, abs=1e-9)

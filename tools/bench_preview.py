@@ -33,7 +33,8 @@ exact, models 10 % and 20 % off in every parameter (as ``--mismatch``), and a pl
 hysteresis is Dahl's (:mod:`sashil.models.dahl`, seed 001 eqs. 5-6) with the law still on Bouc-Wen.
 The Dahl plant has the damper's yield torque and its stiffness before yield: w' = ρ·(θ̇ − |θ̇|·w),
 T = c(i)·θ̇ + (kwa + kwb·i)·w with kwa = α1·z_u, kwb = α2·z_u, ρ = δ/z_u (z_u the Bouc-Wen
-bound), the Bouc-Wen law with n = 1, γ = 0, β = δ = ρ, so the simulated rig runs it as it is and
+bound): seed 001 eq. 17 as :mod:`sashil.models.hysteresis` writes it (γ the coefficient of
+|θ̇|·z·|z|^(n−1), β of θ̇·|z|^n) with n = 1, β = 0, γ = δ = ρ, so the simulated rig runs it as it is and
 the true plant's bound is computed on it. Each share is of the true plant's bound, over its best
 passive run. It writes the cases and the figures as JSON (``--json``, with the commit and the
 machine's load) and the curve as a PNG (``--png``).
@@ -262,8 +263,8 @@ def dahl_plant(params: dict[str, float]) -> dict[str, float]:
         "alpha1": p.alpha1 * z_u,
         "alpha2": p.alpha2 * z_u,
         "n": 1.0,
-        "gamma": 0.0,
-        "beta": rho,
+        "beta": 0.0,
+        "gamma": rho,
         "delta": rho,
     }
 

@@ -1,5 +1,19 @@
-"""``preview-optimal``: a law that knows the road to come plans the optimal damping before the run
-and tracks it online.
+"""``preview-optimal``: a law that knows the road to come plans the optimal damping over it.
+
+Receding (``plan: receding``, the default): semi-active model predictive control with road preview
+(Göhrle et al., IEEE/ASME Trans. Mechatronics 2014; Giorgetti, Bemporad et al., IJC 2006). Every
+``replan_cycles`` cycles the law asks for a plan from the state its controller estimates (θ, θ̇2,
+ẑ, the measured coil current) over ``horizon_s``, the road known for ``preview_s`` ahead (the
+window of :meth:`preview_cycles` the controller fills each cycle; at rest past it), on the law's
+Bouc-Wen model stepped every ``slot_cycles`` cycles (:mod:`sashil.control.preview_horizon`). The
+plan comes into force ``replan_cycles`` after its request, its first slots the commands already
+in force; the law commands the plan in force, each cycle a read of its slot. Before the run the
+first plan is made from rest over the road's first preview. Where a plan is made: on simulated
+time in the law's own cycle (deterministic), on the real clock in a planner process beside the loop
+(:mod:`sashil.runtime.planner`), so the loop's cycle pays a request every re-plan period and one
+read of shared memory each cycle.
+
+Open loop (``plan: open-loop``): the whole road planned before the run and tracked.
 
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
 cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
