@@ -182,7 +182,8 @@ def _law_of(stage: Any) -> Any:
         law = getattr(stage, "law", None)
         if law is not None:
             return law
-        stage = stage.__dict__.get("stage") or stage.__dict__.get("controller")
+        own = getattr(stage, "__dict__", {})  # its own attributes: a wrapper's delegation is not followed
+        stage = own.get("stage") or own.get("controller")
     return None
 
 
