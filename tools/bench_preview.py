@@ -64,6 +64,10 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+# the numeric libraries on one thread: L-BFGS-B's small factorisations on a BLAS thread pool ran ten
+# times slower on a busy machine (set before numpy loads them)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -630,9 +634,22 @@ def main() -> int:
             args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
         return 0
     if args.mismatch is not None:
+        before = provenance()
         shares = each_case(mismatch_case, pairs, args.jobs, duration, args.mismatch, args.set)
         mismatch_table([(d, r, s) for (d, r), s in zip(pairs, shares, strict=True)], args.mismatch)
         print(f"wall {time.perf_counter() - start:.0f} s (load {os.getloadavg()[0]:.2f})")
+        if args.json is not None:
+            record = {
+                "tool": "tools/bench_preview.py --mismatch",
+                "started": before,
+                "ended": provenance(),
+                "fraction": args.mismatch,
+                "duration_s": duration,
+                "set": args.set,
+                "cases": [{"damper": d, "road": r, "share": s} for (d, r), s in zip(pairs, shares, strict=True)],
+            }
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
         return 0
     cases = each_case(run_case, pairs, args.jobs, duration, args.set)
     table(cases)
