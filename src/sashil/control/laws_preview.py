@@ -73,9 +73,11 @@ __all__ = ["PreviewOptimal"]
 
 
 class PreviewOptimal(Law):
-    """Plans the optimal current over the commanded road before the run (the bound's optimiser over a
-    receding horizon, on the law's model) and commands it, plus an LQR feedback on the error from the
-    planned state (Savaresi et al.; Giorgetti, Bemporad et al. 2006)."""
+    """Re-plans the optimal current from the estimated state over the road a finite preview shows,
+    every few cycles, and commands the plan in force (receding-horizon semi-active MPC: Göhrle et al.
+    2014; Giorgetti, Bemporad et al. 2006); or, with ``plan: open-loop``, plans the whole commanded
+    road before the run and tracks it with an LQR feedback on the error from the planned state
+    (Savaresi et al.)."""
 
     name = "preview-optimal"
     reads_road_ahead = True
