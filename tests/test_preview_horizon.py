@@ -104,7 +104,7 @@ def _run_law(law: PreviewOptimal, cycles: int) -> list[float]:
 
 
 def test_the_receding_law_is_the_default_reads_its_preview_and_gives_the_same_commands_on_every_run():
-    law = PreviewOptimal(_context(), preview_s=0.2, horizon_s=0.2, replan_iterations=5)
+    law = PreviewOptimal(_context(), preview_s=0.2, horizon_s=0.2, replan_cycles=20, replan_iterations=5)
     assert law.plan == "receding" and law.preview_cycles() == 200
     once = _run_law(law, 120)
     again = _run_law(law, 120)
