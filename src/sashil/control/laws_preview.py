@@ -97,7 +97,7 @@ class PreviewOptimal(Law):
     )
     slot_cycles = Param(5, low=1, high=100, doc="cycles per step of the re-plan's model (receding)")
     replan_cycles = Param(
-        100, low=1, high=1000, doc="cycles between re-plans, and from a request to its plan in force (receding)"
+        50, low=1, high=1000, doc="cycles between re-plans, and from a request to its plan in force (receding)"
     )
     replan_iterations = Param(30, low=1, high=10000, doc="L-BFGS-B iterations per re-plan at most (receding)")
     block_s = Param(10.0, unit="s", low=0.05, high=600.0, doc="length of each planned block")
