@@ -55,6 +55,7 @@ import math
 import os
 import statistics
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -249,6 +250,8 @@ def mismatch_table(rows: list[tuple[str, str, dict[str, float]]], fraction: floa
         print(f"  {law:16s} median / worst: exact {_fmt(exact)}  off {_fmt(off)}  off − exact {_fmt(change)}")
 
 
+#: where the curve's figure goes
+OUT_PNG = Path(__file__).resolve().parent / "out" / "preview_curve.png"
 #: the preview lengths of the curve [s]
 PREVIEWS = (0.0, 0.05, 0.1, 0.25, 0.5, 1.0)
 QUICK_PREVIEWS = (0.0, 0.25)
@@ -580,7 +583,9 @@ def main() -> int:
     parser.add_argument("--json", type=Path, help="write every case here")
     parser.add_argument("--mismatch", type=float, help="measure the laws built on a model off by this fraction")
     parser.add_argument("--curve", action="store_true", help="the share against the preview length on four plants")
-    parser.add_argument("--png", type=Path, default=Path("tools/out/preview_curve.png"), help="the curve's figure")
+    parser.add_argument(
+        "--png", type=Path, help="the curve's figure (default tools/out/preview_curve.png; --quick: a temporary file)"
+    )
     parser.add_argument("--loop-cost", type=int, metavar="PAIRS", help="PAIRS of real-clock runs, passive and preview")
     parser.add_argument("--set", action="append", default=[], help="controller.KEY=VALUE for the preview law (repeat)")
     args = parser.parse_args()
@@ -597,8 +602,6 @@ def main() -> int:
     start = time.perf_counter()
     pairs = [(d, r) for d in dampers for r in roads]
     if args.loop_cost:
-        import tempfile
-
         before = provenance()
         with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
             cost = loop_cost(args.loop_cost, duration, args.set, Path(scratch))
@@ -617,7 +620,12 @@ def main() -> int:
         curve = each_case(curve_case, pairs, args.jobs, duration, previews, args.set)
         figures = curve_figures(curve, previews)
         curve_table(figures, previews, len(curve))
-        curve_png(args.png, figures, previews, len(curve))
+        if args.png is None and args.quick:  # the quick mode draws, and leaves the repository's figure alone
+            with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
+                curve_png(Path(scratch) / "curve.png", figures, previews, len(curve))
+        else:
+            args.png = args.png or OUT_PNG
+            curve_png(args.png, figures, previews, len(curve))
         print(f"figure: {args.png}; wall {time.perf_counter() - start:.0f} s (load {os.getloadavg()[0]:.2f})")
         if args.json is not None:
             record = {
