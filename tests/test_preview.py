@@ -235,7 +235,7 @@ def test_the_bouc_wen_plan_model_steps_the_rigs_own_z_over_each_angle_increment(
 
 def test_preview_optimal_commands_the_plan_and_feeds_back_the_state_error_through_the_torques_slope():
     ctx = _seed_context()
-    law = PreviewOptimal(ctx, feedback_gain=1.0, block_s=0.1, tail_s=0.0, plan_iterations=5)
+    law = PreviewOptimal(ctx, plan="open-loop", feedback_gain=1.0, block_s=0.1, tail_s=0.0, plan_iterations=5)
     road = commanded_road(lambda t: 0.1 * math.sin(10.0 * t), 1e-3, 0.2, 0)
     law.plan_road(road)
     k = 50

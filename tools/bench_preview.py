@@ -25,12 +25,26 @@ off by F (``mismatch.fraction`` F, signs alternating over J, k, c1, c2, α1, α2
 coil's lag F slower) against the true plant, beside the same law built on the true plant, on the
 one scale of the true plant's passive runs and bound.
 
+With ``--curve`` it measures instead the share of the receding-horizon preview law (the
+default, ``controller.plan: receding``) against its preview length (:data:`PREVIEWS`: 0, 50, 100,
+250, 500 ms and 1 s of road known ahead; the horizon stays 1 s, the road taken at rest past the
+preview), and of the open-loop plan of the whole road beside it, on four plants: the law's model
+exact, models 10 % and 20 % off in every parameter (as ``--mismatch``), and a plant whose
+hysteresis is Dahl's (:mod:`sashil.models.dahl`, seed 001 eqs. 5-6) with the law still on Bouc-Wen.
+The Dahl plant has the damper's yield torque and its stiffness before yield: w' = ρ·(θ̇ − |θ̇|·w),
+T = c(i)·θ̇ + (kwa + kwb·i)·w with kwa = α1·z_u, kwb = α2·z_u, ρ = δ/z_u (z_u the Bouc-Wen
+bound): seed 001 eq. 17 as :mod:`sashil.models.hysteresis` writes it (γ the coefficient of
+|θ̇|·z·|z|^(n−1), β of θ̇·|z|^n) with n = 1, β = 0, γ = δ = ρ, so the simulated rig runs it as it is and
+the true plant's bound is computed on it. Each share is of the true plant's bound, over its best
+passive run. It writes the cases and the figures as JSON (``--json``, with the commit and the
+machine's load) and the curve as a PNG (``--png``).
+
 The preview law's compute per cycle: the controller stage's ``step`` (estimator, observer, law,
 inverse) timed with ``perf_counter_ns`` over one run on the seed damper; p50 and p99 [µs]. The
 machine's load is printed with it (a shared machine inflates the tail).
 
     .venv/bin/python tools/bench_preview.py [--quick] [--dampers N|all] [--skip N] [--duration S] [--jobs N] [--json PATH]
-        [--mismatch F] [--set controller.KEY=VALUE ...]
+        [--mismatch F] [--curve] [--png PATH] [--set controller.KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -41,12 +55,19 @@ import math
 import os
 import statistics
 import sys
+import tempfile
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
+
+# the numeric libraries on one thread: L-BFGS-B's small factorisations on a BLAS thread pool ran ten
+# times slower on a busy machine (set before numpy loads them)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
@@ -229,6 +250,210 @@ def mismatch_table(rows: list[tuple[str, str, dict[str, float]]], fraction: floa
         print(f"  {law:16s} median / worst: exact {_fmt(exact)}  off {_fmt(off)}  off − exact {_fmt(change)}")
 
 
+#: where the curve's figure goes
+OUT_PNG = Path(__file__).resolve().parent / "out" / "preview_curve.png"
+#: the preview lengths of the curve [s]
+PREVIEWS = (0.0, 0.05, 0.1, 0.25, 0.5, 1.0)
+QUICK_PREVIEWS = (0.0, 0.25)
+#: the plants of the curve: the law's model exact, 10 % and 20 % off, and Dahl's hysteresis
+PLANTS = ("exact", "10 % off", "20 % off", "dahl")
+OPEN_LOOP = "open-loop"
+
+
+def dahl_plant(params: dict[str, float]) -> dict[str, float]:
+    """The Bouc-Wen parameters of the Dahl plant of the damper ``params`` (module docstring)."""
+    p = BoucWenParams.from_mapping(params)
+    z_u = p.z_bound
+    rho = p.delta / z_u
+    return {
+        **{k: float(v) for k, v in asdict(p).items()},
+        "alpha1": p.alpha1 * z_u,
+        "alpha2": p.alpha2 * z_u,
+        "n": 1.0,
+        "beta": 0.0,
+        "gamma": rho,
+        "delta": rho,
+    }
+
+
+@contextmanager
+def plant_params(params: dict[str, float] | None) -> Iterator[None]:
+    """Runs of :func:`run_job` inside it go on a simulated rig whose plant is ``params`` (Bouc-Wen
+    parameters), whatever model the config gives the controller (None: the config's plant)."""
+    from sashil.config.parts import RigParts
+    from sashil.lab import _compare
+
+    if params is None:
+        yield
+        return
+    original = _compare.open_rig
+
+    def open_plant(parts: RigParts) -> Any:
+        values = {**parts.values, "model": {"name": "bouc-wen", "params": dict(params)}, "mismatch": None}
+        return original(RigParts(parts.backend, values))
+
+    _compare.open_rig = open_plant  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        _compare.open_rig = original
+
+
+def curve_case(
+    damper: str, road_text: str, duration: float, previews: list[float], preview: list[str]
+) -> dict[str, Any]:
+    """The shares of the receding law at each preview length and of the open-loop plan on each of
+    :data:`PLANTS` (module docstring), and each plant's passive and bound RMS θ̈2."""
+    from sashil.drivers.mismatch import plant_sections
+
+    law = config_of(dict(DAMPERS)[damper], duration)
+    out: dict[str, Any] = {"damper": damper, "road": road_text, "plants": {}}
+    for plant in PLANTS:
+        if plant == "dahl":
+            true = config_of(dahl_plant(law["model"]["params"]), duration)
+            model_config, patch = law, dict(true["model"]["params"])
+        else:
+            fraction = {"exact": 0.0, "10 % off": 0.1, "20 % off": 0.2}[plant]
+            model_config = apply_overrides(law, [f"mismatch.fraction={fraction}", f"mismatch.coil_tau={fraction}"])
+            model, rig = plant_sections(model_config["model"], model_config["rig"], model_config["mismatch"])
+            true = config_of(dict(model["params"]), duration)
+            true["rig"]["coil_tau_s"] = float(rig["coil_tau_s"])
+            patch = None
+        i_max = float(true["rig"]["current_max_a"])
+        passive = [
+            run_job(
+                LawJob(
+                    "passive",
+                    apply_overrides(true, ["controller.law=passive", f"controller.current_a={i}"]),
+                    road_text,
+                    duration,
+                )
+            ).metrics["rms_accel_rad_s2"]
+            for i in (0.0, i_max)
+        ]
+        best = min(passive)
+        road, _ = parse_road(road_text, RoadParts.read(true))
+        bound = hysteretic_bound(true, road, duration)
+        shares: dict[str, float] = {}
+        runs = [(f"{s:g}", [f"controller.preview_s={s}"]) for s in previews] + [
+            (OPEN_LOOP, ["controller.plan=open-loop"])
+        ]
+        for key, keys in runs:
+            config = apply_overrides(model_config, law_overrides("preview-optimal", [*preview, *keys]))
+            with plant_params(patch):
+                result = run_job(LawJob("preview-optimal", config, road_text, duration))
+            rms = result.metrics["rms_accel_rad_s2"] if result.ok else math.nan
+            shares[key] = share_of_bound(rms, best, bound)
+        out["plants"][plant] = {"best_passive": best, "bound": bound, "share": shares}
+    return out
+
+
+def curve_figures(cases: list[dict[str, Any]], previews: list[float]) -> dict[str, Any]:
+    """Per plant and preview length (and the open-loop plan): the median and worst share."""
+    figures: dict[str, Any] = {}
+    for plant in PLANTS:
+        row = {}
+        for key in [*(f"{s:g}" for s in previews), OPEN_LOOP]:
+            values = [c["plants"][plant]["share"][key] for c in cases]
+            known = [v for v in values if math.isfinite(v)]
+            row[key] = {
+                "median": statistics.median(known) if known else math.nan,
+                "worst": min(known) if known else math.nan,
+            }
+        figures[plant] = row
+    return figures
+
+
+def curve_table(figures: dict[str, Any], previews: list[float], count: int) -> None:
+    print()
+    print(f"share of the true plant's bound against the preview length, median / worst over {count} cases")
+    keys = [*(f"{s:g}" for s in previews), OPEN_LOOP]
+    print("  plant       " + "".join(f"{(k + ' s') if k != OPEN_LOOP else k:>17s}" for k in keys))
+    for plant, row in figures.items():
+        print(f"  {plant:10s}  " + "".join(f"{row[k]['median']:7.1f}% {row[k]['worst']:6.1f}%  " for k in keys))
+
+
+def curve_png(path: Path, figures: dict[str, Any], previews: list[float], count: int) -> None:
+    """The median share (the worst as a thin line) against the preview length, one colour per plant."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    ms = [1000.0 * s for s in previews]
+    for plant, row in figures.items():
+        median = [row[f"{s:g}"]["median"] for s in previews]
+        worst = [row[f"{s:g}"]["worst"] for s in previews]
+        (line,) = ax.plot(ms, median, marker="o", label=f"{plant} (median)")
+        ax.plot(ms, worst, linestyle=":", color=line.get_color(), linewidth=1.0)
+        ax.axhline(row[OPEN_LOOP]["median"], color=line.get_color(), linewidth=0.6, linestyle="--")
+    ax.set_xlabel("road known ahead [ms]")
+    ax.set_ylabel("share of the true plant's bound [%]")
+    ax.set_title(f"receding-horizon preview law, {count} cases (dotted: worst; dashed: open-loop plan)", fontsize=9)
+    ax.grid(True, linewidth=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def provenance() -> dict[str, Any]:
+    """The commit measured and the machine's load (1, 5 and 15 minutes) now."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=False)
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True, text=True, check=False
+    )
+    return {
+        "commit": commit.stdout.strip(),
+        "dirty": bool(dirty.stdout.strip()),
+        "loadavg": list(os.getloadavg()),
+        "cpus": os.cpu_count(),
+    }
+
+
+def loop_cost(pairs: int, duration: float, preview: list[str], out: Path) -> dict[str, Any]:
+    """``pairs`` pairs of ``sashil run`` on the real clock (the loop in its own process, the simulated
+    rig, ISO 8608 class C at 10 m/s): ``passive`` at 0.5 A, then ``preview-optimal`` with its planner
+    process beside, one after the other so both see the same minute of a shared machine; per run
+    the lateness and compute quantiles [µs], missed deadlines and the load; per pair the difference
+    of the p99 lateness (preview − passive)."""
+    import sashil
+
+    runs: list[dict[str, Any]] = []
+    for index in range(pairs):
+        pair = {}
+        for law in ("passive", "preview-optimal"):
+            folder = out / f"loop-{index}-{law}"
+            keys = ["controller.current_a=0.5"] if law == "passive" else list(preview)
+            run = sashil.run(law, duration_s=duration, road="iso8608:C:10", set=keys, out=folder)
+            timing = run.summary["timing"]
+            pair[law] = {
+                "exit_status": run.summary["exit_status"],
+                "lateness_us": timing["lateness_us"],
+                "compute_us": timing["compute_us"],
+                "missed_deadlines": timing["missed_deadlines"],
+                "load": os.getloadavg()[0],
+            }
+        p99 = {law: float(pair[law]["lateness_us"]["p99"]) for law in pair}
+        pair["p99_lateness_change_us"] = p99["preview-optimal"] - p99["passive"]
+        runs.append(pair)
+        print(
+            f"  pair {index}: p99 lateness passive {p99['passive']:.1f} µs, preview-optimal "
+            f"{p99['preview-optimal']:.1f} µs (change {pair['p99_lateness_change_us']:+.1f} µs); compute p99 "
+            f"{pair['passive']['compute_us']['p99']:.1f} / {pair['preview-optimal']['compute_us']['p99']:.1f} µs; "
+            f"missed {pair['passive']['missed_deadlines']} / {pair['preview-optimal']['missed_deadlines']} "
+            f"(load {os.getloadavg()[0]:.2f})",
+            flush=True,
+        )
+    changes = [pair["p99_lateness_change_us"] for pair in runs]
+    return {"pairs": runs, "median_p99_change_us": statistics.median(changes), "worst_p99_change_us": max(changes)}
+
+
 def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, float, float]:
     """p50, p99 and max of the preview law's controller step [µs] over one run on the seed damper."""
     from sashil.control.registry import make_controller
@@ -259,6 +484,13 @@ def cycle_us(duration: float, preview: list[str] | None = None) -> tuple[float, 
             return cmd
 
     stage = RoadStage(controller, road, duration)
+    from sashil.runtime.planner import PlannerProcess, plan_beside_loop
+
+    # the loop's own cost: re-plans in the planner process, as on the real clock (run_plan on
+    # simulated time leaves a planner already beside the loop in place)
+    beside = plan_beside_loop(stage, virtual=False)
+    if isinstance(beside, PlannerProcess):
+        beside.wait_ready()
     run_plan(
         assemble(config),
         open_rig(rig_parts(config)),
@@ -342,7 +574,7 @@ def each_case(work: Any, pairs: list[tuple[str, str]], jobs: int, *args: Any) ->
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="one damper, one road, 4 s: seconds")
+    parser.add_argument("--quick", action="store_true", help="the curve on one damper, one road, 4 s, two previews")
     parser.add_argument("--dampers", default="10", help="how many dampers (in ORDER), or all")
     parser.add_argument("--skip", type=int, default=0, help="leave out the first N of those (a run in parts)")
     parser.add_argument("--roads", default=",".join(ROADS), help="comma-separated --road values")
@@ -350,10 +582,16 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel processes")
     parser.add_argument("--json", type=Path, help="write every case here")
     parser.add_argument("--mismatch", type=float, help="measure the laws built on a model off by this fraction")
+    parser.add_argument("--curve", action="store_true", help="the share against the preview length on four plants")
+    parser.add_argument(
+        "--png", type=Path, help="the curve's figure (default tools/out/preview_curve.png; --quick: a temporary file)"
+    )
+    parser.add_argument("--loop-cost", type=int, metavar="PAIRS", help="PAIRS of real-clock runs, passive and preview")
     parser.add_argument("--set", action="append", default=[], help="controller.KEY=VALUE for the preview law (repeat)")
     args = parser.parse_args()
-    if args.quick:
+    if args.quick:  # the curve on one case, a short horizon: the code path in seconds
         dampers, roads, duration = ["seed"], list(QUICK_ROADS), 4.0
+        args.set = ["controller.horizon_s=0.25", "controller.replan_iterations=10", *args.set]
     else:
         count = len(ORDER) if args.dampers == "all" else int(args.dampers)
         dampers, roads, duration = list(ORDER[args.skip : count]), args.roads.split(","), args.duration
@@ -363,10 +601,63 @@ def main() -> int:
     )
     start = time.perf_counter()
     pairs = [(d, r) for d in dampers for r in roads]
+    if args.loop_cost:
+        before = provenance()
+        with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
+            cost = loop_cost(args.loop_cost, duration, args.set, Path(scratch))
+        print(
+            f"p99 lateness, preview-optimal − passive: median {cost['median_p99_change_us']:+.1f} µs, "
+            f"worst {cost['worst_p99_change_us']:+.1f} µs over {args.loop_cost} pairs (goal: within 5 µs)"
+        )
+        if args.json is not None:
+            record = {"tool": "tools/bench_preview.py --loop-cost", "started": before, "ended": provenance(), **cost}
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+        return 0
+    if args.curve or args.quick:
+        previews = list(QUICK_PREVIEWS if args.quick else PREVIEWS)
+        before = provenance()
+        curve = each_case(curve_case, pairs, args.jobs, duration, previews, args.set)
+        figures = curve_figures(curve, previews)
+        curve_table(figures, previews, len(curve))
+        if args.png is None and args.quick:  # the quick mode draws, and leaves the repository's figure alone
+            with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
+                curve_png(Path(scratch) / "curve.png", figures, previews, len(curve))
+        else:
+            args.png = args.png or OUT_PNG
+            curve_png(args.png, figures, previews, len(curve))
+        print(f"figure: {args.png}; wall {time.perf_counter() - start:.0f} s (load {os.getloadavg()[0]:.2f})")
+        if args.json is not None:
+            record = {
+                "tool": "tools/bench_preview.py --curve",
+                "started": before,
+                "ended": provenance(),
+                "duration_s": duration,
+                "previews_s": previews,
+                "set": args.set,
+                "figures": figures,
+                "cases": curve,
+            }
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+        return 0
     if args.mismatch is not None:
+        before = provenance()
         shares = each_case(mismatch_case, pairs, args.jobs, duration, args.mismatch, args.set)
         mismatch_table([(d, r, s) for (d, r), s in zip(pairs, shares, strict=True)], args.mismatch)
         print(f"wall {time.perf_counter() - start:.0f} s (load {os.getloadavg()[0]:.2f})")
+        if args.json is not None:
+            record = {
+                "tool": "tools/bench_preview.py --mismatch",
+                "started": before,
+                "ended": provenance(),
+                "fraction": args.mismatch,
+                "duration_s": duration,
+                "set": args.set,
+                "cases": [{"damper": d, "road": r, "share": s} for (d, r), s in zip(pairs, shares, strict=True)],
+            }
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
         return 0
     cases = each_case(run_case, pairs, args.jobs, duration, args.set)
     table(cases)

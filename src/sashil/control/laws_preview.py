@@ -1,5 +1,19 @@
-"""``preview-optimal``: a law that knows the road to come plans the optimal damping before the run
-and tracks it online.
+"""``preview-optimal``: a law that knows the road to come plans the optimal damping over it.
+
+Receding (``plan: receding``, the default): semi-active model predictive control with road preview
+(Göhrle et al., IEEE/ASME Trans. Mechatronics 2014; Giorgetti, Bemporad et al., IJC 2006). Every
+``replan_cycles`` cycles the law asks for a plan from the state its controller estimates (θ, θ̇2,
+ẑ, the measured coil current) over ``horizon_s``, the road known for ``preview_s`` ahead (the
+window of :meth:`preview_cycles` the controller fills each cycle; at rest past it), on the law's
+Bouc-Wen model stepped every ``slot_cycles`` cycles (:mod:`sashil.control.preview_horizon`). The
+plan comes into force ``replan_cycles`` after its request, its first slots the commands already
+in force; the law commands the plan in force, each cycle a read of its slot. Before the run the
+first plan is made from rest over the road's first preview. Where a plan is made: on simulated
+time in the law's own cycle (deterministic), on the real clock in a planner process beside the loop
+(:mod:`sashil.runtime.planner`), so the loop's cycle pays a request every re-plan period and one
+read of shared memory each cycle.
+
+Open loop (``plan: open-loop``): the whole road planned before the run and tracked.
 
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
 cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
@@ -50,6 +64,7 @@ import numpy as np
 from sashil.control.law_api import CommandedRoad, Law, LawState, Param
 from sashil.control.lqr import scaled_lqr_gains
 from sashil.control.plan_boucwen import BoucWenPlanModel
+from sashil.control.preview_horizon import HorizonPlanner, HorizonSpec, InlinePlanner, PlanSource
 from sashil.control.preview_mpc import RecedingPlan
 from sashil.control.preview_plan import Horizon, Model, PlanModel, plan_current
 from sashil.errors import ConfigError
@@ -58,13 +73,33 @@ __all__ = ["PreviewOptimal"]
 
 
 class PreviewOptimal(Law):
-    """Plans the optimal current over the commanded road before the run (the bound's optimiser over a
-    receding horizon, on the law's model) and commands it, plus an LQR feedback on the error from the
-    planned state (Savaresi et al.; Giorgetti, Bemporad et al. 2006)."""
+    """Re-plans the optimal current from the estimated state over the road a finite preview shows,
+    every few cycles, and commands the plan in force (receding-horizon semi-active MPC: Göhrle et al.
+    2014; Giorgetti, Bemporad et al. 2006); or, with ``plan: open-loop``, plans the whole commanded
+    road before the run and tracks it with an LQR feedback on the error from the planned state
+    (Savaresi et al.)."""
 
     name = "preview-optimal"
     reads_road_ahead = True
 
+    plan = Param(
+        "receding",
+        choices=("receding", "open-loop"),
+        doc="re-plan from the estimated state over the preview (receding), or plan the whole road before the run",
+    )
+    preview_s = Param(1.0, unit="s", low=0.0, high=1.0, doc="road known ahead of each re-plan (receding)")
+    horizon_s = Param(
+        2.0,
+        unit="s",
+        low=0.01,
+        high=4.0,
+        doc="time each re-plan looks ahead, the road at rest past the preview (receding)",
+    )
+    slot_cycles = Param(5, low=1, high=100, doc="cycles per step of the re-plan's model (receding)")
+    replan_cycles = Param(
+        50, low=1, high=1000, doc="cycles between re-plans, and from a request to its plan in force (receding)"
+    )
+    replan_iterations = Param(30, low=1, high=10000, doc="L-BFGS-B iterations per re-plan at most (receding)")
     block_s = Param(10.0, unit="s", low=0.05, high=600.0, doc="length of each planned block")
     tail_s = Param(2.0, unit="s", low=0.0, high=60.0, doc="road after a block that its optimisation also sees")
     plan_iterations = Param(400, low=1, high=100000, doc="L-BFGS-B iterations per block at most")
@@ -104,11 +139,40 @@ class PreviewOptimal(Law):
         self._dt = 1.0 / float(self.context.rate_hz)
         self._last = 0.0
         self._receding: RecedingPlan | None = None
+        self.planner: PlanSource | None = None
+        self._replan = int(self.replan_cycles)
+        if str(self.plan) == "receding":
+            slot = int(self.slot_cycles)
+            if self._replan % slot:
+                raise ConfigError(
+                    f"controller.replan_cycles: expected a multiple of controller.slot_cycles ({slot}), got {self._replan}"
+                )
+            self._spec = HorizonSpec(
+                self._dt,
+                slot,
+                max(1, int(round(float(self.horizon_s) / (slot * self._dt)))),
+                self.preview_cycles(),
+                self._replan,
+                int(self.replan_iterations),
+            )
+
+    def preview_cycles(self) -> int:
+        """The cycles of road ahead each re-plan reads (receding; 0 for the plan of the whole road)."""
+        if str(self.plan) != "receding":
+            return 0
+        return int(round(float(self.preview_s) / self._dt))
 
     def plan_road(self, road: CommandedRoad) -> None:
-        """Plan the damping of every cycle of ``road`` (module docstring)."""
+        """Receding: the first plan, from rest over the road's first preview; open-loop: plan the
+        damping of every cycle of ``road`` (module docstring)."""
         assert self.context is not None
         ctx = self.context
+        if str(self.plan) == "receding":
+            planner = HorizonPlanner(ctx.model, ctx.coil_tau_s, ctx.current_max_a, self._spec)
+            self._first = planner.plan(0, (0.0, 0.0, 0.0, 0.0), road.rate_rad_s, at_once=True)
+            self.planner = InlinePlanner(planner)
+            self.planner.start(self._first)
+            return
         kind = str(self.plan_model)
         friction = PlanModel.of(ctx.model, kind != "envelope", float(self.friction_eps), ctx.coil_tau_s, road.dt_s)
         horizon = Horizon(
@@ -151,9 +215,19 @@ class PreviewOptimal(Law):
     def reset(self) -> None:
         if self._receding is not None:
             self._receding.restart()
+        if self.planner is not None:
+            self.planner.start(self._first)
 
     def current(self, state: LawState) -> float:
         k = int(state.time_s / self._dt + 0.5)
+        planner = self.planner
+        if planner is not None:
+            if k % self._replan == 0 and k > 0:
+                planner.request(
+                    k, (state.theta_rad, state.body_dot_rad_s, state.z_hat, state.current_a), state.road_ahead_dot_rad_s
+                )
+            plan = planner.latest(k)
+            return 0.0 if plan is None else plan.command_at(k)
         if k >= len(self._i):  # past the planned road (or none planned): the last current, no feedback
             return self._last
         u = self._i[k]

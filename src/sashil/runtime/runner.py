@@ -273,8 +273,12 @@ def control_loop(
     """The run's :class:`~sashil.runtime.loop.ControlLoop`, wherever it runs (this process, or a
     loop process: :mod:`sashil.runtime.worker`): ``stage`` on ``rig`` at the spec's rate (or
     ``rate_hz``) on ``clock``, under the spec's safety limits and overrun policy, its rows to
-    ``recorder``, its warnings to ``warn``."""
+    ``recorder``, its warnings to ``warn``. On the real clock a preview law's re-planning moves to a
+    planner process beside the loop (:func:`sashil.runtime.planner.plan_beside_loop`)."""
+    from sashil.runtime.planner import plan_beside_loop  # the session's process loads no planner
+
     loop = spec.loop
+    plan_beside_loop(stage, bool(getattr(clock, "virtual", False)))
     return ControlLoop(
         rig,
         stage,
@@ -304,6 +308,9 @@ def loop_end(
     """How a loop run ended, wherever it ran (a loop process sends it as its ``end`` message): how
     the loop ended, its timing counters, the stage's, the safety supervisor's, the real-time
     set-up's and the rig's facts, the tuning's events."""
+    from sashil.runtime.planner import end_beside_loop
+
+    end_beside_loop(stage)
     result = loop.result
     controller = stage if hasattr(stage, "clip_warning") else getattr(stage, "controller", None)
     clipped = getattr(controller, "clip_warning", None)
