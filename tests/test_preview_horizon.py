@@ -103,26 +103,29 @@ def _run_law(law: PreviewOptimal, cycles: int) -> list[float]:
     return out
 
 
-def test_the_receding_law_is_the_default_reads_its_preview_and_gives_the_same_commands_on_every_run():
-    law = PreviewOptimal(_context(), preview_s=0.2, horizon_s=0.2, replan_cycles=20, replan_iterations=5)
+def test_the_receding_law_reads_its_preview_and_gives_the_same_commands_on_every_run():
+    law = PreviewOptimal(
+        _context(), plan="receding", preview_s=0.2, horizon_s=0.2, replan_cycles=20, replan_iterations=5
+    )
     assert law.plan == "receding" and law.preview_cycles() == 200
     once = _run_law(law, 120)
     again = _run_law(law, 120)
     assert once == again
     assert all(0.0 <= u <= 1.0 for u in once)
     assert once[:20] == [law._first.command_at(k) for k in range(20)]  # the first re-plan arrives at cycle 40
+    assert PreviewOptimal(_context()).plan == "open-loop"  # the default
     assert PreviewOptimal(_context(), plan="open-loop").preview_cycles() == 0
 
 
 def test_a_re_plan_period_that_is_not_whole_slots_is_refused_naming_the_key():
     with pytest.raises(ConfigError, match=r"controller\.replan_cycles: expected a multiple of controller\.slot_cycles"):
-        PreviewOptimal(_context(), slot_cycles=5, replan_cycles=12)
+        PreviewOptimal(_context(), plan="receding", slot_cycles=5, replan_cycles=12)
 
 
 def test_on_simulated_time_the_law_keeps_planning_inline():
     from sashil.runtime.planner import plan_beside_loop
 
-    law = PreviewOptimal(_context(), preview_s=0.1, horizon_s=0.1, replan_iterations=2)
+    law = PreviewOptimal(_context(), plan="receding", preview_s=0.1, horizon_s=0.1, replan_iterations=2)
     law.plan_road(commanded_road(lambda t: 1.0, 1e-3, 0.1, law.preview_cycles()))
     assert plan_beside_loop(law, virtual=True) is None
     assert isinstance(law.planner, InlinePlanner)
@@ -132,7 +135,7 @@ def test_on_simulated_time_the_law_keeps_planning_inline():
 def test_beside_the_loop_a_planner_process_makes_the_inline_plans_and_leaves_nothing_behind():
     from sashil.runtime.planner import PlannerProcess, plan_beside_loop
 
-    law = PreviewOptimal(_context(), preview_s=0.1, horizon_s=0.2, replan_iterations=10)
+    law = PreviewOptimal(_context(), plan="receding", preview_s=0.1, horizon_s=0.2, replan_iterations=10)
     w_speed = lambda t: 2.0 * math.sin(7.0 * t)  # noqa: E731
     law.plan_road(commanded_road(w_speed, 1e-3, 1.0, law.preview_cycles()))
     reference = InlinePlanner(HorizonPlanner(BoucWenParams(), 0.01, 1.0, law._spec))

@@ -25,8 +25,8 @@ off by F (``mismatch.fraction`` F, signs alternating over J, k, c1, c2, α1, α2
 coil's lag F slower) against the true plant, beside the same law built on the true plant, on the
 one scale of the true plant's passive runs and bound.
 
-With ``--curve`` it measures instead the share of the receding-horizon preview law (the
-default, ``controller.plan: receding``) against its preview length (:data:`PREVIEWS`: 0, 50, 100,
+With ``--curve`` it measures instead the share of the receding-horizon preview law
+(``controller.plan: receding``) against its preview length (:data:`PREVIEWS`: 0, 50, 100,
 250, 500 ms and 1 s of road known ahead; the horizon stays 1 s, the road taken at rest past the
 preview), and of the open-loop plan of the whole road beside it, on four plants: the law's model
 exact, models 10 % and 20 % off in every parameter (as ``--mismatch``), and a plant whose
@@ -335,7 +335,7 @@ def curve_case(
         road, _ = parse_road(road_text, RoadParts.read(true))
         bound = hysteretic_bound(true, road, duration)
         shares: dict[str, float] = {}
-        runs = [(f"{s:g}", [f"controller.preview_s={s}"]) for s in previews] + [
+        runs = [(f"{s:g}", ["controller.plan=receding", f"controller.preview_s={s}"]) for s in previews] + [
             (OPEN_LOOP, ["controller.plan=open-loop"])
         ]
         for key, keys in runs:
@@ -429,7 +429,7 @@ def loop_cost(pairs: int, duration: float, preview: list[str], out: Path) -> dic
         pair = {}
         for law in ("passive", "preview-optimal"):
             folder = out / f"loop-{index}-{law}"
-            keys = ["controller.current_a=0.5"] if law == "passive" else list(preview)
+            keys = ["controller.current_a=0.5"] if law == "passive" else ["controller.plan=receding", *preview]
             run = sashil.run(law, duration_s=duration, road="iso8608:C:10", set=keys, out=folder)
             timing = run.summary["timing"]
             pair[law] = {
