@@ -162,6 +162,15 @@ def test_stale_streams_go_and_live_ones_stay(tmp_path):
     dead.close()
 
 
+def test_a_planners_plan_file_goes_with_its_loop_process(tmp_path):
+    mine = tmp_path / f"sashil-planner-{os.getpid()}-0a1b2c3d"
+    orphan = tmp_path / f"sashil-planner-{NO_SUCH_PID}-0a1b2c3d"
+    for path in (mine, orphan):
+        path.write_bytes(bytes(64))
+    assert remove_stale(tmp_path) == [orphan]
+    assert mine.exists()
+
+
 def test_a_stream_being_made_stays(tmp_path):
     # its maker (the pid in its name) is alive and has not written the header's pids yet: all zero
     making = tmp_path / f"sashil-{os.getpid()}-0a1b2c3d.stream"

@@ -410,7 +410,8 @@ class FrameWriter:
 
 def remove_stale(folder: Path | None = None) -> list[Path]:
     """Remove stream files whose processes are all gone: the one that created it (its name's pid,
-    alive while it fills the header) and the session and loop processes the header names; returns them."""
+    alive while it fills the header) and the session and loop processes the header names; and a
+    planner's plan files whose loop process (its name's pid) is gone; returns them."""
     folder = STREAM_DIR if folder is None else Path(folder)
     removed = []
     for path in folder.glob("sashil-*.stream"):
@@ -424,6 +425,12 @@ def remove_stale(folder: Path | None = None) -> list[Path]:
         except OSError:
             continue
         if not any(pid > 0 and pid_alive(pid) for pid in pids):
+            with contextlib.suppress(OSError):
+                path.unlink()
+                removed.append(path)
+    for path in folder.glob("sashil-planner-*"):  # a preview law's plans (runtime.planner): its loop's pid
+        creator = path.name.split("-")[2]
+        if creator.isdigit() and not pid_alive(int(creator)):
             with contextlib.suppress(OSError):
                 path.unlink()
                 removed.append(path)
