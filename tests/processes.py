@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 
@@ -16,3 +17,12 @@ def loop_of(session: int) -> int:
     (server,) = children(session)
     (loop,) = children(server)
     return loop
+
+
+def running_loop(session: subprocess.Popen) -> int:
+    """The loop process of ``session`` (a ``sashil run -v`` with stderr piped), once its stderr says
+    ``loop: running``; AssertionError naming its exit code when it never does."""
+    for line in session.stderr:  # type: ignore[union-attr]
+        if line.startswith("loop: running"):
+            return loop_of(session.pid)
+    raise AssertionError(f"the loop never ran (exit {session.wait()})")

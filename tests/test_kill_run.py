@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import loop_of
+from processes import children, running_loop
 
 from sashil.drivers.firmware import compiler
 from sashil.recording.data_file import REQUIRED_COLUMNS, read_data_csv
@@ -61,13 +61,8 @@ def _kill_the_session(out: Path, *args: str) -> tuple[int, dict[str, int]]:
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        for line in proc.stderr:  # type: ignore[union-attr]
-            if line.startswith("loop: running"):
-                break
-        else:
-            raise AssertionError(f"the loop never ran (exit {proc.wait()})")
-        loop = loop_of(proc.pid)
-        (server,) = [int(pid) for pid in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
+        loop = running_loop(proc)
+        (server,) = children(proc.pid)
         time.sleep(1.0)  # the coil at 0.8 A
         killed = time.monotonic_ns()
         proc.kill()

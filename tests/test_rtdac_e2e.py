@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from processes import loop_of
+from processes import running_loop
 
 from sashil.config.rtdac_section import WIRING_KEYS
 
@@ -152,12 +152,7 @@ def test_the_loop_process_killed_the_session_rests_the_board(tmp_path, board):
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        for line in proc.stderr:  # type: ignore[union-attr]
-            if line.startswith("loop: running"):
-                break
-        else:
-            raise AssertionError(f"the loop never ran (exit {proc.wait()})")
-        loop = loop_of(proc.pid)
+        loop = running_loop(proc)
         time.sleep(1.0)  # the coil on, the road turning
         os.kill(loop, signal.SIGKILL)
         _, err = proc.communicate(timeout=60)
@@ -469,12 +464,7 @@ def test_the_heartbeat_holds_the_relay_through_a_run_and_every_host_process_kill
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
-        for line in proc.stderr:  # type: ignore[union-attr]
-            if line.startswith("loop: running"):
-                break
-        else:
-            raise AssertionError(f"the loop never ran (exit {proc.wait()})")
-        loop = loop_of(proc.pid)
+        loop = running_loop(proc)
         time.sleep(0.5)
         killed_ns = time.monotonic_ns()
         os.killpg(proc.pid, signal.SIGKILL)  # the session and its loop server
