@@ -44,14 +44,12 @@ class CoilDrive:
         map_current_a: Sequence[float],
         map_output: Sequence[float],
         ki_per_s: float,
-        current_max_a: float,
         authority: float = 0.25,
         tau_s: float = 0.0,
     ):
         self.map_current_a = tuple(map_current_a)
         self.map_output = tuple(map_output)
         self.ki_per_s = ki_per_s
-        self.current_max_a = current_max_a
         self.authority = authority
         self.rest = self.map_output[0]
         self.tau_s = tau_s

@@ -126,7 +126,6 @@ class RtdacRig(RigInterface):
             wiring.coil_map_current_a,
             wiring.coil_map_output,
             wiring.coil_loop_ki_per_s,
-            current_max_a,
             wiring.coil_loop_authority,
             coil_tau_s,
         )

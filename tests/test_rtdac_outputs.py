@@ -20,7 +20,7 @@ DT = 0.0078125  # 2**-7 s: ki 16/s times it is 1/8
 
 
 def coil(tau_s: float = 0.0) -> CoilDrive:
-    return CoilDrive((0.0, 1.0), (0.0, 1.0), 16.0, 1.0, 0.25, tau_s)
+    return CoilDrive((0.0, 1.0), (0.0, 1.0), 16.0, 0.25, tau_s)
 
 
 def test_the_map_alone_without_a_sense_and_rest_at_or_below_0_a():
