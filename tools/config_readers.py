@@ -1,0 +1,119 @@
+"""Count the files that read a config's keys outside the config layer.
+
+A file counts when it has either of these:
+
+* a subscript, ``.get`` or ``read_key`` on a name like ``config``, ``cfg``, ``conf``,
+  ``*_config``, ``config_*``, ``doc`` or ``document``;
+* a section's name (a top-level key of ``configs/sim.yaml``) used as a key on ``values``,
+  ``section``, ``controller``, ``model``, ``rig`` or ``options``.
+
+The count runs over ``src/sashil`` and ``drivers/``, leaving out ``src/sashil/config/``. Files in
+the loop's own layers (runtime/, control/, safety.py and the backends) are listed apart, since
+none of them may read a config's keys.
+
+Usage: ``python tools/config_readers.py [--list] [--check] [--quick]``. With ``--check`` it exits 1
+when a loop-side file reads keys; ``--quick`` is the same count (it takes well under a second).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import re
+import sys
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG_NAME = re.compile(r"^(config|cfg|conf|doc|document|\w+_config|config_\w+)$")
+SECTION_HOLDERS = {"values", "section", "controller", "model", "rig", "options"}
+LOOP_SIDE = ("src/sashil/runtime/", "src/sashil/control/", "src/sashil/safety.py", "drivers/")
+
+
+def section_names() -> set[str]:
+    """The config's section names: the top-level keys of the simulated rig's config."""
+    with open(ROOT / "configs" / "sim.yaml", encoding="utf-8") as handle:
+        return set(yaml.safe_load(handle))
+
+
+def _name_of(node: ast.expr) -> str | None:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    return None
+
+
+def _first_key(call_or_subscript: ast.AST) -> str | None:
+    if isinstance(call_or_subscript, ast.Subscript):
+        key = call_or_subscript.slice
+    elif isinstance(call_or_subscript, ast.Call) and call_or_subscript.args:
+        key = call_or_subscript.args[0]
+    else:
+        return None
+    return key.value if isinstance(key, ast.Constant) and isinstance(key.value, str) else None
+
+
+def reasons(tree: ast.AST, sections: set[str]) -> list[str]:
+    """Each place in ``tree`` that reads a config's keys, as ``line: what``."""
+    found: list[str] = []
+    for node in ast.walk(tree):
+        if not isinstance(node, (ast.Subscript, ast.Call)):
+            continue
+        holder: str | None = None
+        if isinstance(node, ast.Subscript):
+            holder = _name_of(node.value)
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            if node.func.attr == "get":
+                holder = _name_of(node.func.value)
+        elif isinstance(node, ast.Call) and _name_of(node.func) == "read_key" and node.args:
+            holder = _name_of(node.args[0])
+            if holder is not None and CONFIG_NAME.match(holder):
+                found.append(f"{node.lineno}: read_key({holder}, …)")
+            continue
+        if holder is None:
+            continue
+        if CONFIG_NAME.match(holder):
+            found.append(f"{node.lineno}: {holder}[…]")
+        elif holder in SECTION_HOLDERS and _first_key(node) in sections:
+            found.append(f"{node.lineno}: {holder}[{_first_key(node)!r}]")
+    return found
+
+
+def readers() -> dict[str, list[str]]:
+    """Every counted file, relative to the checkout, with its reading places."""
+    sections = section_names()
+    files = sorted((ROOT / "src" / "sashil").rglob("*.py")) + sorted((ROOT / "drivers").rglob("*.py"))
+    counted: dict[str, list[str]] = {}
+    for path in files:
+        relative = path.relative_to(ROOT).as_posix()
+        if relative.startswith("src/sashil/config/"):
+            continue
+        places = reasons(ast.parse(path.read_text(encoding="utf-8")), sections)
+        if places:
+            counted[relative] = places
+    return counted
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--list", action="store_true", help="print each reading place")
+    parser.add_argument("--check", action="store_true", help="exit 1 when a loop-side file reads keys")
+    parser.add_argument("--quick", action="store_true", help="the same count (kept for the tools' quick test)")
+    args = parser.parse_args(argv)
+    counted = readers()
+    loop_side = [name for name in counted if name.startswith(LOOP_SIDE)]
+    for name, places in counted.items():
+        mark = "  (loop side)" if name in loop_side else ""
+        print(f"{name}: {len(places)}{mark}")
+        if args.list:
+            for place in places:
+                print(f"    {place}")
+    print(f"files that read a config's keys: {len(counted)} (target <= 12)")
+    print(f"of them on the loop side: {len(loop_side)} (target 0)")
+    return 1 if args.check and loop_side else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
