@@ -189,6 +189,10 @@ def run(args: argparse.Namespace) -> int:
     faults = _faults(args)
     operator = _operator(args)
     duration = None if args.duration is None else positive_seconds("--duration", args.duration)
+    from sashil.runtime.warmup import warm_kernels
+
+    # the simulated rig's kernels load before the link opens, so no session's first Command waits on them
+    warm_kernels()
     if args.transport == "rtdac":
         return run_rtdac(args, config, operator, duration, _announce)
     truth = None
