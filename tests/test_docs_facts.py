@@ -70,9 +70,11 @@ def _prose(text: str) -> str:
     return _CODE_SPAN.sub("", text)
 
 
-def _code(text: str) -> list[str]:
-    """Every line of a fenced block and every inline code span of the page."""
-    lines = [line for block in fenced_blocks(text) for line in block.body.splitlines()]
+def _code(text: str, *, output: bool = True) -> list[str]:
+    """Every line of a fenced block and every inline code span of the page; ``output=False`` leaves
+    out the ``text`` blocks, a program's printed output rather than commands to type."""
+    blocks = [block for block in fenced_blocks(text) if output or block.info != "text"]
+    lines = [line for block in blocks for line in block.body.splitlines()]
     return lines + _CODE_SPAN.findall(_FENCE.sub("", text))
 
 
@@ -101,7 +103,7 @@ def _commands(line: str) -> list[tuple[str, list[str]]]:
 def test_every_option_of_a_command_exists(page: Path):
     options = _verb_options()
     wrong = []
-    for line in _code(page.read_text(encoding="utf-8")):
+    for line in _code(page.read_text(encoding="utf-8"), output=False):
         for verb, words in _commands(line):
             if verb not in options:
                 if not verb.startswith("-") and re.fullmatch(r"[a-z][a-z-]+", verb):
