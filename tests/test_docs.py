@@ -87,8 +87,13 @@ def test_cli_reference_has_every_verb_and_option_and_no_other():
     assert documented == list(VERBS)
     parsers = gen_reference.verb_parsers(build_parser())
     for verb, chunk in zip(documented, re.split(r"^## \S+$", page, flags=re.M)[1:], strict=True):
-        options = {o for a in parsers[verb]._actions for o in a.option_strings if a.help != argparse.SUPPRESS}
+        actions = [a for a in parsers[verb]._actions if a.help != argparse.SUPPRESS]
+        options = {o for a in actions for o in a.option_strings}
+        # its own options as table rows; the shared ones it takes by name on the line linking their table
         listed = set(re.findall(r"^\| `(-[-\w]+)", chunk, flags=re.M)) | set(re.findall(r", `(-[-\w]+)", chunk))
+        shared_line = re.search(r"^\[Shared options\]\(#[\w-]+\): (.*)\.$", chunk, flags=re.M)
+        named = set(re.findall(r"`(-[-\w]+)`", shared_line.group(1))) if shared_line else set()
+        listed |= {o for a in actions if named & set(a.option_strings) for o in a.option_strings}
         assert listed == options - {"-h", "--help"}, verb
 
 

@@ -191,37 +191,46 @@ def cli_page() -> str:
     root = build_parser()
     parsers = verb_parsers(root)
     out = [HEADER, "# Command line\n\n", f"{root.description}\n\n"]
-    out.append("One command, `sashil VERB [options]`; `sashil VERB --help` prints the same as below. ")
+    out.append("One command, `sashil VERB [options]`; `sashil VERB --help` prints its usage and options. ")
     out.append("`sashil --version` prints the version. Exit codes: [exit codes](exit-codes.md).\n\n")
     out.append(_table(["verb", "what it does"], [[f"[`{n}`](#{n})", p.description] for n, p in parsers.items()]))
     shared = _shared_options(parsers)
-    out.append(
-        "\n### Options several verbs share\n\nEach verb's table below lists these too, with a link here.\n\n"
-        + _table(["option", "meaning"], [[option, meaning] for option, meaning in shared])
-    )
+    out.append(f"\n### {SHARED_HEADING}\n\n" + _table(["option", "meaning"], [list(key) for key in shared]))
     for name, parser in parsers.items():
         out.append(f"\n## {name}\n\n{parser.description}\n\n")
         example = (parser.epilog or "").removeprefix("example:").strip()
         if example:
             out.append(f"```text\n{example}\n```\n\n")
-        out.append(f"```text\n{_usage(parser)}```\n\n")
-        shown = 0
-        for group in parser._action_groups:
-            rows = [
-                [_option(a), SHARED_LINK if (_option(a), _help(a, parser.prog)) in shared else _help(a, parser.prog)]
-                for a in group._group_actions
-                if a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction)
-            ]
-            if rows:
-                out.append(f"### {name}: {group.title}\n\n" + _table(["option", "meaning"], rows) + "\n")
-                shown += 1
-        if not shown:
-            out.append("No options.\n")
+        out.extend(_verb_options(parser, shared))
     return "".join(out)
 
 
-#: the meaning a verb's table gives an option that several verbs share with the same help
-SHARED_LINK = "as [shared](#options-several-verbs-share)"
+#: the heading of the table that gives each option several verbs share once
+SHARED_HEADING = "Options several verbs share"
+
+
+def _verb_options(parser: argparse.ArgumentParser, shared: Mapping[tuple[str, str], list[str]]) -> list[str]:
+    """A verb's section below its example: the shared options it takes by name, then its own options,
+    one table per argument group (the default groups, positional arguments and options, unheaded)."""
+    own_options: list[str] = []
+    taken: list[str] = []
+    for group in parser._action_groups:
+        rows = []
+        for action in group._group_actions:
+            if action.help == argparse.SUPPRESS or isinstance(action, argparse._HelpAction):
+                continue
+            key = (_option(action), _help(action, parser.prog))
+            if key in shared:
+                taken.append(f"`{action.option_strings[-1]}`")
+            else:
+                rows.append(list(key))
+        if rows:
+            heading = "" if group.title in ("options", "positional arguments") else f"*{group.title}*\n\n"
+            own_options.append(heading + _table(["option", "meaning"], rows) + "\n")
+    out = []
+    if taken:
+        out.append(f"[Shared options](#{_slug(SHARED_HEADING)}): {', '.join(taken)}.\n\n")
+    return out + (own_options or ["No options of its own.\n"])
 
 
 def _shared_options(parsers: dict[str, argparse.ArgumentParser]) -> dict[tuple[str, str], list[str]]:
@@ -233,13 +242,6 @@ def _shared_options(parsers: dict[str, argparse.ArgumentParser]) -> dict[tuple[s
             if a.option_strings and a.help != argparse.SUPPRESS and not isinstance(a, argparse._HelpAction):
                 verbs.setdefault((_option(a), _help(a, parser.prog)), []).append(name)
     return {key: names for key, names in verbs.items() if len(names) >= 3}
-
-
-def _usage(parser: argparse.ArgumentParser) -> str:
-    """The usage line ``sashil VERB --help`` prints ([optional] in brackets), at a fixed width."""
-    formatter = argparse.HelpFormatter(parser.prog, width=100)
-    formatter.add_usage(parser.usage, parser._actions, parser._mutually_exclusive_groups)
-    return formatter.format_help()
 
 
 # ---------------------------------------------------------------- the config
@@ -272,15 +274,17 @@ def config_page() -> str:
 
     out = [HEADER, "# Config keys\n\n"]
     out.append(
-        "Every key a config file (`--config FILE`) or `--set section.key=value` accepts, with its kind, "
-        "default (the default config: the simulated rig with the seed parameters), bounds and meaning. "
+        "Every key a config file (`--config FILE`) or `--set section.key=value` accepts, with its kind and "
+        "bounds, default (the default config: the simulated rig with the seed parameters) and meaning. "
         "`float?` and `str?` also take `null`. A config only needs the keys it changes.\n\n"
     )
     for name, section in SCHEMA.items():
         out.append(f"## {name}\n\n")
         if section.doc:
             out.append(f"{_rst_to_md(section.doc)}.\n\n")
-        out.append(_table(["key", "kind", "default", "bounds", "meaning"], list(_config_rows({name: section}, ""))))
+        rows = [[key, f"{kind}: {bounds}" if bounds else kind, default, meaning] for key, kind, default, bounds, meaning in
+                _config_rows({name: section}, "")]  # fmt: skip
+        out.append(_table(["key", "kind and bounds", "default", "meaning"], rows))
         out.append("\n")
     return "".join(out)
 
@@ -442,6 +446,22 @@ def _doc(obj: Any) -> str:
     return _rst_to_md(inspect.cleandoc(obj.__doc__ or "")).strip()
 
 
+#: a sentence's end: a full stop, then a space and a capital, a code span or a bracket
+_SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=[A-Z`(\[*:])")
+_ABBREVIATIONS = ("e.g.", "i.e.", "etc.", "vs.", "cf.")
+
+
+def _first_sentence(obj: Any) -> str:
+    """The first sentence of ``obj``'s docstring, as Markdown (its first paragraph joined into one line,
+    cut at the first full stop that is not an abbreviation's)."""
+    paragraph = " ".join(inspect.cleandoc(obj.__doc__ or "").split("\n\n", 1)[0].split())
+    for end in _SENTENCE_END.finditer(paragraph):
+        head = paragraph[: end.start()]
+        if not head.endswith(_ABBREVIATIONS):
+            return _rst_to_md(head).strip()
+    return _rst_to_md(paragraph).strip()
+
+
 def _signature(name: str, obj: Any) -> str:
     try:
         signature = inspect.signature(obj)
@@ -475,7 +495,7 @@ def _attribute_comments(cls: type) -> list[tuple[str, str]]:
     return found
 
 
-def _members(cls: type) -> str:
+def _members(cls: type, describe: Callable[[Any], str] = _doc) -> str:
     out = []
     for name, member in vars(cls).items():
         if name.startswith("_"):
@@ -490,14 +510,16 @@ def _members(cls: type) -> str:
         is_method = inspect.isfunction(member) or isinstance(member, (classmethod, staticmethod))
         title = f"{cls.__name__}.{name}"
         sig = _signature(title, target).replace("(self, ", "(").replace("(self)", "()").replace("(cls)", "()")
-        out.append(f"### {title}\n\n" + (sig if is_method else "") + _doc(target) + "\n\n")
+        out.append(f"### {title}\n\n" + (sig if is_method else "") + describe(target) + "\n\n")
     return "".join(out)
 
 
-def _entry(title: str, obj: Any, members: bool = True) -> str:
-    out = f"## {title}\n\n" + _signature(title, obj) + _doc(obj) + "\n\n"
+def _entry(title: str, obj: Any, members: bool = True, describe: Callable[[Any], str] = _doc) -> str:
+    """A heading, the signature and ``describe(obj)`` (the docstring whole, or its first sentence), then a
+    class's public members the same way."""
+    out = f"## {title}\n\n" + _signature(title, obj) + describe(obj) + "\n\n"
     if inspect.isclass(obj) and members:
-        out += _members(obj)
+        out += _members(obj, describe)
     return out
 
 
@@ -518,24 +540,25 @@ def python_api_page() -> str:
     import sashil
     from sashil import api
 
-    out = [HEADER, "# Python API\n\n`import sashil`: the verbs from Python, and any run folder read back.\n\n"]
-    out.append(_entry("sashil.run", sashil.run))
-    out.append(_entry("sashil.drop_test", sashil.drop_test))
-    out.append(_entry("sashil.load_run", sashil.load_run))
+    out = [HEADER, "# Python API\n\n`import sashil`: the verbs from Python, and any run folder read back. "]
+    out.append("Each name's signature and the first sentence of its docstring (`help(name)` prints the rest).\n\n")
+    out.append(_entry("sashil.run", sashil.run, describe=_first_sentence))
+    out.append(_entry("sashil.drop_test", sashil.drop_test, describe=_first_sentence))
+    out.append(_entry("sashil.load_run", sashil.load_run, describe=_first_sentence))
     out.append(_doc(api) + "\n\n")
-    out.append(_entry("Run", sashil.Run))
+    out.append(_entry("Run", sashil.Run, describe=_first_sentence))
     import sashil.lab as lab
 
     out.append("# The experiments: `sashil.lab`\n\n" + _doc(lab) + "\n\n")
     for name in lab.__all__:
-        out.append(_entry(f"sashil.lab.{name}", getattr(lab, name), members=False))
+        out.append(_entry(f"sashil.lab.{name}", getattr(lab, name), members=False, describe=_first_sentence))
     import sashil.testing as testing
 
     out.append("# A lab's tests: `sashil.testing`\n\n" + _doc(testing) + "\n\n")
     for name in testing.__all__:
         value = getattr(testing, name)
         if callable(value):
-            out.append(_entry(f"sashil.testing.{name}", value))
+            out.append(_entry(f"sashil.testing.{name}", value, describe=_first_sentence))
     return "".join(out)
 
 
