@@ -415,28 +415,27 @@ def dbc_page() -> str:
     db = cantools.database.load_file(str(ROOT / "drivers" / "sashil.dbc"))
     out = [HEADER, "# CAN database (sashil.dbc)\n\n"]
     out.append("The messages of `drivers/sashil.dbc`, installed as `sashil.drivers/sashil.dbc`; ")
-    out.append("the protocol's CAN section says how they make a session ([protocol](protocol.md)).\n\n")
+    out.append("the protocol's CAN section says how they make a session ([protocol](protocol.md)). ")
+    out.append("A signal's bits count from the payload's first byte's least significant bit; its type is ")
+    out.append("`u` (unsigned) or `s` (signed) and its width, little-endian unless it says `big`, times its scale ")
+    out.append("(and plus its offset) when not 1 (0).\n\n")
     for msg in sorted(db.messages, key=lambda m: m.frame_id):
         senders = ", ".join(msg.senders) or "—"
         out.append(f"## {msg.name} (0x{msg.frame_id:03X})\n\n{msg.length} bytes, sent by {senders}.")
         out.append(f" {msg.comment}\n\n" if msg.comment else "\n\n")
-        rows = [
-            [
-                f"`{s.name}`",
-                s.start,
-                s.length,
-                "little" if s.byte_order == "little_endian" else "big",
-                "signed" if s.is_signed else "unsigned",
-                f"{s.scale:g}",
-                f"{s.offset:g}",
-                s.unit or "",
-                s.comment or "",
-            ]
-            for s in msg.signals
-        ]
-        out.append(_table(["signal", "start", "bits", "order", "sign", "scale", "offset", "unit", "comment"], rows))
+        rows = [[f"`{s.name}`", f"{s.start}–{s.start + s.length - 1}", _signal_type(s), s.unit or "", s.comment or ""]
+                for s in msg.signals]  # fmt: skip
+        out.append(_table(["signal", "bits", "type", "unit", "comment"], rows))
         out.append("\n")
     return "".join(out)
+
+
+def _signal_type(signal: Any) -> str:
+    """A DBC signal's type in a few characters: ``u16``, ``s32 big``, ``u16 × 0.0005``, ``s8 × 2 + 1``."""
+    text = f"{'s' if signal.is_signed else 'u'}{signal.length}"
+    text += " big" if signal.byte_order != "little_endian" else ""
+    text += f" × {signal.scale:g}" if signal.scale != 1 else ""
+    return text + (f" + {signal.offset:g}" if signal.offset else "")
 
 
 # ---------------------------------------------------------------- docstrings
