@@ -258,15 +258,25 @@ def _config_rows(fields: Mapping[str, Any], prefix: str) -> Iterator[list[Any]]:
             yield from _config_rows(spec.fields, dotted + ".")
             continue
         assert isinstance(spec, Field)
-        bounds = ""
-        if spec.kind.startswith("choice"):  # "choice?" also takes null
-            bounds = ", ".join(f"`{c}`" for c in spec.choices)
-        else:
-            low = f"{'>' if spec.low_open else '>='} {spec.low:g}" if spec.low is not None else ""
-            high = f"<= {spec.high:g}" if spec.high is not None and spec.high < 2**31 - 1 else ""
-            bounds = " and ".join(b for b in (low, high) if b)
         default = "null" if spec.default is None else spec.default
-        yield [f"`{dotted}`", spec.kind, f"`{default}`", bounds, _rst_to_md(spec.doc)]
+        yield [f"`{dotted}`", spec.kind, f"`{default}`", _bounds(spec), _rst_to_md(spec.doc)]
+
+
+def _bounds(field: Any) -> str:
+    """A field's choices (as code) or its numeric range in interval notation: ``[0, 10]``, ``(0, 1]``,
+    ``> 0``, ``≥ 0``. Empty when it has neither."""
+    if field.kind.startswith("choice"):  # "choice?" also takes null
+        return ", ".join(f"`{c}`" for c in field.choices)
+    low, high = field.low, field.high if field.high is not None and field.high < 2**31 - 1 else None
+    if low is None and high is None:
+        return ""
+    if low is not None and high is not None:
+        text = f"{'(' if field.low_open else '['}{low:g}, {high:g}]"
+    elif low is not None:
+        text = f"{'>' if field.low_open else '≥'} {low:g}"
+    else:
+        text = f"≤ {high:g}"
+    return text
 
 
 def config_page() -> str:
@@ -575,10 +585,20 @@ def laws_page() -> str:
         cls = point.load()
         assert issubclass(cls, Law)
         out.append(f"## {point.name}\n\n`{point.value}`, output: {cls.output_kind()}. {_doc(cls)}\n\n")
-        rows = [[f"`controller.{n}`", p.describe(), _rst_to_md(p.doc)] for n, p in cls.params().items()]
-        out.append(_table(["key", "default (bounds)", "meaning"], rows) if rows else "No parameters.\n")
+        rows = [[f"`controller.{n}`", _param_default(p), _rst_to_md(p.doc)] for n, p in cls.params().items()]
+        out.append(_table(["key", "default, bounds", "meaning"], rows) if rows else "No parameters.\n")
         out.append("\n")
     return "".join(out)
+
+
+def _param_default(param: Any) -> str:
+    """A law parameter's default with its unit, then its bounds (``0.5 s, >= 0``; ``null A, [0, 10] or null``)."""
+    default = "required" if param.required else ("null" if param.default is None else repr(param.default))
+    text = default + (f" {param.unit}" if param.unit else "")
+    bounds = _bounds(param.field)
+    if bounds:
+        text += f", {'integer ' if param.field.kind == 'int' else ''}{bounds}"
+    return text + (" or null" if param.field.kind.endswith("?") else "")
 
 
 PAGES: dict[str, Callable[[], str]] = {
