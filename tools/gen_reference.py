@@ -284,17 +284,17 @@ def config_page() -> str:
 
     out = [HEADER, "# Config keys\n\n"]
     out.append(
-        "Every key a config file (`--config FILE`) or `--set section.key=value` accepts, with its kind and "
-        "bounds, default (the default config: the simulated rig with the seed parameters) and meaning. "
+        "Every key a config file (`--config FILE`) or `--set section.key=value` accepts, with its default "
+        "(the default config: the simulated rig with the seed parameters), kind, bounds and meaning. "
         "`float?` and `str?` also take `null`. A config only needs the keys it changes.\n\n"
     )
     for name, section in SCHEMA.items():
         out.append(f"## {name}\n\n")
         if section.doc:
             out.append(f"{_rst_to_md(section.doc)}.\n\n")
-        rows = [[key, f"{kind}: {bounds}" if bounds else kind, default, meaning] for key, kind, default, bounds, meaning in
-                _config_rows({name: section}, "")]  # fmt: skip
-        out.append(_table(["key", "kind and bounds", "default", "meaning"], rows))
+        rows = [[key, f"{default}; " * bool(default) + kind + f": {bounds}" * bool(bounds), meaning]
+                for key, kind, default, bounds, meaning in _config_rows({name: section}, "")]  # fmt: skip
+        out.append(_table(["key", "default, kind, bounds", "meaning"], rows))
         out.append("\n")
     return "".join(out)
 
@@ -547,14 +547,12 @@ def law_api_page() -> str:
 
 def python_api_page() -> str:
     import sashil
-    from sashil import api
 
     out = [HEADER, "# Python API\n\n`import sashil`: the verbs from Python, and any run folder read back. "]
     out.append("Each name's signature and the first sentence of its docstring (`help(name)` prints the rest).\n\n")
     out.append(_entry("sashil.run", sashil.run, describe=_first_sentence))
     out.append(_entry("sashil.drop_test", sashil.drop_test, describe=_first_sentence))
     out.append(_entry("sashil.load_run", sashil.load_run, describe=_first_sentence))
-    out.append(_doc(api) + "\n\n")
     out.append(_entry("Run", sashil.Run, describe=_first_sentence))
     import sashil.lab as lab
 
