@@ -33,9 +33,7 @@ CONTRIBUTOR_FOLDER = "contributor/"
 
 def show(rev: str, path: str) -> str:
     """The text of ``path`` at ``rev`` (``git show rev:path``)."""
-    return subprocess.run(
-        ["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True, check=True
-    ).stdout
+    return subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
 
 
 def _nav_pages(entries: object) -> Iterator[str]:
