@@ -197,7 +197,7 @@ def cli_page() -> str:
     shared = _shared_options(parsers)
     out.append(f"\n### {SHARED_HEADING}\n\n" + _table(["option", "meaning"], [list(key) for key in shared]))
     for name, parser in parsers.items():
-        out.append(f"\n## {name}\n\n{parser.description}\n\n")
+        out.append(f"\n## {name}\n\n")  # what it does: the verbs' table above
         example = (parser.epilog or "").removeprefix("example:").strip()
         if example:
             out.append(f"```text\n{example}\n```\n\n")
