@@ -2,12 +2,14 @@
 
 Each page is built from what the code itself declares:
 
-- ``cli.md``: every verb's options, from ``sashil.cli.build_parser()``;
-- ``config.md``: every config key with its type, default, bounds and doc, from the schema
+- ``cli.md``: every verb's options, from ``sashil.cli.build_parser()``: the options three verbs or
+  more share with the same help in one table, each verb's own in its section;
+- ``config.md``: every config key as one row (default, kind, bounds, its doc), from the schema
   (``sashil.config.sections.SCHEMA``);
 - ``summary-json.md``: the common keys of ``summary.json`` (``sashil.recording.summary_schema``);
-- ``law-api.md`` and ``python-api.md``: signatures and docstrings of ``Law``, ``Param``,
-  ``LawState``, ``LawContext``, ``sashil.run``, ``sashil.drop_test``, ``sashil.load_run``, ``Run``;
+- ``law-api.md``: signatures and docstrings of ``Law``, ``Param``, ``LawState``, ``LawContext``;
+- ``python-api.md``: signatures and each docstring's first sentence of ``sashil.run``,
+  ``sashil.drop_test``, ``sashil.load_run``, ``Run``, ``sashil.lab`` and ``sashil.testing``;
 - ``laws.md``: the built-in laws (sashil's own ``sashil.laws`` entry points) and their parameters;
 - ``data-columns.md``: the loop's ``data.csv`` columns and ``events.csv``'s, with their units;
 - ``protocol.md`` and ``dbc.md``: the wire protocol document and the CAN database's messages;
