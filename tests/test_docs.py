@@ -79,6 +79,20 @@ def test_the_api_reference_links_its_types_and_hides_private_fields():
     assert "_sub_entries" not in page
 
 
+def test_python_api_reference_has_every_public_name():
+    import sashil
+    import sashil.lab as lab
+    import sashil.testing as testing
+
+    page = (DOCS / "reference" / "python-api.md").read_text(encoding="utf-8")
+    headings = set(re.findall(r"^#{2,3} (\S+)$", page, flags=re.M))
+    names = {"sashil.run", "sashil.drop_test", "sashil.load_run", "Run"}
+    names |= {f"Run.{n}" for n in vars(sashil.Run) if not n.startswith("_")}
+    names |= {f"sashil.lab.{n}" for n in lab.__all__}
+    names |= {f"sashil.testing.{n}" for n in testing.__all__ if callable(getattr(testing, n))}
+    assert not names - headings, f"python-api.md lacks {sorted(names - headings)}"
+
+
 def test_cli_reference_has_every_verb_and_option_and_no_other():
     from sashil.cli import VERBS, build_parser
 

@@ -117,10 +117,12 @@ class Run:
 
     @property
     def name(self) -> str:
+        """The folder's name (a sub-run's: ``i1.000A``)."""
         return self.path.name
 
     @property
     def verb(self) -> str | None:
+        """The verb that wrote the folder (``summary.json`` → ``verb``), or None."""
         return self.summary.get("verb")
 
     @cached_property
