@@ -10,6 +10,12 @@ A word is a whitespace-separated token of the page's Markdown as stored, code bl
 targets included: the count is what a reader scrolls past, and it needs no Markdown parser. Both revs
 are read with ``git show rev:path``, so nothing is checked out.
 
+At c10b158 this rule counts 43,115 words, 0.9 % under the 43,517 the issue's last count gave; that
+count's own rule is not recorded (no page of c10b158 left out or taken in by path accounts for the
+402 words, nor does counting ASCII whitespace alone), and at main (c92f04b) this rule counts 42,446
+where it gave 39,238, so the two counts differ in rule, not only in rounding. Both revs here are
+counted by the one rule above.
+
 Usage: ``python tools/manual_words.py [--baseline REV] [--target 0.6] [--quick]``. ``--quick`` counts
 HEAD against itself (the same code path; the ratio is 100 %).
 """
