@@ -13,7 +13,7 @@ Every summary has the common keys below, whatever the verb; a verb adds its own 
 ``exit_status``    ok | stopped | safety_trip | deadline_missed | lossy | error
 ``exit_code``      the process exit code of that status (0, 130, 3, 4, 5, 1 or the error's)
 ``error``          one line, or null
-``driver``         sim | serial | can, or null when no rig was driven (simulate)
+``driver``         sim | serial | can | rtdac (or a lab's backend), or null when no rig was driven (simulate)
 ``controller``     what commanded the damper, by the law's name (``passive 0.5 A``,
                    ``skyhook``, ...), or null
 ``controller_origin`` where the law came from: ``built-in``, ``package NAME``, ``file PATH``
