@@ -7,8 +7,10 @@ A file counts when it has either of these:
 * a section's name (a key of the schema's ``SCHEMA`` table in ``src/sashil/config/sections.py``)
   used as a key on ``values``, ``section``, ``controller``, ``model``, ``rig`` or ``options``.
 
-A config's keys are strings: an integer index (``doc[0]``, a docstring's first paragraph) reads
-a sequence, not a config, and does not count.
+Only reads count: a config's keys are strings, so an integer index (``doc[0]``, a docstring's
+first paragraph) reads a sequence, not a config, and a subscript stored to or deleted
+(``doc["intervals_95"] = ...``, a document being written, with the subscripts it is written
+through: ``doc["calibration"]["intervals"] = ...``) reads nothing.
 
 The count runs over ``src/sashil`` and ``drivers/``, leaving out ``src/sashil/config/``. Files in
 the loop's own layers (runtime/, control/, safety.py and the backends) are listed apart, since
@@ -43,13 +45,26 @@ def section_names() -> set[str]:
     raise SystemExit("config_readers: no SCHEMA table in src/sashil/config/sections.py")
 
 
-def _indexes_a_sequence(node: ast.AST) -> bool:
-    """Whether ``node`` is a subscript by an integer constant (a sequence's item, not a key)."""
-    return (
-        isinstance(node, ast.Subscript)
-        and isinstance(node.slice, ast.Constant)
-        and type(node.slice.value) is int
-    )
+def _written(tree: ast.AST) -> set[int]:
+    """The subscripts of ``tree`` stored to or deleted, and those they are written through (the
+    ``doc["a"]`` of ``doc["a"]["b"] = value``), by ``id``."""
+    written: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Subscript) and not isinstance(node.ctx, ast.Load):
+            inner: ast.expr = node
+            while isinstance(inner, ast.Subscript):
+                written.add(id(inner))
+                inner = inner.value
+    return written
+
+
+def _reads_no_key(node: ast.AST, written: set[int]) -> bool:
+    """Whether ``node`` is a subscript that reads no key: by an integer constant (a sequence's
+    item) or written (:func:`_written`)."""
+    if not isinstance(node, ast.Subscript):
+        return False
+    by_index = isinstance(node.slice, ast.Constant) and type(node.slice.value) is int
+    return by_index or id(node) in written
 
 
 def _name_of(node: ast.expr) -> str | None:
@@ -73,6 +88,7 @@ def _first_key(call_or_subscript: ast.AST) -> str | None:
 def reasons(tree: ast.AST, sections: set[str]) -> list[str]:
     """Each place in ``tree`` that reads a config's keys, as ``line: what``."""
     found: list[str] = []
+    written = _written(tree)
     for node in ast.walk(tree):
         if not isinstance(node, (ast.Subscript, ast.Call)):
             continue
@@ -87,7 +103,7 @@ def reasons(tree: ast.AST, sections: set[str]) -> list[str]:
             if holder is not None and CONFIG_NAME.match(holder):
                 found.append(f"{node.lineno}: read_key({holder}, …)")
             continue
-        if holder is None or _indexes_a_sequence(node):
+        if holder is None or _reads_no_key(node, written):
             continue
         if CONFIG_NAME.match(holder):
             found.append(f"{node.lineno}: {holder}[…]")
