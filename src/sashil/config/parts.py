@@ -16,7 +16,9 @@ from typing import Any
 
 from sashil.config.frozen import freeze, thaw
 from sashil.config.schema import defaults
+from sashil.config.section_parts import SECTION_PARTS, MismatchPart, ModelPart, RigPart, RtdacPart, section_of
 from sashil.config.sections import CONTROLLER
+from sashil.errors import ConfigError
 
 __all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key"]
 
@@ -35,14 +37,50 @@ def read_key(config: Mapping[str, Any], path: str) -> Any:
 @dataclass(frozen=True)
 class RigParts:
     """A backend's name and the values of the config keys its class declares in ``reads``
-    (``{value name: dotted config key}``), by value name."""
+    (``{value name: dotted config key}``): a whole ``model``, ``rig``, ``mismatch`` or ``rtdac``
+    section as its typed part (:mod:`sashil.config.section_parts`), every other key's value in
+    ``values`` by value name."""
 
     backend: str
     values: Mapping[str, Any]
+    model: ModelPart | None = None
+    rig: RigPart | None = None
+    mismatch: MismatchPart | None = None
+    rtdac: RtdacPart | None = None
+
+    @staticmethod
+    def backend_of(config: Mapping[str, Any]) -> str:
+        """The backend a resolved config names (``driver.name``)."""
+        return str(read_key(config, "driver.name"))
 
     @classmethod
     def read(cls, config: Mapping[str, Any], backend: str, reads: Mapping[str, str]) -> RigParts:
-        return cls(backend, freeze({name: read_key(config, path) for name, path in reads.items()}, "rig parts"))
+        values: dict[str, Any] = {}
+        sections: dict[str, Any] = {}
+        for name, path in reads.items():
+            if path not in SECTION_PARTS:
+                values[name] = read_key(config, path)
+            elif name != path:
+                raise ConfigError(
+                    f"driver {backend!r}: reads the whole section {path!r} as {name!r} (name it {path!r})"
+                )
+            else:
+                sections[path] = SECTION_PARTS[path].read(read_key(config, path), path)
+        return cls(backend, freeze(values, "rig parts"), **sections)
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: each typed section as the section it was read from, or None."""
+        sections = {
+            name: None if getattr(self, name) is None else section_of(getattr(self, name)) for name in SECTION_PARTS
+        }
+        return {"backend": self.backend, "values": thaw(self.values), **sections}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RigParts:
+        sections = {
+            name: part.read(data[name], name) for name, part in SECTION_PARTS.items() if data.get(name) is not None
+        }
+        return cls(str(data["backend"]), freeze(data["values"], "rig parts"), **sections)
 
 
 @dataclass(frozen=True)
@@ -170,13 +208,20 @@ class RunSpec:
     def to_json(self) -> dict[str, Any]:
         """Plain JSON values: each part a mapping of its fields."""
         return thaw(
-            {key: vars(value) if hasattr(value, "__dataclass_fields__") else value for key, value in vars(self).items()}
+            {
+                key: value.to_json()
+                if isinstance(value, RigParts)
+                else vars(value)
+                if hasattr(value, "__dataclass_fields__")
+                else value
+                for key, value in vars(self).items()
+            }
         )
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RunSpec:
         return cls(
-            rig=RigParts(str(data["rig"]["backend"]), freeze(data["rig"]["values"], "rig parts")),
+            rig=RigParts.from_json(data["rig"]),
             stage=StageParts(
                 **{
                     **data["stage"],
