@@ -15,23 +15,25 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sashil.config.frozen import freeze, thaw
-from sashil.config.schema import defaults
-from sashil.config.section_parts import SECTION_PARTS, MismatchPart, ModelPart, RigPart, RtdacPart, section_of
-from sashil.config.sections import CONTROLLER
+from sashil.config.keys import read_key
+from sashil.config.section_parts import (
+    SECTION_PARTS,
+    ControllerPart,
+    MismatchPart,
+    ModelPart,
+    RigPart,
+    RtdacPart,
+    section_of,
+)
 from sashil.errors import ConfigError
 
-__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key"]
+__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key", "read_keys"]
 
 
-def read_key(config: Mapping[str, Any], path: str) -> Any:
-    """The value at a dotted ``path`` of a config (``rig.coil_tau_s``; a section's name alone gives
-    the whole section); KeyError naming the path when it is not there."""
-    value: Any = config
-    for part in path.split("."):
-        if not isinstance(value, Mapping) or part not in value:
-            raise KeyError(f"config key {path!r} is not in the resolved config")
-        value = value[part]
-    return value
+def read_keys(config: Mapping[str, Any], reads: Mapping[str, str], where: str = "options") -> Mapping[str, Any]:
+    """The values of the config keys a ``reads`` table declares (``{value name: dotted config key}``),
+    by value name, read-only: what a module that declares its keys (an experiment, a road) is given."""
+    return freeze({name: read_key(config, path) for name, path in reads.items()}, where)
 
 
 @dataclass(frozen=True)
@@ -90,8 +92,8 @@ class StageParts:
     rig's facts a law and an estimator use."""
 
     law: str
-    controller: Mapping[str, Any]
-    model: Mapping[str, Any]
+    controller: ControllerPart
+    model: ModelPart
     current_max_a: float
     #: the coil lag the controller assumes: ``controller.coil_tau_s``, else the rig's [s]
     coil_tau_s: float
@@ -101,21 +103,28 @@ class StageParts:
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> StageParts:
-        """The parts of a config, resolved or being resolved (a ``controller`` key a config predates
-        takes its default)."""
-        controller = {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
-        rig = config.get("rig") or {}
-        tau = controller.get("coil_tau_s")
-        tau = rig.get("coil_tau_s") if tau is None else tau
+        """The parts of a resolved config (each key strictly: ConfigError naming one that is missing)."""
+        controller = ControllerPart.read(read_key(config, "controller"))
+        rig = RigPart.read(read_key(config, "rig"))
         return cls(
-            law=str(controller["law"]),
-            controller=freeze(controller, "controller"),
-            model=freeze(config.get("model") or {}, "model"),
-            current_max_a=float(rig.get("current_max_a", 0.0)),
-            coil_tau_s=float(tau or 0.0),
-            counts_per_rev=int(rig.get("encoder_counts_per_rev", 0)),
-            angle_noise_rad=float(rig.get("angle_noise_rad") or 0.0),
-            rate_hz=float((config.get("loop") or {}).get("rate_hz", 1000.0)),
+            law=controller.law,
+            controller=controller,
+            model=ModelPart.read(read_key(config, "model")),
+            current_max_a=rig.current_max_a,
+            coil_tau_s=rig.coil_tau_s if controller.coil_tau_s is None else controller.coil_tau_s,
+            counts_per_rev=rig.encoder_counts_per_rev,
+            angle_noise_rad=rig.angle_noise_rad,
+            rate_hz=float(read_key(config, "loop.rate_hz")),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: the controller and the model as the sections they were read from."""
+        return {**vars(self), "controller": self.controller.section(), "model": section_of(self.model)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> StageParts:
+        return cls(
+            **{**data, "controller": ControllerPart.read(data["controller"]), "model": ModelPart.read(data["model"])}
         )
 
 
@@ -210,7 +219,7 @@ class RunSpec:
         return thaw(
             {
                 key: value.to_json()
-                if isinstance(value, RigParts)
+                if isinstance(value, (RigParts, StageParts))
                 else vars(value)
                 if hasattr(value, "__dataclass_fields__")
                 else value
@@ -222,13 +231,7 @@ class RunSpec:
     def from_json(cls, data: Mapping[str, Any]) -> RunSpec:
         return cls(
             rig=RigParts.from_json(data["rig"]),
-            stage=StageParts(
-                **{
-                    **data["stage"],
-                    "controller": freeze(data["stage"]["controller"], "controller"),
-                    "model": freeze(data["stage"]["model"], "model"),
-                }
-            ),
+            stage=StageParts.from_json(data["stage"]),
             safety=SafetyParts(**data["safety"]),
             loop=LoopParts(**{**data["loop"], "rt": freeze(data["loop"]["rt"], "loop.rt")}),
             virtual=bool(data["virtual"]),

@@ -9,13 +9,20 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["RecordedModel", "recorded_controller"]
+from sashil.config.sections import CONTROLLER
+
+__all__ = ["RecordedModel", "recorded_controller", "recorded_law"]
 
 
 def recorded_controller(config: Mapping[str, Any]) -> dict[str, Any]:
     """The ``controller:`` mapping of a recorded config ({} when absent or not a mapping)."""
     section = config.get("controller") if isinstance(config, Mapping) else None
     return dict(section) if isinstance(section, Mapping) else {}
+
+
+def recorded_law(config: Mapping[str, Any]) -> str:
+    """The law a recorded config names (``controller.law``; the schema's default when not recorded)."""
+    return str(recorded_controller(config).get("law", CONTROLLER.fields["law"].default))
 
 
 @dataclass(frozen=True)

@@ -14,9 +14,20 @@ from types import UnionType
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from sashil.config.frozen import freeze, thaw
+from sashil.config.keys import read_key
 from sashil.errors import ConfigError
 
-__all__ = ["SECTION_PARTS", "MismatchPart", "ModelPart", "RigPart", "RtdacPart", "read_fields", "section_of"]
+__all__ = [
+    "SECTION_PARTS",
+    "CalibratePart",
+    "ControllerPart",
+    "MismatchPart",
+    "ModelPart",
+    "RigPart",
+    "RtdacPart",
+    "read_fields",
+    "section_of",
+]
 
 Part = TypeVar("Part")
 
@@ -167,6 +178,78 @@ class RtdacPart:
     @classmethod
     def read(cls, section: Mapping[str, Any], where: str = "rtdac") -> RtdacPart:
         return read_fields(cls, section, where)
+
+
+@dataclass(frozen=True)
+class ControllerPart:
+    """The ``controller`` section: the law, the controller's own keys (the estimator, the observer's
+    inverse and the coil-lag lead; :data:`sashil.config.sections.CONTROLLER` says what each means)
+    and, in ``params``, the section's other keys: the law's parameters, which the law checks."""
+
+    law: str
+    estimator: str
+    kalman_accel_psd: float
+    kalman_road_jerk_psd: float
+    kalman_road_jerk_psd_commanded: float
+    kalman_quantisation: str
+    edge_timing: bool
+    kalman_bias_psd: float
+    innovation_limit_counts: float
+    estimator_bandwidth_hz: float
+    estimator_order: int
+    road_bandwidth_hz: float
+    model_aided: bool
+    inverse: str
+    min_authority_nm_per_a: float
+    lead_horizon_s: float
+    lead_current_laws: bool
+    #: the coil lag the controller assumes [s] (None: the rig's)
+    coil_tau_s: float | None
+    tune_ramp_s: float
+    params: Mapping[str, Any]
+
+    @classmethod
+    def read(cls, section: Mapping[str, Any], where: str = "controller") -> ControllerPart:
+        own = {field.name for field in fields(cls)} - {"params"}
+        params = {key: value for key, value in section.items() if key not in own}
+        return read_fields(cls, {**section, "params": params}, where)
+
+    def section(self) -> dict[str, Any]:
+        """The section as the config holds it: the controller's keys and the law's parameters side by side."""
+        plain = section_of(self)
+        return {**{key: value for key, value in plain.items() if key != "params"}, **plain["params"]}
+
+
+@dataclass(frozen=True)
+class CalibratePart:
+    """The ``calibrate`` section: the plan of ``sashil calibrate`` (the drops and road chirps to fit,
+    the held-out runs, the fit's model and its intervals' blocks)."""
+
+    theta0_deg: float
+    currents_a: tuple[float, ...]
+    small_theta0_deg: float
+    small_currents_a: tuple[float, ...]
+    drop_duration_s: float
+    road_currents_a: tuple[float, ...]
+    road_amplitude_deg: float
+    road_f_start_hz: float
+    road_f_stop_hz: float
+    road_duration_s: float
+    road_ramp_s: float
+    validate_theta0_deg: float
+    validate_currents_a: tuple[float, ...]
+    validate_road_currents_a: tuple[float, ...]
+    max_rig_time_s: float
+    model: Literal["bouc-wen", "dahl", "lugre", "bingham", "all"]
+    inertia_kg_m2: float | None
+    profile_n: bool
+    interval_block_s: float
+    extra_steps: int
+
+    @classmethod
+    def read(cls, config: Mapping[str, Any]) -> CalibratePart:
+        """The ``calibrate`` section of a resolved config."""
+        return read_fields(cls, read_key(config, "calibrate"), "calibrate")
 
 
 #: the sections a backend receives typed when its ``reads`` names the whole section, by section name
