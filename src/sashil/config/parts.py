@@ -103,7 +103,7 @@ class StageParts:
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> StageParts:
-        """The parts of a resolved config (each key strictly: ConfigError naming one that is missing)."""
+        """The parts of a resolved config, each key read strictly (a missing or mistyped one: an error naming it)."""
         controller = ControllerPart.read(read_key(config, "controller"))
         rig = RigPart.read(read_key(config, "rig"))
         return cls(
