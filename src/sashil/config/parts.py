@@ -79,7 +79,7 @@ class RigParts:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RigParts:
-        sections = {
+        sections: dict[str, Any] = {
             name: part.read(data[name], name) for name, part in SECTION_PARTS.items() if data.get(name) is not None
         }
         return cls(str(data["backend"]), freeze(data["values"], "rig parts"), **sections)
