@@ -39,7 +39,7 @@ def assemble(
         rig = rig_parts(config)
         virtual = on_virtual_clock(rig, config["driver"]["clock"])
     else:
-        rig, virtual = RigParts(str(config["driver"]["name"]), freeze({}, "rig parts")), False
+        rig, virtual = RigParts(RigParts.backend_of(config), freeze({}, "rig parts")), False
     return RunSpec(
         rig=rig,
         stage=StageParts.read(config),

@@ -51,7 +51,7 @@ from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import parse_override
-from sashil.config.parts import RunSpec, StageParts, read_key
+from sashil.config.parts import RigParts, RunSpec, StageParts
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label, make_stage
@@ -234,7 +234,7 @@ def law_summary(result: Any, config: RunConfig, road_text: str, duration: float)
     return {
         **common,
         "verb": "compare",
-        "driver": read_key(config, "driver.name"),
+        "driver": RigParts.backend_of(config),
         "controller": result.label,
         "controller_origin": entry.origin,
         "parameters": law_parameters(result, config),
