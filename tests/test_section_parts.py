@@ -14,12 +14,13 @@ from sashil.config.rtdac_section import RTDAC
 from sashil.config.section_parts import (
     CalibratePart,
     ControllerPart,
+    LoopRtPart,
     MismatchPart,
     ModelPart,
     RigPart,
     RtdacPart,
 )
-from sashil.config.sections import CALIBRATE, CONTROLLER, MISMATCH, MODEL, RIG
+from sashil.config.sections import CALIBRATE, CONTROLLER, LOOP, MISMATCH, MODEL, RIG
 from sashil.drivers import rig_parts
 from sashil.drivers.mismatch import plant_parts
 from sashil.engine import assemble
@@ -33,7 +34,14 @@ def _names(part) -> set[str]:
 
 @pytest.mark.parametrize(
     ("part", "section"),
-    [(ModelPart, MODEL), (RigPart, RIG), (MismatchPart, MISMATCH), (RtdacPart, RTDAC), (CalibratePart, CALIBRATE)],
+    [
+        (ModelPart, MODEL),
+        (RigPart, RIG),
+        (MismatchPart, MISMATCH),
+        (RtdacPart, RTDAC),
+        (CalibratePart, CALIBRATE),
+        (LoopRtPart, LOOP.fields["rt"]),
+    ],
 )
 def test_a_part_has_the_keys_of_its_section(part, section):
     assert _names(part) == set(section.fields)

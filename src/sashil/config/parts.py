@@ -19,6 +19,7 @@ from sashil.config.keys import read_key
 from sashil.config.section_parts import (
     SECTION_PARTS,
     ControllerPart,
+    LoopRtPart,
     MismatchPart,
     ModelPart,
     RigPart,
@@ -175,7 +176,7 @@ class LoopParts:
     spin_margin_us: float
     overrun_policy: str
     warn_interval_s: float
-    rt: Mapping[str, Any]
+    rt: LoopRtPart
     max_missed_fraction: float
     max_lost_fraction: float
     process: bool
@@ -188,11 +189,15 @@ class LoopParts:
             spin_margin_us=float(loop["spin_margin_us"]),
             overrun_policy=str(loop["overrun_policy"]),
             warn_interval_s=float(loop["warn_interval_s"]),
-            rt=freeze(loop["rt"], "loop.rt"),
+            rt=LoopRtPart.read(loop["rt"]),
             max_missed_fraction=float(loop["max_missed_fraction"]),
             max_lost_fraction=float(config["driver"]["max_lost_fraction"]),
             process=bool(loop["process"]),
         )
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: the real-time set-up as the section it was read from."""
+        return {**vars(self), "rt": section_of(self.rt)}
 
 
 @dataclass(frozen=True)
@@ -219,7 +224,7 @@ class RunSpec:
         return thaw(
             {
                 key: value.to_json()
-                if isinstance(value, (RigParts, StageParts))
+                if isinstance(value, (RigParts, StageParts, LoopParts))
                 else vars(value)
                 if hasattr(value, "__dataclass_fields__")
                 else value
@@ -233,7 +238,7 @@ class RunSpec:
             rig=RigParts.from_json(data["rig"]),
             stage=StageParts.from_json(data["stage"]),
             safety=SafetyParts(**data["safety"]),
-            loop=LoopParts(**{**data["loop"], "rt": freeze(data["loop"]["rt"], "loop.rt")}),
+            loop=LoopParts(**{**data["loop"], "rt": LoopRtPart.read(data["loop"]["rt"])}),
             virtual=bool(data["virtual"]),
             plan=freeze(data.get("plan") or {}, "plan"),
             options=freeze(data.get("options") or {}, "options"),

@@ -21,6 +21,7 @@ __all__ = [
     "SECTION_PARTS",
     "CalibratePart",
     "ControllerPart",
+    "LoopRtPart",
     "MismatchPart",
     "ModelPart",
     "RigPart",
@@ -218,6 +219,23 @@ class ControllerPart:
         """The section as the config holds it: the controller's keys and the law's parameters side by side."""
         plain = section_of(self)
         return {**{key: value for key, value in plain.items() if key != "params"}, **plain["params"]}
+
+
+@dataclass(frozen=True)
+class LoopRtPart:
+    """The ``loop.rt`` section: the loop's best-effort real-time set-up (priority, CPU, memory lock,
+    the garbage collector, timer slack and the interpreter's switch interval)."""
+
+    priority: int
+    cpu: int | None
+    mlockall: bool
+    gc: Literal["disable", "freeze", "none"]
+    timer_slack_ns: int
+    gil_switch_us: int
+
+    @classmethod
+    def read(cls, section: Mapping[str, Any], where: str = "loop.rt") -> LoopRtPart:
+        return read_fields(cls, section, where)
 
 
 @dataclass(frozen=True)
