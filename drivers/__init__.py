@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from sashil.config.parts import RigParts, read_key
+from sashil.config.parts import RigParts
 from sashil.drivers.interface import SAFE_COMMAND, RigCapabilities, RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.errors import ConfigError, DriverError
 from sashil.plugins import BACKENDS_GROUP, entry_point_table, load_class
@@ -55,13 +55,13 @@ def backend_reads(name: str) -> Mapping[str, str]:
 def rig_parts(config: Mapping[str, Any], backend: str | None = None) -> RigParts:
     """The parts of a resolved config's backend (``driver.name``, or ``backend``): the values of
     the config keys the backend declares (:func:`backend_reads`)."""
-    name = backend if backend is not None else str(read_key(config, "driver.name"))
+    name = backend if backend is not None else RigParts.backend_of(config)
     return RigParts.read(config, name, backend_reads(name))
 
 
 def open_rig(parts: RigParts) -> RigInterface:
     """Build (not yet configure) the rig backend ``parts`` names from the values it declared."""
-    return backend_class(parts.backend).from_parts(parts.values)  # type: ignore[attr-defined]
+    return backend_class(parts.backend).from_parts(parts)  # type: ignore[attr-defined]
 
 
 def declared_capabilities(parts: RigParts) -> RigCapabilities:

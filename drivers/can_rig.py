@@ -18,6 +18,7 @@ from typing import Any, ClassVar
 
 import can
 
+from sashil.config.parts import RigParts
 from sashil.drivers.can_codec import RIG_IDS, CanDecoder, encode
 from sashil.drivers.link_rig import LINK_READS, PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import PROTOCOL_VERSION, Hello, Message, Version
@@ -104,7 +105,8 @@ class CanRig(LinkRig):
     }
 
     @classmethod
-    def from_parts(cls, values: Mapping[str, Any]) -> CanRig:
+    def from_parts(cls, parts: RigParts) -> CanRig:
+        values = parts.values
         return cls(LinkSettings(values), values["can_interface"], values["can_bitrate"], dict(values["can_options"]))
 
     def describe(self) -> str:

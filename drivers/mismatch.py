@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import random
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
-from sashil.config.frozen import thaw
+from sashil.config.frozen import freeze, thaw
+from sashil.config.section_parts import MismatchPart, ModelPart, RigPart, section_of
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
@@ -51,22 +53,33 @@ def mismatch_fractions(section: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
-def plant_sections(
-    model: Mapping[str, Any], rig: Mapping[str, Any], mismatch: Mapping[str, Any] | None
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The simulated plant's ``model`` and ``rig`` sections: copies of the given ones after the
-    ``mismatch`` section (None or empty: unchanged)."""
-    section: Mapping[str, Any] = mismatch or {}
-    model_out, rig_out = thaw(model), thaw(rig)
-    fractions = mismatch_fractions(section)
-    params = model_out["params"]
-    for key, frac in fractions.items():
+def plant_parts(model: ModelPart, rig: RigPart, mismatch: MismatchPart | None) -> tuple[ModelPart, RigPart]:
+    """The simulated plant's model and rig: ``model`` and ``rig`` after the ``mismatch`` section
+    (None: unchanged)."""
+    params = thaw(model.params)
+    for key, frac in mismatch_fractions(vars(mismatch) if mismatch is not None else {}).items():
         if key in params:
             params[key] = params[key] * (1.0 + frac)
     if params.get("beta", 1.0) + params.get("gamma", 0.0) <= 0:
         raise ConfigError("mismatch: the plant's beta + gamma must stay > 0 (bounded z)")
-    rig_out["coil_tau_s"] = rig_out["coil_tau_s"] * (1.0 + float(section.get("coil_tau", 0.0) or 0.0))
-    for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a"):
-        if section.get(key) is not None:
-            rig_out[key] = section[key]
-    return model_out, rig_out
+    if mismatch is None:
+        return replace(model, params=freeze(params, "model.params")), rig
+    changed = {
+        key: getattr(mismatch, key)
+        for key in ("encoder_counts_per_rev", "angle_noise_rad", "current_noise_a")
+        if getattr(mismatch, key) is not None
+    }
+    return replace(model, params=freeze(params, "model.params")), replace(
+        rig, coil_tau_s=rig.coil_tau_s * (1.0 + mismatch.coil_tau), **changed
+    )
+
+
+def plant_sections(
+    model: Mapping[str, Any], rig: Mapping[str, Any], mismatch: Mapping[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The simulated plant's ``model`` and ``rig`` sections (:func:`plant_parts`) of whole sections of
+    a resolved config: copies of the given ones after the ``mismatch`` section (None or empty: unchanged)."""
+    plant_model, plant_rig = plant_parts(
+        ModelPart.read(model), RigPart.read(rig), MismatchPart.read(mismatch) if mismatch else None
+    )
+    return section_of(plant_model), section_of(plant_rig)

@@ -12,24 +12,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import yaml
-
+from sashil.config.rtdac_map_file import read_map_file
 from sashil.drivers.rtdac_codec import FRAME_WORDS, Header
 from sashil.errors import ConfigError, DriverError
 
 #: the maps that ship with sashil
 BUILTIN_DIR = Path(__file__).with_name("rtdac_maps")
-
-_BLOCKS: dict[str, tuple[str, ...]] = {
-    "header": ("logic_version", "application", "synthesis_date", "module_counts"),
-    "digital_io": ("pin_mode", "direction", "output", "input"),
-    "pwm": ("count", "base", "stride"),
-    "encoder": ("count", "reset", "index_active", "index_invert", "counter_base", "stride"),
-    "ad": ("count", "gain_base", "value_base"),
-    "da": ("count", "base"),
-}
 
 
 @dataclass(frozen=True)
@@ -100,49 +89,10 @@ class RegisterMap:
         return f"logic {self.logic} ({apps}; {self.source})"
 
 
-def _int(value: Any, where: str, low: int = 0, high: int = FRAME_WORDS - 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ConfigError(f"{where}: expected an integer from {low} to {high}, got {value!r}")
-    return value
-
-
 def load_map(path: Path) -> RegisterMap:
-    """One map file, checked: a wrong key is one line naming the file and the key."""
-    try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f"{path}: cannot read the register map ({err})") from None
-    if not isinstance(doc, dict):
-        raise ConfigError(f"{path}: expected a mapping of the register map's blocks")
-    where = str(path)
-    known = {"logic_version", "applications", "evidence", *_BLOCKS}
-    for key in doc:
-        if key not in known:
-            raise ConfigError(f"{where}: {key}: unknown key (known: {', '.join(sorted(known))})")
-    values: dict[str, Any] = {
-        "logic_version": _int(doc.get("logic_version"), f"{where}: logic_version", 0, 0xFFFF),
-        "source": path.name,
-        "evidence": str(doc.get("evidence", "")),
-    }
-    apps = doc.get("applications")
-    if apps is not None and not (isinstance(apps, list) and all(isinstance(a, str) for a in apps)):
-        raise ConfigError(f"{where}: applications: expected a list of names or null, got {apps!r}")
-    values["applications"] = None if apps is None else tuple(a.strip() for a in apps)
-    for block, keys in _BLOCKS.items():
-        section = doc.get(block)
-        if not isinstance(section, dict):
-            raise ConfigError(f"{where}: {block}: expected a mapping with {', '.join(keys)}")
-        for key in keys:
-            if key not in section:
-                raise ConfigError(f"{where}: {block}.{key}: missing")
-        if block == "header":
-            continue  # the header's words are fixed by the frame (rtdac_codec.decode_header)
-        prefix = {"digital_io": ""}.get(block, block + "_")
-        for key in keys:
-            name = {"counter_base": "base"}.get(key, key) if block == "encoder" else key
-            low = 1 if key in ("count", "stride") else 0
-            values[prefix + name] = _int(section[key], f"{where}: {block}.{key}", low)
-    return RegisterMap(**values)
+    """One map file, checked (:func:`~sashil.config.rtdac_map_file.read_map_file`): a wrong key is
+    one line naming the file and the key."""
+    return RegisterMap(**read_map_file(path, FRAME_WORDS))
 
 
 def known_maps(map_dir: str | None = None) -> list[RegisterMap]:

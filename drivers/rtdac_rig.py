@@ -42,6 +42,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
+from sashil.config.parts import RigParts
 from sashil.drivers.interface import (
     TWO_PI,
     RigCapabilities,
@@ -176,27 +177,29 @@ class RtdacRig(RigInterface):
     }
 
     @classmethod
-    def from_parts(cls, values: Mapping[str, Any], backend: Any = None) -> RtdacRig:
+    def from_parts(cls, parts: RigParts, backend: Any = None) -> RtdacRig:
         """The backend the ``rtdac`` section, ``driver.port`` and the rig's coil describe (nothing
         opened); ``backend``: a pyusb backend object to find the board through."""
-        section = values["rtdac"]
+        board, values = parts.rtdac, parts.values
+        if board is None:
+            raise DriverError("rtdac: the rig parts carry no rtdac section (RtdacRig.reads names it)")
         usb = UsbSettings(
-            manufacturer=section["manufacturer"],
-            serial=section["serial"],
-            vendor_id=section["vendor_id"],
-            product_id=section["product_id"],
-            usb_backend=section["usb_backend"],
+            manufacturer=board.manufacturer,
+            serial=board.serial,
+            vendor_id=board.vendor_id,
+            product_id=board.product_id,
+            usb_backend=board.usb_backend,
             port=values["port"],
-            timeout_ms=section["transfer_timeout_ms"],
+            timeout_ms=board.transfer_timeout_ms,
             rate_hz=values.get("rate_hz"),
         )
         return cls(
             usb,
-            Wiring.from_section(section),
+            Wiring.from_part(board),
             current_max_a=values["current_max_a"],
             coil_tau_s=values["coil_tau_s"],
-            application=section["application"],
-            map_dir=section["map_dir"],
+            application=board.application,
+            map_dir=board.map_dir,
             backend=backend,
             busy_limit_s=max(values["link_lost_ms"], 1.0) * 1e-3,
         )

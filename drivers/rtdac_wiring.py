@@ -7,9 +7,10 @@ what the SAS rig wires where (the section's docs say which defaults guess).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any
+
+from sashil.config.section_parts import RtdacPart
 
 
 @dataclass(frozen=True)
@@ -46,11 +47,6 @@ class Wiring:
     bringup_road_output: float = 0.25
 
     @classmethod
-    def from_section(cls, section: Mapping[str, Any], **changes: Any) -> Wiring:
-        """The section's wiring keys, with ``changes`` over them."""
-        values = {f.name: _plain(section[f.name]) for f in fields(cls)}
-        return replace(cls(**values), **changes)
-
-
-def _plain(value: Any) -> Any:
-    return tuple(value) if isinstance(value, (list, tuple)) else value
+    def from_part(cls, part: RtdacPart, **changes: Any) -> Wiring:
+        """The ``rtdac`` section's wiring, with ``changes`` over it."""
+        return replace(cls(**{f.name: getattr(part, f.name) for f in fields(cls)}), **changes)

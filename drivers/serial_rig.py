@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 
 import serial
 
+from sashil.config.parts import RigParts
 from sashil.drivers import slcan_codec
 from sashil.drivers.link_rig import LINK_READS, PROBE_S, LinkRig, LinkSettings, error_reason, read_raw
 from sashil.drivers.messages import Message
@@ -76,8 +77,8 @@ class SerialRig(LinkRig):
     reads: ClassVar[Mapping[str, str]] = {**LINK_READS, "baud": "driver.baud"}
 
     @classmethod
-    def from_parts(cls, values: Mapping[str, Any]) -> SerialRig:
-        return cls(LinkSettings(values), baud=values["baud"])
+    def from_parts(cls, parts: RigParts) -> SerialRig:
+        return cls(LinkSettings(parts.values), baud=parts.values["baud"])
 
     def describe(self) -> str:
         return f"serial {self.port_name}"

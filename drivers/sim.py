@@ -18,10 +18,11 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
+from sashil.config.parts import RigParts
 from sashil.drivers.interface import (
     FLAG_HELD,
     NO_EDGE,
@@ -34,7 +35,7 @@ from sashil.drivers.interface import (
     RigState,
     clamp_current,
 )
-from sashil.drivers.mismatch import plant_sections
+from sashil.drivers.mismatch import plant_parts
 from sashil.drivers.sim_advance import advance
 from sashil.errors import DriverError
 from sashil.models.hysteresis import rig_params
@@ -127,21 +128,23 @@ class SimulatedRig(RigInterface):
     reads: ClassVar[Mapping[str, str]] = {"model": "model", "rig": "rig", "mismatch": "mismatch"}
 
     @classmethod
-    def from_parts(cls, values: Mapping[str, Any]) -> SimulatedRig:
+    def from_parts(cls, parts: RigParts) -> SimulatedRig:
         """The rig of the ``model`` and ``rig`` sections, after the ``mismatch`` section (the plant, not the model)."""
-        model, rig = plant_sections(values["model"], values["rig"], values.get("mismatch"))
+        if parts.model is None or parts.rig is None:
+            raise DriverError("sim: the rig parts carry no model or rig section (SimulatedRig.reads names both)")
+        model, rig = plant_parts(parts.model, parts.rig, parts.mismatch)
         plant = RigPlant(
-            rig_params(model),
-            coil_tau_s=rig["coil_tau_s"],
-            current_max_a=rig["current_max_a"],
-            max_step_s=rig["plant_max_step_s"],
+            rig_params({"name": model.name, "params": model.params}),
+            coil_tau_s=rig.coil_tau_s,
+            current_max_a=rig.current_max_a,
+            max_step_s=rig.plant_max_step_s,
         )
         return cls(
             plant,
-            counts_per_rev=rig["encoder_counts_per_rev"],
-            angle_noise_rad=rig["angle_noise_rad"],
-            current_noise_a=rig["current_noise_a"],
-            noise_seed=rig["noise_seed"],
+            counts_per_rev=rig.encoder_counts_per_rev,
+            angle_noise_rad=rig.angle_noise_rad,
+            current_noise_a=rig.current_noise_a,
+            noise_seed=rig.noise_seed,
         )
 
     # lifecycle -----------------------------------------------------------------------------

@@ -12,6 +12,7 @@ import pytest
 import serial
 
 from sashil.cli import main
+from sashil.config.section_parts import LoopRtPart
 from sashil.diagnostics import FAIL, OK, WARN, exit_code, table
 from sashil.diagnostics.board import judge_rtt, rtt_figures
 from sashil.diagnostics.jitter import judge, summarise
@@ -123,7 +124,7 @@ def test_timer_slack():
 
 
 def test_machine_checks_cover_the_loop_section(config):
-    names = [c.name for c in machine_checks(MachineFacts(), config["loop"]["rt"])]
+    names = [c.name for c in machine_checks(MachineFacts(), LoopRtPart.read(config["loop"]["rt"]))]
     assert names == ["preemption", "sched_fifo", "memlock", "cpu_governor", "isolated_cpus", "timer_slack"]
 
 

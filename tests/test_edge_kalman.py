@@ -160,7 +160,7 @@ def test_a_run_with_bad_edge_times_ends_at_zero_current_with_exit_3_and_the_coun
             super().write(RigCommand(cmd.current_a, 0.5), t_ns, dt_ns)
 
     config = default_config()
-    rig = BadEdges.from_parts(rig_parts(config, "sim").values)
+    rig = BadEdges.from_parts(rig_parts(config, "sim"))
     rig.currents = []
     ctl = make_controller(
         "passive", StageParts.read({**config, "controller": {**config["controller"], "current_a": 0.5}})

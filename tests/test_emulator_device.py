@@ -76,7 +76,7 @@ def test_samples_are_the_simulated_rig_sensor_model():
     """The board adds no physics: same plant, same times -> the same encoder counts."""
     config = default_config()
     device = build_device(config)
-    reference = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    reference = SimulatedRig.from_parts(rig_parts(config, "sim"))
     reference.configure(), reference.activate()
     device.handle(Configure(1000, 1000, PACING_DEVICE), 0)
     reference.read(0, 0)

@@ -665,18 +665,21 @@ def test_a_page_value_that_is_no_number_is_argparses_line(tmp_path):
 
 
 def test_sub_runs_are_labelled_in_the_order_their_loops_run(tmp_path):
+    from sashil.config.parts import read_keys
     from sashil.lab._sweep import frequencies
-    from sashil.panel.bench import sub_runs
+    from sashil.panel.bench import PANEL_READS, sub_runs
 
     bench = Bench(runs_dir=tmp_path / "runs")
     drop = bench.resolve({"experiment": "drop-test", "law": "passive", "currents_a": [1, 0, 0.25]})
-    assert sub_runs(drop, "drop-test") == ["1 A", "0 A", "0.25 A"]
+    assert sub_runs(read_keys(drop, PANEL_READS), "drop-test") == ["1 A", "0 A", "0.25 A"]
     stepped = bench.resolve(
         {"experiment": "sweep", "law": "passive", "f_start_hz": 1, "f_stop_hz": 4, "stepped": True, "steps": 3}
     )
-    assert sub_runs(stepped, "sweep") == [f"{f:.3g} Hz" for f in frequencies(1, 4, 3, stepped["sweep"]["spacing"])]
+    assert sub_runs(read_keys(stepped, PANEL_READS), "sweep") == [
+        f"{f:.3g} Hz" for f in frequencies(1, 4, 3, stepped["sweep"]["spacing"])
+    ]
     chirp = bench.resolve({"experiment": "sweep", "law": "passive", "f_start_hz": 1, "f_stop_hz": 4, "duration_s": 5})
-    assert sub_runs(chirp, "sweep") == ["chirp 1-4 Hz over 5 s"]
+    assert sub_runs(read_keys(chirp, PANEL_READS), "sweep") == ["chirp 1-4 Hz over 5 s"]
 
 
 class HealthyStream:

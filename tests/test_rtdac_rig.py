@@ -75,7 +75,7 @@ def make(
     clock = Clock()
     board = build_board(freeze_config(board_raw), logic, identity, operator, faults)
     port = Tap(board, clock)
-    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac"))
     rig.link.backend = EmulatedUsbBackend(port)
     on_clock(rig, clock)
     return rig, board, clock, port
@@ -148,7 +148,7 @@ def test_the_current_loop_corrects_a_power_stage_the_map_does_not_match():
     board = build_board(freeze_config(raw), stage_gain=0.85)  # 15 % less current than the map says
     host = default_config()
     host["rtdac"].update(BENCH_SECTION)
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(host), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(host), "rtdac"))
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     on_clock(rig, clock)
     rig.configure()
@@ -357,7 +357,7 @@ def test_a_pyusb_backend_named_in_config_is_called_with_the_port_or_with_nothing
         pyusb_backend(UsbSettings(usb_backend="their_emulator:nothing"))
     raw = default_config()
     raw["rtdac"]["usb_backend"] = "their_emulator:without"
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac"))
     rig.configure()
     assert rig.header is not None and rig.header.logic == "0103"
     rig.close()

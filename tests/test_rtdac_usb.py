@@ -66,7 +66,7 @@ def link_to(port: Tap, rate_hz: float | None = None) -> BoardLink:
 
 
 def rig_on(port: Tap) -> RtdacRig:
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac"))
     rig.link.backend = EmulatedUsbBackend(port)
     clock = port.clock
     rig.monotonic = lambda: clock.now * 1e-9  # configure's wait for the arm's stillness on simulated time

@@ -56,7 +56,7 @@ def bench(bench_wiring: dict | None = None, board_sets: dict | None = None) -> t
         section, name = key.split(".")
         raw[section][name] = value
     board = build_board(freeze_config(raw), stage_gain=STAGE_GAIN, wiring_changes=bench_wiring or BENCH)
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac"))
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.configure()
     return rig, board, clock
@@ -114,7 +114,7 @@ def test_the_fragment_is_a_config_that_drives_the_bench_it_was_found_on(tmp_path
     config = load_config(tmp_path / "wiring.yaml")
     clock = BoardClock()
     board = build_board(freeze_config(default_config()), stage_gain=STAGE_GAIN, wiring_changes=BENCH)
-    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac"))
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.configure()
     rig.activate()
@@ -213,8 +213,8 @@ def test_the_walk_stays_under_the_bring_up_caps():
 
 def test_a_low_cap_shrinks_the_pulses(tmp_path):
     rig, board, clock = bench()
-    rig.wiring = Wiring.from_section(
-        rig_parts(freeze_config(default_config()), "rtdac").values["rtdac"],
+    rig.wiring = Wiring.from_part(
+        rig_parts(freeze_config(default_config()), "rtdac").rtdac,
         bringup_current_max_a=0.05,
         bringup_road_output=0.01,
     )

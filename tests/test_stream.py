@@ -133,7 +133,7 @@ def test_a_stalled_recorder_stops_the_loop_at_0_a_and_keeps_every_recorded_row(t
     from sashil.runtime.loop import ControlLoop, record_columns
 
     config = load_config(None)
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     stage = ConstantCurrent(0.4)
     shared = Stream.create(record_columns(stage), capacity=64, window=4096, folder=tmp_path)
     shared.header[RECORDER_W] = 1  # a recorder that never drains

@@ -168,7 +168,9 @@ def test_a_safety_trip_in_a_sweep_leaves_the_damper_at_zero_amps():
     with pytest.raises(SafetyTrip):
         run_profile(
             config,
-            make_controller("passive", StageParts.read({**config, "controller": {"current_a": 0.5}})),
+            make_controller(
+                "passive", StageParts.read({**config, "controller": {**config["controller"], "current_a": 0.5}})
+            ),
             sine_profile(math.radians(1.0), 1.6, 1.0),
             20.0,
             factory,

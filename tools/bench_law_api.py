@@ -54,7 +54,7 @@ def record_samples(cycles: int) -> list:
     config = default_config()
     road, _ = parse_road("sine:1.6:1.0", RoadParts.read(config))
     assert road is not None
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     rig.configure()
     rig.activate()
     samples = []

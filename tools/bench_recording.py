@@ -96,7 +96,7 @@ def closed_loop(config: dict, duration: float, folder: Path, rrd: Path | None, b
     config["controller"]["law"] = "target-damping"
     config["controller"]["zeta"] = 0.08
     stage = RoadStage(make_controller("target-damping", StageParts.read(config)), road_sine(math.radians(2.0), 1.6))
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     live = None
     if rrd is not None:
         columns = (*record_columns(stage), "lateness_us", "band_lo_nm", "band_hi_nm")

@@ -50,7 +50,7 @@ def record(config: dict[str, Any], seconds: float, folder: Path) -> tuple[dict[s
     """The recorded stream of a skyhook run of ``seconds``, and the wall time the simulation took."""
     road, _ = parse_road("sine:1.2:1.0", RoadParts.read(config))
     stage = RoadStage(make_controller(None, StageParts.read(config)), road)
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     started = time.perf_counter()
     outcome = run_plan(
         assemble(config), rig, stage, VirtualClock(), seconds, data_path=folder / "data.csv", realtime=False

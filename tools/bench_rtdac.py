@@ -66,7 +66,7 @@ def bench_config() -> object:
 def measure(backend: object, cycles: int) -> tuple[list[float], list[float]]:
     """(bare exchanges, backend cycles) [s], interleaved in blocks of 100 so that both see the same load."""
     config = bench_config()
-    rig = RtdacRig.from_parts(rig_parts(config, "rtdac").values, backend=backend)  # type: ignore[arg-type]
+    rig = RtdacRig.from_parts(rig_parts(config, "rtdac"), backend=backend)  # type: ignore[arg-type]
     rig.configure()
     rig.activate()
     dev = rig.link.dev
@@ -120,7 +120,7 @@ class RecordedLink:
 
 def own_work(backend: object, cycles: int) -> list[float]:
     """The backend's cycle [s] over a :class:`RecordedLink`."""
-    rig = RtdacRig.from_parts(rig_parts(bench_config(), "rtdac").values, backend=backend)  # type: ignore[arg-type]
+    rig = RtdacRig.from_parts(rig_parts(bench_config(), "rtdac"), backend=backend)  # type: ignore[arg-type]
     rig.configure()
     rig.activate()
     real = rig.link

@@ -57,7 +57,7 @@ def bench(host: dict, truth: dict, motor: RoadMotor) -> tuple[RtdacRig, RtdacBoa
     clock = BoardClock()
     board = build_board(freeze_config(default_config()), wiring_changes=truth)
     board.motor = motor
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(raw), "rtdac"))
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.monotonic, rig.sleep = clock.seconds, clock.sleep
     return rig, board, clock

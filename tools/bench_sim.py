@@ -80,7 +80,7 @@ def one_drop(config: dict[str, Any], current: float, record_s: float) -> Any:
 def bare_plant(config: dict[str, Any], cycles: int, current: float) -> tuple[float, float]:
     """(wall, CPU) seconds of ``cycles`` plant steps of one period (the drop's hold, then free)."""
     rate = config["loop"]["rate_hz"]
-    plant = SimulatedRig.from_parts(rig_parts(config, "sim").values).plant
+    plant = SimulatedRig.from_parts(rig_parts(config, "sim")).plant
     plant.hold(math.radians(-5.0))
     dt = 1.0 / rate
     held = round(0.3 * rate)
@@ -158,7 +158,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     current = 1.0
     samples: list[Any] = []
     commands: list[float] = []
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     read, write = rig.read, rig.write
 
     def capture_read(t_ns: int, dt_ns: int) -> Any:
@@ -192,7 +192,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     rate = config["loop"]["rate_hz"]
 
     def plant_alone() -> None:
-        plant = SimulatedRig.from_parts(rig_parts(config, "sim").values).plant
+        plant = SimulatedRig.from_parts(rig_parts(config, "sim")).plant
         plant.hold(math.radians(-5.0))
         step, dt, held = plant.step, 1.0 / rate, round(release_after * rate)
         for k, command in enumerate(commands):
@@ -202,7 +202,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
 
     def backend(with_write: bool) -> Callable[[], None]:
         def run() -> None:
-            sim = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+            sim = SimulatedRig.from_parts(rig_parts(config, "sim"))
             sim.operator_hold(math.radians(-5.0), release_after)
             sim.set_initial_current(current)
             sim.configure()
@@ -248,7 +248,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
     def in_turn() -> None:
         """A cycle's calls one after another over the run's times, as the loop makes them, without
         the loop around them (no clock, deadlines, timing rings, stop or tuning checks)."""
-        sim = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+        sim = SimulatedRig.from_parts(rig_parts(config, "sim"))
         sim.operator_hold(math.radians(-5.0), release_after)
         sim.set_initial_current(current)
         sim.configure()

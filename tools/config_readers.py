@@ -4,8 +4,13 @@ A file counts when it has either of these:
 
 * a subscript, ``.get`` or ``read_key`` on a name like ``config``, ``cfg``, ``conf``,
   ``*_config``, ``config_*``, ``doc`` or ``document``;
-* a section's name (a top-level key of ``configs/sim.yaml``) used as a key on ``values``,
-  ``section``, ``controller``, ``model``, ``rig`` or ``options``.
+* a section's name (a key of the schema's ``SCHEMA`` table in ``src/sashil/config/sections.py``)
+  used as a key on ``values``, ``section``, ``controller``, ``model``, ``rig`` or ``options``.
+
+Only reads count: a config's keys are strings, so an integer index (``doc[0]``, a docstring's
+first paragraph) reads a sequence, not a config, and a subscript stored to or deleted
+(``doc["intervals_95"] = ...``, a document being written, with the subscripts it is written
+through: ``doc["calibration"]["intervals"] = ...``) reads nothing.
 
 The count runs over ``src/sashil`` and ``drivers/``, leaving out ``src/sashil/config/``. Files in
 the loop's own layers (runtime/, control/, safety.py and the backends) are listed apart, since
@@ -23,8 +28,6 @@ import re
 import sys
 from pathlib import Path
 
-import yaml
-
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG_NAME = re.compile(r"^(config|cfg|conf|doc|document|\w+_config|config_\w+)$")
 SECTION_HOLDERS = {"values", "section", "controller", "model", "rig", "options"}
@@ -32,9 +35,36 @@ LOOP_SIDE = ("src/sashil/runtime/", "src/sashil/control/", "src/sashil/safety.py
 
 
 def section_names() -> set[str]:
-    """The config's section names: the top-level keys of the simulated rig's config."""
-    with open(ROOT / "configs" / "sim.yaml", encoding="utf-8") as handle:
-        return set(yaml.safe_load(handle))
+    """The config's section names: the string keys of the ``SCHEMA`` table in the config layer's
+    ``sections.py`` (read from its source, so the count imports nothing of sashil)."""
+    tree = ast.parse((ROOT / "src" / "sashil" / "config" / "sections.py").read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "SCHEMA" for t in node.targets):
+            if isinstance(node.value, ast.Dict):
+                return {k.value for k in node.value.keys if isinstance(k, ast.Constant) and isinstance(k.value, str)}
+    raise SystemExit("config_readers: no SCHEMA table in src/sashil/config/sections.py")
+
+
+def _written(tree: ast.AST) -> set[int]:
+    """The subscripts of ``tree`` stored to or deleted, and those they are written through (the
+    ``doc["a"]`` of ``doc["a"]["b"] = value``), by ``id``."""
+    written: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Subscript) and not isinstance(node.ctx, ast.Load):
+            inner: ast.expr = node
+            while isinstance(inner, ast.Subscript):
+                written.add(id(inner))
+                inner = inner.value
+    return written
+
+
+def _reads_no_key(node: ast.AST, written: set[int]) -> bool:
+    """Whether ``node`` is a subscript that reads no key: by an integer constant (a sequence's
+    item) or written (:func:`_written`)."""
+    if not isinstance(node, ast.Subscript):
+        return False
+    by_index = isinstance(node.slice, ast.Constant) and type(node.slice.value) is int
+    return by_index or id(node) in written
 
 
 def _name_of(node: ast.expr) -> str | None:
@@ -58,6 +88,7 @@ def _first_key(call_or_subscript: ast.AST) -> str | None:
 def reasons(tree: ast.AST, sections: set[str]) -> list[str]:
     """Each place in ``tree`` that reads a config's keys, as ``line: what``."""
     found: list[str] = []
+    written = _written(tree)
     for node in ast.walk(tree):
         if not isinstance(node, (ast.Subscript, ast.Call)):
             continue
@@ -72,7 +103,7 @@ def reasons(tree: ast.AST, sections: set[str]) -> list[str]:
             if holder is not None and CONFIG_NAME.match(holder):
                 found.append(f"{node.lineno}: read_key({holder}, …)")
             continue
-        if holder is None:
+        if holder is None or _reads_no_key(node, written):
             continue
         if CONFIG_NAME.match(holder):
             found.append(f"{node.lineno}: {holder}[…]")

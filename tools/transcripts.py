@@ -52,7 +52,7 @@ def walk_transcript() -> str:
     """The walk's dialogue and its rows, against the emulated bench in this process."""
     clock = BoardClock()
     board = build_board(freeze_config(default_config()), stage_gain=STAGE_GAIN, wiring_changes=BENCH)
-    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac").values)
+    rig = RtdacRig.from_parts(rig_parts(freeze_config(default_config()), "rtdac"))
     rig.link.backend = EmulatedUsbBackend(DirectPort(board, clock))
     rig.monotonic, rig.sleep = clock.seconds, clock.sleep
     rig.configure()

@@ -26,6 +26,7 @@ import struct
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from sashil.config.section_parts import RtdacPart
 from sashil.drivers import rig_parts
 from sashil.drivers.emulator.device import Operator
 from sashil.drivers.interface import RigCommand
@@ -80,9 +81,9 @@ class RoadMotor:
     tau_s: float = 0.02
 
     @classmethod
-    def from_section(cls, section: Any, tau_s: float = 0.02) -> RoadMotor:
+    def from_part(cls, board: RtdacPart, tau_s: float = 0.02) -> RoadMotor:
         """The motor a config's feed-forward describes (its gain the feed-forward's inverse)."""
-        per = section["road_output_per_rad_s"]
+        per = board.road_output_per_rad_s
         return cls(1.0 / per if per > 0.0 else 0.0, tau_s)
 
 
@@ -447,17 +448,19 @@ def build_board(
     layouts = {m.logic: m for m in known_maps()}
     if logic not in layouts:
         raise ValueError(f"logic: expected one of {', '.join(layouts)}, got {logic!r}")
-    section = rig_parts(config, "rtdac").values["rtdac"]  # the board's section, as the host's backend reads it
+    board = rig_parts(config, "rtdac").rtdac  # the board's section, as the host's backend reads it
+    if board is None:
+        raise ValueError("the rtdac backend's parts carry no rtdac section")
     # the bench's truth: the config's wiring, with the coil's current sensed on A/D 0 where the config
     # reads no sense (a host that reads none is the host's choice, not the bench's wiring)
-    sense = section["coil_sense_ad"] if section["coil_sense_ad"] is not None else 0
-    wiring = Wiring.from_section(section, **{"coil_sense_ad": sense, **(wiring_changes or {})})
+    sense = board.coil_sense_ad if board.coil_sense_ad is not None else 0
+    wiring = Wiring.from_part(board, **{"coil_sense_ad": sense, **(wiring_changes or {})})
     if stage_gain != 1.0:
         wiring = replace(wiring, coil_map_current_a=tuple(stage_gain * a for a in wiring.coil_map_current_a))
-    motor = RoadMotor.from_section(section, road_tau_s)
+    motor = RoadMotor.from_part(board, road_tau_s)
     ident = identity or BoardIdentity(logic_version=layouts[logic].logic_version)
     return RtdacBoard(
-        SimulatedRig.from_parts(rig_parts(config, "sim").values),
+        SimulatedRig.from_parts(rig_parts(config, "sim")),
         layouts[logic],
         wiring,
         ident,

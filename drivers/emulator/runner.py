@@ -57,7 +57,7 @@ def build_device(
     ``board``: ``python`` (:class:`RigDevice`) or ``c`` (the firmware's C logic,
     :class:`~sashil.drivers.emulator.c_board.CBoardDevice`, which needs a C compiler; DriverError
     if there is none); ``link``: ``serial`` or ``can``, the frames the C board speaks."""
-    rig = SimulatedRig.from_parts(rig_parts(config, "sim").values)
+    rig = SimulatedRig.from_parts(rig_parts(config, "sim"))
     if board == "c":
         from sashil.drivers.emulator.c_board import CBoardDevice
 

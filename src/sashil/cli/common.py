@@ -174,13 +174,13 @@ def resolve_config(args: argparse.Namespace, models: Sequence[str] | None = None
     """The config of the common options, resolved and checked (:func:`~sashil.engine.resolve.resolve`,
     read-only), and the ``--format`` values checked against its driver: for the verbs whose own
     options set no config key (``doctor``, ``emulate``)."""
-    from sashil.config.parts import read_key
+    from sashil.config.parts import RigParts
     from sashil.engine.resolve import resolve
 
     if getattr(args, "current", None) is not None and getattr(args, "controller", None) not in (None, "passive"):
         raise ConfigError(f"--current: only for --controller passive (got --controller {args.controller})")
     config = resolve(config_source(args), getattr(args, "verb", None), models)
-    outputs_of(args).check(str(read_key(config, "driver.name")))
+    outputs_of(args).check(RigParts.backend_of(config))
     return config
 
 

@@ -15,34 +15,75 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from sashil.config.frozen import freeze, thaw
-from sashil.config.schema import defaults
-from sashil.config.sections import CONTROLLER
+from sashil.config.keys import read_key
+from sashil.config.section_parts import (
+    SECTION_PARTS,
+    ControllerPart,
+    LoopRtPart,
+    MismatchPart,
+    ModelPart,
+    RigPart,
+    RtdacPart,
+    section_of,
+)
+from sashil.errors import ConfigError
 
-__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key"]
+__all__ = ["LoopParts", "RigParts", "RunSpec", "SafetyParts", "StageParts", "read_key", "read_keys"]
 
 
-def read_key(config: Mapping[str, Any], path: str) -> Any:
-    """The value at a dotted ``path`` of a config (``rig.coil_tau_s``; a section's name alone gives
-    the whole section); KeyError naming the path when it is not there."""
-    value: Any = config
-    for part in path.split("."):
-        if not isinstance(value, Mapping) or part not in value:
-            raise KeyError(f"config key {path!r} is not in the resolved config")
-        value = value[part]
-    return value
+def read_keys(config: Mapping[str, Any], reads: Mapping[str, str], where: str = "options") -> Mapping[str, Any]:
+    """The values of the config keys a ``reads`` table declares (``{value name: dotted config key}``),
+    by value name, read-only: what a module that declares its keys (an experiment, a road) is given."""
+    return freeze({name: read_key(config, path) for name, path in reads.items()}, where)
 
 
 @dataclass(frozen=True)
 class RigParts:
     """A backend's name and the values of the config keys its class declares in ``reads``
-    (``{value name: dotted config key}``), by value name."""
+    (``{value name: dotted config key}``): a whole ``model``, ``rig``, ``mismatch`` or ``rtdac``
+    section as its typed part (:mod:`sashil.config.section_parts`), every other key's value in
+    ``values`` by value name."""
 
     backend: str
     values: Mapping[str, Any]
+    model: ModelPart | None = None
+    rig: RigPart | None = None
+    mismatch: MismatchPart | None = None
+    rtdac: RtdacPart | None = None
+
+    @staticmethod
+    def backend_of(config: Mapping[str, Any]) -> str:
+        """The backend a resolved config names (``driver.name``)."""
+        return str(read_key(config, "driver.name"))
 
     @classmethod
     def read(cls, config: Mapping[str, Any], backend: str, reads: Mapping[str, str]) -> RigParts:
-        return cls(backend, freeze({name: read_key(config, path) for name, path in reads.items()}, "rig parts"))
+        values: dict[str, Any] = {}
+        sections: dict[str, Any] = {}
+        for name, path in reads.items():
+            if path not in SECTION_PARTS:
+                values[name] = read_key(config, path)
+            elif name != path:
+                raise ConfigError(
+                    f"driver {backend!r}: reads the whole section {path!r} as {name!r} (name it {path!r})"
+                )
+            else:
+                sections[path] = SECTION_PARTS[path].read(read_key(config, path), path)
+        return cls(backend, freeze(values, "rig parts"), **sections)
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: each typed section as the section it was read from, or None."""
+        sections = {
+            name: None if getattr(self, name) is None else section_of(getattr(self, name)) for name in SECTION_PARTS
+        }
+        return {"backend": self.backend, "values": thaw(self.values), **sections}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RigParts:
+        sections: dict[str, Any] = {
+            name: part.read(data[name], name) for name, part in SECTION_PARTS.items() if data.get(name) is not None
+        }
+        return cls(str(data["backend"]), freeze(data["values"], "rig parts"), **sections)
 
 
 @dataclass(frozen=True)
@@ -52,8 +93,8 @@ class StageParts:
     rig's facts a law and an estimator use."""
 
     law: str
-    controller: Mapping[str, Any]
-    model: Mapping[str, Any]
+    controller: ControllerPart
+    model: ModelPart
     current_max_a: float
     #: the coil lag the controller assumes: ``controller.coil_tau_s``, else the rig's [s]
     coil_tau_s: float
@@ -63,21 +104,28 @@ class StageParts:
 
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> StageParts:
-        """The parts of a config, resolved or being resolved (a ``controller`` key a config predates
-        takes its default)."""
-        controller = {**defaults(CONTROLLER.fields), **(config.get("controller") or {})}
-        rig = config.get("rig") or {}
-        tau = controller.get("coil_tau_s")
-        tau = rig.get("coil_tau_s") if tau is None else tau
+        """The parts of a resolved config, each key read strictly (a missing or mistyped one: an error naming it)."""
+        controller = ControllerPart.read(read_key(config, "controller"))
+        rig = RigPart.read(read_key(config, "rig"))
         return cls(
-            law=str(controller["law"]),
-            controller=freeze(controller, "controller"),
-            model=freeze(config.get("model") or {}, "model"),
-            current_max_a=float(rig.get("current_max_a", 0.0)),
-            coil_tau_s=float(tau or 0.0),
-            counts_per_rev=int(rig.get("encoder_counts_per_rev", 0)),
-            angle_noise_rad=float(rig.get("angle_noise_rad") or 0.0),
-            rate_hz=float((config.get("loop") or {}).get("rate_hz", 1000.0)),
+            law=controller.law,
+            controller=controller,
+            model=ModelPart.read(read_key(config, "model")),
+            current_max_a=rig.current_max_a,
+            coil_tau_s=rig.coil_tau_s if controller.coil_tau_s is None else controller.coil_tau_s,
+            counts_per_rev=rig.encoder_counts_per_rev,
+            angle_noise_rad=rig.angle_noise_rad,
+            rate_hz=float(read_key(config, "loop.rate_hz")),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: the controller and the model as the sections they were read from."""
+        return {**vars(self), "controller": self.controller.section(), "model": section_of(self.model)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> StageParts:
+        return cls(
+            **{**data, "controller": ControllerPart.read(data["controller"]), "model": ModelPart.read(data["model"])}
         )
 
 
@@ -128,7 +176,7 @@ class LoopParts:
     spin_margin_us: float
     overrun_policy: str
     warn_interval_s: float
-    rt: Mapping[str, Any]
+    rt: LoopRtPart
     max_missed_fraction: float
     max_lost_fraction: float
     process: bool
@@ -141,11 +189,15 @@ class LoopParts:
             spin_margin_us=float(loop["spin_margin_us"]),
             overrun_policy=str(loop["overrun_policy"]),
             warn_interval_s=float(loop["warn_interval_s"]),
-            rt=freeze(loop["rt"], "loop.rt"),
+            rt=LoopRtPart.read(loop["rt"]),
             max_missed_fraction=float(loop["max_missed_fraction"]),
             max_lost_fraction=float(config["driver"]["max_lost_fraction"]),
             process=bool(loop["process"]),
         )
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON values: the real-time set-up as the section it was read from."""
+        return {**vars(self), "rt": section_of(self.rt)}
 
 
 @dataclass(frozen=True)
@@ -170,22 +222,23 @@ class RunSpec:
     def to_json(self) -> dict[str, Any]:
         """Plain JSON values: each part a mapping of its fields."""
         return thaw(
-            {key: vars(value) if hasattr(value, "__dataclass_fields__") else value for key, value in vars(self).items()}
+            {
+                key: value.to_json()
+                if isinstance(value, (RigParts, StageParts, LoopParts))
+                else vars(value)
+                if hasattr(value, "__dataclass_fields__")
+                else value
+                for key, value in vars(self).items()
+            }
         )
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RunSpec:
         return cls(
-            rig=RigParts(str(data["rig"]["backend"]), freeze(data["rig"]["values"], "rig parts")),
-            stage=StageParts(
-                **{
-                    **data["stage"],
-                    "controller": freeze(data["stage"]["controller"], "controller"),
-                    "model": freeze(data["stage"]["model"], "model"),
-                }
-            ),
+            rig=RigParts.from_json(data["rig"]),
+            stage=StageParts.from_json(data["stage"]),
             safety=SafetyParts(**data["safety"]),
-            loop=LoopParts(**{**data["loop"], "rt": freeze(data["loop"]["rt"], "loop.rt")}),
+            loop=LoopParts(**{**data["loop"], "rt": LoopRtPart.read(data["loop"]["rt"])}),
             virtual=bool(data["virtual"]),
             plan=freeze(data.get("plan") or {}, "plan"),
             options=freeze(data.get("options") or {}, "options"),

@@ -32,10 +32,10 @@ def law_context(parts: StageParts) -> LawContext | None:
     """What a law may know of the rig: the controller's Bouc-Wen model, current range, rate and coil
     lag (None when the controller's model is not the rig's Bouc-Wen model)."""
     model = parts.model
-    if model.get("name", "bouc-wen") != "bouc-wen":
+    if model.name != "bouc-wen":
         return None
     return LawContext(
-        model=BoucWenParams.from_mapping(model.get("params") or {}),
+        model=BoucWenParams.from_mapping(model.params),
         current_max_a=parts.current_max_a,
         rate_hz=parts.rate_hz,
         coil_tau_s=parts.coil_tau_s,

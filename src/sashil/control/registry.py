@@ -47,7 +47,9 @@ def _stage_law(parts: StageParts, name: str | None = None) -> tuple[LawEntry, La
     config has been checked against its own law by :func:`~sashil.control.law_config.check_controller`)."""
     entry = find_law(parts.law if name is None else name)
     declared = entry.cls.params()
-    return entry, build_law(entry, parts, {key: value for key, value in parts.controller.items() if key in declared})
+    return entry, build_law(
+        entry, parts, {key: value for key, value in parts.controller.params.items() if key in declared}
+    )
 
 
 def law_run_label(parts: StageParts) -> str:
@@ -71,25 +73,25 @@ def make_stage(parts: StageParts) -> tuple[str, Any]:
 def make_estimator(parts: StageParts) -> RigEstimator | KalmanRigEstimator:
     """The ``controller.estimator``: the rig-model Kalman filter or the fixed-bandwidth tracking filters."""
     section = parts.controller
-    if section.get("estimator", "kalman") == "kalman":
+    if section.estimator == "kalman":
         estimator = KalmanRigEstimator(
             1.0 / parts.rate_hz,
-            accel_psd=float(section["kalman_accel_psd"]),
-            road_jerk_psd=float(section["kalman_road_jerk_psd"]),
-            bias_psd=float(section["kalman_bias_psd"]),
+            accel_psd=section.kalman_accel_psd,
+            road_jerk_psd=section.kalman_road_jerk_psd,
+            bias_psd=section.kalman_bias_psd,
             angle_noise_rad=parts.angle_noise_rad,
-            innovation_limit=float(section["innovation_limit_counts"]),
-            commanded_road_jerk_psd=float(section["kalman_road_jerk_psd_commanded"]),
-            quantisation=str(section["kalman_quantisation"]),
-            edge_timing=bool(section["edge_timing"]),
+            innovation_limit=section.innovation_limit_counts,
+            commanded_road_jerk_psd=section.kalman_road_jerk_psd_commanded,
+            quantisation=section.kalman_quantisation,
+            edge_timing=section.edge_timing,
         )
         # the gains now, not in the first real-time cycle (the device confirms the resolution)
         estimator.prepare(parts.counts_per_rev)
         return estimator
     return RigEstimator(
-        float(section["estimator_bandwidth_hz"]),
-        float(section["road_bandwidth_hz"]),
-        order=3 if section.get("estimator_order", 2) == 3 else 2,
+        section.estimator_bandwidth_hz,
+        section.road_bandwidth_hz,
+        order=3 if section.estimator_order == 3 else 2,
     )
 
 
@@ -108,7 +110,7 @@ def make_controller(
     section = parts.controller
     entry, law = _stage_law(parts, name)
     if law.context is None:  # the law's context holds the model only when it is the rig's Bouc-Wen
-        raise ConfigError(f"model.name: the controller runs the bouc-wen model, got {parts.model.get('name')!r}")
+        raise ConfigError(f"model.name: the controller runs the bouc-wen model, got {parts.model.name!r}")
     params = law.context.model
     i_max = parts.current_max_a
     if torque is not None:
@@ -120,10 +122,10 @@ def make_controller(
         origin=entry.origin,
         estimator=make_estimator(parts),
         observer=BoucWenObserver(params),
-        inverse=HysteresisInverse(params, i_max, float(section["min_authority_nm_per_a"]), section["inverse"]),
-        lead=CoilLagCompensator(parts.coil_tau_s, float(section["lead_horizon_s"]), i_max),
-        lead_current_laws=bool(section.get("lead_current_laws", False)),
+        inverse=HysteresisInverse(params, i_max, section.min_authority_nm_per_a, section.inverse),
+        lead=CoilLagCompensator(parts.coil_tau_s, section.lead_horizon_s, i_max),
+        lead_current_laws=section.lead_current_laws,
         current_max_a=i_max,
-        model_aided=bool(section["model_aided"]),
+        model_aided=section.model_aided,
         nominal_dt_s=1.0 / parts.rate_hz,
     )

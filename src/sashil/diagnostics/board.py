@@ -8,11 +8,12 @@ trips the host goes quiet; the board's watchdog must trip and report it in a Sta
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.config.parts import RigParts
+from sashil.config.frozen import freeze
 from sashil.diagnostics import FAIL, OK, WARN, Check
 from sashil.drivers import open_rig
 from sashil.drivers.interface import FLAG_WATCHDOG
@@ -37,7 +38,7 @@ def board_checks(run: RunSpec, rounds: int) -> list[Check]:
     rig paced by the host."""
     if "pacing" not in run.rig.values:
         return [_check("hello", OK, f"driver {run.rig.backend}: no link to check")]
-    rig = open_rig(RigParts(run.rig.backend, {**run.rig.values, "pacing": "host"}))
+    rig = open_rig(replace(run.rig, values=freeze({**run.rig.values, "pacing": "host"}, "rig parts")))
     if not isinstance(rig, LinkRig):
         rig.close()
         return [_check("hello", OK, f"driver {run.rig.backend}: no link to check")]

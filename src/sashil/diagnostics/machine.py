@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import os
 import resource
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from sashil.config.section_parts import LoopRtPart
 from sashil.diagnostics import FAIL, OK, WARN, Check
 
 CAP_IPC_LOCK = 14
@@ -228,15 +227,15 @@ def timer_slack(facts: MachineFacts, configured_ns: int) -> Check:
     )
 
 
-def machine_checks(facts: MachineFacts, rt: Mapping[str, Any]) -> list[Check]:
-    """Every machine check for the config's ``loop`` section."""
+def machine_checks(facts: MachineFacts, rt: LoopRtPart) -> list[Check]:
+    """Every machine check for the config's ``loop.rt`` set-up."""
     return [
         preemption(facts),
-        sched_fifo(facts, int(rt["priority"])),
-        memlock(facts, bool(rt["mlockall"])),
-        governor(facts, rt["cpu"]),
-        isolated_cpus(facts, rt["cpu"]),
-        timer_slack(facts, int(rt["timer_slack_ns"])),
+        sched_fifo(facts, rt.priority),
+        memlock(facts, rt.mlockall),
+        governor(facts, rt.cpu),
+        isolated_cpus(facts, rt.cpu),
+        timer_slack(facts, rt.timer_slack_ns),
     ]
 
 

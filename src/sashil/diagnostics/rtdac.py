@@ -104,7 +104,7 @@ def exchange_checks(rig: RtdacRig, n: int, rate_hz: float) -> list[Check]:
 def board_checks(run: RunSpec, round_trips: int) -> tuple[list[Check], RtdacRig | None]:
     """Find and open the board, read its header and map, time the exchange; the rig is left open
     (outputs at rest) for the walk, or None when it could not be opened."""
-    rig = RtdacRig.from_parts(run.rig.values)
+    rig = RtdacRig.from_parts(run.rig)
     checks: list[Check] = []
     try:
         rig.configure()

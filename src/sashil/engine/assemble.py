@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from sashil.config.frozen import freeze
-from sashil.config.parts import LoopParts, RigParts, RunSpec, SafetyParts, StageParts, read_key
+from sashil.config.parts import LoopParts, RigParts, RunSpec, SafetyParts, StageParts, read_keys
 from sashil.drivers import on_virtual_clock, rig_parts
 
 if TYPE_CHECKING:
@@ -39,7 +39,7 @@ def assemble(
         rig = rig_parts(config)
         virtual = on_virtual_clock(rig, config["driver"]["clock"])
     else:
-        rig, virtual = RigParts(str(config["driver"]["name"]), freeze({}, "rig parts")), False
+        rig, virtual = RigParts(RigParts.backend_of(config), freeze({}, "rig parts")), False
     return RunSpec(
         rig=rig,
         stage=StageParts.read(config),
@@ -47,7 +47,7 @@ def assemble(
         loop=LoopParts.read(config),
         virtual=virtual,
         plan=freeze(plan or {}, "plan"),
-        options=freeze({name: read_key(config, path) for name, path in (reads or {}).items()}, "options"),
+        options=read_keys(config, reads or {}),
     )
 
 

@@ -8,8 +8,7 @@ import math
 from typing import TYPE_CHECKING
 
 from sashil.api import Run, load_run
-from sashil.engine import assemble
-from sashil.lab.calibration.plan import READS
+from sashil.config.section_parts import CalibratePart
 from sashil.lab.calibration.session import calibrate_rig
 from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
@@ -39,8 +38,8 @@ def calibrate(
 
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("calibrate")
-    section = assemble(config, reads=READS).options["calibrate"]
-    inertia = section["inertia_kg_m2"]
+    section = CalibratePart.read(config)
+    inertia = section.inertia_kg_m2
     outcome = calibrate_rig(
         config,
         outputs.out,
@@ -48,7 +47,7 @@ def calibrate(
         say=lambda text: on_event(Event("progress", text)),
         prompt=lambda text: on_event(Event("prompt", text)),
         source=source,
-        profile=section["profile_n"],
+        profile=section.profile_n,
     )
     cal, best = outcome.calibration, outcome.calibration.best
     if inertia is None:

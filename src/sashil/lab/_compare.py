@@ -51,7 +51,7 @@ from sashil import engine
 from sashil.api import Run, load_run
 from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import parse_override
-from sashil.config.parts import RunSpec, StageParts, read_key
+from sashil.config.parts import RigParts, RunSpec, StageParts
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label, make_stage
@@ -216,7 +216,7 @@ def law_parameters(result: Any, config: RunConfig) -> dict[str, Any]:
         return dict(reported)
     stage = StageParts.read(config)
     declared = find_law(stage.law).cls.params()
-    return {key: stage.controller.get(key, param.default) for key, param in declared.items()}
+    return {key: stage.controller.params.get(key, param.default) for key, param in declared.items()}
 
 
 def law_summary(result: Any, config: RunConfig, road_text: str, duration: float) -> dict[str, Any]:
@@ -234,7 +234,7 @@ def law_summary(result: Any, config: RunConfig, road_text: str, duration: float)
     return {
         **common,
         "verb": "compare",
-        "driver": read_key(config, "driver.name"),
+        "driver": RigParts.backend_of(config),
         "controller": result.label,
         "controller_origin": entry.origin,
         "parameters": law_parameters(result, config),
@@ -310,7 +310,7 @@ def _bound(run: RunSpec, road: Any, duration: float, on_event: Listener) -> Any:
     settle = float(run.options["settle_s"])
     if road is None or duration <= settle:
         return None
-    params = BoucWenParams.from_mapping(run.stage.model["params"])
+    params = BoucWenParams.from_mapping(run.stage.model.params)
     start = time.perf_counter()
     i_max = run.stage.current_max_a
     bound = optimal_bound(params, i_max, road, duration, settle)
@@ -346,9 +346,9 @@ def _scale_bound(
     best = best_passive(results)
     if bound is None or best is None or best.accel_source != "encoders":
         return bound.rms_accel_bound if bound is not None else float("nan")
-    current = float(StageParts.read(configs[best.label]).controller["current_a"])
+    current = float(StageParts.read(configs[best.label]).controller.params["current_a"])
     model = model_passive(
-        BoucWenParams.from_mapping(run.stage.model["params"]),
+        BoucWenParams.from_mapping(run.stage.model.params),
         current,
         run.stage.coil_tau_s,
         road,

@@ -32,7 +32,7 @@ import numpy as np
 import yaml
 
 from sashil.api import Run, load_run
-from sashil.config.parts import StageParts
+from sashil.config.recorded import recorded_law
 from sashil.control.controller import Controller
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import NO_EDGE, RigSample
@@ -101,7 +101,7 @@ def replay(
     documents.start(None, config, spec)
     started = time.perf_counter()
     # the run's live changes (sashil tune) belong to its own law: replayed with it, not with another
-    own_law = controller.name == StageParts.read(run.config).law
+    own_law = controller.name == recorded_law(run.config)
     changes = recorded_changes(Path(run_folder) / EVENTS_FILE) if own_law else {}
     out = replay_rows(
         controller,

@@ -79,8 +79,8 @@ def simulate(config: RunConfig, outputs: Outputs | None = None, on_event: Listen
     outputs = outputs if outputs is not None else Outputs()
     outputs.check_folder_only("simulate")
     run = assemble(config, reads=READS, drives_rig=False)
-    model = str(run.stage.model["name"])
-    params = dict(run.stage.model["params"])
+    model = run.stage.model.name
+    params = dict(run.stage.model.params)
     if model == "bouc-wen":
         params = {**BoucWenParams().as_dict(), **params}
     inputs, measured, source = _inputs(run.options)

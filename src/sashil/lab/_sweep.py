@@ -92,7 +92,7 @@ TRANSMISSIBILITY_COLUMNS = (
 
 def _shown(run: RunSpec) -> dict[str, Any]:
     """The run's law section as a plot's label reads it (:func:`~sashil.recording.labels.controller_label`)."""
-    return {"controller": run.stage.controller}
+    return {"controller": run.stage.controller.section()}
 
 
 def _freq_label(f_hz: float) -> str:
@@ -343,8 +343,8 @@ def _chirp(
     )
     if live is not None:
         shown = dict(cols)
-        if run.stage.model["name"] == "bouc-wen":
-            feasible_band(shown, run.stage.model["params"], run.stage.current_max_a)
+        if run.stage.model.name == "bouc-wen":
+            feasible_band(shown, run.stage.model.params, run.stage.current_max_a)
         live.log_columns(shown)
         live.close()
     body = cols["theta_rad"] + cols["theta_road_rad"]

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from sashil.api import load_run
+from sashil.config.recorded import RecordedModel
 from sashil.errors import DataFileError
 from sashil.recording import plots
 from sashil.recording.labels import (
@@ -80,9 +81,9 @@ class RunRecord:
 
 def _model_params(config: dict[str, Any]) -> dict[str, float] | None:
     """k, J of a run's config (None when it has no model)."""
+    params = RecordedModel.read(config).params
     try:
-        params = config["model"]["params"]
-        return {"k": float(params["k"]), "J": float(params.get("J", 1.0))}
+        return {"k": float(params["k"]), "J": float(params.get("J", 1.0))} if params is not None else None
     except (KeyError, TypeError, ValueError):
         return None
 

@@ -344,7 +344,7 @@ class Bench:
             from sashil.engine import assemble
 
             run_spec = assemble(config, reads=PANEL_READS)
-            values = {name: run_spec.stage.controller.get(name) for name in declared}
+            values = {name: run_spec.stage.controller.params.get(name) for name in declared}
             self.run = RunState(
                 state="starting",
                 run_id=self.run.run_id + 1,
@@ -365,7 +365,7 @@ class Bench:
             self._sent_row = 0
             self.view = StreamView(self.run.plan, self._keep, self._sub_run_started)
             model = run_spec.stage.model
-            self._band = (model["params"], run_spec.stage.current_max_a) if model.get("name") == "bouc-wen" else None
+            self._band = (model.params, run_spec.stage.current_max_a) if model.name == "bouc-wen" else None
             outputs = Outputs(out=folder)
             self._thread = threading.Thread(
                 target=self._work,
@@ -631,7 +631,15 @@ class Bench:
 
 
 #: what the panel reads of a run's experiment to label its sub-runs (a run's ``options``)
-PANEL_READS = {"drop_test": "drop_test", "sweep": "sweep"}
+PANEL_READS = {
+    "currents_a": "drop_test.currents_a",
+    "stepped": "sweep.stepped",
+    "f_start_hz": "sweep.f_start_hz",
+    "f_stop_hz": "sweep.f_stop_hz",
+    "steps": "sweep.steps",
+    "spacing": "sweep.spacing",
+    "sweep_s": "sweep.duration_s",
+}
 
 
 def sub_runs(options: Mapping[str, Any], experiment: str) -> list[str]:
@@ -639,15 +647,14 @@ def sub_runs(options: Mapping[str, Any], experiment: str) -> list[str]:
     a stepped sine's frequencies, a chirp's band; a run on a road is one, unlabelled (``options``:
     a run's, :data:`PANEL_READS`)."""
     if experiment == "drop-test":
-        return [f"{float(current):g} A" for current in options["drop_test"]["currents_a"]]
+        return [f"{float(current):g} A" for current in options["currents_a"]]
     if experiment == "sweep":
         from sashil.lab._sweep import frequencies
 
-        section = options["sweep"]
-        if section["stepped"]:
-            steps = frequencies(section["f_start_hz"], section["f_stop_hz"], section["steps"], section["spacing"])
-            return [f"{f:.3g} Hz" for f in steps]
-        return [f"chirp {section['f_start_hz']:g}-{section['f_stop_hz']:g} Hz over {section['duration_s']:g} s"]
+        f0, f1 = options["f_start_hz"], options["f_stop_hz"]
+        if options["stepped"]:
+            return [f"{f:.3g} Hz" for f in frequencies(f0, f1, options["steps"], options["spacing"])]
+        return [f"chirp {f0:g}-{f1:g} Hz over {options['sweep_s']:g} s"]
     return [""]
 
 

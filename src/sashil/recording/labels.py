@@ -10,15 +10,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from sashil.config.recorded import recorded_controller
 from sashil.config.schema import defaults
 from sashil.config.sections import CONTROLLER
 from sashil.errors import ConfigError
 
 
 def controller_section(config: Mapping[str, Any]) -> dict[str, Any]:
-    """The ``controller:`` mapping of a resolved config ({} when absent or not a mapping)."""
-    section = config.get("controller") if isinstance(config, Mapping) else None
-    return dict(section) if isinstance(section, Mapping) else {}
+    """The ``controller:`` mapping of a run's config ({} when absent or not a mapping)."""
+    return recorded_controller(config)
 
 
 def law_parameters(config: Mapping[str, Any]) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from sashil.errors import ConfigError
 from sashil.recording.formats import can_formats, check_formats, write_data_formats
 
 if TYPE_CHECKING:
-    pass
+    from sashil.config.section_parts import ModelPart
 
 __all__ = ["IN_RUN_FOLDER", "Outputs"]
 
@@ -72,7 +72,7 @@ class Outputs:
         )
 
     def open_live_tap(
-        self, model: Mapping[str, Any], current_max_a: float, columns: Sequence[str], name: str, folder: Path
+        self, model: ModelPart, current_max_a: float, columns: Sequence[str], name: str, folder: Path
     ) -> Any:
         """A :class:`~sashil.recording.rerun_log.LiveTap` for a loop run, or None without a live view.
         The feasible torque band of ``model`` (its ``name`` and ``params``) up to ``current_max_a``
@@ -82,8 +82,8 @@ class Outputs:
         from sashil.recording.rerun_log import LiveTap
 
         band = None
-        if model.get("name") == "bouc-wen" and "z_hat" in columns and "theta_dot_rad_s" in columns:
-            band = (model["params"], float(current_max_a))
+        if model.name == "bouc-wen" and "z_hat" in columns and "theta_dot_rad_s" in columns:
+            band = (model.params, float(current_max_a))
         extra = ("lateness_us",) + (("band_lo_nm", "band_hi_nm") if band is not None else ())
         return LiveTap(self.open_rerun(tuple(columns) + extra, name, folder), band=band)
 

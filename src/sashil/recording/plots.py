@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from sashil.config.recorded import RecordedModel
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.labels import controller_label
 
@@ -72,8 +73,8 @@ def add_feasible_band(cols: dict[str, np.ndarray], config: dict[str, Any]) -> bo
     damper at the observed state: as recorded, or computed from ``z_hat`` and ``theta_dot_rad_s`` with
     the Bouc-Wen model of the run's config. Returns whether the band is there."""
     if not (has_values(cols, "band_lo_nm") and has_values(cols, "band_hi_nm")):
-        model, rig = config.get("model") or {}, config.get("rig") or {}
-        if model.get("name") != "bouc-wen" or not isinstance(model.get("params"), dict):
+        model = RecordedModel.read(config)
+        if model.name != "bouc-wen" or model.params is None or model.current_max_a is None:
             return False
         if not (has_values(cols, "z_hat") and has_values(cols, "theta_dot_rad_s")):
             return False
@@ -82,7 +83,7 @@ def add_feasible_band(cols: dict[str, np.ndarray], config: dict[str, Any]) -> bo
         cols.pop("band_lo_nm", None)
         cols.pop("band_hi_nm", None)
         try:
-            feasible_band(cols, model["params"], float(rig.get("current_max_a", 1.0)))
+            feasible_band(cols, model.params, model.current_max_a)
         except (KeyError, TypeError, ValueError):
             return False
     return "band_lo_nm" in cols and "band_hi_nm" in cols

@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from sashil.config.parts import read_key
+from sashil.config.parts import read_keys
 from sashil.drivers.interface import RigCommand, RigSample
 from sashil.errors import ConfigError, DataFileError
 from sashil.models.plant import RoadProfile
@@ -74,7 +74,7 @@ class RoadParts:
     @classmethod
     def read(cls, config: Mapping[str, Any]) -> RoadParts:
         """The parts of a resolved config, by :attr:`READS`."""
-        return cls.of({name: read_key(config, path) for name, path in cls.READS.items()})
+        return cls.of(read_keys(config, cls.READS, "road parts"))
 
 
 def parse_road(text: str | None, parts: RoadParts) -> tuple[RoadProfile | None, str]:

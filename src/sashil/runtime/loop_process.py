@@ -142,7 +142,7 @@ class LoopProcess:
         self.spec = spec
         self.rate_hz = spec.loop.rate_hz
         #: the CPU the loop pins itself to (``loop.rt.cpu``; None: no pinning)
-        self.loop_cpu: int | None = spec.loop.rt.get("cpu") if realtime else None
+        self.loop_cpu: int | None = spec.loop.rt.cpu if realtime else None
         self.process: ForkedLoop | subprocess.Popen[bytes] | None = None
         #: what the loop server said while it prepared, before this loop's messages began
         self._early: list[str] = []

@@ -18,9 +18,11 @@ import ctypes.util
 import gc
 import os
 import sys
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sashil.config.section_parts import LoopRtPart
 
 MCL_CURRENT = 1
 MCL_FUTURE = 2
@@ -65,9 +67,9 @@ class RealtimeSetup:
     _saved: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def from_parts(cls, rt: Mapping[str, Any]) -> RealtimeSetup:
+    def from_parts(cls, rt: LoopRtPart) -> RealtimeSetup:
         """The set-up of the ``loop.rt`` values."""
-        return cls(rt["priority"], rt["cpu"], rt["mlockall"], rt["gc"], rt["timer_slack_ns"], rt["gil_switch_us"])
+        return cls(rt.priority, rt.cpu, rt.mlockall, rt.gc, rt.timer_slack_ns, rt.gil_switch_us)
 
     # the steps --------------------------------------------------------------------------------
     def apply(self) -> dict[str, StepOutcome]:

@@ -29,7 +29,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
-from sashil.runtime.tuning import EVENT_COLUMNS, RAMP_KEY, LiveTuning
+from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
@@ -50,7 +50,7 @@ def open_tuning(
     law = getattr(stage, "law", None)
     if law is None or not hasattr(law, "check_parameters"):
         return None, None
-    tuning = LiveTuning(law, spec.loop.rate_hz, float(spec.stage.controller.get(RAMP_KEY, 0.0)))
+    tuning = LiveTuning(law, spec.loop.rate_hz, spec.stage.controller.tune_ramp_s)
     try:
         server = TuneServer(folder.path, tuning).start()
     except OSError as err:

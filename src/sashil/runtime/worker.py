@@ -194,7 +194,6 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
     from sashil.runtime.rt_setup import RealtimeSetup
     from sashil.runtime.runner import control_loop, loop_end, run_realtime
     from sashil.runtime.stream import MISSED_W, THREADS_W, StreamWriter
-    from sashil.runtime.tuning import RAMP_KEY
 
     _as_the_session(job)
     spec = RunSpec.from_json(job["spec"])  # read-only here too, as the session assembled it
@@ -227,7 +226,7 @@ def run(job: dict[str, Any], messages: Messages, flag: Any) -> int:
         stop = LoopStop(flag, stream, session, HealthWriter(stream, rig, stage), every=max(1, round(rate / 10)))
         tuning = None
         if tunable:
-            tuning = MailboxTuning(law, rate, float(spec.stage.controller.get(RAMP_KEY, 0.0)), stream)
+            tuning = MailboxTuning(law, rate, spec.stage.controller.tune_ramp_s, stream)
         writer = StreamWriter(stream)
         loop = control_loop(
             spec,

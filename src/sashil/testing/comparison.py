@@ -140,7 +140,7 @@ def _bound(config: dict[str, Any]) -> BoundResult:
         if road is None:
             raise ValueError("compare.road: none: the optimal bound needs a road")
         _bound_cache[key] = optimal_bound(
-            BoucWenParams.from_mapping(run.stage.model["params"]),
+            BoucWenParams.from_mapping(run.stage.model.params),
             run.stage.current_max_a,
             road,
             float(section["duration_s"]),

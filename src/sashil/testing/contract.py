@@ -111,7 +111,7 @@ def check_law(
     spec = _timed_spec(law, timer, times)
     first = run_law(spec, road=road, duration_s=duration_s, params=params, rig=rig)
     compute = _quantiles_us(times)
-    found = _run_faults(first, instance, i_max, BoucWenParams.from_mapping(stage.model["params"]), torque_reach)
+    found = _run_faults(first, instance, i_max, BoucWenParams.from_mapping(stage.model.params), torque_reach)
     if found and found[0].startswith("failed at "):  # one fault, one line: the run's, which says when
         what = found[0].partition(": ")[2].removesuffix(" (the run ended at 0 A)")
         faults = [fault for fault in faults if not fault.startswith(what)]

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from sashil.config.section_parts import CalibratePart
 from sashil.identify.data import Record, record_from_columns
 from sashil.identify.fit import FitResult
 from sashil.identify.intervals import LAB, Intervals, params_at, quantities
@@ -42,21 +42,21 @@ class Suggestion:
     predicted: float  # its predicted relative half-width with the step added
 
 
-def candidates(section: Mapping[str, Any], current_max_a: float, road: RoadChirp) -> list[Step]:
+def candidates(section: CalibratePart, current_max_a: float, road: RoadChirp) -> list[Step]:
     """Drops from the plan's large and small angles, and road chirps, at 0 A, i_max/2 and i_max."""
     currents = (0.0, 0.5 * current_max_a, current_max_a)
     out = []
     for i in currents:
-        for angle in (section["theta0_deg"], section["small_theta0_deg"]):
-            out.append(Step(f"extra-drop-{abs(angle):g}deg-{i:.2f}A", "fit", angle, i, section["drop_duration_s"]))
+        for angle in (section.theta0_deg, section.small_theta0_deg):
+            out.append(Step(f"extra-drop-{abs(angle):g}deg-{i:.2f}A", "fit", angle, i, section.drop_duration_s))
     for i in currents:
         out.append(
             Step(
-                f"extra-road-{abs(section['theta0_deg']):g}deg-{i:.2f}A",
+                f"extra-road-{abs(section.theta0_deg):g}deg-{i:.2f}A",
                 "fit",
-                section["theta0_deg"],
+                section.theta0_deg,
                 i,
-                section["road_duration_s"],
+                section.road_duration_s,
                 road,
             )
         )

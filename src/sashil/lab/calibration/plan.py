@@ -12,10 +12,10 @@ section (:func:`plan_from_config`).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from sashil.config.section_parts import CalibratePart
 from sashil.engine import assemble
 from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError
@@ -113,42 +113,42 @@ class Plan:
         return [s for s in self.steps if s.role == "validate"]
 
 
-def road_chirp(section: Mapping[str, Any]) -> RoadChirp:
+def road_chirp(section: CalibratePart) -> RoadChirp:
     """The road chirp of a ``calibrate`` section. It ends ROAD_REST_S before the record does: its
     last speed command is exactly 0 (a wheel left turning would move the road under the next run)."""
     return RoadChirp(
-        math.radians(section["road_amplitude_deg"]),
-        section["road_f_start_hz"],
-        section["road_f_stop_hz"],
-        section["road_duration_s"] - ROAD_REST_S,
-        section["road_ramp_s"],
+        math.radians(section.road_amplitude_deg),
+        section.road_f_start_hz,
+        section.road_f_stop_hz,
+        section.road_duration_s - ROAD_REST_S,
+        section.road_ramp_s,
     )
 
 
 #: the calibration's own values (``{name: config key}``), read once by the engine into its run's
-#: ``options``: its section, the rig's angle limit, and the drop test's (each step is a drop)
-READS = {**DROP_READS, "calibrate": "calibrate", "angle_limit_deg": "rig.angle_limit_deg"}
+#: ``options``: the rig's angle limit and the drop test's (each step is a drop); its own section
+#: is read typed (:class:`~sashil.config.section_parts.CalibratePart`)
+READS = {**DROP_READS, "angle_limit_deg": "rig.angle_limit_deg"}
 
 
 def plan_from_config(config: RunConfig, source: str = "config") -> Plan:
     """The plan of a resolved config's ``calibrate`` section (:func:`plan_of` its assembled run)."""
-    return plan_of(assemble(config, reads=READS), source)
+    return plan_of(assemble(config, reads=READS), CalibratePart.read(config), source)
 
 
-def plan_of(run: RunSpec, source: str = "config") -> Plan:
-    """The plan of the run's ``calibrate`` section (its ``options``, :data:`READS`), checked against
-    the rig (one-line ConfigError).
+def plan_of(run: RunSpec, section: CalibratePart, source: str = "config") -> Plan:
+    """The plan of the ``calibrate`` section ``section`` for the run (its ``options``: :data:`READS`),
+    checked against the rig (one-line ConfigError).
 
     Currents must lie in [0, rig.current_max_a]; the fit needs at least two currents when the model
     has current terms (checked by the caller, which knows whether they are asked for); the estimated
     rig time must stay within ``max_rig_time_s``; the road chirp must stay below a tenth of the
     loop rate."""
-    section: Mapping[str, Any] = run.options["calibrate"]
     i_max = run.stage.current_max_a
     limit = float(run.options["angle_limit_deg"])
 
     def currents(key: str) -> list[float]:
-        values = section[key]
+        values: tuple[float, ...] = getattr(section, key)
         for value in values:
             if not 0.0 <= value <= i_max:
                 raise ConfigError(
@@ -159,28 +159,28 @@ def plan_of(run: RunSpec, source: str = "config") -> Plan:
         return [float(v) for v in values]
 
     for key in ("theta0_deg", "small_theta0_deg", "validate_theta0_deg"):
-        angle = section[key]
+        angle: float = getattr(section, key)
         if not 0.0 < abs(angle) < limit:
             raise ConfigError(
                 f"{source}: calibrate.{key}: expected an angle away from 0 and within ±{limit:g} deg "
                 f"(rig.angle_limit_deg), got {angle:g}"
             )
         check_theta0(run.options["release_threshold_deg"], angle, f"{source}: calibrate.{key}")
-    f0, f1 = section["road_f_start_hz"], section["road_f_stop_hz"]
+    f0, f1 = section.road_f_start_hz, section.road_f_stop_hz
     if f1 < f0:
         raise ConfigError(f"{source}: calibrate.road_f_stop_hz: expected >= road_f_start_hz ({f0:g}), got {f1:g}")
     if f1 > run.loop.rate_hz / 10:
         raise ConfigError(
             f"{source}: calibrate.road_f_stop_hz: expected at most a tenth of loop.rate_hz, got {f1:g} Hz"
         )
-    if 2 * section["road_ramp_s"] >= section["road_duration_s"] - ROAD_REST_S:
+    if 2 * section.road_ramp_s >= section.road_duration_s - ROAD_REST_S:
         raise ConfigError(
             f"{source}: calibrate.road_ramp_s: the two ramps must fit in road_duration_s "
-            f"({section['road_duration_s']:g} s), got {section['road_ramp_s']:g} s"
+            f"({section.road_duration_s:g} s), got {section.road_ramp_s:g} s"
         )
     road = road_chirp(section)
-    drop_s = section["drop_duration_s"]
-    big, small, held_out = section["theta0_deg"], section["small_theta0_deg"], section["validate_theta0_deg"]
+    drop_s = section.drop_duration_s
+    big, small, held_out = section.theta0_deg, section.small_theta0_deg, section.validate_theta0_deg
     # (role, theta0, current, road) in rig order: fit drops, fit road runs, held-out runs
     specs: list[tuple[str, float, float, RoadChirp | None]] = []
     specs += [("fit", big, i, None) for i in currents("currents_a")]
@@ -194,17 +194,17 @@ def plan_of(run: RunSpec, source: str = "config") -> Plan:
             role,
             theta0,
             current,
-            section["road_duration_s"] if chirp else drop_s,
+            section.road_duration_s if chirp else drop_s,
             chirp,
         )
         for n, (role, theta0, current, chirp) in enumerate(specs, start=1)
     ]
     if not any(s.role == "fit" for s in steps):
         raise ConfigError(f"{source}: calibrate: the plan has no run to fit (all current lists are empty)")
-    plan = Plan(tuple(steps), section["model"])
-    if plan.rig_time_s > section["max_rig_time_s"]:
+    plan = Plan(tuple(steps), section.model)
+    if plan.rig_time_s > section.max_rig_time_s:
         raise ConfigError(
             f"{source}: calibrate: the plan would take about {plan.rig_time_s:.0f} s of rig time, more than "
-            f"calibrate.max_rig_time_s = {section['max_rig_time_s']:g} s (fewer currents or shorter runs)"
+            f"calibrate.max_rig_time_s = {section.max_rig_time_s:g} s (fewer currents or shorter runs)"
         )
     return plan

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sashil.config.frozen import freeze_config, thaw
+from sashil.config.section_parts import CalibratePart
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble
 from sashil.errors import ConfigError, DriverIOError, SashilError
@@ -185,9 +186,9 @@ def calibrate_rig(
         derived["calibrate"]["model"] = model
         config = freeze_config(derived)
     run = assemble(config, reads=READS)
-    section = run.options["calibrate"]
-    plan = plan_of(run, source)
-    check_plan(plan, source, float(section["interval_block_s"]))
+    section = CalibratePart.read(config)
+    plan = plan_of(run, section, source)
+    check_plan(plan, source, section.interval_block_s)
     check_port(run.options["port"])
     folder = RunFolder.create(out, "calibrate")
     runs_folder = RunFolder.create(folder.path / "runs", "calibrate")
@@ -198,10 +199,10 @@ def calibrate_rig(
         f"calibration plan: {len(plan.steps)} runs, about {plan.rig_time_s:.0f} s of rig time "
         f"({run.rig.backend} rig; operator hold angles {', '.join(f'{a:g}' for a in plan.operator_angles_deg())} deg)"
     )
-    session = _Session(run, plan, folder, documents, runs, say, prompt or say, J)
+    session = _Session(run, section, plan, folder, documents, runs, say, prompt or say, J)
     session.run_steps(plan.steps, 1, len(plan.steps))
     say(f"rig time {session.rig_s:.0f} s; fitting ...")
-    extra = int(section["extra_steps"])
+    extra = section.extra_steps
     cal = session.fit(profile and not extra)
     if extra:
         cal = session.run_extra_steps(cal, extra, profile)
@@ -210,10 +211,12 @@ def calibrate_rig(
 
 @dataclass
 class _Session:
-    """One calibration under way: its assembled run (``options``: :data:`READS`) and plan, its
-    folders, the runs so far, how it talks to the user (``say``) and to the operator (``tell``)."""
+    """One calibration under way: its assembled run (``options``: :data:`READS`), its ``calibrate``
+    section and plan, its folders, the runs so far, how it talks to the user (``say``) and to the
+    operator (``tell``)."""
 
     run: RunSpec
+    calibrate: CalibratePart
     plan: Plan
     folder: RunFolder
     documents: Documents
@@ -307,7 +310,7 @@ class _Session:
     def fit(self, profile_n: bool) -> Calibration:
         """The model fitted to the fit runs, validated on the held-out ones, with the extra steps
         that would shrink its widest interval ranked."""
-        section = self.run.options["calibrate"]
+        section = self.calibrate
         current_max_a = self.run.stage.current_max_a
         cal = analyse(
             [r for r in self.results if r.step.role == "fit"],
@@ -318,7 +321,7 @@ class _Session:
             progress=self.say,
             profile=profile_n,
             current_max_a=current_max_a,
-            block_s=float(section["interval_block_s"]),
+            block_s=section.interval_block_s,
         )
         if cal.intervals is not None:
             road = road_chirp(section)
