@@ -22,9 +22,7 @@ SHORT = ("compare.settle_s=1", "road.period_s=10")
 
 
 def _config(duration: float = 3.0, sets: tuple[str, ...] = SHORT):
-    return resolve(
-        ConfigSource(sets=sets, options=(Option("--duration", "compare.duration_s", duration),)), "compare"
-    )
+    return resolve(ConfigSource(sets=sets, options=(Option("--duration", "compare.duration_s", duration),)), "compare")
 
 
 def _fake(rms_of):
