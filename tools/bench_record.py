@@ -4,12 +4,19 @@ it, the commit measured (``git rev-parse HEAD``, with ``+dirty`` when tracked fi
 the date (UTC), the machine's load (``os.getloadavg``: 1, 5 and 15 minutes) at the start and the end,
 its cores and the command line. The docs cite the kept file behind each table (``tools/out/*.json``).
 
-A tool imports it (``sys.path`` holds ``tools/`` when a script runs from it)::
+A tool whose figures are a structure writes them (``sys.path`` holds ``tools/`` when a script runs
+from it)::
 
     from bench_record import Recorder
     record = Recorder("bench_compare")          # the start: commit, date, load now
     ...
     record.write(path, figures)                 # the end: the load again, the figures
+
+and every other keeps what it prints, line by line, under the same provenance::
+
+    keep_output("bench_sim", main)
+
+A ``--quick`` run (CI's: its figures mean nothing) keeps nothing unless told where (``--json``).
 
 Run alone it prints the record a benchmark started now would carry:
 
@@ -19,12 +26,14 @@ Run alone it prints the record a benchmark started now would carry:
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import math
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: where the kept records live, one file per benchmark (and mode)
 OUT = ROOT / "tools" / "out"
 
-__all__ = ["OUT", "Recorder", "commit", "out_path", "provenance"]
+__all__ = ["OUT", "Recorder", "commit", "keep_output", "out_path", "provenance"]
 
 
 def commit(root: Path = ROOT) -> str:
@@ -100,6 +109,42 @@ class Recorder:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.record(figures), indent=1, allow_nan=False) + "\n", encoding="utf-8")
         return path
+
+
+class _Tee(io.TextIOBase):
+    """A text stream that writes to ``stream`` and keeps a copy."""
+
+    def __init__(self, stream: Any):
+        self.stream, self.kept = stream, io.StringIO()
+
+    def write(self, text: str) -> int:
+        self.kept.write(text)
+        return int(self.stream.write(text) or len(text))
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+    def isatty(self) -> bool:
+        return bool(self.stream.isatty())
+
+
+def keep_output(name: str, main: Callable[[], Any], path: Path | None = None) -> Any:
+    """Run a benchmark's ``main`` and keep what it prints: when it returns, the lines go to ``path``
+    (default :func:`out_path`) as ``figures.output`` with the provenance at its start, the load at
+    its end and what ``main`` returned (``exit``). A run that raises (bad arguments, a failure) and a
+    ``--quick`` run keep nothing. Returns what ``main`` returned."""
+    if "--quick" in sys.argv[1:]:
+        return main()
+    record = Recorder(name)
+    tee = _Tee(sys.stdout)
+    sys.stdout = tee
+    try:
+        result = main()
+    finally:
+        sys.stdout = tee.stream
+    kept = record.write(path or out_path(name), {"output": tee.kept.getvalue().splitlines(), "exit": result})
+    print(f"record: {kept}")
+    return result
 
 
 def main() -> None:
