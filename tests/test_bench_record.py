@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-import bench_record  # noqa: E402
+import bench_record
 
 
 def _git(root: Path, *args: str) -> str:
