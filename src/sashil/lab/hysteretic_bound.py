@@ -157,16 +157,26 @@ class _Cost:
         self.grad = np.empty(self.w.size)
         self.kept = float(np.sum(mask))
 
+    def _filtered(self, u: np.ndarray) -> np.ndarray:
+        """θ̈2 under ``u``, low-passed (the trajectory left in the buffers for the adjoint)."""
+        thetas, vs, zs, coil, accel = self.bufs
+        self.model.forward(
+            np.ascontiguousarray(u, dtype=float), self.w, self.m, self.h, self.x0, thetas, vs, zs, coil, accel
+        )
+        return lowpass(accel, self.sos)
+
     def value(self, u: np.ndarray) -> float:
-        self.model.forward(np.ascontiguousarray(u, dtype=float), self.w, self.m, self.h, self.x0, *self.bufs)
-        filtered = lowpass(self.bufs[4], self.sos)
+        filtered = self._filtered(u)
         return float(np.sum(self.mask * filtered * filtered) / self.kept)
 
     def __call__(self, u: np.ndarray) -> tuple[float, np.ndarray]:
-        value = self.value(u)
-        filtered = lowpass(self.bufs[4], self.sos)
+        filtered = self._filtered(u)
+        value = float(np.sum(self.mask * filtered * filtered) / self.kept)
         direct = (2.0 / self.kept) * lowpass(self.mask * filtered, self.sos)
-        self.model.adjoint(u, self.w, self.m, self.h, *self.bufs[:4], direct, self.grad)
+        thetas, vs, zs, coil, _ = self.bufs
+        self.model.adjoint(
+            np.ascontiguousarray(u, dtype=float), self.w, self.m, self.h, thetas, vs, zs, coil, direct, self.grad
+        )
         return value, self.grad.copy()
 
     def rates(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
