@@ -61,6 +61,10 @@ def test_keep_output_keeps_what_a_benchmark_prints_but_not_a_quick_or_failed_run
     bench_record.keep_output("bench_x", main, tmp_path / "quick.json")
     assert not (tmp_path / "quick.json").exists()
 
+    monkeypatch.setattr(sys, "argv", ["bench_x.py", "--child", "{}"])  # the tool's own child process
+    bench_record.keep_output("bench_x", main, tmp_path / "child.json", children=("--child",))
+    assert not (tmp_path / "child.json").exists()
+
     def fails() -> int:
         raise SystemExit(2)
 

@@ -128,12 +128,13 @@ class _Tee(io.TextIOBase):
         return bool(self.stream.isatty())
 
 
-def keep_output(name: str, main: Callable[[], Any], path: Path | None = None) -> Any:
+def keep_output(name: str, main: Callable[[], Any], path: Path | None = None, children: tuple[str, ...] = ()) -> Any:
     """Run a benchmark's ``main`` and keep what it prints: when it returns, the lines go to ``path``
     (default :func:`out_path`) as ``figures.output`` with the provenance at its start, the load at
-    its end and what ``main`` returned (``exit``). A run that raises (bad arguments, a failure) and a
-    ``--quick`` run keep nothing. Returns what ``main`` returned."""
-    if "--quick" in sys.argv[1:]:
+    its end and what ``main`` returned (``exit``). A run that raises (bad arguments, a failure), a
+    ``--quick`` run and a run with one of the flags ``children`` (the tool started as its own child
+    process: its parent keeps the figures) keep nothing. Returns what ``main`` returned."""
+    if any(flag in sys.argv[1:] for flag in ("--quick", *children)):
         return main()
     record = Recorder(name)
     tee = _Tee(sys.stdout)

@@ -495,4 +495,4 @@ if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_record import keep_output
 
-    raise SystemExit(keep_output("mutate_safety", main))
+    raise SystemExit(keep_output("mutate_safety", main, children=("--child",)))
