@@ -131,8 +131,10 @@ def test_compare_over_the_emulated_serial_link_agrees_with_the_simulated_rig(tmp
     comfortable on both."""
     from test_link_e2e import Emulator, relaxed_config
 
+    # the link's passive baseline: the best of the two references (compare.passive_currents_a), as
+    # the simulated rig's search finds 1 A on this road
     common = ["--road", "iso8608:C", "--duration", "6", "--set", "compare.rest_s=0.5", "-q",
-              "--set", f"compare.max_pause_ms={MAX_PAUSE_MS}"]  # fmt: skip
+              "--set", f"compare.max_pause_ms={MAX_PAUSE_MS}", "--set", "compare.passive_currents_a=[0.0, 1.0]"]  # fmt: skip
     assert main(["compare", *common, "--controller", "skyhook-add", "--out", str(tmp_path / "sim")]) == 0
     emu = Emulator(tmp_path, "serial", "python")
     try:

@@ -60,11 +60,11 @@ def test_compare_returns_the_run_with_each_laws_metrics_beside_the_references(tm
 
 def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
     from sashil.engine import assemble
-    from sashil.engine.resolve import apply_overrides
-    from sashil.lab._compare import READS, _header, _scale_bound
+    from sashil.lab._compare import READS, _header, scale_bound
     from sashil.lab.compare_metrics import LawResult
-    from sashil.lab.hysteretic_bound import model_passive
-    from sashil.lab.optimal_bound import BoundResult
+    from sashil.lab.compare_report import Scale
+    from sashil.lab.hysteretic_bound import HystereticBound, model_passive
+    from sashil.lab.passive_baseline import Baseline
     from sashil.models.hysteresis import BoucWenParams
     from sashil.roads.option import RoadParts, parse_road
 
@@ -75,25 +75,24 @@ def test_over_the_encoders_the_shares_scale_puts_the_bound_on_their_chain():
     model = model_passive(
         params, 1.0, tau, road, 3.0, settle, bandwidth_hz=float(config["compare"]["accel_bandwidth_hz"])
     )
-    configs = {"passive 1 A": apply_overrides(config, ["controller.law=passive", "controller.current_a=1.0"])}
-    configs["passive 0 A"] = apply_overrides(config, ["controller.law=passive", "controller.current_a=0.0"])
-    bound = BoundResult(1.0, 3.0, 1.2, 1, "hysteretic")
+    bound = HystereticBound(1.2, 1.0, 3.0, {"mid current": 1.2, "sign rule": 1.25})
     run_spec = assemble(config, reads=READS)
     floor = 1.0
-    runs = [
-        LawResult("passive 0 A", metrics={"rms_accel_rad_s2": 9.0}, accel_source="encoders"),
-        LawResult("passive 1 A", metrics={"rms_accel_rad_s2": math.hypot(model, floor)}, accel_source="encoders"),
-    ]
-    # the best passive run's excess over the model's own at 1 A is the chain's floor: added to the bound
-    assert _scale_bound(run_spec, road, 3.0, bound, runs, configs) == pytest.approx(math.hypot(1.2, floor), rel=1e-6)
-    for run in runs:  # the plant's own θ̈2: the bound as it is
-        run.accel_source = "plant"
-    assert _scale_bound(run_spec, road, 3.0, bound, runs, configs) == 1.2
-    assert math.isnan(_scale_bound(run_spec, road, 3.0, None, runs, configs))
-    # compare.md's header names the scale only where it is not the bound's own
-    header = _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, math.hypot(1.2, floor))
+    row = LawResult("passive 1 A", metrics={"rms_accel_rad_s2": math.hypot(model, floor)}, accel_source="encoders")
+    baseline = Baseline(1.0, row, "listed", {1.0: row})
+    # the baseline run's excess over the model's own at its current (1 A) is the chain's floor: added to the bound
+    assert scale_bound(run_spec, road, 3.0, 1.2, baseline) == pytest.approx(math.hypot(1.2, floor), rel=1e-6)
+    row.accel_source = "plant"  # the plant's own θ̈2: the bound as it is
+    assert scale_bound(run_spec, road, 3.0, 1.2, baseline) == 1.2
+    assert math.isnan(scale_bound(run_spec, road, 3.0, math.nan, baseline))
+    # compare.md's header names the scale only where it is not the bound's own, and the starts' spread
+    scale = Scale("passive 1 A", row.metrics["rms_accel_rad_s2"], math.hypot(1.2, floor))
+    header = _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, baseline, scale)
     assert header["share's scale"].startswith(f"the bound on the encoders' chain, RMS θ̈2 {math.hypot(1.2, floor):.4g}")
-    assert "share's scale" not in _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, 1.2)
+    assert "mid current 1.2, sign rule 1.25 rad/s², 0.05 apart (2.8 % of its gap)" in header["optimal bound"]
+    assert header["passive baseline"].startswith("1 A, the best of the constant currents compare.passive_currents_a")
+    plain = _header(run_spec, "iso8608:C", "C", 3.0, True, 1, 3, 1.0, bound, baseline, Scale("passive 1 A", 3.0, 1.2))
+    assert "share's scale" not in plain and "true plant's bound" not in plain
 
 
 def test_a_law_that_fails_gets_its_row_and_the_summary_names_it(tmp_path):

@@ -252,7 +252,7 @@ def test_preview_optimal_commands_the_plan_and_feeds_back_the_state_error_throug
 
 def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_one_scale():
     from sashil.lab.compare_metrics import LawResult
-    from sashil.lab.compare_report import share_of_bound, shares_of_bound
+    from sashil.lab.compare_report import Scale, share_of_bound, shares_of_bound
 
     assert share_of_bound(2.0, 2.0, 1.5) == 0.0  # the best passive run itself
     assert share_of_bound(1.5, 2.0, 1.5) == 100.0  # the bound reached
@@ -264,7 +264,9 @@ def test_the_share_of_the_bound_runs_from_the_best_passive_run_to_the_bound_on_o
         LawResult("passive 1 A", metrics={"rms_accel_rad_s2": 2.0}),
         LawResult("law", metrics={"rms_accel_rad_s2": 1.8}),
     ]
-    assert shares_of_bound(runs, 1.6) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})
+    # the 0 % is the passive baseline the scale names (compare's best constant current), not a row's minimum
+    scale = Scale("passive 1 A", 2.0, 1.6)
+    assert shares_of_bound(runs, scale) == pytest.approx({"passive 0 A": -125.0, "passive 1 A": 0.0, "law": 50.0})
 
 
 def test_the_bound_on_a_chain_adds_the_chains_floor_in_quadrature_so_a_law_at_the_bound_reads_100_percent():

@@ -14,13 +14,15 @@ deterministic on the virtual clock).
 
     .venv/bin/python tools/bench_compare_pause.py [--quick] [--json PATH]
 
+The figures are kept as JSON (``tools/bench_record.py``: the commit, the date, the load):
+``tools/out/bench_compare_pause.json``, or ``--json PATH`` (a quick run: only with ``--json``).
+
 ``--quick``: one damper, one law, one Δ, two moments, 3 s runs; the figures mean little.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from dataclasses import dataclass
@@ -29,6 +31,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drop_damping import DAMPERS
+from bench_record import Recorder, out_path
 
 from sashil import engine
 from sashil.control.registry import make_stage
@@ -104,8 +107,11 @@ def change_pct(paused: Figures, base: Figures) -> tuple[float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="a tiny problem (CI): the figures mean little")
-    parser.add_argument("--json", metavar="PATH", help="also write every change to PATH")
+    parser.add_argument(
+        "--json", metavar="PATH", type=Path, help="write the record here (default: tools/out/bench_compare_pause.json)"
+    )
     args = parser.parse_args()
+    record = Recorder("bench_compare_pause")
     dampers = [(n, p) for n, p in DAMPERS if n in (("seed",) if args.quick else DAMPER_SET)]
     laws = dict(list(LAWS.items())[:1]) if args.quick else LAWS
     pauses = (20.0,) if args.quick else PAUSES_MS
@@ -139,8 +145,20 @@ def main() -> None:
         label = f"{pause_ms:g}" + (" (baseline: none)" if pause_ms == 0.0 else "")
         print(f"{label:>10s} {len(seen):5d} {max(travel):13.2f}% {statistics.median(travel):6.2f}% "
               f"{max(comfort):10.2f}% {statistics.median(comfort):6.2f}%")  # fmt: skip
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+    path = args.json if args.json is not None else (None if args.quick else out_path("bench_compare_pause"))
+    if path is not None:
+        summary = {
+            f"{pause_ms:g}": {
+                "runs": len(seen),
+                "travel_worst_pct": max(abs(t) for t, _ in seen),
+                "travel_median_pct": statistics.median(abs(t) for t, _ in seen),
+                "comfort_worst_pct": max(abs(c) for _, c in seen),
+                "comfort_median_pct": statistics.median(abs(c) for _, c in seen),
+            }
+            for pause_ms, seen in changes.items()
+        }
+        figures = {"duration_s": duration, "settle_s": settle, "by_pause_ms": summary, "changes": rows}
+        print(f"record: {record.write(path, figures)}")
 
 
 if __name__ == "__main__":

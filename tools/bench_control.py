@@ -20,7 +20,9 @@ import argparse
 import copy
 import math
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -235,4 +237,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    keep_output("bench_control", main)

@@ -44,6 +44,7 @@ import copy
 import json
 import math
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -381,4 +382,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    keep_output("bench_control_link", main)

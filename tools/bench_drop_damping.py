@@ -24,6 +24,8 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
+import sys
+from pathlib import Path
 from typing import Any
 
 from sashil.engine.resolve import default_config
@@ -153,4 +155,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    keep_output("bench_drop_damping", main)

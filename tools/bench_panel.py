@@ -31,6 +31,7 @@ import csv
 import http.client
 import json
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -265,4 +266,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    raise SystemExit(keep_output("bench_panel", main))

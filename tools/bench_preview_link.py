@@ -371,4 +371,7 @@ def calibrate(dampers: list[str], folder: Path) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    raise SystemExit(keep_output("bench_preview_link", main))

@@ -178,4 +178,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    raise SystemExit(keep_output("bench_rtdac_faults", main))

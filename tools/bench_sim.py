@@ -41,8 +41,10 @@ import copy
 import itertools
 import math
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from sashil.config.parts import SafetyParts, StageParts
@@ -364,4 +366,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    keep_output("bench_sim", main)

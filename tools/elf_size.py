@@ -72,4 +72,7 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_record import keep_output
+
+    raise SystemExit(keep_output("elf_size", lambda: main(sys.argv[1:])))

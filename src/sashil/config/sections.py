@@ -482,6 +482,12 @@ COMPARE = Section(
             "int", 2, low=0, high=10, doc="on a real rig: times a law is run again for a host pause (max_pause_ms)"
         ),
         "jobs": Field("int", 1, low=1, high=64, doc="simulated rig: laws run in this many processes (--jobs)"),
+        "passive_currents_a": Field(
+            "float_list",
+            [0.0, 0.25, 0.5, 0.75, 1.0],
+            doc="on a real rig: the constant currents run, the best of them the passive baseline "
+            "(a simulated rig searches [0, i_max])",
+        ),
         "road": Field("str", "iso8608:C", doc="the road every law runs on (--road syntax)"),
         "duration_s": Field(
             "float", 30.0, low=0.0, low_open=True, doc="seconds per law, more than settle_s (--duration)"

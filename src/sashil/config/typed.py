@@ -258,6 +258,7 @@ class CompareSection(TypedDict):
     max_pause_ms: ReadOnly[float]
     repeats: ReadOnly[int]
     jobs: ReadOnly[int]
+    passive_currents_a: ReadOnly[tuple[float, ...]]
     road: ReadOnly[str]
     duration_s: ReadOnly[float]
 

@@ -21,7 +21,16 @@ if TYPE_CHECKING:
 
     from sashil.config.parts import RunSpec
 
-__all__ = ["METRICS", "LawResult", "arm_acceleration", "arm_curve", "metrics_of", "sample_times"]
+__all__ = [
+    "METRICS",
+    "LawResult",
+    "arm_acceleration",
+    "arm_curve",
+    "cycle_times",
+    "metric_window",
+    "metrics_of",
+    "sample_times",
+]
 
 
 @dataclass
@@ -165,6 +174,19 @@ def sample_times(stream: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None
     return times, first
 
 
+def cycle_times(n: int, h: float) -> np.ndarray:
+    """The times [s] of ``n`` cycles of period ``h`` from 0, as a run's stream records them (its
+    ``time_s``: the cycle's start in whole nanoseconds, times 1e-9)."""
+    return (np.arange(n) * int(round(h * 1e9))) * 1e-9
+
+
+def metric_window(time_s: np.ndarray, settle_s: float) -> np.ndarray:
+    """The cycles compare's metrics keep, as a boolean mask of their times ``time_s`` [s]: those at or
+    after ``settle_s`` (``compare.settle_s``). The one window of the metrics and of the optimal
+    bound's cost (:mod:`sashil.lab.hysteretic_bound`)."""
+    return np.asarray(time_s, dtype=float) >= settle_s
+
+
 def metrics_of(stream: dict[str, Any], run: RunSpec) -> tuple[dict[str, float], np.ndarray, np.ndarray, str]:
     """The metrics of a law's stream (module docstring), its time and θ̈2 after the settling, and
     where θ̈2 came from (``run``: the law's, its ``options`` the ``compare`` section's keys)."""
@@ -174,7 +196,7 @@ def metrics_of(stream: dict[str, Any], run: RunSpec) -> tuple[dict[str, float], 
     accel, source = arm_acceleration(
         {k: np.asarray(v)[:-1] for k, v in stream.items()}, rate, float(section["accel_bandwidth_hz"])
     )
-    keep = time_s >= float(section["settle_s"])
+    keep = metric_window(time_s, float(section["settle_s"]))
     if not np.any(keep):
         raise ValueError("nothing recorded after compare.settle_s")
     theta = np.asarray(stream["theta_rad"], dtype=float)[:-1][keep]

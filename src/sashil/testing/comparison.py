@@ -1,16 +1,18 @@
-"""What a lab asserts on about its law's run: comfort and travel against the best constant current,
-and the share of the optimal bound.
+"""What a lab asserts on about its law's run: comfort and travel against the passive baseline, and
+the share of the optimal bound, the figures ``sashil compare`` reports for the same run.
 
 The metrics are ``sashil compare``'s (:mod:`sashil.lab._compare`): comfort is the RMS arm
 acceleration θ̈2 low-passed at ``compare.accel_bandwidth_hz``, travel the RMS relative angle θ, both
-after ``compare.settle_s``. The references are the passive damper at constant currents, each run on
-the same rig, road, seed and duration as the law (the law's ``config.yaml`` with the passive law).
-The optimal bound is :func:`sashil.lab.optimal_bound.optimal_bound`'s: the best comfort any
-damping inside the feasible band could reach on this road knowing it in advance, in the model's
-viscous envelope; a law's share of it is its comfort gain over the best constant current as a share
-of the bound's gain over the best constant damping (as ``compare.md`` reports it).
+after ``compare.settle_s``. The passive baseline is compare's own
+(:func:`sashil.lab.passive_baseline.best_constant_current`): on the simulated rig a bounded search
+for the best constant current over [0, i_max], each candidate run on the same rig, road, seed and
+duration as the law (the law's ``config.yaml`` with the passive law); with ``currents_a`` the best
+of those currents, as compare finds it on a real rig. The optimal bound is compare's too
+(:func:`sashil.lab._compare.compare_bound`, on the controller's model, its cost over the metric's
+window, from starts no law made), and a law's share of it is compare's
+100·(passive − law)/(passive − bound) (:func:`sashil.lab.compare_report.share_of_bound`).
 
-References and bounds are kept for the rest of the process: every law of a test session compared on
+Baselines and bounds are kept for the rest of the process: every law of a test session compared on
 one road runs them once.
 """
 
@@ -24,33 +26,33 @@ from typing import Any
 
 from sashil.api import Run
 from sashil.config.frozen import freeze_config
-from sashil.config.parts import StageParts
+from sashil.config.parts import RunSpec, StageParts
 from sashil.engine import assemble
-from sashil.engine.resolve import ConfigSource, resolve
 from sashil.lab._compare import READS as COMPARE_READS
-from sashil.lab._compare import LawJob, run_job
-from sashil.lab.optimal_bound import BoundResult, optimal_bound
-from sashil.models.hysteresis import BoucWenParams
+from sashil.lab._compare import compare_bound, passive_job, run_job, scale_bound
+from sashil.lab.compare_metrics import LawResult
+from sashil.lab.compare_report import above_bound, share_of_bound
+from sashil.lab.hysteretic_bound import HystereticBound
+from sashil.lab.passive_baseline import Baseline, best_constant_current
 from sashil.roads.option import RoadParts, parse_road
 
 __all__ = ["Comparison", "compare_with_passive"]
 
-#: the constant currents tried, as fractions of rig.current_max_a
-CURRENT_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
-
-_passive_cache: dict[str, dict[str, float]] = {}
-_bound_cache: dict[str, BoundResult] = {}
+_baseline_cache: dict[str, Baseline] = {}
+_bound_cache: dict[str, HystereticBound | None] = {}
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """A law's run against the constant currents on the same rig and road.
+    """A law's run against the passive baseline on the same rig and road.
 
-    Gains are positive when the law is better: ``comfort_gain_pct`` = 100·(1 − RMS θ̈2 / that of the
-    constant current with the lowest RMS θ̈2), ``travel_gain_pct`` = 100·(1 − RMS θ / that of the
-    constant current with the lowest RMS θ). ``share_of_bound_pct``: ``comfort_gain_pct`` as a share
-    of the optimal bound's gain (100: all the bound allows; NaN when the bound is no better than
-    constant damping)."""
+    Gains are positive when the law is better: ``comfort_gain_pct`` = 100·(1 − RMS θ̈2 / the
+    baseline's), the baseline the best constant current (``comfort_current_a``, found by
+    ``baseline_method``: ``"search"`` or ``"listed"``); ``travel_gain_pct`` = 100·(1 − RMS θ / the
+    least RMS θ of the constant currents run to find the baseline, 0 A and i_max among them on the
+    simulated rig). ``bound_gain_pct``: how far the bound lies below the baseline;
+    ``share_of_bound_pct``: where the law lies from the baseline (0) to the bound (100), flagged in
+    ``above_bound`` beyond 100 % by more than compare's tolerance; NaN without a bound."""
 
     law: str
     rms_accel_rad_s2: float
@@ -63,46 +65,55 @@ class Comparison:
     travel_gain_pct: float
     bound_gain_pct: float
     share_of_bound_pct: float
+    baseline_method: str = "search"
+    bound_rms_accel_rad_s2: float = math.nan
+    above_bound: bool = False
 
     def __str__(self) -> str:
         return (
             f"{self.law}: comfort {self.comfort_gain_pct:+.1f} % against {self.comfort_current_a:g} A, travel "
             f"{self.travel_gain_pct:+.1f} % against {self.travel_current_a:g} A, "
             f"{self.share_of_bound_pct:.0f} % of the optimal bound's {self.bound_gain_pct:.1f} %"
+            + (" (above the bound)" if self.above_bound else "")
         )
 
 
 def compare_with_passive(run: Run, currents_a: Sequence[float] | None = None, *, bound: bool = True) -> Comparison:
-    """Compare a law's ``run`` (a run of :func:`sashil.testing.run_law`) with the passive damper at
-    ``currents_a`` (default: 0, ¼, ½, ¾ and all of ``rig.current_max_a``) and, with ``bound``, with
-    the optimal bound on its road."""
+    """Compare a law's ``run`` (a run of :func:`sashil.testing.run_law`) with compare's passive
+    baseline (default: the bounded search over [0, ``rig.current_max_a``]; ``currents_a``: the best
+    of those currents) and, with ``bound``, with compare's optimal bound on its road."""
     config = run.config
     summary = run.summary
     if summary.get("exit_status") != "ok" or not run.metrics:
         raise ValueError(f"{run.path}: the law's run did not finish ({summary.get('error') or summary.get('status')})")
-    stage = StageParts.read(config)
-    i_max = stage.current_max_a
-    currents = [fraction * i_max for fraction in CURRENT_FRACTIONS] if currents_a is None else list(currents_a)
-    if not currents:
+    if currents_a is not None and not list(currents_a):
         raise ValueError("currents_a: give at least one constant current")
-    passive = {current: _passive(config, current) for current in currents}
-    comfort = min(passive, key=lambda current: passive[current]["rms_accel_rad_s2"])
-    travel = min(passive, key=lambda current: passive[current]["rms_theta_deg"])
+    stage = StageParts.read(config)
+    spec = assemble(freeze_config(config), reads=COMPARE_READS)
+    baseline = _baseline(config, spec, currents_a)
+    travel = min(
+        (c for c, r in baseline.evaluated.items() if r.ok), key=lambda c: baseline.evaluated[c].metrics["rms_theta_deg"]
+    )
+    travel_theta = float(baseline.evaluated[travel].metrics["rms_theta_deg"])
     accel, theta = float(run.metrics["rms_accel_rad_s2"]), float(run.metrics["rms_theta_deg"])
-    comfort_gain = 100.0 * (1.0 - accel / passive[comfort]["rms_accel_rad_s2"])
-    bound_gain = _bound(config).gain_pct if bound else math.nan
+    p = baseline.rms_accel
+    b = _scale(config, spec, baseline) if bound else math.nan
+    share = share_of_bound(accel, p, b)
     return Comparison(
         law=str(summary.get("controller") or stage.law),
         rms_accel_rad_s2=accel,
         rms_theta_deg=theta,
-        comfort_current_a=comfort,
-        comfort_rms_accel_rad_s2=passive[comfort]["rms_accel_rad_s2"],
+        comfort_current_a=baseline.current_a,
+        comfort_rms_accel_rad_s2=p,
         travel_current_a=travel,
-        travel_rms_theta_deg=passive[travel]["rms_theta_deg"],
-        comfort_gain_pct=comfort_gain,
-        travel_gain_pct=100.0 * (1.0 - theta / passive[travel]["rms_theta_deg"]),
-        bound_gain_pct=bound_gain,
-        share_of_bound_pct=100.0 * comfort_gain / bound_gain if bound_gain > 0.0 else math.nan,
+        travel_rms_theta_deg=travel_theta,
+        comfort_gain_pct=100.0 * (1.0 - accel / p),
+        travel_gain_pct=100.0 * (1.0 - theta / travel_theta),
+        bound_gain_pct=100.0 * (1.0 - b / p),
+        share_of_bound_pct=share,
+        baseline_method=baseline.method,
+        bound_rms_accel_rad_s2=b,
+        above_bound=above_bound(share),
     )
 
 
@@ -112,38 +123,34 @@ def _key(config: dict[str, Any], *parts: Any) -> str:
     return json.dumps([rest, *parts], sort_keys=True, default=str)
 
 
-def _passive(config: dict[str, Any], current_a: float) -> dict[str, float]:
-    """The metrics of the passive damper at ``current_a`` on the run's rig and road."""
-    key = _key(config, current_a)
-    if key not in _passive_cache:
-        passive = resolve(
-            ConfigSource(config=config, controller="passive", sets=(f"controller.current_a={current_a!r}",)),
-            "compare",
-        )
-        section = assemble(passive, reads=COMPARE_READS).options
-        result = run_job(
-            LawJob(f"passive {current_a:g} A", passive, str(section["road"]), float(section["duration_s"]))
-        )
-        if not result.ok:
-            raise RuntimeError(f"the passive damper at {current_a:g} A did not finish: {result.status}")
-        _passive_cache[key] = dict(result.metrics)
-    return _passive_cache[key]
+def _road(spec: RunSpec) -> tuple[str, float]:
+    return str(spec.options["road"]), float(spec.options["duration_s"])
 
 
-def _bound(config: dict[str, Any]) -> BoundResult:
-    """The optimal bound on the run's road for its model (module docstring)."""
+def _baseline(config: dict[str, Any], spec: RunSpec, currents_a: Sequence[float] | None) -> Baseline:
+    """Compare's passive baseline on the run's rig and road (module docstring)."""
+    listed = None if currents_a is None else [float(c) for c in currents_a]
+    key = _key(config, "baseline", listed)
+    if key not in _baseline_cache:
+        road, duration = _road(spec)
+
+        def run_current(current: float) -> LawResult:
+            return run_job(passive_job(config, current, road, duration))
+
+        _baseline_cache[key] = best_constant_current(run_current, spec.stage.current_max_a, listed)
+    return _baseline_cache[key]
+
+
+def _scale(config: dict[str, Any], spec: RunSpec, baseline: Baseline) -> float:
+    """Compare's 100 %: its optimal bound on the run's road, on the runs' chain (module docstring)."""
     key = _key(config, "bound")
+    road_text, duration = _road(spec)
+    road, _ = parse_road(road_text, RoadParts.of(spec.options))
+    if road is None:
+        raise ValueError("compare.road: none: the optimal bound needs a road")
     if key not in _bound_cache:
-        run = assemble(freeze_config(config), reads=COMPARE_READS)
-        section = run.options
-        road, _ = parse_road(str(section["road"]), RoadParts.of(section))
-        if road is None:
-            raise ValueError("compare.road: none: the optimal bound needs a road")
-        _bound_cache[key] = optimal_bound(
-            BoucWenParams.from_mapping(run.stage.model.params),
-            run.stage.current_max_a,
-            road,
-            float(section["duration_s"]),
-            float(section["settle_s"]),
-        )
-    return _bound_cache[key]
+        _bound_cache[key] = compare_bound(spec, road, duration)
+    bound = _bound_cache[key]
+    if bound is None:
+        return math.nan
+    return scale_bound(spec, road, duration, bound.rms_accel_bound, baseline)
