@@ -28,11 +28,14 @@ if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
     from sashil.runtime.loop_process import LoopProcess
 
-__all__ = ["READS", "closed_loop", "run_in_loop", "run_plan"]
+__all__ = ["PLAN", "READS", "closed_loop", "run_in_loop"]
 
 #: ``sashil run``'s own values (``{name: config key}``), read once by the engine into its run's
 #: ``options``: how long, the road and what it is made with, the port a CAN trace names
 READS = {"duration_s": "run.duration_s", "road": "run.road", "port": "driver.port", **RoadParts.READS}
+#: ``sashil run``'s plan: its values are the run's ``options`` (the road, what it is made with, how
+#: long the run commands it), which a loop process receives with the rest of the run
+PLAN = {"kind": "run"}
 
 
 def closed_loop(
@@ -58,12 +61,12 @@ def closed_loop(
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
 
     outputs = outputs if outputs is not None else Outputs()
-    spec = assemble(config, reads=READS)
+    spec = assemble(config, PLAN, READS)
     outputs.check(spec.rig.backend)
     duration = spec.options["duration_s"]
     rate, backend = spec.loop.rate_hz, spec.rig.backend
     started = engine.start_session(
-        spec.with_plan(run_plan(spec)),
+        spec,
         duration,
         tune=tune,
         can_trace=bool(can_formats(tuple(outputs.formats))),
@@ -158,27 +161,15 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
     return load_run(folder.path)
 
 
-def run_plan(run: RunSpec) -> dict[str, Any]:
-    """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
-    text, what it is made with, and how long the run commands it, from the run's ``options``
-    (:data:`READS`)."""
-    return {
-        "kind": "run",
-        "road": run.options["road"],
-        "road_parts": vars(RoadParts.of(run.options)),
-        "duration_s": run.options["duration_s"],
-    }
-
-
 def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
-    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``,
-    ``run.plan`` as :func:`run_plan` gives it): the law on its road (the rig's road motor gets the
+    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``, its
+    values the run's ``options``, :data:`READS`): the law on its road (the rig's road motor gets the
     profile's speed); its label and the road's text."""
     from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
 
-    plan = run.plan
+    options = run.options
     label, stage = make_stage(run.stage)
-    road, road_text = parse_road(plan["road"], RoadParts(**plan["road_parts"]))
+    road, road_text = parse_road(options["road"], RoadParts.of(options))
     if road is not None:
-        stage = RoadStage(stage, road, plan["duration_s"])
+        stage = RoadStage(stage, road, options["duration_s"])
     return stage, label, road_text
