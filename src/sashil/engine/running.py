@@ -70,18 +70,36 @@ def run(
     starts raises with nothing energised; what ends the loop does not raise.
 
     ``documents``: where the run's documents go, as run ``name`` (None: the verb's folder itself):
-    ``start`` with ``config`` (the config its folder records; None: none), ``stop`` with the
+    ``start`` with ``config`` (the config its folder records; None: none), ``progress`` as the loop
+    starts and once it has ended (:func:`running_text`, :func:`ran_text`), ``stop`` with the
     outcome and ``analyse(outcome)`` (the experiment's analysis: ``error``, what ended the run as
     the experiment judges it, ``entry``, ``data``, ``formats``), which is called with or without
     documents."""
     clock = clock if clock is not None else default_clock(spec)
+    alone = loop_in_process(spec, clock, plan)
     if documents is not None:
         documents.start(name, config, spec)
-    outcome = _run_loop(spec, plan, duration_s, clock, rig, data_path, live, stop, trace, realtime, say)
+        documents.progress(name, running_text(spec, duration_s, alone))
+    outcome = _run_loop(spec, plan, duration_s, clock, alone, rig, data_path, live, stop, trace, realtime, say)
     analysis = dict(analyse(outcome)) if analyse is not None else {}
     if documents is not None:
+        documents.progress(name, ran_text(spec, outcome.summary))
         documents.stop(str(name), outcome.summary, analysis.pop("error", outcome.error), **analysis)
     return outcome
+
+
+def running_text(spec: RunSpec, duration_s: float | None, alone: bool) -> str:
+    """A run's progress as its loop starts: where the loop runs, on which clock, how long and how fast."""
+    where = "a loop process" if alone else "this process"
+    clock = "simulated time" if spec.virtual else "the real clock"
+    length = "until its plan ends" if duration_s is None else f"{duration_s:g} s"
+    return f"running: {spec.rig.backend} backend, the loop in {where} on {clock}, {length} at {spec.loop.rate_hz:g} Hz"
+
+
+def ran_text(spec: RunSpec, summary: Mapping[str, Any]) -> str:
+    """A run's progress once its loop has ended: the run time its cycles make and how it ended."""
+    cycles = int((summary.get("timing") or {}).get("cycles", 0))
+    return f"ran: {cycles} cycles ({cycles / spec.loop.rate_hz:g} s of run time), {summary.get('exit_status', 'ok')}"
 
 
 def _run_loop(
@@ -89,6 +107,7 @@ def _run_loop(
     plan: Any,
     duration_s: float | None,
     clock: Clock,
+    alone: bool,
     rig: Callable[[], RigInterface] | None,
     data_path: str | Path | None,
     live: Any,
@@ -97,8 +116,8 @@ def _run_loop(
     realtime: bool,
     say: Callable[[str], None],
 ) -> RunOutcome:
-    """The loop of ``plan`` where the one rule says it runs (see :func:`run`)."""
-    if loop_in_process(spec, clock, plan):
+    """The loop of ``plan`` where the one rule says it runs (``alone``: in a loop process; see :func:`run`)."""
+    if alone:
         return run_plan_process(spec, plan, duration_s, data_path=data_path, say=say, live=live, stop=stop, trace=trace)
     board = rig() if rig is not None else open_rig(spec.rig)
     attach = getattr(plan, "attach_rig", None)
