@@ -19,7 +19,6 @@ from sashil.recording.rest import rest_phrase
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.roads.option import RoadParts, RoadStage, parse_road
-from sashil.runtime.session import run_session
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
@@ -63,51 +62,65 @@ def closed_loop(
     outputs = outputs if outputs is not None else Outputs()
     spec = assemble(config, PLAN, READS)
     outputs.check(spec.rig.backend)
-    duration = spec.options["duration_s"]
-    rate, backend = spec.loop.rate_hz, spec.rig.backend
-    started = engine.start_session(
-        spec,
-        duration,
+    opener = _Opener(spec, outputs, on_event, progress, views)
+    session = engine.Session(
+        opener,
         tune=tune,
         can_trace=bool(can_formats(tuple(outputs.formats))),
         say=lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text)),
     )
-    loop, process, label, road_text = started.loop, started.process, started.label, started.road_text
     try:
-        folder = RunFolder.create(outputs.out, "run")
-    except BaseException:
-        loop.abort()
-        raise
-    live = outputs.open_live_tap(spec.stage.model, spec.stage.current_max_a, started.columns, "sashil run", folder.path)
-    if progress:  # a bar on a terminal, a line every 10 s otherwise
-        live = SessionHooks(live, RunProgress(duration, rate))
-    if views:
-        live = SessionHooks(live, *views)
-    on_event(
-        Event(
-            "progress",
-            f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
-            f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
-            {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
-        )
-    )
-    if process is None:
-        trace = outputs.start_can_trace(started.rig, folder.path)
-    else:
-        trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
-    finish = _Finish(outputs, folder, road_text, trace, process)
-
-    def say(line: str) -> None:
-        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
-
-    try:
-        outcome = run_session(
-            loop, config, folder, duration, controller=label, live=live, say=say, tune=tune, finish=finish, stop=stop
-        )
+        outcome = engine.run(spec, None, spec.options["duration_s"], config=config, stop=stop, session=session)
     finally:
-        if trace is not None and finish.trace_stats is None:
-            trace.close()
-    return _ended(outcome, folder, on_event)
+        opener.close_trace()
+    return _ended(outcome, opener.opened.folder, on_event)
+
+
+class _Opener:
+    """What ``sashil run`` readies once its loop is: the run folder, the live view (and a progress
+    bar, and the caller's views), the CAN trace, the run's first line, the finish hook."""
+
+    def __init__(self, spec: RunSpec, outputs: Outputs, on_event: Listener, progress: bool, views: Sequence[Any]):
+        self.spec, self.outputs, self.on_event, self.progress, self.views = spec, outputs, on_event, progress, views
+        self.finish: _Finish | None = None
+        self.opened: engine.SessionFolder
+
+    def __call__(self, started: engine.StartedLoop) -> engine.SessionFolder:
+        spec, outputs, on_event = self.spec, self.outputs, self.on_event
+        duration, rate, process = spec.options["duration_s"], spec.loop.rate_hz, started.process
+        folder = RunFolder.create(outputs.out, "run")
+        live = outputs.open_live_tap(
+            spec.stage.model, spec.stage.current_max_a, started.columns, "sashil run", folder.path
+        )
+        if self.progress:  # a bar on a terminal, a line every 10 s otherwise
+            live = SessionHooks(live, RunProgress(duration, rate))
+        if self.views:
+            live = SessionHooks(live, *self.views)
+        on_event(
+            Event(
+                "progress",
+                f"sashil run: {spec.rig.backend} backend, {started.label}, road {started.road_text}, {rate:g} Hz, "
+                f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+                {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
+            )
+        )
+        if process is None:
+            trace = outputs.start_can_trace(started.rig, folder.path)
+        else:
+            trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
+        self.finish = _Finish(outputs, folder, started.road_text, trace, process)
+
+        def say(line: str) -> None:
+            on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
+
+        self.opened = engine.SessionFolder(folder, live, self.finish, say)
+        return self.opened
+
+    def close_trace(self) -> None:
+        """The CAN trace closed, when the run's finish did not close it."""
+        finish = self.finish
+        if finish is not None and finish.trace is not None and finish.trace_stats is None:
+            finish.trace.close()
 
 
 class _Finish:

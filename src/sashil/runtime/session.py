@@ -127,7 +127,7 @@ class InProcessLoop:
 
 def run_session(
     loop: SessionLoop,
-    config: Mapping[str, Any],
+    config: Mapping[str, Any] | None,
     folder: RunFolder,
     duration_s: float | None,
     *,
