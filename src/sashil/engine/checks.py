@@ -175,11 +175,10 @@ def check_road_reverses(config: Any, verb: str | None, reverses: bool, named: Na
     )
 
 
-def check_road_ahead(config: RunConfig, verb: str | None, named: Named, law: str, reads_ahead: bool) -> None:
-    """Refuse a law that reads the road ahead (``law``; ``reads_ahead``: its class's
-    ``Law.reads_road_ahead``) under a plan that commands no road: a drop test, a replay, a
+def check_road_ahead(config: RunConfig, verb: str | None, named: Named, spec: str, reads_ahead: bool) -> None:
+    """Refuse a law that reads the road ahead (``spec``, the law as given; ``reads_ahead``: its
+    class's ``Law.reads_road_ahead``) under a plan that commands no road: a drop test, a replay, a
     calibration, ``--road none``."""
-    spec = law
     if not reads_ahead:
         return
     if verb in ROAD_PLANS:
