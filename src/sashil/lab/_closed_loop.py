@@ -62,7 +62,7 @@ def closed_loop(
     outputs = outputs if outputs is not None else Outputs()
     spec = assemble(config, PLAN, READS)
     outputs.check(spec.rig.backend)
-    opener = _Opener(spec, outputs, on_event, progress, views)
+    opener = _Opener(outputs, on_event, progress, views)
     session = engine.Session(
         opener,
         tune=tune,
@@ -77,16 +77,17 @@ def closed_loop(
 
 
 class _Opener:
-    """What ``sashil run`` readies once its loop is: the run folder, the live view (and a progress
-    bar, and the caller's views), the CAN trace, the run's first line, the finish hook."""
+    """What ``sashil run`` readies once its loop is (the run it was assembled for: ``started.loop.spec``):
+    the run folder, the live view (and a progress bar, and the caller's views), the CAN trace, the
+    run's first line, the finish hook."""
 
-    def __init__(self, spec: RunSpec, outputs: Outputs, on_event: Listener, progress: bool, views: Sequence[Any]):
-        self.spec, self.outputs, self.on_event, self.progress, self.views = spec, outputs, on_event, progress, views
+    def __init__(self, outputs: Outputs, on_event: Listener, progress: bool, views: Sequence[Any]):
+        self.outputs, self.on_event, self.progress, self.views = outputs, on_event, progress, views
         self.finish: _Finish | None = None
         self.opened: engine.SessionFolder
 
     def __call__(self, started: engine.StartedLoop) -> engine.SessionFolder:
-        spec, outputs, on_event = self.spec, self.outputs, self.on_event
+        spec, outputs, on_event = started.loop.spec, self.outputs, self.on_event
         duration, rate, process = spec.options["duration_s"], spec.loop.rate_hz, started.process
         folder = RunFolder.create(outputs.out, "run")
         live = outputs.open_live_tap(
