@@ -3,38 +3,37 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from sashil import engine
 from sashil.api import Run, load_run
-from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
+from sashil.plans import run as run_plan
 from sashil.recording.formats import can_formats
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.rest import rest_phrase
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
-from sashil.roads.option import RoadParts, RoadStage, parse_road
+from sashil.roads.option import RoadParts
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
 if TYPE_CHECKING:
-    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
     from sashil.runtime.loop_process import LoopProcess
 
-__all__ = ["PLAN", "READS", "closed_loop", "run_in_loop"]
+__all__ = ["PLAN", "READS", "closed_loop"]
 
 #: ``sashil run``'s own values (``{name: config key}``), read once by the engine into its run's
 #: ``options``: how long, the road and what it is made with, the port a CAN trace names
 READS = {"duration_s": "run.duration_s", "road": "run.road", "port": "driver.port", **RoadParts.READS}
-#: ``sashil run``'s plan: its values are the run's ``options`` (the road, what it is made with, how
-#: long the run commands it), which a loop process receives with the rest of the run
-PLAN = {"kind": "run"}
+#: ``sashil run``'s plan (:mod:`sashil.plans.run`): its values are the run's ``options`` (the road,
+#: what it is made with, how long the run commands it), which a loop process receives with the run
+PLAN = {"kind": run_plan.KIND}
 
 
 def closed_loop(
@@ -173,17 +172,3 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
             raise error
         raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
     return load_run(folder.path)
-
-
-def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
-    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``, its
-    values the run's ``options``, :data:`READS`): the law on its road (the rig's road motor gets the
-    profile's speed); its label and the road's text."""
-    from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
-
-    options = run.options
-    label, stage = make_stage(run.stage)
-    road, road_text = parse_road(options["road"], RoadParts.of(options))
-    if road is not None:
-        stage = RoadStage(stage, road, options["duration_s"])
-    return stage, label, road_text
