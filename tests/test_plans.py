@@ -20,8 +20,9 @@ from sashil.runtime.worker import plan_builder
 def test_the_runtime_builds_sashil_runs_plan_from_the_package_not_an_entry_point():
     assert plan_builder("run") is run_plan.build is BUILT_IN["run"]
     assert "run" not in entry_point_table(PLANS_GROUP)  # the entry points are for the plans not built in
+    assert plan_builder("sweep") is BUILT_IN["sweep"]
     assert plan_builder("drop-test") is drop_in_loop  # an entry point
-    with pytest.raises(ConfigError, match=r"cannot run a plan of kind 'nope' \(it runs run, drop-test, sweep"):
+    with pytest.raises(ConfigError, match=r"cannot run a plan of kind 'nope' \(it runs run, sweep, drop-test"):
         plan_builder("nope")
 
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from sashil.plans import run
+from sashil.plans import run, sweep
 
 __all__ = ["BUILT_IN"]
 
 #: the built-in plans by kind: ``build(run, rig, prompt) -> (stage, label, road_text)``
-BUILT_IN: dict[str, Callable[..., tuple[Any, str, str]]] = {run.KIND: run.build}
+BUILT_IN: dict[str, Callable[..., tuple[Any, str, str]]] = {run.KIND: run.build, sweep.KIND: sweep.build}
