@@ -10,8 +10,9 @@ A session's loop (``sashil run``, a script's, the panel's: its folder made once 
 its law tuned live) is launched by the same function, under the same rule (``run(..., session=)``).
 
 Given the verb's :class:`~sashil.recording.documents.Documents`, the engine emits the run's ``start``
-document before the loop (the resolved config, the assembled run, the versions) and its ``stop``
-after it: the outcome's summary keys, to which the experiment's ``analyse`` adds its analysis.
+document before the loop (the resolved config, the assembled run, the versions), its ``progress``
+as the loop starts and once it has ended, and its ``stop`` after it: the outcome's summary keys, to
+which the experiment's ``analyse`` adds its analysis.
 """
 
 from __future__ import annotations
