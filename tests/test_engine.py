@@ -109,7 +109,7 @@ def test_a_missing_key_is_named():
 
 def test_the_engine_emits_a_runs_start_and_its_stop_with_the_experiments_analysis():
     """engine.run hands the verb's subscribers the run's start (the config its folder records, the
-    assembled run, the versions) before the loop, and its stop after it: the loop's summary keys,
+    assembled run, the versions) before the loop, its progress, and its stop after it: the loop's summary keys,
     what ended it and the experiment's analysis (here a drop's, on simulated time)."""
     from sashil.lab._drop_test import run_drop_test
     from sashil.recording.documents import Documents, versions
@@ -127,8 +127,8 @@ def test_the_engine_emits_a_runs_start_and_its_stop_with_the_experiments_analysi
         recorded_config=config,
         describe=lambda record: {"entry": {"peaks": len(record.metrics.peaks_deg)}, "data": record.columns},
     )
-    assert [kind for kind, _ in seen] == ["start", "stop"]
-    start, stop = seen[0][1], seen[1][1]
+    assert [kind for kind, _ in seen] == ["start", "progress", "progress", "stop"]
+    start, stop = seen[0][1], seen[-1][1]
     assert start["run"] == "i0.500A" and start["config"] is config and start["versions"] == versions()
     assert isinstance(start["spec"], RunSpec) and start["spec"].rig.backend == "sim" and start["spec"].virtual
     assert stop["run"] == "i0.500A" and stop["error"] is None and stop["outcome"] is record.run

@@ -72,3 +72,21 @@ def test_the_start_document_carries_the_versions_and_the_ending_rule():
     assert starts[0]["versions"] == versions() and starts[0]["spec"] is None and starts[0]["config"] is None
     assert ending(None) == {"exit_status": "ok", "error": None, "exit_code": 0}
     assert ending(ConfigError("--out x: exists"))["exit_code"] == 2
+
+
+def test_the_writer_is_the_one_caller_of_the_summary_and_config_writes():
+    """summary.json and config.yaml are each written from one call site, whatever the verb: the
+    session's, a verb's, and a loop's that its session left (runtime/orphan.py) go through the writer."""
+    import ast
+    from pathlib import Path
+
+    import sashil
+
+    callers = set()
+    for path in Path(sashil.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                name = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
+                if name in ("write_summary", "write_config"):
+                    callers.add((path.relative_to(Path(sashil.__file__).parent).as_posix(), name))
+    assert callers == {("recording/folder_writer.py", "write_summary"), ("recording/folder_writer.py", "write_config")}

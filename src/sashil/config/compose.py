@@ -1,18 +1,18 @@
-"""A run's config composed from where it comes from, step by step, each step validated by the
-schema: the file (or a mapping, or the defaults), a parameter file, the law and the ``--set``
+"""A run's config composed from where it comes from, all its steps in one pass, each step validated
+by the schema: the file (or a mapping, or the defaults), a parameter file, the law and the ``--set``
 values, each verb option, ``--driver`` and ``--port``.
 
-:func:`config_steps` yields the config after each step with the name a message about it gives (the
-file, ``--params FILE``, ``--set``, the option) and the parameters a new law replaced, so that the
-resolution (:func:`sashil.engine.resolve.resolve`), which knows the laws, checks each step's law
-before the next step is composed. Where a verb cannot run the config's model, the step that chose
-it is named (:func:`check_model`).
+:func:`compose` returns the composed config with the step that set each key last (the file,
+``--params FILE``, ``--set``, the option) and the parameters a new law replaced, so that the
+resolution (:func:`sashil.engine.resolve.resolve`), which knows the laws, checks the law once, on
+the whole config, and names the step a failing key came from. Where a verb cannot run the config's
+model, the step that chose it is named (:func:`check_model`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +25,7 @@ from sashil.config.sections import SCHEMA
 from sashil.errors import ConfigError
 from sashil.models.registry import MODEL_PARAMS
 
-__all__ = ["ConfigSource", "Option", "Step", "check_model", "config_steps"]
+__all__ = ["Composed", "ConfigSource", "Option", "check_model", "compose"]
 
 
 @dataclass(frozen=True)
@@ -57,39 +57,42 @@ class ConfigSource:
 
 
 @dataclass(frozen=True)
-class Step:
-    """The config after one step, the name a message about that step gives, and the parameters of
-    a law the step's new ``controller.law`` replaced."""
+class Composed:
+    """A config composed from all its steps: the config, the step that set each of its
+    ``controller`` keys last (``controller.<key>`` -> the step's name, as a message names it; every
+    key of the first step's section is the first step's), and the parameters of a law that a later
+    ``controller.law`` replaced, and no later step set again."""
 
     config: Config
-    source: str
+    steps: Mapping[str, str]
     replaced: frozenset[str] = frozenset()
 
 
-def config_steps(source: ConfigSource, verb: str | None, models: Sequence[str]) -> Iterator[Step]:
-    """The config of ``source`` after each step, in order: the file (or mapping, or defaults),
-    ``params``, the law then each ``--set``, the verb's options, ``--driver``, ``--port``. Each is
-    validated by the schema; after the options, a model ``verb`` cannot run (not in ``models``) is
-    refused (:func:`check_model`). A step is composed only once the one before it has been taken."""
+def compose(source: ConfigSource, verb: str | None, models: Sequence[str]) -> Composed:
+    """The config of ``source``, its steps applied in order: the file (or mapping, or defaults),
+    ``params``, the law then each ``--set``, the verb's options, ``--driver``, ``--port``. Each step
+    is validated by the schema, naming the step; after the options, a model ``verb`` cannot run
+    (not in ``models``) is refused (:func:`check_model`)."""
     if isinstance(source.config, Mapping):
-        config = validate(thaw(source.config), SCHEMA, "config")
-        yield Step(config, "config")
+        config, first = validate(thaw(source.config), SCHEMA, "config"), "config"
     else:
-        config = read_config(source.config)
-        yield Step(config, "defaults" if source.config is None else str(source.config))
+        config, first = read_config(source.config), "defaults" if source.config is None else str(source.config)
+    steps = {f"controller.{key}": first for key in config.get("controller") or {}}
     if source.params is not None:
         config = apply_params(config, source.params)
-        yield Step(config, str(source.params))  # the law's checks against the new model
     sets = [parse_override(text) for text in source.sets]
     law = [(["controller", "law"], source.controller)] if source.controller else []
     changes = [(law + sets, "--set" if sets else "--controller")]  # the law before its --set keys
     changes += [
         ([(option.key.split("."), option.value)], option.name) for option in source.options if option.value is not None
     ]
+    replaced: set[str] = set()
     for values, name in changes:
         if values:
-            config, replaced = set_values(config, values, name)
-            yield Step(config, name, frozenset(replaced))
+            config, gone = set_values(config, values, name)
+            own = {path[1] for path, _ in values if len(path) == 2 and path[0] == "controller"}
+            replaced = (replaced - own) | gone
+            steps.update({f"controller.{key}": name for key in own})
     check_model(config, source, verb, models)
     if source.params is not None and _mismatched(config.get("mismatch") or {}):
         logging.getLogger("sashil").warning(
@@ -99,8 +102,8 @@ def config_steps(source: ConfigSource, verb: str | None, models: Sequence[str]) 
         )
     for key, value, name in (("name", source.driver, "--driver"), ("port", source.port, "--port")):
         if value is not None:
-            config, replaced = set_values(config, [(["driver", key], value)], name)
-            yield Step(config, name, frozenset(replaced))
+            config, _ = set_values(config, [(["driver", key], value)], name)
+    return Composed(config, steps, frozenset(replaced))
 
 
 def check_model(config: Config, source: ConfigSource, verb: str | None, models: Sequence[str]) -> None:

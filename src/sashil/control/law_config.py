@@ -15,7 +15,7 @@ from typing import Any
 from sashil.config.parts import StageParts
 from sashil.config.sections import CONTROLLER
 from sashil.control.law_api import Law, LawContext
-from sashil.control.law_registry import LawEntry, find_law
+from sashil.control.law_registry import WHERE, LawEntry, find_law
 from sashil.errors import ConfigError
 from sashil.models.hysteresis import BoucWenParams
 
@@ -56,19 +56,26 @@ def reads_road_ahead(spec: str) -> bool:
         return False
 
 
-def check_controller(section: dict[str, Any], parts: StageParts, source: str, replaced: Collection[str] = ()) -> None:
+def check_controller(
+    section: dict[str, Any], parts: StageParts, steps: Mapping[str, str], replaced: Collection[str] = ()
+) -> LawEntry:
     """Check the ``controller`` ``section`` of a config being resolved (not yet frozen): its law and
     the law's parameters, in place, the law built on the stage's ``parts``; fill in every
-    parameter's value. ``replaced``: the parameters of a law that
-    ``controller.law`` has just replaced; those the new law does not declare go with the old law,
-    the rest keep their values.
+    parameter's value, and return the law found. ``replaced``: the parameters of a law that a new
+    ``controller.law`` replaced; those the new law does not declare go with the old law, the rest
+    keep their values.
 
-    Errors are one line ``<source>: controller.<key>: <problem>``."""
+    ``steps``: where each key came from (``controller.<key>`` -> the step that set it, as a message
+    names it: a file, ``--set``, an option). Errors are one line ``<step>: controller.<key>:
+    <problem>``, the step that set the failing key, else the step that set ``controller.law`` (a
+    parameter the law gave its default)."""
     try:
         entry = find_law(section["law"])
         for key in set(replaced) - set(entry.cls.params()):
             section.pop(key, None)
         law = build_law(entry, parts, section)
     except ConfigError as err:
-        raise ConfigError(f"{source}: {err}") from None
+        key = str(err).partition(":")[0].strip()
+        raise ConfigError(f"{steps.get(key, steps[WHERE])}: {err}") from None
     section.update(law.parameter_values())
+    return entry

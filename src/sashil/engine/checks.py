@@ -175,13 +175,11 @@ def check_road_reverses(config: Any, verb: str | None, reverses: bool, named: Na
     )
 
 
-def check_road_ahead(config: RunConfig, verb: str | None, named: Named, law: str | None = None) -> None:
-    """Refuse a law that reads the road ahead (``law``, None: ``controller.law``) under a plan that
-    commands no road: a drop test, a replay, a calibration, ``--road none``."""
-    spec = law if law is not None else (config.get("controller") or {}).get("law")
-    from sashil.control.law_config import reads_road_ahead  # the laws' entry points: only for a law
-
-    if not spec or not reads_road_ahead(str(spec)):
+def check_road_ahead(config: RunConfig, verb: str | None, named: Named, spec: str, reads_ahead: bool) -> None:
+    """Refuse a law that reads the road ahead (``spec``, the law as given; ``reads_ahead``: its
+    class's ``Law.reads_road_ahead``) under a plan that commands no road: a drop test, a replay, a
+    calibration, ``--road none``."""
+    if not reads_ahead:
         return
     if verb in ROAD_PLANS:
         key = ROAD_PLANS[verb]

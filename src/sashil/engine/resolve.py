@@ -18,13 +18,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from sashil.config import Config, read_config
-from sashil.config.compose import ConfigSource, Option, config_steps
+from sashil.config.compose import ConfigSource, Option, compose
 from sashil.config.frozen import freeze_config
 from sashil.config.overrides import parse_override, set_values
 from sashil.config.parts import StageParts
+from sashil.control import law_config
 from sashil.drivers import declared_capabilities, rig_parts
 from sashil.engine import checks as verb_checks
 from sashil.errors import ConfigError
@@ -64,12 +65,10 @@ VERB_CHECKS: dict[str, Callable[[RunConfig, Callable[[str], str]], None]] = {
 def check_controller(config: Config, source: str, replaced: Collection[str] = ()) -> None:
     """Check the config's law and its parameters (:func:`sashil.control.law_config.check_controller`;
     ``replaced``: the parameters of a law that ``controller.law`` has just replaced)."""
-    from sashil.control.law_config import check_controller as check_law  # the laws' entry points: only to check one
-
     section = config.get("controller")
     if not isinstance(section, dict):
         raise ConfigError(f"{source}: controller: expected a mapping, got {section!r}")
-    check_law(section, StageParts.read(config), source, replaced)
+    law_config.check_controller(section, StageParts.read(config), {"controller.law": source}, replaced)
 
 
 def default_config() -> Config:
@@ -103,30 +102,33 @@ def apply_overrides(config: Mapping[str, Any], overrides: Iterable[str], source:
 
 
 def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str] | None = None) -> RunConfig:
-    """The read-only config ``verb`` runs with, from ``source``. Order: the file (or defaults),
-    ``params``, the law then each ``--set``, the verb's options, ``--driver``/``--port``; then the
-    backend-dependent keys. Every step is checked before anything is opened or written; a model
-    the verb cannot run (not in ``models``, default the rig models) is refused. The result is a
+    """The read-only config ``verb`` runs with, from ``source``. Its steps are composed in one pass
+    by the config layer (:func:`sashil.config.compose.compose`: the file (or defaults), ``params``,
+    the law then each ``--set``, the verb's options, ``--driver``/``--port``, each validated by the
+    schema), keeping the step each key came from; the law is checked once, on the whole config, an
+    error naming the step that set the failing key; then the backend-dependent keys and the verb's
+    own checks. Everything is checked before anything is opened or written; a model the verb cannot
+    run (not in ``models``, default the rig models) is refused. The result is a
     :class:`~sashil.config.frozen.FrozenSection` typed as :class:`~sashil.config.typed.RunConfig`
     (the schema's sections, generated from it), so mypy checks every read of it."""
-    config: Config = {}
-    for step in config_steps(source, verb, models if models is not None else RIG_MODELS):
-        check_controller(step.config, step.source, step.replaced)  # before the next step is composed
-        config = step.config
+    composed = compose(source, verb, models if models is not None else RIG_MODELS)
+    config = composed.config
+    parts = StageParts.read(config)
+    law = law_config.check_controller(config["controller"], parts, composed.steps, composed.replaced)
+    checked = cast("RunConfig", config)  # composed and checked: what is frozen below
     if verb not in RIGLESS_VERBS:
         _resolve_backend(config, source, verb)
-    resolved = freeze_config(config)
     check = VERB_CHECKS.get(verb or "")
     if check is not None:  # the verb's own checks of its keys, naming the option that set each
-        check(resolved, lambda key: _named(source, key))
+        check(checked, lambda key: _named(source, key))
     if verb not in RIGLESS_VERBS:  # a law that reads the road ahead needs a plan that commands one
-        verb_checks.check_road_ahead(resolved, verb, lambda key: _named(source, key))
-    return resolved
+        verb_checks.check_road_ahead(checked, verb, lambda key: _named(source, key), law.spec, law.cls.reads_road_ahead)
+    return freeze_config(config)
 
 
 def _resolve_backend(config: Config, source: ConfigSource, verb: str | None) -> None:
     """The keys that depend on the backend's declared capabilities, set in ``config`` before it is frozen."""
-    caps = declared_capabilities(rig_parts(freeze_config(config)))
+    caps = declared_capabilities(rig_parts(config))
     driver = config["driver"]
     if source.port is not None and not caps.link:
         raise ConfigError(

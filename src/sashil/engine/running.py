@@ -7,11 +7,12 @@ there: in a loop process of its own, which builds the same plan from its values
 runner (:func:`~sashil.runtime.runner.run_plan`), the plan given its rig first (``plan.attach_rig``).
 Either way the verb gets one :class:`~sashil.runtime.runner.RunOutcome`, its stream read back.
 A session's loop (``sashil run``, a script's, the panel's: its folder made once the loop is ready,
-its law tuned live) is started by the same rule (:func:`start_session`).
+its law tuned live) is launched by the same function, under the same rule (``run(..., session=)``).
 
 Given the verb's :class:`~sashil.recording.documents.Documents`, the engine emits the run's ``start``
-document before the loop (the resolved config, the assembled run, the versions) and its ``stop``
-after it: the outcome's summary keys, to which the experiment's ``analyse`` adds its analysis.
+document before the loop (the resolved config, the assembled run, the versions), its ``progress``
+as the loop starts and once it has ended, and its ``stop`` after it: the outcome's summary keys, to
+which the experiment's ``analyse`` adds its analysis.
 """
 
 from __future__ import annotations
@@ -26,15 +27,16 @@ from sashil.config.parts import RunSpec
 from sashil.drivers import RigInterface, open_rig
 from sashil.engine.where import loop_in_process
 from sashil.recording.documents import Documents
+from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock, RealClock, default_clock
 from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import RunOutcome, run_plan
-from sashil.runtime.session import InProcessLoop, SessionLoop
+from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
 
 if TYPE_CHECKING:
     from sashil.runtime.loop_process import LoopProcess
 
-__all__ = ["StartedLoop", "run", "start_session"]
+__all__ = ["Session", "SessionFolder", "StartedLoop", "run"]
 
 log = logging.getLogger("sashil")
 
@@ -56,9 +58,16 @@ def run(
     name: str | None = None,
     config: Mapping[str, Any] | None = None,
     analyse: Callable[[RunOutcome], Mapping[str, Any]] | None = None,
+    session: Session | None = None,
 ) -> RunOutcome:
     """Run ``plan`` of the assembled ``spec`` for ``duration_s`` (None: until the plan ends) and
     return its outcome, the stream read back (:attr:`RunOutcome.stream`).
+
+    ``session``: the run is a session's (``sashil run``, a script's, the panel's: ``plan`` None, the
+    run's own plan ``spec.plan``, built where its loop runs): its loop made ready first, then its
+    folder, views and finish hook by ``session.ready``, then the session run into that folder
+    (:func:`~sashil.runtime.session.run_session`: ``config.yaml`` from ``config``, ``summary.json``
+    once), until ``stop`` or ``duration_s``.
 
     ``clock``: the run's clock (default: the spec's, :func:`~sashil.runtime.clock.default_clock`).
     ``rig``: makes the rig for a loop in this process (default: the spec's backend). ``data_path``:
@@ -70,18 +79,38 @@ def run(
     starts raises with nothing energised; what ends the loop does not raise.
 
     ``documents``: where the run's documents go, as run ``name`` (None: the verb's folder itself):
-    ``start`` with ``config`` (the config its folder records; None: none), ``stop`` with the
+    ``start`` with ``config`` (the config its folder records; None: none), ``progress`` as the loop
+    starts and once it has ended (:func:`running_text`, :func:`ran_text`), ``stop`` with the
     outcome and ``analyse(outcome)`` (the experiment's analysis: ``error``, what ended the run as
     the experiment judges it, ``entry``, ``data``, ``formats``), which is called with or without
     documents."""
+    if session is not None:
+        return _run_session(spec, duration_s, session, config, stop)
     clock = clock if clock is not None else default_clock(spec)
+    alone = loop_in_process(spec, clock, plan)
     if documents is not None:
         documents.start(name, config, spec)
-    outcome = _run_loop(spec, plan, duration_s, clock, rig, data_path, live, stop, trace, realtime, say)
+        documents.progress(name, running_text(spec, duration_s, alone))
+    outcome = _run_loop(spec, plan, duration_s, clock, alone, rig, data_path, live, stop, trace, realtime, say)
     analysis = dict(analyse(outcome)) if analyse is not None else {}
     if documents is not None:
+        documents.progress(name, ran_text(spec, outcome.summary))
         documents.stop(str(name), outcome.summary, analysis.pop("error", outcome.error), **analysis)
     return outcome
+
+
+def running_text(spec: RunSpec, duration_s: float | None, alone: bool) -> str:
+    """A run's progress as its loop starts: where the loop runs, on which clock, how long and how fast."""
+    where = "a loop process" if alone else "this process"
+    clock = "simulated time" if spec.virtual else "the real clock"
+    length = "until its plan ends" if duration_s is None else f"{duration_s:g} s"
+    return f"running: {spec.rig.backend} backend, the loop in {where} on {clock}, {length} at {spec.loop.rate_hz:g} Hz"
+
+
+def ran_text(spec: RunSpec, summary: Mapping[str, Any]) -> str:
+    """A run's progress once its loop has ended: the run time its cycles make and how it ended."""
+    cycles = int((summary.get("timing") or {}).get("cycles", 0))
+    return f"ran: {cycles} cycles ({cycles / spec.loop.rate_hz:g} s of run time), {summary.get('exit_status', 'ok')}"
 
 
 def _run_loop(
@@ -89,6 +118,7 @@ def _run_loop(
     plan: Any,
     duration_s: float | None,
     clock: Clock,
+    alone: bool,
     rig: Callable[[], RigInterface] | None,
     data_path: str | Path | None,
     live: Any,
@@ -97,8 +127,8 @@ def _run_loop(
     realtime: bool,
     say: Callable[[str], None],
 ) -> RunOutcome:
-    """The loop of ``plan`` where the one rule says it runs (see :func:`run`)."""
-    if loop_in_process(spec, clock, plan):
+    """The loop of ``plan`` where the one rule says it runs (``alone``: in a loop process; see :func:`run`)."""
+    if alone:
         return run_plan_process(spec, plan, duration_s, data_path=data_path, say=say, live=live, stop=stop, trace=trace)
     board = rig() if rig is not None else open_rig(spec.rig)
     attach = getattr(plan, "attach_rig", None)
@@ -134,7 +164,7 @@ def _run_loop(
 
 @dataclass(frozen=True)
 class StartedLoop:
-    """A session's loop, ready to go (:func:`start_session`): the loop (a
+    """A session's loop, ready to go (what :attr:`Session.ready` is given): the loop (a
     :class:`~sashil.runtime.session.SessionLoop`), its loop process (None: it runs in this process)
     and its rig (None: the rig is the loop process's), the stage's label, the road's text and the
     stage's columns."""
@@ -147,30 +177,71 @@ class StartedLoop:
     columns: tuple[str, ...]
 
 
-def start_session(
-    spec: RunSpec,
-    duration_s: float | None,
-    *,
-    tune: bool = True,
-    can_trace: bool = False,
-    say: Callable[[str, str], None] = lambda kind, text: log.warning("%s", text),
-) -> StartedLoop:
-    """The loop of a session on the real clock (``sashil run``, a script's, the panel's) of the
-    assembled run ``spec`` (its ``plan``: the kind and values a loop builds its stage from), made
-    ready where the one rule says it runs (:func:`~sashil.engine.where.loop_in_process`): in a loop
-    process of its own, or in this one (the rig built, its port open, the board greeted). Its stage
-    is built by the same function either way (:func:`~sashil.runtime.worker.build`), once, where
-    the loop runs. ``tune``: the loop serves live changes of its law; ``can_trace``: the loop
-    process puts every CAN frame into the stream; ``say(kind, text)``: the warm-up's progress and
-    warnings. Bad input (a port that cannot be opened) raises before anything is energised."""
+@dataclass(frozen=True)
+class SessionFolder:
+    """What a session's verb readies once its loop is (:attr:`Session.ready`): the run folder, the
+    views of the stream (``start(stream, timing)``, ``close(trips, notes)``; None: none), the verb's
+    finish hook (:func:`~sashil.runtime.session.run_session`'s ``finish``) and where the loop's
+    lines go."""
+
+    folder: RunFolder
+    live: Any = None
+    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None = None
+    say: Callable[[str], None] = log.warning
+
+
+@dataclass(frozen=True)
+class Session:
+    """A session's run (:func:`run` with ``session``): ``ready(started)`` makes the verb's folder and
+    views once the loop is ready (a failure there gives the loop up, nothing energised);
+    ``tune``: the loop serves live changes of its law; ``can_trace``: a loop process puts every CAN
+    frame into the stream; ``say(kind, text)``: the warm-up's progress and warnings."""
+
+    ready: Callable[[StartedLoop], SessionFolder]
+    tune: bool = True
+    can_trace: bool = False
+    say: Callable[[str, str], None] = lambda kind, text: log.warning("%s", text)
+
+
+def _run_session(
+    spec: RunSpec, duration_s: float | None, session: Session, config: Mapping[str, Any] | None, stop: Any
+) -> RunOutcome:
+    """A session's loop made ready (:func:`_ready_loop`), its folder by the verb, then run into it."""
+    started = _ready_loop(spec, duration_s, session)
+    try:
+        opened = session.ready(started)
+    except BaseException:
+        started.loop.abort()
+        raise
+    return run_session(
+        started.loop,
+        config,
+        opened.folder,
+        duration_s,
+        controller=started.label,
+        live=opened.live,
+        say=opened.say,
+        tune=session.tune,
+        finish=opened.finish,
+        stop=stop,
+    )
+
+
+def _ready_loop(spec: RunSpec, duration_s: float | None, session: Session) -> StartedLoop:
+    """The loop of a session on the real clock, of the assembled run ``spec`` (its ``plan``: the kind
+    and values a loop builds its stage from), made ready where the one rule says it runs
+    (:func:`~sashil.engine.where.loop_in_process`): in a loop process of its own, or in this one (the
+    rig built, its port open, the board greeted). Its stage is built by the same function either
+    way (:func:`~sashil.runtime.worker.build`), once, where the loop runs. Bad input (a port that
+    cannot be opened) raises before anything is energised."""
     clock = RealClock.for_rate(spec.loop.spin_margin_us, spec.loop.rate_hz)
     if loop_in_process(spec, clock):
         # the session's side of a loop process loads here: a run on simulated time never needs it
         from sashil.runtime.loop_process import LoopProcess
 
-        process = LoopProcess(spec, duration_s, tune=tune, can_trace=can_trace).start()
+        process = LoopProcess(spec, duration_s, tune=session.tune, can_trace=session.can_trace).start()
         try:
-            ready = process.wait_ready(say)
+            ready = process.wait_ready(session.say)
         except BaseException:
             process.close()
             raise
@@ -180,7 +251,7 @@ def start_session(
     from sashil.runtime.loop import record_columns
     from sashil.runtime.worker import build
 
-    rig, stage, label, road_text = build(spec, _Said(say))
+    rig, stage, label, road_text = build(spec, _Said(session.say))
     return StartedLoop(InProcessLoop(spec, rig, stage, clock), None, rig, label, road_text, record_columns(stage))
 
 

@@ -3,36 +3,37 @@ rate, under a law and a road, into a run folder (data.csv, timing, run.png, summ
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from sashil import engine
 from sashil.api import Run, load_run
-from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.events import Event, Listener, ignore
+from sashil.plans import run as run_plan
 from sashil.recording.formats import can_formats
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.rest import rest_phrase
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
-from sashil.roads.option import RoadParts, RoadStage, parse_road
-from sashil.runtime.session import run_session
+from sashil.roads.option import RoadParts
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
 
 if TYPE_CHECKING:
-    from sashil.config.parts import RunSpec
     from sashil.config.typed import RunConfig
     from sashil.runtime.loop_process import LoopProcess
 
-__all__ = ["READS", "closed_loop", "run_in_loop", "run_plan"]
+__all__ = ["PLAN", "READS", "closed_loop"]
 
 #: ``sashil run``'s own values (``{name: config key}``), read once by the engine into its run's
 #: ``options``: how long, the road and what it is made with, the port a CAN trace names
 READS = {"duration_s": "run.duration_s", "road": "run.road", "port": "driver.port", **RoadParts.READS}
+#: ``sashil run``'s plan (:mod:`sashil.plans.run`): its values are the run's ``options`` (the road,
+#: what it is made with, how long the run commands it), which a loop process receives with the run
+PLAN = {"kind": run_plan.KIND}
 
 
 def closed_loop(
@@ -58,53 +59,68 @@ def closed_loop(
     with no folder left; an error during the run ends at 0 A and is raised after the folder is complete."""
 
     outputs = outputs if outputs is not None else Outputs()
-    spec = assemble(config, reads=READS)
+    spec = assemble(config, PLAN, READS)
     outputs.check(spec.rig.backend)
-    duration = spec.options["duration_s"]
-    rate, backend = spec.loop.rate_hz, spec.rig.backend
-    started = engine.start_session(
-        spec.with_plan(run_plan(spec)),
-        duration,
+    opener = _Opener(outputs, on_event, progress, views)
+    session = engine.Session(
+        opener,
         tune=tune,
         can_trace=bool(can_formats(tuple(outputs.formats))),
         say=lambda kind, text: on_event(Event("warning" if kind == "warning" else "progress", text)),
     )
-    loop, process, label, road_text = started.loop, started.process, started.label, started.road_text
     try:
-        folder = RunFolder.create(outputs.out, "run")
-    except BaseException:
-        loop.abort()
-        raise
-    live = outputs.open_live_tap(spec.stage.model, spec.stage.current_max_a, started.columns, "sashil run", folder.path)
-    if progress:  # a bar on a terminal, a line every 10 s otherwise
-        live = SessionHooks(live, RunProgress(duration, rate))
-    if views:
-        live = SessionHooks(live, *views)
-    on_event(
-        Event(
-            "progress",
-            f"sashil run: {backend} backend, {label}, road {road_text}, {rate:g} Hz, "
-            f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
-            {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
-        )
-    )
-    if process is None:
-        trace = outputs.start_can_trace(started.rig, folder.path)
-    else:
-        trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
-    finish = _Finish(outputs, folder, road_text, trace, process)
-
-    def say(line: str) -> None:
-        on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
-
-    try:
-        outcome = run_session(
-            loop, config, folder, duration, controller=label, live=live, say=say, tune=tune, finish=finish, stop=stop
-        )
+        outcome = engine.run(spec, None, spec.options["duration_s"], config=config, stop=stop, session=session)
     finally:
-        if trace is not None and finish.trace_stats is None:
-            trace.close()
-    return _ended(outcome, folder, on_event)
+        opener.close_trace()
+    return _ended(outcome, opener.opened.folder, on_event)
+
+
+class _Opener:
+    """What ``sashil run`` readies once its loop is (the run it was assembled for: ``started.loop.spec``):
+    the run folder, the live view (and a progress bar, and the caller's views), the CAN trace, the
+    run's first line, the finish hook."""
+
+    def __init__(self, outputs: Outputs, on_event: Listener, progress: bool, views: Sequence[Any]):
+        self.outputs, self.on_event, self.progress, self.views = outputs, on_event, progress, views
+        self.finish: _Finish | None = None
+        self.opened: engine.SessionFolder
+
+    def __call__(self, started: engine.StartedLoop) -> engine.SessionFolder:
+        spec, outputs, on_event = started.loop.spec, self.outputs, self.on_event
+        duration, rate, process = spec.options["duration_s"], spec.loop.rate_hz, started.process
+        folder = RunFolder.create(outputs.out, "run")
+        live = outputs.open_live_tap(
+            spec.stage.model, spec.stage.current_max_a, started.columns, "sashil run", folder.path
+        )
+        if self.progress:  # a bar on a terminal, a line every 10 s otherwise
+            live = SessionHooks(live, RunProgress(duration, rate))
+        if self.views:
+            live = SessionHooks(live, *self.views)
+        on_event(
+            Event(
+                "progress",
+                f"sashil run: {spec.rig.backend} backend, {started.label}, road {started.road_text}, {rate:g} Hz, "
+                f"{'until stopped' if duration is None else f'{duration:g} s'} -> {folder.path}",
+                {"folder": str(folder.path)},  # known before the loop starts: its tuning socket is there
+            )
+        )
+        if process is None:
+            trace = outputs.start_can_trace(started.rig, folder.path)
+        else:
+            trace = outputs.follow_can_trace(folder.path, spec.options["port"], process.can_frames)
+        self.finish = _Finish(outputs, folder, started.road_text, trace, process)
+
+        def say(line: str) -> None:
+            on_event(Event("progress" if line.startswith(("realtime:", "live tuning:")) else "warning", line))
+
+        self.opened = engine.SessionFolder(folder, live, self.finish, say)
+        return self.opened
+
+    def close_trace(self) -> None:
+        """The CAN trace closed, when the run's finish did not close it."""
+        finish = self.finish
+        if finish is not None and finish.trace is not None and finish.trace_stats is None:
+            finish.trace.close()
 
 
 class _Finish:
@@ -156,29 +172,3 @@ def _ended(outcome: Any, folder: RunFolder, on_event: Listener) -> Run:
             raise error
         raise SashilError(f"{type(error).__name__}: {error} (the damper was set to 0 A first)") from error
     return load_run(folder.path)
-
-
-def run_plan(run: RunSpec) -> dict[str, Any]:
-    """``sashil run``'s plan as plain values (the ``run`` plan of ``sashil.plans``): the ``--road``
-    text, what it is made with, and how long the run commands it, from the run's ``options``
-    (:data:`READS`)."""
-    return {
-        "kind": "run",
-        "road": run.options["road"],
-        "road_parts": vars(RoadParts.of(run.options)),
-        "duration_s": run.options["duration_s"],
-    }
-
-
-def run_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[Any, str, str]:
-    """``sashil run``'s stage built where its loop runs (the ``run`` plan of ``sashil.plans``,
-    ``run.plan`` as :func:`run_plan` gives it): the law on its road (the rig's road motor gets the
-    profile's speed); its label and the road's text."""
-    from sashil.control.registry import make_stage  # the law's stage: only where a loop runs, never to parse a road
-
-    plan = run.plan
-    label, stage = make_stage(run.stage)
-    road, road_text = parse_road(plan["road"], RoadParts(**plan["road_parts"]))
-    if road is not None:
-        stage = RoadStage(stage, road, plan["duration_s"])
-    return stage, label, road_text

@@ -56,6 +56,7 @@ from sashil.config.frozen import freeze, thaw
 from sashil.config.overrides import parse_override
 from sashil.config.parts import RigParts, RunSpec, StageParts
 from sashil.config.sections import CONTROLLER
+from sashil.control.law_config import reads_road_ahead
 from sashil.control.law_registry import find_law
 from sashil.control.registry import law_run_label, make_stage
 from sashil.drivers import open_rig
@@ -453,7 +454,7 @@ def compare(
     road, duration = str(section["road"]), float(section["duration_s"])
     chosen = [law if isinstance(law, CompareLaw) else CompareLaw(law) for law in laws] or own_law(config)
     for law in chosen:  # a law that reads the road ahead needs the road: refused before anything is written
-        check_road_ahead(config, "compare", str, law.law)
+        check_road_ahead(config, "compare", str, law.law, reads_road_ahead(law.law))
     currents = reference_currents(run)
     jobs = _jobs(config, currents, chosen, road, duration)
     virtual = run.virtual

@@ -35,12 +35,13 @@ from sashil.api import Run, load_run
 from sashil.config.parts import RunSpec
 from sashil.control.registry import law_run_label, make_controller
 from sashil.drivers import open_rig
-from sashil.drivers.interface import RigCommand, RigInterface, RigSample, capabilities_of
+from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble, assembled
 from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
 from sashil.lab.events import Event, Listener, ignore
 from sashil.models.plant import RoadProfile
+from sashil.plans.sweep import SweepStage
 from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.formats import can_formats
@@ -50,7 +51,7 @@ from sashil.recording.plots import plot_chirp, plot_transmissibility
 from sashil.recording.rerun_log import feasible_band
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
-from sashil.roads.profiles import SweepRoad, chirp_profile, road_of, sine_profile
+from sashil.roads.profiles import chirp_profile, sine_profile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
@@ -392,87 +393,6 @@ def frequencies(f_start_hz: float, f_stop_hz: float, steps: int, spacing: str = 
 
 
 #: the controller's per-cycle values a sweep records (the controller's attributes, docs/architecture.md names)
-CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
-
-
-class SweepStage:
-    """Loop stage: run ``controller`` (any stage with the controller's attributes) and command the
-    road speed. It keeps no data: the runner's stream records every cycle, with the controller's
-    signals and the true damper torque of a rig that reports it (``torque_true_nm``: a simulated
-    plant's, its capability ``true_torque``; NaN elsewhere). The stage that runs, given its rig
-    (:meth:`attach_rig`), hands the road to come to the controller, for a law that reads the road ahead
-    (``duration_s``: how long it will be commanded, None: until stopped)."""
-
-    def __init__(self, controller: Any, road: RoadProfile, duration_s: float | None = None):
-        self.controller = controller
-        self.duration_s = duration_s
-        #: the controller is the config's law: a loop process can make its own (:meth:`spec`)
-        self.from_config = False
-        #: the controller's signals (a current law's own output, current_law_a, too) and the true torque
-        self.signal_names = (*getattr(controller, "signal_names", CONTROLLER_SIGNALS), "torque_true_nm")
-        self.road = road
-        self._truth: RigInterface | None = None
-        self.torque_true_nm = math.nan
-        self._t0: int | None = None
-        #: what the loop process's twin of this stage counted (:meth:`absorb`), None: it ran here
-        self.seen: dict[str, Any] | None = None
-
-    def __getattr__(self, name: str) -> Any:  # the controller's signals (NaN for a stage without them)
-        if name in CONTROLLER_SIGNALS or name == "current_law_a":
-            return getattr(self.__dict__["controller"], name, math.nan)
-        raise AttributeError(name)
-
-    def attach_rig(self, rig: RigInterface) -> None:
-        """Meet the rig this stage runs on, before its loop starts: its true damper torque recorded
-        when it reports one, and the road to come handed to the controller."""
-        self._truth = rig if capabilities_of(rig).true_torque else None
-        attach = getattr(self.controller, "attach_road", None)
-        if attach is not None:
-            road = self.road
-            attach(lambda t: road(t)[1], self.duration_s)
-
-    def spec(self) -> dict[str, Any] | None:
-        """What a loop process builds this run from (the config's law on the same road:
-        :func:`sweep_stage`), or None when it cannot (a controller not the config's law, a road
-        without a spec)."""
-        if not self.from_config or not isinstance(self.road, SweepRoad):
-            return None
-        return {"kind": "sweep", "road": self.road.spec, "duration_s": self.duration_s}
-
-    def facts(self) -> dict[str, Any]:
-        """The controller's counts after the run (its clipped cycles, its summary statistics)."""
-        stats = getattr(self.controller, "stats", None)
-        return {"clip_count": int(getattr(self.controller, "clip_count", 0)), "stats": stats() if stats else None}
-
-    def absorb(self, facts: dict[str, Any]) -> None:
-        """Take the :meth:`facts` of the same run in the loop process (:attr:`clip_count`, :meth:`stats`)."""
-        self.seen = facts
-
-    @property
-    def clip_count(self) -> int:
-        """The controller's clipped cycles (as the loop process's controller counted them, when it ran there)."""
-        seen = self.__dict__.get("seen")
-        return int(seen["clip_count"]) if seen is not None else int(getattr(self.controller, "clip_count", 0))
-
-    def stats(self) -> dict[str, Any] | None:
-        """The controller's summary statistics (the loop process's controller's, when it ran there)."""
-        seen = self.__dict__.get("seen")
-        if seen is not None:
-            return seen["stats"]
-        stats = getattr(self.controller, "stats", None)
-        return stats() if stats is not None else None
-
-    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand | None:
-        if self._t0 is None:
-            self._t0 = t_ns
-        t = (t_ns - self._t0) * 1e-9
-        if self._truth is not None:
-            self.torque_true_nm = self._truth.plant_truth().damper_torque_nm
-        cmd = self.controller.step(sample, t_ns, dt_ns)
-        cmd.road_speed_rad_s = self.road(t)[1]
-        return cmd
-
-
 def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """:data:`SWEEP_COLUMNS`, a current law's own output (``current_law_a``) when the stream has it,
     and ``seq`` (int64) of a sweep's stream."""
@@ -483,20 +403,6 @@ def sweep_columns(stream: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 RigFactory = Callable[["RunSpec", RoadProfile], RigInterface]
-
-
-def sweep_stage(run: RunSpec, rig: RigInterface) -> SweepStage:
-    """A sweep run's stage built in a loop process: the run's law on the road of its plan, for
-    ``duration_s`` of it."""
-    stage = SweepStage(make_controller(None, run.stage), road_of(run.plan["road"]), run.plan.get("duration_s"))
-    stage.attach_rig(rig)
-    return stage
-
-
-def sweep_in_loop(run: RunSpec, rig: RigInterface, prompt: Callable[[str], None]) -> tuple[SweepStage, str, str]:
-    """One run of a sweep built in a loop process (the ``sweep`` plan of ``sashil.plans``: a chirp,
-    or one frequency of a stepped sine): the run's law on the road of its plan (``run.plan``)."""
-    return sweep_stage(run, rig), run.stage.law, str(run.plan["road"].get("shape"))
 
 
 def default_rig(run: RunSpec, road: RoadProfile) -> RigInterface:
@@ -546,8 +452,8 @@ def run_sweep(
     :attr:`~SweepStage.clip_count` and :meth:`~SweepStage.stats`).
 
     ``law_of_config``: ``controller`` is the config's law, so on the real clock with
-    ``loop.process`` a loop process can run the same stage of its own (:func:`sweep_stage`; the
-    road a :class:`SweepRoad`); ``rig_factory`` then goes unused. Clock: ``clock``, else the
+    ``loop.process`` a loop process can run the same stage of its own (:func:`sashil.plans.sweep.stage`; the
+    road a :class:`~sashil.roads.profiles.SweepRoad`); ``rig_factory`` then goes unused. Clock: ``clock``, else the
     config's (:func:`~sashil.runtime.clock.default_clock`: the virtual one for the simulated
     rig, the real one for a link). ``keep`` gets the columns recorded so far however the run ends
     (a link fault, a safety trip, a stop), before the error propagates. ``data_path``: the runner

@@ -126,7 +126,7 @@ class LoopProcess:
     ):
         """``spec``: the assembled run, all the loop process is sent of it, with its ``plan`` (the
         plan's ``kind`` and values, which the loop process builds the plan from: the
-        ``sashil.plans`` entry points). ``can_trace``: the loop process puts
+        built-in plans of :mod:`sashil.plans` or the ``sashil.plans`` entry points). ``can_trace``: the loop process puts
         every CAN frame into the stream (:meth:`can_frames`)."""
         if not spec.plan:
             raise ValueError("LoopProcess: the spec names no plan (assemble it with one)")

@@ -21,7 +21,8 @@ loop server it was forked from, or the session for a fresh interpreter):
 Ending. The loop process stops as it does for a signal (0 A with the road at rest, read on until
 the coil's current has decayed, deactivate, close). The session's recorder wrote rows up to the
 stream's ``recorded`` word; the rest, down to the safe state's row, is appended to ``data.csv``
-here in the same format, and ``timing.npz`` and ``summary.json`` are written (``exit_status:
+here in the same format, ``timing.npz`` is written and ``summary.json`` through the folder's writer (the
+:class:`~sashil.recording.folder_writer.FolderWriter`, as the session would have: ``exit_status:
 error``, ``stop_reason``: the session died). The stream file stays, marked ``died``, until the
 next run's :func:`~sashil.runtime.stream.remove_stale`.
 """
@@ -40,8 +41,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.errors import SashilError
+from sashil.recording.documents import Documents
+from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_summary
 from sashil.runtime.runner import end_summary
 from sashil.runtime.stream import HOLD_BYTES, HOLDER_W, RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
@@ -230,8 +232,9 @@ def finish_alone(
     run = RunFolder(folder, verb)
     run.write_timing(timing)
     error = SashilError(f"{end['stop_reason']}: the loop stopped at 0 A and wrote the rest of the data itself")
-    write_summary(
-        run,
+    writer = Documents([FolderWriter(run, verb, {}, several=False)])  # the folder's one writer of summary.json
+    writer.summary(
+        None,
         {
             "verb": verb,
             **end_summary(

@@ -2,7 +2,7 @@
 as :func:`~sashil.runtime.runner.run_plan` gives in this process.
 
 On the real clock, with ``loop.process`` (the default), a plan that says how to build it
-(``plan.spec()``: its ``kind`` and arguments, the ``sashil.plans`` entry points) runs in a loop
+(``plan.spec()``: its ``kind`` and arguments, :func:`sashil.runtime.worker.plan_builder`) runs in a loop
 process (:mod:`sashil.runtime.loop_process`): the rig, the safety supervisor and the plan live
 there, and nothing else. This process keeps the plan's twin, which takes what the loop process's
 plan saw (``plan.absorb(facts)``) after the run, records the stream into the data file, feeds the

@@ -127,7 +127,7 @@ class InProcessLoop:
 
 def run_session(
     loop: SessionLoop,
-    config: Mapping[str, Any],
+    config: Mapping[str, Any] | None,
     folder: RunFolder,
     duration_s: float | None,
     *,
@@ -166,31 +166,14 @@ def run_session(
         }
         if outcome.loop_process is not None:
             head["loop_process"] = outcome.loop_process
-        outcome.summary = _close_folder(
-            folder, documents, loop.spec.rig.backend, outcome.timing, outcome.tuning_rows, head, finish
-        )
+        if outcome.tuning_rows:  # the live changes
+            folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, outcome.tuning_rows)
+        folder.write_timing(outcome.timing)
+        summary = {**head, "driver": loop.spec.rig.backend}
+        if finish is not None:  # the verb's keys, given the summary so far
+            summary.update(finish(summary))
+        documents.summary(None, summary)
+        outcome.summary = summary
     finally:
         loop.close()
     return outcome
-
-
-def _close_folder(
-    folder: RunFolder,
-    documents: Documents,
-    driver: str,
-    timing: Any,
-    event_rows: list[list[Any]],
-    summary: dict[str, Any],
-    finish: Callable[[dict[str, Any]], Mapping[str, Any]] | None,
-) -> dict[str, Any]:
-    """A session's last writes into ``folder``, wherever its loop ran: the live changes
-    (``events.csv``, when there were any), the timing file, and ``summary.json`` once: ``summary``
-    with the run's ``driver`` and the keys the verb's ``finish`` hook adds, given the summary so far."""
-    if event_rows:
-        folder.write_rows(EVENTS_FILE, EVENT_COLUMNS, event_rows)
-    folder.write_timing(timing)
-    summary = {**summary, "driver": driver}
-    if finish is not None:
-        summary.update(finish(summary))
-    documents.summary(None, summary)
-    return summary
