@@ -91,7 +91,7 @@ class PreviewOptimal(Law):
         choices=("receding", "open-loop"),
         doc="re-plan from the estimated state over the preview (receding), or plan the whole road before the run",
     )
-    preview_s = Param(1.0, unit="s", low=0.0, high=1.0, doc="road known ahead of each re-plan (receding)")
+    preview_s = Param(1.0, unit="s", low=0.0, high=4.0, doc="road known ahead of each re-plan (receding)")
     horizon_s = Param(
         2.0,
         unit="s",
@@ -99,7 +99,7 @@ class PreviewOptimal(Law):
         high=4.0,
         doc="time each re-plan looks ahead, the road at rest past the preview (receding)",
     )
-    slot_cycles = Param(5, low=1, high=100, doc="cycles per step of the re-plan's model (receding)")
+    slot_cycles = Param(2, low=1, high=100, doc="cycles per step of the re-plan's model (receding)")
     replan_cycles = Param(
         50, low=1, high=1000, doc="cycles between re-plans, and from a request to its plan in force (receding)"
     )
