@@ -259,9 +259,9 @@ QUICK_PREVIEWS = (0.0, 0.25)
 #: the horizon a re-plan looks past its preview at least [s] (the law's default horizon is 2 s)
 HORIZON_PAST_PREVIEW_S = 1.0
 #: the cases of the manual's figure (docs/figures/preview_curve.png, ``tools/figures.py``)
-FIGURE_DAMPERS = ORDER[:6]
+FIGURE_DAMPERS = ORDER[:3]
 FIGURE_ROADS = ("iso8608:B:20", "iso8608:C:10")
-FIGURE_DURATION_S = 8.0
+FIGURE_DURATION_S = 6.0
 #: the plants of the curve: the law's model exact, 10 % and 20 % off, and Dahl's hysteresis
 PLANTS = ("exact", "10 % off", "20 % off", "dahl")
 OPEN_LOOP = "open-loop"
