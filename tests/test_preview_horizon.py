@@ -113,7 +113,7 @@ def test_the_receding_law_reads_its_preview_and_gives_the_same_commands_on_every
     assert once == again
     assert all(0.0 <= u <= 1.0 for u in once)
     assert once[:20] == [law._first.command_at(k) for k in range(20)]  # the first re-plan arrives at cycle 40
-    assert PreviewOptimal(_context()).plan == "open-loop"  # the default
+    assert PreviewOptimal(_context()).plan == "receding"  # the default: a rig is never its model
     assert PreviewOptimal(_context(), plan="open-loop").preview_cycles() == 0
 
 
@@ -190,3 +190,12 @@ def test_the_dahl_plant_of_the_benchmark_is_bouc_wen_with_n_1_beta_0_and_gamma_d
         bouc_wen = advance_z(w, step, plant.beta, plant.gamma, plant.delta, plant.n, plant.z_bound)
         # advance_z integrates by Runge-Kutta in the travel, Dahl's is the exact solution
         assert bouc_wen == pytest.approx(dahl_w_advance(w, step, rho), rel=1e-5, abs=1e-9)
+
+
+def test_a_preview_past_a_second_is_read_whole_and_its_model_stepped_every_two_cycles():
+    law = PreviewOptimal(_context(), preview_s=2.5, horizon_s=3.5)
+    assert law.plan == "receding" and law.preview_cycles() == 2500
+    # 3.5 s of 2-cycle slots of 1 ms
+    assert (law._spec.slot_cycles, law._spec.slots, law._spec.preview_cycles) == (2, 1750, 2500)
+    with pytest.raises(ConfigError, match=r"controller\.preview_s"):
+        PreviewOptimal(_context(), preview_s=4.5)

@@ -252,9 +252,16 @@ def mismatch_table(rows: list[tuple[str, str, dict[str, float]]], fraction: floa
 
 #: where the curve's figure goes
 OUT_PNG = Path(__file__).resolve().parent / "out" / "preview_curve.png"
-#: the preview lengths of the curve [s]
-PREVIEWS = (0.0, 0.05, 0.1, 0.25, 0.5, 1.0)
+#: the preview lengths of the curve [s]: up to the law's 1 s, then 2 and 3 s (how much of the gap
+#: to the whole road's plan is the road a 1 s preview does not show)
+PREVIEWS = (0.0, 0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 3.0)
 QUICK_PREVIEWS = (0.0, 0.25)
+#: the horizon a re-plan looks past its preview at least [s] (the law's default horizon is 2 s)
+HORIZON_PAST_PREVIEW_S = 1.0
+#: the cases of the manual's figure (docs/figures/preview_curve.png, ``tools/figures.py``)
+FIGURE_DAMPERS = ORDER[:3]
+FIGURE_ROADS = ("iso8608:B:20", "iso8608:C:10")
+FIGURE_DURATION_S = 6.0
 #: the plants of the curve: the law's model exact, 10 % and 20 % off, and Dahl's hysteresis
 PLANTS = ("exact", "10 % off", "20 % off", "dahl")
 OPEN_LOOP = "open-loop"
@@ -299,6 +306,15 @@ def plant_params(params: dict[str, float] | None) -> Iterator[None]:
         _compare.open_rig = original
 
 
+def preview_keys(preview_s: float) -> list[str]:
+    """The keys of a receding run that sees ``preview_s`` ahead: a preview longer than the law's
+    horizon less :data:`HORIZON_PAST_PREVIEW_S` lengthens the horizon to that."""
+    keys = [f"controller.preview_s={preview_s:g}"]
+    if preview_s + HORIZON_PAST_PREVIEW_S > 2.0:
+        keys.append(f"controller.horizon_s={preview_s + HORIZON_PAST_PREVIEW_S:g}")
+    return keys
+
+
 def curve_case(
     damper: str, road_text: str, duration: float, previews: list[float], preview: list[str]
 ) -> dict[str, Any]:
@@ -335,7 +351,7 @@ def curve_case(
         road, _ = parse_road(road_text, RoadParts.read(true))
         bound = hysteretic_bound(true, road, duration)
         shares: dict[str, float] = {}
-        runs = [(f"{s:g}", ["controller.plan=receding", f"controller.preview_s={s}"]) for s in previews] + [
+        runs = [(f"{s:g}", ["controller.plan=receding", *preview_keys(s)]) for s in previews] + [
             (OPEN_LOOP, ["controller.plan=open-loop"])
         ]
         for key, keys in runs:
@@ -346,6 +362,17 @@ def curve_case(
             shares[key] = share_of_bound(rms, best, bound)
         out["plants"][plant] = {"best_passive": best, "bound": bound, "share": shares}
     return out
+
+
+def previews_of(text: str) -> list[float]:
+    """The preview lengths of ``--previews`` [s]: numbers >= 0, comma-separated."""
+    try:
+        previews = [float(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers of seconds, got {text!r}") from None
+    if any(not math.isfinite(s) or s < 0.0 for s in previews):
+        raise argparse.ArgumentTypeError(f"expected preview lengths >= 0 s, got {text!r}")
+    return previews
 
 
 def curve_figures(cases: list[dict[str, Any]], previews: list[float]) -> dict[str, Any]:
@@ -364,12 +391,38 @@ def curve_figures(cases: list[dict[str, Any]], previews: list[float]) -> dict[st
     return figures
 
 
-def curve_table(figures: dict[str, Any], previews: list[float], count: int) -> None:
+def kept_gain(cases: list[dict[str, Any]], previews: list[float]) -> dict[str, Any]:
+    """Per plant other than ``exact`` and per preview length (and the open-loop plan): the median and
+    worst, over the cases, of the share on that plant over the share on the exact model [%] (the
+    part of its exact-model gain a law keeps on a rig that is not its model); cases whose exact
+    share is not above 0 are left out."""
+    kept: dict[str, Any] = {}
+    for plant in PLANTS[1:]:
+        row = {}
+        for key in [*(f"{s:g}" for s in previews), OPEN_LOOP]:
+            ratios = [
+                100.0 * c["plants"][plant]["share"][key] / c["plants"]["exact"]["share"][key]
+                for c in cases
+                if c["plants"]["exact"]["share"][key] > 0.0 and math.isfinite(c["plants"][plant]["share"][key])
+            ]
+            row[key] = {
+                "median": statistics.median(ratios) if ratios else math.nan,
+                "worst": min(ratios) if ratios else math.nan,
+                "cases": len(ratios),
+            }
+        kept[plant] = row
+    return kept
+
+
+def curve_table(figures: dict[str, Any], previews: list[float], count: int, kept: dict[str, Any]) -> None:
     print()
     print(f"share of the true plant's bound against the preview length, median / worst over {count} cases")
     keys = [*(f"{s:g}" for s in previews), OPEN_LOOP]
     print("  plant       " + "".join(f"{(k + ' s') if k != OPEN_LOOP else k:>17s}" for k in keys))
     for plant, row in figures.items():
+        print(f"  {plant:10s}  " + "".join(f"{row[k]['median']:7.1f}% {row[k]['worst']:6.1f}%  " for k in keys))
+    print("the share kept of the exact model's (share on the plant / share on the exact model), median / worst")
+    for plant, row in kept.items():
         print(f"  {plant:10s}  " + "".join(f"{row[k]['median']:7.1f}% {row[k]['worst']:6.1f}%  " for k in keys))
 
 
@@ -397,6 +450,40 @@ def curve_png(path: Path, figures: dict[str, Any], previews: list[float], count:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _rounded(value: Any) -> Any:
+    """``value`` with each float to 0.1 (the figure's data: the numbers its caption states)."""
+    if isinstance(value, dict):
+        return {key: _rounded(item) for key, item in value.items()}
+    return round(value, 1) if isinstance(value, float) else value
+
+
+def figure(out: Path, jobs: int = 2) -> None:
+    """The manual's figure ``out``/preview_curve.png and its data ``out``/preview_curve.json: the
+    curve on :data:`FIGURE_DAMPERS` x :data:`FIGURE_ROADS`, :data:`FIGURE_DURATION_S` each, every
+    length of :data:`PREVIEWS` (``tools/figures.py --figure preview_curve``; minutes)."""
+    pairs = [(d, r) for d in FIGURE_DAMPERS for r in FIGURE_ROADS]
+    previews = list(PREVIEWS)
+    before = provenance()
+    curve = each_case(curve_case, pairs, jobs, FIGURE_DURATION_S, previews, [])
+    figures = curve_figures(curve, previews)
+    kept = kept_gain(curve, previews)
+    curve_table(figures, previews, len(curve), kept)
+    curve_png(out / "preview_curve.png", figures, previews, len(curve))
+    record = {
+        "tool": "tools/figures.py --figure preview_curve (tools/bench_preview.py)",
+        "started": before,
+        "ended": provenance(),
+        "dampers": list(FIGURE_DAMPERS),
+        "roads": list(FIGURE_ROADS),
+        "duration_s": FIGURE_DURATION_S,
+        "previews_s": previews,
+        "figures": _rounded(figures),
+        "kept_of_exact": _rounded(kept),
+        "cases": curve,
+    }
+    (out / "preview_curve.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
 
 
 def provenance() -> dict[str, Any]:
@@ -586,6 +673,12 @@ def main() -> int:
     parser.add_argument(
         "--png", type=Path, help="the curve's figure (default tools/out/preview_curve.png; --quick: a temporary file)"
     )
+    parser.add_argument(
+        "--previews",
+        type=previews_of,
+        default=",".join(f"{s:g}" for s in PREVIEWS),
+        help="with --curve: comma-separated preview lengths [s] (fewer for the whole spread)",
+    )
     parser.add_argument("--loop-cost", type=int, metavar="PAIRS", help="PAIRS of real-clock runs, passive and preview")
     parser.add_argument("--set", action="append", default=[], help="controller.KEY=VALUE for the preview law (repeat)")
     args = parser.parse_args()
@@ -615,11 +708,12 @@ def main() -> int:
             args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
         return 0
     if args.curve or args.quick:
-        previews = list(QUICK_PREVIEWS if args.quick else PREVIEWS)
+        previews = list(QUICK_PREVIEWS) if args.quick else args.previews
         before = provenance()
         curve = each_case(curve_case, pairs, args.jobs, duration, previews, args.set)
         figures = curve_figures(curve, previews)
-        curve_table(figures, previews, len(curve))
+        kept = kept_gain(curve, previews)
+        curve_table(figures, previews, len(curve), kept)
         if args.png is None and args.quick:  # the quick mode draws, and leaves the repository's figure alone
             with tempfile.TemporaryDirectory(prefix="bench-preview-") as scratch:
                 curve_png(Path(scratch) / "curve.png", figures, previews, len(curve))
@@ -636,6 +730,7 @@ def main() -> int:
                 "previews_s": previews,
                 "set": args.set,
                 "figures": figures,
+                "kept_of_exact": kept,
                 "cases": curve,
             }
             args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,8 @@ same run that drew it. The makers are the tools this one wraps: ``readme_figures
 rig's verbs: drop_test, hysteresis, compare, transmissibility, calibration, identify, timing),
 ``rig_figure.py`` (rig.svg, drawn by code), ``tutorial_figures.py`` (run: ``sashil run``'s run.png;
 doctor: a healthy ``sashil doctor`` table against the emulated board) and ``panel_figures.py``
-(panel, panel-runs: Chromium against ``sashil panel``).
+(panel, panel-runs: Chromium against ``sashil panel``) and ``bench_preview.py`` (preview_curve: the
+preview law's share of the bound against the road it knows ahead, on simulated rigs; minutes).
 
     .venv/bin/python tools/figures.py                      # every figure (minutes)
     .venv/bin/python tools/figures.py --figure compare     # one figure (repeatable)
@@ -50,6 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "figures"
 sys.path.insert(0, str(ROOT / "tools"))
 
+import bench_preview  # noqa: E402
 import panel_figures  # noqa: E402
 import readme_figures  # noqa: E402
 import rig_figure  # noqa: E402
@@ -158,6 +160,7 @@ FIGURES = {
     "doctor": Figure("doctor.svg", "tutorial_figures.py"),
     "panel": Figure("panel.png", "panel_figures.py", recompute_panel),
     "panel-runs": Figure("panel-runs.png", "panel_figures.py"),
+    "preview_curve": Figure("preview_curve.png", "bench_preview.py"),
 }
 #: the figures ``--quick`` draws (in this process, in seconds)
 QUICK = ("rig", "hysteresis")
@@ -294,6 +297,11 @@ def make(names: tuple[str, ...], out: Path, quick: bool) -> None:
     tutorial = tuple(name for name in names if name in tutorial_figures.FIGURES)
     if tutorial:
         tutorial_figures.figures(out, quick=quick, chosen=tutorial)
+    if "preview_curve" in names:
+        if quick:
+            names = tuple(name for name in names if name != "preview_curve")
+        else:
+            bench_preview.figure(out)
     if {"panel", "panel-runs"} & set(names):
         lacking = panel_figures.missing()
         if lacking is None:
