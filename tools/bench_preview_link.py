@@ -6,12 +6,13 @@ For each damper (``tools/bench_drop_damping.py``'s, by name; bench_preview's ORD
 (ISO 8608 C at 10 m/s), each run as ``sashil compare`` runs it (:func:`sashil.lab._compare.run_job`):
 
 - ``sim``: the simulated rig (virtual clock), the law's model the plant's own: the passive runs at
-  0 A and i_max and ``preview-optimal``; θ̈2 the plant's own;
+  the currents ``compare.passive_currents_a`` lists (compare's baseline on a rig, the best of them)
+  and ``preview-optimal``; θ̈2 the plant's own;
 - ``calibrated``: the same, ``preview-optimal`` built on the model ``sashil calibrate`` fitted over
   serial against ``sashil emulate`` of this damper (``--calibrated DIR``: DIR/<damper>/params.yaml,
   from :func:`sashil.lab.calibration.emulated.calibrate_emulated`, ``--inertia`` the true J; ``--calibrate``
   makes them first), run against the true plant, on the true plant's passive runs and bound;
-- ``serial``: the same three runs over pyserial against ``sashil emulate`` of this damper (a fresh
+- ``serial``: the same runs over pyserial against ``sashil emulate`` of this damper (a fresh
   emulator per run, its ``--truth`` log joined to the host's rows on the wire's sequence number).
   θ̈2 both as compare measures it over a link (the encoders) and the emulator's true
   (−k·θ − T)/J, low-passed alike.
@@ -72,6 +73,7 @@ from sashil.lab._compare import LawJob, run_job
 from sashil.lab.compare_metrics import arm_acceleration
 from sashil.lab.compare_report import share_of_bound
 from sashil.lab.hysteretic_bound import bound_on_chain, model_passive
+from sashil.lab.passive_baseline import passive_label
 from sashil.models.hysteresis import BoucWenParams
 from sashil.roads.option import RoadParts, parse_road
 
@@ -84,14 +86,19 @@ def progress(text: str) -> None:
     print(f"  .. {time.strftime('%H:%M:%S')} load {os.getloadavg()[0]:.2f}  {text}", flush=True)
 
 
+def reference_currents(config: dict[str, Any]) -> list[float]:
+    """The passive references: the constant currents ``compare.passive_currents_a`` lists, compare's
+    baseline on a rig where each candidate is a run of rig time (the best of them)."""
+    return [float(current) for current in config["compare"]["passive_currents_a"]]
+
+
 def labels(config: dict[str, Any]) -> list[tuple[str, list[str]]]:
-    """The three runs: the passive references and the preview law, each with its overrides."""
-    i_max = float(config["rig"]["current_max_a"])
-    return [
-        ("passive 0 A", ["controller.law=passive", "controller.current_a=0.0"]),
-        (f"passive {i_max:g} A", ["controller.law=passive", f"controller.current_a={i_max}"]),
-        (LAW, [f"controller.law={LAW}"]),
+    """The runs: the passive references and the preview law, each with its overrides."""
+    passive = [
+        (passive_label(current), ["controller.law=passive", f"controller.current_a={current}"])
+        for current in reference_currents(config)
     ]
+    return [*passive, (LAW, [f"controller.law={LAW}"])]
 
 
 def sim_runs(config: dict[str, Any], road: str, duration: float) -> tuple[dict[str, float], dict[str, float]]:
@@ -183,8 +190,8 @@ def model_refs(config: dict[str, Any], road_text: str, duration: float) -> dict[
     tau, settle = float(config["rig"]["coil_tau_s"]), float(config["compare"]["settle_s"])
     bandwidth = float(config["compare"]["accel_bandwidth_hz"])
     refs = {"bound": hysteretic_bound(config, road, duration)}
-    for current in (0.0, float(config["rig"]["current_max_a"])):
-        refs[f"passive {current:g} A"] = model_passive(
+    for current in reference_currents(config):
+        refs[passive_label(current)] = model_passive(
             params, current, tau, road, duration, settle, bandwidth_hz=bandwidth
         )
     return refs
@@ -235,7 +242,7 @@ def serial_shares(
     keep: Path | None = None,
     retries: int = 0,
 ) -> dict[str, Any]:
-    """The three runs over serial, ``repeat`` times, and the preview law's shares on each chain: the
+    """The runs over serial, ``repeat`` times, and the preview law's shares on each chain: the
     median of the rounds (each round's shares beside it: a run's realised road varies with the host's
     pauses, so one round's share varies)."""
     rounds = [serial_round(config, road, duration, refs, keep, i, retries) for i in range(repeat)]
@@ -255,7 +262,7 @@ def serial_round(
     i: int = 0,
     retries: int = 0,
 ) -> dict[str, Any]:
-    """One round of the three runs over serial and the preview law's shares on each chain; ``keep``:
+    """One round of the runs over serial and the preview law's shares on each chain; ``keep``:
     the runs' folders (data.csv, the emulator's truth log) kept in keep/round-<i>; a run whose link
     failed (a write timeout while the emulator stalls under load) is run again up to ``retries``
     times, in keep/round-<i>/retry-<n>."""
