@@ -51,6 +51,7 @@ import tempfile
 import threading
 from pathlib import Path
 
+from sashil.config.section_parts import LoopRtPart
 from sashil.control.laws import Passive
 from sashil.control.stages import ConstantCurrent
 from sashil.drivers.firmware import compiler
@@ -93,7 +94,7 @@ def bare_run(config: dict, rate: float, duration: float, tune_folder: Path | Non
     """The empty cycle; with ``tune_folder``, plus the passive law's live tuning listening on a socket
     there with no change pending (what every cycle of ``sashil run`` pays for being tunable)."""
     clock = RealClock.for_rate(config["loop"]["spin_margin_us"], rate)
-    rt = RealtimeSetup.from_parts(config["loop"]["rt"])
+    rt = RealtimeSetup.from_parts(LoopRtPart.read(config["loop"]["rt"]))
     tuning = server = None
     stage = ConstantCurrent(0.5)
     if tune_folder is not None:
