@@ -4,6 +4,7 @@ with the zig C compiler of the ``ziglang`` package, checked in the ELF it produc
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import sys
@@ -90,7 +91,10 @@ def test_tools_elf_size_prints_what_make_printed(firmware, tmp_path):
     elf_file = tmp_path / "board.elf"
     elf_file.write_bytes(image.data)
     tool = Path(__file__).resolve().parents[1] / "tools" / "elf_size.py"
-    done = subprocess.run([sys.executable, str(tool), str(elf_file)], capture_output=True, text=True, timeout=60)
+    env = {**os.environ, "SASHIL_KEEP_OUTPUT": "0"}  # a test's run keeps no record in tools/out/
+    done = subprocess.run(
+        [sys.executable, str(tool), str(elf_file)], capture_output=True, text=True, timeout=60, env=env
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.split(": ", 1)[1] in printed
 

@@ -59,3 +59,19 @@ def test_bad_previews_are_refused_in_one_line_naming_the_option(text):
     assert done.returncode == 2
     assert "argument --previews: expected" in done.stderr.strip().splitlines()[-1]
     assert done.stdout == ""
+
+
+def test_the_dahl_plant_runs_under_the_configs_controller_with_its_own_parameters(bench):
+    # the Dahl plant's runs open the simulated rig on the Dahl-form parameters, whatever model the
+    # config gives the controller (a run under another plant must not fail to open its rig)
+    from sashil.drivers import rig_parts
+    from sashil.engine.resolve import default_config
+    from sashil.lab import _compare
+
+    config = default_config()
+    plant = bench.dahl_plant(config["model"]["params"])
+    with bench.plant_params(plant):
+        rig = _compare.open_rig(rig_parts(config, "sim"))
+    assert rig.plant.params.beta == 0.0 and rig.plant.params.n == 1.0
+    assert rig.plant.params.gamma == pytest.approx(plant["gamma"])
+    assert _compare.open_rig(rig_parts(config, "sim")).plant.params.n == config["model"]["params"]["n"]

@@ -62,7 +62,7 @@ import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
@@ -283,6 +283,7 @@ def plant_params(params: dict[str, float] | None) -> Iterator[None]:
     """Runs of :func:`run_job` inside it go on a simulated rig whose plant is ``params`` (Bouc-Wen
     parameters), whatever model the config gives the controller (None: the config's plant)."""
     from sashil.config.parts import RigParts
+    from sashil.config.section_parts import ModelPart
     from sashil.lab import _compare
 
     if params is None:
@@ -291,8 +292,8 @@ def plant_params(params: dict[str, float] | None) -> Iterator[None]:
     original = _compare.open_rig
 
     def open_plant(parts: RigParts) -> Any:
-        values = {**parts.values, "model": {"name": "bouc-wen", "params": dict(params)}, "mismatch": None}
-        return original(RigParts(parts.backend, values))
+        model = ModelPart("bouc-wen", dict(params))
+        return original(replace(parts, model=model, mismatch=None))
 
     _compare.open_rig = open_plant  # type: ignore[assignment]
     try:

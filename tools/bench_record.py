@@ -132,9 +132,11 @@ def keep_output(name: str, main: Callable[[], Any], path: Path | None = None, ch
     """Run a benchmark's ``main`` and keep what it prints: when it returns, the lines go to ``path``
     (default :func:`out_path`) as ``figures.output`` with the provenance at its start, the load at
     its end and what ``main`` returned (``exit``). A run that raises (bad arguments, a failure), a
-    ``--quick`` run and a run with one of the flags ``children`` (the tool started as its own child
-    process: its parent keeps the figures) keep nothing. Returns what ``main`` returned."""
-    if any(flag in sys.argv[1:] for flag in ("--quick", *children)):
+    ``--quick`` run, a run with one of the flags ``children`` (the tool started as its own child
+    process: its parent keeps the figures) and a run with ``SASHIL_KEEP_OUTPUT=0`` in its environment
+    (a test's) keep nothing. Returns what ``main`` returned."""
+    quiet = os.environ.get("SASHIL_KEEP_OUTPUT") == "0"
+    if quiet or any(flag in sys.argv[1:] for flag in ("--quick", *children)):
         return main()
     record = Recorder(name)
     tee = _Tee(sys.stdout)
