@@ -15,16 +15,16 @@ read of shared memory each cycle.
 
 Open loop (``plan: open-loop``): the whole road planned before the run and tracked. It keeps more
 of the bound on a model that is the plant, and far less on one that is not; a lab's rig is never
-its model, so the re-planned law is the default. Over the 18-damper spread on ISO 8608 B and C at
-10 and 20 m/s (``tools/bench_preview.py --curve --previews 1 --dampers all``, 72 cases), median /
-worst share of the true plant's bound, re-planned with 1 s of preview against open loop: exact
-model 89.4 / 76.8 % against 96.3 / 86.7 %; 10 % off 83.3 / 54.9 % against 50.7 / −72.7 %; 20 % off
-63.2 / −14.6 % against −17.3 / −237.7 %; a Dahl plant 80.3 / −228.4 % against 89.7 / −55.8 %.
-The re-planned law's gap on the exact model is the road past its preview: over the manual's curve
-(``tools/figures.py --figure preview_curve``, 6 cases) 1, 2 and 3 s of preview keep a median 86.3,
-90.8 and 92.5 % against the open loop's 93.9 %, and on the seed damper (ISO 8608 C at 10 m/s, 8 s,
-the model stepped every cycle) 89.5, 94.6 and 95.9 % against 96.4 %: the gap shrinks two- to
-fourfold per second of preview, as the arm's free response does (e^(−ζω·1 s) = e^(−0.13·10.7) = 0.25).
+its model, so the re-planned law is the default. Over the 18-damper spread on ISO 8608 C at
+10 m/s (``tools/bench_preview.py --curve --previews 1 --dampers all --roads iso8608:C:10``), median /
+worst share of the true plant's bound (compare's baseline and law-free bound), re-planned with 1 s
+of preview against open loop: exact model 80.8 / 73.2 % against 89.6 / 85.2 %; 10 % off 75.9 / 43.3 %
+against 48.4 / −43.9 %; 20 % off 60.4 / 31.4 % against −13.4 / −201.4 %; a Dahl plant 77.1 / −113.0 %
+against 86.4 / 6.3 %. The re-planned law's gap on the exact model is the road past its preview:
+over the manual's curve (``tools/figures.py --figure preview_curve``, 6 cases) 1, 2 and 3 s of
+preview keep a median 74.5, 77.8 and 79.0 % against the open loop's 80.8 %: the gap narrows with
+each second of preview (6.3, 3.0, 1.8 points), and the arm's free response decays to
+e^(−ζω·1 s) = e^(−0.13·10.7) = 0.25 a second, so the road past a 1 s preview still moves the arm.
 
 Plan (before the run, :meth:`PreviewOptimal.plan_road`): the commanded road's speeds θ̇1 of every
 cycle go to :func:`sashil.control.preview_plan.plan_current`, the optimal bound's own optimiser
