@@ -1,4 +1,4 @@
-"""Issue 56's count: the files outside the config layer that read a config's keys, and the rule's reading."""
+"""The config readers' count: the files outside the config layer that read a config's keys, and the rule's reading."""
 
 from __future__ import annotations
 
