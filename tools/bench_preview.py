@@ -75,6 +75,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drop_damping import DAMPERS
+from bench_record import provenance
 
 from sashil.config.parts import StageParts
 from sashil.drivers import rig_parts
@@ -467,24 +468,13 @@ def figure(out: Path, jobs: int = 2) -> None:
         "kept_of_exact": _rounded(kept),
         "cases": curve,
     }
-    (out / "preview_curve.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    write_record(out / "preview_curve.json", record)
 
 
-def provenance() -> dict[str, Any]:
-    """The commit measured and the machine's load (1, 5 and 15 minutes) now."""
-    import subprocess
-
-    root = Path(__file__).resolve().parents[1]
-    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=False)
-    dirty = subprocess.run(
-        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True, text=True, check=False
-    )
-    return {
-        "commit": commit.stdout.strip(),
-        "dirty": bool(dirty.stdout.strip()),
-        "loadavg": list(os.getloadavg()),
-        "cpus": os.cpu_count(),
-    }
+def write_record(path: Path, record: Any) -> None:
+    """Write one of the benchmark's JSON records to ``path`` (its folder made)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
 
 
 def loop_cost(pairs: int, duration: float, preview: list[str], out: Path) -> dict[str, Any]:
@@ -688,8 +678,7 @@ def main() -> int:
         )
         if args.json is not None:
             record = {"tool": "tools/bench_preview.py --loop-cost", "started": before, "ended": provenance(), **cost}
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+            write_record(args.json, record)
         return 0
     if args.curve or args.quick:
         previews = list(QUICK_PREVIEWS) if args.quick else args.previews
@@ -717,8 +706,7 @@ def main() -> int:
                 "kept_of_exact": kept,
                 "cases": curve,
             }
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+            write_record(args.json, record)
         return 0
     if args.mismatch is not None:
         before = provenance()
@@ -735,8 +723,7 @@ def main() -> int:
                 "set": args.set,
                 "cases": [{"damper": d, "road": r, "share": s} for (d, r), s in zip(pairs, shares, strict=True)],
             }
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(record, indent=1), encoding="utf-8")
+            write_record(args.json, record)
         return 0
     cases = each_case(run_case, pairs, args.jobs, duration, args.set)
     table(cases)
@@ -748,7 +735,7 @@ def main() -> int:
     )
     print(f"wall {time.perf_counter() - start:.0f} s")
     if args.json is not None:
-        args.json.write_text(json.dumps([asdict(c) for c in cases], indent=1), encoding="utf-8")
+        write_record(args.json, [asdict(c) for c in cases])
     return 0
 
 
