@@ -3,23 +3,15 @@
 from __future__ import annotations
 
 import ast
-import importlib.util
-import sys
 from pathlib import Path
+
+from tool_module import load_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def load_tool():
-    spec = importlib.util.spec_from_file_location("config_readers_tool", ROOT / "tools" / "config_readers.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_at_most_twelve_files_read_a_configs_keys_and_none_on_the_loop_side():
-    tool = load_tool()
+    tool = load_tool("config_readers", "config_readers_tool")
     counted = tool.readers()
     loop_side = [name for name in counted if name.startswith(tool.LOOP_SIDE)]
     assert loop_side == []
@@ -27,7 +19,7 @@ def test_at_most_twelve_files_read_a_configs_keys_and_none_on_the_loop_side():
 
 
 def test_the_rule_counts_reads_of_a_config_and_of_a_sections_name():
-    tool = load_tool()
+    tool = load_tool("config_readers", "config_readers_tool")
     sections = tool.section_names()
     assert {"model", "rig", "mismatch", "rtdac", "controller", "calibrate"} <= sections  # rtdac: not in sim.yaml
     source = """
@@ -49,7 +41,7 @@ options["calibrate"]
 
 
 def test_a_sequence_index_and_a_document_being_written_read_no_key():
-    tool = load_tool()
+    tool = load_tool("config_readers", "config_readers_tool")
     source = """
 doc = ["a paragraph"]
 first = doc[0]

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from tool_module import load_tool
 
 from sashil.drivers.firmware import elf
 
@@ -113,12 +114,7 @@ def test_the_firmware_answers_a_session_on_qemus_stm32f405(tmp_path):
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    spec = importlib.util.spec_from_file_location(
-        "qemu_smoke", Path(__file__).resolve().parents[1] / "tools" / "qemu_smoke.py"
-    )
-    assert spec is not None and spec.loader is not None
-    qemu_smoke = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(qemu_smoke)
+    qemu_smoke = load_tool("qemu_smoke")
     steps = qemu_smoke.smoke(tmp_path / "cortex-m4" / "sashil-board-qemu.elf", timeout_s=5.0)
     assert steps[0].startswith("Hello -> Version(protocol_version=2, counts_per_rev=4096, current_max_a=2.0)")
     assert len(steps) == 3

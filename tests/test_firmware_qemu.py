@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from board_port import Port
+from tool_module import load_tool
 
 from sashil.drivers.firmware import qemu
 from sashil.drivers.interface import FLAG_WATCHDOG
@@ -158,10 +159,7 @@ def test_the_images_instructions_per_sample_under_icount_are_counted_the_same_ea
     the ARM image's cost per sample is the same number run after run, whatever the host's load."""
     if not qemu.available() or importlib.util.find_spec("ziglang") is None or shutil.which("make") is None:
         pytest.skip("needs qemu-system-arm, make and the ziglang package")
-    spec = importlib.util.spec_from_file_location("bench_firmware", ROOT / "tools" / "bench_firmware.py")
-    assert spec is not None and spec.loader is not None
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_tool("bench_firmware")
     first, second = bench.qemu_instructions(str(tmp_path)), bench.qemu_instructions(str(tmp_path))
     assert isinstance(first, float) and first == second
     assert 1000 < first < 6000  # decode a Command frame, encode a Sample frame: thousands, not more

@@ -3,21 +3,12 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import grimp
+from tool_module import load_tool
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def load_tool():
-    spec = importlib.util.spec_from_file_location("layers_tool", ROOT / "tools" / "layers.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_the_import_graph_follows_the_link_to_drivers():
@@ -27,7 +18,7 @@ def test_the_import_graph_follows_the_link_to_drivers():
 
 
 def test_every_package_stands_in_a_layer():
-    tool = load_tool()
+    tool = load_tool("layers", "layers_tool")
     layers = tool.contract()
     named = {name.strip() for layer in layers["layers"] for name in layer.replace(":", "|").split("|")}
     packages = {
@@ -40,5 +31,7 @@ def test_every_package_stands_in_a_layer():
 def test_the_picture_in_the_architecture_page_is_the_codes():
     text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
     shown = text.split("<!-- tools/layers.py -->\n```text\n", 1)[1].split("```", 1)[0]
-    assert shown == load_tool().picture(), "docs/architecture.md: run python tools/layers.py and paste its picture"
+    assert shown == load_tool("layers", "layers_tool").picture(), (
+        "docs/architecture.md: run python tools/layers.py and paste its picture"
+    )
     assert "NOT ALLOWED" not in shown

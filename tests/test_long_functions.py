@@ -2,30 +2,22 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
+
+from tool_module import load_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def load_tool():
-    spec = importlib.util.spec_from_file_location("long_functions", ROOT / "tools" / "long_functions.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up while the class is made
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_no_more_long_functions_than_the_ceiling():
-    tool = load_tool()
+    tool = load_tool("long_functions")
     found = tool.long_functions()
     listing = "\n".join(f"{f.lines} {f.path}:{f.line} {f.name}" for f in found)
     assert len(found) <= tool.CEILING, f"more than {tool.CEILING} functions over {tool.LINES} lines:\n{listing}"
 
 
 def test_the_count_sees_drivers_once_and_measures_a_function_whole(tmp_path):
-    tool = load_tool()
+    tool = load_tool("long_functions")
     files = tool._files()
     assert any(path.parent.name == "drivers" for path in files)
     assert len({path.resolve() for path in files}) == len(files)

@@ -2,23 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "mutate_safety.py"
-
-
-def load_tool():
-    spec = importlib.util.spec_from_file_location("mutate_safety", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+from tool_module import load_tool
 
 
 def test_every_target_has_mutants_and_each_compiles():
-    tool = load_tool()
+    tool = load_tool("mutate_safety")
     for target in tool.TARGETS:
         found = tool.mutants(target)
         assert found, f"no comparison found in {target.path} (renamed?)"
@@ -28,7 +16,7 @@ def test_every_target_has_mutants_and_each_compiles():
 
 
 def test_a_mutant_changes_exactly_one_operator():
-    tool = load_tool()
+    tool = load_tool("mutate_safety")
     (target,) = [t for t in tool.TARGETS if t.function == "clamp_current"]
     (mutant,) = tool.mutants(target)
     assert mutant.text.endswith("current_a == current_a")
@@ -38,7 +26,7 @@ def test_a_mutant_changes_exactly_one_operator():
 
 
 def test_every_c_target_has_mutants_each_one_operator_away_and_the_equivalents_exist():
-    tool = load_tool()
+    tool = load_tool("mutate_safety")
     every = []
     for target in tool.C_TARGETS:
         found = tool.c_mutants(target)
@@ -54,7 +42,7 @@ def test_every_c_target_has_mutants_each_one_operator_away_and_the_equivalents_e
 
 
 def test_the_c_watchdogs_comparison_and_its_logical_not_are_mutated():
-    tool = load_tool()
+    tool = load_tool("mutate_safety")
     (tick,) = [t for t in tool.C_TARGETS if t.function == "sashil_board_tick"]
     texts = [m.text for m in tool.c_mutants(tick)]
     assert any("now_us - b->last_cmd_us > (uint64_t)b->watchdog_ms" in t.split("  ->  ")[1] for t in texts)
