@@ -16,10 +16,10 @@ import sashil
 from sashil.config import dump_config
 from sashil.config.frozen import FrozenSection, thaw
 from sashil.config.parts import LoopParts, StageParts
+from sashil.engine.events import Event
 from sashil.engine.resolve import ConfigSource, Option, default_config, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
-from sashil.lab.events import Event
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
 from sashil.recording.summary_writer import write_summary
@@ -179,7 +179,11 @@ def test_every_experiment_is_a_function_of_sashil_lab_even_after_its_module_is_i
 
     import sashil.lab as lab
 
-    for name in ("drop_test", "closed_loop", "sweep", "compare", "calibrate", "replay", "simulate"):
-        importlib.import_module(f"sashil.lab._{name}")
+    modules = {
+        name: f"sashil.lab._{name}" for name in ("drop_test", "sweep", "compare", "calibrate", "replay", "simulate")
+    }
+    modules["closed_loop"] = "sashil.engine.sashil_run"  # sashil run's session, which the engine runs
+    for name, module in modules.items():
+        importlib.import_module(module)
         assert callable(getattr(lab, name)) and getattr(lab, name).__name__ == name
         assert name in lab.__all__

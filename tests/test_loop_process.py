@@ -22,7 +22,7 @@ from processes import loop_of
 
 import sashil
 from sashil.engine.resolve import ConfigSource, Option, resolve
-from sashil.lab import closed_loop
+from sashil.engine.sashil_run import closed_loop
 from sashil.recording.data_file import read_data_csv
 from sashil.runtime import loop_server
 from sashil.runtime.signals import StopFlag

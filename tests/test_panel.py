@@ -732,7 +732,7 @@ def test_each_sub_run_is_sent_to_its_end_then_the_next_labelled(tmp_path):
 
     first, timing = HealthyStream(columns), Counts()
     view.start(first, timing)
-    from sashil.lab.events import Event
+    from sashil.engine.events import Event
 
     bench._on_event(Event("prompt", "press the arm to -5 deg and hold it still"))  # the operator's instruction
     assert bench.status()["prompt"] == "press the arm to -5 deg and hold it still"

@@ -7,8 +7,8 @@ import pytest
 
 from sashil.engine import assemble
 from sashil.engine.resolve import ConfigSource, resolve
+from sashil.engine.sashil_run import PLAN, READS
 from sashil.errors import ConfigError
-from sashil.lab._closed_loop import PLAN, READS
 from sashil.lab._drop_test import drop_in_loop
 from sashil.plans import BUILT_IN
 from sashil.plans import run as run_plan

@@ -9,7 +9,7 @@ SCHED_FIFO priority, mlockall, GC off, timer slack) and the same loop code
    whose write does nothing, a stage returning one preallocated command; no safety, no recorder),
    and the same with the passive law's live tuning listening on its socket, no change pending (its
    cost per cycle: goal <= 2 us);
-2. **own process**: what ``sashil run`` does (:func:`sashil.lab.closed_loop`): the loop process on
+2. **own process**: what ``sashil run`` does (:func:`sashil.engine.sashil_run.closed_loop`): the loop process on
    the simulated rig under the skyhook law and the default road, and in the session process the
    recorder writing data.csv, the rerun view (recorded to ``live.rrd``), the tuning socket and one
    more subscriber reading the stream at 30 Hz;

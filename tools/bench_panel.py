@@ -3,7 +3,7 @@
 
 In one process, on the simulated rig at loop.rate_hz (skyhook, c_sky 1.5, the default sine road):
 
-1. **bare**: ``sashil.lab.closed_loop`` for ``--duration`` seconds, no page;
+1. **bare**: ``sashil.engine.sashil_run.closed_loop`` for ``--duration`` seconds, no page;
 2. **panel**: the same run started through the panel's server (uvicorn on 127.0.0.1, in a thread
    of this process, as ``sashil panel`` serves it) with ``--pages`` websocket pages streaming, then
    stopped with STOP from a page.
@@ -49,7 +49,7 @@ AHEAD_S = 3.0
 
 def bare_run(folder: Path, duration: float) -> dict[str, Any]:
     from sashil.engine.resolve import ConfigSource, Option, resolve
-    from sashil.lab import closed_loop
+    from sashil.engine.sashil_run import closed_loop
     from sashil.recording.outputs import Outputs
 
     source = ConfigSource(

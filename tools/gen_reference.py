@@ -98,7 +98,7 @@ _DOCUMENTED: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "ConfigSource": ("python-api.md", "sashil.lab.ConfigSource", ("sashil.lab", "sashil.engine.resolve")),
     "Option": ("python-api.md", "sashil.lab.Option", ("sashil.lab", "sashil.engine.resolve")),
     "resolve": ("python-api.md", "sashil.lab.resolve", ("sashil.lab", "sashil.engine.resolve")),
-    "Event": ("python-api.md", "sashil.lab.Event", ("sashil.lab", "sashil.lab.events")),
+    "Event": ("python-api.md", "sashil.lab.Event", ("sashil.lab", "sashil.engine.events")),
     "Outputs": ("python-api.md", "sashil.lab.Outputs", ("sashil.lab", "sashil.recording.outputs")),
     "SimRig": ("python-api.md", "sashil.testing.SimRig", ("sashil.testing", "sashil.testing.rig")),
     "run_law": ("python-api.md", "sashil.testing.run_law", ("sashil.testing", "sashil.testing.rig")),

@@ -22,11 +22,11 @@ from typing import Any
 import yaml
 
 from sashil.api import Run
+from sashil.engine.events import Listener, printer
 from sashil.engine.resolve import ConfigSource, Option, resolve
+from sashil.engine.sashil_run import closed_loop
 from sashil.errors import ConfigError
-from sashil.lab._closed_loop import closed_loop
 from sashil.lab._drop_test import drop_test as run_drops
-from sashil.lab.events import Listener, printer
 from sashil.plugins import check_not_importing
 from sashil.recording.outputs import Outputs
 
@@ -109,7 +109,7 @@ def run(
 ) -> Run:
     """``sashil run`` from Python: ``controller`` (a law name, ``module:Class``, ``file.py:Class`` or a
     Law class), ``set`` as ``{"controller.c_sky": 2.0}`` or ``["controller.c_sky=2"]``. ``on_event``
-    receives the run's :class:`~sashil.lab.events.Event` messages (default: printed unless ``quiet``)."""
+    receives the run's :class:`~sashil.engine.events.Event` messages (default: printed unless ``quiet``)."""
     check_not_importing("sashil.run")
     if current_a is not None:
         if controller not in (None, "passive"):

@@ -50,9 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.engine.events import printer
     from sashil.engine.resolve import Option, resolve
     from sashil.lab._compare import compare, laws_of, split_sets
-    from sashil.lab.events import printer
 
     setup_logging(args)
     base_sets, law_sets = split_sets(list(args.overrides))

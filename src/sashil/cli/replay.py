@@ -20,9 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from sashil.engine.events import printer
     from sashil.engine.resolve import resolve
     from sashil.lab._replay import recorded_config, replay
-    from sashil.lab.events import printer
 
     own = recorded_config(args.run_folder)  # a run folder to replay, checked before anything else
     source = config_source(args)

@@ -62,9 +62,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from sashil.engine.events import printer
     from sashil.engine.resolve import Option, resolve
-    from sashil.lab._closed_loop import closed_loop
-    from sashil.lab.events import printer
+    from sashil.engine.sashil_run import closed_loop
 
     if args.current is not None:
         if args.controller not in (None, "passive"):

@@ -33,9 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.engine.events import printer
     from sashil.engine.resolve import Option, resolve
     from sashil.lab._simulate import simulate
-    from sashil.lab.events import printer
     from sashil.models.registry import MODEL_PARAMS
 
     options = (

@@ -54,9 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sashil.engine.events import printer
     from sashil.engine.resolve import Option, resolve
     from sashil.lab._sweep import sweep
-    from sashil.lab.events import printer
 
     setup_logging(args)
     options = (

@@ -24,15 +24,15 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
+    from sashil.engine.events import Event
     from sashil.engine.resolve import ConfigSource, Option, resolve
+    from sashil.engine.sashil_run import closed_loop
     from sashil.lab._calibrate import calibrate
-    from sashil.lab._closed_loop import closed_loop
     from sashil.lab._compare import CompareLaw, compare
     from sashil.lab._drop_test import drop_test
     from sashil.lab._replay import replay
     from sashil.lab._simulate import simulate
     from sashil.lab._sweep import sweep
-    from sashil.lab.events import Event
     from sashil.recording.outputs import Outputs
 
 _LAZY = {
@@ -41,9 +41,9 @@ _LAZY = {
     "resolve": "sashil.engine.resolve",
     "RunConfig": "sashil.config.typed",
     "calibrate": "sashil.lab._calibrate",
-    "closed_loop": "sashil.lab._closed_loop",
+    "closed_loop": "sashil.engine.sashil_run",
     "drop_test": "sashil.lab._drop_test",
-    "Event": "sashil.lab.events",
+    "Event": "sashil.engine.events",
     "Outputs": "sashil.recording.outputs",
     "replay": "sashil.lab._replay",
     "simulate": "sashil.lab._simulate",

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 
 from sashil.api import Run, load_run
 from sashil.config.section_parts import CalibratePart
+from sashil.engine.events import Event, Listener, ignore
 from sashil.lab.calibration.session import calibrate_rig
-from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.outputs import Outputs
 
 if TYPE_CHECKING:

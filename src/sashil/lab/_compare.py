@@ -63,6 +63,7 @@ from sashil.drivers import open_rig
 from sashil.drivers.interface import capabilities_of
 from sashil.engine import assemble
 from sashil.engine.checks import check_road_ahead
+from sashil.engine.events import Event, Listener, ignore
 from sashil.engine.resolve import apply_overrides
 from sashil.errors import ConfigError, SashilError
 from sashil.lab.compare_metrics import METRICS, LawResult, metrics_of
@@ -76,7 +77,6 @@ from sashil.lab.compare_report import (
     write_compare_md,
     write_metrics_csv,
 )
-from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.hysteretic_bound import HystereticBound, bound_on_chain, find_bound, model_passive
 from sashil.lab.passive_baseline import Baseline, best_constant_current, passive_label
 from sashil.models.hysteresis import BoucWenParams

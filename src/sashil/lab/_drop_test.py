@@ -35,9 +35,9 @@ from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface
 from sashil.drivers.operator_prompt import hold_prompt
 from sashil.engine import assemble, assembled
 from sashil.engine.checks import check_theta0
+from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import ConfigError, DriverTimeoutError, SashilError
 from sashil.lab.compare_metrics import sample_times
-from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
 from sashil.recording.documents import Documents
@@ -105,7 +105,7 @@ def drop_test(
     Each current is a sub-run (``i0.000A/``, ...) when there are several. The law in
     ``controller.law`` takes over at the release (``passive``: the constant current throughout).
     On the real clock each drop runs in a loop process of its own (``loop.process``). ``views``:
-    readers of each drop's stream, as :func:`sashil.lab.closed_loop` takes them (each gets
+    readers of each drop's stream, as :func:`sashil.engine.sashil_run.closed_loop` takes them (each gets
     ``start(stream, timing)`` and ``close(trips, notes)`` once per drop, with that drop's stream).
     ``stop``: a flag another thread may set to end the current drop at 0 A and the test.
     Returns the folder as a :class:`~sashil.api.Run`. Bad input raises ConfigError before any folder

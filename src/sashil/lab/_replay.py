@@ -37,8 +37,8 @@ from sashil.control.controller import Controller
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.engine import assemble
+from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import DataFileError
-from sashil.lab.events import Event, Listener, ignore
 from sashil.recording.documents import Documents
 from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs

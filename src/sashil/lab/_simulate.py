@@ -14,9 +14,9 @@ import numpy as np
 from sashil.api import Run, load_run
 from sashil.engine import assemble
 from sashil.engine.checks import input_file
+from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import ConfigError
 from sashil.identify.simulate import drop_test_inputs, simulate_columns
-from sashil.lab.events import Event, Listener, ignore
 from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv

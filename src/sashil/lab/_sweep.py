@@ -37,9 +37,9 @@ from sashil.control.registry import law_run_label, make_controller
 from sashil.drivers import open_rig
 from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble, assembled
+from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
-from sashil.lab.events import Event, Listener, ignore
 from sashil.models.plant import RoadProfile
 from sashil.plans.sweep import SweepStage
 from sashil.recording.documents import Documents
@@ -120,7 +120,7 @@ def sweep(
     table (``transmissibility.csv``, ``.png``; the points in ``summary.json``). The tables and the
     folder line are ``output`` events. ``progress``: a bar on stderr over the stepped sine's
     frequencies, instead of a ``progress`` event per frequency. ``views``: readers of each run's
-    stream, as :func:`sashil.lab.closed_loop` takes them (a stepped sine's view gets
+    stream, as :func:`sashil.engine.sashil_run.closed_loop` takes them (a stepped sine's view gets
     ``start(stream, timing)`` and ``close(trips, notes)`` once per frequency); ``stop``: a flag
     another thread may set to end the running frequency at 0 A and the sweep (exit 130).
 

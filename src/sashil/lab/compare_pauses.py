@@ -23,8 +23,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from sashil.engine.events import Event, Listener
 from sashil.lab.compare_metrics import LawResult
-from sashil.lab.events import Event, Listener
 
 __all__ = ["PausePolicy", "pause_ms", "paused_note", "run_unpaused"]
 

@@ -3,7 +3,7 @@
 :class:`Bench` is the panel's only link to the rig. It resolves a page's choices into an
 experiment's config exactly as its verb does (:func:`sashil.engine.resolve.resolve` with verb
 ``run``, ``drop-test`` or ``sweep``, the verb's options named as on its command line: a bad value
-is the CLI's one line and nothing starts), runs :func:`sashil.lab.closed_loop`,
+is the CLI's one line and nothing starts), runs :func:`sashil.engine.sashil_run.closed_loop`,
 :func:`sashil.lab.drop_test` or :func:`sashil.lab.sweep` in a worker thread with a
 :class:`StreamView` reading each sub-run's stream and a :class:`~sashil.runtime.signals.StopFlag`,
 tunes a run's law through the run folder's tuning socket (:func:`sashil.runtime.tune_socket.request`,
@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from sashil.config.frozen import thaw
+from sashil.engine.events import Event
 from sashil.errors import ConfigError, SashilError
-from sashil.lab.events import Event
 from sashil.panel.catalog import LawChoice, laws_catalog
 from sashil.panel.frames import decimation_step, encode_batch, next_window, select_columns
 from sashil.recording.rest import NO_SENSE_REST, safe_state_current
@@ -111,7 +111,7 @@ def stream_health(stream: Any) -> dict[str, int] | None:
 
 
 class StreamView:
-    """A reader of an experiment's streams (a ``views=`` entry of :func:`sashil.lab.closed_loop`,
+    """A reader of an experiment's streams (a ``views=`` entry of :func:`sashil.engine.sashil_run.closed_loop`,
     :func:`sashil.lab.drop_test` and :func:`sashil.lab.sweep`): each sub-run calls
     :meth:`start` with its fresh stream and :meth:`close` when it ends, so the view keeps one
     :class:`Segment` per sub-run, labelled from ``labels`` in order. The panel reads the newest rows
@@ -386,7 +386,8 @@ class Bench:
                 self.run.prompt = ""
 
     def _work(self, experiment: str, config: Any, outputs: Any, flag: StopFlag, view: StreamView) -> None:
-        from sashil.lab import closed_loop, drop_test, sweep
+        from sashil.engine.sashil_run import closed_loop
+        from sashil.lab import drop_test, sweep
 
         status, reason = "error", ""
         summary: Mapping[str, Any] = {}

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING, Any
 from sashil import engine
 from sashil.api import Run, load_run
 from sashil.engine import assemble
+from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import ConfigError, SashilError
-from sashil.lab.events import Event, Listener, ignore
 from sashil.plans import run as run_plan
 from sashil.recording.formats import can_formats
 from sashil.recording.outputs import Outputs
