@@ -12,8 +12,8 @@ import yaml
 
 from sashil.errors import ConfigError, SafetyTrip
 from sashil.recording.documents import Documents, versions
-from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.run_folder import RunFolder
+from sashil.writer.folder_writer import FolderWriter, ending
 
 
 def test_the_writer_of_several_runs_writes_each_and_the_folder_once(tmp_path):
@@ -89,4 +89,4 @@ def test_the_writer_is_the_one_caller_of_the_summary_and_config_writes():
                 name = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
                 if name in ("write_summary", "write_config"):
                     callers.add((path.relative_to(Path(sashil.__file__).parent).as_posix(), name))
-    assert callers == {("recording/folder_writer.py", "write_summary"), ("recording/folder_writer.py", "write_config")}
+    assert callers == {("writer/folder_writer.py", "write_summary"), ("writer/folder_writer.py", "write_config")}

@@ -22,9 +22,9 @@ from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_summary
 from sashil.runtime.runner import losses
 from sashil.runtime.timing import TimingStats
+from sashil.writer.summary_writer import write_summary
 
 
 def _imports_of(code: str) -> set[str]:

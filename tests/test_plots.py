@@ -18,7 +18,7 @@ from sashil.engine.resolve import default_config
 from sashil.lab.report import write_report
 from sashil.recording import plots
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
+from sashil.writer.summary_writer import write_config, write_summary
 
 
 @pytest.fixture

@@ -41,7 +41,6 @@ from sashil.lab.compare_metrics import sample_times
 from sashil.lab.metrics import DropMetrics, damping_text, drop_metrics, settling_text
 from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
 from sashil.recording.run_folder import RunFolder
@@ -49,6 +48,7 @@ from sashil.recording.run_progress import SessionHooks
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.parts import StageParts

@@ -40,13 +40,13 @@ from sashil.engine import assemble
 from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import DataFileError
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.loop import SETTLE_PHASE
 from sashil.runtime.session import EVENTS_FILE
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

@@ -21,11 +21,11 @@ from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure
 from sashil.recording.run_folder import RunFolder
 from sashil.stats import nrmse
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

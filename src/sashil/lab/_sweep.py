@@ -43,7 +43,6 @@ from sashil.identify.progress import Progress
 from sashil.models.plant import RoadProfile
 from sashil.plans.sweep import SweepStage
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.formats import can_formats
 from sashil.recording.labels import controller_label
 from sashil.recording.outputs import Outputs
@@ -56,6 +55,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
 from sashil.stats import nrmse
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

@@ -2,7 +2,7 @@
 start and stop (:func:`sashil.engine.run`), a verb its folder's start and end.
 
 A subscriber is a callable ``(kind, document)``: the run folder's writer
-(:class:`~sashil.recording.folder_writer.FolderWriter`) among them. The kinds and their keys are the
+(:class:`~sashil.writer.folder_writer.FolderWriter`) among them. The kinds and their keys are the
 writer's module's: ``start`` (the resolved config, the assembled run, the versions), ``progress``
 and ``stop`` (the outcome, to which the experiment adds its analysis; ``run`` None: the verb's end).
 """

@@ -1,5 +1,5 @@
 """The run folder of docs/architecture.md: ``config.yaml``, ``data.csv``, ``summary.json``, plots
-(``config.yaml`` and ``summary.json`` through their one writer, :mod:`sashil.recording.summary_writer`).
+(``config.yaml`` and ``summary.json`` through their one writer, :mod:`sashil.writer.summary_writer`).
 
 A run folder is created only after every input has been checked, so a bad argument leaves nothing
 behind; files are written under a temporary name and renamed, so a reader never sees half a file.

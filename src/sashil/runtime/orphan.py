@@ -22,7 +22,7 @@ Ending. The loop process stops as it does for a signal (0 A with the road at res
 the coil's current has decayed, deactivate, close). The session's recorder wrote rows up to the
 stream's ``recorded`` word; the rest, down to the safe state's row, is appended to ``data.csv``
 here in the same format, ``timing.npz`` is written and ``summary.json`` through the folder's writer (the
-:class:`~sashil.recording.folder_writer.FolderWriter`, as the session would have: ``exit_status:
+:class:`~sashil.writer.folder_writer.FolderWriter`, as the session would have: ``exit_status:
 error``, ``stop_reason``: the session died). The stream file stays, marked ``died``, until the
 next run's :func:`~sashil.runtime.stream.remove_stale`.
 """
@@ -42,11 +42,11 @@ from typing import TYPE_CHECKING, Any
 
 from sashil.errors import SashilError
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import end_summary
 from sashil.runtime.stream import HOLD_BYTES, HOLDER_W, RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

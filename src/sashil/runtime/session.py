@@ -4,7 +4,7 @@
 process (:class:`InProcessLoop`: the one runner, RT set-up, signals, safety and the threaded
 recorder) or in a process of its own (:class:`~sashil.runtime.loop_process.LoopProcess`: the
 session records the loop's stream); the session's own part is the same either way. Its folder's
-writer (:class:`~sashil.recording.folder_writer.FolderWriter`) writes ``config.yaml`` first and
+writer (:class:`~sashil.writer.folder_writer.FolderWriter`) writes ``config.yaml`` first and
 always ``summary.json`` at the end, once, whatever ended the loop (a signal, a trip, an error, the
 loop process's death). The rig is already in the safe state (0 A,
 deactivated, closed) when the summary is written.
@@ -23,13 +23,13 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+from sashil.writer.folder_writer import FolderWriter
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

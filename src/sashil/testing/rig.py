@@ -24,10 +24,10 @@ from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab._compare import LawJob, folder_name, law_summary, run_job
 from sashil.plugins import check_not_importing
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter
 from sashil.recording.run_folder import RunFolder
 from sashil.roads.option import RoadParts, parse_road
 from sashil.scripting import law_spec, set_items
+from sashil.writer.folder_writer import FolderWriter
 
 __all__ = ["DEFAULT_ROAD", "SimRig", "run_law", "warm_up"]
 

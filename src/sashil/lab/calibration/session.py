@@ -29,9 +29,9 @@ from sashil.lab.calibration.plan import READS, Plan, Step, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
 from sashil.recording.documents import Documents
-from sashil.recording.folder_writer import FolderWriter, ending
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE
+from sashil.writer.folder_writer import FolderWriter, ending
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

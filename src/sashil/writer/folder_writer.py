@@ -23,7 +23,7 @@ The engine hands every subscriber the same documents, in order (:mod:`sashil.rec
 :func:`ending` is the one error rule of every summary (the status, the one line and the exit code
 of what ended a run). ``config.yaml`` and ``summary.json`` are written here, each from one place
 (:meth:`FolderWriter._write_config`, :meth:`FolderWriter._write_summary`), through
-:mod:`sashil.recording.summary_writer` and its one schema.
+:mod:`sashil.writer.summary_writer` and its one schema.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import Any
 from sashil.errors import exit_code_of, status_of
 from sashil.recording.outputs import Outputs
 from sashil.recording.run_folder import RunFolder
-from sashil.recording.summary_writer import write_config, write_summary
+from sashil.writer.summary_writer import write_config, write_summary
 
 __all__ = ["RUN_LEVEL_KEYS", "FolderWriter", "ending"]
 
