@@ -12,8 +12,8 @@ from sashil.identify.data import Record, load_records
 from sashil.identify.rig_models import MODELS
 from sashil.identify.road import angle_acceleration, applied_road_angle, count_quantum, edge_boundaries
 from sashil.lab.calibration.analysis import APPLIED_ROAD, records_of, road_acceleration, with_applied_road
-from sashil.lab.calibration.plan import RoadChirp, Step
 from sashil.lab.calibration.rig import StepResult
+from sashil.plans.calibration_step import RoadChirp, Step
 
 COUNTS = 4096
 Q = 2.0 * math.pi / COUNTS

@@ -13,7 +13,8 @@ import yaml
 from sashil.cli import main
 from sashil.config import load_params
 from sashil.engine.resolve import default_config
-from sashil.lab.calibration.plan import RoadChirp, plan_from_config
+from sashil.lab.calibration.plan import plan_from_config
+from sashil.plans.calibration_step import RoadChirp
 
 SMALL_PLAN = {
     "currents_a": [0.0, 1.0],
@@ -250,11 +251,12 @@ def _sample(seq: int, theta_deg: float, flags: int) -> object:
 @pytest.mark.parametrize("flags, held", [(0x02, True), (0x00, False)])
 def test_a_drop_test_takes_a_simulated_operators_flagged_hold_wherever_it_is(flags, held):
     # the emulator with one --hold-deg holds every drop at -5 deg; a plan step asks for -2.5 deg
+    from sashil.engine import assemble
     from sashil.engine.resolve import default_config
-    from sashil.lab._drop_test import DropTestPlan, DropTestSettings
+    from sashil.lab._drop_test import READS
+    from sashil.plans.drop import DropTestPlan
 
-    settings = DropTestSettings.from_config(default_config(), -2.5, 0.0, 1.0)
-    plan = DropTestPlan(settings, 4096)
+    plan = DropTestPlan(assemble(default_config(), reads=READS), -2.5, 0.0, 1.0)
     for seq in range(1, 400):  # 0.4 s held still at -5 deg (hold_time_s is 0.2 s)
         plan.step(_sample(seq, -5.0, flags), seq * 1_000_000, 1_000_000)
     assert (plan.phase == "held") is held

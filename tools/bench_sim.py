@@ -52,9 +52,11 @@ from sashil.control.registry import make_controller
 from sashil.drivers import rig_parts
 from sashil.drivers.interface import RigCommand
 from sashil.drivers.sim import SimulatedRig
+from sashil.engine import assemble
 from sashil.engine.resolve import default_config
-from sashil.lab._drop_test import DropTestPlan, DropTestSettings, run_drop_test
+from sashil.lab._drop_test import READS, run_drop_test
 from sashil.models.hysteresis import BoucWenParams, BoucWenZ
+from sashil.plans.drop import DropTestPlan
 from sashil.recording.recorder import Recorder
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import ControlLoop, record_columns
@@ -71,6 +73,11 @@ def drop_config(law: str) -> dict[str, Any]:
     if law == "skyhook":
         config["controller"]["c_sky"] = 2.0
     return config
+
+
+def drop_plan(config: dict[str, Any], current: float, record_s: float, controller: Any) -> DropTestPlan:
+    """A drop's plan from -5 deg at ``current`` for ``record_s`` under ``controller``, given no rig."""
+    return DropTestPlan(assemble(config, reads=READS), -5.0, current, record_s, controller)
 
 
 def one_drop(config: dict[str, Any], current: float, record_s: float) -> Any:
@@ -225,9 +232,9 @@ def bench_breakdown(law: str, record_s: float) -> None:
         def run() -> None:
             ctl = fresh()
             if with_plan:
-                settings = DropTestSettings.from_config(config, -5.0, current, record_s)
-                settings.known_release_after_s = release_after
-                step = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], ctl).step
+                plan = drop_plan(config, current, record_s, ctl)
+                plan.known_release_after_s = release_after
+                step = plan.step
             elif ctl is not None:
                 ctl.held = False
                 step = ctl.step
@@ -255,9 +262,8 @@ def bench_breakdown(law: str, record_s: float) -> None:
         sim.set_initial_current(current)
         sim.configure()
         sim.activate()
-        settings = DropTestSettings.from_config(config, -5.0, current, record_s)
-        settings.known_release_after_s = release_after
-        plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], fresh())
+        plan = drop_plan(config, current, record_s, fresh())
+        plan.known_release_after_s = release_after
         safety = SafetySupervisor.from_parts(SafetyParts.read(config))
         safety.start(steps[0][1])
         recorder = Recorder(None, record_columns(plan), keep=True)
@@ -276,8 +282,7 @@ def bench_breakdown(law: str, record_s: float) -> None:
         recorder.stream()
 
     def recording_alone() -> None:
-        settings = DropTestSettings.from_config(config, -5.0, current, record_s)
-        plan = DropTestPlan(settings, config["rig"]["encoder_counts_per_rev"], fresh())
+        plan = drop_plan(config, current, record_s, fresh())
         recorder = Recorder(None, record_columns(plan), keep=True)
         loop = ControlLoop(rig, plan, VirtualClock(), rate, recorder=recorder)
         loop.start_ns = steps[0][1]

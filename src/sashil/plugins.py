@@ -1,8 +1,10 @@
 """Finding plug-ins: the entry-point groups ``sashil.laws``, ``sashil.backends``, ``sashil.plans``
 and ``sashil.stages``, and classes named as ``package.module:Class`` or ``path/to/file.py:Class``.
 
-Built-in laws, backends and plans are registered through the same entry points (``pyproject.toml``) as a
-lab's own package, so there is one table per group. Two entry points claiming one name are an
+Built-in laws and backends are registered through the same entry points (``pyproject.toml``) as a
+lab's own package, so there is one table per group. The built-in plans and stages are
+:mod:`sashil.plans`' own tables (``BUILT_IN``, ``BUILT_IN_STAGES``), which the runtime imports by
+name; the ``sashil.plans`` and ``sashil.stages`` groups hold a lab's own. Two entry points claiming one name are an
 error that names both (a silent winner would run a different law than the one the user meant).
 Loading is lazy: the table holds entry points; a class is imported when it is asked for.
 """
@@ -34,10 +36,12 @@ __all__ = [
 
 LAWS_GROUP = "sashil.laws"
 BACKENDS_GROUP = "sashil.backends"
-#: plan kind -> the function that builds the plan of a ``plan.spec()`` in a loop process, as
-#: ``build(config, spec, rig, prompt) -> (stage, label, road_text)``: the runtime imports no experiment
+#: a lab's own plans: kind -> the function that builds the plan of a ``plan.spec()`` in a loop
+#: process, as ``build(run, rig, prompt) -> (stage, label, road_text)`` (``run.plan``: the spec), so
+#: the runtime imports no experiment; looked up for a kind not built in (``sashil.plans.BUILT_IN``)
 PLANS_GROUP = "sashil.plans"
-#: stage kind -> the class whose ``from_spec(spec)`` builds a stage a drop hands over to at its release
+#: a lab's own stages: kind -> the class whose ``from_spec(spec)`` builds a stage a drop hands over to
+#: at its release; looked up for a kind not built in (``sashil.plans.BUILT_IN_STAGES``)
 STAGES_GROUP = "sashil.stages"
 
 

@@ -8,6 +8,7 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from sashil.control.controller import SIGNALS
 from sashil.control.registry import make_controller
 from sashil.drivers.interface import RigCommand, RigInterface, RigSample, capabilities_of
 from sashil.roads.profiles import SweepRoad, road_of
@@ -22,7 +23,7 @@ __all__ = ["CONTROLLER_SIGNALS", "KIND", "SweepStage", "build", "stage"]
 KIND = "sweep"
 
 #: the controller's signals a sweep records
-CONTROLLER_SIGNALS = ("theta_dot_rad_s", "z_hat", "torque_hat_nm", "torque_cmd_nm")
+CONTROLLER_SIGNALS = SIGNALS
 
 
 class SweepStage:

@@ -45,7 +45,7 @@ from typing import Any, NoReturn, Protocol
 
 from sashil.config.parts import RunSpec
 from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
-from sashil.plans import BUILT_IN
+from sashil.plans import BUILT_IN, drop
 from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
 from sashil.runtime.serve import serve
 from sashil.runtime.signals import catch_stop_signals
@@ -87,7 +87,7 @@ class Messages:
 #: an emulator's ``--hold-deg``) holds the arm from the greeting and lets go a while after it, so a
 #: drop's hold must start with its loop (a port that cannot be opened then ends the run at once,
 #: with nothing energised, and the drop test leaves no folder)
-GREET_AT_START = frozenset({"drop-test"})
+GREET_AT_START = frozenset({drop.KIND})
 
 
 def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:

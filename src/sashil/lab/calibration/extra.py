@@ -28,7 +28,7 @@ from sashil.identify.fit import FitResult
 from sashil.identify.intervals import LAB, Intervals, params_at, quantities
 from sashil.identify.rig_models import MODELS
 from sashil.lab.calibration.analysis import road_acceleration, trimmed
-from sashil.lab.calibration.plan import RoadChirp, Step
+from sashil.plans.calibration_step import RoadChirp, Step
 
 #: sample period of a candidate's simulated record [s]
 CANDIDATE_DT_S = 1e-3

@@ -2,9 +2,8 @@
 
 Every step is a drop test (seed 001 section 8): the arm is pressed to ``theta0_deg`` and released
 with the coil already at ``current_a``; a *road* step also drives the road wheel from the release
-on with a chirp theta1(t) = A*w(t)*sin(phi(t)) through the resonance (sqrt(k/J)/2pi, ~1.66 Hz with
-the seed values), so that the damper keeps moving at high current where a drop stops within a
-cycle. Each step has a role: ``fit`` (the identification sees it) or ``validate`` (held out: the
+on with a chirp through the resonance (:class:`~sashil.plans.calibration_step.Step` and its
+:class:`~sashil.plans.calibration_step.RoadChirp`, which the loop runs). Each step has a role: ``fit`` (the identification sees it) or ``validate`` (held out: the
 fitted model predicts it from its inputs alone). The plan comes from the config's ``calibrate``
 section (:func:`plan_from_config`).
 """
@@ -20,6 +19,7 @@ from sashil.engine import assemble
 from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError
 from sashil.lab._drop_test import READS as DROP_READS
+from sashil.plans.calibration_step import RoadChirp, Step
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
@@ -29,66 +29,6 @@ if TYPE_CHECKING:
 STEP_OVERHEAD_S = 2.0
 #: a road run's record goes on this long after its chirp has ended (the wheel at rest)
 ROAD_REST_S = 0.5
-
-
-@dataclass(frozen=True)
-class RoadChirp:
-    """theta1(t) = A*w(t)*sin(phi(t)), phi' = 2*pi*f(t), f linear from f0 to f1 between the ramps;
-    w(t) a raised-cosine ramp up over ``ramp_s`` and down over the last ``ramp_s`` of ``duration_s``
-    (the wheel ends at rest, so the next run starts with a still road)."""
-
-    amplitude_rad: float
-    f_start_hz: float
-    f_stop_hz: float
-    duration_s: float
-    ramp_s: float
-
-    def _window(self, t: float) -> tuple[float, float]:
-        """w(t) and w'(t)."""
-        r, d = self.ramp_s, self.duration_s
-        if t <= 0.0 or t >= d:
-            return 0.0, 0.0
-        if r > 0.0 and t < r:
-            return 0.5 - 0.5 * math.cos(math.pi * t / r), 0.5 * math.pi / r * math.sin(math.pi * t / r)
-        if r > 0.0 and t > d - r:
-            u = d - t
-            return 0.5 - 0.5 * math.cos(math.pi * u / r), -0.5 * math.pi / r * math.sin(math.pi * u / r)
-        return 1.0, 0.0
-
-    def _phase(self, t: float) -> tuple[float, float]:
-        """phi(t) and phi'(t) (the frequency sweeps over the whole record)."""
-        rate = (self.f_stop_hz - self.f_start_hz) / self.duration_s
-        return 2.0 * math.pi * (self.f_start_hz * t + 0.5 * rate * t * t), 2.0 * math.pi * (self.f_start_hz + rate * t)
-
-    def angle(self, t: float) -> float:
-        w, _ = self._window(t)
-        return self.amplitude_rad * w * math.sin(self._phase(t)[0])
-
-    def speed(self, t: float) -> float:
-        """theta1'(t) [rad/s]: the road wheel's speed command."""
-        w, dw = self._window(t)
-        phi, dphi = self._phase(t)
-        return self.amplitude_rad * (dw * math.sin(phi) + w * dphi * math.cos(phi))
-
-
-@dataclass(frozen=True)
-class Step:
-    """One run of the plan: a drop from ``theta0_deg`` at ``current_a``, with a road chirp or not."""
-
-    name: str
-    role: str  # "fit" | "validate"
-    theta0_deg: float
-    current_a: float
-    duration_s: float
-    road: RoadChirp | None = None
-
-    @property
-    def kind(self) -> str:
-        return "road" if self.road is not None else "drop"
-
-    def describe(self) -> str:
-        what = f"road chirp {self.road.f_start_hz:g}-{self.road.f_stop_hz:g} Hz" if self.road else "drop"
-        return f"{what} from {self.theta0_deg:g} deg at {self.current_a:g} A, {self.duration_s:g} s ({self.role})"
 
 
 @dataclass(frozen=True)

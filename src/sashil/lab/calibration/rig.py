@@ -3,14 +3,13 @@
 A step is a drop test (:func:`sashil.lab._drop_test.run_drop_test`: hold, release, record;
 on the simulated rig the backend plays the operator, on the emulator ``--hold-deg`` does (with
 ``--prompts``, at the angle the host's prompt asks), on the bench a person) whose "controller"
-(:class:`StepStage`) commands the step's constant current and, from the release on, the road
-wheel's speed for a road step. Every backend's road wheel obeys those speed commands (the
-simulated rig's :class:`~sashil.drivers.sim.RoadWheel` as the emulator's and the bench's motor).
+(:class:`~sashil.plans.calibration_step.StepStage`, built again where the drop's loop runs)
+commands the step's constant current and, from the release on, the road wheel's speed for a road
+step.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,25 +17,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sashil.drivers.interface import FLAG_STUCK_SENSOR, TWO_PI, RigCommand, RigSample
-from sashil.errors import DriverError, SashilError
+from sashil.drivers.interface import TWO_PI
+from sashil.errors import SashilError
 from sashil.identify.road import held_speed
-from sashil.lab._drop_test import CONTROLLER_COLUMNS, DropRecord, run_drop_test
-from sashil.lab.calibration.plan import RoadChirp, Step
+from sashil.lab._drop_test import DropRecord, run_drop_test
+from sashil.plans.calibration_step import Step, StepStage, StuckEncoderError
+from sashil.plans.drop import CONTROLLER_COLUMNS
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
 
 #: a record whose angle spans fewer encoder counts than this did not move
 MIN_COUNTS_MOVED = 4
-#: the road wheel's speed is updated every this many cycles (4 ms at 1 kHz): a staircase (the
-#: commanded speeds are recorded, and shape the applied road between the road encoder's edges), at a
-#: quarter of the link traffic per cycle
-ROAD_UPDATE_CYCLES = 4
-
-
-class StuckEncoderError(DriverError):
-    """The rig reports a frozen encoder, or the arm never moved: nothing to calibrate (exit 2)."""
 
 
 @dataclass
@@ -47,45 +39,6 @@ class StepResult:
     release_estimated: bool
     error: SashilError | None = None
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-class StepStage:
-    """The drop test's controller stage of a step: the constant current throughout, and after the
-    release (``held`` False, set by the drop test) the road chirp's speed. A sample flagged with a
-    stuck encoder ends the step at once. It keeps no data: the runner's stream records each
-    cycle's device time, ``seq`` and the road speed commanded."""
-
-    def __init__(self, step: Step):
-        self.step_def = step
-        self.held = True
-        self.current_cmd_a = step.current_a
-        self.theta_dot_rad_s = self.z_hat = self.torque_hat_nm = self.torque_cmd_nm = math.nan
-        self._t0_ns: int | None = None
-        self._road_speed = 0.0
-        self._cycle = 0
-
-    def spec(self) -> dict[str, Any]:
-        """What a loop process builds this stage from (:meth:`from_spec`): the step."""
-        return {"kind": "calibration-step", "step": dataclasses.asdict(self.step_def)}
-
-    @classmethod
-    def from_spec(cls, spec: dict[str, Any]) -> StepStage:
-        fields = dict(spec["step"])
-        road = fields.pop("road", None)
-        return cls(Step(**fields, road=RoadChirp(**road) if road is not None else None))
-
-    def step(self, sample: RigSample, t_ns: int, dt_ns: int) -> RigCommand:
-        if sample.flags & FLAG_STUCK_SENSOR:
-            raise StuckEncoderError(f"{self.step_def.name}: the rig reports a stuck encoder (the angle is frozen)")
-        road = self.step_def.road
-        if not self.held and road is not None:
-            if self._t0_ns is None:
-                self._t0_ns = t_ns
-            if self._cycle % ROAD_UPDATE_CYCLES == 0:
-                self._road_speed = road.speed((t_ns - self._t0_ns) * 1e-9)
-            self._cycle += 1
-            return RigCommand(self.step_def.current_a, self._road_speed)
-        return RigCommand(self.step_def.current_a)
 
 
 def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:

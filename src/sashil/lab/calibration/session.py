@@ -25,9 +25,10 @@ from sashil.identify.report import write_params
 from sashil.identify.rig_models import MODELS
 from sashil.lab.calibration.analysis import Calibration, analyse, gap_cut
 from sashil.lab.calibration.extra import candidates, suggest
-from sashil.lab.calibration.plan import READS, Plan, Step, plan_of, road_chirp
+from sashil.lab.calibration.plan import READS, Plan, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
-from sashil.lab.calibration.rig import StepResult, StuckEncoderError, run_step
+from sashil.lab.calibration.rig import StepResult, run_step
+from sashil.plans.calibration_step import Step, StuckEncoderError
 from sashil.recording.documents import Documents
 from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE
