@@ -332,3 +332,32 @@ def test_deactivate_recovers_the_link_and_confirms_the_rest_from_the_readback(us
     assert rig.safe_state["safe_state_confirmed"] is True and rig.safe_state["safe_state_attempts"] == 2
     assert board.at_rest()
     rig.close()
+
+
+def test_a_reply_that_comes_after_its_transfer_timed_out_is_dropped_not_taken_for_the_next(tmp_path):
+    """Over the board's socket, a write whose reply comes late (the board's process was descheduled)
+    has timed out on the host; the late reply (``OK`` + a 2-byte count) must not be read as the
+    next transfer's answer (a 504-byte frame)."""
+    import socket
+
+    from sashil.drivers.emulator.rtdac_usb import OK, SocketPort
+
+    path = str(tmp_path / "board.sock")
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    listener.bind(path)
+    listener.listen(1)
+    port = SocketPort(path)
+    try:
+        assert port.call(b"W\x02" + bytes(8), timeout_s=0.0) is None  # no answer yet: timed out
+        board, _ = listener.accept()
+        with board:
+            write = board.recv(1024)
+            assert write[2:4] == b"W\x02"
+            board.send(write[:2] + OK + (8).to_bytes(2, "little"))  # the write's answer, late
+            frame = bytes(range(256)) * 2  # 512 bytes, the read's answer, tagged as the next request
+            board.send((int.from_bytes(write[:2], "little") + 1).to_bytes(2, "little") + OK + frame[:504])
+            assert port.call(b"R\x84" + (504).to_bytes(2, "little"), timeout_s=1.0) == OK + frame[:504]
+            assert board.recv(1024)[2:4] == b"R\x84"
+    finally:
+        port.close()
+        listener.close()

@@ -13,7 +13,9 @@ The backend reaches the board through a port:
   (``driver.port: emulated:PATH``);
 * :class:`DirectPort` calls a board in the same process, on a clock the caller gives (tests).
 
-One request, one reply, each a packet: ``O`` open, ``C`` claim, ``L`` release, ``I`` the board's
+One request, one reply, each a packet that starts with a 2-byte tag the reply echoes: a reply to a
+request the host has given up on (its transfer timed out) is dropped on arrival, as libusb never
+hands a cancelled transfer's completion to a later one. After the tag: ``O`` open, ``C`` claim, ``L`` release, ``I`` the board's
 identity (JSON), ``U`` its USB side (speed, packet size, endpoints: JSON), ``W`` + endpoint + data,
 ``R`` + endpoint + size, ``H`` + endpoint clear halt, ``X`` reset. A reply starts with ``0`` (ok)
 or ``1`` + errno + text (libusb's errors: 5 I/O error, 13 access denied, 16 busy, 19 no such
@@ -48,8 +50,10 @@ from sashil.drivers.emulator.rtdac_board import BoardIdentity, RtdacBoard, Trans
 from sashil.drivers.rtdac_codec import ENDPOINT_IN, ENDPOINT_OUT, FRAME_WORDS
 
 OK, FAIL = b"\x00", b"\x01"
-#: the packet size the socket carries (a frame plus its header)
+#: the packet size the socket carries (a frame plus its header and tag)
 PACKET = 1024
+#: how many tags there are (2 bytes): a reply is matched to its request by its tag
+TAGS = 1 << 16
 EMULATED_PREFIX = "emulated:"
 
 
@@ -243,6 +247,8 @@ class SocketPort(BoardPort):
     def __init__(self, path: str):
         self.path = path
         self._sock: socket.socket | None = None
+        #: the tag of the last request sent (each request's is the next, modulo 2**16)
+        self._tag = 0
 
     def _connect(self) -> socket.socket:
         if self._sock is None:
@@ -256,11 +262,17 @@ class SocketPort(BoardPort):
         return self._sock
 
     def call(self, request: bytes, timeout_s: float) -> bytes | None:
+        self._tag = (self._tag + 1) % TAGS
+        tag = self._tag.to_bytes(2, "little")
+        deadline = time.monotonic() + timeout_s
         try:
             sock = self._connect()
             sock.setblocking(False)
-            sock.send(request)
-            reply = _poll(sock, timeout_s)
+            sock.send(tag + request)
+            while True:  # replies to requests that timed out arrive first, in order: dropped
+                reply = _poll(sock, max(deadline - time.monotonic(), 0.0))
+                if not reply or reply[:2] == tag:
+                    break
         except TimeoutError:
             return None
         except OSError as err:
@@ -268,7 +280,7 @@ class SocketPort(BoardPort):
         if not reply:  # the board's process ended: the device is gone
             self.close()
             return _fail(errno.ENODEV, "No such device (it may have been disconnected)")
-        return reply
+        return reply[2:]
 
     def close(self) -> None:
         if self._sock is not None:
@@ -511,10 +523,11 @@ class BoardServer:
             self.connections.remove(conn)
             conn.close()
             return
+        tag, request = request[:2], request[2:]
         reply = serve(self.board, request, self.clock(), conn, self.state)
         if reply is not None:
             try:
-                conn.send(reply)
+                conn.send(tag + reply)
             except OSError:
                 pass
 
