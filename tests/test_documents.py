@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab._drop_test import run_drop_test
-from sashil.recording.documents import Documents
+from sashil.writer.documents import Documents
 
 
 def test_each_drop_of_a_set_reports_its_progress_between_its_start_and_its_stop():

@@ -112,7 +112,7 @@ def test_the_engine_emits_a_runs_start_and_its_stop_with_the_experiments_analysi
     assembled run, the versions) before the loop, its progress, and its stop after it: the loop's summary keys,
     what ended it and the experiment's analysis (here a drop's, on simulated time)."""
     from sashil.lab._drop_test import run_drop_test
-    from sashil.recording.documents import Documents, versions
+    from sashil.writer.documents import Documents, versions
 
     config = _config()
     seen: list[tuple[str, dict]] = []

@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 from sashil.errors import ConfigError, SafetyTrip
-from sashil.recording.documents import Documents, versions
-from sashil.recording.run_folder import RunFolder
+from sashil.writer.documents import Documents, versions
 from sashil.writer.folder_writer import FolderWriter, ending
+from sashil.writer.run_folder import RunFolder
 
 
 def test_the_writer_of_several_runs_writes_each_and_the_folder_once(tmp_path):

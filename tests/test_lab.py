@@ -21,9 +21,9 @@ from sashil.engine.resolve import ConfigSource, Option, default_config, resolve
 from sashil.errors import ConfigError, LossError, exit_code_of, status_of
 from sashil.lab._drop_test import drop_test
 from sashil.recording.outputs import Outputs
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import losses
 from sashil.runtime.timing import TimingStats
+from sashil.writer.run_folder import RunFolder
 from sashil.writer.summary_writer import write_summary
 
 

@@ -13,11 +13,11 @@ from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.engine import assemble
 from sashil.errors import DeadlineMissedError, DiskSpaceError, DriverIOError
 from sashil.recording.data_file import read_data_csv
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime import runner
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.session import InProcessLoop, run_session
+from sashil.writer.run_folder import RunFolder
 
 PERIOD = 1_000_000  # 1 kHz
 COUNTS = 4096

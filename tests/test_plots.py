@@ -17,7 +17,7 @@ from sashil.cli import main
 from sashil.engine.resolve import default_config
 from sashil.lab.report import write_report
 from sashil.recording import plots
-from sashil.recording.run_folder import RunFolder
+from sashil.writer.run_folder import RunFolder
 from sashil.writer.summary_writer import write_config, write_summary
 
 

@@ -13,10 +13,10 @@ from sashil.drivers import open_rig
 from sashil.engine import assemble
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.rerun_log import LiveTap, RerunLog, feasible_band, load_rrd
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import VirtualClock
 from sashil.runtime.loop import record_columns
 from sashil.runtime.session import InProcessLoop, run_session
+from sashil.writer.run_folder import RunFolder
 
 
 def _series(doc, entity):

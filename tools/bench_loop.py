@@ -59,12 +59,12 @@ from sashil.drivers.interface import RigCommand, RigInterface, RigSample
 from sashil.engine.resolve import ConfigSource, Option, load_config, resolve
 from sashil.lab import Outputs, closed_loop
 from sashil.recording.outputs import IN_RUN_FOLDER
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import ControlLoop
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import LiveTuning
+from sashil.writer.run_folder import RunFolder
 
 
 class NullRig(RigInterface):

@@ -40,11 +40,11 @@ from sashil.engine import assemble
 from sashil.engine.resolve import load_config
 from sashil.recording.recorder import Recorder
 from sashil.recording.rerun_log import LiveTap, RerunLog
-from sashil.recording.run_folder import RunFolder
 from sashil.roads.option import RoadStage
 from sashil.runtime.clock import RealClock
 from sashil.runtime.loop import record_columns
 from sashil.runtime.session import InProcessLoop, run_session
+from sashil.writer.run_folder import RunFolder
 
 
 def road_sine(amplitude_rad: float, freq_hz: float):

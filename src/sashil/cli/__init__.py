@@ -186,7 +186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         enable(parser)
     args = parser.parse_args(argv)
-    from sashil.recording.run_folder import CREATED
+    from sashil.writer.run_folder import CREATED
 
     CREATED.clear()  # this invocation's folders only (main() may run many times in one process)
     try:
@@ -194,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args._module.run(args) or 0)
     except SashilError as err:
         if err.exit_code == ConfigError.exit_code:  # bad input: nothing written
-            from sashil.recording.run_folder import discard_unused
+            from sashil.writer.run_folder import discard_unused
 
             discard_unused()
         print(f"sashil {args.verb}: error: {err}", file=sys.stderr)

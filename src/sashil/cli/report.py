@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from sashil.lab.report import write_report
     from sashil.recording.formats import check_formats, write_data_formats
     from sashil.recording.matlab import export_mat
-    from sashil.recording.run_folder import RunFolder
+    from sashil.writer.run_folder import RunFolder
 
     progress = lambda line: say(args, f"sashil report: {line}")  # noqa: E731
     # read everything before creating the output folder: bad input leaves nothing behind

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.errors import ConfigError
+from sashil.plans.drop import check_theta0
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -26,7 +27,6 @@ __all__ = [
     "check_run",
     "check_simulate",
     "check_sweep",
-    "check_theta0",
     "input_file",
 ]
 
@@ -56,17 +56,6 @@ def check_drops(config: RunConfig, named: Named) -> None:
             raise ConfigError(f"{where}: expected a current in [0, {i_max:g}] A (rig.current_max_a), got {value:g}")
     if len(set(currents)) != len(currents):
         raise ConfigError(f"{where}: each current once, got {currents}")
-
-
-def check_theta0(threshold: float, theta0_deg: float, option: str = "--theta0-deg") -> None:
-    """Refuse a hold angle the release could not be detected from: the release is the arm moving
-    ``threshold`` (``drop_test.release_threshold_deg``) from the hold, and released at |theta0|
-    below it, it swings less."""
-    if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
-        raise ConfigError(
-            f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "
-            f"(the release is detected when the arm moves that far from the hold), got {theta0_deg:g}"
-        )
 
 
 def _road_parses(config: RunConfig, text: str | None, key: str, named: Named) -> None:

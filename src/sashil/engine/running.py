@@ -9,7 +9,7 @@ Either way the verb gets one :class:`~sashil.runtime.runner.RunOutcome`, its str
 A session's loop (``sashil run``, a script's, the panel's: its folder made once the loop is ready,
 its law tuned live) is launched by the same function, under the same rule (``run(..., session=)``).
 
-Given the verb's :class:`~sashil.recording.documents.Documents`, the engine emits the run's ``start``
+Given the verb's :class:`~sashil.writer.documents.Documents`, the engine emits the run's ``start``
 document before the loop (the resolved config, the assembled run, the versions), its ``progress``
 as the loop starts and once it has ended, and its ``stop`` after it: the outcome's summary keys, to
 which the experiment's ``analyse`` adds its analysis.
@@ -26,12 +26,12 @@ from typing import TYPE_CHECKING, Any
 from sashil.config.parts import RunSpec
 from sashil.drivers import RigInterface, open_rig
 from sashil.engine.where import loop_in_process
-from sashil.recording.documents import Documents
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock, RealClock, default_clock
 from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import RunOutcome, run_plan
 from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
+from sashil.writer.documents import Documents
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.runtime.loop_process import LoopProcess

@@ -16,11 +16,11 @@ from sashil.recording.formats import can_formats
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_run, plot_timing
 from sashil.recording.rest import rest_phrase
-from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import RunProgress, SessionHooks
 from sashil.roads.option import RoadParts
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.timing import format_timing
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

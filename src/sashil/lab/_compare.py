@@ -80,12 +80,12 @@ from sashil.lab.compare_report import (
 from sashil.lab.hysteretic_bound import HystereticBound, bound_on_chain, find_bound, model_passive
 from sashil.lab.passive_baseline import Baseline, best_constant_current, passive_label
 from sashil.models.hysteresis import BoucWenParams
-from sashil.recording.documents import Documents
 from sashil.recording.outputs import Outputs
-from sashil.recording.run_folder import RunFolder
 from sashil.roads.option import RoadParts, RoadStage, parse_road
 from sashil.runtime.loop import stage_signals
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter, ending
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

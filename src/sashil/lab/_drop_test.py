@@ -4,8 +4,14 @@ record the free oscillation at each constant current, one sub-run per current.
 Each drop is a plan in the loop (:class:`~sashil.plans.drop.DropTestPlan`: constant current,
 hold, release, run on), built where the loop runs; this module makes the plans, runs them through
 the engine and derives each drop's record from the runner's stream (:func:`drop_record`: the
-release dated by the backend, or from the departure samples by
-:func:`~sashil.plans.drop.estimate_release_ns`), its metrics and the folder's plot and summary.
+release dated by the backend, or from the departure samples by :func:`estimate_release_ns`), its
+metrics and the folder's plot and summary.
+
+Release time. When the backend plays the operator it knows the instant it lets go. Otherwise the
+release is estimated from the departure (:func:`estimate_release_ns`): just after release the arm
+leaves the hold angle with constant acceleration, ``|theta - theta_hold| = a/2 * (t - t_r)^2``, so
+``sqrt|dtheta|`` is linear in t and its zero is t_r (a least-squares line through the departure
+samples between two encoder counts and the release threshold).
 """
 
 from __future__ import annotations
@@ -27,7 +33,6 @@ from sashil.control.law_registry import law_label
 from sashil.control.registry import stage_signals
 from sashil.drivers.interface import RigInterface
 from sashil.engine import assemble, assembled
-from sashil.engine.checks import check_theta0
 from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import SashilError
 from sashil.lab.compare_metrics import sample_times
@@ -36,19 +41,17 @@ from sashil.plans.drop import (
     CONFIG_LAW,
     DROP_COLUMNS,
     DropTestPlan,
-    controller_columns,
-    estimate_release_ns,
     plan_drop,
 )
-from sashil.recording.documents import Documents
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_drop_test
-from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
@@ -137,7 +140,7 @@ def drop_test(
         target = writer.folder_for(_label(current))
         record = run_drop(
             run,
-            _plan(run, theta0_deg, current, duration, prompt, CONFIG_LAW if closed else None),
+            plan_drop(run, theta0_deg, current, duration, prompt, CONFIG_LAW if closed else None),
             data_path=target.file(CYCLES_FILE),  # every cycle streamed as it runs (the hold too)
             live=SessionHooks(*views) if views else None,
             stop=stop,
@@ -254,6 +257,30 @@ class DropRecord:
     device_release_s: float | None = None
 
 
+def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
+    """Release instant from departure samples: zero of the line through ``sqrt|theta - hold|``."""
+    ts, roots = [], []
+    for t, angle in zip(times_ns, angles, strict=True):
+        moved = abs(angle - hold_angle)
+        if moved >= 1.5 * resolution:
+            ts.append(t)
+            roots.append(math.sqrt(moved))
+    if len(ts) >= 2:
+        t_rel = np.asarray(ts, dtype=float) - ts[0]
+        slope, intercept = np.polyfit(t_rel, np.asarray(roots), 1)
+        if slope > 0:
+            estimate = ts[0] + int(round(-intercept / slope))
+            last_still = max(
+                (t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < 0.5 * resolution),
+                default=None,
+            )
+            if last_still is None or estimate >= last_still:
+                return min(estimate, ts[0])
+            return last_still
+    still = [t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < resolution]
+    return still[-1] if still else times_ns[0]
+
+
 #: how far before its detection the release is looked for in the stream (the departure samples)
 RELEASE_WINDOW_S = 1.0
 
@@ -263,11 +290,11 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
 
     The release is the backend's known instant, else the zero of the departure (see the module
     docstring) in the stream's rows of the last :data:`RELEASE_WINDOW_S` before the detection.
-    Columns: :data:`DROP_COLUMNS` (+ :func:`controller_columns` under a controller) and ``seq``,
+    Columns: :data:`DROP_COLUMNS` (+ the plan's ``signal_names`` under a controller) and ``seq``,
     time zero at the release; rows up to ``duration_s`` after it (the shutdown's 0 A row included
     when the run ended earlier). ``stream`` keeps every stream column of those rows (device time,
     road speed commanded) for a caller that needs them."""
-    names = DROP_COLUMNS + controller_columns(plan.controller) + ("seq",)
+    names = DROP_COLUMNS + tuple(plan.signal_names) + ("seq",)
     empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
     if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
         return DropRecord(empty, 0, False, plan.hold_angle)
@@ -293,20 +320,6 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
     if "device_time_us" in stream:  # the device's clock at the release (between two samples)
         record.device_release_s = float(np.interp(release_ns, t_ns, stream["device_time_us"] * 1e-6))
     return record
-
-
-def _plan(
-    run: RunSpec,
-    theta0_deg: float,
-    current_a: float,
-    duration_s: float,
-    notify: Callable[[str], None] | None,
-    controller: Any,
-) -> DropTestPlan:
-    """The plan of one drop in the drop test's assembled ``run`` (:func:`~sashil.plans.drop.plan_drop`),
-    its hold angle checked against the release threshold first (a one-line ConfigError)."""
-    check_theta0(run.options["release_threshold_deg"], theta0_deg, "theta0_deg")
-    return plan_drop(run, theta0_deg, current_a, duration_s, notify, controller)
 
 
 def run_drop_test(
@@ -351,7 +364,7 @@ def run_drop_test(
     up to it and the error in ``record.error``.
     """
     run = assembled(config, READS)
-    plan = _plan(run, theta0_deg, current_a, duration_s, notify, controller)
+    plan = plan_drop(run, theta0_deg, current_a, duration_s, notify, controller)
     return run_drop(
         run,
         plan,

@@ -39,14 +39,14 @@ from sashil.drivers.interface import NO_EDGE, RigSample
 from sashil.engine import assemble
 from sashil.engine.events import Event, Listener, ignore
 from sashil.errors import DataFileError
-from sashil.recording.documents import Documents
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import has_values, pyplot, save_figure
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.loop import SETTLE_PHASE
 from sashil.runtime.session import EVENTS_FILE
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

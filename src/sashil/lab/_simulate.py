@@ -20,12 +20,12 @@ from sashil.identify.simulate import drop_test_inputs, simulate_columns
 from sashil.lab.metrics import drop_metrics
 from sashil.models.hysteresis import BoucWenParams
 from sashil.recording.data_file import read_data_csv
-from sashil.recording.documents import Documents
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import BESIDE, pyplot, save_figure
-from sashil.recording.run_folder import RunFolder
 from sashil.stats import nrmse
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

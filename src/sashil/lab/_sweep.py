@@ -42,20 +42,20 @@ from sashil.errors import ConfigError, SashilError
 from sashil.identify.progress import Progress
 from sashil.models.plant import RoadProfile
 from sashil.plans.sweep import SweepStage
-from sashil.recording.documents import Documents
 from sashil.recording.formats import can_formats
 from sashil.recording.labels import controller_label
 from sashil.recording.outputs import Outputs
 from sashil.recording.plots import plot_chirp, plot_transmissibility
 from sashil.recording.rerun_log import feasible_band
-from sashil.recording.run_folder import RunFolder
 from sashil.recording.run_progress import SessionHooks
 from sashil.roads.profiles import chirp_profile, sine_profile
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
 from sashil.stats import nrmse
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig

@@ -332,7 +332,7 @@ class Bench:
             config = self.resolve(choice)
             experiment = str(choice.get("experiment") or "run")
             from sashil.recording.outputs import Outputs
-            from sashil.recording.run_folder import utc_stamp
+            from sashil.writer.run_folder import utc_stamp
 
             base = self.runs_dir / f"{utc_stamp()}-{experiment}"
             folder, suffix = base, 1

@@ -6,12 +6,6 @@ The plan (:class:`DropTestPlan`) is a loop stage: it commands a constant current
 release and runs for the requested duration after it. The same plan runs on the simulated rig
 (which plays the operator), the emulator and the bench (where a person does); a loop process
 builds it again from the assembled run and its :meth:`DropTestPlan.spec` (:func:`drop_in_loop`).
-
-Release time. When the backend plays the operator it knows the instant it lets go. Otherwise the
-release is estimated from the departure (:func:`estimate_release_ns`): just after release the arm
-leaves the hold angle with constant acceleration, ``|theta - theta_hold| = a/2 * (t - t_r)^2``, so
-``sqrt|dtheta|`` is linear in t and its zero is t_r (a least-squares line through the departure
-samples between two encoder counts and the release threshold).
 """
 
 from __future__ import annotations
@@ -21,8 +15,6 @@ import math
 import os
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
 
 from sashil.control.controller import SIGNALS
 from sashil.drivers.interface import FLAG_HELD, TWO_PI, RigCommand, RigInterface, RigSample, capabilities_of
@@ -40,9 +32,9 @@ __all__ = [
     "EMULATED_HOLD_WAIT_S",
     "KIND",
     "DropTestPlan",
+    "check_theta0",
     "controller_columns",
     "drop_in_loop",
-    "estimate_release_ns",
     "plan_drop",
     "pseudo_terminal",
     "stage_controller",
@@ -83,30 +75,6 @@ def pseudo_terminal(rig: Any) -> str | None:
     if not isinstance(port, str) or not port.startswith("/"):
         return None
     return port if os.path.realpath(port).startswith("/dev/pts/") else None
-
-
-def estimate_release_ns(times_ns: list[int], angles: list[float], hold_angle: float, resolution: float) -> int:
-    """Release instant from departure samples: zero of the line through ``sqrt|theta - hold|``."""
-    ts, roots = [], []
-    for t, angle in zip(times_ns, angles, strict=True):
-        moved = abs(angle - hold_angle)
-        if moved >= 1.5 * resolution:
-            ts.append(t)
-            roots.append(math.sqrt(moved))
-    if len(ts) >= 2:
-        t_rel = np.asarray(ts, dtype=float) - ts[0]
-        slope, intercept = np.polyfit(t_rel, np.asarray(roots), 1)
-        if slope > 0:
-            estimate = ts[0] + int(round(-intercept / slope))
-            last_still = max(
-                (t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < 0.5 * resolution),
-                default=None,
-            )
-            if last_still is None or estimate >= last_still:
-                return min(estimate, ts[0])
-            return last_still
-    still = [t for t, a in zip(times_ns, angles, strict=True) if abs(a - hold_angle) < resolution]
-    return still[-1] if still else times_ns[0]
 
 
 class DropTestPlan:
@@ -351,6 +319,17 @@ def stage_controller(stage: StageParts) -> Any:
     return make_controller(None, stage) if law_reads_state(stage) else None
 
 
+def check_theta0(threshold: float, theta0_deg: float, option: str = "--theta0-deg") -> None:
+    """Refuse a hold angle the release could not be detected from: the release is the arm moving
+    ``threshold`` (``drop_test.release_threshold_deg``) from the hold, and released at |theta0|
+    below it, it swings less."""
+    if math.isfinite(theta0_deg) and abs(theta0_deg) < threshold:
+        raise ConfigError(
+            f"{option}: expected an angle at least drop_test.release_threshold_deg = {threshold:g} deg from 0 "
+            f"(the release is detected when the arm moves that far from the hold), got {theta0_deg:g}"
+        )
+
+
 def plan_drop(
     run: RunSpec,
     theta0_deg: float,
@@ -362,7 +341,9 @@ def plan_drop(
     """The plan of one drop from ``theta0_deg`` at ``current_a`` for ``duration_s`` after the
     release in the assembled ``run``, not yet given its rig (:meth:`DropTestPlan.attach_rig`).
     ``controller``: the stage that takes over at the release (:data:`CONFIG_LAW`: the run's law,
-    None: the constant current throughout)."""
+    None: the constant current throughout). A hold angle the release could not be detected from is
+    refused first (:func:`check_theta0`, a one-line ConfigError naming ``theta0_deg``)."""
+    check_theta0(run.options["release_threshold_deg"], theta0_deg, "theta0_deg")
     from_config = isinstance(controller, str) and controller == CONFIG_LAW
     plan = DropTestPlan(
         run,

@@ -1,1 +1,1 @@
-"""Run records: the run folder, data files, summaries and plots (off the hot path)."""
+"""Run records: data files, summaries, plots, formats and traces (off the hot path); the run folder and its writer are :mod:`sashil.writer`."""

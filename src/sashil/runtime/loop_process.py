@@ -72,7 +72,7 @@ from sashil.runtime.tune_socket import TuneServer
 
 if TYPE_CHECKING:
     from sashil.config.parts import RigParts, RunSpec
-    from sashil.recording.run_folder import RunFolder
+    from sashil.writer.run_folder import RunFolder
 
 #: the most a tuning request waits for the loop's answer [s] (a 1 Hz loop answers within 1 s)
 REPLY_WAIT_S = 30.0

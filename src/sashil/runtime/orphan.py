@@ -41,12 +41,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sashil.errors import SashilError
-from sashil.recording.documents import Documents
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import end_summary
 from sashil.runtime.stream import HOLD_BYTES, HOLDER_W, RECORDED_W, Stream
 from sashil.runtime.stream_recorder import append, format_block
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

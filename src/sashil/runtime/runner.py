@@ -42,13 +42,13 @@ from sashil.drivers.interface import capabilities_of
 from sashil.errors import DataFileError, DiskSpaceError, LossError, Stopped, error_fields, exit_code_of
 from sashil.recording.data_file import read_data_csv
 from sashil.recording.recorder import Recorder
-from sashil.recording.run_folder import DATA_FILES
 from sashil.runtime.clock import Clock
 from sashil.runtime.loop import ControlLoop, record_columns
 from sashil.runtime.rt_setup import RealtimeSetup
 from sashil.runtime.signals import StopFlag, catch_stop_signals, stopped_error
 from sashil.runtime.tuning import EVENT_COLUMNS
 from sashil.safety import SafetySupervisor
+from sashil.writer.run_folder import DATA_FILES
 
 if TYPE_CHECKING:
     from sashil.config.parts import LoopParts, RunSpec

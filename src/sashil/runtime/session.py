@@ -22,14 +22,14 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
-from sashil.recording.documents import Documents
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import LoopHooks, RunOutcome, run_plan
 from sashil.runtime.signals import StopFlag
 from sashil.runtime.tune_socket import TuneServer
 from sashil.runtime.tuning import EVENT_COLUMNS, LiveTuning
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

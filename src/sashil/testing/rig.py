@@ -23,11 +23,11 @@ from sashil.control.registry import law_run_label
 from sashil.engine.resolve import ConfigSource, Option, resolve
 from sashil.lab._compare import LawJob, folder_name, law_summary, run_job
 from sashil.plugins import check_not_importing
-from sashil.recording.documents import Documents
-from sashil.recording.run_folder import RunFolder
 from sashil.roads.option import RoadParts, parse_road
 from sashil.scripting import law_spec, set_items
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter
+from sashil.writer.run_folder import RunFolder
 
 __all__ = ["DEFAULT_ROAD", "SimRig", "run_law", "warm_up"]
 

@@ -1,6 +1,6 @@
 """The run folder's writer: a subscriber to a verb's documents that writes what ran and how it ended.
 
-The engine hands every subscriber the same documents, in order (:mod:`sashil.recording.documents`):
+The engine hands every subscriber the same documents, in order (:mod:`sashil.writer.documents`):
 
 * ``start``: a run begins. ``{"run": name or None, "config": the resolved config or None, "spec":
   the assembled run (a :class:`~sashil.config.parts.RunSpec`), "versions": the software's}``. ``run`` None is the folder
@@ -34,7 +34,7 @@ from typing import Any
 
 from sashil.errors import exit_code_of, status_of
 from sashil.recording.outputs import Outputs
-from sashil.recording.run_folder import RunFolder
+from sashil.writer.run_folder import RunFolder
 from sashil.writer.summary_writer import write_config, write_summary
 
 __all__ = ["RUN_LEVEL_KEYS", "FolderWriter", "ending"]

@@ -20,8 +20,8 @@ from typing import Any
 
 from sashil._version import __version__
 from sashil.config import dump_config
-from sashil.recording.run_folder import RunFolder, utc_now
 from sashil.recording.summary_schema import normalise
+from sashil.writer.run_folder import RunFolder, utc_now
 
 __all__ = ["SUMMARY_FILE", "provenance", "write_config", "write_summary"]
 

@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING
 
 from sashil.config.section_parts import CalibratePart
 from sashil.engine import assemble
-from sashil.engine.checks import check_theta0
 from sashil.errors import ConfigError
 from sashil.lab._drop_test import READS as DROP_READS
 from sashil.plans.calibration_step import RoadChirp, Step
+from sashil.plans.drop import check_theta0
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec

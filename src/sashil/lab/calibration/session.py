@@ -29,10 +29,10 @@ from sashil.lab.calibration.plan import READS, Plan, plan_of, road_chirp
 from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, run_step
 from sashil.plans.calibration_step import Step, StuckEncoderError
-from sashil.recording.documents import Documents
-from sashil.recording.run_folder import RunFolder
 from sashil.runtime.runner import CYCLES_FILE
+from sashil.writer.documents import Documents
 from sashil.writer.folder_writer import FolderWriter, ending
+from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
