@@ -118,9 +118,12 @@ def test_drop_test_over_the_link_matches_the_sim_backend(transport, driver, emul
     run = json.loads((out / "summary.json").read_text())["runs"][0]
     assert run["release_estimated"]  # found from the data: nobody told the host when the operator let go
     assert abs(run["hold_angle_deg"] - sim_drop["hold_angle_deg"]) <= COUNT_DEG
-    # peaks within two encoder counts, period within two loop cycles (timing jitter)
+    # peaks within two encoder counts, period within two loop cycles (timing jitter) and the longest
+    # link gap: an emulator descheduled on a busy machine leaves a hole in the record that long, and
+    # the period is known to within it
     assert np.allclose(run["peaks_deg"][:4], sim_drop["peaks_deg"][:4], atol=2 * COUNT_DEG)
-    assert abs(run["period_s"] - sim_drop["period_s"]) < 0.002
+    gap_s = float((run.get("link") or {}).get("gap_max_ms") or 0.0) * 1e-3
+    assert abs(run["period_s"] - sim_drop["period_s"]) < 0.002 + gap_s, run.get("link")
 
 
 @pytest.mark.parametrize("transport, driver", DRIVERS)

@@ -191,6 +191,11 @@ def command_round_trip(driver: str, port: str, n: int) -> list[int]:
     return times
 
 
+def _us(value: float | None) -> str:
+    """A timing figure in whole microseconds, or "-" where the run has none (it ended before it had any)."""
+    return "-" if value is None else f"{value:.0f}"
+
+
 def run_over_link(
     driver: str, transport: str, pacing: str, duration: float, tmp: Path, timeout_ms: float | None
 ) -> None:
@@ -222,10 +227,11 @@ def run_over_link(
     summary = json.loads((out / "summary.json").read_text())
     timing = summary["timing"]
     link_lines = [line for line in done.stderr.splitlines() if "link:" in line]
+    lateness, read = timing["lateness_us"], timing["read_us"]
     print(
         f"  {transport:6s} pacing {pacing:6s}: exit {done.returncode}, cycles {timing['cycles']}, "
-        f"missed deadlines {timing['missed_deadlines']}, lateness p99 {timing['lateness_us']['p99']:.0f} "
-        f"max {timing['lateness_us']['max']:.0f} us, read p50 {timing['read_us']['p50']:.0f} p99 {timing['read_us']['p99']:.0f} us"
+        f"missed deadlines {timing['missed_deadlines']}, lateness p99 {_us(lateness['p99'])} "
+        f"max {_us(lateness['max'])} us, read p50 {_us(read['p50'])} p99 {_us(read['p99'])} us"
     )
     link_stats = summary.get("link") or {}
     print(
