@@ -141,9 +141,9 @@ def test_a_link_failure_mid_test_keeps_the_data_and_ends_at_zero_amps(config):
     rig = _FailingRig(open_rig(rig_parts(config)), fail_on=1300)  # 0.3 s hold, then ~1 s of oscillation
     record = run_drop_test(config, -5.0, 1.0, 10.0, rig=rig)
     assert record.error is not None and "device disconnected" in str(record.error)
-    assert record.run["exit_status"] == "error"
-    assert 0.9 < record.columns["time_s"][-2] < 1.0  # the data up to the fault is kept,
-    assert record.columns["current_cmd_a"][-1] == 0.0  # then the 0 A the shutdown sent
+    assert record.summary["exit_status"] == "error"
+    assert 0.9 < record.data["time_s"][-2] < 1.0  # the data up to the fault is kept,
+    assert record.data["current_cmd_a"][-1] == 0.0  # then the 0 A the shutdown sent
     assert rig.currents[-1] == 0.0  # the safe command went out last
     assert (rig.deactivated, rig.closed) == (1, 1)
     assert rig.rig._command == 0.0  # and the simulated coil is driven to 0 A

@@ -251,7 +251,7 @@ def test_target_damping_drop_decays_exponentially_with_mismatch_and_constant_cur
         run_drop_test(config, -5.0, 0.5, 6.0, rig=open_rig(assemble(config).rig), clock=VirtualClock()).metrics
     )
     assert constant[-1] / constant[0] > 1.2, constant  # Coulomb-like hysteresis: decrement grows as it decays
-    assert record.columns["current_cmd_a"].max() > record.columns["current_cmd_a"].min()  # the controller commanded
+    assert record.data["current_cmd_a"].max() > record.data["current_cmd_a"].min()  # the controller commanded
 
 
 # --- registry errors --------------------------------------------------------------------------

@@ -16,7 +16,7 @@ def test_each_drop_of_a_set_reports_its_progress_between_its_start_and_its_stop(
     def subscriber(kind, fields):
         seen.append((kind, fields.get("run"), fields.get("text", "")))
         if kind == "stop":
-            cycles.append(fields["outcome"]["timing"]["cycles"])
+            cycles.append(fields["record"].summary["timing"]["cycles"])
 
     documents = Documents([subscriber])
     for current in (0.0, 0.5):

@@ -22,7 +22,12 @@ def _oscillation(t_s: np.ndarray) -> np.ndarray:
 
 def _record(device_us: np.ndarray, loop_s: np.ndarray, seq: np.ndarray) -> DropRecord:
     theta = _oscillation(device_us * 1e-6)  # each row carries the angle of the sample it read
-    record = DropRecord({"time_s": loop_s, "theta_rad": theta}, 0, False, math.radians(-5.0))
+    record = DropRecord(
+        data={"time_s": loop_s, "theta_rad": theta},
+        release_time_ns=0,
+        release_estimated=False,
+        hold_angle_rad=math.radians(-5.0),
+    )
     record.stream = {"time_s": loop_s, "theta_rad": theta, "seq": seq, "device_time_us": device_us.astype(float)}
     record.device_release_s = 0.0
     return record
@@ -38,7 +43,7 @@ def test_a_busy_hosts_late_reads_leave_the_period_on_the_devices_clock():
     time_s, theta = sampled_angle(record)
     assert np.array_equal(time_s, device_us * 1e-6)
     on_device = drop_metrics(time_s, theta).period_s
-    on_host = drop_metrics(loop_s, record.columns["theta_rad"]).period_s
+    on_host = drop_metrics(loop_s, record.data["theta_rad"]).period_s
     assert on_device is not None and abs(on_device - PERIOD_S) < 0.0006  # the 1 ms grid's resolution
     assert on_host is not None and on_host - PERIOD_S > 0.002  # the host's clock: a quarter of the 12 ms
 
@@ -55,10 +60,10 @@ def test_a_device_clock_that_restates_the_loops_gives_way_to_the_loops():
     device_us = np.floor(loop_s * 1e6)
     record = _record(device_us, loop_s, np.arange(3000))
     time_s, theta = sampled_angle(record)
-    assert time_s is record.columns["time_s"] and theta is record.columns["theta_rad"]
+    assert time_s is record.data["time_s"] and theta is record.data["theta_rad"]
 
 
 def test_a_rig_without_a_device_clock_keeps_the_loops():
     loop_s = np.arange(100) * 1e-3
     record = _record(np.zeros(100), loop_s, np.arange(100))
-    assert sampled_angle(record)[0] is record.columns["time_s"]
+    assert sampled_angle(record)[0] is record.data["time_s"]

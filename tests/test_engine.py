@@ -125,12 +125,13 @@ def test_the_engine_emits_a_runs_start_and_its_stop_with_the_experiments_analysi
         documents=documents,
         name="i0.500A",
         recorded_config=config,
-        describe=lambda record: {"entry": {"peaks": len(record.metrics.peaks_deg)}, "data": record.columns},
+        describe=lambda record: setattr(record, "entry", {"peaks": len(record.metrics.peaks_deg)}),
     )
     assert [kind for kind, _ in seen] == ["start", "progress", "progress", "stop"]
     start, stop = seen[0][1], seen[-1][1]
     assert start["run"] == "i0.500A" and start["config"] is config and start["versions"] == versions()
     assert isinstance(start["spec"], RunSpec) and start["spec"].rig.backend == "sim" and start["spec"].virtual
-    assert stop["run"] == "i0.500A" and stop["error"] is None and stop["outcome"] is record.run
-    assert stop["outcome"]["exit_status"] == "ok" and stop["outcome"]["timing"]["cycles"] > 0
-    assert stop["entry"] == {"peaks": len(record.metrics.peaks_deg)} and stop["data"] is record.columns
+    # the stop document carries the drop's record itself: what the verb reads is what the writer reads
+    assert stop["run"] == "i0.500A" and stop["record"] is record and record.error is None
+    assert record.summary["exit_status"] == "ok" and record.summary["timing"]["cycles"] > 0
+    assert record.entry == {"peaks": len(record.metrics.peaks_deg)} and record.data["time_s"].size > 0

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from sashil.errors import ConfigError, SafetyTrip
-from sashil.writer.documents import Documents, versions
+from sashil.writer.documents import Documents, RunRecord, versions
 from sashil.writer.folder_writer import FolderWriter, ending
 from sashil.writer.run_folder import RunFolder
 
@@ -26,10 +26,11 @@ def test_the_writer_of_several_runs_writes_each_and_the_folder_once(tmp_path):
     documents.progress("i0.000A", "dropping")
     data = {"time_s": np.array([0.0, 0.001]), "theta_rad": np.array([-0.1, -0.09])}
     documents.stop(
-        "i0.000A", {"timing": {"cycles": 2}}, None, entry={"current_a": 0.0, "timing": {"cycles": 2}}, data=data
+        "i0.000A",
+        RunRecord(summary={"timing": {"cycles": 2}}, entry={"current_a": 0.0, "timing": {"cycles": 2}}, data=data),
     )
     trip = SafetyTrip("angle 12 deg beyond the limit")
-    documents.stop("i1.000A", {}, trip, entry={"current_a": 1.0, "controller": "passive 1 A"})
+    documents.stop("i1.000A", RunRecord(error=trip, entry={"current_a": 1.0, "controller": "passive 1 A"}))
     documents.end(note="two drops")
 
     kinds = [("start", None), ("start", "i0.000A"), ("progress", "i0.000A")]
@@ -59,7 +60,7 @@ def test_a_single_run_is_the_folder_with_its_loop_keys_at_the_top(tmp_path):
     writer = FolderWriter(folder, "sweep", {"driver": "sim"}, several=False)
     documents = Documents([writer])
     documents.start("f1.000Hz", {"sweep": {"stepped": False}})  # a single run's start is the folder's
-    documents.stop("f1.000Hz", {}, None, entry={"timing": {"cycles": 9}, "link": None})
+    documents.stop("f1.000Hz", RunRecord(entry={"timing": {"cycles": 9}, "link": None}))
     documents.end()
     summary = json.loads((tmp_path / "one" / "summary.json").read_text())
     assert summary["timing"] == {"cycles": 9} and summary["runs"][0]["folder"] == "."

@@ -38,9 +38,9 @@ def test_without_hysteresis_the_drop_test_is_a_damped_linear_oscillator(config, 
     m = record.metrics
     assert m.period_s == pytest.approx(2 * math.pi / omega_d, rel=2e-3)
     assert m.log_decrement == pytest.approx(2 * math.pi * sigma / omega_d, rel=1e-2)
-    t = record.columns["time_s"]
+    t = record.data["time_s"]
     expected = _closed_form(t, math.radians(-5.0), 1.0, 109.0, c)
-    assert np.max(np.abs(record.columns["theta_rad"] - expected)) < math.radians(0.002)
+    assert np.max(np.abs(record.data["theta_rad"] - expected)) < math.radians(0.002)
 
 
 def test_without_damping_the_amplitude_is_kept(config):
@@ -81,10 +81,10 @@ def _reference_drop(current: float, duration: float):
 def test_seed_drop_test_follows_the_model(config, current):
     record = run_drop_test(config, -5.0, current, 3.0)
     t_ref, theta_ref = _reference_drop(current, 3.0)
-    n = min(len(t_ref), len(record.columns["time_s"]))
-    assert record.columns["time_s"][:n] == pytest.approx(t_ref[:n], abs=1e-9)
+    n = min(len(t_ref), len(record.data["time_s"]))
+    assert record.data["time_s"][:n] == pytest.approx(t_ref[:n], abs=1e-9)
     resolution = 2 * math.pi / config["rig"]["encoder_counts_per_rev"]
-    error = np.abs(record.columns["theta_rad"][:n] - theta_ref[:n])
+    error = np.abs(record.data["theta_rad"][:n] - theta_ref[:n])
     # quantisation (half a count) plus the plant's 1 ms step
     assert np.max(error) < 0.5 * resolution + math.radians(0.005)
     ref_peaks = [

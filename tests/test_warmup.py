@@ -96,8 +96,8 @@ def test_a_run_after_the_warm_up_compiles_no_other_signature():
             record = run_drop_test(config, -5.0, 0.0, 0.3, controller=make_controller(None, StageParts.read(config)))
             after = {name: [str(s) for s in k.signatures] for name, k in kernels.items()}
             calls = {name: sum(k.stats.cache_hits.values()) + sum(k.stats.cache_misses.values()) for name, k in kernels.items()}
-            print(json.dumps({"before": before, "after": after, "cycles": record.run["timing"]["cycles"],
-                              "edges": record.run["timing"]["cycles"] and int((record.stream["arm_edge_dir"] != 0).sum())}))
+            print(json.dumps({"before": before, "after": after, "cycles": record.summary["timing"]["cycles"],
+                              "edges": record.summary["timing"]["cycles"] and int((record.stream["arm_edge_dir"] != 0).sum())}))
             """
         )
     )

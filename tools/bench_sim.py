@@ -113,10 +113,10 @@ def bench_speed(law: str, repeats: int, record_s: float) -> None:
         wall0, cpu0 = time.perf_counter(), time.process_time()
         record = one_drop(config, current, record_s)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-        simulated = record.run["timing"]["cycles"] / rate
+        simulated = record.summary["timing"]["cycles"] / rate
         wall_ratios.append(simulated / wall)
         cpu_ratios.append(simulated / cpu)
-        bare_wall, bare_cpu = bare_plant(config, record.run["timing"]["cycles"], current)
+        bare_wall, bare_cpu = bare_plant(config, record.summary["timing"]["cycles"], current)
         plant_wall.append(simulated / bare_wall)
         plant_cpu.append(simulated / bare_cpu)
     what = "passive, constant current" if law == "passive" else f"under {law!r} after the release"
@@ -189,10 +189,10 @@ def bench_breakdown(law: str, record_s: float) -> None:
     def fresh() -> Any:
         return built.pop()
 
-    cycles = record.run["timing"]["cycles"]
+    cycles = record.summary["timing"]["cycles"]
     whole, loop_thread = _cpu_and_thread(lambda: run_drop_test(config, -5.0, current, record_s, controller=fresh()))
     # the cost of a run that does not grow with its length: the same drop with a record SHORT_S long
-    short = run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()).run["timing"]["cycles"]
+    short = run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()).summary["timing"]["cycles"]
     short_cpu = _cpu(lambda: run_drop_test(config, -5.0, current, SHORT_S, controller=fresh()))
     per_run = short_cpu - short * (loop_thread - short_cpu) / (cycles - short)  # the loop's thread, both
     commands = commands[:cycles]
@@ -328,8 +328,8 @@ def bench_damper_step(record_s: float = 10.0) -> None:
     params = BoucWenParams()
     config = default_config()
     record = run_drop_test(config, -5.0, 0.0, record_s)
-    angles = record.columns["theta_rad"].tolist()
-    currents = record.columns["current_a"].tolist()
+    angles = record.data["theta_rad"].tolist()
+    currents = record.data["current_a"].tolist()
     increments = [b - a for a, b in itertools.pairwise(angles)]
     law = BoucWenZ.from_params(params)
     torque = params.torque

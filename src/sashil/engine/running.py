@@ -11,8 +11,8 @@ its law tuned live) is launched by the same function, under the same rule (``run
 
 Given the verb's :class:`~sashil.writer.documents.Documents`, the engine emits the run's ``start``
 document before the loop (the resolved config, the assembled run, the versions), its ``progress``
-as the loop starts and once it has ended, and its ``stop`` after it: the outcome's summary keys, to
-which the experiment's ``analyse`` adds its analysis.
+as the loop starts and once it has ended, and its ``stop`` after it: the run's record, which the
+experiment's ``analyse`` makes of the outcome (a :class:`~sashil.writer.documents.RunRecord`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from sashil.runtime.clock import Clock, RealClock, default_clock
 from sashil.runtime.plan_process import run_plan_process
 from sashil.runtime.runner import RunOutcome, run_plan
 from sashil.runtime.session import InProcessLoop, SessionLoop, run_session
-from sashil.writer.documents import Documents
+from sashil.writer.documents import Documents, RunRecord
 from sashil.writer.run_folder import RunFolder
 
 if TYPE_CHECKING:
@@ -57,7 +57,7 @@ def run(
     documents: Documents | None = None,
     name: str | None = None,
     config: Mapping[str, Any] | None = None,
-    analyse: Callable[[RunOutcome], Mapping[str, Any]] | None = None,
+    analyse: Callable[[RunOutcome], RunRecord] | None = None,
     session: Session | None = None,
 ) -> RunOutcome:
     """Run ``plan`` of the assembled ``spec`` for ``duration_s`` (None: until the plan ends) and
@@ -80,10 +80,10 @@ def run(
 
     ``documents``: where the run's documents go, as run ``name`` (None: the verb's folder itself):
     ``start`` with ``config`` (the config its folder records; None: none), ``progress`` as the loop
-    starts and once it has ended (:func:`running_text`, :func:`ran_text`), ``stop`` with the
-    outcome and ``analyse(outcome)`` (the experiment's analysis: ``error``, what ended the run as
-    the experiment judges it, ``entry``, ``data``, ``formats``), which is called with or without
-    documents."""
+    starts and once it has ended (:func:`running_text`, :func:`ran_text`), ``stop`` with the run's
+    record: ``analyse(outcome)``, the experiment's (what ended the run as the experiment judges it,
+    its entry, data and format labels beside the loop's summary keys), which is called with or
+    without documents; without ``analyse``, the outcome's summary keys and error alone."""
     if session is not None:
         return _run_session(spec, duration_s, session, config, stop)
     clock = clock if clock is not None else default_clock(spec)
@@ -92,10 +92,10 @@ def run(
         documents.start(name, config, spec)
         documents.progress(name, running_text(spec, duration_s, alone))
     outcome = _run_loop(spec, plan, duration_s, clock, alone, rig, data_path, live, stop, trace, realtime, say)
-    analysis = dict(analyse(outcome)) if analyse is not None else {}
+    record = analyse(outcome) if analyse is not None else RunRecord(summary=outcome.summary, error=outcome.error)
     if documents is not None:
         documents.progress(name, ran_text(spec, outcome.summary))
-        documents.stop(str(name), outcome.summary, analysis.pop("error", outcome.error), **analysis)
+        documents.stop(str(name), record)
     return outcome
 
 

@@ -4,8 +4,9 @@ record the free oscillation at each constant current, one sub-run per current.
 Each drop is a plan in the loop (:class:`~sashil.plans.drop.DropTestPlan`: constant current,
 hold, release, run on), built where the loop runs; this module makes the plans, runs them through
 the engine and derives each drop's record from the runner's stream (:func:`drop_record`: the
-release dated by the backend, or from the departure samples by :func:`estimate_release_ns`), its
-metrics and the folder's plot and summary.
+release dated by the backend, or from the departure samples by :func:`estimate_release_ns`) and its
+metrics. The record is the drop's stop document (a :class:`~sashil.writer.documents.RunRecord`):
+the folder's writer reads its row, its data and its format labels from it.
 
 Release time. When the backend plays the operator it knows the instant it lets go. Otherwise the
 release is estimated from the departure (:func:`estimate_release_ns`): just after release the arm
@@ -49,7 +50,7 @@ from sashil.recording.run_progress import SessionHooks
 from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE, RunOutcome
 from sashil.runtime.signals import StopFlag
-from sashil.writer.documents import Documents
+from sashil.writer.documents import Documents, RunRecord
 from sashil.writer.folder_writer import FolderWriter
 from sashil.writer.run_folder import RunFolder
 
@@ -150,19 +151,19 @@ def drop_test(
             recorded_config=own[current] if several else None,
             describe=functools.partial(_described, current, label, theta0_deg),
         )
-        assert record.metrics is not None and record.run  # run_drop sets both
+        assert record.metrics is not None and record.summary  # run_drop sets both
         if live is not None:
             live.note(
                 live_offset_s,
                 f"drop test from {theta0_deg:g} deg at {current:g} A (release at t = {live_offset_s:g} s)",
             )
-            live.log_columns(record.columns, live_offset_s)
+            live.log_columns(record.data, live_offset_s)
             live_offset_s += duration + 1.0
         entry = writer.entries[-1]
         if writer.failed:
-            overlay.append({**entry, **record.columns, "label": f"{label} (stopped)"})
+            overlay.append({**entry, **record.data, "label": f"{label} (stopped)"})
             break
-        overlay.append({**entry, **record.columns, "label": label})
+        overlay.append({**entry, **record.data, "label": label})
         on_event(Event("result", result_line(record.metrics, duration), {"current_a": current}))
         for note in result_warnings(record.metrics):
             on_event(Event("warning", f"drop test at {current:g} A: {note}", {"current_a": current}))
@@ -211,15 +212,16 @@ def _writer(
     return FolderWriter(folder, "drop-test", common, several=several, outputs=outputs)
 
 
-def _described(current: float, label: str, theta0_deg: float, record: DropRecord) -> dict[str, Any]:
-    """One drop's analysis for its stop document: its row of the summary, its data and what its
+def _described(current: float, label: str, theta0_deg: float, record: DropRecord) -> None:
+    """One drop's record as its stop document tells it: its row of the summary and what its
     --format files are labelled with."""
-    entry = _drop_row(record, current, label, theta0_deg)
-    return {"entry": entry, "data": record.columns, "formats": {"current_a": current, "controller": label}}
+    record.entry = _drop_row(record, current, label, theta0_deg)
+    record.formats = {"current_a": current, "controller": label}
 
 
-def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dict[str, Any]:
+def _drop_row(record: DropRecord, current: float, label: str, theta0_deg: float) -> dict[str, Any]:
     """One drop's row of the folder's summary: what ran, its figures, its timing and facts."""
+    assert record.metrics is not None  # every record run_drop makes has its metrics
     return {
         "current_a": current,
         "controller": label,
@@ -227,9 +229,9 @@ def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dic
         "hold_angle_deg": math.degrees(record.hold_angle_rad),
         "release_estimated": record.release_estimated,
         **record.metrics.as_dict(),
-        "timing": record.run["timing"],
-        "trips": record.run["trips"],
-        "safe_state": record.run.get("safe_state"),
+        "timing": record.summary["timing"],
+        "trips": record.summary["trips"],
+        "safe_state": record.summary.get("safe_state"),
         "link": record.extra.get("link"),
         "realtime": record.extra.get("realtime"),
         "can_trace": record.extra.get("can_trace"),
@@ -237,19 +239,19 @@ def _drop_row(record: Any, current: float, label: str, theta0_deg: float) -> dic
     }
 
 
-@dataclass
-class DropRecord:
-    """The recorded free oscillation, time zero at the release."""
+@dataclass(kw_only=True)
+class DropRecord(RunRecord):
+    """The recorded free oscillation, time zero at the release: the drop's record, and so its stop
+    document (``data``: the columns from the release on; ``summary``: the loop run's summary.json
+    keys, :func:`~sashil.runtime.runner.loop_summary`: how it ended, its timing, trips and safe
+    state; ``error``: what ended the test early, the data up to it kept)."""
 
-    columns: dict[str, np.ndarray]
+    data: dict[str, np.ndarray]
     release_time_ns: int
     release_estimated: bool
     hold_angle_rad: float
-    #: the loop run's summary.json keys (:func:`~sashil.runtime.runner.loop_summary`): how it ended, its
-    #: timing, trips and safe state
-    run: dict[str, Any] = field(default_factory=dict)
+    error: SashilError | None = None
     metrics: DropMetrics | None = None
-    error: SashilError | None = None  # what ended the test early (the data up to it is kept)
     extra: dict[str, Any] = field(default_factory=dict)
     #: every stream column of the record's rows (time zero at the release)
     stream: dict[str, np.ndarray] = field(default_factory=dict)
@@ -297,7 +299,7 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
     names = DROP_COLUMNS + tuple(plan.signal_names) + ("seq",)
     empty = {name: np.zeros(0, dtype=np.int64 if name == "seq" else float) for name in names}
     if plan.detected_ns is None or not stream or stream["time_s"].size == 0:
-        return DropRecord(empty, 0, False, plan.hold_angle)
+        return DropRecord(data=empty, release_time_ns=0, release_estimated=False, hold_angle_rad=plan.hold_angle)
     t_ns = loop_start_ns + np.round(stream["time_s"] * 1e9).astype(np.int64)
     release_ns = plan.known_release_ns
     estimated = release_ns is None
@@ -314,7 +316,9 @@ def drop_record(stream: dict[str, np.ndarray], plan: DropTestPlan, loop_start_ns
     columns = {name: stream[name][rows] for name in names}
     columns["time_s"] = (t_ns[rows] - release_ns) * 1e-9
     columns["seq"] = columns["seq"].astype(np.int64)
-    record = DropRecord(columns, release_ns, estimated, plan.hold_angle)
+    record = DropRecord(
+        data=columns, release_time_ns=release_ns, release_estimated=estimated, hold_angle_rad=plan.hold_angle
+    )
     record.stream = {name: values[rows] for name, values in stream.items()}
     record.stream["time_s"] = columns["time_s"]
     if "device_time_us" in stream:  # the device's clock at the release (between two samples)
@@ -339,7 +343,7 @@ def run_drop_test(
     documents: Documents | None = None,
     name: str | None = None,
     recorded_config: Mapping[str, Any] | None = None,
-    describe: Callable[[DropRecord], Mapping[str, Any]] | None = None,
+    describe: Callable[[DropRecord], None] | None = None,
 ) -> DropRecord:
     """One drop test of a resolved ``config`` or of the drop test's assembled run (its ``options``:
     :data:`READS`) at a constant current (or, after the release, under ``controller``: a stage, or :data:`CONFIG_LAW`
@@ -357,7 +361,7 @@ def run_drop_test(
     ``trace``: a :class:`~sashil.recording.can_trace.CanTrace` (not started) fed the run's CAN
     frames, closed after the run (its statistics in ``record.extra["can_trace"]``). ``documents``:
     the verb's documents, this drop as run ``name`` recording ``recorded_config`` (None: none of its own),
-    its stop document the drop's analysis as ``describe(record)`` gives it.
+    its stop document the record, with the row and format labels ``describe(record)`` gives it.
 
     Returns the record from the release on. An error that ends the test early (a driver error, a
     safety trip, no hold) does not raise: the rig is already safe, and the record carries the data
@@ -394,21 +398,24 @@ def run_drop(
     documents: Documents | None = None,
     name: str | None = None,
     recorded_config: Mapping[str, Any] | None = None,
-    describe: Callable[[DropRecord], Mapping[str, Any]] | None = None,
+    describe: Callable[[DropRecord], None] | None = None,
 ) -> DropRecord:
     """The drop ``plan`` of the drop test's assembled ``run`` through the engine, and its record
     (the arguments as :func:`run_drop_test` takes them)."""
     records: list[DropRecord] = []
 
-    def analyse(outcome: RunOutcome) -> dict[str, Any]:
+    def analyse(outcome: RunOutcome) -> DropRecord:
         if live is not None:
             live.close(outcome.trips, ())
         # whatever ended the test early, the rig is at 0 A, deactivated and closed
         error = outcome.error if outcome.error is not None else outcome.stop_error()
         if error is not None and not isinstance(error, SashilError):
             raise error
-        records.append(_record(run, outcome, plan, error))
-        return {"error": error, **(describe(records[0]) if describe is not None else {})}
+        record = _record(run, outcome, plan, error)
+        if describe is not None:
+            describe(record)
+        records.append(record)
+        return record
 
     engine.run(
         run,
@@ -431,7 +438,7 @@ def _record(run: RunSpec, outcome: RunOutcome, plan: DropTestPlan, error: Sashil
     """The drop's record from the release on, from the run's stream: its columns, the run's summary
     keys and facts, its metrics."""
     record = drop_record(outcome.stream, plan, outcome.start_ns)
-    record.run = outcome.summary
+    record.summary = outcome.summary
     record.error = error
     if outcome.can_trace is not None:
         record.extra["can_trace"] = outcome.can_trace
@@ -458,7 +465,7 @@ def sampled_angle(record: DropRecord) -> tuple[np.ndarray, np.ndarray]:
     lateness, which is the host's, not the arm's. A device clock that only restates the loop's (a
     simulated rig's: the loop's time in whole µs, :data:`SAME_CLOCK_S`) gives way to the loop's,
     which is finer."""
-    loop_time, theta = record.columns["time_s"], record.columns["theta_rad"]
+    loop_time, theta = record.data["time_s"], record.data["theta_rad"]
     sampled = sample_times(record.stream) if record.device_release_s is not None else None
     if sampled is None:
         return loop_time, theta

@@ -53,7 +53,7 @@ from sashil.runtime.clock import Clock
 from sashil.runtime.runner import CYCLES_FILE
 from sashil.runtime.signals import StopFlag
 from sashil.stats import nrmse
-from sashil.writer.documents import Documents
+from sashil.writer.documents import Documents, RunRecord
 from sashil.writer.folder_writer import FolderWriter
 from sashil.writer.run_folder import RunFolder
 
@@ -252,11 +252,11 @@ def _stepped(
             except SashilError as err:  # the frequencies done so far are kept
                 if err.exit_code != ConfigError.exit_code:
                     entry = {"frequency_hz": f, "safe_state": getattr(err, "safe_state", None)}
-                    documents.stop(_freq_label(f), {}, err, entry=entry)
+                    documents.stop(_freq_label(f), RunRecord(error=err, entry=entry))
                 raise
             points.append(point)
             extra["points"].append(point.__dict__)
-            documents.stop(_freq_label(f), {}, None, entry=dict(point.__dict__))
+            documents.stop(_freq_label(f), RunRecord(entry=dict(point.__dict__)))
             bar.advance(1, f"{f:.3g} Hz")
     finally:
         bar.close()
@@ -332,7 +332,7 @@ def _chirp(
         )
     except SashilError as err:
         if err.exit_code != ConfigError.exit_code:
-            documents.stop("chirp", {}, err, entry={"safe_state": getattr(err, "safe_state", None)})
+            documents.stop("chirp", RunRecord(error=err, entry={"safe_state": getattr(err, "safe_state", None)}))
         raise
     outputs.write_formats(folder.path, "sweep", cols, exit_status="ok", controller=label)
     plot_chirp(
@@ -367,7 +367,7 @@ def _chirp(
             {"body_rms_rad": body_rms, "body_peak_rad": body_peak},
         )
     )
-    documents.stop("chirp", {}, None)
+    documents.stop("chirp", RunRecord())
     extra.update(summary)
 
 

@@ -4,13 +4,15 @@ start and stop (:func:`sashil.engine.run`), a verb its folder's start and end.
 A subscriber is a callable ``(kind, document)``: the run folder's writer
 (:class:`~sashil.writer.folder_writer.FolderWriter`) among them. The kinds and their keys are the
 writer's module's: ``start`` (the resolved config, the assembled run, the versions), ``progress``
-and ``stop`` (the outcome, to which the experiment adds its analysis; ``run`` None: the verb's end).
+and ``stop`` (the run's :class:`RunRecord`: how its loop ended and the experiment's analysis of it;
+``run`` None: the verb's end).
 """
 
 from __future__ import annotations
 
 import platform
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from sashil._version import __version__
@@ -18,7 +20,7 @@ from sashil._version import __version__
 if TYPE_CHECKING:
     from sashil.config.parts import RunSpec
 
-__all__ = ["Documents", "Subscriber", "versions"]
+__all__ = ["Documents", "RunRecord", "Subscriber", "versions"]
 
 #: a reader of a verb's documents: ``(kind, document)``
 Subscriber = Callable[[str, Mapping[str, Any]], None]
@@ -27,6 +29,23 @@ Subscriber = Callable[[str, Mapping[str, Any]], None]
 def versions() -> dict[str, str]:
     """The software a run ran on, for its start document."""
     return {"sashil": __version__, "python": platform.python_version()}
+
+
+@dataclass(kw_only=True)
+class RunRecord:
+    """What one run leaves, as its ``stop`` document carries it to every subscriber: how its loop
+    ended (``summary``: the loop's summary.json keys; {} when the verb ran no loop of the engine's),
+    what ended the run as the experiment judges it (``error``; None: it ended normally), and the
+    experiment's analysis: ``entry`` (the run's row of the folder's summary), ``data`` (the columns
+    of its ``data.csv``; None: none) and ``formats`` (the keys its ``--format`` files are labelled
+    with). An experiment's own record (a drop's) is a ``RunRecord`` with its figures beside these,
+    so the record the verb reads is the document the writer reads."""
+
+    summary: dict[str, Any] = field(default_factory=dict)
+    error: BaseException | None = None
+    entry: dict[str, Any] = field(default_factory=dict)
+    data: Mapping[str, Any] | None = None
+    formats: dict[str, Any] = field(default_factory=dict)
 
 
 class Documents:
@@ -52,10 +71,9 @@ class Documents:
     def progress(self, run: str | None, text: str) -> None:
         self.emit("progress", {"run": run, "text": text})
 
-    def stop(self, run: str, outcome: Mapping[str, Any], error: BaseException | None, **analysis: Any) -> None:
-        """Run ``run`` ended: the loop's summary keys (``outcome``), what ended it, and the
-        experiment's ``analysis`` (``entry``, ``data``, ``formats``)."""
-        self.emit("stop", {"run": run, "outcome": outcome, "error": error, **analysis})
+    def stop(self, run: str, record: RunRecord) -> None:
+        """Run ``run`` ended, as its ``record`` tells it."""
+        self.emit("stop", {"run": run, "record": record})
 
     def summary(self, run: str | None, summary: Mapping[str, Any]) -> None:
         """Run ``run`` (None: the verb) ended with the summary the verb composed itself."""

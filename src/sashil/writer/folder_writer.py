@@ -8,11 +8,11 @@ The engine hands every subscriber the same documents, in order (:mod:`sashil.wri
   ``config`` (none when it is None: a run whose folder records no config of its own).
 * ``progress``: what a run is doing (``{"run": name, "text": ...}``): for views; the writer keeps
   nothing of it.
-* ``stop``: a run ended. ``{"run": name, "outcome": the loop's summary keys, "error": what ended it
-  or None}``, to which the experiment adds its analysis: ``entry`` (the run's row of the folder's
-  summary), ``data`` (the columns of its ``data.csv``) and ``formats`` (the keys its ``--format``
-  files are labelled with). The writer writes the data files and, for one run of several, its
-  ``summary.json``.
+* ``stop``: a run ended. ``{"run": name, "record": its RunRecord}``
+  (:class:`~sashil.writer.documents.RunRecord`: the loop's summary keys, what ended the run or
+  None, and the experiment's analysis: ``entry``, the run's row of the folder's summary; ``data``,
+  the columns of its ``data.csv``; ``formats``, the keys its ``--format`` files are labelled with).
+  The writer writes the data files and, for one run of several, its ``summary.json``.
 * ``stop`` with ``run`` None: the verb ended (``{"run": None, "extra": the verb's own keys}``): the
   folder's ``summary.json``, with every run's entry, how the set ended (the first failing run
   ends it; what ran before it is kept) and a single run's loop keys at the top.
@@ -34,6 +34,7 @@ from typing import Any
 
 from sashil.errors import exit_code_of, status_of
 from sashil.recording.outputs import Outputs
+from sashil.writer.documents import RunRecord
 from sashil.writer.run_folder import RunFolder
 from sashil.writer.summary_writer import write_config, write_summary
 
@@ -90,7 +91,7 @@ class FolderWriter:
         elif kind == "stop" and name is None:
             self._close(fields.get("extra", {}))
         elif kind == "stop":
-            self._run_ended(str(name), fields)
+            self._run_ended(str(name), fields["record"])
 
     def folder_for(self, name: str | None) -> RunFolder:
         """Where run ``name`` writes: its sub-folder (created), or the folder itself for a single
@@ -110,21 +111,19 @@ class FolderWriter:
             return "."
         return str((self.sub_root / name).relative_to(self.folder.path))
 
-    def _run_ended(self, name: str, fields: Mapping[str, Any]) -> None:
+    def _run_ended(self, name: str, record: RunRecord) -> None:
         """One run's files: its data and --format files, its entry in the folder's summary and, as
         one of several, its own summary (its entry's values of the common keys win: its controller).
         The first failing run is the folder's error."""
-        target, error, data = self.folder_for(name), fields.get("error"), fields.get("data")
+        target, error, data = self.folder_for(name), record.error, record.data
         if data is not None:
             target.write_data(data)
             if self.outputs is not None:
                 status = ending(error)["exit_status"]
-                self.outputs.write_formats(
-                    target.path, self.verb, data, exit_status=status, **fields.get("formats", {})
-                )
+                self.outputs.write_formats(target.path, self.verb, data, exit_status=status, **record.formats)
         row = {
             "folder": self._folder_key(name),
-            **fields.get("entry", {}),
+            **record.entry,
             **{k: v for k, v in ending(error).items() if k != "exit_code"},
         }
         self.entries.append(row)

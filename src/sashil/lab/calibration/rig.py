@@ -50,7 +50,7 @@ def on_device_clock(record: DropRecord, road: bool) -> dict[str, np.ndarray]:
     speed commanded in each row's cycle (``road_speed_cmd_rad_s``) and the road encoder's last edge
     as each sample carried it, on the same clock (``road_edge_s``: NaN none; ``road_edge_dir``
     +1/-1, 0 none): where the board's wheel was, and when. All from the runner's stream."""
-    columns = {k: v for k, v in record.columns.items() if k not in CONTROLLER_COLUMNS}
+    columns = {k: v for k, v in record.data.items() if k not in CONTROLLER_COLUMNS}
     stream = record.stream
     if columns["time_s"].size == 0 or "device_time_us" not in stream or record.device_release_s is None:
         return columns
@@ -90,6 +90,6 @@ def run_step(run: RunSpec, step: Step, data_path: str | Path | None = None) -> S
     for key in ("link", "loop_process"):  # the link's statistics; the loop process that ran the step
         if key in record.extra:
             extra[key] = record.extra[key]
-    if record.run:
-        extra["trips"] = record.run["trips"]
+    if record.summary:
+        extra["trips"] = record.summary["trips"]
     return StepResult(step, columns, math.degrees(record.hold_angle_rad), record.release_estimated, error, extra)

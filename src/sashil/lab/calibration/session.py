@@ -30,7 +30,7 @@ from sashil.lab.calibration.report import params_document, write_report
 from sashil.lab.calibration.rig import StepResult, run_step
 from sashil.plans.calibration_step import Step, StuckEncoderError
 from sashil.runtime.runner import CYCLES_FILE
-from sashil.writer.documents import Documents
+from sashil.writer.documents import Documents, RunRecord
 from sashil.writer.folder_writer import FolderWriter, ending
 from sashil.writer.run_folder import RunFolder
 
@@ -260,7 +260,9 @@ class _Session:
             self.results.append(result)
             recorded = result.columns.get("time_s") is not None and result.columns["time_s"].size
             entry = {**_summary_row(result), "metrics": result.extra.get("metrics")}
-            self.documents.stop(step.name, {}, result.error, entry=entry, data=result.columns if recorded else None)
+            self.documents.stop(
+                step.name, RunRecord(error=result.error, entry=entry, data=result.columns if recorded else None)
+            )
             if result.error is not None:
                 failure = result.error
                 break
