@@ -15,12 +15,16 @@ import hashlib
 import importlib
 import importlib.util
 import sys
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
+from typing import TypeVar
 
 from sashil.errors import ConfigError
+
+T = TypeVar("T")
 
 __all__ = [
     "BACKENDS_GROUP",
@@ -28,6 +32,7 @@ __all__ = [
     "PLANS_GROUP",
     "STAGES_GROUP",
     "Plugin",
+    "built_in_or_registered",
     "entry_point_table",
     "is_class_spec",
     "load_class",
@@ -77,6 +82,25 @@ def entry_point_table(group: str) -> dict[str, Plugin]:
             )
         table[point.name] = plugin
     return table
+
+
+def built_in_or_registered(
+    what: str,
+    kind: str,
+    built_in: Mapping[str, T],
+    group: str,
+    load: Callable[[str, str], T],
+    refusal: Callable[[str, str], str],
+) -> T:
+    """The ``what`` (a plan, a stage) of ``kind``: ``built_in``'s, else the entry point of that name
+    in ``group``, loaded by ``load(target, where)``. Any other kind is a one-line ConfigError,
+    ``refusal(kind, known)``, ``known`` the built-in and registered kinds."""
+    if kind in built_in:
+        return built_in[kind]
+    table = entry_point_table(group)
+    if kind not in table:
+        raise ConfigError(refusal(kind, ", ".join([*built_in, *table])))
+    return load(table[kind].target, f"{what} {kind!r}")
 
 
 def is_class_spec(text: str) -> bool:

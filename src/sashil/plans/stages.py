@@ -6,9 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from sashil.errors import ConfigError
 from sashil.plans import calibration_step
-from sashil.plugins import STAGES_GROUP, entry_point_table, load_class
+from sashil.plugins import STAGES_GROUP, built_in_or_registered, load_class
 
 __all__ = ["BUILT_IN_STAGES", "stage_class", "stage_from_spec"]
 
@@ -19,13 +18,14 @@ BUILT_IN_STAGES: dict[str, type] = {calibration_step.KIND: calibration_step.Step
 def stage_class(kind: str) -> type:
     """The class of the stage of ``kind``: built in, else the ``sashil.stages`` entry point of that
     name; a one-line ConfigError naming the known kinds (built-in and registered) for any other."""
-    if kind in BUILT_IN_STAGES:
-        return BUILT_IN_STAGES[kind]
-    table = entry_point_table(STAGES_GROUP)
-    if kind not in table:
-        known = ", ".join([*BUILT_IN_STAGES, *table])
-        raise ConfigError(f"no stage of kind {kind!r} is built in or registered (known: {known})")
-    return load_class(table[kind].target, f"stage {kind!r}")
+    return built_in_or_registered(
+        "stage",
+        kind,
+        BUILT_IN_STAGES,
+        STAGES_GROUP,
+        load_class,
+        lambda kind, known: f"no stage of kind {kind!r} is built in or registered (known: {known})",
+    )
 
 
 def stage_from_spec(spec: dict[str, Any]) -> Any:

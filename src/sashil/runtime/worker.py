@@ -46,7 +46,7 @@ from typing import Any, NoReturn, Protocol
 from sashil.config.parts import RunSpec
 from sashil.errors import ConfigError, DiskSpaceError, error_fields, exit_code_of
 from sashil.plans import BUILT_IN, drop
-from sashil.plugins import PLANS_GROUP, entry_point_table, load_target
+from sashil.plugins import PLANS_GROUP, built_in_or_registered, load_target
 from sashil.runtime.serve import serve
 from sashil.runtime.signals import catch_stop_signals
 
@@ -95,13 +95,14 @@ def plan_builder(kind: str) -> Callable[..., tuple[Any, str, str]]:
     (stage, label, road_text)``, ``spec`` the assembled run with the plan's values): a built-in plan
     of :mod:`sashil.plans`, else the ``sashil.plans`` entry point of that name (a lab's own), so the
     runtime imports no experiment."""
-    if kind in BUILT_IN:
-        return BUILT_IN[kind]
-    plans = entry_point_table(PLANS_GROUP)
-    if kind not in plans:
-        known = ", ".join([*BUILT_IN, *plans])
-        raise ConfigError(f"the loop process cannot run a plan of kind {kind!r} (it runs {known})")
-    return load_target(plans[kind].target, f"plan {kind!r}")  # type: ignore[return-value]  # a registered builder
+    return built_in_or_registered(
+        "plan",
+        kind,
+        BUILT_IN,
+        PLANS_GROUP,
+        load_target,  # type: ignore[arg-type]  # a registered builder
+        lambda kind, known: f"the loop process cannot run a plan of kind {kind!r} (it runs {known})",
+    )
 
 
 class Sender(Protocol):
