@@ -26,15 +26,13 @@ def test_compose_keeps_the_step_that_set_each_controller_key_last(tmp_path):
         sets=("controller.c_sky=3",),
         options=(Option("--current", "controller.onoff_current_a", 0.4),),
     )
-    told: list[tuple[dict, dict, frozenset]] = []
-    config = compose(source, "run", RIG_MODELS, lambda *args: told.append((args[0], dict(args[1]), args[2])))
-    ((checked, steps, replaced),) = told  # the law is checked once, on the whole config
-    assert checked is config and config["controller"]["c_sky"] == 3
-    assert steps["controller.law"] == "--set"  # --controller, composed with the --set keys
-    assert steps["controller.c_sky"] == "--set"
-    assert steps["controller.onoff_current_a"] == "--current"
-    assert steps["controller.estimator"] == str(path)  # the file's section, defaults filled
-    assert replaced == frozenset()  # c_sky was set again alongside the new law
+    composed = compose(source, "run", RIG_MODELS)
+    assert composed.steps["controller.law"] == "--set"  # --controller, composed with the --set keys
+    assert composed.steps["controller.c_sky"] == "--set"
+    assert composed.steps["controller.onoff_current_a"] == "--current"
+    assert composed.steps["controller.estimator"] == str(path)  # the file's section, defaults filled
+    assert composed.config["controller"]["c_sky"] == 3
+    assert composed.replaced == frozenset()  # c_sky was set again alongside the new law
 
 
 def test_a_law_error_names_the_step_of_the_failing_key_not_the_last_step(tmp_path):

@@ -2,19 +2,17 @@
 by the schema: the file (or a mapping, or the defaults), a parameter file, the law and the ``--set``
 values, each verb option, ``--driver`` and ``--port``.
 
-The composition keeps the step that set each ``controller`` key last (the file, ``--params
-FILE``, ``--set``, the option) and the parameters a new law replaced, and hands them, with the
-composed config, to the resolution's check of the law (:func:`sashil.engine.resolve.resolve` knows
-the laws): the law is checked once, on the whole config, and an error names the step a failing key
-came from. Where each key came from stays inside the composition; what it returns is the config
-alone. Where a verb cannot run the config's model, the step that chose it is named
-(:func:`check_model`).
+:func:`compose` returns the composed config with the step that set each key last (the file,
+``--params FILE``, ``--set``, the option) and the parameters a new law replaced, so that the
+resolution (:func:`sashil.engine.resolve.resolve`), which knows the laws, checks the law once, on
+the whole config, and names the step a failing key came from. Where a verb cannot run the config's
+model, the step that chose it is named (:func:`check_model`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +25,7 @@ from sashil.config.sections import SCHEMA
 from sashil.errors import ConfigError
 from sashil.models.registry import MODEL_PARAMS
 
-__all__ = ["ConfigSource", "LawCheck", "Option", "check_model", "compose"]
+__all__ = ["Composed", "ConfigSource", "Option", "check_model", "compose"]
 
 
 @dataclass(frozen=True)
@@ -58,19 +56,23 @@ class ConfigSource:
     port: str | None = None
 
 
-#: the check of a composed config's law: ``(config, steps, replaced)``, where ``steps`` maps each
-#: ``controller.<key>`` to the step that set it last (as a message names it; every key of the first
-#: step's section is the first step's) and ``replaced`` holds the parameters of a law that a later
-#: ``controller.law`` replaced and no later step set again; it may complete the section in place
-LawCheck = Callable[[Config, Mapping[str, str], frozenset[str]], None]
+@dataclass(frozen=True)
+class Composed:
+    """A config composed from all its steps: the config, the step that set each of its
+    ``controller`` keys last (``controller.<key>`` -> the step's name, as a message names it; every
+    key of the first step's section is the first step's), and the parameters of a law that a later
+    ``controller.law`` replaced, and no later step set again."""
+
+    config: Config
+    steps: Mapping[str, str]
+    replaced: frozenset[str] = frozenset()
 
 
-def compose(source: ConfigSource, verb: str | None, models: Sequence[str], check_law: LawCheck) -> Config:
+def compose(source: ConfigSource, verb: str | None, models: Sequence[str]) -> Composed:
     """The config of ``source``, its steps applied in order: the file (or mapping, or defaults),
     ``params``, the law then each ``--set``, the verb's options, ``--driver``, ``--port``. Each step
     is validated by the schema, naming the step; after the options, a model ``verb`` cannot run
-    (not in ``models``) is refused (:func:`check_model`); last, ``check_law`` checks the whole
-    config's law, told the step of each key (see :data:`LawCheck`)."""
+    (not in ``models``) is refused (:func:`check_model`)."""
     if isinstance(source.config, Mapping):
         config, first = validate(thaw(source.config), SCHEMA, "config"), "config"
     else:
@@ -101,8 +103,7 @@ def compose(source: ConfigSource, verb: str | None, models: Sequence[str], check
     for key, value, name in (("name", source.driver, "--driver"), ("port", source.port, "--port")):
         if value is not None:
             config, _ = set_values(config, [(["driver", key], value)], name)
-    check_law(config, steps, frozenset(replaced))
-    return config
+    return Composed(config, steps, frozenset(replaced))
 
 
 def check_model(config: Config, source: ConfigSource, verb: str | None, models: Sequence[str]) -> None:

@@ -34,7 +34,6 @@ from sashil.roads.syntax import DEFAULT_SIM_ROAD
 
 if TYPE_CHECKING:
     from sashil.config.typed import RunConfig
-    from sashil.control.law_registry import LawEntry
 
 __all__ = [
     "ConfigSource",
@@ -112,13 +111,10 @@ def resolve(source: ConfigSource, verb: str | None = None, models: Sequence[str]
     run (not in ``models``, default the rig models) is refused. The result is a
     :class:`~sashil.config.frozen.FrozenSection` typed as :class:`~sashil.config.typed.RunConfig`
     (the schema's sections, generated from it), so mypy checks every read of it."""
-    laws: list[LawEntry] = []  # the law the check found, for the road-ahead check below
-
-    def check_law(config: Config, steps: Mapping[str, str], replaced: frozenset[str]) -> None:
-        laws.append(law_config.check_controller(config["controller"], StageParts.read(config), steps, replaced))
-
-    config = compose(source, verb, models if models is not None else RIG_MODELS, check_law)
-    law = laws[0]
+    composed = compose(source, verb, models if models is not None else RIG_MODELS)
+    config = composed.config
+    parts = StageParts.read(config)
+    law = law_config.check_controller(config["controller"], parts, composed.steps, composed.replaced)
     checked = cast("RunConfig", config)  # composed and checked: what is frozen below
     if verb not in RIGLESS_VERBS:
         _resolve_backend(config, source, verb)
