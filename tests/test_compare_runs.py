@@ -156,9 +156,11 @@ def test_drop_test_on_an_emulator_that_holds_nothing_says_how_and_leaves_no_fold
     emu = Emulator(tmp_path, "serial", "python")
     out = tmp_path / "drop"
     try:
-        # the link rides through a busy machine's pauses (as the link tests' normal runs do), so the
-        # run meets the missing hold, not a link timeout
-        patient = ["--set", "driver.link_lost_ms=500", "--set", "driver.max_lost_fraction=1.0"]
+        # the link rides through a busy machine's pauses (as the link tests' normal runs do: no
+        # sample, or an emulator that reads nothing, for up to 500 ms), so the run meets the missing
+        # hold, not a link timeout
+        patient = ["--set", "driver.sample_timeout_ms=500", "--set", "driver.link_lost_ms=500"]
+        patient += ["--set", "driver.max_lost_fraction=1.0"]
         code = main(["drop-test", "--driver", "serial", "--port", emu.link, *patient, "--out", str(out)])
     finally:
         emu.stop()
